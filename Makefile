@@ -1,0 +1,45 @@
+# Every target creates and uses .venv itself: a fresh machine needs only python3.11, make and git.
+PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+VDMCHECK_VERSION := 1.1.3
+VDMCHECK_DIR := tools/vdmcheck
+
+.PHONY: all venv fmus demo test bench vdmcheck clean
+
+all: test
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+fmus: $(STAMP)
+	$(BIN)/ipcosim build
+
+# VDMCheck2 (FMI 2 static checker) from Maven Central; skipped where Java or Maven is absent.
+vdmcheck:
+	@if [ -f $(VDMCHECK_DIR)/.ok ]; then exit 0; fi; \
+	if command -v java >/dev/null 2>&1 && command -v mvn >/dev/null 2>&1; then \
+	  mkdir -p $(VDMCHECK_DIR) && \
+	  mvn -q dependency:copy -Dartifact=org.into-cps.vdmcheck.fmi2:vdmcheck2:$(VDMCHECK_VERSION):zip:distribution-static \
+	      -DoutputDirectory=$(VDMCHECK_DIR) && \
+	  (cd $(VDMCHECK_DIR) && unzip -qo vdmcheck2-$(VDMCHECK_VERSION)-distribution-static.zip) && touch $(VDMCHECK_DIR)/.ok \
+	  || echo "vdmcheck: download failed; VDMCheck tests will be skipped"; \
+	else echo "vdmcheck: java/mvn not found; VDMCheck tests will be skipped"; fi
+
+demo: fmus
+	$(BIN)/ipcosim run single-mass-lqr --plot --out out/demo
+
+test: fmus vdmcheck
+	$(BIN)/python -m pytest
+
+bench: fmus
+	$(BIN)/python -m harness.bench
+
+clean:
+	rm -rf build out

@@ -1,0 +1,88 @@
+"""Linearization of the nonlinear plants about the upright equilibrium.
+
+The Jacobians are taken from the same right-hand side the simulation integrates
+(``fmus.physics``), by central differences (step 1e-6; the model is smooth, so the
+truncation error is ~1e-12 relative). Coulomb friction is left out (b = 0), as in the
+thesis: it has no derivative at rest.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .params import DoubleMassParams, PlantParams, kind_of
+from .physics import MEASURED, rhs_for, rhs_no_inductance, state_names
+
+
+@dataclass(frozen=True)
+class LinearModel:
+    """Continuous-time state-space model ``x' = A x + B u, y = C x + D u``."""
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    states: tuple[str, ...]
+    outputs: tuple[str, ...]
+
+    @property
+    def poles(self) -> np.ndarray:
+        """Eigenvalues of A, sorted by real part (descending)."""
+        ev = np.linalg.eigvals(self.A)
+        return ev[np.lexsort((ev.imag, -ev.real))]
+
+    def to_json_dict(self) -> dict:
+        """The ``ipcosim linearize --json`` document (format fixed by DESIGN.md)."""
+        return {"A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(), "D": self.D.tolist(),
+                "states": list(self.states), "outputs": list(self.outputs),
+                "poles": [[float(p.real), float(p.imag)] for p in self.poles]}
+
+
+def _jacobian(f, x0: np.ndarray, u0: float, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    n = x0.size
+    A = np.empty((n, n))
+    for j in range(n):
+        dx = np.zeros(n)
+        dx[j] = eps
+        A[:, j] = (np.asarray(f(x0 + dx, u0)) - np.asarray(f(x0 - dx, u0))) / (2 * eps)
+    B = ((np.asarray(f(x0, u0 + eps)) - np.asarray(f(x0, u0 - eps))) / (2 * eps)).reshape(n, 1)
+    return A, B
+
+
+def linearize(params: PlantParams, inductance: bool = True) -> LinearModel:
+    """Linearize a plant about the upright equilibrium (all states 0, voltage 0).
+
+    Parameters
+    ----------
+    params : SingleMassParams or DoubleMassParams
+        Physical parameters (``fmus.params.preset``).
+    inductance : bool
+        Keep the motor current as a state (5 or 7 states). If False the inductance is
+        neglected and the current eliminated algebraically (4 or 6 states), as in the
+        thesis's App. A.2 and B.3 designs.
+
+    Returns
+    -------
+    LinearModel
+        States in ``fmus.physics`` order (current last); outputs are the measured positions.
+    """
+    if isinstance(params, DoubleMassParams):
+        p = replace(params, b1=0.0, b2=0.0)
+    else:
+        p = replace(params, b=0.0)
+    kind = kind_of(p)
+    names = state_names(kind)
+    if inductance:
+        rhs = rhs_for(p)
+        f = lambda x, u: rhs(tuple(x), u, p)  # noqa: E731
+    else:
+        names = names[:-1]
+        f = lambda x, u: rhs_no_inductance(tuple(x), u, p)  # noqa: E731
+    A, B = _jacobian(f, np.zeros(len(names)), 0.0)
+    outputs = MEASURED[kind]
+    C = np.zeros((len(outputs), len(names)))
+    for r, name in enumerate(outputs):
+        C[r, names.index(name)] = 1.0
+    D = np.zeros((len(outputs), 1))
+    return LinearModel(A=A, B=B, C=C, D=D, states=tuple(names), outputs=tuple(outputs))

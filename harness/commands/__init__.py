@@ -1,0 +1,1 @@
+"""Sub-commands of the ``ipcosim`` command line (see ``harness.cli``)."""
