@@ -1,0 +1,502 @@
+"""Thin FMI 2.0 co-simulation plumbing over pythonfmu 0.7.0, shared by every FMU script.
+
+An FMU script is one file per FMU, ``fmus/fmu_<snake_model_name>.py`` or
+``controllers/fmu_<snake_model_name>.py``, holding one subclass of :class:`FmuBase`.
+The class only copies values in and out; the physics or the control law lives in a
+pure module. Example::
+
+    from fmus.fmi import FmuBase, StepFailure
+
+    class Integrator(FmuBase):
+        '''Integrates its input (first docstring line = modelDescription description).'''
+
+        def __init__(self, **kwargs):
+            super().__init__(**kwargs)
+            self.add_input("u", start=0.0, unit="V", description="integrand")
+            # depends_on: the inputs this output depends on *directly* (within the same
+            # communication point); () = no direct feed-through (no algebraic loop).
+            # initial_depends_on: what the output depends on at initialization.
+            self.add_output("y", unit="V.s", description="integral", depends_on=(),
+                            initial_depends_on=("y0",))
+            self.add_parameter("y0", start=0.0, unit="V.s", description="initial value")
+            self.add_parameter("gain", start=1.0, unit="1", description="gain",
+                               check=lambda v: None if v > 0 else "must be > 0")
+
+        def setup(self) -> None:
+            # Called on leaving initialization mode, after every parameter passed its
+            # checks: build the model and compute the outputs at the start time.
+            self.y = self.y0
+
+        def step(self, t: float, h: float) -> None:
+            # Advance from t to t + h. Raise StepFailure for a step that cannot be done
+            # (the FMU stays at t); any other exception is a bug.
+            y = self.y + self.gain * self.u * h
+            if not math.isfinite(y):
+                raise StepFailure(f"y became {y} in the step from t = {t} s")
+            self.y = y
+
+Declaring variables: ``add_input``, ``add_output``, ``add_parameter``, ``add_local`` or
+the general ``add_variable``; each takes ``name``, ``start``, ``unit``, ``description``
+and optional ``getter``/``setter`` callables (default: the instance attribute of the
+same name, created with ``start``). ``type_`` may be ``float`` (FMI Real, default),
+``int``, ``bool`` or ``str``; non-Real inputs, outputs and locals are declared
+``variability="discrete"`` as FMI requires. Parameters are ``fixed`` by default
+(``tunable=True`` allows changes between steps; ``parameters_changed()`` is then called
+before the next step). Units are plain strings over ``kg m s A K mol cd rad`` and the
+derived ``N V Ohm H W J Hz``, combined with ``.``, ``/`` and integer exponents
+(``m/s2``, ``N.m.s/rad``, ``kg.m2``, ``1``); the generated modelDescription.xml gets the
+matching ``<UnitDefinitions>``.
+
+What the generated modelDescription.xml holds (``to_xml``, which pythonfmu's builder
+calls): ``unit`` attributes and ``<UnitDefinitions>``; outputs ``initial="calculated"``
+when they depend on something at initialization (they are then computed in
+``exit_initialization_mode`` and listed in ``<InitialUnknowns>`` with those
+dependencies) and ``initial="exact"`` with their start value otherwise;
+``<ModelStructure><Outputs>`` with the declared direct dependencies.
+
+Error reporting, as pythonfmu 0.7.0's C wrapper allows (measured through fmpy with a
+logger callback, ``tests/test_fmi_plumbing.py``):
+
+* ``step`` raising :class:`StepFailure` -> the message is logged with status
+  fmi2Error (category ``logStatusError``) and ``fmi2DoStep`` returns **fmi2Discard**;
+  the FMU state stays at the communication point ``t``.
+* A bad parameter (non-finite Real, a failed ``check``, an exception in ``setup``) ->
+  the message (``parameter NAME = VALUE UNIT: reason``) is logged with status fmi2Error
+  and ``fmi2ExitInitializationMode`` returns **fmi2Fatal**: any Python exception
+  reaching the wrapper becomes fmi2Fatal (it has no path to fmi2Error), after which the
+  instance may only be freed.
+* Any other exception anywhere -> logged with status fmi2Error, then fmi2Fatal.
+
+The wrapper forwards log messages (including the fmi2Fatal one) **only to an instance
+instantiated with loggingOn = fmi2True** (and, after ``fmi2SetDebugLogging`` with a
+category list, only those categories): a master that wants the error text must
+instantiate with logging on. With pythonfmu 0.7.0 the fmi2Fatal line itself carries no
+text when a message was logged just before (it reads "unknown error"); the logged
+fmi2Error line is the one to report.
+
+pythonfmu 0.7.0 workaround: on every instantiation its C wrapper re-executes the FMU
+script and releases one reference to the script module's ``__dict__`` that it never
+took. ``FmuBase.__init_subclass__`` takes one reference each time the FMU class
+statement runs, which balances it (without this, the second instance of an FMU in a
+process fails with "module has no attribute ...").
+"""
+from __future__ import annotations
+
+import math
+import re
+import sys
+import traceback
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Sequence
+from xml.etree.ElementTree import Element, SubElement
+
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
+from pythonfmu.enums import Fmi2Status
+
+__all__ = ["FmuBase", "FmuError", "StepFailure", "VariableInfo", "parse_unit", "positive", "nonnegative"]
+
+# Dicts of FMU script modules kept alive (see the module docstring, pythonfmu workaround).
+_PINNED_MODULE_DICTS: list[dict[str, Any]] = []
+
+
+class FmuError(RuntimeError):
+    """An FMU cannot continue (bad parameter, call in the wrong state); reported as fmi2Fatal."""
+
+
+class StepFailure(ArithmeticError):
+    """A communication step that cannot be completed; reported as fmi2Discard, state kept at ``t``."""
+
+
+def positive(value: float) -> str | None:
+    """Parameter check: ``None`` if ``value > 0`` else the reason."""
+    return None if value > 0 else "must be > 0"
+
+
+def nonnegative(value: float) -> str | None:
+    """Parameter check: ``None`` if ``value >= 0`` else the reason."""
+    return None if value >= 0 else "must be >= 0"
+
+
+# --- units ---------------------------------------------------------------------------------
+
+_BASE = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+_DERIVED: dict[str, dict[str, int]] = {
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "J": {"kg": 1, "m": 2, "s": -2},
+    "W": {"kg": 1, "m": 2, "s": -3},
+    "V": {"kg": 1, "m": 2, "s": -3, "A": -1},
+    "Ohm": {"kg": 1, "m": 2, "s": -3, "A": -2},
+    "H": {"kg": 1, "m": 2, "s": -2, "A": -2},
+    "Hz": {"s": -1},
+}
+_TOKEN = re.compile(r"^([A-Za-z]+)(-?\d+)?$")
+
+
+def parse_unit(unit: str) -> dict[str, int]:
+    """SI base-unit exponents of a unit string such as ``"N.m.s/rad"`` or ``"m/s2"``.
+
+    Parameters
+    ----------
+    unit : str
+        Factors joined by ``.``; everything after a ``/`` is in the denominator; a factor
+        may carry an integer exponent (``m2``, ``s-1``). ``"1"`` is dimensionless.
+
+    Returns
+    -------
+    dict
+        Exponent per base unit (``kg m s A K mol cd rad``), zero exponents omitted.
+
+    Raises
+    ------
+    ValueError
+        For a factor that is not a known unit symbol.
+    """
+    exps: dict[str, int] = {}
+    parts = unit.split("/")
+    for k, part in enumerate(parts):
+        sign = 1 if k == 0 else -1
+        for tok in part.split("."):
+            if tok in ("", "1"):
+                continue
+            m = _TOKEN.match(tok)
+            if not m:
+                raise ValueError(f"unit {unit!r}: cannot parse factor {tok!r}")
+            sym, power = m.group(1), int(m.group(2) or 1)
+            if sym in _BASE:
+                base = {sym: 1}
+            elif sym in _DERIVED:
+                base = _DERIVED[sym]
+            else:
+                raise ValueError(f"unit {unit!r}: unknown unit symbol {sym!r}")
+            for b, e in base.items():
+                exps[b] = exps.get(b, 0) + sign * power * e
+    return {b: e for b, e in exps.items() if e}
+
+
+# --- variable metadata -----------------------------------------------------------------------
+
+_CAUSALITY = {c.name: c for c in Fmi2Causality}
+_VARIABILITY = {v.name: v for v in Fmi2Variability}
+_INITIAL = {i.name: i for i in Fmi2Initial}
+_TYPES: dict[type, type] = {float: Real, int: Integer, bool: Boolean, str: String}
+
+
+@dataclass
+class VariableInfo:
+    """What :class:`FmuBase` knows about one declared variable beyond pythonfmu's ScalarVariable."""
+
+    name: str
+    causality: str
+    variability: str
+    type_: type
+    unit: str | None = None
+    initial: str | None = None
+    depends_on: tuple[str, ...] | None = None
+    depends_kind: str | None = None
+    initial_depends_on: tuple[str, ...] | None = None
+    check: Callable[[Any], str | None] | None = None
+    value_reference: int = -1
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class FmuBase(Fmi2Slave):
+    """Base class of every ipcosim FMU (a pythonfmu ``Fmi2Slave``); see the module docstring.
+
+    Subclasses declare their variables in ``__init__`` and implement ``setup()`` and
+    ``step(t, h)``; optionally ``parameters_changed()`` (tunable parameters) and
+    ``teardown()``.
+    """
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        # pythonfmu 0.7.0 workaround (module docstring): keep one more reference to the dict
+        # of the module whose code defines this class, each time the class statement runs.
+        frame = sys._getframe(1)
+        while frame is not None and frame.f_code.co_name == "__init_subclass__":
+            frame = frame.f_back
+        if frame is not None:
+            _PINNED_MODULE_DICTS.append(frame.f_globals)
+        module = sys.modules.get(cls.__module__)
+        if module is not None:
+            _PINNED_MODULE_DICTS.append(module.__dict__)
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        doc = (type(self).__doc__ or "").strip().splitlines()
+        if self.description is None and doc:
+            self.description = doc[0].strip()
+        self.info: dict[str, VariableInfo] = {}
+        self.start_time = 0.0
+        self.initialized = False
+        self._parameters_dirty = False
+
+    # --- declaring variables -----------------------------------------------------------------
+
+    def add_variable(self, name: str, causality: str, *, start: Any = None, unit: str | None = None,
+                     description: str | None = None, variability: str | None = None,
+                     type_: type = float, initial: str | None = None,
+                     getter: Callable[[], Any] | None = None, setter: Callable[[Any], None] | None = None,
+                     depends_on: Sequence[str] | None = None, depends_kind: str | None = None,
+                     initial_depends_on: Sequence[str] | None = None,
+                     check: Callable[[Any], str | None] | None = None) -> VariableInfo:
+        """Declare one FMI scalar variable; see the module docstring.
+
+        Parameters
+        ----------
+        name : str
+            FMI variable name; also the instance attribute holding the value unless
+            ``getter``/``setter`` are given.
+        causality : str
+            ``"input"``, ``"output"``, ``"parameter"``, ``"calculatedParameter"`` or ``"local"``.
+        start : optional
+            Initial attribute value (and the XML start value where FMI requires one).
+        unit : str, optional
+            Unit string (``parse_unit``); Real variables only.
+        description : str, optional
+            Text for the modelDescription.
+        variability : str, optional
+            Default: ``fixed`` for parameters, ``continuous`` for other Reals, ``discrete``
+            for other types.
+        type_ : type
+            ``float``, ``int``, ``bool`` or ``str``.
+        initial : str, optional
+            Override of the ``initial`` attribute (outputs: see the module docstring).
+        getter, setter : callable, optional
+            Value access instead of the attribute ``name``.
+        depends_on : sequence of str, optional
+            Outputs: the inputs the output depends on directly (default: none).
+        depends_kind : str, optional
+            Outputs: FMI ``dependenciesKind`` applied to every entry of ``depends_on``.
+        initial_depends_on : sequence of str, optional
+            Outputs: inputs and parameters that determine the output at initialization.
+            ``None`` (default) = every input and parameter.
+        check : callable, optional
+            Parameters: ``check(value) -> None | reason`` run on leaving initialization.
+
+        Returns
+        -------
+        VariableInfo
+        """
+        if name in self.info:
+            raise FmuError(f"{type(self).__name__}: variable {name!r} declared twice")
+        if causality not in _CAUSALITY:
+            raise FmuError(f"{type(self).__name__}.{name}: unknown causality {causality!r}")
+        if type_ not in _TYPES:
+            raise FmuError(f"{type(self).__name__}.{name}: unsupported type {type_!r}")
+        if unit is not None:
+            if type_ is not float:
+                raise FmuError(f"{type(self).__name__}.{name}: only Real variables carry a unit")
+            parse_unit(unit)
+        if variability is None:
+            if causality in ("parameter", "calculatedParameter"):
+                variability = "fixed"
+            else:
+                variability = "continuous" if type_ is float else "discrete"
+        if variability == "continuous" and type_ is not float:
+            variability = "discrete"
+        if causality == "output":
+            if initial is None:
+                initial = "calculated" if initial_depends_on is None or len(initial_depends_on) else "exact"
+            depends_on = tuple(depends_on or ())
+        elif causality == "parameter" and initial is None:
+            initial = "exact"
+        if getter is None and setter is None and start is not None and not hasattr(self, name):
+            setattr(self, name, type_(start))
+        if getter is None:
+            getter = (lambda n=name: getattr(self, n))
+        if setter is None and causality != "calculatedParameter" and variability != "constant":
+            setter = (lambda v, n=name: setattr(self, n, v))
+        if causality == "parameter" and setter is not None:
+            setter = self._parameter_setter(name, variability, setter)
+        cls = _TYPES[type_]
+        var = cls(name, causality=_CAUSALITY[causality], variability=_VARIABILITY[variability],
+                  initial=_INITIAL[initial] if initial else None, description=description,
+                  getter=getter, setter=setter)
+        self.register_variable(var, nested=False)
+        info = VariableInfo(name=name, causality=causality, variability=variability, type_=type_, unit=unit,
+                            initial=initial, depends_on=tuple(depends_on) if depends_on is not None else None,
+                            depends_kind=depends_kind,
+                            initial_depends_on=(tuple(initial_depends_on) if initial_depends_on is not None
+                                                else None),
+                            check=check, value_reference=var.value_reference)
+        self.info[name] = info
+        return info
+
+    def add_input(self, name: str, *, start: Any = 0.0, **kwargs: Any) -> VariableInfo:
+        """Declare an input (``start`` required by FMI; default 0)."""
+        return self.add_variable(name, "input", start=start, **kwargs)
+
+    def add_output(self, name: str, *, start: Any = 0.0, **kwargs: Any) -> VariableInfo:
+        """Declare an output (``depends_on``: direct input dependencies, default none)."""
+        return self.add_variable(name, "output", start=start, **kwargs)
+
+    def add_parameter(self, name: str, *, start: Any, tunable: bool = False, **kwargs: Any) -> VariableInfo:
+        """Declare a parameter (``fixed`` unless ``tunable``; non-finite Reals are rejected)."""
+        return self.add_variable(name, "parameter", start=start,
+                                 variability="tunable" if tunable else "fixed", **kwargs)
+
+    def add_local(self, name: str, *, start: Any = 0.0, **kwargs: Any) -> VariableInfo:
+        """Declare a local (observable internal) variable."""
+        return self.add_variable(name, "local", start=start, **kwargs)
+
+    def _parameter_setter(self, name: str, variability: str,
+                          setter: Callable[[Any], None]) -> Callable[[Any], None]:
+        def set_parameter(value: Any) -> None:
+            if self.initialized:
+                if variability != "tunable":
+                    self._fail(f"parameter {name} is fixed: it cannot be set to {value!r} after initialization")
+                self._parameters_dirty = True
+            setter(value)
+        return set_parameter
+
+    # --- hooks for subclasses ----------------------------------------------------------------
+
+    def setup(self) -> None:
+        """Build the model from the (checked) parameters and compute the outputs at ``start_time``."""
+
+    def step(self, t: float, h: float) -> None:
+        """Advance from ``t`` to ``t + h``; raise :class:`StepFailure` if that is impossible."""
+        raise NotImplementedError
+
+    def parameters_changed(self) -> None:
+        """Called before a step when a tunable parameter changed after initialization."""
+
+    def teardown(self) -> None:
+        """Called by ``terminate``."""
+
+    # --- FMI entry points (called by pythonfmu's C wrapper) ----------------------------------
+
+    def setup_experiment(self, start_time: float, stop_time: float | None = None,
+                         tolerance: float | None = None) -> None:
+        self.start_time = float(start_time)
+
+    def exit_initialization_mode(self) -> None:
+        try:
+            self.check_parameters()
+            self.setup()
+        except Exception as exc:  # noqa: BLE001 -- reported through the FMI logger
+            self._fail(self._message(exc), exc)
+        self.initialized = True
+
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        try:
+            if self._parameters_dirty:
+                self.check_parameters()
+                self.parameters_changed()
+                self._parameters_dirty = False
+            self.step(current_time, step_size)
+            return True
+        except StepFailure as exc:
+            self.log(str(exc), Fmi2Status.error)
+            return False
+        except Exception as exc:  # noqa: BLE001
+            self._fail(self._message(exc), exc)
+            return False  # not reached
+
+    def terminate(self) -> None:
+        try:
+            self.teardown()
+        except Exception as exc:  # noqa: BLE001
+            self._fail(self._message(exc), exc)
+
+    def check_parameters(self) -> None:
+        """Reject non-finite Real parameters and run every parameter's ``check``.
+
+        Raises
+        ------
+        FmuError
+            ``parameter NAME = VALUE UNIT: reason`` for the first offending parameter.
+        """
+        for info in self.info.values():
+            if info.causality != "parameter":
+                continue
+            value = self.vars[info.value_reference].getter()
+            unit = f" {info.unit}" if info.unit and info.unit != "1" else ""
+            if info.type_ is float and not math.isfinite(value):
+                raise FmuError(f"parameter {info.name} = {value}{unit}: not a finite number")
+            if info.check is not None:
+                reason = info.check(value)
+                if reason:
+                    raise FmuError(f"parameter {info.name} = {value}{unit}: {reason}")
+
+    # --- error reporting ---------------------------------------------------------------------
+
+    @staticmethod
+    def _message(exc: BaseException) -> str:
+        text = str(exc).strip()
+        if isinstance(exc, (FmuError, StepFailure, ValueError, ArithmeticError)) and text:
+            return text.splitlines()[0]
+        tb = traceback.extract_tb(exc.__traceback__)
+        where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
+        return f"{type(exc).__name__}: {text or 'no message'}{where}"
+
+    def _fail(self, message: str, cause: BaseException | None = None) -> None:
+        """Log ``message`` with status fmi2Error and raise (the wrapper returns fmi2Fatal)."""
+        self.log(message, Fmi2Status.error)
+        raise FmuError(message) from cause
+
+    # --- modelDescription.xml ----------------------------------------------------------------
+
+    def to_xml(self, model_options: dict[str, str] = dict()) -> Element:  # noqa: B006 -- pythonfmu's signature
+        """pythonfmu's model description plus units, unit definitions and the true model structure."""
+        root = super().to_xml(model_options)
+        index = {info.name: info.value_reference + 1 for info in self.info.values()}
+        inputs = [i.name for i in self.info.values() if i.causality == "input"]
+        knowns = [i.name for i in self.info.values()
+                  if i.causality == "input" or (i.causality == "parameter" and i.initial == "exact")]
+
+        # unit attributes and definitions
+        units: dict[str, dict[str, int]] = {}
+        for sv in root.iter("ScalarVariable"):
+            info = self.info.get(sv.get("name"))
+            if info is None or info.unit is None:
+                continue
+            real = sv.find("Real")
+            if real is not None:
+                real.set("unit", info.unit)
+                units[info.unit] = parse_unit(info.unit)
+        if units:
+            ud = Element("UnitDefinitions")
+            for name in sorted(units):
+                u = SubElement(ud, "Unit", {"name": name})
+                SubElement(u, "BaseUnit", {b: str(e) for b, e in units[name].items()})
+            children = list(root)
+            pos = next(k for k, c in enumerate(children) if c.tag == "CoSimulation") + 1
+            root.insert(pos, ud)
+
+        # model structure
+        old = root.find("ModelStructure")
+        if old is not None:
+            root.remove(old)
+        ms = SubElement(root, "ModelStructure")
+        outputs = sorted((i for i in self.info.values() if i.causality == "output"), key=lambda i: index[i.name])
+        if outputs:
+            node = SubElement(ms, "Outputs")
+            for info in outputs:
+                deps = info.depends_on or ()
+                for d in deps:
+                    if d not in inputs:
+                        raise FmuError(f"{type(self).__name__}.{info.name}: depends_on {d!r} is not an input")
+                attrib = {"index": str(index[info.name]), "dependencies": _indices(deps, index)}
+                if deps and info.depends_kind:
+                    attrib["dependenciesKind"] = " ".join([info.depends_kind] * len(deps))
+                SubElement(node, "Unknown", attrib)
+        unknowns = sorted((i for i in self.info.values()
+                           if (i.causality == "output" and i.initial in ("calculated", "approx"))
+                           or i.causality == "calculatedParameter"), key=lambda i: index[i.name])
+        if unknowns:
+            node = SubElement(ms, "InitialUnknowns")
+            for info in unknowns:
+                attrib = {"index": str(index[info.name])}
+                if info.initial_depends_on is not None:
+                    for d in info.initial_depends_on:
+                        if d not in knowns:
+                            raise FmuError(f"{type(self).__name__}.{info.name}: initial_depends_on {d!r} is "
+                                           "not an input or an exact parameter")
+                    attrib["dependencies"] = _indices(info.initial_depends_on, index)
+                SubElement(node, "Unknown", attrib)
+        return root
+
+
+def _indices(names: Iterable[str], index: dict[str, int]) -> str:
+    return " ".join(str(i) for i in sorted(index[n] for n in names))
