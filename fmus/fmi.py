@@ -300,6 +300,9 @@ class FmuBase(Fmi2Slave):
             depends_on = tuple(depends_on or ())
         elif causality == "parameter" and initial is None:
             initial = "exact"
+        if getter is None and setter is None and name in _RESERVED:
+            raise FmuError(f"{type(self).__name__}: variable name {name!r} clashes with an FmuBase attribute; "
+                           "pass getter/setter or rename it")
         if getter is None and setter is None and start is not None and not hasattr(self, name):
             setattr(self, name, type_(start))
         if getter is None:
@@ -496,6 +499,13 @@ class FmuBase(Fmi2Slave):
                     attrib["dependencies"] = _indices(info.initial_depends_on, index)
                 SubElement(node, "Unknown", attrib)
         return root
+
+
+#: Attribute names used by pythonfmu's Fmi2Slave and FmuBase (a variable stored as an attribute must avoid them).
+_RESERVED = frozenset(dir(FmuBase)) | {
+    "vars", "instance_name", "resources", "visible", "log_queue", "guid", "author", "license", "version",
+    "copyright", "modelName", "description", "default_experiment", "info", "start_time", "initialized",
+    "_parameters_dirty"}
 
 
 def _indices(names: Iterable[str], index: dict[str, int]) -> str:

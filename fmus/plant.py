@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
-from .integrator import ETDRK4
-from .params import PlantParams, kind_of, validate
+from .integrator import FastETDRK4
+from .params import DoubleMassParams, PlantParams, SingleMassParams, kind_of, validate
 from .physics import (MEASURED, clip_voltage, rhs_for, single_mass_from_momentum, single_mass_momentum_rhs,
                       single_mass_to_momentum, state_names)
 
@@ -16,8 +16,66 @@ class PlantStepError(FloatingPointError):
     """The plant state became non-finite during a step (reported with time and state)."""
 
 
+def single_mass_internal_rhs(p: SingleMassParams) -> Callable[..., tuple[float, ...]]:
+    """``f(xc, p1, th, p2, i, vA)``: ``fmus.physics.single_mass_momentum_rhs`` with the parameters folded
+    into constants and the voltage already clipped (same arithmetic; checked equal in the tests)."""
+    sin, cos, tanh = math.sin, math.cos, math.tanh
+    ml = 0.5 * p.Mp * p.Lp
+    m11 = p.Meq + p.Mp
+    m22 = p.Mp * p.Lp * p.Lp / 3.0
+    mlg = ml * p.g
+    kf, ke, beq, bp, ra, la = p.force_per_amp, p.emf_per_velocity, p.Beq, p.Bp, p.Ra, p.La
+    b, cv = p.b, p.coulomb_velocity
+
+    def f(xc: float, p1: float, th: float, p2: float, i: float, vA: float) -> tuple[float, ...]:
+        s = sin(th)
+        m12 = -ml * cos(th)
+        det = m11 * m22 - m12 * m12
+        xd = (m22 * p1 - m12 * p2) / det
+        thd = (m11 * p2 - m12 * p1) / det
+        fric = b * tanh(xd / cv) if b else 0.0
+        return (xd, kf * i - beq * xd - fric, thd, mlg * s - bp * thd + ml * s * thd * xd,
+                (vA - ra * i - ke * xd) / la)
+    return f
+
+
+def double_mass_internal_rhs(p: DoubleMassParams) -> Callable[..., tuple[float, ...]]:
+    """``f(xa, xa', xc, xc', th, th', i, vA)``: ``fmus.physics.double_mass_rhs`` with the parameters folded
+    into constants and the voltage already clipped (same arithmetic; checked equal in the tests)."""
+    sin, cos, tanh = math.sin, math.cos, math.tanh
+    K, kf, ke, ra, la = p.K, p.force_per_amp, p.emf_per_velocity, p.Ra, p.La
+    Ba, Bf, Bc, Bp, Ma_eq = p.Ba, p.Bf, p.Bc, p.Bp, p.Ma_eq
+    b1, b2, cv = p.b1, p.b2, p.coulomb_velocity
+    ml = 0.5 * p.Mp * p.Lp
+    m11 = p.Mc + p.Mp
+    m22 = p.Mp * p.Lp * p.Lp / 3.0
+    mlg = ml * p.g
+    bfc = Bf + Bc
+
+    def f(xa: float, xad: float, xc: float, xcd: float, th: float, thd: float, i: float,
+          vA: float) -> tuple[float, ...]:
+        spring = K * (xa - xc)
+        fa = b1 * tanh(xad / cv) if b1 else 0.0
+        fc = b2 * tanh(xcd / cv) if b2 else 0.0
+        xadd = (kf * i - Ba * xad + Bf * xcd - spring - fa) / Ma_eq
+        s = sin(th)
+        m12 = -ml * cos(th)
+        r1 = Bf * xad - bfc * xcd + spring - ml * thd * thd * s - fc
+        r2 = mlg * s - Bp * thd
+        det = m11 * m22 - m12 * m12
+        return (xad, xadd, xcd, (m22 * r1 - m12 * r2) / det, thd, (m11 * r2 - m12 * r1) / det,
+                (vA - ra * i - ke * xad) / la)
+    return f
+
+
 class Plant:
     """Nonlinear IP02 plant advanced in fixed steps with the voltage held over each step.
+
+    The integrator is ETDRK4 (``fmus.integrator``) with the stiff linear part taken at the
+    upright equilibrium, on an internal state in which the motor current enters the slow
+    equations with constant coefficients: the momentum form ``[xc, p1, th, p2, i]`` for the
+    single mass (``fmus.physics``), the plain state for the double mass (there the current
+    drives only the active cart, whose mass matrix is constant).
 
     Parameters
     ----------
@@ -34,20 +92,23 @@ class Plant:
         self.kind = kind_of(params)
         self.state_names = state_names(self.kind)
         self._rhs = rhs_for(params)
-        # The integrator works on an internal state in which the stiff current enters the slow
-        # equations with constant coefficients (see fmus.physics, momentum form).
         if self.kind == "single-mass":
             self._irhs = single_mass_momentum_rhs
             self._to_int = single_mass_to_momentum
             self._from_int = single_mass_from_momentum
+            self._f = single_mass_internal_rhs(params)
         else:
             self._irhs = self._rhs
             self._to_int = self._from_int = lambda x, p: tuple(x)
+            self._f = double_mass_internal_rhs(params)
         self._L = self._internal_jacobian()
-        self._steppers: dict[float, ETDRK4] = {}
+        self._steppers: dict[float, FastETDRK4] = {}
+        self._limit = params.voltage_limit
         self.t = float(t0)
         self.voltage = 0.0
         self.x = np.zeros(len(self.state_names))
+        self._xl: list[float] = self.x.tolist()
+        self._z: list[float] = list(self._to_int(self._xl, params))
         if x0 is not None:
             self.set_state(x0)
 
@@ -58,13 +119,15 @@ class Plant:
             raise ValueError(f"{self.kind} state needs {len(self.state_names)} values "
                              f"({', '.join(self.state_names)}), got {x.shape}")
         if not np.all(np.isfinite(x)):
-            bad = [n for n, v in zip(self.state_names, x) if not math.isfinite(v)]
+            bad = [f"{n} = {v}" for n, v in zip(self.state_names, x) if not math.isfinite(v)]
             raise ValueError(f"initial state is not finite: {', '.join(bad)}")
         self.x = x.copy()
+        self._xl = self.x.tolist()
+        self._z = list(self._to_int(self._xl, self.params))
 
     def derivatives(self, voltage: float | None = None) -> tuple[float, ...]:
         """Right-hand side at the current state (for the voltage held now, or ``voltage``)."""
-        return self._rhs(self.x.tolist(), self.voltage if voltage is None else voltage, self.params)
+        return self._rhs(self._xl, self.voltage if voltage is None else voltage, self.params)
 
     def do_step(self, t: float, h: float, voltage: float) -> None:
         """Advance from time ``t`` to ``t + h`` with ``voltage`` [V] held constant.
@@ -76,27 +139,31 @@ class Plant:
         ValueError
             If ``h`` is not a positive finite number or ``voltage`` is not finite.
         """
-        if not (h > 0 and math.isfinite(h)):
-            raise ValueError(f"step size h = {h} s must be positive and finite")
-        if not math.isfinite(voltage):
-            raise ValueError(f"input voltage = {voltage} V at t = {t} s is not finite")
         stepper = self._steppers.get(h)
         if stepper is None:
-            stepper = self._steppers[h] = ETDRK4(self._L, h)
-        rhs, p, L = self._irhs, self.params, self._L
-
-        def nonlinear(z: np.ndarray) -> np.ndarray:
-            return np.array(rhs(z.tolist(), voltage, p)) - L @ z
-
-        z_new = stepper.step(np.array(self._to_int(self.x.tolist(), p)), nonlinear)
-        x_new = np.array(self._from_int(z_new.tolist(), p))
-        if not np.all(np.isfinite(x_new)):
-            state = ", ".join(f"{n}={v:.6g}" for n, v in zip(self.state_names, self.x))
+            if not (h > 0 and math.isfinite(h)):
+                raise ValueError(f"step size h = {h} s must be positive and finite")
+            stepper = self._steppers[h] = FastETDRK4(self._L, h)
+        if not math.isfinite(voltage):
+            raise ValueError(f"input voltage = {voltage} V at t = {t} s is not finite")
+        limit = self._limit
+        vA = limit if voltage > limit else (-limit if voltage < -limit else voltage)
+        z = stepper.step(self._z, self._f, vA)
+        x = self._from_int(z, self.params) if self.kind == "single-mass" else z
+        if not all(map(math.isfinite, x)):
+            state = ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.state_names, self._xl))
             raise PlantStepError(f"plant state became non-finite in the step from t = {t:.6g} s "
                                  f"(h = {h:g} s, voltage = {voltage:g} V); state at t: {state}")
-        self.x = x_new
+        self._z = z
+        self._xl = list(x)
+        self.x = np.array(self._xl)
         self.voltage = voltage
         self.t = t + h
+
+    @property
+    def state(self) -> list[float]:
+        """The state as a list of floats (a copy), ``state_names`` order."""
+        return list(self._xl)
 
     def _internal_jacobian(self, eps: float = 1e-6) -> np.ndarray:
         """Jacobian of the internal right-hand side at the upright equilibrium (the stiff linear part)."""
@@ -117,7 +184,7 @@ class Plant:
 
     def values(self) -> dict[str, float]:
         """Every state by name (SI units)."""
-        return dict(zip(self.state_names, self.x.tolist()))
+        return dict(zip(self.state_names, self._xl))
 
     def measured(self) -> tuple[float, ...]:
         """The encoder-measured positions (``fmus.physics.MEASURED``)."""
