@@ -1,0 +1,161 @@
+"""Monte Carlo robustness: success rate, metric distributions and one figure per metric.
+
+A run is a success when its status is ``ok``: the pendulum stayed upright (|angle| < 0.35 rad
+throughout) and the cart ended inside the +-2 % settling band of the step (the task's band,
+``harness.metrics``). The success rate is reported with its 95 % Wilson score interval.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+#: Default uncertainty of ``compare --robustness``: masses, friction (viscous damping) and the
+#: spring stiffness, each uniform within +-20 % of its nominal value.
+DEFAULT_UNCERTAINTY = {
+    "single-mass": ("plant.Mc", "plant.Mp", "plant.Beq", "plant.Bp"),
+    "double-mass": ("plant.Ma", "plant.Mc", "plant.Mp", "plant.Ba", "plant.Bc", "plant.Bf", "plant.K", "plant.Bp"),
+}
+DEFAULT_SPREAD = 0.2
+
+
+def default_vary(kind: str, parameters: Mapping[str, Any] | None = None, spread: float = DEFAULT_SPREAD) -> list[str]:
+    """``--vary`` expressions of the default uncertainty for plant ``kind`` (only the
+    parameters the scenario has, when ``parameters`` is given)."""
+    names = DEFAULT_UNCERTAINTY[kind]
+    if parameters is not None:
+        names = tuple(n for n in names if n in parameters)
+    return [f"{n}=uniform({1 - spread:g},{1 + spread:g})*nominal" for n in names]
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """95 % Wilson score interval of a success proportion (nan, nan for n = 0)."""
+    if n <= 0:
+        return (math.nan, math.nan)
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def _numeric(rows: Iterable[Mapping[str, Any]], name: str) -> np.ndarray:
+    values = []
+    for r in rows:
+        v = r.get(name)
+        if isinstance(v, bool):
+            values.append(1.0 if v else 0.0)
+        elif isinstance(v, (int, float)) and math.isfinite(v):
+            values.append(float(v))
+    return np.asarray(values, dtype=float)
+
+
+def summarize(rows: Sequence[Mapping[str, Any]], metric_names: Sequence[str]) -> dict[str, Any]:
+    """Success rate and the distribution of each metric over the runs that completed.
+
+    Returns
+    -------
+    dict
+        ``runs``, ``counts`` (per status), ``success_rate``, ``success_ci95`` and ``metrics``:
+        per metric ``n`` (runs with a value), ``mean``, ``std``, ``min``, ``p5``, ``median``,
+        ``p95``, ``max``.
+    """
+    n = len(rows)
+    counts: dict[str, int] = {}
+    for r in rows:
+        counts[r["status"]] = counts.get(r["status"], 0) + 1
+    ok = counts.get("ok", 0)
+    completed = [r for r in rows if r["status"] != "error"]
+    metrics: dict[str, dict[str, float]] = {}
+    for name in metric_names:
+        x = _numeric(completed, name)
+        if x.size == 0:
+            metrics[name] = {"n": 0}
+            continue
+        metrics[name] = {"n": int(x.size), "mean": float(np.mean(x)), "std": float(np.std(x)),
+                         "min": float(np.min(x)), "p5": float(np.percentile(x, 5)),
+                         "median": float(np.median(x)), "p95": float(np.percentile(x, 95)),
+                         "max": float(np.max(x))}
+    lo, hi = wilson_interval(ok, n)
+    return {"runs": n, "counts": counts, "success_rate": ok / n if n else math.nan,
+            "success_ci95": [lo, hi], "metrics": metrics}
+
+
+def fmt(value: Any, digits: int = 4) -> str:
+    """A number for a table: 4 significant digits, '-' for missing."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, (int, float)):
+        if value == 0:
+            return "0"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+def summary_markdown(summary: Mapping[str, Any], title: str = "Robustness") -> str:
+    """The summary as Markdown (success rate line + distribution table)."""
+    lo, hi = summary["success_ci95"]
+    counts = ", ".join(f"{k} {v}" for k, v in sorted(summary["counts"].items()))
+    lines = [f"## {title}", "",
+             f"Success rate: **{100 * summary['success_rate']:.1f} %** of {summary['runs']} runs "
+             f"(95 % CI {100 * lo:.1f}-{100 * hi:.1f} %); {counts}.", "",
+             "| metric | runs | mean | std | min | p5 | median | p95 | max |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for name, s in summary["metrics"].items():
+        if not s.get("n"):
+            lines.append(f"| {name} | 0 | - | - | - | - | - | - | - |")
+            continue
+        lines.append(f"| {name} | {s['n']} | " + " | ".join(fmt(s[k]) for k in
+                                                         ("mean", "std", "min", "p5", "median", "p95", "max")) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_distributions(rows: Sequence[Mapping[str, Any]], metric_names: Sequence[str], out_dir: Path,
+                       title: str = "") -> list[Path]:
+    """One histogram per metric (successful and failed runs stacked), as PNG files.
+
+    Returns
+    -------
+    list of Path
+        The written figures, ``out_dir/<metric>.png``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    completed = [r for r in rows if r["status"] != "error"]
+    good = [r for r in completed if r["status"] == "ok"]
+    bad = [r for r in completed if r["status"] != "ok"]
+    paths = []
+    for name in metric_names:
+        xg, xb = _numeric(good, name), _numeric(bad, name)
+        if xg.size + xb.size == 0:
+            continue
+        fig, ax = plt.subplots(figsize=(5.0, 3.2), dpi=100)
+        allx = np.concatenate([xg, xb])
+        bins = np.histogram_bin_edges(allx, bins=min(30, max(5, int(np.sqrt(allx.size)) + 1)))
+        if np.ptp(allx) == 0:
+            bins = np.array([allx[0] - 0.5, allx[0] + 0.5]) if allx[0] == 0 else \
+                np.array([allx[0] * 0.99, allx[0] * 1.01])
+            bins = np.sort(bins)
+        ax.hist([xg, xb], bins=bins, stacked=True, color=["tab:green", "tab:red"],
+                label=[f"success ({xg.size})", f"failure ({xb.size})"])
+        ax.set_xlabel(name)
+        ax.set_ylabel("runs")
+        if title:
+            ax.set_title(title, fontsize=9)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        path = out_dir / f"{name}.png"
+        fig.savefig(path)
+        plt.close(fig)
+        paths.append(path)
+    return paths

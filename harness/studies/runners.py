@@ -1,0 +1,244 @@
+"""Run specifications: what one run of a sweep is, built once per worker.
+
+A :class:`RunSpec` is a small picklable description (for a co-simulation: the scenario
+and the run settings). The sweep engine sends it to every worker, where ``build()`` is
+called once -- for a co-simulation this extracts and loads the FMUs -- and the returned
+runner is called once per case with the case's parameter values and seed. A runner returns
+a dict of metrics; it may raise, and the engine records the exception as a failed run.
+
+Specs here:
+
+* :class:`CosimSpec` (in ``harness.studies.cosim``): the real FMI co-simulation of a scenario.
+* :class:`PurePlantSpec`: the pure-Python single-mass plant under a discrete LQR state
+  feedback, no FMUs -- a fast, deterministic stand-in with the same metrics, used to test the
+  engine and to check a cluster set-up quickly (scenario name ``pure:single-mass-lqr``).
+* :class:`SyntheticSpec`: an analytic function with optional delay and failures (tests, bench).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from dataclasses import dataclass, field, fields
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from harness.errors import IpcosimError
+
+#: A per-worker run function: (parameter values, seed) -> metrics.
+Runner = Callable[[Mapping[str, float], int], dict]
+
+#: Statuses a run can end with. ``ok`` is a success; the others are failures.
+STATUSES = ("ok", "fell", "unsettled", "error")
+
+
+class RunFailure(IpcosimError, RuntimeError):
+    """A run that could not be carried out (recorded as status ``error``)."""
+
+
+def classify_task(metrics: Mapping[str, Any]) -> str:
+    """Status of a closed-loop run of the thesis's task.
+
+    ``fell`` when the pendulum did not stay upright, ``unsettled`` when the cart was not
+    inside the +-2 % settling band at the end of the run (``settling_time_s`` is None),
+    else ``ok`` (upright and settled: a success).
+    """
+    if metrics.get("upright") is not True:
+        return "fell"
+    if metrics.get("settling_time_s") is None:
+        return "unsettled"
+    return "ok"
+
+
+def stable_hash(obj: Any) -> str:
+    """SHA-256 (hex, 16 chars) of a JSON-serialisable description."""
+    text = json.dumps(obj, sort_keys=True, default=repr, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+class RunSpec:
+    """Base of run specifications (see the module docstring).
+
+    Subclasses set ``name``, ``parameters`` (``component.variable`` -> nominal value of every
+    parameter a sweep may vary) and ``metric_names``, and implement ``build`` and ``describe``.
+    """
+
+    name: str = "spec"
+    parameters: Mapping[str, float] = {}
+    metric_names: tuple[str, ...] = ()
+    stop_time: float = 0.0
+
+    def build(self) -> Runner:  # pragma: no cover - abstract
+        """Create the per-worker runner (load models once)."""
+        raise NotImplementedError
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-serialisable description (recorded in the sweep's metadata, hashed into ``key``)."""
+        return {"name": self.name}
+
+    def classify(self, metrics: Mapping[str, Any]) -> str:
+        """Status of a finished run (default: the thesis's task criterion)."""
+        return classify_task(metrics)
+
+    @property
+    def key(self) -> str:
+        """Identity of the spec: runs of specs with equal keys are interchangeable."""
+        return stable_hash(self.describe())
+
+
+# --------------------------------------------------------------------------- synthetic
+
+
+@dataclass
+class SyntheticSpec(RunSpec):
+    """An analytic stand-in for a co-simulation (tests and benchmarks).
+
+    ``value = (model.x - 1)^2 + (model.y - 2)^2 + noise * N(0, 1)`` with the normal draw seeded
+    by the case's seed. A run raises :class:`RunFailure` when ``model.x > fail_above``, ends its
+worker process abruptly (as a crashing FMU would) when ``model.x > crash_above``, takes at
+    least ``delay_s`` seconds, and, with ``calls_dir`` set, leaves a file named after its seed
+    there (so tests can count how often each case ran).
+    """
+
+    delay_s: float = 0.0
+    fail_above: float = math.inf
+    crash_above: float = math.inf
+    noise: float = 0.0
+    calls_dir: str | None = None
+    name: str = "synthetic"
+    parameters: Mapping[str, float] = field(default_factory=lambda: {"model.x": 1.0, "model.y": 2.0})
+    metric_names: tuple[str, ...] = ("value", "upright", "settling_time_s")
+
+    def describe(self) -> dict[str, Any]:
+        return {"name": self.name, "delay_s": self.delay_s, "fail_above": repr(self.fail_above),
+                "crash_above": repr(self.crash_above),
+                "noise": self.noise, "parameters": dict(self.parameters)}
+
+    def build(self) -> Runner:
+        spec = self
+
+        def run(params: Mapping[str, float], seed: int) -> dict:
+            t0 = time.perf_counter()
+            values = {**spec.parameters, **params}
+            unknown = set(params) - set(spec.parameters)
+            if unknown:
+                raise RunFailure(f"synthetic model has no parameter {sorted(unknown)[0]!r}")
+            x, y = values["model.x"], values["model.y"]
+            if spec.calls_dir:
+                with open(os.path.join(spec.calls_dir, f"{seed}.{os.getpid()}.{time.monotonic_ns()}"), "w"):
+                    pass
+            if x > spec.crash_above:
+                os._exit(70)
+            if x > spec.fail_above:
+                raise RunFailure(f"model.x = {x:g} is above {spec.fail_above:g}: the model diverged")
+            noise = spec.noise * float(np.random.default_rng(seed).normal()) if spec.noise else 0.0
+            value = (x - 1.0) ** 2 + (y - 2.0) ** 2 + noise
+            remaining = spec.delay_s - (time.perf_counter() - t0)
+            if remaining > 0:
+                time.sleep(remaining)
+            return {"value": value, "upright": value < 1.0, "settling_time_s": 1.0 if value < 0.5 else None}
+
+        return run
+
+
+# --------------------------------------------------------------------------- pure plant loop
+
+
+@dataclass
+class PurePlantSpec(RunSpec):
+    """The single-mass plant (``fmus.plant.Plant``) under a discrete LQR state feedback.
+
+    The controller samples the true state every ``controller.sample_period`` and holds
+    ``u = -K (x - [r, 0, 0, 0])`` (clipped to ``controller.voltage_limit``); ``K`` is the LQR
+    gain of the nominal plant's 4-state model for ``Q = diag(q_position, q_velocity, q_angle,
+    q_angular_velocity)``, ``R = r_voltage``. The reference steps to ``setpoint.amplitude`` at
+    ``setpoint.step_time``. Plant parameters are the ``fmus.params`` names under ``plant.``.
+    """
+
+    stop_time: float = 5.0
+    step: float = 1e-3
+    preset: str = "thesis-ch3"
+    name: str = "pure:single-mass-lqr"
+    metric_names: tuple[str, ...] = ()
+    parameters: Mapping[str, float] = field(default_factory=dict)
+
+    CONTROLLER_DEFAULTS = {"controller.q_position": 2000.0, "controller.q_velocity": 1.0,
+                           "controller.q_angle": 200.0, "controller.q_angular_velocity": 1.0,
+                           "controller.r_voltage": 1.0, "controller.sample_period": 2e-3,
+                           "controller.voltage_limit": 10.0}
+    SETPOINT_DEFAULTS = {"setpoint.amplitude": 0.05, "setpoint.step_time": 0.0}
+
+    def __post_init__(self) -> None:
+        from fmus.params import preset
+        from harness.metrics import METRIC_KEYS
+        from harness.studies.cost import COST_TERMS
+
+        plant = preset(self.preset)
+        params = {f"plant.{f.name}": float(getattr(plant, f.name)) for f in fields(plant)}
+        params.update(self.CONTROLLER_DEFAULTS)
+        params.update(self.SETPOINT_DEFAULTS)
+        self.parameters = params
+        self.metric_names = tuple(METRIC_KEYS) + COST_TERMS
+
+    def describe(self) -> dict[str, Any]:
+        return {"name": self.name, "stop_time": self.stop_time, "step": self.step, "preset": self.preset,
+                "parameters": dict(self.parameters)}
+
+    def build(self) -> Runner:
+        from fmus.linearize import linearize
+        from fmus.params import preset, with_values
+        from fmus.plant import Plant
+        from harness.studies.cost import task_metrics
+
+        nominal_plant = preset(self.preset)
+        design = linearize(nominal_plant, inductance=False)
+        spec = self
+        gains: dict[tuple, np.ndarray] = {}
+
+        def gain(q: tuple[float, ...], r: float) -> np.ndarray:
+            if (q, r) not in gains:
+                import control
+                K, _, _ = control.lqr(design.A, design.B, np.diag(q), np.array([[r]]))
+                gains[(q, r)] = np.asarray(K, dtype=float).ravel()
+            return gains[(q, r)]
+
+        def run(params: Mapping[str, float], seed: int) -> dict:
+            unknown = set(params) - set(spec.parameters)
+            if unknown:
+                raise RunFailure(f"{spec.name} has no parameter {sorted(unknown)[0]!r}")
+            v = {**spec.parameters, **params}
+            plant_values = {k[6:]: val for k, val in params.items() if k.startswith("plant.")}
+            plant = Plant(with_values(nominal_plant, plant_values))
+            K = gain((v["controller.q_position"], v["controller.q_velocity"], v["controller.q_angle"],
+                      v["controller.q_angular_velocity"]), v["controller.r_voltage"])
+            h = spec.step
+            ratio = v["controller.sample_period"] / h
+            every = int(round(ratio))
+            if every < 1 or abs(ratio - every) > 1e-9 * max(1.0, ratio):
+                raise RunFailure(f"controller.sample_period = {v['controller.sample_period']:g} s is not an "
+                                 f"integer multiple of the step {h:g} s")
+            n = int(round(spec.stop_time / h))
+            limit = v["controller.voltage_limit"]
+            amplitude, step_time = v["setpoint.amplitude"], v["setpoint.step_time"]
+            t = np.arange(n + 1) * h
+            pos, ang, ref, volt = (np.empty(n + 1) for _ in range(4))
+            u = 0.0
+            for k in range(n + 1):
+                x = plant.x
+                r = amplitude if t[k] >= step_time else 0.0
+                if k % every == 0:
+                    err = np.array([x[0] - r, x[1], x[2], x[3]])
+                    u = float(min(max(-K @ err, -limit), limit))
+                pos[k], ang[k], ref[k], volt[k] = x[0], x[2], r, u
+                if k == n:
+                    break
+                if abs(x[2]) > 1.5:  # fallen far beyond the upright limit: stop integrating
+                    pos[k + 1:], ang[k + 1:], ref[k + 1:], volt[k + 1:] = x[0], x[2], r, u
+                    break
+                plant.do_step(float(t[k]), h, u)
+            return task_metrics(t, pos, ref, ang, volt)
+
+        return run

@@ -1,0 +1,61 @@
+"""Turn a scenario name or path (plus run settings) into a run specification."""
+from __future__ import annotations
+
+from typing import Mapping
+
+from harness.errors import UsageError
+from harness.studies.runners import PurePlantSpec, RunSpec
+
+#: Scenario names served without FMUs (pure-Python stand-ins, see ``harness.studies.runners``).
+PURE_SCENARIOS = {"pure:single-mass-lqr": PurePlantSpec}
+
+
+def parse_set(items: list[str] | None) -> dict[str, float]:
+    """``--set comp.var=value`` options as a dict (values must be numbers)."""
+    out: dict[str, float] = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or "." not in key:
+            raise UsageError(f"--set {item!r}: expected COMPONENT.VARIABLE=VALUE")
+        try:
+            out[key] = float(value)
+        except ValueError:
+            raise UsageError(f"--set {item!r}: {value.strip()!r} is not a number") from None
+    return out
+
+
+def spec_for(scenario: str, stop_time: float | None = None, step: float | None = None,
+             overrides: Mapping[str, float] | None = None) -> RunSpec:
+    """The run specification of a scenario.
+
+    Parameters
+    ----------
+    scenario : str
+        A scenario name (``single-mass-lqr``), a path to a scenario folder or ``.ssp``, or a
+        pure-Python stand-in (``pure:single-mass-lqr``).
+    stop_time, step : float, optional
+        Override the scenario's experiment.
+    overrides : mapping, optional
+        ``component.variable`` values set in every run (``--set``).
+    """
+    if stop_time is not None and not stop_time > 0:
+        raise UsageError(f"--stop-time {stop_time}: must be positive")
+    if step is not None and not step > 0:
+        raise UsageError(f"--step {step}: must be positive")
+    if scenario in PURE_SCENARIOS:
+        kwargs = {}
+        if stop_time is not None:
+            kwargs["stop_time"] = stop_time
+        if step is not None:
+            kwargs["step"] = step
+        spec = PURE_SCENARIOS[scenario](**kwargs)
+        if overrides:
+            unknown = [k for k in overrides if k not in spec.parameters]
+            if unknown:
+                raise UsageError(f"--set {unknown[0]}: {scenario} has no parameter {unknown[0]!r}")
+            spec.parameters = {**spec.parameters, **overrides}
+        return spec
+    from harness.studies.cosim import CosimSpec
+
+    return CosimSpec.from_scenario(scenario, stop_time=stop_time, step=step, overrides=overrides)

@@ -1,0 +1,255 @@
+"""The ``--vary`` grammar: how a sweep varies one scenario parameter.
+
+One expression per parameter, ``COMPONENT.VARIABLE=FORM`` with FORM one of::
+
+    uniform(a, b)          uniform random on [a, b]
+    normal(mean, std)      normal random
+    grid(start, stop, n)   n evenly spaced values, both ends included
+    [v1, v2, ...]          the listed values
+    v                      one value (the same as --set)
+
+Any form may be scaled by the parameter's nominal value (its value in the scenario):
+``uniform(0.8,1.2)*nominal`` or ``nominal*uniform(0.8,1.2)``. Random forms are sampled
+once per run; grid and list forms span a Cartesian product, and each grid point is run
+``samples`` times (with fresh random values of the random forms).
+
+Parsing never evaluates Python: numbers are read with ``float``. A malformed expression or
+an unknown parameter raises :class:`VaryError` with one line naming the expression.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from harness.errors import UsageError
+
+FORMS_HELP = ("uniform(a,b), normal(mean,std), grid(start,stop,n), [v1,v2,...] or a number, "
+              "each optionally '*nominal'")
+
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*\.[A-Za-z_][A-Za-z0-9_.\[\]]*$")
+_CALL = re.compile(r"^([A-Za-z_]\w*)\s*\((.*)\)$")
+_DISTRIBUTIONS = {"uniform": 2, "normal": 2, "grid": 3}
+
+
+class VaryError(UsageError):
+    """A ``--vary`` expression that cannot be parsed or names an unknown parameter."""
+
+
+@dataclass(frozen=True)
+class Vary:
+    """One parsed ``--vary`` expression.
+
+    Attributes
+    ----------
+    name : str
+        ``component.variable``.
+    kind : str
+        ``uniform``, ``normal``, ``grid``, ``values`` (list or single number).
+    args : tuple of float
+        The form's arguments (for ``values``: the values).
+    relative : bool
+        True when the form is scaled by the nominal value.
+    text : str
+        The expression as given (for messages and metadata).
+    """
+
+    name: str
+    kind: str
+    args: tuple[float, ...]
+    relative: bool = False
+    text: str = ""
+
+    @property
+    def is_random(self) -> bool:
+        """True for sampled forms (uniform, normal)."""
+        return self.kind in ("uniform", "normal")
+
+    def points(self, nominal: float) -> list[float]:
+        """The values of a grid or list form (absolute, nominal applied)."""
+        scale = nominal if self.relative else 1.0
+        if self.kind == "grid":
+            start, stop, n = self.args
+            return [float(v) * scale for v in np.linspace(start, stop, int(n))]
+        if self.kind == "values":
+            return [v * scale for v in self.args]
+        raise ValueError(f"{self.kind} is a random form, it has no points")
+
+    def sample(self, rng: np.random.Generator, nominal: float) -> float:
+        """One random value (absolute, nominal applied)."""
+        scale = nominal if self.relative else 1.0
+        a, b = self.args
+        value = rng.uniform(a, b) if self.kind == "uniform" else rng.normal(a, b)
+        return float(value) * scale
+
+
+def _number(text: str, expr: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise VaryError(f"--vary {expr!r}: {text.strip()!r} is not a number") from None
+    if not math.isfinite(value):
+        raise VaryError(f"--vary {expr!r}: {text.strip()!r} is not a finite number")
+    return value
+
+
+def _split_args(text: str, expr: str) -> list[float]:
+    parts = [p for p in (s.strip() for s in text.split(","))]
+    if parts == [""]:
+        return []
+    if any(p == "" for p in parts):
+        raise VaryError(f"--vary {expr!r}: empty argument in {text!r}")
+    return [_number(p, expr) for p in parts]
+
+
+def parse_vary(expr: str, parameters: Mapping[str, float] | None = None) -> Vary:
+    """Parse one ``--vary`` expression.
+
+    Parameters
+    ----------
+    expr : str
+        ``component.variable=FORM`` (see the module docstring).
+    parameters : mapping, optional
+        Known parameters (``component.variable`` -> nominal value); when given, an unknown
+        name is an error and ``*nominal`` needs a numeric nominal value.
+
+    Returns
+    -------
+    Vary
+
+    Raises
+    ------
+    VaryError
+        One line naming the expression and what is wrong with it.
+    """
+    name, sep, form = expr.partition("=")
+    name, form = name.strip(), form.strip()
+    if not sep or not name or not form:
+        raise VaryError(f"--vary {expr!r}: expected COMPONENT.VARIABLE=FORM with FORM one of {FORMS_HELP}")
+    if not _NAME.match(name):
+        raise VaryError(f"--vary {expr!r}: {name!r} is not a COMPONENT.VARIABLE name (e.g. plant.Mp)")
+    if parameters is not None and name not in parameters:
+        component = name.split(".", 1)[0]
+        known = sorted(k.split(".", 1)[1] for k in parameters if k.split(".", 1)[0] == component)
+        hint = (f"{component} parameters: {', '.join(known)}" if known else
+                f"components: {', '.join(sorted({k.split('.', 1)[0] for k in parameters}))}")
+        raise VaryError(f"--vary {expr!r}: unknown parameter {name!r} ({hint})")
+
+    relative = False
+    body = form.replace(" ", "")
+    if body.endswith("*nominal"):
+        relative, body = True, body[: -len("*nominal")]
+    elif body.startswith("nominal*"):
+        relative, body = True, body[len("nominal*"):]
+    if "nominal" in body:
+        raise VaryError(f"--vary {expr!r}: 'nominal' may only multiply the whole form, e.g. uniform(0.8,1.2)*nominal")
+    if relative and parameters is not None:
+        nominal = parameters[name]
+        if nominal is None or not isinstance(nominal, (int, float)) or not math.isfinite(nominal):
+            raise VaryError(f"--vary {expr!r}: {name} has no numeric nominal value to scale")
+
+    if body.startswith("[") and body.endswith("]"):
+        values = _split_args(body[1:-1], expr)
+        if not values:
+            raise VaryError(f"--vary {expr!r}: the list of values is empty")
+        return Vary(name, "values", tuple(values), relative, expr)
+    call = _CALL.match(body)
+    if call:
+        dist, argtext = call.group(1), call.group(2)
+        if dist not in _DISTRIBUTIONS:
+            raise VaryError(f"--vary {expr!r}: unknown form {dist!r} (expected {FORMS_HELP})")
+        args = _split_args(argtext, expr)
+        if len(args) != _DISTRIBUTIONS[dist]:
+            raise VaryError(f"--vary {expr!r}: {dist} takes {_DISTRIBUTIONS[dist]} arguments, got {len(args)}")
+        if dist == "uniform" and not args[0] < args[1]:
+            raise VaryError(f"--vary {expr!r}: uniform(a,b) needs a < b")
+        if dist == "normal" and not args[1] > 0:
+            raise VaryError(f"--vary {expr!r}: normal(mean,std) needs std > 0")
+        if dist == "grid":
+            if args[2] != int(args[2]) or args[2] < 1:
+                raise VaryError(f"--vary {expr!r}: grid(start,stop,n) needs a whole n >= 1")
+            if args[2] > 1 and not args[0] != args[1]:
+                raise VaryError(f"--vary {expr!r}: grid(start,stop,n) needs start != stop")
+        return Vary(name, dist, tuple(args), relative, expr)
+    if "(" in body or ")" in body or "[" in body or "]" in body:
+        raise VaryError(f"--vary {expr!r}: malformed form {form!r} (expected {FORMS_HELP})")
+    return Vary(name, "values", (_number(body, expr),), relative, expr)
+
+
+def parse_all(exprs: Iterable[str], parameters: Mapping[str, float] | None = None) -> list[Vary]:
+    """Parse several expressions; a parameter may be varied only once."""
+    varies: list[Vary] = []
+    seen: set[str] = set()
+    for expr in exprs:
+        vary = parse_vary(expr, parameters)
+        if vary.name in seen:
+            raise VaryError(f"--vary {expr!r}: {vary.name} is varied twice")
+        seen.add(vary.name)
+        varies.append(vary)
+    return varies
+
+
+@dataclass(frozen=True)
+class Case:
+    """One run of a sweep: its position, its parameter values and its seed.
+
+    ``params`` maps ``component.variable`` to the value set for this run. ``seed`` is
+    handed to the run (for any randomness inside it) and recorded with its results.
+    """
+
+    index: int
+    params: Mapping[str, float] = field(default_factory=dict)
+    seed: int = 0
+
+
+def case_seed(seed: int, index: int) -> int:
+    """The seed of run ``index`` of a sweep seeded with ``seed`` (independent of run order)."""
+    return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, dtype=np.uint32)[0])
+
+
+def make_cases(varies: Sequence[Vary], nominal: Mapping[str, float], samples: int | None = None,
+               seed: int = 0, fixed: Mapping[str, float] | None = None) -> list[Case]:
+    """Expand parsed variations into the list of runs.
+
+    Parameters
+    ----------
+    varies : sequence of Vary
+        Parsed ``--vary`` expressions.
+    nominal : mapping
+        Nominal value of each varied parameter (``component.variable`` -> value).
+    samples : int, optional
+        Runs per grid point (default: 100 when a random form is present, else 1).
+    seed : int
+        Master seed. Run ``i`` draws its random values from its own generator seeded by
+        ``(seed, i)``, so the values do not depend on the executor or the order of runs.
+    fixed : mapping, optional
+        Values set in every run (like ``--set``), recorded with each case.
+
+    Returns
+    -------
+    list of Case
+    """
+    if samples is None:
+        samples = 100 if any(v.is_random for v in varies) else 1
+    if samples < 1:
+        raise VaryError(f"--samples {samples}: need at least 1 sample")
+    grid_varies = [v for v in varies if not v.is_random]
+    random_varies = [v for v in varies if v.is_random]
+    grids = [v.points(nominal.get(v.name, 1.0)) for v in grid_varies]
+    cases: list[Case] = []
+    index = 0
+    for point in itertools.product(*grids):
+        for _ in range(samples):
+            cs = case_seed(seed, index)
+            rng = np.random.default_rng(cs)
+            params: dict[str, float] = dict(fixed or {})
+            params.update({v.name: float(x) for v, x in zip(grid_varies, point)})
+            for v in random_varies:
+                params[v.name] = v.sample(rng, nominal.get(v.name, 1.0))
+            cases.append(Case(index=index, params=params, seed=cs))
+            index += 1
+    return cases
