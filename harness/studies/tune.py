@@ -1,0 +1,292 @@
+"""Automatic gain tuning: differential evolution over controller parameters, evaluated in
+parallel by the sweep engine.
+
+The cost of a gain set is :func:`harness.studies.cost.cost` of one run of the scenario with
+those gains (ITAE of the cart position + weighted ITAE of the angle + weighted ISE of the
+voltage; infinite when the pendulum falls). ``scipy.optimize.differential_evolution`` proposes a
+population per generation; its ``workers`` map hands the whole generation to the sweep engine,
+so the runs of a generation go in parallel on the local pool or a Dask cluster. The
+scenario's own gains (the thesis's) are put into the initial population, so the result is never
+worse than them.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from harness.errors import UsageError
+from harness.studies import cost as costmod
+from harness.studies.robustness import fmt
+from harness.studies.runners import RunSpec
+from harness.studies.vary import Case, case_seed
+
+#: Default search range around a nominal value g: [g / DEFAULT_FACTOR, g * DEFAULT_FACTOR].
+DEFAULT_FACTOR = 2.0
+
+
+class TuneError(UsageError):
+    """Bad tuning parameters or bounds."""
+
+
+def parse_params(text: str, parameters: Mapping[str, Any]) -> list[str]:
+    """``controller.a,controller.b`` -> names, each checked against the scenario's parameters."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise TuneError("--params: give at least one COMPONENT.VARIABLE")
+    for n in names:
+        if n not in parameters:
+            component = n.split(".", 1)[0]
+            known = sorted(k.split(".", 1)[1] for k in parameters if k.split(".", 1)[0] == component)
+            hint = f"{component} parameters: {', '.join(known)}" if known else "no such component"
+            raise TuneError(f"--params: unknown parameter {n!r} ({hint})")
+    if len(set(names)) != len(names):
+        raise TuneError(f"--params {text!r}: a parameter is listed twice")
+    return names
+
+
+def parse_bounds(items: Iterable[str], names: Sequence[str], parameters: Mapping[str, Any]) -> list[tuple[float, float]]:
+    """Search bounds per parameter: ``--bounds NAME=LO:HI`` or the default factor-2 range
+    around the nominal value (a zero nominal needs explicit bounds)."""
+    given: dict[str, tuple[float, float]] = {}
+    for item in items:
+        name, sep, rng = item.partition("=")
+        name = name.strip()
+        lo_text, sep2, hi_text = rng.partition(":")
+        if not sep or not sep2:
+            raise TuneError(f"--bounds {item!r}: expected COMPONENT.VARIABLE=LOW:HIGH")
+        if name not in names:
+            raise TuneError(f"--bounds {item!r}: {name} is not in --params")
+        try:
+            lo, hi = float(lo_text), float(hi_text)
+        except ValueError:
+            raise TuneError(f"--bounds {item!r}: LOW and HIGH must be numbers") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise TuneError(f"--bounds {item!r}: need finite LOW < HIGH")
+        given[name] = (lo, hi)
+    bounds = []
+    for n in names:
+        if n in given:
+            bounds.append(given[n])
+            continue
+        g = parameters[n]
+        if not isinstance(g, (int, float)) or not math.isfinite(g) or g == 0:
+            raise TuneError(f"--params: {n} has nominal value {g!r}; give its range with --bounds {n}=LOW:HIGH")
+        a, b = g / DEFAULT_FACTOR, g * DEFAULT_FACTOR
+        bounds.append((min(a, b), max(a, b)))
+    return bounds
+
+
+@dataclass
+class TuneResult:
+    """Outcome of :func:`tune`.
+
+    Attributes
+    ----------
+    names : list of str
+        Tuned parameters.
+    nominal, best : dict
+        Scenario's values and the best found.
+    nominal_cost, best_cost : float
+        Cost J (inf when the pendulum fell).
+    nominal_row, best_row : dict
+        The sweep rows (metrics) of the nominal and the best run.
+    evaluations : list of dict
+        Every run made (flat sweep rows plus ``cost``), in order.
+    generations : int
+        Differential-evolution generations carried out.
+    """
+
+    names: list[str]
+    nominal: dict[str, float]
+    best: dict[str, float]
+    nominal_cost: float
+    best_cost: float
+    nominal_row: dict[str, Any]
+    best_row: dict[str, Any]
+    evaluations: list[dict[str, Any]] = field(default_factory=list)
+    generations: int = 0
+    message: str = ""
+
+
+class SweepMap:
+    """The ``workers`` map handed to differential evolution: evaluates a generation through the
+    sweep engine and returns the (surrogate) costs."""
+
+    def __init__(self, spec: RunSpec, names: Sequence[str], executor: Any, seed: int,
+                 w_angle: float, w_voltage: float, budget: int,
+                 on_row: Callable[[dict[str, Any]], None] | None = None) -> None:
+        from harness.sweep import run_sweep
+
+        self._run_sweep = run_sweep
+        self.spec, self.names, self.executor, self.seed = spec, list(names), executor, seed
+        self.w_angle, self.w_voltage, self.budget = w_angle, w_voltage, budget
+        self.rows: list[dict[str, Any]] = []
+        self.on_row = on_row
+        self.generations = 0
+
+    def evaluate(self, vectors: Sequence[Sequence[float]]) -> list[dict[str, Any]]:
+        """Run one case per parameter vector; return their rows (with ``cost``)."""
+        start = len(self.rows)
+        cases = [Case(index=start + i, params=dict(zip(self.names, map(float, v))), seed=case_seed(self.seed, start + i))
+                 for i, v in enumerate(vectors)]
+        result = self._run_sweep(self.spec, cases, executor=self.executor)
+        for row in result.rows:
+            row["cost"] = costmod.cost(row, self.w_angle, self.w_voltage) if row["status"] != "error" else math.inf
+            self.rows.append(row)
+            if self.on_row:
+                self.on_row(row)
+        return result.rows
+
+    def __call__(self, func: Callable, iterable: Iterable) -> list[float]:
+        vectors = [np.asarray(x, dtype=float) for x in iterable]
+        rows = self.evaluate(vectors)
+        self.generations += 1
+        stop = self.spec.stop_time or 1.0
+        return [costmod.surrogate_cost(r, stop, self.w_angle, self.w_voltage) if r["status"] != "error"
+                else 2.0 * costmod.FALL_PENALTY for r in rows]
+
+
+def plan_population(budget: int, dims: int) -> tuple[int, int]:
+    """(popsize multiplier, generations after the first) so that the total number of runs,
+    ``popsize * dims * (1 + maxiter)``, stays within ``budget`` (at least 5 members, 1 generation)."""
+    if budget < 2 * max(5, dims):
+        raise TuneError(f"--budget {budget}: need at least {2 * max(5, dims)} runs for {dims} parameter(s)")
+    popsize = max(1, math.ceil(5 / dims))
+    # grow the population while it leaves room for ~ 8 generations
+    while (popsize + 1) * dims * 9 <= budget and popsize < 15:
+        popsize += 1
+    maxiter = max(1, budget // (popsize * dims) - 1)
+    return popsize, maxiter
+
+
+def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, float]], budget: int = 200,
+         executor: Any = None, seed: int = 0, w_angle: float = costmod.W_ANGLE,
+         w_voltage: float = costmod.W_VOLTAGE, progress: bool = False,
+         on_row: Callable[[dict[str, Any]], None] | None = None) -> TuneResult:
+    """Minimise the tuning cost over ``names`` within ``bounds`` by differential evolution.
+
+    Parameters
+    ----------
+    spec : RunSpec
+        The scenario (its nominal parameter values are the starting point).
+    names : sequence of str
+        Parameters to tune (``component.variable``).
+    bounds : sequence of (float, float)
+        Search range of each.
+    budget : int
+        Maximum number of runs (the nominal run included).
+    executor : LocalExecutor or DaskExecutor, optional
+        Where runs go (default: a local pool, closed at the end).
+    seed : int
+        Seed of the optimiser (and of the runs).
+    w_angle, w_voltage : float
+        Cost weights.
+    progress : bool
+        Print one line per generation on stderr.
+    """
+    from scipy.optimize import differential_evolution
+
+    from harness.sweep import open_executor
+
+    dims = len(names)
+    popsize, maxiter = plan_population(budget - 1, dims)
+    nominal = {n: float(spec.parameters[n]) for n in names}
+    x0 = np.array([min(max(nominal[n], lo), hi) for n, (lo, hi) in zip(names, bounds)])
+    own = executor is None
+    if own:
+        executor = open_executor()
+    try:
+        mapper = SweepMap(spec, names, executor, seed, w_angle, w_voltage, budget, on_row)
+        nominal_row = mapper.evaluate([np.array([nominal[n] for n in names])])[0]
+        best_seen = [nominal_row["cost"]]
+
+        def callback(*_: Any, **__: Any) -> None:
+            if progress:
+                gen_best = min(r["cost"] for r in mapper.rows)
+                best_seen.append(gen_best)
+                print(f"tune: generation {mapper.generations}, {len(mapper.rows)} runs, best cost "
+                      f"{fmt(gen_best)} (nominal {fmt(nominal_row['cost'])})", file=sys.stderr, flush=True)
+
+        result = differential_evolution(
+            lambda x: math.inf, bounds=list(bounds), popsize=popsize, maxiter=maxiter, tol=0.0, atol=0.0,
+            polish=False, updating="deferred", workers=mapper, x0=x0, rng=np.random.default_rng(seed),
+            init="latinhypercube", callback=callback)
+    finally:
+        if own:
+            executor.close()
+
+    candidates = [r for r in mapper.rows if r["status"] != "error"]
+    best_row = min(candidates, key=lambda r: r["cost"]) if candidates else nominal_row
+    if not (best_row["cost"] < nominal_row["cost"]):
+        best_row = nominal_row
+    best = {n: float(best_row[n]) for n in names}
+    return TuneResult(names=list(names), nominal=nominal, best=best, nominal_cost=nominal_row["cost"],
+                      best_cost=best_row["cost"], nominal_row=nominal_row, best_row=best_row,
+                      evaluations=mapper.rows, generations=mapper.generations, message=str(result.message))
+
+
+# --------------------------------------------------------------------------- outputs
+
+SSV_NS = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+
+
+def ssv_text(values: Mapping[str, float], name: str = "tuned", description: str = "") -> str:
+    """An SSP 1.0 parameter set (``.ssv``) holding ``component.variable`` Real values."""
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             f'<ssv:ParameterSet xmlns:ssv="{SSV_NS}" version="1.0" name={quoteattr(name)}>']
+    if description:
+        lines.append(f"  <!-- {description.replace('--', '-')} -->")
+    lines.append("  <ssv:Parameters>")
+    for key, value in values.items():
+        lines.append(f'    <ssv:Parameter name={quoteattr(key)}><ssv:Real value="{float(value)!r}"/></ssv:Parameter>')
+    lines += ["  </ssv:Parameters>", "</ssv:ParameterSet>", ""]
+    return "\n".join(lines)
+
+
+def read_ssv_values(path: Path) -> dict[str, float]:
+    """The Real values of an ``.ssv`` file (``name`` -> value)."""
+    from lxml import etree
+
+    root = etree.parse(str(path)).getroot()
+    out = {}
+    for p in root.iter(f"{{{SSV_NS}}}Parameter"):
+        real = p.find(f"{{{SSV_NS}}}Real")
+        if real is not None:
+            out[p.get("name")] = float(real.get("value"))
+    return out
+
+
+TABLE_METRICS = ("cost", "itae_position", "settling_time_s", "overshoot_m", "steady_state_error_m",
+                 "max_abs_angle_rad", "peak_voltage_V", "rms_voltage_V", "upright")
+
+
+def before_after_markdown(res: TuneResult, label_before: str = "scenario gains") -> str:
+    """Before/after table of parameter values and metrics."""
+    lines = [f"| | {label_before} | tuned |", "|---|---|---|"]
+    for n in res.names:
+        lines.append(f"| {n} | {fmt(res.nominal[n], 6)} | {fmt(res.best[n], 6)} |")
+    for m in TABLE_METRICS:
+        before, after = res.nominal_row.get(m), res.best_row.get(m)
+        lines.append(f"| {m} | {fmt(before)} | {fmt(after)} |")
+    lines.append(f"| status | {res.nominal_row['status']} | {res.best_row['status']} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_evaluations(path: Path, rows: Sequence[Mapping[str, Any]], names: Sequence[str]) -> None:
+    """Every run of the tuning as CSV (parameters, cost, status, metrics)."""
+    if not rows:
+        return
+    keys = ["index", "status", "cost", *names]
+    keys += [k for k in rows[0] if k not in keys and k not in ("seed", "success")]
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(keys)
+        for r in rows:
+            w.writerow(["" if r.get(k) is None else r.get(k) for k in keys])
