@@ -1,0 +1,651 @@
+"""The virtual IP02 rig: the plant physics behind a model of the Q4 card, the amplifier and the lab.
+
+One source of truth: the motion is :class:`fmus.plant.Plant` (the same object the plant
+FMUs step). Around it the rig models what a controller meets on the real bench:
+
+* **DAC** -- 12 bits over +-10 V (two's-complement codes -2048..2047, 1 LSB = 20/4096 V);
+  analog output 0 drives the power amplifier (gain 1), outputs 1..3 are not connected.
+* **Encoders** -- quadrature, 4096 counts/rev, 32-bit wrapping counters: channel 0 the
+  motor-driven cart (2.275e-5 m/count), channel 1 the pendulum (1.534e-3 rad/count,
+  counter-clockwise positive), channel 2 the passive cart of the double mass (2.275e-5
+  m/count); channel 3 is not connected. A counter reads ``offset + floor(position /
+  resolution)``, so a reading is within one count below the true position.
+* **Software limits** (the lab's safety supervisor) -- cart +-0.30 m (every cart),
+  pendulum +-20 deg, checked on the encoder readings after every physics step. A trip
+  latches the amplifier off (0 V to the motor, whatever the card writes) until
+  :meth:`VirtualRig.reset` (the operator's reset).
+* **Hard end stops** at +-0.407 m (half the 0.814 m track): a cart reaching one stops
+  dead (inelastic; its outward velocity is set to zero).
+* **Watchdog** -- as on the Q4 (see :mod:`harness.hil.api`), timed on the rig's clock.
+  Expiry forces the analog outputs to their expiration states (0 V unless configured)
+  and latches: writes are refused until ``watchdog_clear``.
+* **Noise and latency** (optional) -- Gaussian count noise of standard deviation
+  ``noise_counts`` (seeded); a one-way transport latency: a write reaches the amplifier
+  ``latency`` seconds after it was made, a reading shows the encoders ``latency``
+  seconds before it was taken.
+
+Clocks. ``lockstep``: the rig's time advances only when asked (:meth:`VirtualRig.advance`,
+:meth:`VirtualRig.step`), in sub-steps of at most ``tick``; deterministic, for CI.
+``wallclock``: the rig's time is the host's monotonic clock since :meth:`start_clock`;
+the physics runs on a fixed grid of ``tick`` seconds, kept up to date by a background
+thread and by every request. Time is kept in integer nanoseconds (never accumulated
+floats). The rig is thread-safe (one re-entrant lock).
+"""
+from __future__ import annotations
+
+import collections
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from fmus.params import DEFAULT_PRESET, PRESETS, preset
+from fmus.physics import MEASURED
+from fmus.plant import Plant, PlantStepError
+
+from .api import (CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite, wrap_int32)
+
+# Q4 card and IP02 facts (thesis-data.md section 1 table and section 3).
+ANALOG_OUTPUTS = 4
+ENCODER_INPUTS = 4
+DAC_BITS = 12
+DAC_RANGE = 10.0                         # +-10 V
+DAC_LSB = 2 * DAC_RANGE / (1 << DAC_BITS)
+COUNTS_PER_REV = 4096
+CART_M_PER_COUNT = 2.275e-5
+PENDULUM_RAD_PER_COUNT = 1.534e-3
+AMPLIFIER_GAIN = 1.0
+MOTOR_CHANNEL = 0
+CART_ENCODER, PENDULUM_ENCODER, PASSIVE_CART_ENCODER = 0, 1, 2
+CART_LIMIT_M = 0.30
+PENDULUM_LIMIT_RAD = math.radians(20.0)
+END_STOP_M = 0.407
+CLOCKS = ("lockstep", "wallclock")
+DEFAULT_TICK = {"lockstep": 1e-3, "wallclock": 5e-4}
+
+NS = 1_000_000_000
+
+
+def to_ns(seconds: float) -> int:
+    """Seconds -> integer nanoseconds (rounded)."""
+    return int(round(float(seconds) * NS))
+
+
+def dac_quantize(volts: float) -> float:
+    """The DAC: the nearest 12-bit code in [-2048, 2047], back in volts."""
+    code = int(round(volts / DAC_LSB))
+    code = max(-(1 << (DAC_BITS - 1)), min((1 << (DAC_BITS - 1)) - 1, code))
+    return code * DAC_LSB
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """Everything that defines a virtual rig.
+
+    Parameters
+    ----------
+    plant : str
+        ``single-mass`` or ``double-mass``.
+    preset : str, optional
+        Physical parameter preset (default: the plant's thesis preset).
+    params : mapping
+        Physical parameter overrides (``fmus.params`` names).
+    initial_state : mapping
+        Initial values by state name (``fmus.physics.state_names``); others 0.
+    clock : str
+        ``lockstep`` or ``wallclock``.
+    tick : float, optional
+        Physics step [s]: the largest sub-step in lockstep, the fixed grid in wallclock.
+    cart_limit, pendulum_limit : float or None
+        Software limits [m], [rad]; None disables one.
+    end_stop : float
+        Hard end stops [m].
+    noise_counts : float
+        Standard deviation of encoder noise [counts]; 0 = none.
+    latency : float
+        One-way transport latency [s].
+    seed : int
+        Seed of the noise generator.
+    """
+
+    plant: str = "single-mass"
+    preset: str | None = None
+    params: Mapping[str, float] = field(default_factory=dict)
+    initial_state: Mapping[str, float] = field(default_factory=dict)
+    clock: str = "lockstep"
+    tick: float | None = None
+    cart_limit: float | None = CART_LIMIT_M
+    pendulum_limit: float | None = PENDULUM_LIMIT_RAD
+    end_stop: float = END_STOP_M
+    noise_counts: float = 0.0
+    latency: float = 0.0
+    seed: int = 0
+
+    def checked(self) -> "RigConfig":
+        """Validate; raises ``ValueError`` naming the offending field."""
+        if self.plant not in DEFAULT_PRESET:
+            raise ValueError(f"rig plant {self.plant!r}: expected single-mass or double-mass")
+        if self.clock not in CLOCKS:
+            raise ValueError(f"rig clock {self.clock!r}: expected lockstep or wallclock")
+        name = self.preset or DEFAULT_PRESET[self.plant]
+        if name in PRESETS and PRESETS[name][0] != self.plant:
+            raise ValueError(f"rig preset {name!r} is a {PRESETS[name][0]} preset, not {self.plant}")
+        for label, value, lo in (("tick", self.tick_s, 1e-6), ("end_stop", self.end_stop, 0.0)):
+            if not (math.isfinite(value) and value > lo):
+                raise ValueError(f"rig {label} = {value}: must be a finite number > {lo:g}")
+        for label, value in (("noise_counts", self.noise_counts), ("latency", self.latency)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"rig {label} = {value}: must be a finite number >= 0")
+        for label, value in (("cart_limit", self.cart_limit), ("pendulum_limit", self.pendulum_limit)):
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise ValueError(f"rig {label} = {value}: must be > 0 (or disabled)")
+        return self
+
+    @property
+    def tick_s(self) -> float:
+        """The physics step [s] (the clock's default if not given)."""
+        return float(self.tick) if self.tick is not None else DEFAULT_TICK[self.clock]
+
+
+@dataclass(frozen=True)
+class RigEvent:
+    """Something the rig's log keeps: a limit trip, a watchdog expiry, a session change..."""
+
+    time: float
+    kind: str
+    message: str
+
+
+class VirtualRig:
+    """The virtual IP02 + Q4 rig (see the module docstring).
+
+    Parameters
+    ----------
+    config : RigConfig
+        The rig's definition.
+    clock_ns : callable
+        Monotonic host clock in nanoseconds (wallclock mode; injectable for tests).
+    """
+
+    def __init__(self, config: RigConfig | None = None,
+                 clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
+        self.config = (config or RigConfig()).checked()
+        self.kind = self.config.plant
+        self.params = preset(self.config.preset or DEFAULT_PRESET[self.kind], **dict(self.config.params))
+        self._clock_ns = clock_ns
+        self.lock = threading.RLock()
+        self.tick_ns = max(1, to_ns(self.config.tick_s))
+        self.latency_ns = to_ns(self.config.latency)
+        self.plant = Plant(self.params)
+        self._x0 = self._initial_state()
+        self.plant.set_state(self._x0)
+        self._rng = np.random.default_rng(self.config.seed)
+        self._t_ns = 0                      # time of the physics state
+        self._wall0_ns: int | None = None   # wallclock: host time of rig time 0
+        self._ticker: threading.Thread | None = None
+        self._stop_ticker = threading.Event()
+        self.events: collections.deque[RigEvent] = collections.deque(maxlen=1000)
+        self.event_count = 0
+        self.counters: collections.Counter[str] = collections.Counter()
+        self.amplifier_enabled = True
+        self.limit_message = ""
+        self._reset_card_state()
+        self._measured_index = [self.plant.state_names.index(n) for n in MEASURED[self.kind]]
+        cart = self._measured_index[0]
+        pend = self.plant.state_names.index("pendulum_angle")
+        # encoder channel -> (state index, resolution)
+        self._encoders: dict[int, tuple[int, float]] = {CART_ENCODER: (cart, CART_M_PER_COUNT),
+                                                        PENDULUM_ENCODER: (pend, PENDULUM_RAD_PER_COUNT)}
+        if self.kind == "double-mass":
+            self._encoders[PASSIVE_CART_ENCODER] = (self.plant.state_names.index("passive_cart_position"),
+                                                    CART_M_PER_COUNT)
+        self._carts = [(i, i + 1, n) for i, n in enumerate(self.plant.state_names) if n.endswith("cart_position")]
+        self._history: collections.deque[tuple[int, np.ndarray]] = collections.deque()
+        self._record_history()
+
+    # --- construction helpers ----------------------------------------------------------------
+
+    def _initial_state(self) -> np.ndarray:
+        names = self.plant.state_names
+        x0 = np.zeros(len(names))
+        for key, value in self.config.initial_state.items():
+            if key not in names:
+                raise ValueError(f"rig initial state: {self.kind} has no state {key!r} "
+                                 f"(states: {', '.join(names)})")
+            if not math.isfinite(float(value)):
+                raise ValueError(f"rig initial state {key} = {value}: not finite")
+            x0[names.index(key)] = float(value)
+        return x0
+
+    def _reset_card_state(self) -> None:
+        self._ao = [0.0] * ANALOG_OUTPUTS            # DAC registers (as written)
+        self._applied = [0.0] * ANALOG_OUTPUTS       # what reached the amplifier (after latency)
+        self._pending: collections.deque[tuple[int, int, float]] = collections.deque()
+        self._expiration = [0.0] * ANALOG_OUTPUTS
+        self._enc_offset = [0] * ENCODER_INPUTS
+        self.wd_running = False
+        self.wd_expired = False
+        self.wd_timeout_ns = 0
+        self.wd_deadline_ns = 0
+        self.wd_last_reload_ns: int | None = None
+        self.wd_expired_at_ns: int | None = None
+
+    def info(self, card_type: str = "q4", card_id: str = "0") -> CardInfo:
+        """The card description a client gets on opening."""
+        return CardInfo(card_type=card_type, card_id=card_id, analog_outputs=ANALOG_OUTPUTS,
+                        encoder_inputs=ENCODER_INPUTS, dac_bits=DAC_BITS, analog_min=-DAC_RANGE,
+                        analog_max=DAC_RANGE, counts_per_rev=COUNTS_PER_REV, clock=self.config.clock,
+                        tick=self.tick_ns / NS, plant=self.kind)
+
+    # --- clock ---------------------------------------------------------------------------------
+
+    @property
+    def lockstep(self) -> bool:
+        """True for the ``lockstep`` clock."""
+        return self.config.clock == "lockstep"
+
+    def start_clock(self, ticker: bool = True) -> None:
+        """Wallclock: set rig time 0 to now and (optionally) start the background ticker."""
+        if self.lockstep:
+            return
+        with self.lock:
+            if self._wall0_ns is None:
+                self._wall0_ns = self._clock_ns() - self._t_ns
+        if ticker and self._ticker is None:
+            self._stop_ticker.clear()
+            self._ticker = threading.Thread(target=self._tick_loop, name="rig-ticker", daemon=True)
+            self._ticker.start()
+
+    def stop_clock(self) -> None:
+        """Stop the background ticker (wallclock)."""
+        self._stop_ticker.set()
+        if self._ticker is not None:
+            self._ticker.join(timeout=5.0)
+            self._ticker = None
+
+    def _tick_loop(self) -> None:
+        period = self.tick_ns / NS
+        while not self._stop_ticker.wait(period):
+            try:
+                with self.lock:
+                    self.sync()
+            except HILError:
+                pass  # a plant fault is recorded as an event; keep the clock running
+
+    def now_ns(self) -> int:
+        """The rig's clock [ns]: simulated (lockstep) or host time since start_clock (wallclock)."""
+        if self.lockstep:
+            return self._t_ns
+        if self._wall0_ns is None:
+            self.start_clock(ticker=False)
+        return self._clock_ns() - self._wall0_ns
+
+    def time(self) -> float:
+        """The rig's clock [s]."""
+        with self.lock:
+            self.sync()
+            return self.now_ns() / NS
+
+    def sync(self) -> None:
+        """Wallclock: run the physics up to the last grid point not after now. Lockstep: nothing."""
+        if self.lockstep:
+            return
+        target = (self.now_ns() // self.tick_ns) * self.tick_ns
+        while self._t_ns < target:
+            self._substep(self.tick_ns)
+
+    def advance(self, dt: float) -> None:
+        """Lockstep: advance the rig by ``dt`` seconds (sub-steps of at most ``tick``). Wallclock: sync."""
+        with self.lock:
+            if not self.lockstep:
+                self.sync()
+                return
+            if not (math.isfinite(dt) and dt >= 0):
+                raise HILError(ErrorCode.INVALID_ARGUMENT, f"advance: dt = {dt} s must be finite and >= 0")
+            self._advance_to(self._t_ns + to_ns(dt))
+
+    def _advance_to(self, target_ns: int) -> None:
+        interval = target_ns - self._t_ns
+        if interval <= 0:
+            return
+        n = -(-interval // self.tick_ns)
+        done = 0
+        for k in range(1, n + 1):
+            upto = interval * k // n
+            self._substep(upto - done)
+            done = upto
+
+    # --- physics ---------------------------------------------------------------------------------
+
+    def _substep(self, dt_ns: int) -> None:
+        t_ns = self._t_ns
+        while self._pending and self._pending[0][0] <= t_ns:
+            _, ch, v = self._pending.popleft()
+            self._applied[ch] = v
+        if self.wd_running and not self.wd_expired and t_ns >= self.wd_deadline_ns:
+            self._expire_watchdog(t_ns)
+        v = AMPLIFIER_GAIN * self._applied[MOTOR_CHANNEL] if self.amplifier_enabled else 0.0
+        try:
+            self.plant.do_step(t_ns / NS, dt_ns / NS, v)
+        except (PlantStepError, ValueError) as exc:
+            self.amplifier_enabled = False
+            self.limit_message = f"plant fault: {exc}"
+            self._event(t_ns, "fault", self.limit_message)
+            raise HILError(ErrorCode.INTERNAL, f"virtual rig: {exc}") from exc
+        self._t_ns = t_ns + dt_ns
+        self._end_stops()
+        self._record_history()
+        self._check_limits()
+
+    def _end_stops(self) -> None:
+        x = self.plant.x
+        stop = self.config.end_stop
+        hit = False
+        for ip, iv, name in self._carts:
+            if abs(x[ip]) > stop:
+                side = math.copysign(1.0, x[ip])
+                x[ip] = side * stop
+                if x[iv] * side > 0:
+                    x[iv] = 0.0
+                hit = True
+                self.counters[f"end_stop:{name}"] += 1
+        if hit:
+            self.plant.set_state(x)
+
+    def _record_history(self) -> None:
+        self._history.append((self._t_ns, self.plant.x.copy()))
+        keep_from = self._t_ns - self.latency_ns
+        while len(self._history) > 1 and self._history[1][0] <= keep_from:
+            self._history.popleft()
+
+    def _sensed_state(self) -> np.ndarray:
+        """The state the encoders show now (``latency`` ago)."""
+        if not self.latency_ns:
+            return self.plant.x
+        when = self._t_ns - self.latency_ns
+        chosen = self._history[0][1]
+        for t, x in self._history:
+            if t <= when:
+                chosen = x
+            else:
+                break
+        return chosen
+
+    def _position_counts(self, channel: int, x: np.ndarray) -> int:
+        if channel not in self._encoders:
+            return 0
+        index, res = self._encoders[channel]
+        return math.floor(x[index] / res)
+
+    def _check_limits(self) -> None:
+        if not self.amplifier_enabled:
+            return
+        x = self._sensed_state()
+        cfg = self.config
+        for ch, (index, res) in self._encoders.items():
+            name = self.plant.state_names[index]
+            value = math.floor(x[index] / res) * res
+            limit = cfg.pendulum_limit if ch == PENDULUM_ENCODER else cfg.cart_limit
+            if limit is None or abs(value) <= limit:
+                continue
+            unit = "rad" if ch == PENDULUM_ENCODER else "m"
+            extra = f" ({math.degrees(value):+.2f} deg, limit +-{math.degrees(limit):.0f} deg)" \
+                if ch == PENDULUM_ENCODER else ""
+            self.amplifier_enabled = False
+            self.limit_message = (f"{'pendulum' if ch == PENDULUM_ENCODER else 'cart'} limit tripped: "
+                                  f"{name} = {value:+.4f} {unit} beyond +-{limit:.4g} {unit}{extra} "
+                                  f"at rig time {self._t_ns / NS:.4f} s; amplifier latched off until reset")
+            self.counters["limit_trips"] += 1
+            self._event(self._t_ns, "limit", self.limit_message)
+            return
+
+    def _expire_watchdog(self, t_ns: int) -> None:
+        self.wd_expired = True
+        self.wd_expired_at_ns = t_ns
+        for ch in range(ANALOG_OUTPUTS):
+            self._ao[ch] = self._expiration[ch]
+            self._applied[ch] = self._expiration[ch]  # the card forces its outputs at once
+        self._pending.clear()
+        self.counters["watchdog_expiries"] += 1
+        last = self.wd_last_reload_ns if self.wd_last_reload_ns is not None else t_ns
+        self._event(t_ns, "watchdog", f"watchdog expired at rig time {t_ns / NS:.4f} s "
+                                      f"({(t_ns - last) / NS:.4f} s after the last reload; timeout "
+                                      f"{self.wd_timeout_ns / NS:g} s): outputs forced to their expiration "
+                                      f"states")
+
+    def _event(self, t_ns: int, kind: str, message: str) -> None:
+        self.events.append(RigEvent(t_ns / NS, kind, message))
+        self.event_count += 1
+
+    # --- card operations (every one syncs the wallclock first) ------------------------------------
+
+    def _check_ao(self, channels: Sequence[int]) -> list[int]:
+        chans = as_channels(channels, "analog output")
+        for c in chans:
+            if c >= ANALOG_OUTPUTS:
+                raise HILError(ErrorCode.BAD_CHANNEL, f"analog output channel {c} does not exist "
+                                                      f"(the card has 0..{ANALOG_OUTPUTS - 1})")
+        return chans
+
+    def _check_enc(self, channels: Sequence[int]) -> list[int]:
+        chans = as_channels(channels, "encoder")
+        for c in chans:
+            if c >= ENCODER_INPUTS:
+                raise HILError(ErrorCode.BAD_CHANNEL, f"encoder channel {c} does not exist "
+                                                      f"(the card has 0..{ENCODER_INPUTS - 1})")
+        return chans
+
+    def write_analog(self, channels: Sequence[int], volts: Sequence[float]) -> None:
+        """Write analog outputs [V] (DAC-quantized; refused after a watchdog expiry)."""
+        with self.lock:
+            self.sync()
+            chans = self._check_ao(channels)
+            values = as_finite(volts, len(chans), "write_analog")
+            if self.wd_expired:
+                raise HILError(ErrorCode.WATCHDOG_EXPIRED,
+                               f"write_analog refused: the watchdog expired at rig time "
+                               f"{(self.wd_expired_at_ns or 0) / NS:.4f} s and was not cleared")
+            for c, v in zip(chans, values):
+                q = dac_quantize(v)
+                self._ao[c] = q
+                if self.latency_ns:
+                    self._pending.append((self._t_ns + self.latency_ns, c, q))
+                else:
+                    self._applied[c] = q
+
+    def read_encoder(self, channels: Sequence[int]) -> np.ndarray:
+        """Encoder counts (int32)."""
+        with self.lock:
+            self.sync()
+            chans = self._check_enc(channels)
+            x = self._sensed_state()
+            sigma = self.config.noise_counts
+            out = []
+            for c in chans:
+                n = self._enc_offset[c] + self._position_counts(c, x)
+                if sigma and c in self._encoders:
+                    n += int(round(self._rng.normal(0.0, sigma)))
+                out.append(wrap_int32(n))
+            return np.array(out, dtype=np.int32)
+
+    def set_encoder_counts(self, channels: Sequence[int], counts: Sequence[int]) -> None:
+        """Load the counters."""
+        with self.lock:
+            self.sync()
+            chans = self._check_enc(channels)
+            if isinstance(counts, (int, np.integer)):
+                counts = [int(counts)] * len(chans)
+            counts = [int(c) for c in counts]
+            if len(counts) != len(chans):
+                raise HILError(ErrorCode.INVALID_ARGUMENT, f"set_encoder_counts: {len(counts)} counts for "
+                                                           f"{len(chans)} channels")
+            x = self._sensed_state()
+            for c, n in zip(chans, counts):
+                self._enc_offset[c] = wrap_int32(n) - self._position_counts(c, x)
+
+    def watchdog_set_analog_expiration_state(self, channels: Sequence[int], volts: Sequence[float]) -> None:
+        """Voltages forced on the outputs when the watchdog expires."""
+        with self.lock:
+            self.sync()
+            chans = self._check_ao(channels)
+            values = as_finite(volts, len(chans), "watchdog_set_analog_expiration_state")
+            for c, v in zip(chans, values):
+                self._expiration[c] = dac_quantize(v)
+
+    def watchdog_start(self, timeout: float) -> None:
+        """Start the watchdog."""
+        with self.lock:
+            self.sync()
+            if not (math.isfinite(timeout) and timeout > 0):
+                raise HILError(ErrorCode.INVALID_ARGUMENT, f"watchdog_start: timeout = {timeout} s must be > 0")
+            self.wd_timeout_ns = max(1, to_ns(timeout))
+            self.wd_running = True
+            self.wd_last_reload_ns = self.now_ns()
+            self.wd_deadline_ns = self.wd_last_reload_ns + self.wd_timeout_ns
+
+    def watchdog_reload(self) -> bool:
+        """Reload; False if the watchdog had expired."""
+        with self.lock:
+            self.sync()
+            if self.wd_expired:
+                return False
+            if self.wd_running:
+                self.wd_last_reload_ns = self.now_ns()
+                self.wd_deadline_ns = self.wd_last_reload_ns + self.wd_timeout_ns
+            return True
+
+    def watchdog_is_expired(self) -> bool:
+        """Whether the watchdog expired and was not cleared."""
+        with self.lock:
+            self.sync()
+            return self.wd_expired
+
+    def watchdog_clear(self) -> None:
+        """Clear an expiry (outputs stay at their expiration states until written)."""
+        with self.lock:
+            self.sync()
+            self.wd_expired = False
+            if self.wd_running:
+                self.wd_last_reload_ns = self.now_ns()
+                self.wd_deadline_ns = self.wd_last_reload_ns + self.wd_timeout_ns
+
+    def watchdog_stop(self) -> None:
+        """Stop the timer (an expiry stays until cleared)."""
+        with self.lock:
+            self.sync()
+            self.wd_running = False
+
+    def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
+             until_ns: int, reload: bool = True) -> StepResult:
+        """One sample period (see :meth:`harness.hil.api.Card.step`); ``until_ns`` is rig time.
+
+        Lockstep: advance to ``until_ns`` (an instant before the rig's time is an error).
+        Wallclock: wait (outside the lock) until the rig's clock reaches ``until_ns``.
+        """
+        with self.lock:
+            self.sync()
+            arrival = self.now_ns()
+            if self.lockstep and until_ns < arrival:
+                raise HILError(ErrorCode.CLOCK, f"step: sample instant {until_ns / NS:.6f} s is before the "
+                                                f"lockstep rig's time {arrival / NS:.6f} s")
+            reloaded = self.watchdog_reload() if reload else True
+            self.write_analog(analog_channels, volts)
+            enc = self._check_enc(encoder_channels)
+            if self.lockstep:
+                self._advance_to(until_ns)
+        if not self.lockstep:
+            wait_until_ns(lambda: self.now_ns(), until_ns)
+        with self.lock:
+            self.sync()
+            counts = self.read_encoder(enc)
+            late = max(0, arrival - until_ns)
+            if late:
+                self.counters["late_samples"] += 1
+            return StepResult(counts=counts, reloaded=reloaded, time=self._t_ns / NS, late=late / NS,
+                              status=self.status())
+
+    # --- lab operations ----------------------------------------------------------------------------
+
+    def new_session(self, who: str = "client") -> None:
+        """A controller takes the rig: the operator has put the carts at 0 and the pendulum upright.
+
+        The card's registers are reset (outputs 0 V, watchdog stopped and cleared, counters at
+        0); a latched limit trip is *not* cleared (that needs :meth:`reset`).
+        """
+        with self.lock:
+            self.sync()
+            self._reset_card_state()
+            self.plant.set_state(self._x0)
+            self._history.clear()
+            self._record_history()
+            self.counters["sessions"] += 1
+            self._event(self._t_ns, "session", f"session opened by {who}")
+
+    def end_session(self, reason: str) -> None:
+        """The controller left (or was lost): outputs to their expiration states, watchdog stopped."""
+        with self.lock:
+            try:
+                self.sync()
+            except HILError:
+                pass
+            for ch in range(ANALOG_OUTPUTS):
+                self._ao[ch] = self._expiration[ch]
+                self._applied[ch] = self._expiration[ch]
+            self._pending.clear()
+            self.wd_running = False
+            self._event(self._t_ns, "session", f"session ended ({reason}): outputs set to their expiration "
+                                               f"states")
+
+    def reset(self) -> None:
+        """The operator's reset: re-home the plant, clear the limit latch, re-enable the amplifier."""
+        with self.lock:
+            try:
+                self.sync()
+            except HILError:
+                pass
+            self._reset_card_state()
+            self.plant.set_state(self._x0)
+            self._history.clear()
+            self._record_history()
+            self.amplifier_enabled = True
+            self.limit_message = ""
+            self.counters["resets"] += 1
+            self._event(self._t_ns, "reset", "operator reset: amplifier enabled, limit latch cleared")
+
+    def motor_voltage(self) -> float:
+        """Voltage the amplifier applies to the motor now [V]."""
+        with self.lock:
+            self.sync()
+            return AMPLIFIER_GAIN * self._applied[MOTOR_CHANNEL] if self.amplifier_enabled else 0.0
+
+    def status(self) -> RigStatus:
+        """Safety status, the clock and the counters."""
+        with self.lock:
+            self.sync()
+            return RigStatus(amplifier_enabled=self.amplifier_enabled,
+                             limit_tripped=bool(self.limit_message) and not self.amplifier_enabled,
+                             watchdog_expired=self.wd_expired, watchdog_running=self.wd_running,
+                             limit_message=self.limit_message, time=self.now_ns() / NS,
+                             motor_voltage=(AMPLIFIER_GAIN * self._applied[MOTOR_CHANNEL]
+                                            if self.amplifier_enabled else 0.0),
+                             counters=dict(self.counters))
+
+    def true_state(self) -> dict[str, float]:
+        """The plant's true state by name (for tests and diagnostics; a controller never sees it)."""
+        with self.lock:
+            self.sync()
+            return self.plant.values()
+
+
+def wait_until_ns(clock_ns: Callable[[], int], deadline_ns: int, spin_ns: int = 300_000) -> int:
+    """Sleep, then spin, until ``clock_ns() >= deadline_ns``; returns the clock at the end."""
+    now = clock_ns()
+    while now < deadline_ns:
+        remaining = deadline_ns - now
+        if remaining > spin_ns:
+            time.sleep((remaining - spin_ns) / NS)
+        now = clock_ns()
+    return now

@@ -1,0 +1,422 @@
+"""TCP server of the virtual rig (protocol: :mod:`harness.hil.protocol`).
+
+One thread accepts connections, one thread serves each connection; every request goes
+to the :class:`~harness.hil.rig.VirtualRig` (itself thread-safe). Nothing a client sends
+can stop the server: bad input is dropped and counted (``RigServer.counters``), an
+unexpected exception while serving a request becomes an ``INTERNAL`` error reply.
+"""
+from __future__ import annotations
+
+import collections
+import socket
+import struct
+import threading
+import time
+from typing import Callable
+
+from .api import ErrorCode, HILError
+from .protocol import (FLAG_AMPLIFIER, FLAG_LIMIT, FLAG_WD_EXPIRED, FLAG_WD_RUNNING, PROTOCOL_VERSION, REPLY_BIT,
+                       DecodeError, Frame, FrameDecoder, Msg, Reader, encode_frame, pack_ints, pack_text,
+                       reply_payload)
+from .rig import NS, VirtualRig
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 18920
+_CLOSE = object()
+
+
+class _Session:
+    def __init__(self, peer: str) -> None:
+        self.peer = peer
+        self.role: str | None = None      # "control" | "monitor"
+        self.last_seq = 0
+        self.steps = 0
+        self.stalled = False
+
+
+class RigServer:
+    """Serve a :class:`VirtualRig` over TCP.
+
+    Parameters
+    ----------
+    rig : VirtualRig
+        The rig to serve (its wallclock is started by :meth:`start`).
+    host, port : str, int
+        Address to bind (port 0: any free port; see :attr:`address`).
+    stall_after_steps : int, optional
+        Fault injection for tests: after this many STEP requests of a controlling
+        session the server stops answering that session (it keeps reading and dropping).
+    log : callable, optional
+        ``log(line)`` for one-line notices (sessions, refusals, drops, limit trips).
+    """
+
+    def __init__(self, rig: VirtualRig, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
+                 stall_after_steps: int | None = None, log: Callable[[str], None] | None = None,
+                 max_connections: int = 8) -> None:
+        self.rig = rig
+        self.host = host
+        self.port = port
+        self.stall_after_steps = stall_after_steps
+        self.log = log or (lambda line: None)
+        self.max_connections = max_connections
+        self.counters: collections.Counter[str] = collections.Counter()
+        self._lock = threading.Lock()
+        self._controller: _Session | None = None
+        self._sock: socket.socket | None = None
+        self._stopping = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._conns: set[socket.socket] = set()
+        self._events_seen = 0
+
+    # --- lifecycle -----------------------------------------------------------------------------
+
+    def start(self) -> "RigServer":
+        """Bind, listen and serve in background threads; returns self."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((self.host, self.port))
+        except OSError as exc:
+            sock.close()
+            raise HILError(ErrorCode.CONNECTION, f"rig cannot listen on {self.host}:{self.port}: "
+                                                 f"{exc.strerror or exc}") from exc
+        sock.listen(4)
+        sock.settimeout(0.2)
+        self._sock = sock
+        self.port = sock.getsockname()[1]
+        self.rig.start_clock()
+        t = threading.Thread(target=self._accept_loop, name="rig-accept", daemon=True)
+        t.start()
+        self._threads.append(t)
+        return self
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) actually bound."""
+        return self.host, self.port
+
+    @property
+    def uri(self) -> str:
+        """Card id for the tcpip backend, e.g. ``0@tcpip://127.0.0.1:18920``."""
+        return f"0@tcpip://{self.host}:{self.port}"
+
+    def serve(self, duration: float | None = None) -> None:
+        """Block until :meth:`close` (or ``duration`` seconds), relaying new rig events to ``log``."""
+        end = None if duration is None else time.monotonic() + duration
+        while not self._stopping.is_set():
+            self._relay_events()
+            if end is not None and time.monotonic() >= end:
+                break
+            self._stopping.wait(0.1)
+        self._relay_events()
+
+    def request_stop(self) -> None:
+        """Make :meth:`serve` return (safe from a signal handler); then call :meth:`close`."""
+        self._stopping.set()
+
+    def close(self) -> None:
+        """Stop serving, close every connection and stop the rig's clock."""
+        self._stopping.set()
+        if self._sock is not None:
+            try:
+                self._sock.close()
+            except OSError:
+                pass
+        with self._lock:
+            conns = list(self._conns)
+        for c in conns:
+            try:
+                c.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+        for t in self._threads:
+            t.join(timeout=5.0)
+        self.rig.stop_clock()
+
+    def __enter__(self) -> "RigServer":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _relay_events(self) -> None:
+        with self.rig.lock:
+            events = list(self.rig.events)
+            total = self.rig.event_count
+        new = min(total - self._events_seen, len(events))
+        for ev in events[len(events) - new:] if new > 0 else []:
+            self.log(f"rig t={ev.time:.4f}s {ev.kind}: {ev.message}")
+        self._events_seen = total
+
+    # --- connections ---------------------------------------------------------------------------
+
+    def _accept_loop(self) -> None:
+        assert self._sock is not None
+        while not self._stopping.is_set():
+            try:
+                conn, addr = self._sock.accept()
+            except socket.timeout:
+                continue
+            except OSError:
+                break
+            peer = f"{addr[0]}:{addr[1]}"
+            with self._lock:
+                too_many = len(self._conns) >= self.max_connections
+                if not too_many:
+                    self._conns.add(conn)
+            if too_many:
+                self.counters["refused"] += 1
+                conn.close()
+                continue
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            t = threading.Thread(target=self._serve_connection, args=(conn, peer), name=f"rig-{peer}",
+                                 daemon=True)
+            t.start()
+            self._threads = [x for x in self._threads if x.is_alive()] + [t]
+
+    def _serve_connection(self, conn: socket.socket, peer: str) -> None:
+        decoder = FrameDecoder()
+        session = _Session(peer)
+        seen = dict(decoder.counters)
+        reason = "connection closed"
+        conn.settimeout(0.2)
+        try:
+            while not self._stopping.is_set():
+                try:
+                    data = conn.recv(65536)
+                except socket.timeout:
+                    continue
+                except OSError as exc:
+                    reason = f"connection lost: {exc}"
+                    break
+                if not data:
+                    break
+                frames = decoder.feed(data)
+                for key, value in decoder.counters.items():
+                    if value > seen[key]:
+                        name = "malformed" if key == "garbage" else key
+                        self.counters[name] += value - seen[key]
+                        self.log(f"rig: dropped {value - seen[key]} {key} input from {peer}")
+                        seen[key] = value
+                for frame in frames:
+                    if session.stalled:
+                        self.counters["stalled_requests"] += 1
+                        continue
+                    if self._handle(conn, session, frame) is _CLOSE:
+                        reason = "session closed"
+                        return
+            if self._stopping.is_set():
+                reason = "server stopped"
+        finally:
+            if session.role == "control":
+                with self._lock:
+                    if self._controller is session:
+                        self._controller = None
+                self.rig.end_session(f"{peer}: {reason}")
+                self.log(f"rig: controlling session {peer} ended ({reason}); outputs at expiration state")
+            with self._lock:
+                self._conns.discard(conn)
+            try:
+                conn.close()
+            except OSError:
+                pass
+
+    # --- requests ------------------------------------------------------------------------------
+
+    def _send(self, conn: socket.socket, frame: Frame, code: int, body: bytes = b"", message: str = "") -> None:
+        st = self.rig.status()
+        flags = ((FLAG_AMPLIFIER if st.amplifier_enabled else 0) | (FLAG_LIMIT if st.limit_tripped else 0)
+                 | (FLAG_WD_EXPIRED if st.watchdog_expired else 0) | (FLAG_WD_RUNNING if st.watchdog_running else 0))
+        payload = reply_payload(code, flags, int(round(st.time * NS)), body, message)
+        try:
+            conn.sendall(encode_frame(frame.type | REPLY_BIT, frame.seq, payload))
+        except OSError:
+            pass  # the receive loop notices the loss
+
+    def _drop(self, counter: str, session: _Session, frame: Frame, why: str) -> None:
+        self.counters[counter] += 1
+        self.log(f"rig: dropped {counter.replace('_', '-')} message from {session.peer} "
+                 f"(type 0x{frame.type:02x}, seq {frame.seq}): {why}")
+
+    def _handle(self, conn: socket.socket, session: _Session, frame: Frame) -> object:
+        if frame.version != PROTOCOL_VERSION:
+            if frame.type == Msg.HELLO and session.role is None:
+                self.counters["version"] += 1
+                self._send(conn, frame, ErrorCode.VERSION,
+                           message=f"protocol version {frame.version} not supported; this rig speaks version "
+                                   f"{PROTOCOL_VERSION}")
+                return _CLOSE
+            self._drop("malformed", session, frame, f"protocol version {frame.version}")
+            return None
+        if frame.type & REPLY_BIT or frame.type not in Msg._value2member_map_:
+            self._drop("malformed", session, frame, "unknown message type")
+            return None
+        if frame.seq <= session.last_seq:
+            self._drop("out_of_order", session, frame, f"sequence number not above {session.last_seq}")
+            return None
+        msg = Msg(frame.type)
+        reader = Reader(frame.payload)
+        try:
+            if session.role is None and msg != Msg.HELLO:
+                session.last_seq = frame.seq
+                self._send(conn, frame, ErrorCode.NOT_CONTROLLER, message="the first request must be HELLO")
+                return None
+            if msg == Msg.HELLO:
+                return self._hello(conn, session, frame, reader)
+            if session.role == "monitor" and msg not in (Msg.STATUS, Msg.TIME, Msg.RESET, Msg.BYE):
+                session.last_seq = frame.seq
+                self._send(conn, frame, ErrorCode.NOT_CONTROLLER,
+                           message=f"{msg.name} needs the controlling session; this is a monitor session")
+                return None
+            body = self._dispatch(msg, reader, session, frame, conn)
+        except DecodeError as exc:
+            self._drop("malformed", session, frame, str(exc))
+            return None
+        except HILError as exc:
+            session.last_seq = frame.seq
+            self._send(conn, frame, exc.code, message=exc.message)
+            return None
+        except Exception as exc:  # noqa: BLE001 -- the server never crashes on a request
+            session.last_seq = frame.seq
+            self.counters["internal_errors"] += 1
+            self._send(conn, frame, ErrorCode.INTERNAL, message=f"rig internal error: {type(exc).__name__}: {exc}")
+            return None
+        if body is _CLOSE:
+            return _CLOSE
+        if body is None:  # stalled: no reply
+            return None
+        session.last_seq = frame.seq
+        self._send(conn, frame, ErrorCode.OK, body)
+        if msg == Msg.BYE:
+            return _CLOSE
+        return None
+
+    def _hello(self, conn: socket.socket, session: _Session, frame: Frame, reader: Reader) -> object:
+        role_code = reader.one("B")
+        name = reader.text()
+        reader.end()
+        session.last_seq = frame.seq
+        if session.role is not None:
+            self._send(conn, frame, ErrorCode.PROTOCOL, message="HELLO twice in one connection")
+            return None
+        role = "control" if role_code else "monitor"
+        if role == "control":
+            with self._lock:
+                holder = self._controller
+                if holder is None:
+                    self._controller = session
+            if holder is not None:
+                self.counters["refused"] += 1
+                self.log(f"rig: refused {session.peer} ({name}): rig busy, controlled by {holder.peer}")
+                self._send(conn, frame, ErrorCode.BUSY,
+                           message=f"rig busy: it is controlled by {holder.peer}; one controlling client at a "
+                                   f"time")
+                return _CLOSE
+            self.rig.new_session(f"{name} at {session.peer}")
+            self.log(f"rig: controlling session opened by {name} at {session.peer}")
+        session.role = role
+        info = self.rig.info()
+        body = struct.pack("!BBBBBIddqH", 0 if info.plant == "single-mass" else 1,
+                           0 if info.clock == "lockstep" else 1, info.analog_outputs, info.encoder_inputs,
+                           info.dac_bits, info.counts_per_rev, info.analog_min, info.analog_max,
+                           int(round(info.tick * NS)), PROTOCOL_VERSION)
+        self._send(conn, frame, ErrorCode.OK, body)
+        return None
+
+    def _dispatch(self, msg: Msg, r: Reader, session: _Session, frame: Frame, conn: socket.socket) -> object:
+        rig = self.rig
+        if msg == Msg.WRITE_ANALOG:
+            ch = r.channels()
+            v = r.doubles(len(ch))
+            r.end()
+            rig.write_analog(ch, v)
+            return b""
+        if msg == Msg.READ_ENCODER:
+            ch = r.channels()
+            r.end()
+            counts = rig.read_encoder(ch)
+            return struct.pack("!H", len(counts)) + pack_ints([int(c) for c in counts])
+        if msg == Msg.SET_ENCODER_COUNTS:
+            ch = r.channels()
+            n = r.ints(len(ch))
+            r.end()
+            rig.set_encoder_counts(ch, n)
+            return b""
+        if msg == Msg.WD_SET_EXPIRATION:
+            ch = r.channels()
+            v = r.doubles(len(ch))
+            r.end()
+            rig.watchdog_set_analog_expiration_state(ch, v)
+            return b""
+        if msg == Msg.WD_START:
+            timeout = r.one("d")
+            r.end()
+            rig.watchdog_start(timeout)
+            return b""
+        if msg == Msg.WD_RELOAD:
+            r.end()
+            return struct.pack("!B", 1 if rig.watchdog_reload() else 0)
+        if msg == Msg.WD_IS_EXPIRED:
+            r.end()
+            return struct.pack("!B", 1 if rig.watchdog_is_expired() else 0)
+        if msg == Msg.WD_CLEAR:
+            r.end()
+            rig.watchdog_clear()
+            return b""
+        if msg == Msg.WD_STOP:
+            r.end()
+            rig.watchdog_stop()
+            return b""
+        if msg == Msg.STEP:
+            until = r.one("q")
+            reload = bool(r.one("B"))
+            ao = r.channels()
+            volts = r.doubles(len(ao))
+            enc = r.channels()
+            r.end()
+            session.steps += 1
+            if self.stall_after_steps is not None and session.steps > self.stall_after_steps:
+                session.stalled = True
+                self.counters["stalled_requests"] += 1
+                self.log(f"rig: fault injection: no longer answering {session.peer} "
+                         f"(after {self.stall_after_steps} steps)")
+                return None
+            res = rig.step(ao, volts, enc, until, reload)
+            return (struct.pack("!BqH", 1 if res.reloaded else 0, int(round(res.late * NS)), len(res.counts))
+                    + pack_ints([int(c) for c in res.counts]))
+        if msg == Msg.ADVANCE:
+            dt = r.one("q")
+            r.end()
+            if dt < 0:
+                raise HILError(ErrorCode.INVALID_ARGUMENT, f"advance: dt = {dt} ns must be >= 0")
+            rig.advance(dt / NS)
+            return b""
+        if msg == Msg.STATUS:
+            r.end()
+            st = rig.status()
+            with rig.lock:
+                last = rig.wd_last_reload_ns if rig.wd_last_reload_ns is not None else -1
+                expired_at = rig.wd_expired_at_ns if rig.wd_expired_at_ns is not None else -1
+            counters = {**{f"rig.{k}": v for k, v in st.counters.items()},
+                        **{f"server.{k}": v for k, v in self.counters.items()}}
+            body = struct.pack("!dqq", st.motor_voltage, last, expired_at) + pack_text(st.limit_message)
+            body += struct.pack("!H", len(counters))
+            for k, v in sorted(counters.items()):
+                body += pack_text(k, 200) + struct.pack("!q", int(v))
+            return body
+        if msg == Msg.RESET:
+            r.end()
+            with self._lock:
+                holder = self._controller
+            if holder is not None and holder is not session:
+                raise HILError(ErrorCode.BUSY, f"reset refused: the rig is controlled by {holder.peer}")
+            rig.reset()
+            self.log(f"rig: operator reset by {session.peer}")
+            return b""
+        if msg == Msg.TIME:
+            r.end()
+            return b""
+        if msg == Msg.BYE:
+            r.end()
+            return b""
+        raise DecodeError(f"unhandled message {msg.name}")

@@ -1,0 +1,269 @@
+"""``tcpip`` backend: a :class:`Card` on a virtual rig served by ``ipcosim rig serve``.
+
+Card id ``N@tcpip://HOST:PORT`` (e.g. ``0@tcpip://127.0.0.1:18920``). Every call is one
+request/reply exchange of :mod:`harness.hil.protocol`; a reply that does not come within
+``timeout`` seconds raises ``HILError(TIMEOUT)`` naming the request.
+"""
+from __future__ import annotations
+
+import select
+import socket
+import struct
+import time
+from typing import Sequence
+
+import numpy as np
+
+from .api import Card, CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite
+from .protocol import (FLAG_AMPLIFIER, FLAG_LIMIT, FLAG_WD_EXPIRED, FLAG_WD_RUNNING, PROTOCOL_VERSION,
+                       REPLY_BIT, REPLY_PREFIX, DecodeError, FrameDecoder, Msg, Reader, encode_frame,
+                       pack_channels, pack_doubles, pack_ints, pack_text)
+
+NS = 1_000_000_000
+
+
+class TcpipCard(Card):
+    """Client of a virtual rig.
+
+    Parameters
+    ----------
+    card_type, card_id : str
+        As given to :func:`harness.hil.open_card` (for messages).
+    host, port : str, int
+        The rig's address.
+    timeout : float
+        Seconds to wait for a reply (beyond the sample instant, for STEP on a wallclock rig).
+    role : str
+        ``control`` (default) or ``monitor`` (status, time and reset only).
+    name : str
+        Client name shown in the rig's log.
+    """
+
+    def __init__(self, card_type: str, card_id: str, host: str, port: int, *, timeout: float = 1.0,
+                 role: str = "control", name: str = "ipcosim") -> None:
+        self.card_type, self.card_id = card_type, card_id
+        self.where = f"tcpip://{host}:{port}"
+        self.timeout = float(timeout)
+        self._seq = 0
+        self._decoder = FrameDecoder()
+        self.stale_replies = 0
+        self._sock: socket.socket | None = None
+        self._last_rig_ns = 0
+        self._last_host_ns = time.monotonic_ns()
+        self.last_flags = 0
+        try:
+            sock = socket.create_connection((host, port), timeout=max(self.timeout, 2.0))
+        except OSError as exc:
+            raise HILError(ErrorCode.CONNECTION, f"cannot connect to the virtual rig at {self.where}: "
+                                                 f"{exc.strerror or exc} (is `ipcosim rig serve` running?)") from exc
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.setblocking(False)
+        self._sock = sock
+        try:
+            r = self._request(Msg.HELLO, struct.pack("!B", 1 if role == "control" else 0) + pack_text(name),
+                              timeout=max(self.timeout, 2.0))
+            plant, clock, n_ao, n_enc, bits, cpr, lo, hi, tick_ns, version = r.take("BBBBBIddqH")
+        except HILError:
+            self._abort()
+            raise
+        self.info = CardInfo(card_type=card_type, card_id=card_id, analog_outputs=n_ao, encoder_inputs=n_enc,
+                             dac_bits=bits, analog_min=lo, analog_max=hi, counts_per_rev=cpr,
+                             clock="lockstep" if clock == 0 else "wallclock", tick=tick_ns / NS,
+                             plant="single-mass" if plant == 0 else "double-mass", protocol_version=version)
+
+    # --- transport -----------------------------------------------------------------------------
+
+    def _abort(self) -> None:
+        if self._sock is not None:
+            try:
+                self._sock.close()
+            except OSError:
+                pass
+            self._sock = None
+
+    def _request(self, msg: Msg, payload: bytes = b"", timeout: float | None = None) -> Reader:
+        if self._sock is None:
+            raise HILError(ErrorCode.NOT_OPEN, f"card {self.card_id} is closed")
+        self._seq += 1
+        seq = self._seq
+        limit = self.timeout if timeout is None else timeout
+        try:
+            self._send_all(encode_frame(msg, seq, payload), limit)
+        except OSError as exc:
+            self._abort()
+            raise HILError(ErrorCode.CONNECTION, f"lost the virtual rig at {self.where} sending {msg.name}: "
+                                                 f"{exc.strerror or exc}") from exc
+        deadline = time.monotonic() + limit
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} did not answer {msg.name} "
+                                                  f"(seq {seq}) within {limit:g} s")
+            try:
+                ready, _, _ = select.select([self._sock], [], [], remaining)
+            except (OSError, ValueError) as exc:
+                self._abort()
+                raise HILError(ErrorCode.CONNECTION, f"lost the virtual rig at {self.where}: {exc}") from exc
+            if not ready:
+                continue
+            try:
+                data = self._sock.recv(65536)
+            except BlockingIOError:
+                continue
+            except OSError as exc:
+                self._abort()
+                raise HILError(ErrorCode.CONNECTION, f"lost the virtual rig at {self.where} waiting for "
+                                                     f"{msg.name}: {exc.strerror or exc}") from exc
+            if not data:
+                self._abort()
+                raise HILError(ErrorCode.CONNECTION, f"the virtual rig at {self.where} closed the connection "
+                                                     f"(waiting for {msg.name})")
+            for frame in self._decoder.feed(data):
+                if frame.seq != seq or frame.type != (msg | REPLY_BIT):
+                    self.stale_replies += 1
+                    continue
+                return self._parse_reply(msg, frame.payload)
+
+    def _send_all(self, data: bytes, limit: float) -> None:
+        assert self._sock is not None
+        view = memoryview(data)
+        deadline = time.monotonic() + limit
+        while view:
+            try:
+                n = self._sock.send(view)
+                view = view[n:]
+            except BlockingIOError:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} does not take data")
+                select.select([], [self._sock], [], remaining)
+
+    def _parse_reply(self, msg: Msg, payload: bytes) -> Reader:
+        r = Reader(payload)
+        try:
+            code, flags, t_ns = r.take(REPLY_PREFIX.format.lstrip("!"))
+            self.last_flags = flags
+            self._last_rig_ns, self._last_host_ns = t_ns, time.monotonic_ns()
+            if code != 0:
+                message = r.text()
+                if code == ErrorCode.BUSY or code == ErrorCode.VERSION:
+                    self._abort()
+                raise HILError(code, f"virtual rig at {self.where}: {message}")
+        except DecodeError as exc:
+            raise HILError(ErrorCode.PROTOCOL, f"malformed {msg.name} reply from {self.where}: {exc}") from exc
+        return r
+
+    def _body(self, r: Reader, fmt: str, msg: str) -> tuple:
+        try:
+            return r.take(fmt)
+        except DecodeError as exc:
+            raise HILError(ErrorCode.PROTOCOL, f"malformed {msg} reply from {self.where}: {exc}") from exc
+
+    # --- the card API --------------------------------------------------------------------------
+
+    def write_analog(self, channels: Sequence[int], volts: Sequence[float]) -> None:
+        ch = as_channels(channels, "analog output")
+        self._request(Msg.WRITE_ANALOG, pack_channels(ch) + pack_doubles(as_finite(volts, len(ch), "write_analog")))
+
+    def read_encoder(self, channels: Sequence[int]) -> np.ndarray:
+        ch = as_channels(channels, "encoder")
+        r = self._request(Msg.READ_ENCODER, pack_channels(ch))
+        (n,) = self._body(r, "H", "READ_ENCODER")
+        return np.array(self._body(r, f"{n}i", "READ_ENCODER"), dtype=np.int32)
+
+    def set_encoder_counts(self, channels: Sequence[int], counts: Sequence[int]) -> None:
+        ch = as_channels(channels, "encoder")
+        if isinstance(counts, (int, np.integer)):
+            counts = [int(counts)] * len(ch)
+        counts = [int(c) for c in counts]
+        if len(counts) != len(ch):
+            raise HILError(ErrorCode.INVALID_ARGUMENT, f"set_encoder_counts: {len(counts)} counts for "
+                                                       f"{len(ch)} channels")
+        self._request(Msg.SET_ENCODER_COUNTS, pack_channels(ch) + pack_ints(counts))
+
+    def watchdog_set_analog_expiration_state(self, channels: Sequence[int], volts: Sequence[float]) -> None:
+        ch = as_channels(channels, "analog output")
+        self._request(Msg.WD_SET_EXPIRATION,
+                      pack_channels(ch) + pack_doubles(as_finite(volts, len(ch), "expiration state")))
+
+    def watchdog_start(self, timeout: float) -> None:
+        self._request(Msg.WD_START, struct.pack("!d", float(timeout)))
+
+    def watchdog_reload(self) -> bool:
+        return bool(self._body(self._request(Msg.WD_RELOAD), "B", "WD_RELOAD")[0])
+
+    def watchdog_is_expired(self) -> bool:
+        return bool(self._body(self._request(Msg.WD_IS_EXPIRED), "B", "WD_IS_EXPIRED")[0])
+
+    def watchdog_clear(self) -> None:
+        self._request(Msg.WD_CLEAR)
+
+    def watchdog_stop(self) -> None:
+        self._request(Msg.WD_STOP)
+
+    def time(self) -> float:
+        self._request(Msg.TIME)
+        return self._last_rig_ns / NS
+
+    def advance(self, dt: float) -> None:
+        """Lockstep rig: advance by ``dt`` seconds."""
+        self._request(Msg.ADVANCE, struct.pack("!q", int(round(dt * NS))))
+
+    def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
+             until: float, reload: bool = True) -> StepResult:
+        ao = as_channels(analog_channels, "analog output")
+        enc = as_channels(encoder_channels, "encoder")
+        until_ns = int(round(until * NS))
+        payload = (struct.pack("!qB", until_ns, 1 if reload else 0) + pack_channels(ao)
+                   + pack_doubles(as_finite(volts, len(ao), "step")) + pack_channels(enc))
+        wait = 0.0
+        if self.info.clock == "wallclock":
+            est_now = self._last_rig_ns + (time.monotonic_ns() - self._last_host_ns)
+            wait = max(0.0, (until_ns - est_now) / NS)
+        r = self._request(Msg.STEP, payload, timeout=self.timeout + wait)
+        reloaded, late_ns, n = self._body(r, "BqH", "STEP")
+        counts = np.array(self._body(r, f"{n}i", "STEP"), dtype=np.int32)
+        return StepResult(counts=counts, reloaded=bool(reloaded), time=self._last_rig_ns / NS, late=late_ns / NS,
+                          status=self._flags_status())
+
+    def _flags_status(self) -> RigStatus:
+        f = self.last_flags
+        return RigStatus(amplifier_enabled=bool(f & FLAG_AMPLIFIER), limit_tripped=bool(f & FLAG_LIMIT),
+                         watchdog_expired=bool(f & FLAG_WD_EXPIRED), watchdog_running=bool(f & FLAG_WD_RUNNING),
+                         time=self._last_rig_ns / NS)
+
+    def status(self) -> RigStatus:
+        r = self._request(Msg.STATUS)
+        try:
+            volts, last, expired_at = r.take("dqq")
+            message = r.text()
+            (k,) = r.take("H")
+            counters = {}
+            for _ in range(k):
+                name = r.text()
+                counters[name] = r.one("q")
+        except DecodeError as exc:
+            raise HILError(ErrorCode.PROTOCOL, f"malformed STATUS reply from {self.where}: {exc}") from exc
+        st = self._flags_status()
+        st.limit_message = message
+        st.motor_voltage = volts
+        counters["wd_last_reload_ns"] = last
+        counters["wd_expired_at_ns"] = expired_at
+        st.counters = counters
+        return st
+
+    def reset(self) -> None:
+        """The operator's reset of the virtual rig (clears a limit latch)."""
+        self._request(Msg.RESET)
+
+    def close(self) -> None:
+        if self._sock is None:
+            return
+        try:
+            self._request(Msg.BYE, timeout=min(self.timeout, 0.5))
+        except HILError:
+            pass
+        self._abort()
+
+
+__all__ = ["TcpipCard", "PROTOCOL_VERSION"]

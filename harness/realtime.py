@@ -1,0 +1,182 @@
+"""Real-time pacing of a fixed-step loop, and its timing statistics.
+
+:class:`Pacer` holds a loop of period ``h`` to the wall clock. Step ``n`` may start no
+earlier than its deadline ``t0 + n*h``, computed from integer nanoseconds every time
+(never by adding periods, so no drift accumulates, and a late step does not shift the
+following deadlines). Waiting is "sleep, then spin": sleep until ``spin`` before the
+deadline (the OS wakes us up late by tens of microseconds), then busy-wait on the
+clock to the deadline itself.
+
+Statistics (:meth:`Pacer.metrics`, the keys ``ipcosim run --realtime`` adds to
+metrics.json):
+
+``period_jitter_p50_s``, ``period_jitter_p99_s``, ``period_jitter_max_s``
+    Percentiles of ``|actual period - h|``, the actual period being the time between
+    the starts of consecutive steps.
+``overruns``
+    Steps that started later than ``tolerance`` after their deadline, i.e. whose
+    predecessor ended that late (default tolerance: half a period). The tolerance absorbs
+    the small constant offset between the master's clock and a HIL card's sample clock
+    (the card's clock paces a HIL run: the adapter returns at the card's sample instant).
+``worst_step_time_s``
+    Longest time from the start to the end of one step (in a HIL run this includes the
+    wait for the card's sample instant).
+``lateness_p99_s``, ``lateness_max_s``
+    How late steps started relative to their deadlines.
+``realtime_steps``
+    Number of paced steps.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+NS = 1_000_000_000
+
+
+def wait_until(deadline_ns: int, clock_ns: Callable[[], int] = time.perf_counter_ns,
+               spin_ns: int = 200_000, sleep: Callable[[float], None] = time.sleep) -> int:
+    """Sleep, then spin, until ``clock_ns() >= deadline_ns``.
+
+    Parameters
+    ----------
+    deadline_ns : int
+        The instant to wait for, on ``clock_ns``'s scale.
+    clock_ns : callable
+        Monotonic clock in nanoseconds.
+    spin_ns : int
+        Sleep only until this long before the deadline, then busy-wait.
+    sleep : callable
+        ``sleep(seconds)``.
+
+    Returns
+    -------
+    int
+        The clock reading when the wait ended (>= ``deadline_ns``).
+    """
+    now = clock_ns()
+    remaining = deadline_ns - now
+    if remaining > spin_ns:
+        sleep((remaining - spin_ns) / NS)
+        now = clock_ns()
+    while now < deadline_ns:
+        now = clock_ns()
+    return now
+
+
+@dataclass(frozen=True)
+class RealtimeStats:
+    """Timing statistics of a paced run [s]."""
+
+    steps: int
+    period_jitter_p50: float
+    period_jitter_p99: float
+    period_jitter_max: float
+    overruns: int
+    worst_step_time: float
+    lateness_p99: float
+    lateness_max: float
+
+    def as_metrics(self) -> dict[str, float | int]:
+        """The metrics.json keys (see the module docstring)."""
+        return {"period_jitter_p50_s": self.period_jitter_p50, "period_jitter_p99_s": self.period_jitter_p99,
+                "period_jitter_max_s": self.period_jitter_max, "overruns": self.overruns,
+                "worst_step_time_s": self.worst_step_time, "lateness_p99_s": self.lateness_p99,
+                "lateness_max_s": self.lateness_max, "realtime_steps": self.steps}
+
+    def summary(self) -> str:
+        """One line for humans."""
+        us = 1e6
+        return (f"{self.steps} steps: period jitter p50 {self.period_jitter_p50 * us:.0f} us, "
+                f"p99 {self.period_jitter_p99 * us:.0f} us, max {self.period_jitter_max * us:.0f} us; "
+                f"{self.overruns} overruns; worst step {self.worst_step_time * us:.0f} us")
+
+
+class Pacer:
+    """Paces steps ``n = 0, 1, 2, ...`` of period ``period`` to the wall clock.
+
+    Use: ``begin(n)`` before step ``n`` (waits for its deadline), ``end(n)`` after it.
+
+    Parameters
+    ----------
+    period : float
+        Step period [s].
+    clock_ns : callable
+        Monotonic clock [ns] (injectable for tests).
+    sleep : callable
+        ``sleep(seconds)`` (injectable for tests).
+    spin : float
+        Busy-wait this long before each deadline [s].
+    tolerance : float, optional
+        Lateness beyond which a step counts as an overrun [s] (default ``period / 2``).
+    """
+
+    def __init__(self, period: float, *, clock_ns: Callable[[], int] = time.perf_counter_ns,
+                 sleep: Callable[[float], None] = time.sleep, spin: float = 200e-6,
+                 tolerance: float | None = None) -> None:
+        if not (math.isfinite(period) and period > 0):
+            raise ValueError(f"real-time period = {period} s must be positive")
+        self.period_ns = int(round(period * NS))
+        self.clock_ns = clock_ns
+        self.sleep = sleep
+        self.spin_ns = int(round(spin * NS))
+        self.tolerance_ns = int(round((period / 2 if tolerance is None else tolerance) * NS))
+        self.t0_ns: int | None = None
+        self._first_tick = 0
+        self._starts: list[int] = []
+        self._lateness: list[int] = []
+        self._durations: list[int] = []
+        self._current_start = 0
+
+    def start(self, first_tick: int = 0, t0_ns: int | None = None) -> None:
+        """Anchor tick ``first_tick`` at ``t0_ns`` (default: now)."""
+        self._first_tick = first_tick
+        self.t0_ns = self.clock_ns() if t0_ns is None else t0_ns
+
+    def deadline_ns(self, tick: int) -> int:
+        """Clock reading at which step ``tick`` may start."""
+        if self.t0_ns is None:
+            self.start(tick)
+        assert self.t0_ns is not None
+        return self.t0_ns + (tick - self._first_tick) * self.period_ns
+
+    def begin(self, tick: int) -> int:
+        """Wait for step ``tick``'s deadline; returns its lateness [ns] (0 if on time)."""
+        deadline = self.deadline_ns(tick)
+        now = wait_until(deadline, self.clock_ns, self.spin_ns, self.sleep)
+        self._current_start = now
+        self._starts.append(now)
+        late = now - deadline
+        self._lateness.append(late)
+        return late
+
+    def end(self, tick: int | None = None) -> int:
+        """Mark the end of the current step; returns its duration [ns]."""
+        d = self.clock_ns() - self._current_start
+        self._durations.append(d)
+        return d
+
+    def stats(self) -> RealtimeStats:
+        """Statistics so far (zeros for fewer than two steps)."""
+        starts = np.asarray(self._starts, dtype=np.int64)
+        late = np.asarray(self._lateness, dtype=np.int64)
+        dur = np.asarray(self._durations, dtype=np.int64)
+        if len(starts) >= 2:
+            jitter = np.abs(np.diff(starts) - self.period_ns) / NS
+            p50, p99, jmax = (float(np.percentile(jitter, 50)), float(np.percentile(jitter, 99)),
+                              float(jitter.max()))
+        else:
+            p50 = p99 = jmax = 0.0
+        return RealtimeStats(steps=len(starts), period_jitter_p50=p50, period_jitter_p99=p99,
+                             period_jitter_max=jmax, overruns=int(np.count_nonzero(late > self.tolerance_ns)),
+                             worst_step_time=float(dur.max()) / NS if len(dur) else 0.0,
+                             lateness_p99=float(np.percentile(late, 99)) / NS if len(late) else 0.0,
+                             lateness_max=float(late.max()) / NS if len(late) else 0.0)
+
+    def metrics(self) -> dict[str, float | int]:
+        """``stats().as_metrics()``."""
+        return self.stats().as_metrics()
