@@ -209,17 +209,21 @@ class RigServer:
                 reason = "server stopped"
         finally:
             if session.role == "control":
-                with self._lock:
-                    if self._controller is session:
-                        self._controller = None
-                self.rig.end_session(f"{peer}: {reason}")
-                self.log(f"rig: controlling session {peer} ended ({reason}); outputs at expiration state")
+                self._release(session, f"{peer}: {reason}")
             with self._lock:
                 self._conns.discard(conn)
             try:
                 conn.close()
             except OSError:
                 pass
+
+    def _release(self, session: _Session, reason: str) -> None:
+        with self._lock:
+            if self._controller is session:
+                self._controller = None
+        session.role = "closed"
+        self.rig.end_session(reason)
+        self.log(f"rig: controlling session ended ({reason}); outputs at their expiration states")
 
     # --- requests ------------------------------------------------------------------------------
 
@@ -418,5 +422,7 @@ class RigServer:
             return b""
         if msg == Msg.BYE:
             r.end()
+            if session.role == "control":   # release before replying: the client may reconnect at once
+                self._release(session, f"{session.peer}: BYE")
             return b""
         raise DecodeError(f"unhandled message {msg.name}")

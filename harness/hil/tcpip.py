@@ -146,8 +146,8 @@ class TcpipCard(Card):
             self._last_rig_ns, self._last_host_ns = t_ns, time.monotonic_ns()
             if code != 0:
                 message = r.text()
-                if code == ErrorCode.BUSY or code == ErrorCode.VERSION:
-                    self._abort()
+                if msg == Msg.HELLO:
+                    self._abort()       # a refused session: the rig closes the connection
                 raise HILError(code, f"virtual rig at {self.where}: {message}")
         except DecodeError as exc:
             raise HILError(ErrorCode.PROTOCOL, f"malformed {msg.name} reply from {self.where}: {exc}") from exc

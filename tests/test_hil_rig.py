@@ -1,0 +1,299 @@
+"""The virtual rig's card and lab model, in lockstep (deterministic) and with a fake wall clock."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fmus.params import preset
+from fmus.plant import Plant
+from harness.hil import ErrorCode, HILError, count_difference
+from harness.hil.api import INT32_MAX
+from harness.hil.rig import (CART_M_PER_COUNT, DAC_LSB, END_STOP_M, PENDULUM_RAD_PER_COUNT, RigConfig, VirtualRig,
+                             dac_quantize)
+
+# Thesis facts (thesis-data.md, section 1 table and section 3)
+THESIS_CART_RES = 2.275e-5
+THESIS_PEND_RES = 1.534e-3
+LSB = 20.0 / 4096
+
+
+def rig(**kw) -> VirtualRig:
+    return VirtualRig(RigConfig(**kw))
+
+
+def test_card_constants_are_the_thesis_numbers():
+    assert CART_M_PER_COUNT == THESIS_CART_RES
+    assert PENDULUM_RAD_PER_COUNT == THESIS_PEND_RES
+    assert DAC_LSB == LSB
+    # 4096 counts per revolution of the pendulum encoder
+    assert abs(4096 * THESIS_PEND_RES - 2 * math.pi) < 2 * math.pi * 1e-3
+
+
+@pytest.mark.parametrize("volts", [0.0, 1.0, -1.0, 3.3333, 7.77, -9.99])
+def test_dac_is_12_bit_over_10_volts(volts):
+    q = dac_quantize(volts)
+    assert abs(q - volts) <= LSB / 2 + 1e-12
+    assert abs(q / LSB - round(q / LSB)) < 1e-9          # an integer code
+
+
+def test_dac_saturates_at_the_range():
+    assert dac_quantize(25.0) == pytest.approx(2047 * LSB)
+    assert dac_quantize(-25.0) == pytest.approx(-10.0)
+
+
+def test_encoders_count_positions_counter_clockwise_positive():
+    r = rig()
+    r.plant.set_state([0.1, 0, 0.2, 0, 0])
+    counts = r.read_encoder([0, 1, 2, 3])
+    assert counts.dtype == np.int32
+    assert counts[0] == math.floor(0.1 / THESIS_CART_RES)
+    assert counts[1] == math.floor(0.2 / THESIS_PEND_RES) > 0       # counter-clockwise = positive
+    assert counts[2] == 0 and counts[3] == 0                         # not connected on the single mass
+    r.plant.set_state([-0.1, 0, -0.2, 0, 0])
+    counts = r.read_encoder([0, 1])
+    assert counts[0] == math.floor(-0.1 / THESIS_CART_RES) < 0
+    assert counts[1] == math.floor(-0.2 / THESIS_PEND_RES) < 0
+
+
+def test_reading_is_within_one_count_below_the_true_position():
+    r = rig()
+    for x in np.linspace(-0.3, 0.3, 37):
+        r.plant.set_state([x, 0, 0, 0, 0])
+        measured = int(r.read_encoder([0])[0]) * THESIS_CART_RES
+        assert 0 <= x - measured < THESIS_CART_RES
+
+
+def test_double_mass_third_encoder_is_the_passive_cart():
+    r = rig(plant="double-mass")
+    r.plant.set_state([0.05, 0, -0.02, 0, 0.1, 0, 0])
+    c = r.read_encoder([0, 1, 2])
+    assert c[0] == math.floor(0.05 / THESIS_CART_RES)
+    assert c[1] == math.floor(0.1 / THESIS_PEND_RES)
+    assert c[2] == math.floor(-0.02 / THESIS_CART_RES)
+
+
+def test_counters_are_32_bit_and_wrap():
+    r = rig()
+    r.set_encoder_counts([0], [INT32_MAX - 1])
+    before = int(r.read_encoder([0])[0])
+    r.plant.set_state([5.5 * THESIS_CART_RES, 0, 0, 0, 0])   # 5 counts further
+    after = int(r.read_encoder([0])[0])
+    assert after < 0 < before                                 # wrapped around
+    assert count_difference(after, before) == 5
+
+
+def test_set_encoder_counts_zeroes_at_the_current_position():
+    r = rig()
+    r.plant.set_state([0.0123, 0, 0.05, 0, 0])
+    r.set_encoder_counts([0, 1], [0, 0])
+    assert list(r.read_encoder([0, 1])) == [0, 0]
+    r.plant.set_state([0.0123 + 100 * THESIS_CART_RES, 0, 0.05, 0, 0])
+    assert int(r.read_encoder([0])[0]) in (99, 100)
+
+
+def test_lockstep_rig_steps_the_plant_physics_exactly():
+    """One source of truth: the rig's motion is fmus.plant.Plant, step for step."""
+    r = rig()
+    plant = Plant(preset("thesis-ch3"))
+    volts = [k * LSB for k in (128, 128, -256, 0, 512, 64)]   # DAC-exact values
+    for k in range(300):
+        v = volts[(k // 50) % len(volts)]
+        r.write_analog([0], [v])
+        r.advance(1e-3)
+        plant.do_step(k * 1e-3, 1e-3, v)
+    assert np.array_equal(r.plant.x, plant.x)
+    assert r.time() == pytest.approx(0.3, abs=1e-12)
+
+
+def test_lockstep_is_deterministic_and_ticks_are_integer_nanoseconds():
+    a, b = rig(), rig()
+    for r in (a, b):
+        for k in range(1, 1001):
+            r.step([0], [1.0 if k < 500 else -1.0], [0, 1], k * 1_000_000)
+    assert np.array_equal(a.plant.x, b.plant.x)
+    assert a._t_ns == 1_000_000_000          # no accumulated float error after 1000 steps
+
+
+def test_step_into_the_past_is_refused_in_lockstep():
+    r = rig()
+    r.advance(0.01)
+    with pytest.raises(HILError) as e:
+        r.step([0], [0.0], [0], 5_000_000)
+    assert e.value.code == ErrorCode.CLOCK
+
+
+def test_bad_channels_and_values_are_clear_errors():
+    r = rig()
+    with pytest.raises(HILError) as e:
+        r.write_analog([4], [0.0])
+    assert e.value.code == ErrorCode.BAD_CHANNEL and "channel 4" in e.value.message
+    with pytest.raises(HILError) as e:
+        r.write_analog([0], [float("nan")])
+    assert e.value.code == ErrorCode.INVALID_ARGUMENT
+    with pytest.raises(HILError) as e:
+        r.read_encoder([7])
+    assert e.value.code == ErrorCode.BAD_CHANNEL
+    with pytest.raises(HILError) as e:
+        r.watchdog_start(0.0)
+    assert e.value.code == ErrorCode.INVALID_ARGUMENT
+
+
+def test_watchdog_expiry_forces_the_expiration_state_and_latches():
+    r = rig()
+    r.watchdog_set_analog_expiration_state([0], [1.0])
+    r.watchdog_start(0.05)
+    r.write_analog([0], [5.0])
+    r.advance(0.04)
+    assert r.watchdog_reload() is True
+    reload_ns = r.wd_last_reload_ns
+    r.advance(0.2)
+    assert r.watchdog_is_expired()
+    assert r.wd_expired_at_ns - reload_ns <= 50_000_000 + r.tick_ns      # within the timeout (+ one tick)
+    assert r.motor_voltage() == pytest.approx(dac_quantize(1.0))         # the expiration state, not 5 V
+    with pytest.raises(HILError) as e:
+        r.write_analog([0], [3.0])
+    assert e.value.code == ErrorCode.WATCHDOG_EXPIRED
+    assert r.watchdog_reload() is False
+    r.watchdog_stop()
+    assert r.watchdog_is_expired()                                        # stop does not clear
+    r.watchdog_clear()
+    r.write_analog([0], [2.0])
+    assert r.motor_voltage() == pytest.approx(dac_quantize(2.0))
+
+
+def test_watchdog_default_expiration_state_is_zero_volts():
+    r = rig()
+    r.watchdog_start(0.01)
+    r.write_analog([0], [4.0])
+    r.advance(0.05)
+    assert r.watchdog_is_expired() and r.motor_voltage() == 0.0
+
+
+def test_pendulum_limit_latches_the_amplifier_off_until_reset():
+    r = rig(initial_state={"pendulum_angle": 0.3})       # 17 deg, inside the 20 deg limit
+    r.new_session("test")
+    assert r.status().amplifier_enabled
+    for _ in range(2000):
+        r.write_analog([0], [0.0])
+        r.advance(1e-3)
+        if not r.amplifier_enabled:
+            break
+    st = r.status()
+    assert st.limit_tripped and not st.amplifier_enabled
+    assert "pendulum" in st.limit_message and "20 deg" in st.limit_message
+    angle = r.true_state()["pendulum_angle"]
+    assert abs(angle) > math.radians(20) - THESIS_PEND_RES
+    r.write_analog([0], [5.0])
+    assert r.motor_voltage() == 0.0                       # the card accepts the write; the amplifier is off
+    r.new_session("next")                                 # a new session does not clear the latch
+    assert r.status().limit_tripped and r.motor_voltage() == 0.0
+    r.reset()
+    r.write_analog([0], [5.0])
+    assert r.status().amplifier_enabled and r.motor_voltage() == pytest.approx(dac_quantize(5.0))
+    assert r.true_state()["pendulum_angle"] == pytest.approx(0.3)      # re-homed
+
+
+def test_cart_limit_trips_at_0_30_m():
+    r = rig(pendulum_limit=None)
+    for _ in range(5000):
+        r.write_analog([0], [6.0])
+        r.advance(1e-3)
+        if not r.amplifier_enabled:
+            break
+    st = r.status()
+    assert st.limit_tripped and "cart_position" in st.limit_message and "0.3" in st.limit_message
+    assert r.true_state()["cart_position"] == pytest.approx(0.30, abs=0.005)
+
+
+def test_hard_end_stop_at_0_407_m():
+    r = rig(cart_limit=None, pendulum_limit=None)
+    positions = []
+    for _ in range(4000):
+        r.write_analog([0], [8.0])
+        r.advance(1e-3)
+        positions.append(r.true_state()["cart_position"])
+    assert max(positions) == pytest.approx(END_STOP_M)
+    assert max(positions) <= 0.407
+    assert r.true_state()["cart_velocity"] == 0.0
+    assert r.status().counters.get("end_stop:cart_position", 0) > 0
+
+
+def test_transport_latency_delays_commands_and_readings():
+    lat = 0.005
+    delayed, direct = rig(latency=lat), rig()
+    for r in (delayed, direct):
+        r.write_analog([0], [3.0])
+    delayed.advance(lat)
+    assert delayed.true_state()["cart_position"] == 0.0          # the command has not arrived yet
+    direct_counts = []
+    delayed_counts = []
+    for k in range(100):
+        direct.advance(1e-3)
+        direct_counts.append(int(direct.read_encoder([0])[0]))
+    # the delayed rig: command arrives 5 ms late, readings show the encoders 5 ms ago
+    for k in range(100):
+        delayed.advance(1e-3)
+        delayed_counts.append(int(delayed.read_encoder([0])[0]))
+    # delayed reading at (lat + (k+1) ms) shows the encoders at (k+1) ms after the command's arrival
+    # = direct reading at (k+1) ms, minus the lat already spent -> shift of lat/1ms samples
+    shift = int(round(lat / 1e-3))
+    assert delayed_counts[shift:] == direct_counts[:len(direct_counts) - shift]
+
+
+def test_encoder_noise_is_seeded_gaussian_counts():
+    a, b, clean = rig(noise_counts=2.0, seed=7), rig(noise_counts=2.0, seed=7), rig()
+    for r in (a, b, clean):
+        r.plant.set_state([0.05, 0, 0.1, 0, 0])
+    ra = np.array([a.read_encoder([0])[0] for _ in range(3000)], dtype=float)
+    rb = np.array([b.read_encoder([0])[0] for _ in range(3000)], dtype=float)
+    exact = float(clean.read_encoder([0])[0])
+    assert np.array_equal(ra, rb)
+    assert 1.6 < np.std(ra - exact) < 2.4
+    assert abs(np.mean(ra - exact)) < 0.2
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.ns = 1_000_000_000
+
+    def __call__(self) -> int:
+        return self.ns
+
+
+def test_wallclock_runs_the_physics_on_a_fixed_grid_of_real_time():
+    clock = FakeClock()
+    r = VirtualRig(RigConfig(clock="wallclock", tick=5e-4), clock_ns=clock)
+    r.start_clock(ticker=False)
+    r.write_analog([0], [2.0])
+    clock.ns += 10_300_000                       # 10.3 ms of real time
+    assert r.time() == pytest.approx(0.0103)
+    assert r._t_ns == 10_000_000                 # physics on the 0.5 ms grid
+    plant = Plant(preset("thesis-ch3"))
+    for k in range(20):
+        plant.do_step(k * 5e-4, 5e-4, dac_quantize(2.0))
+    assert np.allclose(r.plant.x, plant.x, rtol=0, atol=1e-15)
+
+
+def test_wallclock_watchdog_expires_on_real_time_without_any_request():
+    clock = FakeClock()
+    r = VirtualRig(RigConfig(clock="wallclock", tick=5e-4), clock_ns=clock)
+    r.start_clock(ticker=False)
+    r.watchdog_start(0.05)
+    r.write_analog([0], [6.0])
+    clock.ns += 200_000_000                      # the client went silent for 0.2 s
+    st = r.status()
+    assert st.watchdog_expired and st.motor_voltage == 0.0
+    assert r.wd_expired_at_ns == 50_000_000      # at the first grid point at the timeout
+
+
+def test_config_errors_name_the_field():
+    with pytest.raises(ValueError, match="clock"):
+        RigConfig(clock="sundial").checked()
+    with pytest.raises(ValueError, match="plant"):
+        RigConfig(plant="triple-mass").checked()
+    with pytest.raises(ValueError, match="latency"):
+        RigConfig(latency=-1).checked()
+    with pytest.raises(ValueError, match="no state"):
+        VirtualRig(RigConfig(initial_state={"angle": 0.1}))

@@ -1,0 +1,102 @@
+"""Real-time pacer: deadlines on integer ticks (no drift), sleep-then-spin, statistics. Simulated clock."""
+from __future__ import annotations
+
+import random
+import time
+
+import pytest
+
+from harness.realtime import Pacer, wait_until
+
+
+class SimClock:
+    """A clock that advances by ``read_cost`` per reading and oversleeps by ``wake_late``."""
+
+    def __init__(self, read_cost: int = 1_000, wake_late: int = 60_000) -> None:
+        self.ns = 5_000_000_000
+        self.read_cost = read_cost
+        self.wake_late = wake_late
+        self.sleeps: list[float] = []
+
+    def clock(self) -> int:
+        self.ns += self.read_cost
+        return self.ns
+
+    def sleep(self, seconds: float) -> None:
+        self.sleeps.append(seconds)
+        self.ns += int(seconds * 1e9) + self.wake_late
+
+    def work(self, ns: int) -> None:
+        self.ns += ns
+
+
+def test_deadlines_never_drift():
+    sim = SimClock()
+    pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep)
+    rng = random.Random(3)
+    pacer.start()
+    t0 = pacer.t0_ns
+    for n in range(5000):
+        pacer.begin(n)
+        sim.work(rng.randrange(50_000, 600_000))
+        pacer.end(n)
+    starts = pacer._starts
+    # every step starts at its own deadline t0 + n*h (within the spin granularity), even after 5000 steps
+    assert all(0 <= s - (t0 + n * 1_000_000) <= 2 * sim.read_cost for n, s in enumerate(starts))
+    st = pacer.stats()
+    assert st.steps == 5000 and st.overruns == 0
+    assert st.period_jitter_max <= 4e-6
+    assert 6.1e-4 >= st.worst_step_time >= 5e-4
+
+
+def test_sleeps_then_spins():
+    sim = SimClock(wake_late=60_000)
+    pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep, spin=200e-6)
+    pacer.start()
+    pacer.begin(0)
+    pacer.end(0)
+    pacer.begin(1)
+    # it slept until ~spin before the deadline, and the oversleep (60 us < spin) was absorbed by spinning
+    assert sim.sleeps and sim.sleeps[-1] == pytest.approx(1e-3 - 200e-6, abs=1e-5)
+    assert pacer._lateness[-1] <= 2 * sim.read_cost
+
+
+def test_a_long_step_counts_overruns_and_later_deadlines_hold():
+    sim = SimClock()
+    pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep)
+    pacer.start()
+    t0 = pacer.t0_ns
+    for n in range(20):
+        pacer.begin(n)
+        sim.work(2_500_000 if n == 5 else 100_000)      # step 5 takes 2.5 periods
+        pacer.end(n)
+    st = pacer.stats()
+    # step 6 starts 1.5 periods late, step 7 0.5 period (+ a little) late: both beyond half a period
+    assert st.overruns == 2
+    assert st.lateness_max == pytest.approx(1.5e-3, abs=1e-5)
+    assert st.worst_step_time == pytest.approx(2.5e-3, abs=1e-5)
+    # the schedule recovers: step 8 onwards at their original deadlines
+    assert all(0 <= pacer._starts[n] - (t0 + n * 1_000_000) <= 2 * sim.read_cost for n in range(8, 20))
+
+
+def test_metrics_keys():
+    sim = SimClock()
+    pacer = Pacer(2e-3, clock_ns=sim.clock, sleep=sim.sleep)
+    for n in range(10):
+        pacer.begin(n)
+        pacer.end(n)
+    m = pacer.metrics()
+    for key in ("period_jitter_p50_s", "period_jitter_p99_s", "period_jitter_max_s", "overruns",
+                "worst_step_time_s", "realtime_steps"):
+        assert key in m
+    assert m["realtime_steps"] == 10
+
+
+def test_wait_until_on_the_real_clock_reaches_the_deadline():
+    deadline = time.perf_counter_ns() + 2_000_000
+    assert wait_until(deadline) >= deadline
+
+
+def test_bad_period():
+    with pytest.raises(ValueError, match="period"):
+        Pacer(0.0)
