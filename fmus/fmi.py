@@ -59,35 +59,47 @@ logger callback, ``tests/test_fmi_plumbing.py``):
 
 * ``step`` raising :class:`StepFailure` -> the message is logged with status
   fmi2Error (category ``logStatusError``) and ``fmi2DoStep`` returns **fmi2Discard**;
-  the FMU state stays at the communication point ``t``.
+  the FMU state stays at the communication point ``t`` and the instance stays usable.
 * A bad parameter (non-finite Real, a failed ``check``, an exception in ``setup``) ->
-  the message (``parameter NAME = VALUE UNIT: reason``) is logged with status fmi2Error
-  and ``fmi2ExitInitializationMode`` returns **fmi2Fatal**: any Python exception
-  reaching the wrapper becomes fmi2Fatal (it has no path to fmi2Error), after which the
-  instance may only be freed.
-* Any other exception anywhere -> logged with status fmi2Error, then fmi2Fatal.
+  ``fmi2ExitInitializationMode`` returns **fmi2Fatal** and the wrapper logs, with status
+  fmi2Fatal and an empty category, the two-line text
+  ``Fatal py exception encountered: [exitInitializationMode] PyObject_CallMethod`` /
+  ``parameter NAME = VALUE UNIT: reason``. Any Python exception reaching the wrapper
+  becomes fmi2Fatal (it has no path to fmi2Error); the instance may then only be freed.
+  **The last line of the fmi2Fatal message is the one to report.**
+* Any other exception in any entry point (``get_*``/``set_*`` included) -> the same, with
+  ``ExceptionType: text at file.py:line`` as the last line.
 
 The wrapper forwards log messages (including the fmi2Fatal one) **only to an instance
 instantiated with loggingOn = fmi2True** (and, after ``fmi2SetDebugLogging`` with a
 category list, only those categories): a master that wants the error text must
-instantiate with logging on. With pythonfmu 0.7.0 the fmi2Fatal line itself carries no
-text when a message was logged just before (it reads "unknown error"); the logged
-fmi2Error line is the one to report.
+instantiate with logging on.
 
-pythonfmu 0.7.0 workaround: on every instantiation its C wrapper re-executes the FMU
-script and releases one reference to the script module's ``__dict__`` that it never
-took. ``FmuBase.__init_subclass__`` takes one reference each time the FMU class
-statement runs, which balances it (without this, the second instance of an FMU in a
-process fails with "module has no attribute ...").
+pythonfmu 0.7.0 workarounds (bugs of its C wrapper, found by testing; ``_take_reference``):
+
+* On every instantiation the wrapper re-executes the FMU script and releases one
+  reference to the script module's ``__dict__`` that it never took.
+  ``FmuBase.__init_subclass__`` adds one reference each time the FMU class statement
+  runs (without this, the second instance of an FMU in a process fails with "module has
+  no attribute ..." and later ones corrupt memory).
+* After a Python exception the wrapper releases the instance, its log queue and the class
+  twice (in the failing call and again in fmi2FreeInstance); ``FmuBase._fail``, through
+  which every exception leaves, adds one reference to each first (without this the
+  process crashes in a later garbage collection).
+* Messages still queued by ``log`` when an exception reaches the wrapper are flushed
+  while the exception is pending, which loses the exception's text; ``_fail`` moves them
+  into the exception's text instead, and raises outside any ``except`` block so that no
+  chained exception or traceback travels with it.
 """
 from __future__ import annotations
 
+import ctypes
 import math
 import re
 import sys
 import traceback
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, NoReturn, Sequence
 from xml.etree.ElementTree import Element, SubElement
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
@@ -95,12 +107,29 @@ from pythonfmu.enums import Fmi2Status
 
 __all__ = ["FmuBase", "FmuError", "StepFailure", "VariableInfo", "parse_unit", "positive", "nonnegative"]
 
-# Dicts of FMU script modules kept alive (see the module docstring, pythonfmu workaround).
-_PINNED_MODULE_DICTS: list[dict[str, Any]] = []
+
+
+def _take_reference(obj: Any) -> None:
+    """Add one reference to ``obj`` that nothing owns: it compensates a reference that
+    pythonfmu 0.7.0's wrapper releases without owning it (module docstring). A Python
+    container would not do: the wrapper's extra release would leave it pointing at a
+    possibly freed object."""
+    _py_incref(obj)
+
+
+_py_incref = ctypes.pythonapi.Py_IncRef
+_py_incref.argtypes = [ctypes.py_object]
+_py_incref.restype = None
 
 
 class FmuError(RuntimeError):
-    """An FMU cannot continue (bad parameter, call in the wrong state); reported as fmi2Fatal."""
+    """An FMU cannot continue (bad parameter, call in the wrong state); reported as fmi2Fatal.
+
+    Its ``repr`` is the bare message: pythonfmu's wrapper logs ``repr(exception)``.
+    """
+
+    def __repr__(self) -> str:
+        return str(self)
 
 
 class StepFailure(ArithmeticError):
@@ -215,10 +244,7 @@ class FmuBase(Fmi2Slave):
         while frame is not None and frame.f_code.co_name == "__init_subclass__":
             frame = frame.f_back
         if frame is not None:
-            _PINNED_MODULE_DICTS.append(frame.f_globals)
-        module = sys.modules.get(cls.__module__)
-        if module is not None:
-            _PINNED_MODULE_DICTS.append(module.__dict__)
+            _take_reference(frame.f_globals)
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
@@ -229,6 +255,8 @@ class FmuBase(Fmi2Slave):
         self.start_time = 0.0
         self.initialized = False
         self._parameters_dirty = False
+        self._getters: dict[type, dict[int, Callable[[], Any]]] = {t: {} for t in _TYPES}
+        self._setters: dict[type, dict[int, Callable[[Any], None]]] = {t: {} for t in _TYPES}
 
     # --- declaring variables -----------------------------------------------------------------
 
@@ -316,6 +344,9 @@ class FmuBase(Fmi2Slave):
                   initial=_INITIAL[initial] if initial else None, description=description,
                   getter=getter, setter=setter)
         self.register_variable(var, nested=False)
+        self._getters[type_][var.value_reference] = getter
+        if setter is not None:
+            self._setters[type_][var.value_reference] = setter
         info = VariableInfo(name=name, causality=causality, variability=variability, type_=type_, unit=unit,
                             initial=initial, depends_on=tuple(depends_on) if depends_on is not None else None,
                             depends_kind=depends_kind,
@@ -347,7 +378,7 @@ class FmuBase(Fmi2Slave):
         def set_parameter(value: Any) -> None:
             if self.initialized:
                 if variability != "tunable":
-                    self._fail(f"parameter {name} is fixed: it cannot be set to {value!r} after initialization")
+                    raise FmuError(f"parameter {name} is fixed: it cannot be set to {value!r} after initialization")
                 self._parameters_dirty = True
             setter(value)
         return set_parameter
@@ -373,12 +404,70 @@ class FmuBase(Fmi2Slave):
                          tolerance: float | None = None) -> None:
         self.start_time = float(start_time)
 
+    def _get(self, type_: type, vrs: Sequence[int]) -> list[Any]:
+        try:
+            getters = self._getters[type_]
+            return [type_(getters[vr]()) for vr in vrs]
+        except Exception as exc:  # noqa: BLE001
+            error = self._access_message("get", type_, vrs, exc)
+        self._fail(error)
+
+    def _set(self, type_: type, vrs: Sequence[int], values: Sequence[Any]) -> None:
+        error = None
+        try:
+            setters = self._setters[type_]
+            for vr, value in zip(vrs, values):
+                setters[vr](value)
+        except Exception as exc:  # noqa: BLE001
+            error = str(exc) if isinstance(exc, FmuError) else self._access_message("set", type_, vrs, exc)
+        if error is not None:
+            self._fail(error)
+
+    def _access_message(self, what: str, type_: type, vrs: Sequence[int], exc: BaseException) -> str:
+        if isinstance(exc, KeyError):
+            vr = exc.args[0] if exc.args else "?"
+            name = self.vars[vr].name if isinstance(vr, int) and vr in self.vars else f"valueReference {vr}"
+            kind = _TYPES[type_].__name__
+            return f"cannot {what} {name} as {kind}" + (" (not settable)" if what == "set" and vr in self.vars else "")
+        return self._message(exc)
+
+    def get_real(self, vrs: Sequence[int]) -> list[float]:
+        return self._get(float, vrs)
+
+    def get_integer(self, vrs: Sequence[int]) -> list[int]:
+        return self._get(int, vrs)
+
+    def get_boolean(self, vrs: Sequence[int]) -> list[bool]:
+        return self._get(bool, vrs)
+
+    def get_string(self, vrs: Sequence[int]) -> list[str]:
+        return self._get(str, vrs)
+
+    def set_real(self, vrs: Sequence[int], values: Sequence[float]) -> None:
+        self._set(float, vrs, values)
+
+    def set_integer(self, vrs: Sequence[int], values: Sequence[int]) -> None:
+        self._set(int, vrs, values)
+
+    def set_boolean(self, vrs: Sequence[int], values: Sequence[bool]) -> None:
+        self._set(bool, vrs, values)
+
+    def set_string(self, vrs: Sequence[int], values: Sequence[str]) -> None:
+        self._set(str, vrs, values)
+
+    # Exceptions are turned into a message inside ``except`` and raised again (by ``_fail``)
+    # only after the ``except`` block, so that nothing chains the original exception and its
+    # traceback to what pythonfmu's wrapper receives (module docstring).
+
     def exit_initialization_mode(self) -> None:
+        error = None
         try:
             self.check_parameters()
             self.setup()
         except Exception as exc:  # noqa: BLE001 -- reported through the FMI logger
-            self._fail(self._message(exc), exc)
+            error = self._message(exc)
+        if error is not None:
+            self._fail(error)
         self.initialized = True
 
     def do_step(self, current_time: float, step_size: float) -> bool:
@@ -393,14 +482,17 @@ class FmuBase(Fmi2Slave):
             self.log(str(exc), Fmi2Status.error)
             return False
         except Exception as exc:  # noqa: BLE001
-            self._fail(self._message(exc), exc)
-            return False  # not reached
+            error = self._message(exc)
+        self._fail(error)
 
     def terminate(self) -> None:
+        error = None
         try:
             self.teardown()
         except Exception as exc:  # noqa: BLE001
-            self._fail(self._message(exc), exc)
+            error = self._message(exc)
+        if error is not None:
+            self._fail(error)
 
     def check_parameters(self) -> None:
         """Reject non-finite Real parameters and run every parameter's ``check``.
@@ -433,10 +525,19 @@ class FmuBase(Fmi2Slave):
         where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
         return f"{type(exc).__name__}: {text or 'no message'}{where}"
 
-    def _fail(self, message: str, cause: BaseException | None = None) -> None:
-        """Log ``message`` with status fmi2Error and raise (the wrapper returns fmi2Fatal)."""
-        self.log(message, Fmi2Status.error)
-        raise FmuError(message) from cause
+    def _fail(self, message: str) -> NoReturn:
+        """Raise ``message`` to pythonfmu's wrapper, which logs it with status fmi2Fatal and returns fmi2Fatal.
+
+        Two pythonfmu 0.7.0 bugs shape this (module docstring): messages still queued when an
+        exception reaches the wrapper corrupt the interpreter's memory, so they are moved into
+        the exception's text; and the wrapper releases the instance, its log queue and the
+        class twice, so extra references are kept (leaked on purpose).
+        """
+        pending = [m.msg for m in self.log_queue]
+        self.log_queue.clear()
+        for obj in (self, self.log_queue, type(self)):
+            _take_reference(obj)
+        raise FmuError("\n".join([*pending, message]))
 
     # --- modelDescription.xml ----------------------------------------------------------------
 

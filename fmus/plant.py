@@ -148,9 +148,13 @@ class Plant:
             raise ValueError(f"input voltage = {voltage} V at t = {t} s is not finite")
         limit = self._limit
         vA = limit if voltage > limit else (-limit if voltage < -limit else voltage)
-        z = stepper.step(self._z, self._f, vA)
-        x = self._from_int(z, self.params) if self.kind == "single-mass" else z
-        if not all(map(math.isfinite, x)):
+        try:
+            z = stepper.step(self._z, self._f, vA)
+            x = self._from_int(z, self.params) if self.kind == "single-mass" else z
+            finite = all(map(math.isfinite, x))
+        except (ValueError, OverflowError, ZeroDivisionError):  # math.sin(inf), float overflow, ...
+            finite = False
+        if not finite:
             state = ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.state_names, self._xl))
             raise PlantStepError(f"plant state became non-finite in the step from t = {t:.6g} s "
                                  f"(h = {h:g} s, voltage = {voltage:g} V); state at t: {state}")

@@ -1,0 +1,20 @@
+"""Shared fixtures: FMUs built into a per-session temporary folder (never into build/)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def plant_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """``{"single-mass": IP02SingleMass.fmu, "double-mass": IP02DoubleMass.fmu}`` built for this session."""
+    from fmus.build import build_all
+
+    out = tmp_path_factory.mktemp("plant-fmus")
+    scripts = [ROOT / "fmus" / "fmu_ip02_single_mass.py", ROOT / "fmus" / "fmu_ip02_double_mass.py"]
+    results = build_all(out, scripts=scripts)
+    fmus = {r.fmu.stem: r.fmu for r in results}
+    return {"single-mass": fmus["IP02SingleMass"], "double-mass": fmus["IP02DoubleMass"]}

@@ -1,0 +1,68 @@
+"""Helpers for tests that drive real FMUs through fmpy: an instance with a capturing logger."""
+from __future__ import annotations
+
+import shutil
+from ctypes import byref
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, free)
+from fmpy.logging import addLoggerProxy
+
+_COUNTER = [0]
+
+
+@dataclass
+class LoggedFmu:
+    """An fmpy FMU2Slave instantiated with logging on; ``messages`` collects (status, category, text)."""
+
+    slave: FMU2Slave
+    vr: dict[str, int]
+    messages: list[tuple[int, str, str]] = field(default_factory=list)
+    callbacks: Any = None  # keeps the ctypes callbacks alive
+
+    def set(self, **values: float) -> None:
+        for name, value in values.items():
+            self.slave.setReal([self.vr[name]], [float(value)])
+
+    def get(self, *names: str) -> list[float]:
+        return self.slave.getReal([self.vr[n] for n in names])
+
+    def text(self) -> str:
+        return "\n".join(m[2] for m in self.messages)
+
+
+def instantiate(fmu: Path, unzip_dir: Path | None = None, logging_on: bool = True) -> LoggedFmu:
+    """Extract (once per ``unzip_dir``) and instantiate an FMU with a capturing logger."""
+    md = read_model_description(str(fmu))
+    if unzip_dir is None or not (unzip_dir / "modelDescription.xml").exists():
+        unzip_dir = Path(extract(str(fmu), unzipdir=str(unzip_dir) if unzip_dir else None))
+    _COUNTER[0] += 1
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=str(unzip_dir), modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName=f"test{_COUNTER[0]}")
+    logged = LoggedFmu(slave=slave, vr={v.name: v.valueReference for v in md.modelVariables})
+
+    def logger(env, name, status, category, message):  # noqa: ANN001 -- ctypes callback
+        logged.messages.append((int(status), (category or b"").decode(), (message or b"").decode()))
+
+    cb = fmi2CallbackFunctions()
+    cb.logger = fmi2CallbackLoggerTYPE(logger)
+    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    addLoggerProxy(byref(cb))
+    logged.callbacks = (cb, logger)
+    slave.instantiate(loggingOn=logging_on, callbacks=cb)
+    return logged
+
+
+def vdmcheck_script(root: Path) -> Path | None:
+    """The VDMCheck2 launcher unpacked by ``make vdmcheck``, if present."""
+    hits = sorted((root / "tools" / "vdmcheck").glob("vdmcheck-*/VDMCheck2.sh"))
+    return hits[-1] if hits else None
+
+
+def java_available() -> bool:
+    return shutil.which("java") is not None
