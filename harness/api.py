@@ -1,0 +1,251 @@
+"""The Python API of the master: :func:`run` for one run, :func:`prepare` for many runs of one
+scenario (parameter sweeps) that share the loaded, checked and extracted FMUs.
+
+Example::
+
+    import harness
+
+    result = harness.run("single-mass-lqr", stop_time=5.0, overrides={"plant.Mp": 0.2})
+    result.metrics["settling_time_s"], result["plant.cart_position"]
+
+    with harness.prepare("double-mass-hsmc") as prepared:      # load and extract once
+        for mp in (0.10, 0.12, 0.14):
+            r = prepared.run(overrides={"plant.Mp": mp}, raise_on_error=False)
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import weakref
+import zipfile
+from pathlib import Path, PurePosixPath
+from typing import Any, Mapping, Sequence
+
+from .algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
+from .errors import UsageError
+from .execution import Execution, SlaveFactory
+from .manipulators import Manipulator
+from .observers import Observer, Progress, realtime_observer
+from .results import Result, SimulationError
+from .ssp import Scenario, load_scenario, select_parameter_set
+from .system import SwapTarget, System, bind, warn_all, with_overrides
+
+
+class Prepared:
+    """A scenario loaded, checked against its FMUs and extracted, ready to run many times.
+
+    Parameters
+    ----------
+    scenario_or_path : str or path or Scenario
+        Scenario name, folder, SSD file or ``.ssp`` archive (or a loaded Scenario).
+    parameter_set : str, optional
+        Bind this parameter set (``thesis``, ``tuned``...) instead of the SSD's default.
+    swaps : mapping of component to FMU path, alias or SwapTarget, optional
+        Components to replace (``{"plant": "hil"}``).
+    fmu_dirs : sequence of path, optional
+        Extra folders to look for FMUs in.
+    algorithm : str
+        ``gauss-seidel`` (default) or ``jacobi``.
+    workdir : path, optional
+        Where to extract FMUs (default: a temporary folder removed by :meth:`close`).
+    slave_factory : callable, optional
+        ``factory(instance) -> Slave`` instead of loading the FMUs (tests).
+    system : System, optional
+        An already bound system (tests); skips loading and binding.
+    warn : bool
+        Issue the binding's notes (unconnected inputs...) as Python warnings.
+    """
+
+    def __init__(self, scenario_or_path: str | os.PathLike[str] | Scenario | None = None, *,
+                 parameter_set: str | None = None,
+                 swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
+                 fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, algorithm: str = GAUSS_SEIDEL,
+                 workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
+                 system: System | None = None, warn: bool = True) -> None:
+        if algorithm not in ALGORITHMS:
+            raise UsageError(f"--algorithm {algorithm}: expected one of {', '.join(ALGORITHMS)}")
+        self.algorithm = algorithm
+        self.slave_factory = slave_factory
+        self.parameter_set = parameter_set
+        self.swaps = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
+                      for k, v in (swaps or {}).items()}
+        self._tmp: Path | None = None
+        self._finalizer: Any = None
+        self.unzip_dirs: dict[str, Path] = {}
+        if system is not None:
+            self.system = system
+            self.scenario = system.scenario
+            return
+        if isinstance(scenario_or_path, Scenario):
+            scenario = scenario_or_path
+        else:
+            scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
+        if parameter_set:
+            scenario = select_parameter_set(scenario, parameter_set)
+        self.scenario = scenario
+        if workdir is None:
+            self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
+            self._finalizer = weakref.finalize(self, shutil.rmtree, str(self._tmp), True)
+            work = self._tmp
+        else:
+            work = Path(workdir)
+            work.mkdir(parents=True, exist_ok=True)
+        fmu_files = self._archive_members(scenario, work) if scenario.location.is_file() else {}
+        self.system = bind(scenario, swaps=swaps, fmu_files=fmu_files)
+        if warn:
+            warn_all(self.system)
+        if slave_factory is None:
+            self._extract(work)
+
+    @staticmethod
+    def _archive_members(scenario: Scenario, work: Path) -> dict[str, Path]:
+        """Extract the FMUs an ``.ssp`` archive carries; components whose FMU is missing are left out."""
+        out: dict[str, Path] = {}
+        with zipfile.ZipFile(scenario.location) as zf:
+            names = set(zf.namelist())
+            for comp in scenario.components:
+                member = str(PurePosixPath(comp.source))
+                if comp.source.startswith("file:") or member not in names:
+                    continue
+                target = work / "ssp" / member
+                target.parent.mkdir(parents=True, exist_ok=True)
+                if not target.exists():
+                    with zf.open(member) as src, open(target, "wb") as dst:
+                        shutil.copyfileobj(src, dst)
+                out[comp.name] = target
+        return out
+
+    def _extract(self, work: Path) -> None:
+        from fmpy import extract
+
+        by_file: dict[Path, Path] = {}
+        for inst in self.system.instances:
+            path = inst.model.path
+            assert path is not None
+            if path not in by_file:
+                target = work / f"{len(by_file)}-{path.stem}"
+                if not (target / "modelDescription.xml").exists():
+                    extract(str(path), unzipdir=str(target))
+                by_file[path] = target
+            self.unzip_dirs[inst.name] = by_file[path]
+
+    # ------------------------------------------------------------------ running
+    def execution(self, stop_time: float | None = None, step: float | None = None,
+                  overrides: Mapping[str, Any] | None = None, *, start_time: float | None = None,
+                  algorithm: str | None = None, observers: Sequence[Observer] = (),
+                  manipulators: Sequence[Manipulator] = (), realtime: bool | None = None, progress: bool = False,
+                  record_every: int = 1, max_init_iterations: int = 20) -> Execution:
+        """A ready :class:`Execution` (checked: step, stop time, overrides, step multiples)."""
+        exp = self.scenario.experiment
+        stop = exp.stop_time if stop_time is None else stop_time
+        h = exp.step_size if step is None else step
+        if stop is None:
+            raise StepSizeError(f"{self.scenario.origin}: no DefaultExperiment stopTime; give --stop-time")
+        if h is None:
+            raise StepSizeError(f"{self.scenario.origin}: no default step size; give --step")
+        _, values = with_overrides(self.system, overrides or {})
+        observers = list(observers)
+        if progress:
+            observers.append(Progress())
+        if realtime or (realtime is None and self.system.realtime):
+            observers.append(realtime_observer())
+        return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
+                         algorithm=algorithm or self.algorithm, overrides=values, observers=observers,
+                         manipulators=manipulators, slave_factory=self.slave_factory, unzip_dirs=self.unzip_dirs,
+                         record_every=record_every, max_init_iterations=max_init_iterations)
+
+    def run(self, stop_time: float | None = None, step: float | None = None,
+            overrides: Mapping[str, Any] | None = None, *, out_dir: str | os.PathLike[str] | None = None,
+            variables: Sequence[str] | None = None, plot: bool = False, raise_on_error: bool = True,
+            **kwargs: Any) -> Result:
+        """Run once; see :func:`harness.run` for the parameters.
+
+        Raises
+        ------
+        SimulationError
+            If the run failed and ``raise_on_error`` (``.result`` holds the partial result,
+            already written to ``out_dir`` when given).
+        """
+        execution = self.execution(stop_time, step, overrides, **kwargs)
+        result = execution.run()
+        result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
+        result.metadata["swaps"] = dict(self.swaps)
+        if out_dir is not None:
+            result.metadata["files"] = {k: str(v) for k, v in
+                                        result.write(out_dir, variables=variables, plot=plot).items()}
+        elif variables:
+            result.select(variables)  # reject unknown names even when nothing is written
+        if result.error is not None and raise_on_error:
+            raise SimulationError(result.error, result)
+        return result
+
+    def close(self) -> None:
+        """Remove the extracted FMUs (if this object created the folder)."""
+        if self._finalizer is not None:
+            self._finalizer()
+
+    def __enter__(self) -> "Prepared":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def prepare(scenario_or_path: str | os.PathLike[str] | Scenario, **kwargs: Any) -> Prepared:
+    """Load, check and extract a scenario once for many runs (see :class:`Prepared`)."""
+    return Prepared(scenario_or_path, **kwargs)
+
+
+def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | None = None,
+        step: float | None = None, overrides: Mapping[str, Any] | None = None,
+        swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None, *,
+        parameter_set: str | None = None, algorithm: str = GAUSS_SEIDEL,
+        fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, out_dir: str | os.PathLike[str] | None = None,
+        variables: Sequence[str] | None = None, plot: bool = False, realtime: bool | None = None,
+        progress: bool = False, observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
+        start_time: float | None = None, record_every: int = 1, raise_on_error: bool = True) -> Result:
+    """Co-simulate a scenario once.
+
+    Parameters
+    ----------
+    scenario_or_path : str or path or Scenario
+        Scenario name (``single-mass-lqr``), folder, SSD file or ``.ssp`` archive.
+    stop_time, step : float, optional
+        [s]; default the scenario's DefaultExperiment (10 s at 1 ms for the project's scenarios).
+    overrides : mapping of ``"component.variable"`` to value, optional
+        Start values (``{"plant.Mp": 0.2, "controller.sample_period": 0.002}``).
+    swaps : mapping of component to FMU path or alias, optional
+        ``{"plant": "hil"}`` or ``{"plant": "other/IP02SingleMass.fmu"}``.
+    parameter_set : str, optional
+        ``thesis`` or ``tuned`` (the scenario's ``.ssv`` files), instead of the SSD's default.
+    algorithm : str
+        ``gauss-seidel`` (default) or ``jacobi``.
+    fmu_dirs : sequence of path, optional
+        Extra folders to look for FMUs in.
+    out_dir : path, optional
+        Write ``results.csv``, ``metrics.json`` (and ``plot.png`` with ``plot``) there.
+    variables : sequence of str, optional
+        Columns of results.csv (names or patterns like ``plant.*``); default all connectors.
+    realtime : bool, optional
+        Pace to wall-clock time; None: only when a swapped-in component asks for it.
+    progress : bool
+        Show a progress bar on stderr (a terminal) for runs longer than a second.
+    observers, manipulators : sequences
+        Extra observers and manipulators (see :mod:`harness.observers`, :mod:`harness.manipulators`).
+    record_every : int
+        Record every n-th communication point.
+    raise_on_error : bool
+        Raise SimulationError on failure (after writing ``out_dir``); else return the partial
+        Result with ``error`` set.
+
+    Returns
+    -------
+    Result
+        ``data`` (structured array: ``time`` + ``component.variable``), ``metrics``, ``metadata``.
+    """
+    with Prepared(scenario_or_path, parameter_set=parameter_set, swaps=swaps, fmu_dirs=fmu_dirs,
+                  algorithm=algorithm) as prepared:
+        return prepared.run(stop_time, step, overrides, out_dir=out_dir, variables=variables, plot=plot,
+                            raise_on_error=raise_on_error, realtime=realtime, progress=progress, observers=observers,
+                            manipulators=manipulators, start_time=start_time, record_every=record_every)
