@@ -32,6 +32,9 @@ ROOT = Path(__file__).resolve().parent.parent
 #: Script folders, and the pure packages packed into the FMUs built from each.
 SCRIPT_DIRS: dict[str, tuple[str, ...]] = {"fmus": ("fmus",), "controllers": ("fmus", "controllers")}
 STAMP_FILE = ".build-stamps.json"
+#: Scripts (by file-name prefix) that need more packages than their folder gives: the HIL
+#: adapters drive the card through ``harness.hil``.
+SCRIPT_PACKAGES: dict[str, tuple[str, ...]] = {"fmu_ip02_hil_": ("fmus", "harness")}
 
 
 class BuildError(RuntimeError):
@@ -178,7 +181,9 @@ def build_all(fmu_dir: Path | str, *, root: Path = ROOT, force: bool = False,
     for script in (discover(root) if scripts is None else [Path(s) for s in scripts]):
         script = script.resolve()
         folder = script.parent.name
-        packages = [root / p for p in SCRIPT_DIRS.get(folder, ("fmus",)) if (root / p).is_dir()]
+        names = next((pk for prefix, pk in SCRIPT_PACKAGES.items() if script.name.startswith(prefix)),
+                     SCRIPT_DIRS.get(folder, ("fmus",)))
+        packages = [root / p for p in names if (root / p).is_dir()]
         digest = _digest(script, packages)
         key = str(script.relative_to(root)) if script.is_relative_to(root) else str(script)
         entry = stamps.get(key)

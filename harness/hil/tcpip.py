@@ -10,6 +10,7 @@ import select
 import socket
 import struct
 import time
+import weakref
 from typing import Sequence
 
 import numpy as np
@@ -20,6 +21,9 @@ from .protocol import (FLAG_AMPLIFIER, FLAG_LIMIT, FLAG_WD_EXPIRED, FLAG_WD_RUNN
                        pack_channels, pack_doubles, pack_ints, pack_text)
 
 NS = 1_000_000_000
+
+#: Open tcpip cards of this process (diagnostics and fault-injection tests).
+OPEN_CARDS: "weakref.WeakSet[TcpipCard]" = weakref.WeakSet()
 
 
 class TcpipCard(Card):
@@ -70,10 +74,12 @@ class TcpipCard(Card):
                              dac_bits=bits, analog_min=lo, analog_max=hi, counts_per_rev=cpr,
                              clock="lockstep" if clock == 0 else "wallclock", tick=tick_ns / NS,
                              plant="single-mass" if plant == 0 else "double-mass", protocol_version=version)
+        OPEN_CARDS.add(self)
 
     # --- transport -----------------------------------------------------------------------------
 
     def _abort(self) -> None:
+        OPEN_CARDS.discard(self)
         if self._sock is not None:
             try:
                 self._sock.close()

@@ -1,0 +1,8 @@
+"""FMU ``IP02HILDoubleMass``: the double-mass plant's connectors on a data-acquisition card (HIL adapter)."""
+from fmus.hil_fmu import HilFmu
+
+
+class IP02HILDoubleMass(HilFmu):
+    """Hardware-in-the-loop adapter for the IP02 double mass: voltage to a Q4 analog output, three encoders to positions."""
+
+    kind = "double-mass"

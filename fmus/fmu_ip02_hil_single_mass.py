@@ -1,0 +1,8 @@
+"""FMU ``IP02HILSingleMass``: the single-mass plant's connectors on a data-acquisition card (HIL adapter)."""
+from fmus.hil_fmu import HilFmu
+
+
+class IP02HILSingleMass(HilFmu):
+    """Hardware-in-the-loop adapter for the IP02 single mass: voltage to a Q4 analog output, encoder counts to positions."""
+
+    kind = "single-mass"

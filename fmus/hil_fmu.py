@@ -1,0 +1,244 @@
+"""FMI face of the hardware-in-the-loop adapter, shared by ``fmu_ip02_hil_single_mass.py`` and
+``fmu_ip02_hil_double_mass.py``.
+
+The adapter stands in for a plant FMU: the same input ``voltage`` [V] and the same
+encoder-measured outputs (``fmus.physics.MEASURED``: ``cart_position``,
+``pendulum_angle``; or ``active_cart_position``, ``passive_cart_position``,
+``pendulum_angle``), so a scenario swaps simulation for hardware by swapping one
+component. It drives a data-acquisition card through :mod:`harness.hil` (a real Q4 with
+Quanser's package, or the virtual rig), at volts-and-counts level:
+
+* **start** (leaving initialization): open the card (``card_uri``), refuse a rig whose
+  amplifier is latched off by a limit trip, write 0 V, set the watchdog's expiration
+  state to 0 V, zero the encoders, start the watchdog (``watchdog_timeout``). The outputs
+  start at 0 (positions relative to the start, as on the lab rig).
+* **every step** ``doStep(t, h)``: reload the watchdog, write ``voltage`` (clipped to
+  ``+-voltage_limit``, divided by ``amplifier_gain``) to the analog output, let the card's
+  clock run to the sample instant ``t + h`` and read the encoders there (one
+  ``Card.step``; on a ``lockstep`` virtual rig this advances the rig by exactly ``h``),
+  and convert counts to SI units with the calibrations (a negative calibration reverses a
+  direction). Counter wrap-around is unwrapped.
+* **faults** (a limit trip, a watchdog expiry, a card error, a rig that does not answer
+  within ``watchdog_timeout``): the message goes to ``last_error`` and to the FMI log, the
+  adapter writes 0 V (best effort) and closes the card, and the step fails (fmi2Discard):
+  the master stops with that message.
+* **terminate, free**: write 0 V, stop the watchdog, close the card.
+
+Status outputs: ``watchdog_expired``, ``limit_tripped`` (Boolean), ``overruns`` (Integer:
+steps whose request reached a real-time card after their sample instant), ``last_error``
+(String, empty when all is well).
+"""
+from __future__ import annotations
+
+import math
+import weakref
+from typing import Any
+
+from .fmi import FmuBase, FmuError, StepFailure
+from .physics import MEASURED, STATE_UNITS
+
+#: Default card: the virtual rig of ``ipcosim rig serve`` on its default address.
+DEFAULT_CARD_URI = "q4:0@tcpip://127.0.0.1:18920"
+CART_M_PER_COUNT = 2.275e-5            # thesis-data.md: IP02 cart encoder
+PENDULUM_RAD_PER_COUNT = 1.534e-3      # thesis-data.md: pendulum encoder, counter-clockwise positive
+
+_DOC = {"cart_position": "cart position from its encoder (relative to the start)",
+        "active_cart_position": "active (motor) cart position from its encoder (relative to the start)",
+        "passive_cart_position": "passive cart position from its encoder (relative to the start)",
+        "pendulum_angle": "pendulum angle from its encoder, counter-clockwise positive (relative to the start)"}
+
+#: per measured output: (channel parameter, default channel, calibration parameter, default calibration, unit)
+_CHANNELS = {"cart_position": ("cart_encoder_channel", 0, "cart_calibration", CART_M_PER_COUNT, "m"),
+             "active_cart_position": ("cart_encoder_channel", 0, "cart_calibration", CART_M_PER_COUNT, "m"),
+             "pendulum_angle": ("pendulum_encoder_channel", 1, "pendulum_calibration", PENDULUM_RAD_PER_COUNT,
+                                "rad"),
+             "passive_cart_position": ("passive_cart_encoder_channel", 2, "passive_cart_calibration",
+                                       CART_M_PER_COUNT, "m")}
+
+
+def _valid_uri(value: str) -> str | None:
+    from harness.hil import HILError, parse_card_uri
+    try:
+        parse_card_uri(value)
+    except HILError as exc:
+        return exc.message
+    return None
+
+
+def _channel(value: int) -> str | None:
+    return None if 0 <= value < 64 else "must be a channel number 0..63"
+
+
+def _nonzero(value: float) -> str | None:
+    return None if value != 0 else "must be non-zero (counts to SI units; negative reverses the direction)"
+
+
+def _close_quietly(holder: dict[str, Any]) -> None:
+    """0 V, watchdog stopped, card closed; never raises (used on free and after faults)."""
+    card = holder.pop("card", None)
+    if card is None:
+        return
+    try:
+        if hasattr(card, "timeout"):
+            card.timeout = min(card.timeout, 0.2)
+        card.write_analog([holder["ao"]], [0.0])
+    except Exception:  # noqa: BLE001 -- best effort: a dead card/connection is already safe
+        pass
+    try:
+        card.watchdog_stop()
+    except Exception:  # noqa: BLE001
+        pass
+    try:
+        card.close()
+    except Exception:  # noqa: BLE001
+        pass
+
+
+class HilFmu(FmuBase):
+    """HIL adapter: the plant's connectors on a data-acquisition card (see the module docstring)."""
+
+    #: 'single-mass' or 'double-mass' (set by the FMU classes).
+    kind: str = ""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self._outputs = list(MEASURED[self.kind])
+        self._pos = [0.0] * len(self._outputs)
+        self.add_input("voltage", start=0.0, unit="V",
+                       description="amplifier command to the motor (written to the card's analog output)")
+        for k, name in enumerate(self._outputs):
+            self.add_output(name, unit=STATE_UNITS[name], description=_DOC[name], getter=(lambda k=k: self._pos[k]),
+                            depends_on=(), initial_depends_on=())
+        self.add_output("watchdog_expired", start=False, type_=bool, depends_on=(), initial_depends_on=(),
+                        description="the card's watchdog expired (outputs forced to 0 V)")
+        self.add_output("limit_tripped", start=False, type_=bool, depends_on=(), initial_depends_on=(),
+                        description="a safety limit latched the amplifier off")
+        self.add_output("overruns", start=0, type_=int, depends_on=(), initial_depends_on=(),
+                        description="steps whose request reached the card after their sample instant")
+        self.add_output("last_error", start="", type_=str, depends_on=(), initial_depends_on=(),
+                        description="the fault that stopped the adapter (empty when all is well)")
+        self.add_parameter("card_uri", start=DEFAULT_CARD_URI, type_=str, check=_valid_uri,
+                           description="card as [TYPE:]ID: q4:0 (Quanser package), "
+                                       "q4:0@tcpip://HOST:PORT (virtual rig), q4:0@inproc://NAME")
+        self.add_parameter("analog_channel", start=0, type_=int, check=_channel,
+                           description="analog output channel driving the amplifier")
+        seen = set()
+        for name in self._outputs:
+            ch_param, ch_default, cal_param, cal_default, unit = _CHANNELS[name]
+            if ch_param in seen:
+                continue
+            seen.add(ch_param)
+            self.add_parameter(ch_param, start=ch_default, type_=int, check=_channel,
+                               description=f"encoder channel of {name}")
+            self.add_parameter(cal_param, start=cal_default, unit=f"{unit}", check=_nonzero,
+                               description=f"{name} per encoder count [{unit}/count]")
+        self.add_parameter("amplifier_gain", start=1.0, unit="1", check=lambda v: None if v > 0 else "must be > 0",
+                           description="power amplifier gain: motor volts per DAC volt")
+        self.add_parameter("voltage_limit", start=10.0, unit="V",
+                           check=lambda v: None if 0 < v <= 10.0 else "must be in (0, 10] V (the DAC range)",
+                           description="the command is clipped to +-voltage_limit before the DAC")
+        self.add_parameter("watchdog_timeout", start=0.1, unit="s",
+                           check=lambda v: None if 0 < v <= 10.0 else "must be in (0, 10] s",
+                           description="card watchdog timeout; also how long to wait for a rig's answer")
+        self.watchdog_expired = False
+        self.limit_tripped = False
+        self.overruns = 0
+        self.last_error = ""
+        self._holder: dict[str, Any] = {}
+        self._finalizer = weakref.finalize(self, _close_quietly, self._holder)
+        self._base_ns: int | None = None
+        self._raw: list[int] = []
+        self._unwrapped: list[int] = []
+
+    # --- lifecycle ---------------------------------------------------------------------------------
+
+    def setup(self) -> None:
+        from harness.hil import HILError, open_uri
+
+        self._enc = [int(getattr(self, _CHANNELS[n][0])) for n in self._outputs]
+        self._cal = [float(getattr(self, _CHANNELS[n][2])) for n in self._outputs]
+        if len(set(self._enc)) != len(self._enc):
+            raise FmuError(f"parameter encoder channels {self._enc}: each measured output needs its own channel")
+        where = f"card {self.card_uri}"
+        try:
+            card = open_uri(self.card_uri, timeout=self.watchdog_timeout, plant=self.kind,
+                            name=f"{self.modelName} {self.instance_name}")
+        except HILError as exc:
+            raise FmuError(f"{where}: {exc.message}") from None
+        self._holder.update(card=card, ao=int(self.analog_channel))
+        try:
+            rig_kind = getattr(card.info, "plant", "")
+            if rig_kind and rig_kind != self.kind:
+                raise FmuError(f"{where} is a {rig_kind} rig, but {self.modelName} is the {self.kind} adapter")
+            status = card.status()
+            if status.limit_tripped:
+                raise FmuError(f"{where}: {status.limit_message or 'a safety limit latched the amplifier off'}; "
+                               f"reset the rig first (ipcosim rig reset)")
+            ao = int(self.analog_channel)
+            card.write_analog([ao], [0.0])
+            card.watchdog_set_analog_expiration_state([ao], [0.0])
+            card.set_encoder_counts(self._enc, [0] * len(self._enc))
+            card.watchdog_start(self.watchdog_timeout)
+            self._raw = [int(c) for c in card.read_encoder(self._enc)]
+        except HILError as exc:
+            _close_quietly(self._holder)
+            raise FmuError(f"{where}: {exc.message}") from None
+        except FmuError:
+            _close_quietly(self._holder)
+            raise
+        self._unwrapped = [0] * len(self._enc)
+        self._pos = [0.0] * len(self._enc)
+        self._base_ns = None
+
+    def step(self, t: float, h: float) -> None:
+        from harness.hil import ErrorCode, HILError, count_difference
+
+        card = self._holder.get("card")
+        if card is None:
+            raise StepFailure(f"the card is closed after an earlier fault: {self.last_error or 'unknown'}")
+        v = float(self.voltage)
+        if not math.isfinite(v):
+            self._fault(f"input voltage = {v} at t = {t:.6g} s is not finite")
+        v = max(-self.voltage_limit, min(self.voltage_limit, v)) / self.amplifier_gain
+        try:
+            if self._base_ns is None:
+                now_ns = int(round(card.time() * 1e9))
+                tick = int(round(getattr(card.info, "tick", 0.0) * 1e9))
+                base = now_ns - int(round(t * 1e9))
+                if tick > 0:  # put the sample instants on the card's clock grid
+                    base = -(-base // tick) * tick
+                self._base_ns = base
+            until = (self._base_ns + int(round((t + h) * 1e9))) / 1e9
+            res = card.step([int(self.analog_channel)], [v], self._enc, until, reload=True)
+        except HILError as exc:
+            if exc.code == ErrorCode.WATCHDOG_EXPIRED:
+                self.watchdog_expired = True
+            self._fault(f"t = {t:.6g} s: {exc.message}")
+        if res.late > 0:
+            self.overruns += 1
+        for k, raw in enumerate(res.counts):
+            raw = int(raw)
+            self._unwrapped[k] += count_difference(raw, self._raw[k])
+            self._raw[k] = raw
+            self._pos[k] = self._unwrapped[k] * self._cal[k]
+        st = res.status
+        if not res.reloaded or (st is not None and st.watchdog_expired):
+            self.watchdog_expired = True
+            self._fault(f"t = {t:.6g} s: the card's watchdog expired (no reload within {self.watchdog_timeout:g} s); "
+                        f"outputs were forced to 0 V")
+        if st is not None and st.limit_tripped:
+            self.limit_tripped = True
+            try:
+                message = card.status().limit_message
+            except HILError:
+                message = ""
+            self._fault(f"t = {t + h:.6g} s: {message or 'a safety limit latched the amplifier off'}")
+
+    def _fault(self, message: str) -> None:
+        """Record, make safe (0 V, close), and fail the step."""
+        self.last_error = message
+        _close_quietly(self._holder)
+        raise StepFailure(message)
+
+    def teardown(self) -> None:
+        _close_quietly(self._holder)
