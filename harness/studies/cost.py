@@ -31,7 +31,39 @@ W_VOLTAGE = 1e-4
 #: Surrogate cost scale handed to the optimiser for a fallen or failed run.
 FALL_PENALTY = 1e3
 
-COST_TERMS = ("itae_position", "itae_angle", "ise_voltage", "fall_time_s")
+#: Hysteresis of the oscillation count [rad]: a swing smaller than this is not a reversal.
+REVERSAL_HYSTERESIS = 0.005
+
+COST_TERMS = ("itae_position", "itae_angle", "ise_voltage", "fall_time_s", "angle_reversals")
+
+
+def reversals(signal: np.ndarray, hysteresis: float = REVERSAL_HYSTERESIS) -> int:
+    """Number of direction reversals of a signal, ignoring swings smaller than ``hysteresis``
+    (an oscillation count: a decaying oscillation of n half-periods above the threshold gives
+    about n)."""
+    x = np.asarray(signal, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size < 2:
+        return 0
+    count, direction, start = 0, 0, float(x[0])
+    extreme = start
+    for v in x[1:].tolist():
+        if direction == 0:
+            if v >= start + hysteresis:
+                direction, extreme = 1, v
+            elif v <= start - hysteresis:
+                direction, extreme = -1, v
+        elif direction > 0:
+            if v > extreme:
+                extreme = v
+            elif v < extreme - hysteresis:
+                count, direction, extreme = count + 1, -1, v
+        else:
+            if v < extreme:
+                extreme = v
+            elif v > extreme + hysteresis:
+                count, direction, extreme = count + 1, 1, v
+    return int(count)
 
 
 def _trapezoid(y: np.ndarray, t: np.ndarray) -> float:
@@ -42,7 +74,7 @@ def _trapezoid(y: np.ndarray, t: np.ndarray) -> float:
 
 def cost_terms(time: np.ndarray, position: np.ndarray, reference: np.ndarray, angle: np.ndarray,
                voltage: np.ndarray) -> dict[str, float | None]:
-    """The integrals the tuning cost is made of.
+    """The integrals the tuning cost is made of, and the angle's oscillation count.
 
     Parameters
     ----------
@@ -53,7 +85,8 @@ def cost_terms(time: np.ndarray, position: np.ndarray, reference: np.ndarray, an
     -------
     dict
         ``itae_position`` [m s^2], ``itae_angle`` [rad s^2], ``ise_voltage`` [V^2 s] and
-        ``fall_time_s`` (first time |angle| >= FALL_ANGLE, or None).
+        ``fall_time_s`` (first time |angle| >= FALL_ANGLE, or None), ``angle_reversals``
+        (``reversals`` of the angle).
     """
     t = np.asarray(time, dtype=float)
     t_rel = t - t[0]
@@ -64,7 +97,8 @@ def cost_terms(time: np.ndarray, position: np.ndarray, reference: np.ndarray, an
     return {"itae_position": _trapezoid(t_rel * e, t),
             "itae_angle": _trapezoid(t_rel * th, t),
             "ise_voltage": _trapezoid(u * u, t),
-            "fall_time_s": float(t[fallen[0]]) if fallen.size else None}
+            "fall_time_s": float(t[fallen[0]]) if fallen.size else None,
+            "angle_reversals": reversals(np.asarray(angle, dtype=float))}
 
 
 def cost(metrics: Mapping[str, Any], w_angle: float = W_ANGLE, w_voltage: float = W_VOLTAGE) -> float:
@@ -99,3 +133,14 @@ def task_metrics(time: np.ndarray, position: np.ndarray, reference: np.ndarray, 
     metrics = dict(compute_metrics(time, position, reference, angle, voltage))
     metrics.update(cost_terms(time, position, reference, angle, voltage))
     return metrics
+
+
+def series(time: np.ndarray, position: np.ndarray, reference: np.ndarray, angle: np.ndarray,
+           voltage: np.ndarray, max_points: int = 2000) -> dict[str, list[float]]:
+    """The signals of a run for plotting, thinned to at most about ``max_points`` samples."""
+    n = len(time)
+    every = max(1, int(np.ceil(n / max_points)))
+    sl = slice(0, n, every)
+    return {"time": np.asarray(time, float)[sl].tolist(), "position": np.asarray(position, float)[sl].tolist(),
+            "reference": np.asarray(reference, float)[sl].tolist(), "angle": np.asarray(angle, float)[sl].tolist(),
+            "voltage": np.asarray(voltage, float)[sl].tolist()}

@@ -161,6 +161,7 @@ class PurePlantSpec(RunSpec):
     stop_time: float = 5.0
     step: float = 1e-3
     preset: str = "thesis-ch3"
+    with_series: bool = False
     name: str = "pure:single-mass-lqr"
     metric_names: tuple[str, ...] = ()
     parameters: Mapping[str, float] = field(default_factory=dict)
@@ -185,13 +186,13 @@ class PurePlantSpec(RunSpec):
 
     def describe(self) -> dict[str, Any]:
         return {"name": self.name, "stop_time": self.stop_time, "step": self.step, "preset": self.preset,
-                "parameters": dict(self.parameters)}
+                "with_series": self.with_series, "parameters": dict(self.parameters)}
 
     def build(self) -> Runner:
         from fmus.linearize import linearize
         from fmus.params import preset, with_values
         from fmus.plant import Plant
-        from harness.studies.cost import task_metrics
+        from harness.studies.cost import series, task_metrics
 
         nominal_plant = preset(self.preset)
         design = linearize(nominal_plant, inductance=False)
@@ -210,7 +211,7 @@ class PurePlantSpec(RunSpec):
             if unknown:
                 raise RunFailure(f"{spec.name} has no parameter {sorted(unknown)[0]!r}")
             v = {**spec.parameters, **params}
-            plant_values = {k[6:]: val for k, val in params.items() if k.startswith("plant.")}
+            plant_values = {k[6:]: val for k, val in v.items() if k.startswith("plant.")}
             plant = Plant(with_values(nominal_plant, plant_values))
             K = gain((v["controller.q_position"], v["controller.q_velocity"], v["controller.q_angle"],
                       v["controller.q_angular_velocity"]), v["controller.r_voltage"])
@@ -239,6 +240,51 @@ class PurePlantSpec(RunSpec):
                     pos[k + 1:], ang[k + 1:], ref[k + 1:], volt[k + 1:] = x[0], x[2], r, u
                     break
                 plant.do_step(float(t[k]), h, u)
-            return task_metrics(t, pos, ref, ang, volt)
+            metrics = task_metrics(t, pos, ref, ang, volt)
+            if spec.with_series:
+                metrics["series"] = series(t, pos, ref, ang, volt)
+            return metrics
+
+        return run
+
+
+# --------------------------------------------------------------------------- several scenarios at once
+
+
+#: Case parameter that selects the sub-spec of a :class:`MultiSpec`.
+SCENARIO_PARAM = "study.scenario"
+
+
+@dataclass
+class MultiSpec(RunSpec):
+    """Several run specs as one, so that runs of different scenarios share one sweep (and its
+    parallelism). A case picks its scenario with the parameter ``study.scenario`` (its index in
+    ``specs``); its other parameters go to that scenario's runner. Each worker builds a
+    scenario's runner the first time it runs one of its cases."""
+
+    specs: list = field(default_factory=list)
+    name: str = "scenarios"
+
+    def __post_init__(self) -> None:
+        names: dict[str, None] = {}
+        for s in self.specs:
+            for m in s.metric_names:
+                names.setdefault(m, None)
+        self.metric_names = tuple(names)
+        self.parameters = {SCENARIO_PARAM: 0.0}
+
+    def describe(self) -> dict[str, Any]:
+        return {"name": self.name, "specs": [s.describe() for s in self.specs]}
+
+    def build(self) -> Runner:
+        specs = self.specs
+        runners: dict[int, Runner] = {}
+
+        def run(params: Mapping[str, float], seed: int) -> dict:
+            i = int(params[SCENARIO_PARAM])
+            if i not in runners:
+                runners[i] = specs[i].build()
+            rest = {k: v for k, v in params.items() if k != SCENARIO_PARAM}
+            return runners[i](rest, seed)
 
         return run

@@ -26,7 +26,7 @@ def parse_set(items: list[str] | None) -> dict[str, float]:
 
 
 def spec_for(scenario: str, stop_time: float | None = None, step: float | None = None,
-             overrides: Mapping[str, float] | None = None) -> RunSpec:
+             overrides: Mapping[str, float] | None = None, series: bool = False) -> RunSpec:
     """The run specification of a scenario.
 
     Parameters
@@ -38,13 +38,15 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
         Override the scenario's experiment.
     overrides : mapping, optional
         ``component.variable`` values set in every run (``--set``).
+    series : bool
+        Return the run's signals (thinned) with its metrics, under ``series`` (for figures).
     """
     if stop_time is not None and not stop_time > 0:
         raise UsageError(f"--stop-time {stop_time}: must be positive")
     if step is not None and not step > 0:
         raise UsageError(f"--step {step}: must be positive")
     if scenario in PURE_SCENARIOS:
-        kwargs = {}
+        kwargs: dict = {"with_series": series}
         if stop_time is not None:
             kwargs["stop_time"] = stop_time
         if step is not None:
@@ -58,4 +60,4 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
         return spec
     from harness.studies.cosim import CosimSpec
 
-    return CosimSpec.from_scenario(scenario, stop_time=stop_time, step=step, overrides=overrides)
+    return CosimSpec.from_scenario(scenario, stop_time=stop_time, step=step, overrides=overrides, series=series)

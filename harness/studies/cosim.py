@@ -1,0 +1,148 @@
+"""The co-simulation run spec: one scenario, run through the master (``harness.prepare``).
+
+Made in the parent from the scenario (parsed and bound, nothing extracted) so that
+``--vary`` and ``--params`` are checked against the scenario's real parameters; each worker
+calls :meth:`CosimSpec.build` once, which loads the scenario and extracts its FMUs into the
+worker's temporary folder, and then runs it once per case with the case's values as start
+values (``--set`` semantics).
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from harness.studies.runners import RunFailure, Runner, RunSpec
+
+#: Extra result columns of a co-simulation run beyond the task metrics and cost terms.
+TIMING_METRICS = ("wall_time_s", "real_time_factor")
+
+
+def _no_slave(instance: Any) -> Any:  # pragma: no cover - never called: binding only
+    raise RuntimeError("binding only")
+
+
+def _hash_files(paths: list[Path]) -> str:
+    h = hashlib.sha256()
+    for p in paths:
+        h.update(p.name.encode())
+        if p.is_dir():
+            for f in sorted(q for q in p.rglob("*") if q.is_file()):
+                h.update(str(f.relative_to(p)).encode())
+                h.update(f.read_bytes())
+        elif p.exists():
+            h.update(p.read_bytes())
+    return h.hexdigest()[:16]
+
+
+@dataclass
+class CosimSpec(RunSpec):
+    """One scenario, run by the co-simulation master.
+
+    Attributes
+    ----------
+    location : str
+        Absolute path of the scenario folder or ``.ssp`` archive (what workers load).
+    stop_time, step : float or None
+        Experiment overrides (None: the scenario's).
+    overrides : dict
+        ``component.variable`` start values applied in every run.
+    with_series : bool
+        Also return the run's signals (thinned) under ``series``.
+    parameter_set : str or None
+        A named parameter set of the scenario (``thesis``, ``tuned``) instead of its default.
+    """
+
+    location: str = ""
+    stop_time: float | None = None
+    step: float | None = None
+    overrides: dict = field(default_factory=dict)
+    with_series: bool = False
+    parameter_set: str | None = None
+    name: str = ""
+    scenario_hash: str = ""
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    metric_names: tuple[str, ...] = ()
+
+    @classmethod
+    def from_scenario(cls, scenario: str, stop_time: float | None = None, step: float | None = None,
+                      overrides: Mapping[str, Any] | None = None, series: bool = False,
+                      parameter_set: str | None = None) -> "CosimSpec":
+        """Parse and bind a scenario (FMUs are not extracted here) and describe its runs.
+
+        Raises
+        ------
+        IpcosimError
+            Unknown scenario, unreadable SSD/FMU, unknown ``--set`` names (one line each).
+        """
+        from harness.api import Prepared
+        from harness.metrics import METRIC_KEYS
+        from harness.studies.cost import COST_TERMS
+        from harness.system import with_overrides
+
+        prepared = Prepared(scenario, parameter_set=parameter_set, slave_factory=_no_slave, warn=False)
+        system = prepared.system
+        overrides = dict(overrides or {})
+        with_overrides(system, overrides)  # unknown or unsettable names: one clear line
+        params: dict[str, Any] = {}
+        files: list[Path] = [prepared.scenario.location]
+        for inst in system.instances:
+            for var in inst.model.variables.values():
+                if var.causality == "parameter" and var.type in ("Real", "Integer") and var.settable:
+                    params[f"{inst.name}.{var.name}"] = inst.start_value(var.name)
+            if inst.model.path is not None:
+                files.append(inst.model.path)
+        params.update(overrides)
+        exp = prepared.scenario.experiment
+        spec = cls(location=str(Path(prepared.scenario.location).resolve()),
+                   stop_time=stop_time if stop_time is not None else exp.stop_time,
+                   step=step if step is not None else exp.step_size, overrides=overrides, with_series=series,
+                   parameter_set=parameter_set, name=prepared.scenario.name or Path(scenario).name,
+                   scenario_hash=_hash_files(files), parameters=params,
+                   metric_names=tuple(METRIC_KEYS) + COST_TERMS + TIMING_METRICS)
+        return spec
+
+    def describe(self) -> dict[str, Any]:
+        return {"name": self.name, "scenario_hash": self.scenario_hash, "location": self.location,
+                "stop_time": self.stop_time, "step": self.step, "overrides": self.overrides,
+                "parameter_set": self.parameter_set, "with_series": self.with_series}
+
+    def build(self) -> Runner:
+        """Load the scenario and extract its FMUs (once per worker); return the run function."""
+        from harness.api import Prepared
+        from harness.results import (ANGLE_COLUMNS, POSITION_COLUMNS, REFERENCE_COLUMNS, VOLTAGE_COLUMNS,
+                                     first_column)
+        from harness.studies.cost import cost_terms, series
+
+        prepared = Prepared(self.location, parameter_set=self.parameter_set, warn=False)
+        spec = self
+
+        def run(params: Mapping[str, float], seed: int) -> dict:
+            values = {**spec.overrides, **params}
+            result = prepared.run(spec.stop_time, spec.step, values, raise_on_error=False)
+            data = result.data
+            cols = result.columns
+            names = [first_column(cols, c) for c in (POSITION_COLUMNS, REFERENCE_COLUMNS, ANGLE_COLUMNS,
+                                                     VOLTAGE_COLUMNS)]
+            metrics = {k: v for k, v in result.metrics.items() if k in spec.metric_names}
+            if None in names or len(data) < 2:
+                raise RunFailure(result.error or f"{spec.name}: the result lacks the position, reference, angle "
+                                                 f"or voltage column")
+            signals = [np.asarray(data[n], dtype=float) for n in names]
+            t = np.asarray(data["time"], dtype=float)
+            metrics.update(cost_terms(t, *signals))
+            if result.error is not None:
+                # a run cut short: a result if the pendulum had fallen by then, else a failure
+                if metrics.get("fall_time_s") is None:
+                    raise RunFailure(result.error)
+                metrics["upright"] = False
+                metrics["error"] = result.error
+            if spec.with_series:
+                metrics["series"] = series(t, *signals)
+            return metrics
+
+        return run

@@ -1,0 +1,424 @@
+"""The controller comparison report (``ipcosim compare``): metrics table plant x controller,
+thesis-style overlaid time series per plant, and the thesis's qualitative claims beside the
+measured numbers, each marked confirmed or not. Written as Markdown and as one self-contained
+HTML page (figures embedded).
+
+The report is rendered from plain data -- one result row per scenario (metrics, status and,
+for the figures, the time series) plus optional robustness summaries -- so it can be checked
+without running anything.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+from harness.studies.robustness import fmt
+
+PLANTS = ("single-mass", "double-mass")
+CONTROLLERS = ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")
+CONTROLLER_LABELS = {"pid": "PID", "cascade-pid": "cascade PID", "lqr": "LQR + observer", "hsmc": "HSMC",
+                     "adaptive-hsmc": "adaptive HSMC"}
+PLANT_LABELS = {"single-mass": "single mass", "double-mass": "double mass"}
+SCENARIOS = tuple(f"{p}-{c}" for p in PLANTS for c in CONTROLLERS)
+
+#: The task's step [m] and the +-2 % band half-width [m].
+STEP = 0.05
+BAND = 0.02 * STEP
+#: Thesis's steady-state error of the double-mass HSMC [m] (section 4.2.3).
+THESIS_DOUBLE_HSMC_SSE = 0.005575
+
+TABLE_COLUMNS = (("status", "status", None), ("settling_time_s", "settling time [s]", 4),
+                 ("overshoot_m", "overshoot [m]", 3), ("steady_state_error_m", "steady-state error [m]", 3),
+                 ("max_abs_angle_rad", "max abs angle [rad]", 3), ("peak_voltage_V", "peak voltage [V]", 3),
+                 ("rms_voltage_V", "RMS voltage [V]", 3), ("upright", "upright", None),
+                 ("angle_reversals", "angle reversals", None), ("cost", "cost J", 3))
+
+
+def split(scenario: str) -> tuple[str, str]:
+    """``single-mass-adaptive-hsmc`` -> (``single-mass``, ``adaptive-hsmc``)."""
+    for plant in PLANTS:
+        if scenario.startswith(plant + "-"):
+            return plant, scenario[len(plant) + 1:]
+    return "", scenario
+
+
+# --------------------------------------------------------------------------- claims
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Outcome of checking one claim: ``confirmed``, ``not confirmed`` or ``not measured``."""
+
+    verdict: str
+    measured: str
+
+
+Results = Mapping[str, Mapping[str, Any]]
+
+
+def _row(results: Results, scenario: str) -> Mapping[str, Any] | None:
+    row = results.get(scenario)
+    if row is None or row.get("status") in (None, "error"):
+        return None
+    return row
+
+
+def _missing(results: Results, *scenarios: str) -> Verdict | None:
+    absent = [s for s in scenarios if _row(results, s) is None]
+    if not absent:
+        return None
+    why = []
+    for s in absent:
+        row = results.get(s)
+        why.append(f"{s}: {row.get('error') or 'failed'}" if row else f"{s}: not run")
+    return Verdict("not measured", "; ".join(why))
+
+
+def _num(row: Mapping[str, Any], key: str, missing: float = math.inf) -> float:
+    v = row.get(key)
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else missing
+
+
+def _desc(row: Mapping[str, Any]) -> str:
+    return (f"status {row.get('status')}, settling {fmt(row.get('settling_time_s'))} s, "
+            f"max abs angle {fmt(row.get('max_abs_angle_rad'))} rad")
+
+
+def _yes(flag: bool) -> str:
+    return "confirmed" if flag else "not confirmed"
+
+
+def _fails(scn: str) -> Callable[[Results], Verdict]:
+    def check(r: Results) -> Verdict:
+        miss = _missing(r, scn)
+        if miss:
+            return miss
+        row = r[scn]
+        return Verdict(_yes(row["status"] != "ok"), f"{scn}: {_desc(row)}")
+    return check
+
+
+def _lqr_single(r: Results) -> Verdict:
+    a, b = "single-mass-lqr", "single-mass-hsmc"
+    miss = _missing(r, a, b)
+    if miss:
+        return miss
+    la, lb = _num(r[a], "angle_reversals", -1), _num(r[b], "angle_reversals", -1)
+    ok = r[a]["status"] == "ok" and la > lb
+    return Verdict(_yes(ok), f"LQR: {_desc(r[a])}, {fmt(la)} angle reversals (HSMC: {fmt(lb)})")
+
+
+def _hsmc_integral_single(r: Results) -> Verdict:
+    s = "single-mass-hsmc"
+    miss = _missing(r, s)
+    if miss:
+        return miss
+    sse = _num(r[s], "steady_state_error_m")
+    return Verdict(_yes(r[s]["status"] == "ok" and sse < BAND),
+                   f"steady-state error {fmt(sse)} m (band {BAND:g} m), status {r[s]['status']}")
+
+
+def _settles_faster(plant: str) -> Callable[[Results], Verdict]:
+    def check(r: Results) -> Verdict:
+        a, h = f"{plant}-adaptive-hsmc", f"{plant}-hsmc"
+        miss = _missing(r, a, h)
+        if miss:
+            return miss
+        ta, th = _num(r[a], "settling_time_s"), _num(r[h], "settling_time_s")
+        return Verdict(_yes(ta < th), f"settling time adaptive {fmt(r[a].get('settling_time_s'))} s vs "
+                                      f"HSMC {fmt(r[h].get('settling_time_s'))} s ('-': never inside the band)")
+    return check
+
+
+def _fewer_oscillations(r: Results) -> Verdict:
+    h, lq = "single-mass-hsmc", "single-mass-lqr"
+    miss = _missing(r, h, lq)
+    if miss:
+        return miss
+    nh, nl = _num(r[h], "angle_reversals", -1), _num(r[lq], "angle_reversals", -1)
+    return Verdict(_yes(0 <= nh < nl), f"angle reversals HSMC {fmt(nh)} vs LQR {fmt(nl)}")
+
+
+def _hsmc_better(r: Results) -> Verdict:
+    parts, ok, measured = [], True, False
+    for plant in PLANTS:
+        h = f"{plant}-hsmc"
+        if _row(r, h) is None:
+            continue
+        for other in ("pid", "lqr"):
+            o = f"{plant}-{other}"
+            if _row(r, o) is None:
+                continue
+            measured = True
+            jh, jo = _num(r[h], "cost"), _num(r[o], "cost")
+            ok &= jh < jo
+            parts.append(f"{PLANT_LABELS[plant]}: J(HSMC) {fmt(jh)} vs J({CONTROLLER_LABELS[other]}) {fmt(jo)}")
+    if not measured:
+        return Verdict("not measured", "HSMC, PID and LQR scenarios not run")
+    return Verdict(_yes(ok), "; ".join(parts))
+
+
+def _double_lqr_falls(r: Results) -> Verdict:
+    s = "double-mass-lqr"
+    miss = _missing(r, s)
+    if miss:
+        return miss
+    return Verdict(_yes(r[s].get("upright") is False),
+                   f"{_desc(r[s])}, {fmt(r[s].get('angle_reversals'))} angle reversals, "
+                   f"falls at {fmt(r[s].get('fall_time_s'))} s")
+
+
+def _double_hsmc(r: Results) -> Verdict:
+    s = "double-mass-hsmc"
+    miss = _missing(r, s)
+    if miss:
+        return miss
+    sse = _num(r[s], "steady_state_error_m")
+    ok = r[s].get("upright") is True and sse >= BAND
+    return Verdict(_yes(ok), f"upright {fmt(r[s].get('upright'))}, steady-state error {fmt(sse)} m "
+                             f"(thesis {THESIS_DOUBLE_HSMC_SSE} m; band {BAND:g} m)")
+
+
+def _double_adaptive(r: Results) -> Verdict:
+    a, h = "double-mass-adaptive-hsmc", "double-mass-hsmc"
+    miss = _missing(r, a, h)
+    if miss:
+        return miss
+    ea, eh = _num(r[a], "steady_state_error_m"), _num(r[h], "steady_state_error_m")
+    ta, th = _num(r[a], "settling_time_s"), _num(r[h], "settling_time_s")
+    return Verdict(_yes(ea < eh and ta < th),
+                   f"steady-state error {fmt(ea)} vs {fmt(eh)} m; settling {fmt(r[a].get('settling_time_s'))} vs "
+                   f"{fmt(r[h].get('settling_time_s'))} s (adaptive vs HSMC)")
+
+
+@dataclass(frozen=True)
+class Claim:
+    """A qualitative claim of the thesis, its source and how it is checked."""
+
+    quote: str
+    source: str
+    test: str
+    check: Callable[[Results], Verdict]
+
+
+CLAIMS: tuple[Claim, ...] = (
+    Claim("Thus, unfortunately PID control does not work for this system.", "3.2.1 (single mass)",
+          "single-mass-pid fails the task (falls or does not settle in the band)", _fails("single-mass-pid")),
+    Claim("It meets the criterion, but has a lot of oscillations.", "3.2.2, Fig. 3.9 (single-mass LQR)",
+          "single-mass-lqr is upright and settled, with more angle reversals than HSMC", _lqr_single),
+    Claim("an integral controller can eliminate the steady-state error for the inverted pendulum single-mass "
+          "system", "ch. 5, Figs. 3.11, 3.19", "single-mass-hsmc settles with steady-state error below the "
+                                               "+-2 % band (0.001 m)", _hsmc_integral_single),
+    Claim("Compared with Figure 3.12, the settling time has been reduced.", "3.2.4 (single-mass adaptive HSMC)",
+          "settling time of single-mass-adaptive-hsmc < single-mass-hsmc", _settles_faster("single-mass")),
+    Claim("Compared with Figure 3.18, we can see it has decreased oscillations greatly.",
+          "3.3, Fig. 3.19 (single-mass HSMC vs LQR, experiment)",
+          "fewer angle reversals with single-mass-hsmc than single-mass-lqr", _fewer_oscillations),
+    Claim("Hierarchical sliding mode control could give a better result than PID and LQR control for "
+          "nonlinear system.", "ch. 5", "cost J of HSMC below PID and LQR on each plant", _hsmc_better),
+    Claim("Figure 4.7 shows that PID control cannot work for this system.", "4.3 (double mass)",
+          "double-mass-pid fails the task", _fails("double-mass-pid")),
+    Claim("the performance of LQR controller has a lot of oscillations and that would cause the pendulum fall "
+          "when the carts stop moving.", "4.3, Fig. 4.9 (double-mass LQR)", "double-mass-lqr does not stay upright",
+          _double_lqr_falls),
+    Claim("It shows that the active cart moves 0.05m distance and the pendulum always up. Wherever initial "
+          "position of carts has been set, it always has a steady-state error of 0.005575m",
+          "4.2.3, Fig. 4.11 (double-mass HSMC)",
+          "double-mass-hsmc upright, with a steady-state error at least the +-2 % band", _double_hsmc),
+    Claim("Compare with Figure 4.11, the steady-state error and settling time have been decreased.",
+          "4.2.4, Fig. 4.12 (double-mass adaptive HSMC)",
+          "double-mass-adaptive-hsmc has smaller steady-state error and settling time than double-mass-hsmc",
+          _double_adaptive),
+)
+
+
+def check_claims(results: Results) -> list[tuple[Claim, Verdict]]:
+    """Every claim with its verdict on the given results (scenario -> row)."""
+    return [(c, c.check(results)) for c in CLAIMS]
+
+
+# --------------------------------------------------------------------------- figures
+
+
+def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
+    """Thesis-style overlaid time series of every controller on one plant: cart position with the
+    reference, pendulum angle and voltage, one line per controller. None if no series."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    series = [(c, results[f"{plant}-{c}"]["series"]) for c in CONTROLLERS
+              if f"{plant}-{c}" in results and results[f"{plant}-{c}"].get("series")]
+    if not series:
+        return None
+    fig, axes = plt.subplots(3, 1, figsize=(8.0, 7.5), dpi=100, sharex=True)
+    ref_drawn = False
+    for controller, s in series:
+        label = CONTROLLER_LABELS.get(controller, controller)
+        axes[0].plot(s["time"], s["position"], label=label, lw=1.2)
+        if not ref_drawn:
+            axes[0].plot(s["time"], s["reference"], "k--", lw=0.8, label="reference")
+            ref_drawn = True
+        axes[1].plot(s["time"], s["angle"], label=label, lw=1.0)
+        axes[2].plot(s["time"], s["voltage"], label=label, lw=0.8)
+    cart = "active cart position [m]" if plant == "double-mass" else "cart position [m]"
+    axes[0].set_ylabel(cart)
+    axes[1].set_ylabel("pendulum angle [rad]")
+    axes[2].set_ylabel("voltage [V]")
+    axes[2].set_xlabel("time [s]")
+    axes[0].set_title(f"IP02 {PLANT_LABELS.get(plant, plant)}: controllers compared")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=8, ncol=3)
+    axes[1].set_ylim(-0.4, 0.4)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+# --------------------------------------------------------------------------- document
+
+
+def _table(results: Results, robustness: Mapping[str, Mapping[str, Any]] | None) -> tuple[list[str], list[list[str]]]:
+    header = ["plant", "controller"] + [label for _, label, _ in TABLE_COLUMNS]
+    if robustness:
+        header.append("robust success (+-20 %)")
+    rows = []
+    for scenario in sorted(results, key=lambda s: (SCENARIOS.index(s) if s in SCENARIOS else 99, s)):
+        row = results[scenario]
+        plant, controller = split(scenario)
+        cells = [PLANT_LABELS.get(plant, plant), CONTROLLER_LABELS.get(controller, controller)]
+        for key, _, digits in TABLE_COLUMNS:
+            v = row.get(key)
+            cells.append(fmt(v, digits) if digits else fmt(v))
+        if robustness:
+            s = robustness.get(scenario)
+            if s and s.get("runs"):
+                lo, hi = s["success_ci95"]
+                cells.append(f"{100 * s['success_rate']:.0f} % ({s['runs']} runs, CI {100 * lo:.0f}-{100 * hi:.0f} %)")
+            else:
+                cells.append("-")
+        rows.append(cells)
+    return header, rows
+
+
+def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    def esc(x: str) -> str:
+        return str(x).replace("|", "\\|")
+    lines = ["| " + " | ".join(map(esc, header)) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(map(esc, r)) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def _html_table(header: Sequence[str], rows: Sequence[Sequence[str]], classes: Sequence[str] | None = None) -> str:
+    out = ["<table>", "<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header) + "</tr>"]
+    for i, r in enumerate(rows):
+        cls = f' class="{classes[i]}"' if classes and classes[i] else ""
+        out.append(f"<tr{cls}>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
+table{border-collapse:collapse;margin:1em 0;font-size:0.9em}td,th{border:1px solid #bbb;padding:4px 8px;text-align:left}
+th{background:#eee}tr.confirmed td:last-child{color:#16702c;font-weight:bold}
+tr.not-confirmed td:last-child{color:#b00020;font-weight:bold}tr.not-measured td:last-child{color:#777}
+img{max-width:100%}blockquote{margin:0;font-style:italic}code{background:#f4f4f4}"""
+
+
+def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str, Any]] | None = None,
+           robustness_note: str = "", meta: Mapping[str, Any] | None = None) -> dict[str, Path]:
+    """Write ``report.md``, ``report.html`` (self-contained) and ``figures/<plant>.png``.
+
+    Parameters
+    ----------
+    results : mapping
+        Scenario name -> flat result row (status, metrics, ``cost``, optional ``series`` with
+        ``time``, ``position``, ``reference``, ``angle``, ``voltage`` lists).
+    out_dir : Path
+        Report folder.
+    robustness : mapping, optional
+        Scenario name -> ``harness.studies.robustness.summarize`` output.
+    robustness_note : str
+        How the robustness column was obtained.
+    meta : mapping, optional
+        Run settings shown in the report (stop time, packages...).
+
+    Returns
+    -------
+    dict
+        ``markdown``, ``html`` and the figure paths by plant.
+    """
+    out_dir.mkdir(parents=True, exist_ok=True)
+    figures: dict[str, Path] = {}
+    for plant in PLANTS:
+        path = plot_plant(plant, results, out_dir / "figures" / f"{plant}.png")
+        if path:
+            figures[plant] = path
+    header, rows = _table(results, robustness)
+    verdicts = check_claims(results)
+    claim_header = ["thesis claim", "source", "checked as", "measured", "verdict"]
+    claim_rows = [[c.quote, c.source, c.test, v.measured, v.verdict] for c, v in verdicts]
+    counts = {k: sum(1 for _, v in verdicts if v.verdict == k) for k in ("confirmed", "not confirmed", "not measured")}
+    errors = [(s, r.get("error")) for s, r in results.items() if r.get("status") == "error"]
+    meta = dict(meta or {})
+
+    intro = ("Each scenario moves the motor-driven cart from 0 to 0.05 m with the pendulum upright (the thesis's "
+             "task). Success (status ok) = the pendulum stays within 0.35 rad and the cart ends inside the +-2 % "
+             "band; 'fell' = the pendulum left 0.35 rad; 'unsettled' = upright but not inside the band at the end. "
+             "Cost J = ITAE(x - r) + 0.1 ITAE(angle) + 1e-4 ISE(voltage), infinite when the pendulum falls. "
+             "Angle reversals count swings of the pendulum larger than 0.005 rad (an oscillation measure).")
+    settings = ", ".join(f"{k} {v}" for k, v in meta.items() if k != "packages")
+
+    md = ["# IP02 controller comparison", "", intro, ""]
+    if settings:
+        md += [f"Settings: {settings}.", ""]
+    md += ["## Metrics (plant x controller)", "", _md_table(header, rows)]
+    if robustness_note:
+        md += [robustness_note, ""]
+    if errors:
+        md += ["Failed runs: " + "; ".join(f"{s}: {e}" for s, e in errors), ""]
+    md += ["## Time series", ""]
+    for plant, path in figures.items():
+        md += [f"![{plant}](figures/{path.name})", ""]
+    md += ["## The thesis's claims, measured",
+           "", f"{counts['confirmed']} confirmed, {counts['not confirmed']} not confirmed, "
+               f"{counts['not measured']} not measured.", "",
+           _md_table(claim_header, [[f"\"{c[0]}\"", *c[1:]] for c in claim_rows])]
+    if meta.get("packages"):
+        md += ["Package versions: " + ", ".join(f"{k} {v}" for k, v in meta["packages"].items()), ""]
+    md_path = out_dir / "report.md"
+    md_path.write_text("\n".join(md))
+
+    body = [f"<h1>IP02 controller comparison</h1>", f"<p>{html.escape(intro)}</p>"]
+    if settings:
+        body.append(f"<p>Settings: {html.escape(settings)}.</p>")
+    body += ["<h2>Metrics (plant x controller)</h2>", _html_table(header, rows)]
+    if robustness_note:
+        body.append(f"<p>{html.escape(robustness_note)}</p>")
+    if errors:
+        body.append("<p>Failed runs: " + html.escape("; ".join(f"{s}: {e}" for s, e in errors)) + "</p>")
+    body.append("<h2>Time series</h2>")
+    for plant, path in figures.items():
+        data = base64.b64encode(path.read_bytes()).decode()
+        body.append(f'<figure><img alt="{plant}" src="data:image/png;base64,{data}"/>'
+                    f"<figcaption>{html.escape(PLANT_LABELS[plant])}</figcaption></figure>")
+    body += ["<h2>The thesis's claims, measured</h2>",
+             f"<p>{counts['confirmed']} confirmed, {counts['not confirmed']} not confirmed, "
+             f"{counts['not measured']} not measured.</p>",
+             _html_table(claim_header, claim_rows, [v.verdict.replace(" ", "-") for _, v in verdicts])]
+    if meta.get("packages"):
+        body.append("<p>Package versions: " + html.escape(", ".join(f"{k} {v}" for k, v in meta["packages"].items()))
+                    + "</p>")
+    page = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"/><title>IP02 controller comparison"
+            f"</title><style>{CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n")
+    html_path = out_dir / "report.html"
+    html_path.write_text(page)
+    return {"markdown": md_path, "html": html_path, **{f"figure:{p}": f for p, f in figures.items()}}
