@@ -35,6 +35,8 @@ from typing import Callable
 
 import numpy as np
 
+from .observers import Observer
+
 NS = 1_000_000_000
 
 
@@ -180,3 +182,72 @@ class Pacer:
     def metrics(self) -> dict[str, float | int]:
         """``stats().as_metrics()``."""
         return self.stats().as_metrics()
+
+
+class RealtimePacer(Observer):
+    """Observer (``harness.observers``) pacing a co-simulation to the wall clock.
+
+    Step ``n`` (from ``t_n`` to ``t_n+1``) starts no earlier than ``t0 + n*h`` on the host's
+    clock. Its :meth:`metrics` add the statistics of :class:`RealtimeStats` to metrics.json,
+    plus ``card_overruns``: the sum of the ``overruns`` outputs of the components that have
+    one (the HIL adapter counts the steps whose request reached the card after their sample
+    instant), read after the last step.
+
+    Parameters
+    ----------
+    spin : float
+        Busy-wait this long before each deadline [s].
+    tolerance : float, optional
+        Overrun tolerance [s] (default half a step).
+    """
+
+    def __init__(self, spin: float = 200e-6, tolerance: float | None = None) -> None:
+        self.spin = spin
+        self.tolerance = tolerance
+        self.pacer: Pacer | None = None
+        self._open = False
+        self._card_overruns: int | None = None
+
+    def start(self, execution) -> None:  # noqa: ANN001 -- harness.execution.Execution
+        self.pacer = Pacer(execution.step_size, spin=self.spin, tolerance=self.tolerance)
+        self.pacer.start(0)
+        self.pacer.begin(0)
+        self._open = True
+
+    def next_tick(self, n: int) -> int | None:
+        return n + 1
+
+    def step(self, execution, n: int) -> None:  # noqa: ANN001
+        assert self.pacer is not None
+        self.pacer.end()
+        self._open = False
+        if n >= execution.n_ticks:
+            self._read_card_overruns(execution)
+            return
+        self.pacer.begin(n)
+        self._open = True
+
+    def finish(self, execution, error: BaseException | None) -> None:  # noqa: ANN001
+        if self._open and self.pacer is not None:
+            self.pacer.end()
+            self._open = False
+
+    def _read_card_overruns(self, execution) -> None:  # noqa: ANN001
+        total = None
+        for inst, slave in zip(execution.instances, execution.slaves):
+            var = inst.model.variables.get("overruns")
+            if var is None or var.causality != "output":
+                continue
+            try:
+                total = (total or 0) + int(slave.get_values([var])[0])
+            except Exception:  # noqa: BLE001 -- statistics must not fail a run
+                pass
+        self._card_overruns = total
+
+    def metrics(self) -> dict[str, float | int]:
+        if self.pacer is None:
+            return {}
+        out = self.pacer.metrics()
+        if self._card_overruns is not None:
+            out["card_overruns"] = self._card_overruns
+        return out
