@@ -286,7 +286,7 @@ class SwapRequest:
 #: returns a SwapTarget. Modules listed in ``SWAP_ALIAS_PROVIDERS`` are imported on first use
 #: so that they can register their aliases (``harness.system.swap_aliases['hil'] = resolver``).
 swap_aliases: dict[str, Callable[[SwapRequest], SwapTarget]] = {}
-SWAP_ALIAS_PROVIDERS: tuple[str, ...] = ("harness.hil",)
+SWAP_ALIAS_PROVIDERS: tuple[str, ...] = ("harness.hil.swap",)
 _providers_loaded = False
 
 
