@@ -240,8 +240,10 @@ class FmuBase(Fmi2Slave):
         super().__init_subclass__(**kwargs)
         # pythonfmu 0.7.0 workaround (module docstring): keep one more reference to the dict
         # of the module whose code defines this class, each time the class statement runs.
+        # The frame running the class statement is the nearest one whose globals are the
+        # module's (metaclass frames such as ABCMeta.__new__ lie in between).
         frame = sys._getframe(1)
-        while frame is not None and frame.f_code.co_name == "__init_subclass__":
+        while frame is not None and frame.f_globals.get("__name__") != cls.__module__:
             frame = frame.f_back
         if frame is not None:
             _take_reference(frame.f_globals)
