@@ -159,7 +159,7 @@ class Execution:
             offsets.append((pos, pos + len(outs)))
             pos += len(outs) + len(ins)
         self.n_values = pos
-        self.values_c = (ctypes.c_double * max(pos, 1))()
+        self.values_c = (ctypes.c_double * (pos + 1))()  # +1: empty slices still map one element
         self.values = np.ctypeslib.as_array(self.values_c)[:pos]
         self._out_offset = [o for o, _ in offsets]
         self._in_offset = [i for _, i in offsets]
@@ -400,17 +400,28 @@ class Execution:
         block = self.record[row0:row1][:, self.output_slots]
         if np.isfinite(block).all():
             return
-        bad_row, bad_col = np.argwhere(~np.isfinite(block))[0]
-        row = row0 + int(bad_row)
-        slot = int(self.output_slots[bad_col])
-        name = next(n for n, s, _ in self.columns if s == slot) if any(s == slot for _, s, _ in self.columns) \
-            else str(slot)
+        bad = ~np.isfinite(block)
+        bad_row = int(np.argmax(bad.any(axis=1)))
+        row = row0 + bad_row
+        # of the outputs that went bad in that row, blame the one of the earliest component in
+        # step order (the others most likely computed theirs from it)
+        rank = {idx: pos for pos, idx in enumerate(self.order)}
+        slots = [int(self.output_slots[c]) for c in np.flatnonzero(bad[bad_row])]
+        slot = min(slots, key=lambda s: (rank[self._slot_owner(s)], s))
+        k = self._slot_owner(slot)
+        inst = self.instances[k]
+        var = self._real_outputs[k][slot - self._out_offset[k]].name
         t = self.time_of(row * self.record_every)
-        comp = name.split(".")[0]
-        model = self.instances[self.index[comp]].model.name if comp in self.index else ""
-        msg = (f"component {comp} ({model}): output {name} = {self.record[row, slot]!r} at t = {t:.6g} s "
-               f"(non-finite value)")
+        msg = (f"component {inst.name} ({inst.model.name}): output {inst.name}.{var} = "
+               f"{float(self.record[row, slot])} at t = {t:.6g} s (non-finite value)")
         raise _TickFailure(msg, row + 1, NonFiniteError(msg))
+
+    def _slot_owner(self, slot: int) -> int:
+        """Index of the component whose outputs hold value-vector slot ``slot``."""
+        for k in range(len(self.instances)):
+            if self._out_offset[k] <= slot < self._in_offset[k]:
+                return k
+        raise KeyError(slot)
 
     def _cleanup(self) -> BaseException | None:
         """Terminate (where FMI allows) and free every instantiated slave; first error returned."""
