@@ -65,10 +65,11 @@ def test_params_and_bounds_errors():
 
 
 def test_ssv_round_trip(tmp_path):
-    values = {"controller.c1": 4.730212345678901, "controller.lambda1": -1.0}
-    path = tmp_path / "tuned.ssv"
+    values = {"controller.c1": 4.730212345678901, "controller.lambda1": -1.0, "n": 3, "on": True}
+    path = tmp_path / "autotuned.ssv"
     path.write_text(ssv_text(values, description="a -- comment"))
-    assert read_ssv_values(path) == values
+    assert read_ssv_values(path) == {"controller.c1": 4.730212345678901, "controller.lambda1": -1.0}
+    assert "<ssv:Integer value=\"3\"/>" in path.read_text() and "<ssv:Boolean value=\"true\"/>" in path.read_text()
 
 
 def test_tune_improves_on_the_nominal_gains_within_budget():
@@ -94,7 +95,7 @@ def test_cli_tune_writes_ssv_and_table(tmp_path, capsys):
                      "--stop-time", "1.5", "--workers", "2", "--out", str(out), "--quiet"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    values = read_ssv_values(out / "tuned.ssv")
+    values = read_ssv_values(out / "autotuned.ssv")
     assert list(values) == ["controller.q_position"] and 1000.0 <= values["controller.q_position"] <= 4000.0
     report = (out / "tune.md").read_text()
     assert "| controller.q_position | 2000 |" in report and "| cost |" in report

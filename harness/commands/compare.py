@@ -31,6 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "friction (viscous damping) and spring stiffness")
     p.add_argument("--samples", type=int, default=20, help="robustness runs per scenario (default 20)")
     p.add_argument("--seed", type=int, default=0, help="robustness seed (default 0)")
+    p.add_argument("--parameter-set", metavar="NAME",
+                   help="bind this parameter set in every scenario that has it, e.g. thesis (default: each "
+                        "scenario's own binding)")
     p.add_argument("--stop-time", type=float, help="simulated seconds per run (default: the scenarios')")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU cores)")
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler address tcp://HOST:PORT")
@@ -59,6 +62,18 @@ def plant_kind(scenario: str, spec: Any) -> str:
     return "double-mass" if "plant.K" in spec.parameters else "single-mass"
 
 
+def _pset(scenario: str, wanted: str | None) -> str | None:
+    """``wanted`` if the scenario has that parameter set, else None (its default binding)."""
+    if not wanted:
+        return None
+    try:
+        from harness.ssp import load_scenario
+
+        return wanted if wanted in load_scenario(scenario).parameter_sets else None
+    except Exception:  # noqa: BLE001 -- reported when the scenario itself is loaded
+        return None
+
+
 def main(args: argparse.Namespace) -> int:
     from harness.errors import IpcosimError, UsageError
     from harness.studies import robustness as rob
@@ -82,7 +97,8 @@ def main(args: argparse.Namespace) -> int:
     specs, spec_names = [], []
     for name in names:
         try:
-            specs.append(spec_for(name, stop_time=args.stop_time, series=True))
+            specs.append(spec_for(name, stop_time=args.stop_time, series=True,
+                                  parameter_set=_pset(name, args.parameter_set)))
             spec_names.append(name)
         except (IpcosimError, OSError, ValueError) as exc:
             results[name] = {"status": "error", "error": one_line(exc).split(": ", 1)[-1]}
@@ -101,10 +117,11 @@ def main(args: argparse.Namespace) -> int:
                 name = spec_names[row["index"]]
                 row = {k: v for k, v in row.items() if k != SCENARIO_PARAM}
                 row["cost"] = cost(row) if row["status"] != "error" else math.inf
+                row["gains"] = getattr(specs[row["index"]], "gains", "") or ""
                 results[name] = row
         if args.robustness:
             for name, spec in zip(spec_names, specs):
-                plain = spec_for(name, stop_time=args.stop_time)
+                plain = spec_for(name, stop_time=args.stop_time, parameter_set=_pset(name, args.parameter_set))
                 varies = parse_all(rob.default_vary(plant_kind(name, plain), plain.parameters), plain.parameters)
                 cases = make_cases(varies, plain.parameters, samples=args.samples, seed=args.seed)
                 if not args.quiet:

@@ -35,6 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler address tcp://HOST:PORT")
     p.add_argument("--set", action="append", default=[], metavar="COMP.VAR=VALUE",
                    help="fixed parameter value in every run")
+    p.add_argument("--parameter-set", metavar="NAME", help="bind this parameter set of the scenario (thesis, tuned...)")
     p.add_argument("--stop-time", type=float, help="simulated seconds per run (default: the scenario's)")
     p.add_argument("--step", type=float, help="communication step [s] (default: the scenario's)")
     p.add_argument("--out", help="output folder (default out/sweep/<scenario>)")
@@ -57,7 +58,8 @@ def main(args: argparse.Namespace) -> int:
     from harness.sweep import make_cases, open_executor, parse_all, run_sweep
 
     overrides = parse_set(args.set)
-    spec = spec_for(args.scenario, stop_time=args.stop_time, step=args.step, overrides=overrides)
+    spec = spec_for(args.scenario, stop_time=args.stop_time, step=args.step, overrides=overrides,
+                    parameter_set=args.parameter_set)
     varies = parse_all(args.vary, spec.parameters)
     cases = make_cases(varies, spec.parameters, samples=args.samples, seed=args.seed)
     out = Path(args.out) if args.out else default_out(args.scenario)
@@ -71,6 +73,7 @@ def main(args: argparse.Namespace) -> int:
         result = run_sweep(spec, cases, out_dir=out, executor=executor, progress=not args.quiet,
                            extra_metadata={"vary": list(args.vary), "set": dict(overrides),
                                            "samples": args.samples, "seed": args.seed,
+                                           "parameter_set": args.parameter_set,
                                            "command": "ipcosim " + " ".join(sys.argv[1:])})
     except KeyboardInterrupt:
         executor.abort()

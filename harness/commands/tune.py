@@ -3,8 +3,11 @@
     ipcosim tune SCENARIO --params controller.c1,controller.lambda1 [--budget N]
                  [--bounds controller.c1=1:10 ...] [--workers W] [--scheduler ADDR] [--seed S]
 
-Writes the tuned parameter set as ``tuned.ssv`` beside the scenario (``ssp/<scenario>/``; for a
-scenario without a folder, into ``--out``), and ``--out`` (default ``out/tune/<scenario>``)
+Starts from the scenario's ``thesis`` parameter set when it has one (the thesis's gains; else
+its default binding, or ``--parameter-set``). Writes the tuned parameter set as
+``autotuned.ssv`` beside the scenario (``ssp/<scenario>/autotuned.ssv``: the complete controller
+set with the tuned values, so ``ipcosim run SCENARIO --parameter-set autotuned`` runs it; for a
+scenario without a folder, into ``--out``), and into ``--out`` (default ``out/tune/<scenario>``)
 ``tune.md`` (before/after table) and ``evaluations.csv`` (every run).
 """
 from __future__ import annotations
@@ -34,7 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--step", type=float, help="communication step [s] (default: the scenario's)")
     p.add_argument("--w-angle", type=float, default=None, help="weight of ITAE(angle) [m/rad] (default 0.1)")
     p.add_argument("--w-voltage", type=float, default=None, help="weight of ISE(voltage) [m s/V^2] (default 1e-4)")
-    p.add_argument("--ssv", help="where to write the tuned parameter set (default: tuned.ssv beside the scenario)")
+    p.add_argument("--parameter-set", metavar="NAME",
+                   help="start from this parameter set of the scenario (default: thesis when it exists)")
+    p.add_argument("--ssv", help="where to write the tuned parameter set (default: autotuned.ssv beside the scenario)")
     p.add_argument("--out", help="report folder (default out/tune/<scenario>)")
     p.add_argument("--quiet", action="store_true", help="no per-generation progress")
     p.set_defaults(func=main)
@@ -59,11 +64,18 @@ def main(args: argparse.Namespace) -> int:
     from harness.commands.sweep import default_out
     from harness.studies import cost as costmod
     from harness.studies import tune as tunemod
-    from harness.studies.specs import parse_set, spec_for
+    from harness.studies.specs import PURE_SCENARIOS, parse_set, spec_for
     from harness.sweep import open_executor
 
     overrides = parse_set(args.set)
-    spec = spec_for(args.scenario, stop_time=args.stop_time, step=args.step, overrides=overrides)
+    pset = args.parameter_set
+    if pset is None and args.scenario not in PURE_SCENARIOS:
+        from harness.ssp import load_scenario
+
+        if "thesis" in load_scenario(args.scenario).parameter_sets:
+            pset = "thesis"
+    spec = spec_for(args.scenario, stop_time=args.stop_time, step=args.step, overrides=overrides,
+                    parameter_set=pset)
     names = tunemod.parse_params(args.params, spec.parameters)
     bounds = tunemod.parse_bounds(args.bounds, names, spec.parameters)
     w_angle = costmod.W_ANGLE if args.w_angle is None else args.w_angle
@@ -72,7 +84,12 @@ def main(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else default_out(args.scenario, "tune")
     out.mkdir(parents=True, exist_ok=True)
     scenario_dir = _scenario_dir(args.scenario)
-    ssv_path = Path(args.ssv) if args.ssv else (scenario_dir or out) / "tuned.ssv"
+    if args.ssv:
+        ssv_path = Path(args.ssv)
+    elif scenario_dir is not None and Path(args.scenario).suffix == ".ssp":
+        ssv_path = scenario_dir / f"{Path(args.scenario).stem}.autotuned.ssv"
+    else:
+        ssv_path = (scenario_dir or out) / "autotuned.ssv"
 
     executor = open_executor(args.workers, args.scheduler)
     print(f"tune {spec.name}: {', '.join(names)} within "
@@ -92,16 +109,22 @@ def main(args: argparse.Namespace) -> int:
     description = (f"ipcosim tune {spec.name} (scenario hash {spec.key}): J = {res.best_cost:.6g} "
                    f"(scenario gains: {res.nominal_cost:.6g}), {len(res.evaluations)} runs, seed {args.seed}, "
                    f"w_angle {w_angle:g}, w_voltage {w_voltage:g}")
+    values, component = tunemod.tuned_parameter_set(args.scenario, res.best, pset)
     ssv_path.parent.mkdir(parents=True, exist_ok=True)
-    ssv_path.write_text(tunemod.ssv_text(res.best, name="tuned", description=description))
-    table = tunemod.before_after_markdown(res)
+    ssv_path.write_text(tunemod.ssv_text(values, name="autotuned", description=description))
+    if component is not None:
+        usage = (f"It is the complete `{component}` parameter set ({pset or 'default'} with the tuned values): "
+                 f"`ipcosim run {args.scenario} --parameter-set autotuned` runs it.")
+    else:
+        usage = "It holds the tuned values as component.variable (apply them with --set)."
+    table = tunemod.before_after_markdown(res, f"{pset} gains" if pset else "scenario gains")
     improved = res.best_cost < res.nominal_cost
     report = (f"# Tuning {spec.name}\n\n{description}.\n\n"
               f"Cost J = ITAE(x - r) + {w_angle:g} ITAE(theta) + {w_voltage:g} ISE(u); infinite when the "
               f"pendulum falls.\n\n{table}\n"
               + ("" if improved else "The optimiser found nothing better than the scenario's gains; "
-                                     "tuned.ssv repeats them.\n")
-              + f"\nTuned parameter set: `{ssv_path}`\n")
+                                     "the written set repeats them.\n")
+              + f"\nTuned parameter set: `{ssv_path}`. {usage}\n")
     (out / "tune.md").write_text(report)
     print(table, end="")
     print(f"tuned parameter set: {ssv_path}\nreport: {out / 'tune.md'}, runs: {out / 'evaluations.csv'}")

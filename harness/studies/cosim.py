@@ -63,6 +63,7 @@ class CosimSpec(RunSpec):
     overrides: dict = field(default_factory=dict)
     with_series: bool = False
     parameter_set: str | None = None
+    gains: str = ""
     name: str = ""
     scenario_hash: str = ""
     parameters: Mapping[str, Any] = field(default_factory=dict)
@@ -101,7 +102,8 @@ class CosimSpec(RunSpec):
         spec = cls(location=str(Path(prepared.scenario.location).resolve()),
                    stop_time=stop_time if stop_time is not None else exp.stop_time,
                    step=step if step is not None else exp.step_size, overrides=overrides, with_series=series,
-                   parameter_set=parameter_set, name=prepared.scenario.name or Path(scenario).name,
+                   parameter_set=parameter_set,
+                   gains=parameter_set or ",".join(prepared.scenario.bound_sets) or "FMU defaults", name=prepared.scenario.name or Path(scenario).name,
                    scenario_hash=_hash_files(files), parameters=params,
                    metric_names=tuple(METRIC_KEYS) + COST_TERMS + TIMING_METRICS)
         return spec

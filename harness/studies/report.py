@@ -287,14 +287,15 @@ def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
 
 
 def _table(results: Results, robustness: Mapping[str, Mapping[str, Any]] | None) -> tuple[list[str], list[list[str]]]:
-    header = ["plant", "controller"] + [label for _, label, _ in TABLE_COLUMNS]
+    header = ["plant", "controller", "gains"] + [label for _, label, _ in TABLE_COLUMNS]
     if robustness:
         header.append("robust success (+-20 %)")
     rows = []
     for scenario in sorted(results, key=lambda s: (SCENARIOS.index(s) if s in SCENARIOS else 99, s)):
         row = results[scenario]
         plant, controller = split(scenario)
-        cells = [PLANT_LABELS.get(plant, plant), CONTROLLER_LABELS.get(controller, controller)]
+        cells = [PLANT_LABELS.get(plant, plant), CONTROLLER_LABELS.get(controller, controller),
+                 str(row.get("gains") or "-")]
         for key, _, digits in TABLE_COLUMNS:
             v = row.get(key)
             cells.append(fmt(v, digits) if digits else fmt(v))

@@ -26,7 +26,8 @@ def parse_set(items: list[str] | None) -> dict[str, float]:
 
 
 def spec_for(scenario: str, stop_time: float | None = None, step: float | None = None,
-             overrides: Mapping[str, float] | None = None, series: bool = False) -> RunSpec:
+             overrides: Mapping[str, float] | None = None, series: bool = False,
+             parameter_set: str | None = None) -> RunSpec:
     """The run specification of a scenario.
 
     Parameters
@@ -40,12 +41,17 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
         ``component.variable`` values set in every run (``--set``).
     series : bool
         Return the run's signals (thinned) with its metrics, under ``series`` (for figures).
+    parameter_set : str, optional
+        Bind this named parameter set of the scenario (``thesis``, ``tuned``, ``autotuned``)
+        instead of its default.
     """
     if stop_time is not None and not stop_time > 0:
         raise UsageError(f"--stop-time {stop_time}: must be positive")
     if step is not None and not step > 0:
         raise UsageError(f"--step {step}: must be positive")
     if scenario in PURE_SCENARIOS:
+        if parameter_set:
+            raise UsageError(f"--parameter-set {parameter_set}: {scenario} has no parameter sets")
         kwargs: dict = {"with_series": series}
         if stop_time is not None:
             kwargs["stop_time"] = stop_time
@@ -60,4 +66,5 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
         return spec
     from harness.studies.cosim import CosimSpec
 
-    return CosimSpec.from_scenario(scenario, stop_time=stop_time, step=step, overrides=overrides, series=series)
+    return CosimSpec.from_scenario(scenario, stop_time=stop_time, step=step, overrides=overrides, series=series,
+                                   parameter_set=parameter_set)

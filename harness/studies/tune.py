@@ -237,17 +237,59 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
 SSV_NS = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 
 
-def ssv_text(values: Mapping[str, float], name: str = "tuned", description: str = "") -> str:
-    """An SSP 1.0 parameter set (``.ssv``) holding ``component.variable`` Real values."""
+def ssv_text(values: Mapping[str, Any], name: str = "autotuned", description: str = "") -> str:
+    """An SSP 1.0 parameter set (``.ssv``): bool -> Boolean, int -> Integer, else Real."""
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
-             f'<ssv:ParameterSet xmlns:ssv="{SSV_NS}" version="1.0" name={quoteattr(name)}>']
-    if description:
-        lines.append(f"  <!-- {description.replace('--', '-')} -->")
-    lines.append("  <ssv:Parameters>")
+             f'<ssv:ParameterSet xmlns:ssv="{SSV_NS}" version="1.0" name={quoteattr(name)}'
+             + (f" description={quoteattr(description)}" if description else "") + ">",
+             "  <ssv:Parameters>"]
     for key, value in values.items():
-        lines.append(f'    <ssv:Parameter name={quoteattr(key)}><ssv:Real value="{float(value)!r}"/></ssv:Parameter>')
+        if isinstance(value, bool):
+            typed = f'<ssv:Boolean value="{str(value).lower()}"/>'
+        elif isinstance(value, int):
+            typed = f'<ssv:Integer value="{value}"/>'
+        else:
+            typed = f'<ssv:Real value="{float(value)!r}"/>'
+        lines.append(f"    <ssv:Parameter name={quoteattr(key)}>{typed}</ssv:Parameter>")
     lines += ["  </ssv:Parameters>", "</ssv:ParameterSet>", ""]
     return "\n".join(lines)
+
+
+def tuned_parameter_set(scenario: str, best: Mapping[str, float],
+                        parameter_set: str | None = None) -> tuple[dict[str, Any], str | None]:
+    """The complete parameter set to write for a tuned scenario.
+
+    When every tuned parameter belongs to one component that binds a parameter-set file (the
+    controller's ``thesis``/``tuned`` set), the result is that set with the tuned values put in,
+    names relative to the component -- a drop-in replacement selectable with
+    ``--parameter-set autotuned``. Otherwise the tuned values alone, as ``component.variable``.
+
+    Returns
+    -------
+    (values, component)
+        ``component`` is None in the second case.
+    """
+    components = {n.split(".", 1)[0] for n in best}
+    if len(components) == 1:
+        component = components.pop()
+        try:
+            from harness.ssp import load_scenario, select_parameter_set
+
+            sc = load_scenario(scenario)
+            if parameter_set:
+                sc = select_parameter_set(sc, parameter_set)
+            comp = sc.component(component)
+        except Exception:  # noqa: BLE001 -- not a scenario with files (e.g. a pure stand-in)
+            comp = None
+        if comp is not None:
+            file_sets = [b for b in comp.bindings if b.source is not None]
+            if file_sets:
+                values: dict[str, Any] = {}
+                for b in file_sets:
+                    values.update({p.name: p.value for p in b.parameters})
+                values.update({n.split(".", 1)[1]: float(v) for n, v in best.items()})
+                return values, component
+    return {n: float(v) for n, v in best.items()}, None
 
 
 def read_ssv_values(path: Path) -> dict[str, float]:
