@@ -134,7 +134,7 @@ class RigServer:
         self.rig.stop_clock()
 
     def __enter__(self) -> "RigServer":
-        return self.start()
+        return self if self._sock is not None else self.start()
 
     def __exit__(self, *exc: object) -> None:
         self.close()

@@ -1,0 +1,280 @@
+"""``--swap plant=hil`` end to end: the master runs scenarios through the adapter FMU against
+virtual rigs served on 127.0.0.1 (lockstep unless a test needs real time; every wait bounded).
+
+Covered here: the open-loop trajectory through the master within one encoder count of the
+plant FMU's; the LQR, HSMC and adaptive HSMC scenarios meet the task through the adapter for
+both plants; pacing turned on by itself on a real-time rig; and the faults of the HIL issue
+through the command line: rig stops answering, master dies, limit trip, malformed messages
+mid-run, second client, Quanser package missing.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from harness.hil.rig import RigConfig, VirtualRig
+from harness.hil.server import RigServer
+
+ROOT = Path(__file__).resolve().parents[1]
+CART_RES, PEND_RES = 2.275e-5, 1.534e-3          # thesis-data.md, encoders
+LSB = 20.0 / 4096
+MEASURED = {"single-mass": ("cart_position", "pendulum_angle"),
+            "double-mass": ("active_cart_position", "passive_cart_position", "pendulum_angle")}
+RES = {"cart_position": CART_RES, "active_cart_position": CART_RES, "passive_cart_position": CART_RES,
+       "pendulum_angle": PEND_RES}
+
+pytestmark = pytest.mark.integration
+
+
+@pytest.fixture(scope="session")
+def fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Every FMU of the project, built for this session."""
+    from fmus.build import build_all
+
+    out = tmp_path_factory.mktemp("all-fmus")
+    build_all(out)
+    return out
+
+
+@pytest.fixture
+def env(fmu_dir, monkeypatch):
+    monkeypatch.setenv("IPCOSIM_FMU_PATH", str(fmu_dir))
+    return dict(os.environ, IPCOSIM_FMU_PATH=str(fmu_dir), PYTHONPATH=str(ROOT))
+
+
+def open_loop_scenario(kind: str, folder: Path) -> Path:
+    """The scenario ``<kind>-lqr`` reduced to its plant, whose voltage input is left unconnected."""
+    text = (ROOT / "ssp" / f"{kind}-lqr" / "SystemStructure.ssd").read_text()
+    start, end = text.index('<ssd:Component name="setpoint"'), text.index('<ssd:Component name="plant"')
+    text = text[:start] + text[end:]
+    c0, c1 = text.index("<ssd:Connections>"), text.index("</ssd:Connections>") + len("</ssd:Connections>")
+    text = text[:c0] + text[c1:]
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "SystemStructure.ssd").write_text(text.replace(f'name="{kind}-lqr"', f'name="{kind}-open-loop"'))
+    return folder
+
+
+def serve(**config) -> RigServer:
+    stall = config.pop("stall_after_steps", None)
+    return RigServer(VirtualRig(RigConfig(**config)), "127.0.0.1", 0, stall_after_steps=stall).start()
+
+
+def ipcosim(args: list[str], env: dict, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "harness.cli", *args], capture_output=True, text=True, env=env,
+                          timeout=timeout, cwd=ROOT)
+
+
+def error_lines(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if line.startswith("ipcosim run: error:")]
+
+
+def volt_schedule(n_steps: int):
+    from harness.manipulators import ScheduledValues
+
+    changes = []
+    for k in range(0, n_steps, 100):
+        v = (1.25 if (k // 300) % 2 == 0 else -0.625) + (k % 200) / 100 * 4 * LSB
+        changes.append((k * 1e-3, "plant", "voltage", round(v / LSB) * LSB))
+    return ScheduledValues(changes)
+
+
+# --- open loop through the master -------------------------------------------------------------------
+
+@pytest.mark.parametrize("kind", ["single-mass", "double-mass"])
+def test_open_loop_voltage_sequence_through_the_swap_matches_the_plant_within_one_count(kind, env, tmp_path,
+                                                                                         monkeypatch):
+    import harness
+
+    scn = open_loop_scenario(kind, tmp_path / "scn")
+    n = 1500
+    sim = harness.run(scn, stop_time=n * 1e-3, manipulators=[volt_schedule(n)])
+    with serve(plant=kind, cart_limit=None, pendulum_limit=None) as srv:
+        monkeypatch.setenv("IPCOSIM_HIL_URI", f"q4:{srv.uri}")
+        hil = harness.run(scn, stop_time=n * 1e-3, swaps={"plant": "hil"}, manipulators=[volt_schedule(n)])
+        assert srv.rig.time() == pytest.approx(n * 1e-3, abs=1e-9)     # lockstep: exactly the run's time
+    assert hil.metadata["components"]["plant"]["model"].startswith("IP02HIL")
+    assert "period_jitter_p99_s" not in hil.metrics                     # lockstep rig: no pacing
+    for name in MEASURED[kind]:
+        a, b = np.asarray(hil[f"plant.{name}"]), np.asarray(sim[f"plant.{name}"])
+        assert len(a) == len(b) == n + 1
+        assert np.max(np.abs(a - b)) < RES[name], name
+    assert np.ptp(np.asarray(sim[f"plant.{MEASURED[kind][0]}"])) > 0.01     # it really moved
+
+
+# --- closed loop: the scenarios meet the task through the adapter --------------------------------
+
+TASK = 0.05
+
+
+@pytest.mark.parametrize("kind", ["single-mass", "double-mass"])
+@pytest.mark.parametrize("law", ["lqr", "hsmc", "adaptive-hsmc"])
+def test_scenarios_meet_the_task_through_the_adapter(kind, law, env, monkeypatch):
+    import harness
+
+    scenario = f"{kind}-{law}"
+    sim = harness.run(scenario, raise_on_error=False)
+    if sim.error is not None or not sim.metrics.get("upright"):
+        pytest.fail(f"{scenario} does not meet the task in simulation ({sim.error or sim.metrics}); "
+                    f"the HIL comparison needs a working controller")
+    with serve(plant=kind) as srv:
+        monkeypatch.setenv("IPCOSIM_HIL_URI", f"q4:{srv.uri}")
+        hil = harness.run(scenario, swaps={"plant": "hil"}, raise_on_error=False)
+        assert not srv.rig.status().limit_tripped
+    assert hil.error is None, hil.error
+    m, s = hil.metrics, sim.metrics
+    assert m["upright"] is True                                   # the pendulum stayed up
+    cart = f"plant.{MEASURED[kind][0]}"
+    final = float(np.mean(np.asarray(hil[cart])[-len(hil[cart]) // 10:]))
+    assert abs(final - TASK) <= max(2.5 * s["steady_state_error_m"], 0.2 * TASK)   # the cart moved 0.05 m
+    assert m["steady_state_error_m"] <= s["steady_state_error_m"] + 20 * CART_RES
+    assert m["max_abs_angle_rad"] <= s["max_abs_angle_rad"] + 0.05
+
+
+# --- pacing ----------------------------------------------------------------------------------------
+
+def test_a_hil_run_on_a_real_time_rig_is_paced_by_itself(env, tmp_path, monkeypatch):
+    import harness
+
+    scn = open_loop_scenario("single-mass", tmp_path / "scn")
+    with serve(clock="wallclock", tick=5e-4) as srv:
+        monkeypatch.setenv("IPCOSIM_HIL_URI", f"q4:{srv.uri}")
+        result = harness.run(scn, stop_time=0.3, swaps={"plant": "hil"}, overrides={"plant.voltage": 0.5})
+    m = result.metrics
+    for key in ("period_jitter_p50_s", "period_jitter_p99_s", "period_jitter_max_s", "overruns",
+                "worst_step_time_s", "card_overruns"):
+        assert key in m, key
+    assert m["realtime_steps"] == 300                        # one per step of 1 ms
+    assert m["period_jitter_p50_s"] <= m["period_jitter_p99_s"] <= m["period_jitter_max_s"]
+    assert m["real_time_factor"] < 1.5                       # it did not run ahead of real time
+
+
+# --- faults through the command line ------------------------------------------------------------------
+
+def test_rig_stops_answering_mid_run(env, tmp_path):
+    scn = open_loop_scenario("single-mass", tmp_path / "scn")
+    out = tmp_path / "out"
+    with serve(stall_after_steps=300, cart_limit=None, pendulum_limit=None) as srv:
+        proc = ipcosim(["run", str(scn), "--swap", "plant=hil", "--set", "plant.voltage=0.625",
+                        "--set", "plant.watchdog_timeout=0.2", "--stop-time", "2", "--out", str(out)],
+                       dict(env, IPCOSIM_HIL_URI=f"q4:{srv.uri}"))
+    assert proc.returncode != 0
+    errors = error_lines(proc.stderr)
+    assert len(errors) == 1 and "did not answer STEP" in errors[0] and "0.2 s" in errors[0], proc.stderr
+    rows = (out / "results.csv").read_text().splitlines()
+    assert len(rows) - 1 == 301                              # t = 0 ... 0.3 s: the results so far
+    assert json.loads((out / "metrics.json").read_text())["wall_time_s"] > 0
+
+
+def test_limit_trip_ends_the_run_naming_the_limit_and_the_amplifier_stays_off(env, tmp_path):
+    scn = open_loop_scenario("single-mass", tmp_path / "scn")
+    with serve(pendulum_limit=None) as srv:
+        args = ["run", str(scn), "--swap", "plant=hil", "--set", "plant.voltage=5", "--stop-time", "5",
+                "--out", str(tmp_path / "out")]
+        e = dict(env, IPCOSIM_HIL_URI=f"q4:{srv.uri}")
+        proc = ipcosim(args, e)
+        assert proc.returncode != 0
+        errors = error_lines(proc.stderr)
+        assert len(errors) == 1 and "cart limit tripped" in errors[0] and "cart_position" in errors[0] \
+            and "0.3" in errors[0], proc.stderr
+        assert (tmp_path / "out" / "results.csv").is_file()
+        assert srv.rig.status().limit_tripped and srv.rig.motor_voltage() == 0.0
+        again = ipcosim(args[:-1] + [str(tmp_path / "out2")], e)           # refused until reset
+        assert again.returncode != 0 and "reset the rig" in error_lines(again.stderr)[0]
+        reset = ipcosim(["rig", "reset", "--port", str(srv.port)], e)
+        assert reset.returncode == 0, reset.stderr
+        assert not srv.rig.status().limit_tripped
+        ok = ipcosim(["run", str(scn), "--swap", "plant=hil", "--set", "plant.voltage=0.3", "--stop-time", "0.2",
+                      "--out", str(tmp_path / "out3"), "--quiet"], e)
+        assert ok.returncode == 0, ok.stderr
+
+
+def test_second_client_is_refused(env, tmp_path):
+    from harness.hil import open_card
+
+    scn = open_loop_scenario("single-mass", tmp_path / "scn")
+    with serve() as srv:
+        holder = open_card("q4", srv.uri)
+        proc = ipcosim(["run", str(scn), "--swap", "plant=hil", "--stop-time", "0.1", "--out", str(tmp_path / "o")],
+                       dict(env, IPCOSIM_HIL_URI=f"q4:{srv.uri}"))
+        holder.close()
+    assert proc.returncode != 0
+    assert "rig busy" in error_lines(proc.stderr)[0]
+
+
+def test_quanser_backend_asked_for_but_not_installed(env, tmp_path):
+    import importlib.util
+
+    if importlib.util.find_spec("quanser") is not None:
+        pytest.skip("the Quanser package is installed here")
+    scn = open_loop_scenario("single-mass", tmp_path / "scn")
+    proc = ipcosim(["run", str(scn), "--swap", "plant=hil", "--stop-time", "0.1", "--out", str(tmp_path / "o")],
+                   dict(env, IPCOSIM_HIL_URI="q4:0"))
+    assert proc.returncode != 0
+    line = error_lines(proc.stderr)[0]
+    assert "quanser.hardware" in line and "not installed" in line
+    assert "Traceback" not in proc.stderr
+
+
+def test_malformed_and_out_of_order_messages_mid_run_are_dropped_and_the_run_goes_on(env, tmp_path, monkeypatch):
+    import harness
+    from harness.hil.protocol import Msg, encode_frame
+    from harness.hil.tcpip import OPEN_CARDS
+    from harness.manipulators import Manipulator
+
+    class Injector(Manipulator):
+        def next_tick(self, n):
+            return 100 if n < 100 else None
+
+        def step(self, execution, n):
+            card = next(iter(OPEN_CARDS))
+            card._sock.send(b"\xde\xad garbage")
+            card._sock.send(encode_frame(Msg.WRITE_ANALOG, 2, b"\x00\x01"))                 # replayed seq
+            card._sock.send(encode_frame(Msg.WRITE_ANALOG, card._seq + 1000, b"\x00\x09"))  # bad payload
+            card._sock.send(encode_frame(Msg.STEP, card._seq + 1001, b"\x00" * 5000))      # oversized
+
+    scn = open_loop_scenario("single-mass", tmp_path / "scn")
+    with serve(cart_limit=None, pendulum_limit=None) as srv:
+        monkeypatch.setenv("IPCOSIM_HIL_URI", f"q4:{srv.uri}")
+        result = harness.run(scn, stop_time=0.3, swaps={"plant": "hil"}, overrides={"plant.voltage": 0.625},
+                             manipulators=[Injector()])
+        counters = dict(srv.counters)
+    assert result.error is None
+    assert len(result["time"]) == 301
+    assert counters["malformed"] == 2 and counters["out_of_order"] == 1 and counters["oversized"] == 1
+
+
+def test_master_dies_and_the_rigs_watchdog_puts_the_motor_at_zero(env, tmp_path):
+    scn = open_loop_scenario("single-mass", tmp_path / "scn")
+    with serve(clock="wallclock", tick=5e-4, cart_limit=None, pendulum_limit=None) as srv:
+        rig = srv.rig
+        proc = subprocess.Popen([sys.executable, "-m", "harness.cli", "run", str(scn), "--swap", "plant=hil",
+                                 "--set", "plant.voltage=1.5", "--stop-time", "60", "--out", str(tmp_path / "o"),
+                                 "--quiet"], env=dict(env, IPCOSIM_HIL_URI=f"q4:{srv.uri}"), cwd=ROOT,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        try:
+            end = time.monotonic() + 120
+            while rig.motor_voltage() == 0.0 and time.monotonic() < end and proc.poll() is None:
+                time.sleep(0.02)                               # bounded: until the master drives the motor
+            assert rig.motor_voltage() == pytest.approx(1.5, abs=LSB), proc.stderr.read() if proc.poll() else ""
+            os.kill(proc.pid, signal.SIGSTOP)                  # the master hangs
+            end = time.monotonic() + 30
+            while not rig.status().watchdog_expired and time.monotonic() < end:
+                time.sleep(0.01)
+            assert rig.status().watchdog_expired and rig.motor_voltage() == 0.0
+            # on the rig's clock, within the adapter's watchdog timeout (0.1 s) plus one physics tick
+            assert rig.wd_expired_at_ns - rig.wd_last_reload_ns <= 100_000_000 + rig.tick_ns
+        finally:
+            os.kill(proc.pid, signal.SIGKILL)                  # and dies
+            proc.wait(timeout=30)
+        end = time.monotonic() + 30
+        while not any(e.kind == "session" and "ended" in e.message for e in rig.events) and time.monotonic() < end:
+            time.sleep(0.01)
+        assert rig.motor_voltage() == 0.0 and not rig.wd_running
