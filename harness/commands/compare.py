@@ -80,7 +80,7 @@ def main(args: argparse.Namespace) -> int:
     from harness.studies.cost import cost
     from harness.studies.report import render
     from harness.studies.runners import SCENARIO_PARAM, MultiSpec
-    from harness.studies.specs import spec_for
+    from harness.studies.specs import for_executor, spec_for
     from harness.studies.vary import Case, case_seed
     from harness.sweep import make_cases, one_line, open_executor, package_versions, parse_all, run_sweep
 
@@ -109,7 +109,7 @@ def main(args: argparse.Namespace) -> int:
     summaries: dict[str, dict[str, Any]] = {}
     try:
         if specs:
-            multi = MultiSpec(specs=specs)
+            multi = for_executor(MultiSpec(specs=specs), executor)
             cases = [Case(index=i, params={SCENARIO_PARAM: float(i)}, seed=case_seed(args.seed, i))
                      for i in range(len(specs))]
             sweep = run_sweep(multi, cases, executor=executor, progress=not args.quiet)
@@ -126,7 +126,8 @@ def main(args: argparse.Namespace) -> int:
                 cases = make_cases(varies, plain.parameters, samples=args.samples, seed=args.seed)
                 if not args.quiet:
                     print(f"compare: robustness of {name}, {len(cases)} runs", file=sys.stderr)
-                res = run_sweep(plain, cases, executor=executor, out_dir=out / "robustness" / name,
+                res = run_sweep(for_executor(plain, executor), cases, executor=executor,
+                                out_dir=out / "robustness" / name,
                                 progress=not args.quiet,
                                 extra_metadata={"vary": [v.text for v in varies], "seed": args.seed})
                 summaries[name] = rob.summarize(res.rows, plain.metric_names)

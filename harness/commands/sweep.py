@@ -54,7 +54,7 @@ def default_out(scenario: str, kind: str = "sweep") -> Path:
 def main(args: argparse.Namespace) -> int:
     from harness.errors import IpcosimError
     from harness.studies import robustness
-    from harness.studies.specs import parse_set, spec_for
+    from harness.studies.specs import for_executor, parse_set, spec_for
     from harness.sweep import make_cases, open_executor, parse_all, run_sweep
 
     overrides = parse_set(args.set)
@@ -70,7 +70,8 @@ def main(args: argparse.Namespace) -> int:
     executor = open_executor(args.workers, args.scheduler)
     print(f"sweep {spec.name}: {len(cases)} runs on {executor.description} -> {out}", file=sys.stderr)
     try:
-        result = run_sweep(spec, cases, out_dir=out, executor=executor, progress=not args.quiet,
+        result = run_sweep(for_executor(spec, executor), cases, out_dir=out, executor=executor,
+                           progress=not args.quiet,
                            extra_metadata={"vary": list(args.vary), "set": dict(overrides),
                                            "samples": args.samples, "seed": args.seed,
                                            "parameter_set": args.parameter_set,

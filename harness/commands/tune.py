@@ -64,7 +64,7 @@ def main(args: argparse.Namespace) -> int:
     from harness.commands.sweep import default_out
     from harness.studies import cost as costmod
     from harness.studies import tune as tunemod
-    from harness.studies.specs import PURE_SCENARIOS, parse_set, spec_for
+    from harness.studies.specs import PURE_SCENARIOS, for_executor, parse_set, spec_for
     from harness.sweep import open_executor
 
     overrides = parse_set(args.set)
@@ -96,7 +96,8 @@ def main(args: argparse.Namespace) -> int:
           f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in bounds)}, budget {args.budget} runs on "
           f"{executor.description}", file=sys.stderr)
     try:
-        res = tunemod.tune(spec, names, bounds, budget=args.budget, executor=executor, seed=args.seed,
+        res = tunemod.tune(for_executor(spec, executor), names, bounds, budget=args.budget, executor=executor,
+                           seed=args.seed,
                            w_angle=w_angle, w_voltage=w_voltage, progress=not args.quiet)
     except KeyboardInterrupt:
         executor.abort()

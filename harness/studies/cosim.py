@@ -68,6 +68,8 @@ class CosimSpec(RunSpec):
     scenario_hash: str = ""
     parameters: Mapping[str, Any] = field(default_factory=dict)
     metric_names: tuple[str, ...] = ()
+    fmu_files: dict = field(default_factory=dict)
+    archive: bytes | None = field(default=None, repr=False)
 
     @classmethod
     def from_scenario(cls, scenario: str, stop_time: float | None = None, step: float | None = None,
@@ -97,6 +99,8 @@ class CosimSpec(RunSpec):
                     params[f"{inst.name}.{var.name}"] = inst.start_value(var.name)
             if inst.model.path is not None:
                 files.append(inst.model.path)
+        fmu_files = {c.source: str(system.instance(c.name).model.path) for c in prepared.scenario.components
+                     if system.instance(c.name).model.path is not None}
         params.update(overrides)
         exp = prepared.scenario.experiment
         spec = cls(location=str(Path(prepared.scenario.location).resolve()),
@@ -105,8 +109,32 @@ class CosimSpec(RunSpec):
                    parameter_set=parameter_set,
                    gains=parameter_set or ",".join(prepared.scenario.bound_sets) or "FMU defaults", name=prepared.scenario.name or Path(scenario).name,
                    scenario_hash=_hash_files(files), parameters=params,
-                   metric_names=tuple(METRIC_KEYS) + COST_TERMS + TIMING_METRICS)
+                   metric_names=tuple(METRIC_KEYS) + COST_TERMS + TIMING_METRICS, fmu_files=fmu_files)
         return spec
+
+    def portable(self) -> "CosimSpec":
+        """A copy that carries the scenario as an ``.ssp`` archive (SSD, parameter sets and every
+        FMU), so that workers on other machines need no files of this one. The archive is made
+        in memory; the copy's ``key`` is the same as this spec's."""
+        import dataclasses
+        import io
+        import zipfile
+
+        if self.archive is not None:
+            return self
+        location = Path(self.location)
+        if location.is_file():
+            data = location.read_bytes()
+        else:
+            buf = io.BytesIO()
+            with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+                for f in sorted(location.iterdir()):
+                    if f.is_file() and (f.name == "SystemStructure.ssd" or f.suffix == ".ssv"):
+                        zf.write(f, f.name)
+                for source, path in self.fmu_files.items():
+                    zf.write(path, source)
+            data = buf.getvalue()
+        return dataclasses.replace(self, archive=data)
 
     def describe(self) -> dict[str, Any]:
         return {"name": self.name, "scenario_hash": self.scenario_hash, "location": self.location,
@@ -120,7 +148,17 @@ class CosimSpec(RunSpec):
                                      first_column)
         from harness.studies.cost import cost_terms, series
 
-        prepared = Prepared(self.location, parameter_set=self.parameter_set, warn=False)
+        location = self.location
+        if self.archive is not None:
+            import atexit
+            import shutil
+            import tempfile
+
+            folder = tempfile.mkdtemp(prefix="ipcosim-ssp-")
+            atexit.register(shutil.rmtree, folder, True)
+            location = str(Path(folder) / f"{Path(self.location).stem or 'scenario'}.ssp")
+            Path(location).write_bytes(self.archive)
+        prepared = Prepared(location, parameter_set=self.parameter_set, warn=False)
         spec = self
 
         def run(params: Mapping[str, float], seed: int) -> dict:

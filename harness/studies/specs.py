@@ -68,3 +68,18 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
 
     return CosimSpec.from_scenario(scenario, stop_time=stop_time, step=step, overrides=overrides, series=series,
                                    parameter_set=parameter_set)
+
+
+def for_executor(spec: RunSpec, executor: object) -> RunSpec:
+    """The spec to send to ``executor``: on a Dask cluster, co-simulation specs carry their
+    scenario and FMUs (workers may be other machines); locally, workers read the files."""
+    from harness.sweep import DaskExecutor
+
+    if not isinstance(executor, DaskExecutor):
+        return spec
+    from harness.studies.runners import MultiSpec
+
+    if isinstance(spec, MultiSpec):
+        return MultiSpec(specs=[for_executor(s, executor) for s in spec.specs], name=spec.name)
+    portable = getattr(spec, "portable", None)
+    return portable() if callable(portable) else spec
