@@ -3,8 +3,9 @@
 ``fmi2DoStep(h = 1 ms)``, ``fmi2GetReal(every output)`` -- beside the same cycle on a
 trivial pythonfmu FMU (one input copied to one output: the floor that pythonfmu, the
 embedded interpreter and fmpy's ctypes calls cost) measured in the same run. The
-difference is what the plant model adds (target: <= 40 us). The pure ``Plant.do_step``
-cost is printed for reference.
+difference is what the plant model adds (target: <= 40 us). The same trivial FMU written
+on ``fmus.fmi.FmuBase`` (what the shared plumbing adds) and the pure ``Plant.do_step``
+cost are printed for reference.
 
 Method: all FMUs are built into a temporary folder and instantiated once; then rounds of
 ``CYCLES`` cycles alternate between the FMUs (so that drifts of the machine hit all of them
@@ -42,6 +43,23 @@ class TrivialBench(Fmi2Slave):
     def do_step(self, current_time, step_size):
         self.y = self.u
         return True
+'''
+
+
+FMUBASE_SCRIPT = '''
+from fmus.fmi import FmuBase
+
+
+class TrivialFmuBaseBench(FmuBase):
+    """One input copied to one output, on fmus.fmi.FmuBase."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.add_input("u", start=0.0, unit="V", description="input")
+        self.add_output("y", unit="V", description="copy of u", initial_depends_on=())
+
+    def step(self, t, h):
+        self.y = self.u
 '''
 
 
@@ -112,9 +130,13 @@ def measure() -> dict[str, float]:
         script = work / "fmu_trivial_bench.py"
         script.write_text(TRIVIAL_SCRIPT)
         trivial = Path(FmuBuilder.build_FMU(script, dest=work / "fmus"))
+        base_script = work / "fmu_trivial_fmubase_bench.py"
+        base_script.write_text(FMUBASE_SCRIPT)
+        (base,) = build_all(work / "fmus", scripts=[base_script])
         plants = {r.fmu.stem: r.fmu for r in build_all(work / "fmus", scripts=[
             ROOT / "fmus" / "fmu_ip02_single_mass.py", ROOT / "fmus" / "fmu_ip02_double_mass.py"])}
         cases = {"floor": _cycle(trivial, "u", work),
+                 "fmubase": _cycle(base.fmu, "u", work),
                  "single-mass": _cycle(plants["IP02SingleMass"], "voltage", work),
                  "double-mass": _cycle(plants["IP02DoubleMass"], "voltage", work)}
         try:
@@ -139,7 +161,9 @@ def run() -> list[str]:
     floor = m["floor"]
     lines = [f"plant FMU cycle through fmpy (setReal voltage, doStep h = 1 ms, getReal all outputs), "
              f"median of {ROUNDS} x {CYCLES} cycles:",
-             f"floor (trivial pythonfmu FMU, 1 in / 1 out): {floor:7.1f} us"]
+             f"floor (trivial pythonfmu FMU, 1 in / 1 out): {floor:7.1f} us",
+             f"same on fmus.fmi.FmuBase:                    {m['fmubase']:7.1f} us  (plumbing adds "
+             f"{m['fmubase'] - floor:.1f} us)"]
     for kind in ("single-mass", "double-mass"):
         added = m[kind] - floor
         verdict = "ok" if added <= TARGET_US else "OVER TARGET"
