@@ -278,3 +278,12 @@ def test_check_fmu_rejects_undefined_units(tmp_path: Path) -> None:
     with pytest.raises(BuildError, match="unit 'm' without a definition"):
         check_fmu(fmu)
     ElementTree.fromstring(md)  # the document itself is well-formed
+
+
+def test_discover_finds_the_fmu_scripts() -> None:
+    from fmus.build import discover
+    scripts = discover(ROOT)
+    names = {s.name for s in scripts}
+    assert {"fmu_ip02_single_mass.py", "fmu_ip02_double_mass.py"} <= names
+    assert all(s.name.startswith("fmu_") and s.parent.name in ("fmus", "controllers") for s in scripts)
+    assert len(names) == len(scripts)  # module names are unique
