@@ -206,7 +206,7 @@ class HilFmu(FmuBase):
                 tick = int(round(getattr(card.info, "tick", 0.0) * 1e9))
                 base = now_ns - int(round(t * 1e9))
                 if tick > 0:  # put the sample instants on the card's clock grid
-                    base = -(-base // tick) * tick
+                    base = (base // tick) * tick
                 self._base_ns = base
             until = (self._base_ns + int(round((t + h) * 1e9))) / 1e9
             res = card.step([int(self.analog_channel)], [v], self._enc, until, reload=True)

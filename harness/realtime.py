@@ -12,12 +12,15 @@ metrics.json):
 
 ``period_jitter_p50_s``, ``period_jitter_p99_s``, ``period_jitter_max_s``
     Percentiles of ``|actual period - h|``, the actual period being the time between
-    the starts of consecutive steps.
+    the starts of consecutive steps (from the second step on: the first one starts when
+    the pacer does).
 ``overruns``
-    Steps that started later than ``tolerance`` after their deadline, i.e. whose
-    predecessor ended that late (default tolerance: half a period). The tolerance absorbs
-    the small constant offset between the master's clock and a HIL card's sample clock
-    (the card's clock paces a HIL run: the adapter returns at the card's sample instant).
+    Steps that started later than ``tolerance`` (default: half a period) after their
+    deadline, i.e. whose predecessor ended that late. Lateness is measured against the
+    schedule ``t0 + n*h`` anchored at the step that ran earliest: when the pacer paces,
+    that is its own schedule; in a HIL run the card's clock paces the loop (the adapter
+    returns at the card's sample instants, a constant offset after the pacer's deadlines)
+    and the offset is not counted as lateness.
 ``worst_step_time_s``
     Longest time from the start to the end of one step (in a HIL run this includes the
     wait for the card's sample instant).
@@ -163,12 +166,20 @@ class Pacer:
         return d
 
     def stats(self) -> RealtimeStats:
-        """Statistics so far (zeros for fewer than two steps)."""
+        """Statistics so far (jitter zero for fewer than three steps)."""
         starts = np.asarray(self._starts, dtype=np.int64)
-        late = np.asarray(self._lateness, dtype=np.int64)
+        if len(starts):
+            schedule = np.arange(len(starts), dtype=np.int64) * self.period_ns
+            late = starts - schedule
+            # anchored at the earliest-running step (see the module doc); the first step starts
+            # when the pacer does and says nothing about the schedule
+            late -= late[1:].min() if len(late) > 1 else late[0]
+            np.maximum(late, 0, out=late)
+        else:
+            late = np.zeros(0, dtype=np.int64)
         dur = np.asarray(self._durations, dtype=np.int64)
-        if len(starts) >= 2:
-            jitter = np.abs(np.diff(starts) - self.period_ns) / NS
+        if len(starts) >= 3:
+            jitter = np.abs(np.diff(starts[1:]) - self.period_ns) / NS
             p50, p99, jmax = (float(np.percentile(jitter, 50)), float(np.percentile(jitter, 99)),
                               float(jitter.max()))
         else:

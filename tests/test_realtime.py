@@ -100,3 +100,19 @@ def test_wait_until_on_the_real_clock_reaches_the_deadline():
 def test_bad_period():
     with pytest.raises(ValueError, match="period"):
         Pacer(0.0)
+
+
+def test_a_constant_offset_of_the_cards_clock_is_not_counted_as_lateness():
+    """HIL: the adapter returns at the card's sample instants, 0.7 ms after the pacer's deadlines."""
+    sim = SimClock()
+    pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep)
+    pacer.start()
+    t0 = pacer.t0_ns
+    for n in range(200):
+        pacer.begin(n)
+        sim.ns = max(sim.ns, t0 + (n + 1) * 1_000_000 + 700_000)   # blocked until the card's instant
+        sim.work(50_000)                                            # then the controller
+        pacer.end(n)
+    st = pacer.stats()
+    assert st.overruns == 0 and st.lateness_max < 5e-6
+    assert st.period_jitter_max < 5e-6

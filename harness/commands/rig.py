@@ -110,6 +110,7 @@ def serve(args: argparse.Namespace) -> int:
     def log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
+    sys.setswitchinterval(1e-4)   # hand the GIL over quickly between the connection and ticker threads
     server = RigServer(rig, args.host, args.port, stall_after_steps=args.stall_after_steps, log=log).start()
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         log(f"ipcosim rig: warning: listening on {args.host}, reachable from other machines")

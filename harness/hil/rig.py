@@ -204,6 +204,9 @@ class VirtualRig:
                                                     CART_M_PER_COUNT)
         self._carts = [(i, i + 1, n) for i, n in enumerate(self.plant.state_names) if n.endswith("cart_position")]
         self._history: collections.deque[tuple[int, np.ndarray]] = collections.deque()
+        # wallclock: keep 0.2 s of physics so that a sample is taken at its instant even if the
+        # request is served late (the physics may already be past it)
+        self._history_ns = 0 if self.lockstep else 200_000_000
         self._record_history()
 
     # --- construction helpers ----------------------------------------------------------------
@@ -267,7 +270,9 @@ class VirtualRig:
             self._ticker = None
 
     def _tick_loop(self) -> None:
-        period = self.tick_ns / NS
+        # Requests sync the physics themselves; the ticker keeps an idle rig (watchdog!) going.
+        # Every event still happens at its grid instant: a late ticker only computes it later.
+        period = max(self.tick_ns / NS, 1e-3)
         while not self._stop_ticker.wait(period):
             try:
                 with self.lock:
@@ -357,20 +362,19 @@ class VirtualRig:
 
     def _record_history(self) -> None:
         self._history.append((self._t_ns, self.plant.x.copy()))
-        keep_from = self._t_ns - self.latency_ns
+        keep_from = self._t_ns - self.latency_ns - self._history_ns
         while len(self._history) > 1 and self._history[1][0] <= keep_from:
             self._history.popleft()
 
-    def _sensed_state(self) -> np.ndarray:
-        """The state the encoders show now (``latency`` ago)."""
-        if not self.latency_ns:
+    def _sensed_state(self, at_ns: int | None = None) -> np.ndarray:
+        """The state the encoders show at rig time ``at_ns`` (default: now), i.e. ``latency`` earlier."""
+        if not self.latency_ns and at_ns is None:
             return self.plant.x
-        when = self._t_ns - self.latency_ns
+        when = (self._t_ns if at_ns is None else at_ns) - self.latency_ns
         chosen = self._history[0][1]
-        for t, x in self._history:
+        for t, x in reversed(self._history):
             if t <= when:
                 chosen = x
-            else:
                 break
         return chosen
 
@@ -456,12 +460,12 @@ class VirtualRig:
                 else:
                     self._applied[c] = q
 
-    def read_encoder(self, channels: Sequence[int]) -> np.ndarray:
-        """Encoder counts (int32)."""
+    def read_encoder(self, channels: Sequence[int], at_ns: int | None = None) -> np.ndarray:
+        """Encoder counts (int32), as of now or of the rig time ``at_ns`` (a recent instant)."""
         with self.lock:
             self.sync()
             chans = self._check_enc(channels)
-            x = self._sensed_state()
+            x = self._sensed_state(at_ns)
             sigma = self.config.noise_counts
             out = []
             for c in chans:
@@ -557,10 +561,10 @@ class VirtualRig:
             if self.lockstep:
                 self._advance_to(until_ns)
         if not self.lockstep:
-            wait_until_ns(lambda: self.now_ns(), until_ns)
+            wait_until_ns(lambda: self.now_ns(), until_ns, spin_ns=0)
         with self.lock:
             self.sync()
-            counts = self.read_encoder(enc)
+            counts = self.read_encoder(enc, at_ns=until_ns)
             late = max(0, arrival - until_ns)
             if late:
                 self.counters["late_samples"] += 1
@@ -641,11 +645,15 @@ class VirtualRig:
 
 
 def wait_until_ns(clock_ns: Callable[[], int], deadline_ns: int, spin_ns: int = 300_000) -> int:
-    """Sleep, then spin, until ``clock_ns() >= deadline_ns``; returns the clock at the end."""
+    """Sleep, then spin, until ``clock_ns() >= deadline_ns``; returns the clock at the end.
+
+    With ``spin_ns = 0`` it only sleeps (in slices of at most 1 ms): it never holds the GIL
+    while waiting, at the price of waking up some tens of microseconds late.
+    """
     now = clock_ns()
     while now < deadline_ns:
         remaining = deadline_ns - now
         if remaining > spin_ns:
-            time.sleep((remaining - spin_ns) / NS)
+            time.sleep(min(remaining - spin_ns, 1_000_000) / NS if spin_ns == 0 else (remaining - spin_ns) / NS)
         now = clock_ns()
     return now

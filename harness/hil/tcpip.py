@@ -87,7 +87,8 @@ class TcpipCard(Card):
                 pass
             self._sock = None
 
-    def _request(self, msg: Msg, payload: bytes = b"", timeout: float | None = None) -> Reader:
+    def _request(self, msg: Msg, payload: bytes = b"", timeout: float | None = None,
+                 after: str = "") -> Reader:
         if self._sock is None:
             raise HILError(ErrorCode.NOT_OPEN, f"card {self.card_id} is closed")
         self._seq += 1
@@ -101,16 +102,17 @@ class TcpipCard(Card):
                                                  f"{exc.strerror or exc}") from exc
         deadline = time.monotonic() + limit
         while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} did not answer {msg.name} "
-                                                  f"(seq {seq}) within {limit:g} s")
-            try:
+            remaining = max(0.0, deadline - time.monotonic())
+            try:  # a last look with no wait once the deadline passed (this process may have stalled)
                 ready, _, _ = select.select([self._sock], [], [], remaining)
             except (OSError, ValueError) as exc:
                 self._abort()
                 raise HILError(ErrorCode.CONNECTION, f"lost the virtual rig at {self.where}: {exc}") from exc
             if not ready:
+                if time.monotonic() >= deadline:
+                    within = f"{self.timeout:g} s {after}" if after else f"{limit:g} s"
+                    raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} did not answer "
+                                                      f"{msg.name} (seq {seq}) within {within}")
                 continue
             try:
                 data = self._sock.recv(65536)
@@ -226,7 +228,8 @@ class TcpipCard(Card):
         if self.info.clock == "wallclock":
             est_now = self._last_rig_ns + (time.monotonic_ns() - self._last_host_ns)
             wait = max(0.0, (until_ns - est_now) / NS)
-        r = self._request(Msg.STEP, payload, timeout=self.timeout + wait)
+        r = self._request(Msg.STEP, payload, timeout=self.timeout + wait,
+                          after="of its sample instant" if wait > 0 else "")
         reloaded, late_ns, n = self._body(r, "BqH", "STEP")
         counts = np.array(self._body(r, f"{n}i", "STEP"), dtype=np.int32)
         return StepResult(counts=counts, reloaded=bool(reloaded), time=self._last_rig_ns / NS, late=late_ns / NS,
