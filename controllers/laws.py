@@ -1,0 +1,620 @@
+"""Discrete control laws for the IP02 plants, pure Python (no FMI import).
+
+Every law is a small class with explicit state:
+
+* ``step(measurements, reference) -> voltage`` is called once per sample instant k T with the
+  plant's measured positions (``fmus.physics.MEASURED[kind]`` order: cart position and pendulum
+  angle for the single mass; active cart, passive cart and pendulum angle for the double mass)
+  and the reference position of the motor-driven cart; it returns the voltage to hold until the
+  next instant, already limited to ``+-voltage_limit``.
+* ``reset()`` returns the law to its initial state (the first ``step`` initializes the velocity
+  estimates from the first measurement, so the output at t = 0 is defined by the inputs at t = 0).
+* ``sample_period`` [s] and ``voltage_limit`` [V] are attributes.
+
+A law never reads a true velocity: velocities come from filtered differentiation
+(``FilteredDerivative``) or from the LQR's observer. Laws with an integrator stop integrating
+while the output is saturated in the direction the integrator pushes (conditional integration,
+the clamping anti-windup).
+
+Sign conventions (``fmus.physics``): a positive voltage pushes the motor cart towards +x; the
+pendulum angle is counter-clockwise from upright, so pushing the cart towards +x makes the
+angle grow, and the pendulum leans towards +x for a *negative* angle.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any, Sequence
+
+import numpy as np
+
+from fmus.physics import MEASURED
+from harness.errors import IpcosimError
+
+from .design import DesignError, LQRDesign, check_sample_period, output_filter
+
+KINDS = ("single-mass", "double-mass")
+G = 9.81
+
+
+class LawParameterError(IpcosimError, ValueError):
+    """A control-law parameter is invalid; ``parameter`` names it."""
+
+    def __init__(self, parameter: str, message: str) -> None:
+        super().__init__(message)
+        self.parameter = parameter
+
+
+class LawInputError(IpcosimError, ValueError):
+    """A measurement or reference handed to ``step`` is not a finite number."""
+
+
+def _check_finite(name: str, value: float) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise LawParameterError(name, f"parameter {name} = {value!r} is not a number") from None
+    if not math.isfinite(v):
+        raise LawParameterError(name, f"parameter {name} = {v} is not finite")
+    return v
+
+
+def _check_nonneg(name: str, value: float) -> float:
+    v = _check_finite(name, value)
+    if v < 0:
+        raise LawParameterError(name, f"parameter {name} = {v} must be >= 0")
+    return v
+
+
+def _check_positive(name: str, value: float) -> float:
+    v = _check_finite(name, value)
+    if v <= 0:
+        raise LawParameterError(name, f"parameter {name} = {v} must be > 0")
+    return v
+
+
+def _check_kind(kind: str) -> str:
+    if kind not in KINDS:
+        raise LawParameterError("kind", f"unknown plant kind {kind!r}; expected one of {', '.join(KINDS)}")
+    return kind
+
+
+def saturate(v: float, limit: float) -> float:
+    """``v`` clipped to ``+-limit``."""
+    return limit if v > limit else (-limit if v < -limit else v)
+
+
+class FilteredDerivative:
+    """Derivative with a first-order low-pass, ``s / (tau s + 1)``, discretized by backward Euler.
+
+    ``d[k] = (tau d[k-1] + y[k] - y[k-1]) / (tau + T)``; ``tau = 0`` gives the backward difference.
+    The first sample initializes ``y[k-1] = y[0]`` and ``d = 0`` (a plant at rest).
+    """
+
+    def __init__(self, sample_period: float, time_constant: float) -> None:
+        self.T = sample_period
+        self.tau = time_constant
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the past samples."""
+        self._prev: float | None = None
+        self.value = 0.0
+
+    def update(self, y: float) -> float:
+        """Feed the sample of this instant; return the derivative estimate."""
+        if self._prev is None:
+            self._prev = y
+            self.value = 0.0
+            return 0.0
+        self.value = (self.tau * self.value + (y - self._prev)) / (self.tau + self.T)
+        self._prev = y
+        return self.value
+
+
+class DiscreteLaw:
+    """Base of the control laws: sample period, voltage limit, measurement checking.
+
+    Parameters
+    ----------
+    kind : {'single-mass', 'double-mass'}
+        Plant the law controls (fixes the measurement order).
+    sample_period : float
+        T [s] > 0.
+    voltage_limit : float
+        Output limit [V] > 0 (10 V: the Q4 card's analog output range).
+    """
+
+    def __init__(self, kind: str, sample_period: float = 1e-3, voltage_limit: float = 10.0) -> None:
+        self.kind = _check_kind(kind)
+        try:
+            self.sample_period = check_sample_period(sample_period)
+        except DesignError as exc:
+            raise LawParameterError("sample_period", str(exc)) from None
+        self.voltage_limit = _check_positive("voltage_limit", voltage_limit)
+        self.measured = MEASURED[kind]
+        self.ticks = 0
+        self.voltage = 0.0
+
+    @property
+    def time(self) -> float:
+        """Time since the law started, ``ticks * sample_period`` [s] (integer ticks)."""
+        return self.ticks * self.sample_period
+
+    def reset(self) -> None:
+        """Return to the initial state."""
+        self.ticks = 0
+        self.voltage = 0.0
+
+    def _inputs(self, measurements: Sequence[float], reference: float) -> tuple[np.ndarray, float]:
+        y = np.asarray(measurements, dtype=float).ravel()
+        if y.size != len(self.measured):
+            raise LawInputError(f"{type(self).__name__}: expected {len(self.measured)} measurements "
+                                f"({', '.join(self.measured)}), got {y.size}")
+        if not np.all(np.isfinite(y)):
+            bad = [n for n, v in zip(self.measured, y) if not math.isfinite(v)]
+            raise LawInputError(f"{type(self).__name__}: measurement {', '.join(bad)} is not finite "
+                                f"at t = {self.time:.6g} s")
+        r = float(reference)
+        if not math.isfinite(r):
+            raise LawInputError(f"{type(self).__name__}: reference = {r} m is not finite at t = {self.time:.6g} s")
+        return y, r
+
+    def step(self, measurements: Sequence[float], reference: float) -> float:
+        """Compute the voltage for this sample instant (see the module docstring)."""
+        y, r = self._inputs(measurements, reference)
+        v = saturate(self._compute(y, r), self.voltage_limit)
+        self.voltage = v
+        self.ticks += 1
+        return v
+
+    def _compute(self, y: np.ndarray, r: float) -> float:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    # positions by meaning
+    def _motor_cart(self, y: np.ndarray) -> float:
+        return float(y[0])
+
+    def _pendulum_cart(self, y: np.ndarray) -> float:
+        return float(y[0] if self.kind == "single-mass" else y[1])
+
+    def _angle(self, y: np.ndarray) -> float:
+        return float(y[-1])
+
+
+# ============================================================================================ PID
+
+@dataclass(frozen=True)
+class PIDGains:
+    """Thesis single-loop PID on the motor-cart position error (3.2.1, 4.2.1).
+
+    ``u = Kp e + Ki int e dt + Kd de/dt``, ``e = r - x_motor``, derivative filtered by
+    ``derivative_time_constant``.
+    """
+
+    Kp: float = 2.009e6        # V/m
+    Ki: float = 1.512e8        # V/(m s)
+    Kd: float = 6676.0         # V s/m
+    derivative_time_constant: float = 1e-3  # s
+
+    UNITS = {"Kp": "V/m", "Ki": "V/(m.s)", "Kd": "V.s/m", "derivative_time_constant": "s"}
+    DOCS = {"Kp": "proportional gain on the motor-cart position error",
+            "Ki": "integral gain on the motor-cart position error",
+            "Kd": "derivative gain on the motor-cart position error",
+            "derivative_time_constant": "time constant of the derivative's low-pass filter"}
+
+
+class PID(DiscreteLaw):
+    """Single-loop PID from the motor-cart position error to the voltage (the thesis's PID).
+
+    It ignores the pendulum: on the thesis's own model the tuner's gains ask for kilovolts, and
+    within the +-10 V limit the loop does not keep the pendulum up (``tests/test_controllers.py``).
+    """
+
+    def __init__(self, kind: str, gains: PIDGains = PIDGains(), sample_period: float = 1e-3,
+                 voltage_limit: float = 10.0) -> None:
+        super().__init__(kind, sample_period, voltage_limit)
+        for f in fields(gains):
+            _check_finite(f.name, getattr(gains, f.name))
+        _check_nonneg("derivative_time_constant", gains.derivative_time_constant)
+        self.gains = gains
+        self._d = FilteredDerivative(self.sample_period, gains.derivative_time_constant)
+        self.reset()
+
+    def reset(self) -> None:
+        super().reset()
+        self.integral = 0.0
+        self._d.reset()
+
+    def _compute(self, y: np.ndarray, r: float) -> float:
+        g = self.gains
+        e = r - self._motor_cart(y)
+        de = -self._d.update(self._motor_cart(y))  # derivative on the measurement: no kick at steps
+        u_pd = g.Kp * e + g.Kd * de
+        integral = self.integral + e * self.sample_period
+        u = u_pd + g.Ki * integral
+        # conditional integration: keep the new integral unless it deepens a saturation
+        if abs(u) <= self.voltage_limit or (u > 0) != (g.Ki * e > 0):
+            self.integral = integral
+        else:
+            u = u_pd + g.Ki * self.integral
+        return u
+
+
+# ==================================================================================== Cascade PID
+
+@dataclass(frozen=True)
+class CascadeGains:
+    """Cascade PID: inner loop on the pendulum angle, outer loop on the cart position.
+
+    Outer loop (cart position -> pendulum angle setpoint)::
+
+        theta_ref = -(Kp_x e + Ki_x int e_m dt - Kd_x x')/g,  clipped to +-theta_ref_limit
+        e = r - x_p      (x_p: the cart carrying the pendulum -- the passive cart for the double mass)
+        e_m = r - x_m    (x_m: the motor-driven cart)
+
+    Inner loop (angle -> voltage)::
+
+        u = -Kp_th (theta - theta_ref) - Ki_th int (theta - theta_ref) dt - Kd_th theta' - Kv_m x_m'
+
+    A pendulum balanced at a constant angle theta makes its cart accelerate at -g theta, so the
+    outer loop is a PD on the cart position acting through the acceleration -g theta_ref; the
+    inner loop must be much faster than the outer one. Velocities are filtered differences.
+    """
+
+    Kp_th: float = 30.0     # V/rad
+    Ki_th: float = 0.0      # V/(rad s)
+    Kd_th: float = 3.0      # V s/rad
+    Kp_x: float = 4.0       # (m/s^2)/m
+    Ki_x: float = 0.0       # (m/s^2)/(m s)
+    Kd_x: float = 4.0       # (m/s^2)/(m/s)
+    Kv_m: float = 0.0       # V s/m
+    theta_ref_limit: float = 0.15   # rad
+    derivative_time_constant: float = 0.005  # s
+
+    UNITS = {"Kp_th": "V/rad", "Ki_th": "V/(rad.s)", "Kd_th": "V.s/rad", "Kp_x": "1/s2", "Ki_x": "1/s3",
+             "Kd_x": "1/s", "Kv_m": "V.s/m", "theta_ref_limit": "rad", "derivative_time_constant": "s"}
+    DOCS = {"Kp_th": "inner loop: proportional gain on the angle error theta - theta_ref",
+            "Ki_th": "inner loop: integral gain on the angle error",
+            "Kd_th": "inner loop: derivative gain on the pendulum angle",
+            "Kp_x": "outer loop: proportional gain, cart position error -> cart acceleration demand",
+            "Ki_x": "outer loop: integral gain on the motor-cart position error",
+            "Kd_x": "outer loop: derivative gain on the cart velocity",
+            "Kv_m": "velocity damping of the motor-driven cart (voltage per velocity)",
+            "theta_ref_limit": "limit of the angle setpoint produced by the outer loop",
+            "derivative_time_constant": "time constant of the derivative low-pass filters"}
+
+
+class CascadePID(DiscreteLaw):
+    """Inner angle loop + outer cart-position loop (see ``CascadeGains``), anti-windup on both integrators."""
+
+    def __init__(self, kind: str, gains: CascadeGains = CascadeGains(), sample_period: float = 1e-3,
+                 voltage_limit: float = 10.0) -> None:
+        super().__init__(kind, sample_period, voltage_limit)
+        for f in fields(gains):
+            _check_finite(f.name, getattr(gains, f.name))
+        _check_positive("theta_ref_limit", gains.theta_ref_limit)
+        _check_nonneg("derivative_time_constant", gains.derivative_time_constant)
+        self.gains = gains
+        tau = gains.derivative_time_constant
+        self._dth = FilteredDerivative(self.sample_period, tau)
+        self._dxp = FilteredDerivative(self.sample_period, tau)
+        self._dxm = FilteredDerivative(self.sample_period, tau)
+        self.reset()
+
+    def reset(self) -> None:
+        super().reset()
+        self.int_x = 0.0
+        self.int_th = 0.0
+        self.theta_ref = 0.0
+        for d in (self._dth, self._dxp, self._dxm):
+            d.reset()
+
+    def _compute(self, y: np.ndarray, r: float) -> float:
+        g, T = self.gains, self.sample_period
+        xm, xp, th = self._motor_cart(y), self._pendulum_cart(y), self._angle(y)
+        vth, vxp, vxm = self._dth.update(th), self._dxp.update(xp), self._dxm.update(xm)
+        e, em = r - xp, r - xm
+        int_x = self.int_x + em * T
+        a_unsat = g.Kp_x * e + g.Ki_x * int_x - g.Kd_x * vxp
+        th_ref = saturate(-a_unsat / G, g.theta_ref_limit)
+        outer_sat = abs(-a_unsat / G) > g.theta_ref_limit
+        eth = th - th_ref
+        int_th = self.int_th + eth * T
+        u_unsat = -g.Kp_th * eth - g.Ki_th * int_th - g.Kd_th * vth - g.Kv_m * vxm
+        inner_sat = abs(u_unsat) > self.voltage_limit
+        # conditional integration: an integrator is frozen while its loop saturates
+        if not (outer_sat or inner_sat):
+            self.int_x = int_x
+        if not inner_sat:
+            self.int_th = int_th
+        self.theta_ref = th_ref
+        return u_unsat
+
+
+# ============================================================================================ LQR
+
+class LQR(DiscreteLaw):
+    """LQR state feedback on a discrete current estimator, ``u = sat(-K x^ + N r)`` (see ``controllers.design``).
+
+    Parameters
+    ----------
+    kind : str
+        Plant kind.
+    design : LQRDesign
+        From ``controllers.design.design_lqr`` (its ``sample_period`` is the law's).
+    voltage_limit : float
+        [V].
+    output_filter_time_constant : float
+        If > 0, each measured position passes through ``1/(tau s + 1)^2`` (zero-order-hold
+        discretized) before the estimator: the thesis's double-mass filters, tau = 0.0008 s.
+    """
+
+    def __init__(self, kind: str, design: LQRDesign, voltage_limit: float = 10.0,
+                 output_filter_time_constant: float = 0.0) -> None:
+        super().__init__(kind, design.sample_period, voltage_limit)
+        if design.model.outputs != tuple(self.measured):
+            raise LawParameterError("design", f"LQR design is for outputs {design.model.outputs}, the "
+                                              f"{kind} plant measures {self.measured}")
+        self.design = design
+        tau = _check_nonneg("output_filter_time_constant", output_filter_time_constant)
+        self.filter = output_filter(tau, self.sample_period) if tau > 0 else None
+        self._Cpinv = np.linalg.pinv(design.model.C)
+        self.reset()
+
+    def reset(self) -> None:
+        super().reset()
+        n = self.design.Ad.shape[0]
+        self.x_pred: np.ndarray | None = None
+        self.x_hat = np.zeros(n)
+        self._filt: np.ndarray | None = None
+
+    def _filter(self, y: np.ndarray) -> np.ndarray:
+        if self.filter is None:
+            return y
+        Ad, Bd, Cd = self.filter
+        if self._filt is None:  # start at rest at the first measurement
+            self._filt = np.outer(y, [1.0, 1.0])
+        out = self._filt @ Cd[0]
+        self._filt = self._filt @ Ad.T + np.outer(y, Bd[:, 0])
+        return out
+
+    def _compute(self, y: np.ndarray, r: float) -> float:
+        d = self.design
+        yf = self._filter(y)
+        if self.x_pred is None:  # plant assumed at rest at the measured positions
+            self.x_pred = self._Cpinv @ yf
+        C = d.model.C
+        self.x_hat = self.x_pred + d.M @ (yf - C @ self.x_pred)
+        u = float(-(d.K @ self.x_hat)[0] + d.N * r)
+        u_applied = saturate(u, self.voltage_limit)
+        self.x_pred = d.Ad @ self.x_hat + d.Bd[:, 0] * u_applied
+        return u
+
+
+# =========================================================================== Hierarchical SMC
+
+@dataclass(frozen=True)
+class SubsystemModel:
+    """``x_(2i)' = f_i(x) + b_i u`` with ``f_i(x) = a . x`` linear in the state (design-model order)."""
+
+    a: tuple[float, ...]
+    b: float
+
+
+@dataclass(frozen=True)
+class HSMCGains:
+    """Hierarchical sliding-mode law (thesis 3.2.3, 4.2.3 after Qian, Yi & Zhao 2008).
+
+    Subsystems (error coordinates, positions minus the reference)::
+
+        single: (th, th'), (xc - r, xc')
+        double: (th, th'), (xc - r, xc'), (xa - r, xa')        xc passive, xa active (motor) cart
+
+    ``s_i = c_i x_(2i-1) + x_(2i)``; layers ``S_1 = s_1``, ``S_i = lambda_(i-1) S_(i-1) + s_i``, and the
+    single-mass top layer weights its own subsystem by ``top_weight`` (the thesis's lambda2 = 1):
+    ``S_n = sum_r alpha_r s_r``. Reaching law ``S_n' = -k S_n - eta tanh(tanh_gain S_n) - KI int S_n``.
+    """
+
+    c: tuple[float, ...]
+    lam: tuple[float, ...]
+    k: float
+    eta: float
+    KI: float = 0.0
+    top_weight: float = 1.0
+    tanh_gain: float = 10.0
+    derivative_time_constant: float = 0.002
+    denominator_min: float = 1e-3
+
+    def alphas(self) -> np.ndarray:
+        """Coefficients alpha_r of s_r in the top layer S_n."""
+        n = len(self.c)
+        alpha = np.empty(n)
+        alpha[n - 1] = self.top_weight
+        prod = 1.0
+        for r in range(n - 2, -1, -1):  # alpha_r = lambda_r lambda_(r+1) ... lambda_(n-1)
+            prod *= self.lam[r]
+            alpha[r] = prod
+        return alpha
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """``value(t) = base + delta exp(-rate t)`` (thesis 3.2.4, 4.2.4)."""
+
+    base: float
+    delta: float = 0.0
+    rate: float = 0.0
+
+    def __call__(self, t: float) -> float:
+        return self.base + self.delta * math.exp(-self.rate * t) if self.delta else self.base
+
+
+class HSMC(DiscreteLaw):
+    """Hierarchical sliding-mode controller (two layers single mass, three double mass).
+
+    The law is the unique input that makes the top layer follow the reaching law exactly on
+    the subsystem models ``x_(2i)' = f_i + b_i u``::
+
+        S_n' = sum_r alpha_r (c_r x_(2r) + f_r) + (sum_r alpha_r b_r) u
+        u = -[sum_r alpha_r (c_r x_(2r) + f_r) + k S_n + eta tanh(g S_n) + KI int S_n] / sum_r alpha_r b_r
+
+    which is Qian, Yi & Zhao's ``u = (sum_r alpha_r b_r u_eq,r + u_sw) / sum_r alpha_r b_r`` with
+    ``b_r u_eq,r = -(c_r x_(2r) + f_r)``. The denominator ``sum_r alpha_r b_r`` must stay away from 0:
+    a set of gains for which ``|sum alpha_r b_r| < denominator_min`` is rejected. The integral of
+    S_n is frozen while the output saturates in the direction the integral pushes.
+
+    Parameters
+    ----------
+    kind : str
+        Plant kind.
+    gains : HSMCGains
+        Surface and reaching-law constants.
+    models : sequence of SubsystemModel
+        ``f_i, b_i`` of each subsystem, in the design-model state order (``subsystem_models``).
+    """
+
+    def __init__(self, kind: str, gains: HSMCGains, models: Sequence[SubsystemModel],
+                 sample_period: float = 1e-3, voltage_limit: float = 10.0) -> None:
+        super().__init__(kind, sample_period, voltage_limit)
+        n_layers = 2 if kind == "single-mass" else 3
+        self.n_layers = n_layers
+        n_states = 2 * n_layers
+        if len(gains.c) != n_layers:
+            raise LawParameterError("c", f"HSMC on the {kind} plant needs {n_layers} surface slopes c, got "
+                                         f"{len(gains.c)}")
+        if len(gains.lam) != n_layers - 1:
+            raise LawParameterError("lambda", f"HSMC on the {kind} plant needs {n_layers - 1} layer weights "
+                                              f"lambda, got {len(gains.lam)}")
+        if len(models) != n_layers:
+            raise LawParameterError("model", f"HSMC needs {n_layers} subsystem models, got {len(models)}")
+        for i, ci in enumerate(gains.c, 1):
+            _check_positive(f"c{i}", ci)
+        for i, li in enumerate(gains.lam, 1):
+            _check_finite(f"lambda{i}", li)
+        for name in ("k", "eta", "KI"):
+            _check_nonneg(name, getattr(gains, name))
+        _check_finite("top_weight", gains.top_weight)
+        _check_positive("tanh_gain", gains.tanh_gain)
+        _check_nonneg("derivative_time_constant", gains.derivative_time_constant)
+        _check_positive("denominator_min", gains.denominator_min)
+        for i, m in enumerate(models, 1):
+            if len(m.a) != n_states:
+                raise LawParameterError(f"a{i}", f"subsystem {i} model needs {n_states} coefficients, got {len(m.a)}")
+            for j, aj in enumerate(m.a, 1):
+                _check_finite(f"a{i}_{j}", aj)
+            _check_finite(f"b{i}", m.b)
+        self.gains = gains
+        self.models = tuple(models)
+        self._A = np.array([m.a for m in models], dtype=float)
+        self._b = np.array([m.b for m in models], dtype=float)
+        self._check_denominator(gains)
+        tau = gains.derivative_time_constant
+        self._d = [FilteredDerivative(self.sample_period, tau) for _ in range(n_layers)]
+        self.reset()
+
+    def _check_denominator(self, gains: HSMCGains) -> float:
+        den = float(gains.alphas() @ self._b)
+        if not math.isfinite(den) or abs(den) < gains.denominator_min:
+            raise LawParameterError("lambda", f"HSMC denominator sum(alpha_r b_r) = {den:.6g} is below "
+                                              f"denominator_min = {gains.denominator_min:g}: the top sliding layer "
+                                              "cannot be moved by the input (change lambda or the b_i)")
+        return den
+
+    def reset(self) -> None:
+        super().reset()
+        self.integral = 0.0
+        self.S = 0.0
+        for d in self._d:
+            d.reset()
+
+    def _state(self, y: np.ndarray, r: float) -> np.ndarray:
+        """Design-model state estimate in error coordinates (fmus.physics order without the current)."""
+        if self.kind == "single-mass":
+            xc, th = y[0] - r, y[1]
+            return np.array([xc, self._d[1].update(y[0]), th, self._d[0].update(th)])
+        xa, xc, th = y[0] - r, y[1] - r, y[2]
+        return np.array([xa, self._d[2].update(y[0]), xc, self._d[1].update(y[1]), th, self._d[0].update(th)])
+
+    def _subsystems(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(positions, velocities) per subsystem: pendulum, pendulum cart, (motor cart)."""
+        if self.kind == "single-mass":
+            return np.array([x[2], x[0]]), np.array([x[3], x[1]])
+        return np.array([x[4], x[2], x[0]]), np.array([x[5], x[3], x[1]])
+
+    def current_gains(self) -> tuple[np.ndarray, float, float, float]:
+        """(c, k, eta, KI) in effect at the law's time (constant for HSMC)."""
+        g = self.gains
+        return np.asarray(g.c, dtype=float), g.k, g.eta, g.KI
+
+    def _compute(self, y: np.ndarray, r: float) -> float:
+        x = self._state(y, r)
+        c, k, eta, KI = self.current_gains()
+        g = self.gains
+        alpha = g.alphas()
+        pos, vel = self._subsystems(x)
+        s = c * pos + vel
+        S = float(alpha @ s)
+        f = self._A @ x
+        num = float(alpha @ (c * vel + f))
+        den = float(alpha @ self._b)
+        integral = self.integral + S * self.sample_period
+        u_rest = -(num + k * S + eta * math.tanh(g.tanh_gain * S)) / den
+        u = u_rest - KI * integral / den
+        if abs(u) <= self.voltage_limit or (u > 0) != (-KI * S / den > 0):
+            self.integral = integral
+        else:
+            u = u_rest - KI * self.integral / den
+        self.S = S
+        return u
+
+
+@dataclass(frozen=True)
+class AdaptiveSchedules:
+    """Time schedules of the adaptive HSMC; ``None`` keeps the HSMC's constant."""
+
+    k: Schedule | None = None
+    eta: Schedule | None = None
+    KI: Schedule | None = None
+    c: tuple[Schedule | None, ...] = ()
+
+
+class AdaptiveHSMC(HSMC):
+    """HSMC whose gains follow time schedules ``p(t) = p0 + dp exp(-rate t)`` (thesis 3.2.4, 4.2.4).
+
+    t is the law's own time ``ticks * sample_period`` (since its start or last reset). High reaching
+    gain early (fast rise), lower later (less overshoot); integral gain small early, full later.
+    """
+
+    def __init__(self, kind: str, gains: HSMCGains, models: Sequence[SubsystemModel],
+                 schedules: AdaptiveSchedules, sample_period: float = 1e-3, voltage_limit: float = 10.0) -> None:
+        super().__init__(kind, gains, models, sample_period, voltage_limit)
+        for name in ("k", "eta", "KI"):
+            sch = getattr(schedules, name)
+            if sch is not None:
+                for part in ("base", "delta", "rate"):
+                    _check_finite(f"{name}_{part}", getattr(sch, part))
+                _check_nonneg(f"{name}_rate", sch.rate)
+                if min(sch.base, sch.base + sch.delta) < 0:
+                    raise LawParameterError(f"{name}_delta", f"schedule of {name} goes negative "
+                                                             f"({sch.base} + {sch.delta} exp(-{sch.rate} t))")
+        if schedules.c and len(schedules.c) != self.n_layers:
+            raise LawParameterError("c", f"need {self.n_layers} c schedules (or none), got {len(schedules.c)}")
+        for i, sch in enumerate(schedules.c, 1):
+            if sch is not None:
+                for part in ("base", "delta", "rate"):
+                    _check_finite(f"c{i}_{part}", getattr(sch, part))
+                _check_nonneg(f"c{i}_rate", sch.rate)
+                if min(sch.base, sch.base + sch.delta) <= 0:
+                    raise LawParameterError(f"c{i}_delta", f"schedule of c{i} must stay > 0 "
+                                                           f"({sch.base} + {sch.delta} exp(-{sch.rate} t))")
+        self.schedules = schedules
+
+    def current_gains(self) -> tuple[np.ndarray, float, float, float]:
+        t = self.time
+        g, sc = self.gains, self.schedules
+        c = np.array([s(t) if s is not None else ci for s, ci in zip(sc.c or (None,) * len(g.c), g.c)])
+        k = sc.k(t) if sc.k is not None else g.k
+        eta = sc.eta(t) if sc.eta is not None else g.eta
+        KI = sc.KI(t) if sc.KI is not None else g.KI
+        return c, k, eta, KI
