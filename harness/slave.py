@@ -99,6 +99,19 @@ class Slave:
 
 
 # --------------------------------------------------------------------------- FMU slave
+_LOGGER: Any = None
+_SINKS: dict[int, "FMUSlave"] = {}
+_SINK_COUNTER = [0]
+
+
+def _route_log(env: Any, instance_name: bytes | None, status: int, category: bytes | None,
+               message: bytes | None) -> None:
+    """The process-wide FMI logger callback: hands a message to the slave that logged it."""
+    slave = _SINKS.get(env if isinstance(env, int) else getattr(env, "value", None))
+    if slave is not None:
+        slave._log(env, instance_name, status, category, message)
+
+
 class FMUSlave(Slave):
     """An FMI 2.0 co-simulation FMU instance (an extracted FMU loaded through FMPy).
 
@@ -153,8 +166,16 @@ class FMUSlave(Slave):
             raise SlaveError(f"component {self.describe()}: cannot load the FMU's shared library: {exc}",
                              self.name, "load") from None
         callbacks = fmi2CallbackFunctions()
-        self._logger = fmi2CallbackLoggerTYPE(self._log)
-        callbacks.logger = self._logger
+        # fmpy's logger proxy keeps one Python logger for the whole process: every FMU's
+        # messages go to the same function, which routes them by componentEnvironment.
+        global _LOGGER
+        if _LOGGER is None:
+            _LOGGER = fmi2CallbackLoggerTYPE(_route_log)
+        _SINK_COUNTER[0] += 1
+        self._sink = _SINK_COUNTER[0]
+        _SINKS[self._sink] = self
+        callbacks.logger = _LOGGER
+        callbacks.componentEnvironment = self._sink
         callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         addLoggerProxy(ctypes.byref(callbacks))
@@ -165,6 +186,7 @@ class FMUSlave(Slave):
             self._fmu.instantiate(callbacks=callbacks, loggingOn=self.logging_on)
         except Exception as exc:  # noqa: BLE001
             self.state = "failed-instantiate"
+            _SINKS.pop(self._sink, None)
             msgs = self.messages()
             raise SlaveError(f"component {self.describe()}: fmi2Instantiate failed ({exc})"
                              + (f": {msgs[-1]}" if msgs else ""), self.name, "fmi2Instantiate") from None
@@ -196,6 +218,7 @@ class FMUSlave(Slave):
     def free(self) -> None:
         if self._fmu is None or self.state in ("freed", "created"):
             return
+        _SINKS.pop(getattr(self, "_sink", None), None)
         try:
             if self._fmu.component is not None:
                 self._fmu.fmi2FreeInstance(self._fmu.component)
