@@ -34,6 +34,7 @@ vdmcheck:
 
 demo: fmus
 	$(BIN)/ipcosim run single-mass-lqr --plot --out out/demo
+	@echo "out/demo/metrics.json:" && cat out/demo/metrics.json
 
 test: fmus vdmcheck
 	$(BIN)/python -m pytest
