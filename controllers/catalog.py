@@ -1,4 +1,5 @@
-"""Named parameter sets of every law and a factory: ``make_law(law, kind, parameter_set)``.
+"""Every control law's parameters (names, units, defaults), its named parameter sets, and one
+factory that builds a law from flat parameter values -- the same values a controller FMU holds.
 
 Each law has a ``thesis`` set (the thesis's numbers, reference/thesis-data.md section 2) and,
 where the thesis's numbers do not do the task on the thesis's own model (move the motor-driven
@@ -11,28 +12,39 @@ law            single mass                  double mass
 PID            thesis (fails: by design)    thesis (fails: by design)
 CascadePID     tuned (no thesis set)        tuned (no thesis set)
 LQR            thesis                       thesis
-HSMC           thesis (too slow), tuned     thesis
-AdaptiveHSMC   thesis (too slow), tuned     thesis
+HSMC           tuned; thesis (too slow)     thesis
+AdaptiveHSMC   tuned; thesis (too slow)     thesis
 =============  ===========================  =========================================
+
+The first set listed is the default: the FMU parameter defaults are its values, and the SSP
+scenarios bind it (``parameter_sets`` feeds ``harness.ssp_gen``'s ``.ssv`` files).
+
+Flat parameter names (``schema``): the law's gains as in ``controllers.laws``; ``sample_period``
+[s]; ``voltage_limit`` [V]; for the model-based laws (LQR, HSMC, AdaptiveHSMC) the design model's
+physical constants as ``model_<name>`` (``fmus.params`` names, defaults = the plant kind's default
+preset): the controller's *belief* about the plant, independent of the plant component.
 """
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import Any
+import math
+from dataclasses import dataclass, replace
+from typing import Any, Mapping
 
+import numpy as np
 
 from fmus.linearize import LinearModel
-from fmus.params import DEFAULT_PRESET, PlantParams, kind_of, preset
+from fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, ParameterError, PlantParams, make, parameter_info
 
 from .design import (THESIS_DOUBLE_MASS_OBSERVER_FACTOR, THESIS_DOUBLE_MASS_Q, THESIS_DOUBLE_MASS_R,
-                     THESIS_SINGLE_MASS_OBSERVER_POLES, THESIS_SINGLE_MASS_R, design_lqr, design_model,
-                     thesis_single_mass_Q)
+                     THESIS_SINGLE_MASS_OBSERVER_POLES, THESIS_SINGLE_MASS_R, DesignError, design_lqr,
+                     design_model, thesis_single_mass_Q)
+from .errors import ControllerParameterError
 from .laws import (LQR, PID, AdaptiveHSMC, AdaptiveSchedules, CascadeGains, CascadePID, DiscreteLaw, HSMC,
-                   HSMCGains, LawParameterError, PIDGains, Schedule, SubsystemModel)
+                   HSMCGains, PIDGains, Schedule, SubsystemModel)
 
 LAWS = ("PID", "CascadePID", "LQR", "HSMC", "AdaptiveHSMC")
+KINDS = ("single-mass", "double-mass")
 PLANT_SUFFIX = {"single-mass": "SingleMass", "double-mass": "DoubleMass"}
-KIND_OF_SUFFIX = {v: k for k, v in PLANT_SUFFIX.items()}
 
 #: Parameter sets per law and plant kind; the first is the default (the one that does the task).
 PARAMETER_SETS: dict[str, dict[str, tuple[str, ...]]] = {
@@ -43,8 +55,12 @@ PARAMETER_SETS: dict[str, dict[str, tuple[str, ...]]] = {
     "AdaptiveHSMC": {"single-mass": ("tuned", "thesis"), "double-mass": ("thesis",)},
 }
 
-#: Where the HSMC's subsystem models f_i, b_i come from.
-COEFFICIENT_SOURCES = ("linearization", "thesis")
+#: Physical constants that do not enter the design model (no inductance, no Coulomb friction, no limit).
+_NOT_IN_DESIGN = {"La", "voltage_limit", "coulomb_velocity", "b", "b1", "b2"}
+
+
+class CatalogError(ControllerParameterError):
+    """Unknown law, plant kind, parameter set or parameter name."""
 
 
 def model_name(law: str, kind: str) -> str:
@@ -62,7 +78,7 @@ def default_set(law: str, kind: str) -> str:
     return PARAMETER_SETS[law][kind][0]
 
 
-# --- HSMC subsystem models -----------------------------------------------------------------------------
+# =================================================================== HSMC subsystem models
 
 def subsystem_rows(kind: str) -> tuple[str, ...]:
     """Design-model state whose derivative each subsystem's ``f_i + b_i u`` gives (layer order)."""
@@ -81,32 +97,43 @@ def subsystem_models(model: LinearModel) -> list[SubsystemModel]:
     return out
 
 
-# App. A.5 (single mass). NOTE: these are the linearization of a cart + pendulum driven by a *force*
-# with the double-mass passive cart's numbers (Mc 0.961 kg, medium pendulum 0.127 kg, Bc 0.002):
-# b1 = 4.488 rad/s^2/N and b2 = 1.008 m/s^2/N are 1/(mass-matrix determinant) terms of that model.
-# Mapping inferred from the values: th'' = a1 th + a5 th' + a2 xc' + b1 u; xc'' = a3 th + a6 th' + a4 xc' + b2 u.
-THESIS_A5 = dict(a1=47.8583476, a2=-0.008976130226, b1=4.48806511, a3=0.9421754475, a4=-0.002016637257,
-                 b2=1.00831862, a5=-0.5471372821, a6=-0.01077135627)
-# App. B.5 (double mass): th'' = a1 th + a2 th' + a3 xc + a4 xc' + a5 xa + a6 xa' (b1 = 0);
-# xc'' = a7 th + a8 th' + a9 xc + a10 xc' + a11 xa + a12 xa' (b2 = 0);
-# xa'' = a13 xc + a14 xc' + a15 xa + a16 xa' + b3 u. Identical to the App. B.3 model.
+# App. A.5 (single mass). These turn out to be the linearization of a cart + pendulum driven by a
+# *force* with the double-mass passive cart's numbers (Mc 0.961 kg, medium pendulum 0.127 kg,
+# Bc 0.002 N s/m): b1 = 4.488 rad/s^2/N and b2 = 1.008 m/s^2/N. Mapping (inferred from the values):
+# th'' = a1 th + a5 th' + a2 xc' + b1 u;  xc'' = a3 th + a6 th' + a4 xc' + b2 u.
+THESIS_A5 = dict(a1=47.8583476, a2=-0.008976130226, a3=0.9421754475, a4=-0.002016637257,
+                 a5=-0.5471372821, a6=-0.01077135627, b1=4.48806511, b2=1.00831862)
+# App. B.5 (double mass): th'' = a1 th + a2 th' + a3 xc + a4 xc' + a5 xa + a6 xa' + b1 u (b1 = 0);
+# xc'' = a7 th + a8 th' + a9 xc + a10 xc' + a11 xa + a12 xa' + b2 u (b2 = 0);
+# xa'' = a13 xc + a14 xc' + a15 xa + a16 xa' + b3 u. The App. B.3 model, entry by entry.
 THESIS_B5 = dict(a1=47.85834769, a2=-0.5471372821, a3=-637.3052461, a4=-9.882719379, a5=637.305246,
-                 a6=9.873743249, b1=0.0, a7=0.942175447, a8=-0.0107713562, a9=-143.1812453, a10=-2.220317620,
-                 a11=143.1812453, a12=2.21830098, b2=0.0, a13=129.9026065, a14=2.012575593, a15=-129.9026065,
-                 a16=-14.70083144, b3=1.57670963)
+                 a6=9.873743249, a7=0.942175447, a8=-0.0107713562, a9=-143.1812453, a10=-2.220317620,
+                 a11=143.1812453, a12=2.21830098, a13=129.9026065, a14=2.012575593, a15=-129.9026065,
+                 a16=-14.70083144, b1=0.0, b2=0.0, b3=1.57670963)
 
 
-def thesis_subsystem_models(kind: str) -> list[SubsystemModel]:
-    """The thesis's f_i, b_i constants (App. A.5 / B.5) in design-model state order."""
-    if kind == "single-mass":
-        t = THESIS_A5  # order [xc, xc', th, th']
+def thesis_coefficients(kind: str) -> dict[str, float]:
+    """The thesis's named f_i, b_i constants (App. A.5 / B.5)."""
+    return dict(THESIS_A5 if kind == "single-mass" else THESIS_B5)
+
+
+def models_from_coefficients(kind: str, t: Mapping[str, float]) -> list[SubsystemModel]:
+    """Subsystem models from the thesis-named constants, in design-model state order."""
+    if kind == "single-mass":  # state [xc, xc', th, th']
         return [SubsystemModel((0.0, t["a2"], t["a1"], t["a5"]), t["b1"]),
                 SubsystemModel((0.0, t["a4"], t["a3"], t["a6"]), t["b2"])]
-    t = THESIS_B5  # order [xa, xa', xc, xc', th, th']
+    # state [xa, xa', xc, xc', th, th']
     return [SubsystemModel((t["a5"], t["a6"], t["a3"], t["a4"], t["a1"], t["a2"]), t["b1"]),
             SubsystemModel((t["a11"], t["a12"], t["a9"], t["a10"], t["a7"], t["a8"]), t["b2"]),
             SubsystemModel((t["a15"], t["a16"], t["a13"], t["a14"], 0.0, 0.0), t["b3"])]
 
+
+def thesis_subsystem_models(kind: str) -> list[SubsystemModel]:
+    """The thesis's f_i, b_i (App. A.5 / B.5) as subsystem models."""
+    return models_from_coefficients(kind, thesis_coefficients(kind))
+
+
+# ============================================================================ the numbers
 
 def thesis_hsmc_gains(kind: str) -> HSMCGains:
     """App. A.5 / B.5 surface and reaching-law constants."""
@@ -123,10 +150,10 @@ def thesis_hsmc_gains(kind: str) -> HSMCGains:
 
 
 def thesis_adaptive(kind: str) -> tuple[HSMCGains, AdaptiveSchedules]:
-    """App. A.6 / B.6 schedules (see docs/controllers.md for the inferred mapping of the single-mass names)."""
+    """App. A.6 / B.6 schedules (docs/controllers.md: the inferred mapping of the single-mass names)."""
     base = thesis_hsmc_gains(kind)
     if kind == "single-mass":
-        # c1 = 43.9911 (+3 e^-0.1t), c2 = 0.1766 + 10 e^-150t, k2 = K2 + dKP2 e^-KP2 t = 0.5 + 15 e^-0.1t,
+        # c1 = 43.9911 + 3 e^-0.1t, c2 = 0.1766 + 10 e^-150t, k2 = K2 + dKP2 e^-KP2 t = 0.5 + 15 e^-0.1t,
         # KI = 320 (1 - dKI2 e^-KI2 t) = 320 - 320 e^-0.3t, eta2 = 0.0005
         g = replace(base, c=(43.9911, 0.1766), k=0.5, eta=0.0005, KI=320.0)
         return g, AdaptiveSchedules(k=Schedule(0.5, 15.0, 0.1), KI=Schedule(320.0, -320.0, 0.3),
@@ -139,8 +166,7 @@ def thesis_adaptive(kind: str) -> tuple[HSMCGains, AdaptiveSchedules]:
                                 c=(None, Schedule(c[1], -0.5, 3.0), None))
 
 
-# --- tuned sets (controllers.tuning; see docs/controllers.md) -------------------------------------------
-
+#: Tuned sets (``python -m controllers.tuning``; rounded to 3 significant digits).
 TUNED_CASCADE: dict[str, CascadeGains] = {
     "single-mass": CascadeGains(Kp_th=101.0, Kd_th=20.8, Kp_x=12.0, Kd_x=8.05, Ki_x=8.01),
     "double-mass": CascadeGains(Kp_th=21.2, Kd_th=2.96, Kp_x=1.3, Kd_x=6.33, Ki_x=0.524, Kv_m=3.29),
@@ -154,37 +180,335 @@ TUNED_ADAPTIVE: dict[str, tuple[HSMCGains, AdaptiveSchedules]] = {
 }
 
 
-# --- the factory ----------------------------------------------------------------------------------------
+# ============================================================================ the schema
 
-def _check_set(law: str, kind: str, parameter_set: str | None) -> str:
-    if law not in PARAMETER_SETS:
-        raise LawParameterError("law", f"unknown control law {law!r}; expected one of {', '.join(LAWS)}")
-    if kind not in PLANT_SUFFIX:
-        raise LawParameterError("kind", f"unknown plant kind {kind!r}")
-    sets = PARAMETER_SETS[law][kind]
-    name = parameter_set or sets[0]
-    if name not in sets:
-        raise LawParameterError("parameter_set", f"{model_name(law, kind)} has no parameter set {name!r}; "
-                                                 f"available: {', '.join(sets)}")
-    return name
+@dataclass(frozen=True)
+class ParamSpec:
+    """One flat law parameter: FMU variable name, default, unit, description and constraint."""
+
+    name: str
+    default: float | bool
+    unit: str | None
+    description: str
+    constraint: str = "finite"     # finite | positive | nonnegative | bool
+
+    def check(self, value: Any) -> str | None:
+        """``None`` if ``value`` is acceptable, else the reason."""
+        if self.constraint == "bool":
+            return None
+        v = float(value)
+        if not math.isfinite(v):
+            return "not a finite number"
+        if self.constraint == "positive" and v <= 0:
+            return "must be > 0"
+        if self.constraint == "nonnegative" and v < 0:
+            return "must be >= 0"
+        return None
 
 
-def lqr_design_for(kind: str, params: PlantParams, sample_period: float = 1e-3, backend: str = "control"):
-    """The thesis's LQR design (weights and observer poles of App. A.2 / B.3) on ``params``."""
-    model = design_model(params)
+def _unit_div(num: dict[str, int], den: dict[str, int]) -> str:
+    exps = dict(num)
+    for b, e in den.items():
+        exps[b] = exps.get(b, 0) - e
+    pos = [f"{b}{e if e != 1 else ''}" for b, e in exps.items() if e > 0]
+    neg = [f"{b}{-e if e != -1 else ''}" for b, e in exps.items() if e < 0]
+    return (".".join(pos) or "1") + ("/" + ".".join(neg) if neg else "")
+
+
+_STATE_DIM = {"position": {"m": 1}, "velocity": {"m": 1, "s": -1}, "angle": {"rad": 1},
+              "angvel": {"rad": 1, "s": -1}}
+
+
+def _state_dim(state: str) -> dict[str, int]:
+    if state == "pendulum_angle":
+        return _STATE_DIM["angle"]
+    if state == "pendulum_velocity":
+        return _STATE_DIM["angvel"]
+    return _STATE_DIM["position" if state.endswith("position") else "velocity"]
+
+
+def _design_states(kind: str) -> tuple[str, ...]:
+    from fmus.physics import state_names
+    return state_names(kind)[:-1]
+
+
+def _model_specs(kind: str) -> list[ParamSpec]:
+    defaults = dict(PRESETS[DEFAULT_PRESET[kind]][1])
+    out = []
+    for info in parameter_info(PLANT_KINDS[kind]):
+        if info["name"] in _NOT_IN_DESIGN:
+            continue
+        meta = {f.name: f.metadata for f in PLANT_KINDS[kind].__dataclass_fields__.values()}[info["name"]]
+        constraint = "positive" if meta.get("positive") else ("nonnegative" if meta.get("nonnegative") else "finite")
+        out.append(ParamSpec(f"model_{info['name']}", float(defaults.get(info["name"], info["default"])),
+                             info["unit"], f"design model: {info['doc']}", constraint))
+    return out
+
+
+def _common_specs() -> list[ParamSpec]:
+    return [ParamSpec("sample_period", 1e-3, "s", "controller sample period: the output is updated at k*sample_period "
+                                                  "and held in between", "positive"),
+            ParamSpec("voltage_limit", 10.0, "V", "output limit (the Q4 card's +-10 V analog output range)",
+                      "positive")]
+
+
+def _hsmc_specs(kind: str, law: str) -> list[ParamSpec]:
+    n = 2 if kind == "single-mass" else 3
+    subsystem = (("pendulum", "cart") if n == 2 else ("pendulum", "passive cart", "active cart"))
+    specs = [ParamSpec(f"c{i + 1}", 1.0, "1/s", f"slope of the {subsystem[i]} sliding surface "
+                                               f"s{i + 1} = c{i + 1} position + velocity", "positive")
+             for i in range(n)]
     if kind == "single-mass":
-        return design_lqr(model, thesis_single_mass_Q(), THESIS_SINGLE_MASS_R,
-                          observer_poles=THESIS_SINGLE_MASS_OBSERVER_POLES, sample_period=sample_period,
-                          backend=backend)
-    return design_lqr(model, THESIS_DOUBLE_MASS_Q, THESIS_DOUBLE_MASS_R,
-                      observer_pole_factor=THESIS_DOUBLE_MASS_OBSERVER_FACTOR, sample_period=sample_period,
-                      backend=backend)
+        specs += [ParamSpec("lambda1", -0.35, "m/rad", "layer weight: S2 = lambda1 S1 + lambda2 s2"),
+                  ParamSpec("lambda2", 1.0, "1", "weight of the cart surface in S2 = lambda1 S1 + lambda2 s2")]
+        top = {"m": 1, "s": -1}
+    else:
+        specs += [ParamSpec("lambda1", -1.0, "m/rad", "layer weight: S2 = lambda1 S1 + s2"),
+                  ParamSpec("lambda2", -50.0, "1", "layer weight: S3 = lambda2 S2 + s3")]
+        top = {"m": 1, "s": -1}
+    specs += [ParamSpec("k", 1.0, "1/s", "reaching law: proportional gain (S' = -k S - eta tanh(g S) - KI int S)",
+                        "nonnegative"),
+              ParamSpec("eta", 0.0, _unit_div({**top, "s": -2}, {}), "reaching law: switching gain", "nonnegative"),
+              ParamSpec("KI", 0.0, "1/s2", "reaching law: integral gain", "nonnegative"),
+              ParamSpec("tanh_gain", 10.0, _unit_div({}, top), "reaching law: slope g of tanh(g S) "
+                                                               "(the thesis's 10)", "positive"),
+              ParamSpec("derivative_time_constant", 0.002, "s", "velocity estimates: time constant of the "
+                                                                "filtered differences", "nonnegative"),
+              ParamSpec("denominator_min", 1e-3, "1", "smallest |sum alpha_r b_r| accepted (the hierarchy divides "
+                                                      "by it)", "positive"),
+              ParamSpec("use_thesis_coefficients", False, None, "subsystem models f_i, b_i: false = from the "
+                                                                "design model's linearization; true = the a*/b* "
+                                                                "parameters (the thesis's constants)", "bool")]
+    rows = subsystem_rows(kind)
+    thesis = thesis_coefficients(kind)
+    # unit of each thesis constant: d(row)/dt per state, u in volts for b (force in newtons for App. A.5)
+    coef_state = _coefficient_states(kind)
+    for name, value in thesis.items():
+        if name.startswith("b"):
+            row = rows[int(name[1:]) - 1]
+            per = {"N": 1} if kind == "single-mass" else {"V": 1}
+            unit = _unit_div(_deriv_dim(row), per)
+            doc = (f"thesis App. A.5 input gain of subsystem {name[1:]} (per newton of cart force)" if
+                   kind == "single-mass" else f"thesis App. B.5 input gain of subsystem {name[1:]}")
+        else:
+            row, state = coef_state[name]
+            unit = _unit_div(_deriv_dim(row), _state_dim(state))
+            doc = f"thesis App. {'A' if kind == 'single-mass' else 'B'}.5 constant: d({row})/dt per {state}"
+        specs.append(ParamSpec(name, value, unit, doc))
+    if law == "AdaptiveHSMC":
+        for base in ["k", "eta", "KI"] + [f"c{i + 1}" for i in range(n)]:
+            unit = next(s.unit for s in specs if s.name == base)
+            specs += [ParamSpec(f"{base}_delta", 0.0, unit, f"schedule {base}(t) = {base} + {base}_delta "
+                                                            f"exp(-{base}_rate t): initial excess"),
+                      ParamSpec(f"{base}_rate", 0.0, "1/s", f"schedule of {base}: decay rate", "nonnegative")]
+    return specs
 
 
-def make_law(law: str, kind: str, parameter_set: str | None = None, design_params: PlantParams | None = None,
-             sample_period: float = 1e-3, voltage_limit: float = 10.0, coefficients: str = "linearization",
-             **options: Any) -> DiscreteLaw:
-    """Build a control law from a named parameter set.
+def _deriv_dim(row: str) -> dict[str, int]:
+    return {"rad": 1, "s": -2} if row == "pendulum_velocity" else {"m": 1, "s": -2}
+
+
+def _coefficient_states(kind: str) -> dict[str, tuple[str, str]]:
+    if kind == "single-mass":
+        return {"a1": ("pendulum_velocity", "pendulum_angle"), "a2": ("pendulum_velocity", "cart_velocity"),
+                "a5": ("pendulum_velocity", "pendulum_velocity"), "a3": ("cart_velocity", "pendulum_angle"),
+                "a4": ("cart_velocity", "cart_velocity"), "a6": ("cart_velocity", "pendulum_velocity")}
+    order = ("pendulum_angle", "pendulum_velocity", "passive_cart_position", "passive_cart_velocity",
+             "active_cart_position", "active_cart_velocity")
+    out = {}
+    for i, st in enumerate(order):
+        out[f"a{i + 1}"] = ("pendulum_velocity", st)
+        out[f"a{i + 7}"] = ("passive_cart_velocity", st)
+    for i, st in enumerate(order[2:]):
+        out[f"a{i + 13}"] = ("active_cart_velocity", st)
+    return out
+
+
+def _lqr_specs(kind: str) -> list[ParamSpec]:
+    states = _design_states(kind)
+    specs = []
+    for s in states:
+        dim = _state_dim(s)
+        specs.append(ParamSpec(f"Q_{s}", 0.0, _unit_div({}, {b: 2 * e for b, e in dim.items()}),
+                               f"LQR state weight on {s} (diagonal of Q)", "nonnegative"))
+    specs.append(ParamSpec("R", 1.0, "1/V2", "LQR input weight", "positive"))
+    specs.append(ParamSpec("observer_pole_factor", 0.0, "1", "observer poles = factor * eig(A - B K) if > 0 "
+                                                              "(thesis double mass: 10); 0 = use observer_pole_*",
+                           "nonnegative"))
+    for i in range(len(states) // 2):
+        specs += [ParamSpec(f"observer_pole_{i + 1}_re", -100.0 * (i + 1), "rad/s",
+                            f"observer pole pair {i + 1}: real part (used when observer_pole_factor = 0)"),
+                  ParamSpec(f"observer_pole_{i + 1}_im", 0.0, "rad/s",
+                            f"observer pole pair {i + 1}: imaginary part >= 0 (re +- j im; 0 = a double real pole)",
+                            "nonnegative")]
+    specs.append(ParamSpec("output_filter_time_constant", 0.0, "s", "each measurement passes 1/(tau s + 1)^2 "
+                                                                     "before the observer if > 0 (thesis double "
+                                                                     "mass: 0.0008)", "nonnegative"))
+    return specs
+
+
+def _pid_specs() -> list[ParamSpec]:
+    g = PIDGains()
+    return [ParamSpec(f, getattr(g, f), PIDGains.UNITS[f], PIDGains.DOCS[f],
+                      "nonnegative" if f == "derivative_time_constant" else "finite")
+            for f in ("Kp", "Ki", "Kd", "derivative_time_constant")]
+
+
+def _cascade_specs() -> list[ParamSpec]:
+    g = CascadeGains()
+    pos = {"theta_ref_limit": "positive", "derivative_time_constant": "nonnegative"}
+    return [ParamSpec(f, getattr(g, f), CascadeGains.UNITS[f], CascadeGains.DOCS[f], pos.get(f, "finite"))
+            for f in CascadeGains.UNITS]
+
+
+def schema(law: str, kind: str) -> list[ParamSpec]:
+    """Every parameter of ``law`` on ``kind``, with the default set's values as defaults."""
+    _check(law, kind)
+    specs = _common_specs()
+    if law == "PID":
+        specs += _pid_specs()
+    elif law == "CascadePID":
+        specs += _cascade_specs()
+    elif law == "LQR":
+        specs += _lqr_specs(kind) + _model_specs(kind)
+    else:
+        specs += _hsmc_specs(kind, law) + _model_specs(kind)
+    values = set_values(law, kind, default_set(law, kind))
+    return [replace(s, default=values.get(s.name, s.default)) for s in specs]
+
+
+def _check(law: str, kind: str) -> None:
+    if law not in PARAMETER_SETS:
+        raise CatalogError("law", f"unknown control law {law!r}; expected one of {', '.join(LAWS)}")
+    if kind not in PLANT_SUFFIX:
+        raise CatalogError("kind", f"unknown plant kind {kind!r}; expected one of {', '.join(KINDS)}")
+
+
+def _hsmc_values(kind: str, g: HSMCGains, use_thesis: bool) -> dict[str, Any]:
+    v: dict[str, Any] = {f"c{i + 1}": float(c) for i, c in enumerate(g.c)}
+    v["lambda1"] = float(g.lam[0])
+    v["lambda2"] = float(g.top_weight if kind == "single-mass" else g.lam[1])
+    v.update(k=g.k, eta=g.eta, KI=g.KI, use_thesis_coefficients=use_thesis)
+    return v
+
+
+def _schedule_values(g: HSMCGains, s: AdaptiveSchedules) -> dict[str, float]:
+    v: dict[str, float] = {}
+    for name in ("k", "eta", "KI"):
+        sch = getattr(s, name)
+        v[name] = sch.base if sch else getattr(g, name)
+        v[f"{name}_delta"] = sch.delta if sch else 0.0
+        v[f"{name}_rate"] = sch.rate if sch else 0.0
+    scs = s.c or (None,) * len(g.c)
+    for i, (sch, c) in enumerate(zip(scs, g.c), 1):
+        v[f"c{i}"] = sch.base if sch else c
+        v[f"c{i}_delta"] = sch.delta if sch else 0.0
+        v[f"c{i}_rate"] = sch.rate if sch else 0.0
+    return v
+
+
+def set_values(law: str, kind: str, parameter_set: str) -> dict[str, Any]:
+    """The values a named parameter set gives (only the parameters it fixes)."""
+    _check(law, kind)
+    sets = PARAMETER_SETS[law][kind]
+    if parameter_set not in sets:
+        raise CatalogError("parameter_set", f"{model_name(law, kind)} has no parameter set {parameter_set!r}; "
+                                            f"available: {', '.join(sets)}")
+    if law == "PID":
+        g = PIDGains()
+        return {"Kp": g.Kp, "Ki": g.Ki, "Kd": g.Kd, "derivative_time_constant": g.derivative_time_constant}
+    if law == "CascadePID":
+        g = TUNED_CASCADE[kind]
+        return {f: getattr(g, f) for f in CascadeGains.UNITS}
+    if law == "LQR":
+        states = _design_states(kind)
+        if kind == "single-mass":
+            Q, R, factor, poles = thesis_single_mass_Q(), THESIS_SINGLE_MASS_R, 0.0, THESIS_SINGLE_MASS_OBSERVER_POLES
+            tau = 0.0
+        else:
+            Q, R, factor, poles = THESIS_DOUBLE_MASS_Q, THESIS_DOUBLE_MASS_R, THESIS_DOUBLE_MASS_OBSERVER_FACTOR, None
+            tau = 0.0008
+        v: dict[str, Any] = {f"Q_{s}": float(Q[i, i]) for i, s in enumerate(states)}
+        v.update(R=float(R), observer_pole_factor=factor, output_filter_time_constant=tau)
+        if poles is not None:
+            upper = [p for p in poles if p.imag >= 0]
+            for i, p in enumerate(upper, 1):
+                v[f"observer_pole_{i}_re"] = float(p.real)
+                v[f"observer_pole_{i}_im"] = float(p.imag)
+        return v
+    if law == "HSMC":
+        if parameter_set == "thesis":
+            return _hsmc_values(kind, thesis_hsmc_gains(kind), True)
+        return _hsmc_values(kind, TUNED_HSMC[kind], False)
+    g, s = thesis_adaptive(kind) if parameter_set == "thesis" else TUNED_ADAPTIVE[kind]
+    v = _hsmc_values(kind, g, parameter_set == "thesis")
+    v.update(_schedule_values(g, s))
+    return v
+
+
+def parameter_sets(kind: str, law: str) -> dict[str, dict[str, Any]]:
+    """``{set name: {FMU parameter: value}}`` of ``law`` on plant ``kind`` (used by ``harness.ssp_gen``)."""
+    return {name: set_values(law, kind, name) for name in PARAMETER_SETS[law][kind]}
+
+
+def defaults(law: str, kind: str) -> dict[str, Any]:
+    """``{name: default}`` of every parameter (``schema``)."""
+    return {s.name: s.default for s in schema(law, kind)}
+
+
+# ============================================================================ the factory
+
+def _design_params(kind: str, values: Mapping[str, Any]) -> PlantParams:
+    phys = {k[len("model_"):]: float(v) for k, v in values.items() if k.startswith("model_")}
+    try:
+        return make(kind, **phys)
+    except ParameterError as exc:
+        msg = str(exc)
+        for name in phys:
+            if msg.startswith(f"parameter {name} "):
+                raise ControllerParameterError(f"model_{name}", msg.replace(f"parameter {name} ",
+                                                                            f"parameter model_{name} ", 1)) from None
+        raise ControllerParameterError("model", msg) from None
+
+
+def design_params_from(kind: str, values: Mapping[str, Any]) -> PlantParams:
+    """The design model's plant parameters from flat ``model_*`` values (others default)."""
+    return _design_params(kind, values)
+
+
+def lqr_design_from(kind: str, v: Mapping[str, Any], backend: str = "control"):
+    """The LQR design the flat values describe (``controllers.design.design_lqr``)."""
+    states = _design_states(kind)
+    model = design_model(_design_params(kind, v))
+    Q = np.diag([float(v[f"Q_{s}"]) for s in states])
+    factor = float(v["observer_pole_factor"])
+    poles = None
+    if factor <= 0:
+        poles = []
+        for i in range(len(states) // 2):
+            re, im = float(v[f"observer_pole_{i + 1}_re"]), float(v[f"observer_pole_{i + 1}_im"])
+            poles += [complex(re, im), complex(re, -im)]
+    try:
+        return design_lqr(model, Q, [[float(v["R"])]], observer_poles=poles,
+                          observer_pole_factor=factor if factor > 0 else None,
+                          sample_period=float(v["sample_period"]), backend=backend)
+    except DesignError as exc:
+        raise DesignError(_fmu_name(exc.parameter, kind), _fmu_message(exc, kind)) from None
+
+
+def _fmu_name(parameter: str, kind: str) -> str:
+    return {"Q": "Q", "R": "R", "observer_poles": "observer_pole_*", "model": "model_*"}.get(parameter, parameter)
+
+
+def _fmu_message(exc: DesignError, kind: str) -> str:
+    where = {"Q": "parameters Q_*", "R": "parameter R", "observer_poles": "parameters observer_pole_*",
+             "observer_pole_factor": "parameter observer_pole_factor", "model": "parameters model_*",
+             "sample_period": "parameter sample_period"}.get(exc.parameter, f"parameter {exc.parameter}")
+    return f"{where}: {exc}"
+
+
+def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, backend: str = "control") -> DiscreteLaw:
+    """A law from flat parameter values (missing ones take their defaults).
 
     Parameters
     ----------
@@ -192,61 +516,103 @@ def make_law(law: str, kind: str, parameter_set: str | None = None, design_param
         One of ``LAWS``.
     kind : {'single-mass', 'double-mass'}
         Plant kind.
+    values : mapping, optional
+        ``{parameter: value}`` (``schema`` names).
+    backend : {'control', 'scipy'}
+        Design back end of the LQR (the FMUs use ``scipy``).
+
+    Raises
+    ------
+    ControllerParameterError
+        Naming the parameter (``parameter`` attribute and the message).
+    """
+    spec = {s.name: s for s in schema(law, kind)}
+    v = {name: s.default for name, s in spec.items()}
+    for name, value in (values or {}).items():
+        if name not in spec:
+            raise CatalogError(name, f"{model_name(law, kind)} has no parameter {name!r}")
+        v[name] = value
+    for name, s in spec.items():
+        reason = s.check(v[name])
+        if reason:
+            unit = f" {s.unit}" if s.unit and s.unit != "1" else ""
+            raise ControllerParameterError(name, f"parameter {name} = {v[name]}{unit}: {reason}")
+    T, vlim = float(v["sample_period"]), float(v["voltage_limit"])
+    if law == "PID":
+        g = PIDGains(**{f: float(v[f]) for f in ("Kp", "Ki", "Kd", "derivative_time_constant")})
+        return PID(kind, g, T, vlim)
+    if law == "CascadePID":
+        return CascadePID(kind, CascadeGains(**{f: float(v[f]) for f in CascadeGains.UNITS}), T, vlim)
+    if law == "LQR":
+        design = lqr_design_from(kind, v, backend)
+        return LQR(kind, design, vlim, output_filter_time_constant=float(v["output_filter_time_constant"]))
+    n = 2 if kind == "single-mass" else 3
+    c = tuple(float(v[f"c{i + 1}"]) for i in range(n))
+    if kind == "single-mass":
+        lam, top = (float(v["lambda1"]),), float(v["lambda2"])
+    else:
+        lam, top = (float(v["lambda1"]), float(v["lambda2"])), 1.0
+    g = HSMCGains(c=c, lam=lam, top_weight=top, k=float(v["k"]), eta=float(v["eta"]), KI=float(v["KI"]),
+                  tanh_gain=float(v["tanh_gain"]), derivative_time_constant=float(v["derivative_time_constant"]),
+                  denominator_min=float(v["denominator_min"]))
+    if bool(v["use_thesis_coefficients"]):
+        models = models_from_coefficients(kind, {k: float(v[k]) for k in thesis_coefficients(kind)})
+    else:
+        models = subsystem_models(design_model(_design_params(kind, v)))
+    if law == "HSMC":
+        return HSMC(kind, g, models, T, vlim)
+
+    def sched(name: str) -> Schedule | None:
+        return Schedule(float(v[name]), float(v[f"{name}_delta"]), float(v[f"{name}_rate"]))
+
+    schedules = AdaptiveSchedules(k=sched("k"), eta=sched("eta"), KI=sched("KI"),
+                                  c=tuple(sched(f"c{i + 1}") for i in range(n)))
+    return AdaptiveHSMC(kind, g, models, schedules, T, vlim)
+
+
+def make_law(law: str, kind: str, parameter_set: str | None = None, design_params: PlantParams | None = None,
+             sample_period: float = 1e-3, voltage_limit: float = 10.0, backend: str = "control",
+             **overrides: Any) -> DiscreteLaw:
+    """A law from a named parameter set (default: the first of ``PARAMETER_SETS``).
+
+    Parameters
+    ----------
+    law, kind : str
+        Law and plant kind.
     parameter_set : str, optional
-        ``thesis`` or ``tuned`` (``PARAMETER_SETS``); default: the first listed.
+        ``thesis`` or ``tuned``.
     design_params : PlantParams, optional
-        Plant parameters the model-based laws (LQR, HSMC) are designed for; default: the
-        kind's default preset (``thesis-ch3`` / ``thesis-ch4``).
+        Plant parameters the model-based laws are designed for (default: the kind's default preset).
     sample_period, voltage_limit : float
         [s], [V].
-    coefficients : {'linearization', 'thesis'}
-        HSMC / AdaptiveHSMC: subsystem models from the design model's linearization or the
-        thesis's App. A.5/B.5 constants.
-    **options
-        ``output_filter_time_constant`` (LQR), ``derivative_time_constant`` (PID, CascadePID, HSMC).
+    backend : str
+        LQR design back end.
+    **overrides
+        Further flat parameter values (``schema`` names), e.g. ``use_thesis_coefficients=True``.
     """
-    name = _check_set(law, kind, parameter_set)
-    if design_params is None:
-        design_params = preset(default_preset(kind))
-    elif kind_of(design_params) != kind:
-        raise LawParameterError("design_params", f"design parameters are for a {kind_of(design_params)} plant, "
-                                                 f"the law for a {kind} plant")
-    if coefficients not in COEFFICIENT_SOURCES:
-        raise LawParameterError("coefficients", f"coefficients = {coefficients!r}; expected one of "
-                                                f"{', '.join(COEFFICIENT_SOURCES)}")
-    tau = options.pop("derivative_time_constant", None)
-    if law == "PID":
-        gains = PIDGains() if tau is None else replace(PIDGains(), derivative_time_constant=tau)
-        _no_options(law, options)
-        return PID(kind, gains, sample_period, voltage_limit)
-    if law == "CascadePID":
-        gains = TUNED_CASCADE[kind] if tau is None else replace(TUNED_CASCADE[kind], derivative_time_constant=tau)
-        _no_options(law, options)
-        return CascadePID(kind, gains, sample_period, voltage_limit)
-    if law == "LQR":
-        tau_f = options.pop("output_filter_time_constant", 0.0008 if kind == "double-mass" else 0.0)
-        _no_options(law, options)
-        design = lqr_design_for(kind, design_params, sample_period)
-        return LQR(kind, design, voltage_limit, output_filter_time_constant=tau_f)
-    _no_options(law, options)
-    models = (subsystem_models(design_model(design_params)) if coefficients == "linearization"
-              else thesis_subsystem_models(kind))
-    if law == "HSMC":
-        gains = thesis_hsmc_gains(kind) if name == "thesis" else TUNED_HSMC[kind]
-        if tau is not None:
-            gains = replace(gains, derivative_time_constant=tau)
-        return HSMC(kind, gains, models, sample_period, voltage_limit)
-    gains, schedules = thesis_adaptive(kind) if name == "thesis" else TUNED_ADAPTIVE[kind]
-    if tau is not None:
-        gains = replace(gains, derivative_time_constant=tau)
-    return AdaptiveHSMC(kind, gains, models, schedules, sample_period, voltage_limit)
+    _check(law, kind)
+    values: dict[str, Any] = dict(set_values(law, kind, parameter_set or default_set(law, kind)))
+    values.update(sample_period=sample_period, voltage_limit=voltage_limit)
+    if design_params is not None and law in ("LQR", "HSMC", "AdaptiveHSMC"):
+        names = {s.name for s in schema(law, kind)}
+        for k2, val in vars(design_params).items():
+            if f"model_{k2}" in names:
+                values[f"model_{k2}"] = val
+    values.update(overrides)
+    return build_law(law, kind, values, backend)
 
 
-def _no_options(law: str, options: dict) -> None:
-    if options:
-        raise LawParameterError(next(iter(options)), f"{law} has no option {', '.join(options)}")
+def lqr_design_for(kind: str, params: PlantParams, sample_period: float = 1e-3, backend: str = "control"):
+    """The thesis's LQR design (App. A.2 / B.3 weights and observer poles) on ``params``."""
+    values = dict(set_values("LQR", kind, "thesis"))
+    values.update({f"model_{k}": v for k, v in vars(params).items() if k not in _NOT_IN_DESIGN},
+                  sample_period=sample_period)
+    full = {s.name: s.default for s in schema("LQR", kind)}
+    full.update(values)
+    return lqr_design_from(kind, full, backend)
 
 
-__all__ = ["LAWS", "PARAMETER_SETS", "make_law", "model_name", "default_set", "default_preset",
-           "subsystem_models", "thesis_subsystem_models", "thesis_hsmc_gains", "thesis_adaptive",
-           "lqr_design_for", "TUNED_CASCADE", "TUNED_HSMC", "TUNED_ADAPTIVE"]
+__all__ = ["LAWS", "KINDS", "PARAMETER_SETS", "ParamSpec", "schema", "set_values", "parameter_sets", "defaults",
+           "build_law", "make_law", "model_name", "default_set", "default_preset", "subsystem_models",
+           "thesis_subsystem_models", "thesis_hsmc_gains", "thesis_adaptive", "lqr_design_for",
+           "design_params_from", "TUNED_CASCADE", "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]

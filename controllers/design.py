@@ -49,10 +49,10 @@ import scipy.signal
 
 from fmus.linearize import LinearModel, linearize
 from fmus.params import PlantParams
-from harness.errors import IpcosimError
+from .errors import ControllerParameterError
 
 
-class DesignError(IpcosimError, ValueError):
+class DesignError(ControllerParameterError):
     """A controller design input is invalid or the design is impossible.
 
     Attributes
@@ -60,10 +60,6 @@ class DesignError(IpcosimError, ValueError):
     parameter : str
         Name of the offending design input (e.g. ``Q``, ``R``, ``observer_poles``, ``sample_period``).
     """
-
-    def __init__(self, parameter: str, message: str) -> None:
-        super().__init__(message)
-        self.parameter = parameter
 
 
 BACKENDS = ("control", "scipy")

@@ -23,26 +23,21 @@ angle grow, and the pendulum leans towards +x for a *negative* angle.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields, replace
-from typing import Any, Sequence
+from dataclasses import dataclass, fields
+from typing import Sequence
 
 import numpy as np
 
 from fmus.physics import MEASURED
-from harness.errors import IpcosimError
-
 from .design import DesignError, LQRDesign, check_sample_period, output_filter
+from .errors import ControllerParameterError, IpcosimError
 
 KINDS = ("single-mass", "double-mass")
 G = 9.81
 
 
-class LawParameterError(IpcosimError, ValueError):
+class LawParameterError(ControllerParameterError):
     """A control-law parameter is invalid; ``parameter`` names it."""
-
-    def __init__(self, parameter: str, message: str) -> None:
-        super().__init__(message)
-        self.parameter = parameter
 
 
 class LawInputError(IpcosimError, ValueError):
@@ -197,7 +192,7 @@ class PIDGains:
     Kd: float = 6676.0         # V s/m
     derivative_time_constant: float = 1e-3  # s
 
-    UNITS = {"Kp": "V/m", "Ki": "V/(m.s)", "Kd": "V.s/m", "derivative_time_constant": "s"}
+    UNITS = {"Kp": "V/m", "Ki": "V/m.s", "Kd": "V.s/m", "derivative_time_constant": "s"}
     DOCS = {"Kp": "proportional gain on the motor-cart position error",
             "Ki": "integral gain on the motor-cart position error",
             "Kd": "derivative gain on the motor-cart position error",
@@ -272,7 +267,7 @@ class CascadeGains:
     theta_ref_limit: float = 0.15   # rad
     derivative_time_constant: float = 0.005  # s
 
-    UNITS = {"Kp_th": "V/rad", "Ki_th": "V/(rad.s)", "Kd_th": "V.s/rad", "Kp_x": "1/s2", "Ki_x": "1/s3",
+    UNITS = {"Kp_th": "V/rad", "Ki_th": "V/rad.s", "Kd_th": "V.s/rad", "Kp_x": "1/s2", "Ki_x": "1/s3",
              "Kd_x": "1/s", "Kv_m": "V.s/m", "theta_ref_limit": "rad", "derivative_time_constant": "s"}
     DOCS = {"Kp_th": "inner loop: proportional gain on the angle error theta - theta_ref",
             "Ki_th": "inner loop: integral gain on the angle error",

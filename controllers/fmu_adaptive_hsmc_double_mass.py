@@ -1,0 +1,9 @@
+"""FMU ``AdaptiveHSMCDoubleMass``: hierarchical sliding-mode control with time-scheduled gains, for the IP02 double-mass carts."""
+from controllers.controller_fmu import ControllerFmu
+
+
+class AdaptiveHSMCDoubleMass(ControllerFmu):
+    """Hierarchical sliding-mode control with time-scheduled gains (IP02 double-mass carts); output the motor voltage, sampled at sample_period."""
+
+    law = "AdaptiveHSMC"
+    kind = "double-mass"

@@ -1,0 +1,9 @@
+"""FMU ``AdaptiveHSMCSingleMass``: hierarchical sliding-mode control with time-scheduled gains, for the IP02 single-mass cart."""
+from controllers.controller_fmu import ControllerFmu
+
+
+class AdaptiveHSMCSingleMass(ControllerFmu):
+    """Hierarchical sliding-mode control with time-scheduled gains (IP02 single-mass cart); output the motor voltage, sampled at sample_period."""
+
+    law = "AdaptiveHSMC"
+    kind = "single-mass"

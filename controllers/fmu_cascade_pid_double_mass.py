@@ -1,0 +1,9 @@
+"""FMU ``CascadePIDDoubleMass``: cascade PID: inner loop on the pendulum angle, outer loop on the cart position, for the IP02 double-mass carts."""
+from controllers.controller_fmu import ControllerFmu
+
+
+class CascadePIDDoubleMass(ControllerFmu):
+    """Cascade PID: inner loop on the pendulum angle, outer loop on the cart position (IP02 double-mass carts); output the motor voltage, sampled at sample_period."""
+
+    law = "CascadePID"
+    kind = "double-mass"

@@ -1,0 +1,9 @@
+"""FMU ``CascadePIDSingleMass``: cascade PID: inner loop on the pendulum angle, outer loop on the cart position, for the IP02 single-mass cart."""
+from controllers.controller_fmu import ControllerFmu
+
+
+class CascadePIDSingleMass(ControllerFmu):
+    """Cascade PID: inner loop on the pendulum angle, outer loop on the cart position (IP02 single-mass cart); output the motor voltage, sampled at sample_period."""
+
+    law = "CascadePID"
+    kind = "single-mass"

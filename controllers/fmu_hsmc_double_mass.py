@@ -1,0 +1,9 @@
+"""FMU ``HSMCDoubleMass``: hierarchical sliding-mode control, for the IP02 double-mass carts."""
+from controllers.controller_fmu import ControllerFmu
+
+
+class HSMCDoubleMass(ControllerFmu):
+    """Hierarchical sliding-mode control (IP02 double-mass carts); output the motor voltage, sampled at sample_period."""
+
+    law = "HSMC"
+    kind = "double-mass"

@@ -1,0 +1,9 @@
+"""FMU ``HSMCSingleMass``: hierarchical sliding-mode control, for the IP02 single-mass cart."""
+from controllers.controller_fmu import ControllerFmu
+
+
+class HSMCSingleMass(ControllerFmu):
+    """Hierarchical sliding-mode control (IP02 single-mass cart); output the motor voltage, sampled at sample_period."""
+
+    law = "HSMC"
+    kind = "single-mass"

@@ -1,0 +1,9 @@
+"""FMU ``LQRDoubleMass``: LQR state feedback on a discrete Luenberger (current) estimator, designed at initialization, for the IP02 double-mass carts."""
+from controllers.controller_fmu import ControllerFmu
+
+
+class LQRDoubleMass(ControllerFmu):
+    """LQR state feedback on a discrete Luenberger (current) estimator, designed at initialization (IP02 double-mass carts); output the motor voltage, sampled at sample_period."""
+
+    law = "LQR"
+    kind = "double-mass"

@@ -1,0 +1,9 @@
+"""FMU ``LQRSingleMass``: LQR state feedback on a discrete Luenberger (current) estimator, designed at initialization, for the IP02 single-mass cart."""
+from controllers.controller_fmu import ControllerFmu
+
+
+class LQRSingleMass(ControllerFmu):
+    """LQR state feedback on a discrete Luenberger (current) estimator, designed at initialization (IP02 single-mass cart); output the motor voltage, sampled at sample_period."""
+
+    law = "LQR"
+    kind = "single-mass"

@@ -1,0 +1,9 @@
+"""FMU ``PIDDoubleMass``: the thesis's single-loop PID on the motor-cart position error, for the IP02 double-mass carts."""
+from controllers.controller_fmu import ControllerFmu
+
+
+class PIDDoubleMass(ControllerFmu):
+    """The thesis's single-loop PID on the motor-cart position error (IP02 double-mass carts); output the motor voltage, sampled at sample_period."""
+
+    law = "PID"
+    kind = "double-mass"

@@ -1,0 +1,9 @@
+"""FMU ``PIDSingleMass``: the thesis's single-loop PID on the motor-cart position error, for the IP02 single-mass cart."""
+from controllers.controller_fmu import ControllerFmu
+
+
+class PIDSingleMass(ControllerFmu):
+    """The thesis's single-loop PID on the motor-cart position error (IP02 single-mass cart); output the motor voltage, sampled at sample_period."""
+
+    law = "PID"
+    kind = "single-mass"
