@@ -26,7 +26,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .algorithm import (ALGORITHMS, GAUSS_SEIDEL, AlgebraicLoopError, Block, InitializationError, StepSizeError, TimeBase,
+from .algorithm import (ALGORITHMS, GAUSS_SEIDEL, Block, InitializationError, StepSizeError, TimeBase,
                         compile_loop, gauss_seidel_order, step_multiples)
 from .manipulators import Manipulator, Overrides
 from .observers import Observer
@@ -98,13 +98,9 @@ class Execution:
         self.multiples = step_multiples(system, self._planned_value, self.timebase.step)
         if algorithm == GAUSS_SEIDEL:
             self.order = [self.index[n] for n in gauss_seidel_order(system)]
-            self.init_order = self.order
         else:
             self.order = list(range(len(self.instances)))
-            try:  # initialization still follows the dependencies when they allow an order
-                self.init_order = [self.index[n] for n in gauss_seidel_order(system)]
-            except AlgebraicLoopError:
-                self.init_order = self.order
+        self.init_order = self.order
         self._layout()
         self.slaves: list[Slave] = []
         self.tick = 0
@@ -314,18 +310,26 @@ class Execution:
             raise InitializationError(
                 f"initialization did not reach a fixed point in {self.max_init_iterations} iterations; "
                 f"still changing: {', '.join(changed)}", changed)
-        # Leave initialization mode component by component in dependency order, handing each
-        # the outputs its upstream components computed on leaving (FMUs whose outputs are
-        # "calculated" compute them in fmi2ExitInitializationMode).
-        for idx in self.init_order:
-            b = self.blocks[idx]
-            self._transfer(b, [])
-            if b.n_in:
-                status = b.set_real(b.handle, b.in_vrs, b.n_in, b.in_values)
-                if status > 1:
-                    raise self.slaves[idx].fail("fmi2SetReal", status, self.start_time)
-            self.slaves[idx].exit_initialization_mode()
-            self._get_outputs(b, self.start_time)
+        if self.algorithm == GAUSS_SEIDEL:
+            # Leave initialization mode component by component in step order, handing each the
+            # outputs its upstream components computed on leaving (FMUs whose outputs are
+            # "calculated" may compute them only in fmi2ExitInitializationMode).
+            for idx in self.order:
+                b = self.blocks[idx]
+                self._transfer(b, [])
+                if b.n_in:
+                    status = b.set_real(b.handle, b.in_vrs, b.n_in, b.in_values)
+                    if status > 1:
+                        raise self.slaves[idx].fail("fmi2SetReal", status, self.start_time)
+                self.slaves[idx].exit_initialization_mode()
+                self._get_outputs(b, self.start_time)
+        else:
+            # Jacobi: every component leaves from the values of initialization mode, then the
+            # outputs are read (what libcosim does); they reach the inputs at the first step.
+            for idx in self.order:
+                self.slaves[idx].exit_initialization_mode()
+            for b in self.blocks:
+                self._get_outputs(b, self.start_time)
         self._run_loop, self._loop_source = compile_loop(self.blocks, self.order, self.algorithm, self.timebase,
                                                          self.record_every)
 
