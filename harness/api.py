@@ -28,6 +28,7 @@ from .execution import Execution, SlaveFactory
 from .manipulators import Manipulator
 from .observers import Observer, Progress, realtime_observer
 from .results import Result, SimulationError
+from .slave import FMUSlave, load_library
 from .ssp import Scenario, load_scenario, select_parameter_set
 from .system import SwapTarget, System, bind, warn_all, with_overrides
 
@@ -70,6 +71,7 @@ class Prepared:
         self.parameter_set = parameter_set
         self.swaps = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
                       for k, v in (swaps or {}).items()}
+        self._libraries: dict[str, Any] = {}
         self._tmp: Path | None = None
         self._finalizer: Any = None
         self.unzip_dirs: dict[str, Path] = {}
@@ -152,7 +154,8 @@ class Prepared:
             observers.append(realtime_observer())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
                          algorithm=algorithm or self.algorithm, overrides=values, observers=observers,
-                         manipulators=manipulators, slave_factory=self.slave_factory, unzip_dirs=self.unzip_dirs,
+                         manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
+                         unzip_dirs=self.unzip_dirs,
                          record_every=record_every, max_init_iterations=max_init_iterations)
 
     def run(self, stop_time: float | None = None, step: float | None = None,
@@ -180,8 +183,22 @@ class Prepared:
             raise SimulationError(result.error, result)
         return result
 
+    def _fmu_slave(self, instance: Any) -> FMUSlave:
+        """A slave on this preparation's loaded library of the component (loaded on first use
+        and kept for the following runs: one run at a time per Prepared)."""
+        lib = self._libraries.get(instance.name)
+        if lib is None:
+            lib = self._libraries[instance.name] = load_library(instance, self.unzip_dirs[instance.name])
+        return FMUSlave(instance, self.unzip_dirs[instance.name], library=lib)
+
     def close(self) -> None:
-        """Remove the extracted FMUs (if this object created the folder)."""
+        """Unload the FMUs' libraries and remove the extracted FMUs (if this object created the folder)."""
+        for lib in self._libraries.values():
+            try:
+                lib.freeLibrary()
+            except Exception:  # noqa: BLE001 -- best effort
+                pass
+        self._libraries.clear()
         if self._finalizer is not None:
             self._finalizer()
 

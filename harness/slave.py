@@ -121,6 +121,9 @@ class FMUSlave(Slave):
         The bound component (model, variables).
     unzip_dir : Path
         Where the FMU is extracted.
+    library : FMU2Slave, optional
+        A loaded library to instantiate from (see :func:`load_library`); it is then not
+        unloaded on :meth:`free`. Default: load one, unload it on :meth:`free`.
     logging_on : bool
         Passed to fmi2Instantiate. On by default: pythonfmu FMUs forward their error messages
         only to instances instantiated with logging on.
@@ -128,14 +131,15 @@ class FMUSlave(Slave):
 
     MAX_MESSAGES = 50
 
-    def __init__(self, instance: Instance, unzip_dir: Path, logging_on: bool = True) -> None:
+    def __init__(self, instance: Instance, unzip_dir: Path, logging_on: bool = True, library: Any = None) -> None:
         self.name = instance.name
         self.model_name = instance.model.name
         self.instance = instance
         self.unzip_dir = Path(unzip_dir)
         self.logging_on = logging_on
         self._messages: list[str] = []
-        self._fmu: Any = None
+        self._fmu: Any = library
+        self._owns_library = library is None
         self._callbacks: Any = None
         self._logger: Any = None
         self.state = "created"
@@ -153,18 +157,13 @@ class FMUSlave(Slave):
         del self._messages[:-self.MAX_MESSAGES]
 
     def instantiate(self) -> None:
-        from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                               fmi2CallbackLoggerTYPE)
         from fmpy import calloc, free  # type: ignore[attr-defined]
         from fmpy.logging import addLoggerProxy  # type: ignore[import-not-found]
 
-        model = self.instance.model
-        try:
-            self._fmu = FMU2Slave(guid=model.guid, unzipDirectory=str(self.unzip_dir),
-                                  modelIdentifier=model.model_identifier, instanceName=self.name)
-        except Exception as exc:  # noqa: BLE001 -- fmpy raises bare exceptions
-            raise SlaveError(f"component {self.describe()}: cannot load the FMU's shared library: {exc}",
-                             self.name, "load") from None
+        if self._fmu is None:
+            self._fmu = load_library(self.instance, self.unzip_dir)
         callbacks = fmi2CallbackFunctions()
         # fmpy's logger proxy keeps one Python logger for the whole process: every FMU's
         # messages go to the same function, which routes them by componentEnvironment.
@@ -224,10 +223,12 @@ class FMUSlave(Slave):
                 self._fmu.fmi2FreeInstance(self._fmu.component)
         finally:
             self.state = "freed"
-            try:
-                self._fmu.freeLibrary()
-            except Exception:  # noqa: BLE001 -- unloading is best effort
-                pass
+            self._fmu.component = None
+            if self._owns_library:
+                try:
+                    self._fmu.freeLibrary()
+                except Exception:  # noqa: BLE001 -- unloading is best effort
+                    pass
 
     def set_values(self, variables: Sequence[Variable], values: Sequence[Any]) -> None:
         groups: dict[str, tuple[list[int], list[Any]]] = {}
@@ -274,6 +275,28 @@ class FMUSlave(Slave):
 
     def raw(self) -> tuple[Any, RawDoStep, RawGetSet, RawGetSet]:
         return self._fmu.component, self._do_step, self._get_real, self._set_real
+
+
+def load_library(instance: Instance, unzip_dir: Path) -> Any:
+    """An FMPy ``FMU2Slave`` with the FMU's shared library loaded and its functions resolved.
+
+    One such object can serve many consecutive instances (fmi2Instantiate ... fmi2FreeInstance)
+    of the component, which saves loading and resolving on every run of a sweep.
+
+    Raises
+    ------
+    SlaveError
+        If the shared library cannot be loaded.
+    """
+    from fmpy.fmi2 import FMU2Slave
+
+    model = instance.model
+    try:
+        return FMU2Slave(guid=model.guid, unzipDirectory=str(unzip_dir), modelIdentifier=model.model_identifier,
+                         instanceName=instance.name)
+    except Exception as exc:  # noqa: BLE001 -- fmpy raises bare exceptions
+        raise SlaveError(f"component {instance.name} ({model.name}): cannot load the FMU's shared library: {exc}",
+                         instance.name, "load") from None
 
 
 def _fmi_type(t: str) -> str:
