@@ -23,6 +23,8 @@ CONTROLLERS = ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")
 CONTROLLER_LABELS = {"pid": "PID", "cascade-pid": "cascade PID", "lqr": "LQR + observer", "hsmc": "HSMC",
                      "adaptive-hsmc": "adaptive HSMC"}
 PLANT_LABELS = {"single-mass": "single mass", "double-mass": "double mass"}
+CONTROLLER_COLORS = {"pid": "tab:gray", "cascade-pid": "tab:purple", "lqr": "tab:orange", "hsmc": "tab:blue",
+                     "adaptive-hsmc": "tab:green"}
 SCENARIOS = tuple(f"{p}-{c}" for p in PLANTS for c in CONTROLLERS)
 
 #: The task's step [m] and the +-2 % band half-width [m].
@@ -260,12 +262,13 @@ def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
     ref_drawn = False
     for controller, s in series:
         label = CONTROLLER_LABELS.get(controller, controller)
-        axes[0].plot(s["time"], s["position"], label=label, lw=1.2)
+        color = CONTROLLER_COLORS.get(controller)
+        axes[0].plot(s["time"], s["position"], label=label, lw=1.2, color=color)
         if not ref_drawn:
             axes[0].plot(s["time"], s["reference"], "k--", lw=0.8, label="reference")
             ref_drawn = True
-        axes[1].plot(s["time"], s["angle"], label=label, lw=1.0)
-        axes[2].plot(s["time"], s["voltage"], label=label, lw=0.8)
+        axes[1].plot(s["time"], s["angle"], label=label, lw=1.0, color=color)
+        axes[2].plot(s["time"], s["voltage"], label=label, lw=0.8, color=color)
     cart = "active cart position [m]" if plant == "double-mass" else "cart position [m]"
     axes[0].set_ylabel(cart)
     axes[1].set_ylabel("pendulum angle [rad]")
