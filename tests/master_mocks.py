@@ -32,7 +32,7 @@ def model(name: str, inputs: Sequence[str] = (), outputs: Sequence[str] = (),
 
 def system(components: Sequence[tuple[str, Model]], connections: Sequence[tuple[str, str]],
            stop_time: float = 1.0, step: float = 0.01,
-           bindings: dict[str, dict[str, float]] | None = None) -> System:
+           bindings: dict[str, dict[str, float]] | None = None, units: dict | None = None) -> System:
     """A System of mock models; ``connections`` as ("a.y", "b.u") pairs."""
     from harness.ssp import Parameter, ParameterSet
 
@@ -49,7 +49,7 @@ def system(components: Sequence[tuple[str, Model]], connections: Sequence[tuple[
         (ae, ac), (be, bc) = a.split("."), b.split(".")
         conns.append(Connection(ae, ac, be, bc))
     scenario = Scenario(name="mock", origin="mock.ssd", location=Path("."), description="", components=tuple(comps),
-                        connections=tuple(conns), units={}, experiment=Experiment(0.0, stop_time, step))
+                        connections=tuple(conns), units=dict(units or {}), experiment=Experiment(0.0, stop_time, step))
     return bind(scenario, models={name: m for name, m in components})
 
 

@@ -361,3 +361,23 @@ def test_unconnected_input_is_a_warning_naming_it():
         warnings.simplefilter("error")
         r = run(sysm, loop_factory(), stop_time=0.1, step=H)
     assert r.ok and np.all(r["plant.voltage"] == 0.0) and np.all(r["plant.position"] == 0.0)
+
+
+def test_units_convert_through_their_definitions_and_mismatches_are_refused():
+    from harness.ssp import Unit
+
+    m = Unit("m", (0, 1, 0, 0, 0, 0, 0, 0))
+    mm = Unit("mm", (0, 1, 0, 0, 0, 0, 0, 0), factor=1e-3)
+    rad = Unit("rad", (0, 0, 0, 0, 0, 0, 0, 1))
+    src = model("Src", outputs=["y"], parameters={"a": 2.0}, units={"y": "m"})
+    dst = model("Dst", inputs=["u"], outputs=["v"], units={"u": "mm", "v": "mm"}, feedthrough={"v": ["u"]})
+    sysm = system([("a", src), ("b", dst)], [("a.y", "b.u")], units={"m": m, "mm": mm})
+    link = sysm.links[0]
+    assert link.factor == pytest.approx(1000.0) and link.offset == 0.0
+    f = Factory(a={"get_fn": lambda s: s.__setitem__("y", s["a"])},
+                b={"get_fn": lambda s: s.__setitem__("v", s["u"])})
+    r = run(sysm, f, stop_time=0.05, step=H)
+    assert np.all(r["b.u"] == pytest.approx(2000.0)) and r["b.v"][0] == pytest.approx(2000.0)
+    bad = model("Dst", inputs=["u"], outputs=["v"], units={"u": "rad"})
+    with pytest.raises(BindingError, match="unit 'm' does not match 'rad'"):
+        system([("a", src), ("b", bad)], [("a.y", "b.u")], units={"m": m, "rad": rad})

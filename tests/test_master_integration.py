@@ -135,3 +135,38 @@ def test_demo_run_writes_results_metrics_and_plot(built, tmp_path):
     assert header[:2] == ["time", "setpoint.reference"] and "plant.cart_position" in header
     assert "settling_time_s" in proc.stdout  # the metrics are printed
     assert (out / "plot.png").stat().st_size > 10_000
+
+
+def test_prepared_runs_many_times_with_different_overrides(built):
+    from harness.slave import FMUSlave
+
+    with harness.prepare(built / "ssp" / "single-mass-lqr.ssp") as prepared:
+        a = prepared.run(0.5, overrides={"plant.Mp": 0.2303})
+        b = prepared.run(0.5, overrides={"plant.Mp": 0.30})
+        c = prepared.run(0.5, overrides={"plant.Mp": 0.2303})
+        assert np.array_equal(a.data, c.data)  # runs are independent: nothing leaks from one to the next
+        assert not np.array_equal(a["plant.pendulum_angle"], b["plant.pendulum_angle"])
+        assert b.metadata["overrides"] == {"plant.Mp": 0.30}
+        assert len(prepared._libraries) == 3  # each FMU loaded once for all runs
+    default = harness.run(built / "ssp" / "single-mass-lqr.ssp", stop_time=0.5)
+    assert np.array_equal(default.data, a.data)  # Mp = 0.2303 is the FMU's default
+    assert isinstance(FMUSlave, type)
+
+
+def test_parameter_set_selection_changes_the_controller(built):
+    ssp = built / "ssp" / "single-mass-hsmc.ssp"
+    tuned = harness.run(ssp, stop_time=1.0)
+    thesis = harness.run(ssp, stop_time=1.0, parameter_set="thesis")
+    assert tuned.metadata["parameter_set"] == "tuned" and thesis.metadata["parameter_set"] == "thesis"
+    assert not np.array_equal(tuned["controller.voltage"], thesis["controller.voltage"])
+    with pytest.raises(Exception, match="has no parameter set 'best'"):
+        harness.run(ssp, stop_time=1.0, parameter_set="best")
+
+
+def test_controller_sample_period_sets_its_step_multiple(built):
+    r = harness.run(built / "ssp" / "single-mass-lqr.ssp", stop_time=1.0,
+                    overrides={"controller.sample_period": 0.002})
+    assert r.metadata["step_multiples"]["controller"] == 2
+    u = r["controller.voltage"]
+    assert np.array_equal(u[1::2], u[0:-1:2])  # held over each 2 ms period
+    assert r.metrics["upright"] is True

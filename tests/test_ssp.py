@@ -50,13 +50,24 @@ def test_the_ten_scenarios_exist_and_follow_the_contract():
 
 
 def test_scenario_files_are_what_the_generator_writes():
+    """The committed files equal what ``python -m harness.ssp_gen`` writes from the controllers'
+    catalog (so a changed parameter set cannot silently diverge from the scenarios)."""
+    from harness.ssp_gen import _ssv, parameter_sets
+
     for name in EXPECTED:
         plant = name[:11]
         law = name[12:]
         sc = load_scenario(name)
-        default = sc.bound_sets[0] if sc.bound_sets else None
-        period = sc.component("controller").step_size_hint
+        sets = parameter_sets(plant, law)
+        assert sets, name
+        default = "tuned" if "tuned" in sets else "thesis"
+        assert sc.bound_sets == (default,)
+        assert sorted(sc.parameter_sets) == sorted(sets)
+        period = float(sets[default].get("sample_period", 1e-3))
         assert (ROOT / "ssp" / name / "SystemStructure.ssd").read_text() == ssd_text(plant, law, default, period)
+        for set_name, values in sets.items():
+            assert (ROOT / "ssp" / name / f"{set_name}.ssv").read_text() == \
+                _ssv(set_name, values, f"{name}: {set_name} controller parameters")
 
 
 def test_libcosim_reads_the_literal_prefixes():
