@@ -268,7 +268,9 @@ def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
             axes[0].plot(s["time"], s["reference"], "k--", lw=0.8, label="reference")
             ref_drawn = True
         axes[1].plot(s["time"], s["angle"], label=label, lw=1.0, color=color)
-        axes[2].plot(s["time"], s["voltage"], label=label, lw=0.8, color=color)
+        failed = results[f"{plant}-{controller}"].get("status") != "ok"
+        axes[2].plot(s["time"], s["voltage"], label=label, lw=0.8, color=color, alpha=0.35 if failed else 1.0,
+                     zorder=1 if failed else 2)
     cart = "active cart position [m]" if plant == "double-mass" else "cart position [m]"
     axes[0].set_ylabel(cart)
     axes[1].set_ylabel("pendulum angle [rad]")
