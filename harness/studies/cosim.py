@@ -158,12 +158,27 @@ class CosimSpec(RunSpec):
             atexit.register(shutil.rmtree, folder, True)
             location = str(Path(folder) / f"{Path(self.location).stem or 'scenario'}.ssp")
             Path(location).write_bytes(self.archive)
-        prepared = Prepared(location, parameter_set=self.parameter_set, warn=False)
+        holder = [Prepared(location, parameter_set=self.parameter_set, warn=False)]
         spec = self
 
+        def release() -> None:
+            # Unload the FMUs before the interpreter starts tearing itself down: left to the
+            # final garbage collection, unloading them at exit can corrupt the heap.
+            import gc
+
+            if holder:
+                holder.pop().close()
+                gc.collect()
+
+        import atexit
+
+        atexit.register(release)
+
         def run(params: Mapping[str, float], seed: int) -> dict:
+            if not holder:
+                raise RunFailure(f"{spec.name}: the runner was released")
             values = {**spec.overrides, **params}
-            result = prepared.run(spec.stop_time, spec.step, values, raise_on_error=False)
+            result = holder[0].run(spec.stop_time, spec.step, values, raise_on_error=False)
             data = result.data
             cols = result.columns
             names = [first_column(cols, c) for c in (POSITION_COLUMNS, REFERENCE_COLUMNS, ANGLE_COLUMNS,
