@@ -232,6 +232,7 @@ class System:
     instances: tuple[Instance, ...]
     links: tuple[Link, ...]
     warnings: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()  # informational (swaps), not warnings
 
     def instance(self, name: str) -> Instance:
         for inst in self.instances:
@@ -386,6 +387,7 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
             raise BindingError(f"--swap {comp}=...: scenario {scenario.name!r} has no component {comp!r} "
                                f"(components: {', '.join(c.name for c in scenario.components)})")
     notes: list[str] = []
+    infos: list[str] = []
     instances: list[Instance] = []
     for comp in scenario.components:
         model = models.get(comp.name)
@@ -406,14 +408,14 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
             realtime = target.realtime
             extra = dict(target.parameters)
             model = read_model(target.fmu, f"--swap {comp.name}={target.fmu}")
-            notes.append(f"component {comp.name!r}: {swapped_from} swapped for {target.description or target.fmu.name}")
+            infos.append(f"component {comp.name!r}: {swapped_from} swapped for {target.description or target.fmu.name}")
         where = f"{origin}: component {comp.name!r} ({model.path.name if model.path else comp.source})"
         connectors = []
         for c in comp.connectors:
             var = model.variables.get(c.name)
             if var is None:
                 if swapped_from is not None and not _is_connected(scenario, comp.name, c.name):
-                    notes.append(f"component {comp.name!r}: unconnected connector {c.name!r} is not in the swapped-in FMU "
+                    infos.append(f"component {comp.name!r}: unconnected connector {c.name!r} is not in the swapped-in FMU "
                                  f"and is left out")
                     continue
                 raise BindingError(f"{where}: connector {c.name!r} is not a variable of the FMU"
@@ -493,7 +495,8 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
                 start = inst.start_value(v.name)
                 notes.append(f"{origin}: input {inst.name}.{v.name} is not connected; it keeps its start value "
                              f"{start!r}")
-    return System(scenario=scenario, instances=tuple(instances), links=tuple(links), warnings=tuple(notes))
+    return System(scenario=scenario, instances=tuple(instances), links=tuple(links), warnings=tuple(notes),
+                  notes=tuple(infos))
 
 
 def _is_connected(scenario: Scenario, comp: str, connector: str) -> bool:

@@ -75,6 +75,9 @@ def main(args: argparse.Namespace) -> int:
     with prepared:
         for note in prepared.system.warnings:
             print(f"ipcosim run: warning: {note}", file=sys.stderr)
+        if not args.quiet:
+            for note in prepared.system.notes:
+                print(f"note: {note}")
         result = prepared.run(stop, step, overrides, out_dir=out, variables=variables, plot=args.plot,
                               realtime=True if args.realtime else None, progress=not args.quiet)
     if not args.quiet:
