@@ -171,7 +171,13 @@ class Prepared:
             already written to ``out_dir`` when given).
         """
         execution = self.execution(stop_time, step, overrides, **kwargs)
-        result = execution.run()
+        try:
+            result = execution.run()
+        except KeyboardInterrupt as exc:  # save what was computed, then stop
+            partial = getattr(exc, "result", None)
+            if out_dir is not None and partial is not None:
+                partial.write(out_dir, variables=variables, plot=plot)
+            raise
         result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
         result.metadata["swaps"] = dict(self.swaps)
         if out_dir is not None:

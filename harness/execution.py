@@ -277,6 +277,9 @@ class Execution:
         wall = _time.perf_counter() - wall0
         result = self._result(rows, error, wall, wall_loop)
         if interrupted is not None:
+            result.error = f"interrupted at t = {self.time_of(self.tick):.6g} s"
+            result.metadata["error"] = result.error
+            interrupted.result = result  # type: ignore[attr-defined]  -- for callers that save it
             raise interrupted
         return result
 

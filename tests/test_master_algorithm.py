@@ -251,12 +251,7 @@ def test_instantiation_failure_frees_the_instances_already_made():
 
 
 def test_keyboard_interrupt_still_frees_every_instance():
-    def interrupt(s, t, h):
-        if t > 0.1:
-            raise KeyboardInterrupt
-        return OK
     f = loop_factory()
-    f.behaviours["setpoint"] = {**f.behaviours["setpoint"], "step_fn": interrupt}
     sysm = loop_system()
     ex = Prepared(system=sysm, slave_factory=f).execution(stop_time=1.0, step=H)
 
@@ -268,9 +263,11 @@ def test_keyboard_interrupt_still_frees_every_instance():
             raise KeyboardInterrupt
 
     ex.observers.append(Interrupting())
-    with pytest.raises(KeyboardInterrupt):
+    with pytest.raises(KeyboardInterrupt) as info:
         ex.run()
     assert all(s.calls[-1] == "free" for s in f.slaves.values())
+    partial = info.value.result
+    assert partial.error == "interrupted at t = 0.2 s" and len(partial.data) == 21
 
 
 # ------------------------------------------------------------------ observers and manipulators

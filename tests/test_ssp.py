@@ -206,3 +206,12 @@ def test_schema_rejects_what_fmpy_reads_carelessly(tmp_path):
     with pytest.raises(ScenarioError, match="version"):
         load_scenario(folder)
     assert NS["ssd"].endswith("SystemStructureDescription")
+
+
+def test_list_prints_one_line_per_scenario(capsys):
+    from harness import cli
+
+    assert cli.main(["list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [l.split()[0] for l in lines] == EXPECTED
+    assert all("10 s at 0.001 s" in l and "sets:" in l for l in lines)
