@@ -19,7 +19,8 @@ Quanser's package, or the virtual rig), at volts-and-counts level:
   and convert counts to SI units with the calibrations (a negative calibration reverses a
   direction). Counter wrap-around is unwrapped.
 * **faults** (a limit trip, a watchdog expiry, a card error, a rig that does not answer
-  within ``watchdog_timeout``): the message goes to ``last_error`` and to the FMI log, the
+  within ``watchdog_timeout`` of the sample instant -- 5 s for a lockstep virtual rig,
+  whose simulated time a stalled host cannot hurt): the message goes to ``last_error`` and to the FMI log, the
   adapter writes 0 V (best effort) and closes the card, and the step fails (fmi2Discard):
   the master stops with that message.
 * **terminate, free**: write 0 V, stop the watchdog, close the card.
@@ -41,6 +42,8 @@ from .physics import MEASURED, STATE_UNITS
 DEFAULT_CARD_URI = "q4:0@tcpip://127.0.0.1:18920"
 CART_M_PER_COUNT = 2.275e-5            # thesis-data.md: IP02 cart encoder
 PENDULUM_RAD_PER_COUNT = 1.534e-3      # thesis-data.md: pendulum encoder, counter-clockwise positive
+#: How long to wait for a lockstep virtual rig's answer [s] (a real-time card: watchdog_timeout).
+LOCKSTEP_REPLY_TIMEOUT = 5.0
 
 _DOC = {"cart_position": "cart position from its encoder (relative to the start)",
         "active_cart_position": "active (motor) cart position from its encoder (relative to the start)",
@@ -166,6 +169,9 @@ class HilFmu(FmuBase):
         except HILError as exc:
             raise FmuError(f"{where}: {exc.message}") from None
         self._holder.update(card=card, ao=int(self.analog_channel))
+        if getattr(card.info, "clock", "") == "lockstep" and hasattr(card, "timeout"):
+            # simulated time: a host that stalls harms nothing, so wait longer for an answer
+            card.timeout = max(self.watchdog_timeout, LOCKSTEP_REPLY_TIMEOUT)
         try:
             rig_kind = getattr(card.info, "plant", "")
             if rig_kind and rig_kind != self.kind:

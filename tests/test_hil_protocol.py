@@ -130,7 +130,7 @@ def test_card_over_tcp_reads_what_the_rig_holds(server):
     card = open_card("q4", server.uri)
     assert card.info.plant == "single-mass" and card.info.clock == "lockstep" and card.info.protocol_version == 1
     server.rig.plant.set_state([0.1, 0, 0.2, 0, 0])
-    assert list(card.read_encoder([0, 1])) == [int(0.1 // 2.275e-5), int(0.2 // 1.534e-3)]
+    assert list(card.read_encoder([0, 1])) == [round(0.1 / 2.275e-5), round(0.2 / 1.534e-3)]   # nearest count
     card.set_encoder_counts([0, 1], [0, 0])
     assert list(card.read_encoder([0, 1])) == [0, 0]
     card.watchdog_start(0.1)

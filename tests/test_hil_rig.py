@@ -19,6 +19,11 @@ THESIS_PEND_RES = 1.534e-3
 LSB = 20.0 / 4096
 
 
+def nearest(q: float) -> int:
+    """The default encoder model: count edges half a count either side of the zero."""
+    return math.floor(q + 0.5)
+
+
 def rig(**kw) -> VirtualRig:
     return VirtualRig(RigConfig(**kw))
 
@@ -48,30 +53,34 @@ def test_encoders_count_positions_counter_clockwise_positive():
     r.plant.set_state([0.1, 0, 0.2, 0, 0])
     counts = r.read_encoder([0, 1, 2, 3])
     assert counts.dtype == np.int32
-    assert counts[0] == math.floor(0.1 / THESIS_CART_RES)
-    assert counts[1] == math.floor(0.2 / THESIS_PEND_RES) > 0       # counter-clockwise = positive
+    assert counts[0] == nearest(0.1 / THESIS_CART_RES)
+    assert counts[1] == nearest(0.2 / THESIS_PEND_RES) > 0       # counter-clockwise = positive
     assert counts[2] == 0 and counts[3] == 0                         # not connected on the single mass
     r.plant.set_state([-0.1, 0, -0.2, 0, 0])
     counts = r.read_encoder([0, 1])
-    assert counts[0] == math.floor(-0.1 / THESIS_CART_RES) < 0
-    assert counts[1] == math.floor(-0.2 / THESIS_PEND_RES) < 0
+    assert counts[0] == nearest(-0.1 / THESIS_CART_RES) < 0
+    assert counts[1] == nearest(-0.2 / THESIS_PEND_RES) < 0
 
 
-def test_reading_is_within_one_count_below_the_true_position():
+def test_reading_is_within_half_a_count_and_the_edge_phase_is_configurable():
     r = rig()
+    edge = rig(encoder_phase=0.0)
     for x in np.linspace(-0.3, 0.3, 37):
-        r.plant.set_state([x, 0, 0, 0, 0])
+        for rr in (r, edge):
+            rr.plant.set_state([x, 0, 0, 0, 0])
         measured = int(r.read_encoder([0])[0]) * THESIS_CART_RES
-        assert 0 <= x - measured < THESIS_CART_RES
+        assert abs(x - measured) <= THESIS_CART_RES / 2 + 1e-15
+        measured = int(edge.read_encoder([0])[0]) * THESIS_CART_RES     # an edge at the zero:
+        assert 0 <= x - measured < THESIS_CART_RES                       # up to one count below
 
 
 def test_double_mass_third_encoder_is_the_passive_cart():
     r = rig(plant="double-mass")
     r.plant.set_state([0.05, 0, -0.02, 0, 0.1, 0, 0])
     c = r.read_encoder([0, 1, 2])
-    assert c[0] == math.floor(0.05 / THESIS_CART_RES)
-    assert c[1] == math.floor(0.1 / THESIS_PEND_RES)
-    assert c[2] == math.floor(-0.02 / THESIS_CART_RES)
+    assert c[0] == nearest(0.05 / THESIS_CART_RES)
+    assert c[1] == nearest(0.1 / THESIS_PEND_RES)
+    assert c[2] == nearest(-0.02 / THESIS_CART_RES)
 
 
 def test_counters_are_32_bit_and_wrap():

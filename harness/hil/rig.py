@@ -9,7 +9,9 @@ FMUs step). Around it the rig models what a controller meets on the real bench:
   motor-driven cart (2.275e-5 m/count), channel 1 the pendulum (1.534e-3 rad/count,
   counter-clockwise positive), channel 2 the passive cart of the double mass (2.275e-5
   m/count); channel 3 is not connected. A counter reads ``offset + floor(position /
-  resolution)``, so a reading is within one count below the true position.
+  resolution + encoder_phase)``: with the default phase 0.5 the count edges lie half a
+  count either side of the zero, so a reading is the nearest count (within half a count
+  of the true position).
 * **Software limits** (the lab's safety supervisor) -- cart +-0.30 m (every cart),
   pendulum +-20 deg, checked on the encoder readings after every physics step. A trip
   latches the amplifier off (0 V to the motor, whatever the card writes) until
@@ -109,6 +111,13 @@ class RigConfig:
         One-way transport latency [s].
     seed : int
         Seed of the noise generator.
+    encoder_phase : float
+        Where the encoders' count edges lie relative to the zero position, in counts: a
+        counter reads ``floor(position / resolution + encoder_phase)``. 0.5 (default): the
+        edges are half a count either side of the zero (the reading is the nearest count,
+        no bias); 0: an edge at the zero (the reading is up to one count below).
+    cart_m_per_count, pendulum_rad_per_count : float
+        Encoder resolutions (default: the thesis's IP02 encoders).
     """
 
     plant: str = "single-mass"
@@ -123,6 +132,9 @@ class RigConfig:
     noise_counts: float = 0.0
     latency: float = 0.0
     seed: int = 0
+    encoder_phase: float = 0.5
+    cart_m_per_count: float = CART_M_PER_COUNT
+    pendulum_rad_per_count: float = PENDULUM_RAD_PER_COUNT
 
     def checked(self) -> "RigConfig":
         """Validate; raises ``ValueError`` naming the offending field."""
@@ -136,6 +148,12 @@ class RigConfig:
         for label, value, lo in (("tick", self.tick_s, 1e-6), ("end_stop", self.end_stop, 0.0)):
             if not (math.isfinite(value) and value > lo):
                 raise ValueError(f"rig {label} = {value}: must be a finite number > {lo:g}")
+        if not (math.isfinite(self.encoder_phase) and 0 <= self.encoder_phase < 1):
+            raise ValueError(f"rig encoder_phase = {self.encoder_phase}: must be in [0, 1) counts")
+        for label, value in (("cart_m_per_count", self.cart_m_per_count),
+                             ("pendulum_rad_per_count", self.pendulum_rad_per_count)):
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"rig {label} = {value}: must be > 0")
         for label, value in (("noise_counts", self.noise_counts), ("latency", self.latency)):
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"rig {label} = {value}: must be a finite number >= 0")
@@ -197,11 +215,13 @@ class VirtualRig:
         cart = self._measured_index[0]
         pend = self.plant.state_names.index("pendulum_angle")
         # encoder channel -> (state index, resolution)
-        self._encoders: dict[int, tuple[int, float]] = {CART_ENCODER: (cart, CART_M_PER_COUNT),
-                                                        PENDULUM_ENCODER: (pend, PENDULUM_RAD_PER_COUNT)}
+        cfg = self.config
+        self._phase = cfg.encoder_phase
+        self._encoders: dict[int, tuple[int, float]] = {CART_ENCODER: (cart, cfg.cart_m_per_count),
+                                                        PENDULUM_ENCODER: (pend, cfg.pendulum_rad_per_count)}
         if self.kind == "double-mass":
             self._encoders[PASSIVE_CART_ENCODER] = (self.plant.state_names.index("passive_cart_position"),
-                                                    CART_M_PER_COUNT)
+                                                    cfg.cart_m_per_count)
         self._carts = [(i, i + 1, n) for i, n in enumerate(self.plant.state_names) if n.endswith("cart_position")]
         self._history: collections.deque[tuple[int, np.ndarray]] = collections.deque()
         # wallclock: keep 0.2 s of physics so that a sample is taken at its instant even if the
@@ -382,7 +402,7 @@ class VirtualRig:
         if channel not in self._encoders:
             return 0
         index, res = self._encoders[channel]
-        return math.floor(x[index] / res)
+        return math.floor(x[index] / res + self._phase)
 
     def _check_limits(self) -> None:
         if not self.amplifier_enabled:
@@ -391,7 +411,7 @@ class VirtualRig:
         cfg = self.config
         for ch, (index, res) in self._encoders.items():
             name = self.plant.state_names[index]
-            value = math.floor(x[index] / res) * res
+            value = math.floor(x[index] / res + self._phase) * res
             limit = cfg.pendulum_limit if ch == PENDULUM_ENCODER else cfg.cart_limit
             if limit is None or abs(value) <= limit:
                 continue
