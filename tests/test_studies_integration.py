@@ -100,3 +100,21 @@ def test_tune_writes_autotuned_set_beside_the_scenario(fmu_env, tmp_path, capsys
 
     result = harness.run(scenario, stop_time=0.5, parameter_set="autotuned")
     assert result.ok and math.isfinite(result.metrics["max_abs_angle_rad"])
+
+
+def test_cosimulation_sweep_on_dask_ships_the_scenario_and_matches_the_pool(fmu_env, tmp_path, capsys):
+    distributed = pytest.importorskip("distributed")
+    common = ["sweep", "single-mass-hsmc", "--vary", "plant.Mp=uniform(0.8,1.2)*nominal", "--samples", "3",
+              "--seed", "4", "--stop-time", "0.5", "--quiet"]
+    assert cli_main(common + ["--workers", "2", "--out", str(tmp_path / "pool")]) == 0
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        code = cli_main(common + ["--scheduler", cluster.scheduler_address, "--out", str(tmp_path / "dask")])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    _, pool = read_results(tmp_path / "pool" / "results.csv")
+    _, dask = read_results(tmp_path / "dask" / "results.csv")
+    varying = ("run_time_s", "wall_time_s", "real_time_factor")
+    strip = [[{k: v for k, v in r.items() if k not in varying} for r in rows] for rows in (pool, dask)]
+    assert strip[0] == strip[1] and len(strip[0]) == 3
+    assert all(r["status"] != "error" for r in dask)

@@ -107,7 +107,8 @@ def main(args: argparse.Namespace) -> int:
         executor.close()
 
     tunemod.write_evaluations(out / "evaluations.csv", res.evaluations, names)
-    description = (f"ipcosim tune {spec.name} (scenario hash {spec.key}): J = {res.best_cost:.6g} "
+    scenario_hash = getattr(spec, "scenario_hash", "") or spec.key
+    description = (f"ipcosim tune {spec.name} (scenario hash {scenario_hash}): J = {res.best_cost:.6g} "
                    f"(scenario gains: {res.nominal_cost:.6g}), {len(res.evaluations)} runs, seed {args.seed}, "
                    f"w_angle {w_angle:g}, w_voltage {w_voltage:g}")
     values, component = tunemod.tuned_parameter_set(args.scenario, res.best, pset)
