@@ -17,7 +17,6 @@ from __future__ import annotations
 import statistics
 import time
 import warnings
-from pathlib import Path
 from typing import Any
 
 from .ssp import BUILD_SSP_DIR

@@ -22,7 +22,7 @@ import ctypes
 import math
 import time as _time
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -31,7 +31,7 @@ from .algorithm import (ALGORITHMS, GAUSS_SEIDEL, Block, InitializationError, St
 from .manipulators import Manipulator, Overrides
 from .observers import Observer
 from .results import Result, SimulationError, task_metrics
-from .slave import STATUS, FMUSlave, Slave, SlaveError
+from .slave import FMUSlave, Slave
 from .system import Instance, System, Variable
 
 SlaveFactory = Callable[[Instance], Slave]

@@ -9,15 +9,14 @@ swaps (``--swap plant=hil``) are applied here, checked for compatible connectors
 """
 from __future__ import annotations
 
-import math
 import os
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 from .errors import IpcosimError
-from .ssp import BASE_UNITS, Connector, Scenario, ScenarioError, Unit
+from .ssp import BASE_UNITS, Connector, Scenario, Unit
 
 SUPPORTED_CONNECTION_TYPES = ("Real",)
 
@@ -618,7 +617,3 @@ def warn_all(system: System) -> None:
     for note in system.warnings:
         category = UnconnectedInputWarning if "is not connected" in note else UserWarning
         warnings.warn(note, category, stacklevel=3)
-
-
-def is_finite_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
