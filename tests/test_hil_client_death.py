@@ -16,7 +16,7 @@ from harness.hil.rig import RigConfig, VirtualRig
 from harness.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
-TIMEOUT = 0.1
+TIMEOUT = 0.5   # [s] long enough that a stall of a loaded VM does not trip it before the test does
 
 CLIENT = """
 import sys, time

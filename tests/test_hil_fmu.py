@@ -269,7 +269,7 @@ def test_rig_that_stops_answering_is_reported_and_the_motor_goes_to_zero(hil_fmu
     srv = RigServer(VirtualRig(RigConfig(clock="wallclock")), "127.0.0.1", 0, stall_after_steps=40).start()
     try:
         hil = start_adapter(hil_fmus["single-mass"], unzipped(hil_fmus["single-mass"]), f"q4:{srv.uri}",
-                            watchdog_timeout=0.3)
+                            watchdog_timeout=1.0)
         assert init_status(hil) == OK
         status = OK
         for k in range(100):
@@ -278,7 +278,7 @@ def test_rig_that_stops_answering_is_reported_and_the_motor_goes_to_zero(hil_fmu
             if status != OK:
                 break
         assert status == DISCARD and k == 40
-        assert "did not answer STEP" in hil.text() and "within 0.3 s of its sample instant" in hil.text()
+        assert "did not answer STEP" in hil.text() and "within 1 s of its sample instant" in hil.text()
         assert hil.slave.getString([hil.vr["last_error"]])[0]
         free(hil)
         for _ in range(300):                        # bounded: the adapter closed its connection

@@ -165,7 +165,8 @@ def test_a_hil_run_on_a_real_time_rig_is_paced_by_itself(env, tmp_path, monkeypa
     scn = open_loop_scenario("single-mass", tmp_path / "scn")
     with serve(clock="wallclock", tick=5e-4) as srv:
         monkeypatch.setenv("IPCOSIM_HIL_URI", f"q4:{srv.uri}")
-        result = harness.run(scn, stop_time=0.3, swaps={"plant": "hil"}, overrides={"plant.voltage": 0.5})
+        result = harness.run(scn, stop_time=0.3, swaps={"plant": "hil"},
+                             overrides={"plant.voltage": 0.5, "plant.watchdog_timeout": 2.0})   # robust to a VM stall
     m = result.metrics
     for key in ("period_jitter_p50_s", "period_jitter_p99_s", "period_jitter_max_s", "overruns",
                 "worst_step_time_s", "card_overruns"):
@@ -194,12 +195,12 @@ def test_rig_stops_answering_mid_run(env, tmp_path):
     out = tmp_path / "out"
     with serve(clock="wallclock", stall_after_steps=300, cart_limit=None, pendulum_limit=None) as srv:
         proc = ipcosim(["run", str(scn), "--swap", "plant=hil", "--set", "plant.voltage=0.625",
-                        "--set", "plant.watchdog_timeout=0.2", "--stop-time", "2", "--out", str(out)],
+                        "--set", "plant.watchdog_timeout=1.0", "--stop-time", "2", "--out", str(out)],
                        dict(env, IPCOSIM_HIL_URI=f"q4:{srv.uri}"))
     assert proc.returncode != 0
     errors = error_lines(proc.stderr)
     assert len(errors) == 1 and "did not answer STEP" in errors[0] \
-        and "within 0.2 s of its sample instant" in errors[0], proc.stderr
+        and "within 1 s of its sample instant" in errors[0], proc.stderr
     rows = (out / "results.csv").read_text().splitlines()
     assert len(rows) - 1 == 301                              # t = 0 ... 0.3 s: the results so far
     assert json.loads((out / "metrics.json").read_text())["wall_time_s"] > 0
@@ -283,12 +284,16 @@ def test_malformed_and_out_of_order_messages_mid_run_are_dropped_and_the_run_goe
     assert counters["malformed"] == 2 and counters["out_of_order"] == 1 and counters["oversized"] == 1
 
 
+WD = 0.5   # watchdog of the real-time fault tests [s]: long enough that a VM stall does not trip it first
+
+
 def test_master_dies_and_the_rigs_watchdog_puts_the_motor_at_zero(env, tmp_path):
     scn = open_loop_scenario("single-mass", tmp_path / "scn")
     with serve(clock="wallclock", tick=5e-4, cart_limit=None, pendulum_limit=None) as srv:
         rig = srv.rig
         proc = subprocess.Popen([sys.executable, "-m", "harness.cli", "run", str(scn), "--swap", "plant=hil",
-                                 "--set", "plant.voltage=1.5", "--stop-time", "60", "--out", str(tmp_path / "o"),
+                                 "--set", "plant.voltage=1.5", "--set", f"plant.watchdog_timeout={WD}",
+                                 "--stop-time", "60", "--out", str(tmp_path / "o"),
                                  "--quiet"], env=dict(env, IPCOSIM_HIL_URI=f"q4:{srv.uri}"), cwd=ROOT,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         try:
@@ -301,8 +306,8 @@ def test_master_dies_and_the_rigs_watchdog_puts_the_motor_at_zero(env, tmp_path)
             while not rig.status().watchdog_expired and time.monotonic() < end:
                 time.sleep(0.01)
             assert rig.status().watchdog_expired and rig.motor_voltage() == 0.0
-            # on the rig's clock, within the adapter's watchdog timeout (0.1 s) plus one physics tick
-            assert rig.wd_expired_at_ns - rig.wd_last_reload_ns <= 100_000_000 + rig.tick_ns
+            # on the rig's clock, within the adapter's watchdog timeout plus one physics tick
+            assert rig.wd_expired_at_ns - rig.wd_last_reload_ns <= int(WD * 1e9) + rig.tick_ns
         finally:
             os.kill(proc.pid, signal.SIGKILL)                  # and dies
             proc.wait(timeout=30)
