@@ -282,7 +282,7 @@ class DaskExecutor:
         Seconds to wait for the scheduler (and for at least one worker).
     """
 
-    def __init__(self, scheduler: Any, timeout: float = 10.0) -> None:
+    def __init__(self, scheduler: Any, timeout: float = 5.0) -> None:
         from distributed import Client
 
         self._own = not isinstance(scheduler, Client)

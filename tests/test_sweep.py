@@ -182,9 +182,9 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
         from harness.sweep import run_sweep, make_cases, parse_all
         from harness.studies.runners import SyntheticSpec
         if __name__ == "__main__":
-            spec = SyntheticSpec(delay_s=0.25, calls_dir={str(calls1)!r})
+            spec = SyntheticSpec(delay_s=0.3, calls_dir={str(calls1)!r})
             cases = make_cases(parse_all(["model.x=uniform(0,2)"], spec.parameters), spec.parameters,
-                               samples=16, seed=5)
+                               samples=24, seed=5)
             try:
                 run_sweep(spec, cases, out_dir={str(out)!r}, workers=2)
             except KeyboardInterrupt:
@@ -204,18 +204,18 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
     with open(results, "a") as fh:
         fh.write("15,123,ok,tr")
     _, saved = read_results(results)
-    assert 4 <= len(saved) < 16
+    assert 4 <= len(saved) < 24
     saved_seeds = {r["seed"] for r in saved}
 
-    spec = SyntheticSpec(delay_s=0.25, calls_dir=str(calls2))  # the same sweep (calls_dir is no part of it)
-    cases = make_cases(parse_all(["model.x=uniform(0,2)"], spec.parameters), spec.parameters, samples=16, seed=5)
+    spec = SyntheticSpec(delay_s=0.3, calls_dir=str(calls2))  # the same sweep (calls_dir is no part of it)
+    cases = make_cases(parse_all(["model.x=uniform(0,2)"], spec.parameters), spec.parameters, samples=24, seed=5)
     result = run_sweep(spec, cases, out_dir=out, workers=2)
     rerun_seeds = {int(p.name.split(".")[0]) for p in calls2.iterdir()}
     assert result.resumed == len(saved)
     assert rerun_seeds.isdisjoint(saved_seeds)
-    assert len(rerun_seeds) == 16 - len(saved)
+    assert len(rerun_seeds) == 24 - len(saved)
     _, final = read_results(results)
-    assert [r["index"] for r in final] == list(range(16))
+    assert [r["index"] for r in final] == list(range(24))
     assert all(r["value"] == pytest.approx((r["model.x"] - 1) ** 2) for r in final)
 
 
