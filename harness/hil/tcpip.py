@@ -229,7 +229,7 @@ class TcpipCard(Card):
             est_now = self._last_rig_ns + (time.monotonic_ns() - self._last_host_ns)
             wait = max(0.0, (until_ns - est_now) / NS)
         r = self._request(Msg.STEP, payload, timeout=self.timeout + wait,
-                          after="of its sample instant" if wait > 0 else "")
+                          after="of its sample instant" if self.info.clock == "wallclock" else "")
         reloaded, late_ns, n = self._body(r, "BqH", "STEP")
         counts = np.array(self._body(r, f"{n}i", "STEP"), dtype=np.int32)
         return StepResult(counts=counts, reloaded=bool(reloaded), time=self._last_rig_ns / NS, late=late_ns / NS,
