@@ -219,7 +219,7 @@ class HilFmu(FmuBase):
         except HILError as exc:
             if exc.code == ErrorCode.WATCHDOG_EXPIRED:
                 self.watchdog_expired = True
-            self._fault(f"t = {t:.6g} s: {exc.message}")
+            self._fault(exc.message)
         if res.late > 0:
             self.overruns += 1
         for k, raw in enumerate(res.counts):
@@ -230,7 +230,7 @@ class HilFmu(FmuBase):
         st = res.status
         if not res.reloaded or (st is not None and st.watchdog_expired):
             self.watchdog_expired = True
-            self._fault(f"t = {t:.6g} s: the card's watchdog expired (no reload within {self.watchdog_timeout:g} s); "
+            self._fault(f"the card's watchdog expired (no reload within {self.watchdog_timeout:g} s); "
                         f"outputs were forced to 0 V")
         if st is not None and st.limit_tripped:
             self.limit_tripped = True
@@ -238,7 +238,7 @@ class HilFmu(FmuBase):
                 message = card.status().limit_message
             except HILError:
                 message = ""
-            self._fault(f"t = {t + h:.6g} s: {message or 'a safety limit latched the amplifier off'}")
+            self._fault(message or "a safety limit latched the amplifier off")
 
     def _fault(self, message: str) -> None:
         """Record, make safe (0 V, close), and fail the step."""
