@@ -2,6 +2,8 @@
 
 The LQR scenario of the single mass, run side by side in one bench:
 
+* ``pacer alone``: the pacer with no work per step, 3 s at 1 kHz -- the scheduling floor of
+  the machine (sleep wake-up latency, preemption by other processes);
 * ``simulated, --realtime``: the plant FMU, the master paced to the wall clock (the pacer's
   own jitter, no card);
 * ``HIL 500 Hz`` and ``HIL 1 kHz``: ``--swap plant=hil`` against a virtual rig served by
@@ -63,9 +65,27 @@ def _run(label: str, swaps: dict[str, str], step: float, overrides: dict[str, An
             f"upright {m.get('upright')} [{status}]")
 
 
+def pacer_floor(seconds: float = 3.0, period: float = 1e-3) -> str:
+    """The pacer alone (no work per step): the machine's scheduling floor for the figures below."""
+    from harness.realtime import Pacer
+
+    pacer = Pacer(period)
+    pacer.start()
+    for n in range(int(round(seconds / period))):
+        pacer.begin(n)
+        pacer.end(n)
+    st = pacer.stats()
+    us = 1e6
+    return (f"{'pacer alone, 1 kHz':28s} jitter p50 {st.period_jitter_p50 * us:6.1f} us  p99 "
+            f"{st.period_jitter_p99 * us:7.1f} us  max {st.period_jitter_max * us:8.1f} us; overruns {st.overruns} "
+            f"of {st.steps}")
+
+
 def run() -> list[str]:
     """Bench lines (see the module docstring)."""
-    lines = [f"HIL real time: {SCENARIO}, {STOP_TIME:g} s per run, virtual rig over TCP on 127.0.0.1"]
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    lines = [f"HIL real time: {SCENARIO}, {STOP_TIME:g} s per run, virtual rig over TCP on 127.0.0.1 "
+             f"({os.cpu_count()} CPUs, load average {load:.2f} at start)", pacer_floor()]
     try:
         lines.append(_run("simulated, --realtime 1 kHz", {}, 1e-3, {}))
     except Exception as exc:  # noqa: BLE001 -- the bench reports what it cannot run
