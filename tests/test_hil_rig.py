@@ -306,3 +306,18 @@ def test_config_errors_name_the_field():
         RigConfig(latency=-1).checked()
     with pytest.raises(ValueError, match="no state"):
         VirtualRig(RigConfig(initial_state={"angle": 0.1}))
+
+
+def test_limits_are_disarmed_after_a_session_ends_and_rearmed_by_the_next():
+    r = rig(initial_state={"pendulum_angle": 0.3})
+    r.new_session("a")
+    r.end_session("done")
+    r.advance(2.0)                                         # the pendulum falls with the motor at 0 V
+    assert abs(r.true_state()["pendulum_angle"]) > math.radians(20)
+    assert not r.status().limit_tripped                    # not the next experiment's fault
+    r.new_session("b")                                     # re-homed and armed again
+    for _ in range(2000):
+        r.advance(1e-3)
+        if r.status().limit_tripped:
+            break
+    assert r.status().limit_tripped

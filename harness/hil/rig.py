@@ -13,9 +13,10 @@ FMUs step). Around it the rig models what a controller meets on the real bench:
   count either side of the zero, so a reading is the nearest count (within half a count
   of the true position).
 * **Software limits** (the lab's safety supervisor) -- cart +-0.30 m (every cart),
-  pendulum +-20 deg, checked on the encoder readings after every physics step. A trip
-  latches the amplifier off (0 V to the motor, whatever the card writes) until
-  :meth:`VirtualRig.reset` (the operator's reset).
+  pendulum +-20 deg, checked on the encoder readings after every physics step while an
+  experiment runs (from the start and from each new controlling session until that
+  session ends). A trip latches the amplifier off (0 V to the motor, whatever the card
+  writes) until :meth:`VirtualRig.reset` (the operator's reset).
 * **Hard end stops** at +-0.407 m (half the 0.814 m track): a cart reaching one stops
   dead (inelastic; its outward velocity is set to zero).
 * **Watchdog** -- as on the Q4 (see :mod:`harness.hil.api`), timed on the rig's clock.
@@ -210,6 +211,10 @@ class VirtualRig:
         self.counters: collections.Counter[str] = collections.Counter()
         self.amplifier_enabled = True
         self.limit_message = ""
+        #: The lab's supervisor watches the limits while an experiment runs: armed from the start
+        #: and by every new session, disarmed when a controlling session ends (the pendulum then
+        #: falls with the motor at 0 V, which is no fault of the next experiment).
+        self.limits_armed = True
         self._reset_card_state()
         self._measured_index = [self.plant.state_names.index(n) for n in MEASURED[self.kind]]
         cart = self._measured_index[0]
@@ -405,7 +410,7 @@ class VirtualRig:
         return math.floor(x[index] / res + self._phase)
 
     def _check_limits(self) -> None:
-        if not self.amplifier_enabled:
+        if not self.amplifier_enabled or not self.limits_armed:
             return
         x = self._sensed_state()
         cfg = self.config
@@ -606,6 +611,7 @@ class VirtualRig:
             self._history.clear()
             self._record_history()
             self.counters["sessions"] += 1
+            self.limits_armed = True
             self._event(self._t_ns, "session", f"session opened by {who}")
 
     def end_session(self, reason: str) -> None:
@@ -620,8 +626,9 @@ class VirtualRig:
                 self._applied[ch] = self._expiration[ch]
             self._pending.clear()
             self.wd_running = False
+            self.limits_armed = False
             self._event(self._t_ns, "session", f"session ended ({reason}): outputs set to their expiration "
-                                               f"states")
+                                               f"states, limits disarmed")
 
     def reset(self) -> None:
         """The operator's reset: re-home the plant, clear the limit latch, re-enable the amplifier."""
