@@ -111,6 +111,9 @@ def serve(args: argparse.Namespace) -> int:
         print(line, file=sys.stderr, flush=True)
 
     sys.setswitchinterval(1e-4)   # hand the GIL over quickly between the connection and ticker threads
+    import gc
+    gc.collect()
+    gc.freeze()                   # start-up objects never again scanned by the collector (shorter pauses)
     server = RigServer(rig, args.host, args.port, stall_after_steps=args.stall_after_steps, log=log).start()
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         log(f"ipcosim rig: warning: listening on {args.host}, reachable from other machines")
