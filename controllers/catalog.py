@@ -168,15 +168,17 @@ def thesis_adaptive(kind: str) -> tuple[HSMCGains, AdaptiveSchedules]:
 
 #: Tuned sets (``python -m controllers.tuning``; rounded to 3 significant digits).
 TUNED_CASCADE: dict[str, CascadeGains] = {
-    "single-mass": CascadeGains(Kp_th=101.0, Kd_th=20.8, Kp_x=12.0, Kd_x=8.05, Ki_x=8.01),
-    "double-mass": CascadeGains(Kp_th=21.2, Kd_th=2.96, Kp_x=1.3, Kd_x=6.33, Ki_x=0.524, Kv_m=3.29),
+    "single-mass": CascadeGains(Kp_th=79.2, Kd_th=12.9, Kp_x=10.9, Kd_x=6.74, Ki_x=6.37),
+    "double-mass": CascadeGains(Kp_th=21.99, Kd_th=3.015, Kp_x=1.255, Kd_x=6.134, Ki_x=0.4976, Kv_m=3.239),
 }
 TUNED_HSMC: dict[str, HSMCGains] = {
-    "single-mass": replace(thesis_hsmc_gains("single-mass"), c=(4.57, 2.71), lam=(-0.23,), k=12.7, KI=34.2),
+    "single-mass": replace(thesis_hsmc_gains("single-mass"), c=(5.63, 2.46), k=76.7, KI=1540.0),
 }
 TUNED_ADAPTIVE: dict[str, tuple[HSMCGains, AdaptiveSchedules]] = {
-    # KI(t) = KI (1 - e^-3t): the integral is held back while the cart is still far from the reference
-    "single-mass": (TUNED_HSMC["single-mass"], AdaptiveSchedules(KI=Schedule(34.2, -34.2, 3.0))),
+    # k(t) = 76.7 - 60 e^-t, c2(t) = 2.46 - e^-3t: a gentle start (no saturation, no overshoot), full
+    # gains after ~1 s (a search over the thesis's schedule forms on top of the tuned HSMC)
+    "single-mass": (TUNED_HSMC["single-mass"], AdaptiveSchedules(k=Schedule(76.7, -60.0, 1.0),
+                                                                 c=(None, Schedule(2.46, -1.0, 3.0)))),
 }
 
 

@@ -511,9 +511,10 @@ class HSMC(DiscreteLaw):
     def _check_denominator(self, gains: HSMCGains) -> float:
         den = float(gains.alphas() @ self._b)
         if not math.isfinite(den) or abs(den) < gains.denominator_min:
-            raise LawParameterError("lambda", f"HSMC denominator sum(alpha_r b_r) = {den:.6g} is below "
-                                              f"denominator_min = {gains.denominator_min:g}: the top sliding layer "
-                                              "cannot be moved by the input (change lambda or the b_i)")
+            raise LawParameterError("lambda", f"parameters lambda1, lambda2: the HSMC denominator sum(alpha_r b_r) "
+                                              f"= {den:.6g} is below denominator_min = {gains.denominator_min:g}: the "
+                                              "top sliding layer cannot be moved by the input (change the layer "
+                                              "weights or the model's b_i)")
         return den
 
     def reset(self) -> None:
@@ -591,8 +592,9 @@ class AdaptiveHSMC(HSMC):
                     _check_finite(f"{name}_{part}", getattr(sch, part))
                 _check_nonneg(f"{name}_rate", sch.rate)
                 if min(sch.base, sch.base + sch.delta) < 0:
-                    raise LawParameterError(f"{name}_delta", f"schedule of {name} goes negative "
-                                                             f"({sch.base} + {sch.delta} exp(-{sch.rate} t))")
+                    raise LawParameterError(f"{name}_delta", f"parameter {name}_delta = {sch.delta}: the schedule "
+                                                             f"{name}(t) = {sch.base} + {sch.delta} exp(-{sch.rate} t) "
+                                                             "goes negative")
         if schedules.c and len(schedules.c) != self.n_layers:
             raise LawParameterError("c", f"need {self.n_layers} c schedules (or none), got {len(schedules.c)}")
         for i, sch in enumerate(schedules.c, 1):
@@ -601,8 +603,9 @@ class AdaptiveHSMC(HSMC):
                     _check_finite(f"c{i}_{part}", getattr(sch, part))
                 _check_nonneg(f"c{i}_rate", sch.rate)
                 if min(sch.base, sch.base + sch.delta) <= 0:
-                    raise LawParameterError(f"c{i}_delta", f"schedule of c{i} must stay > 0 "
-                                                           f"({sch.base} + {sch.delta} exp(-{sch.rate} t))")
+                    raise LawParameterError(f"c{i}_delta", f"parameter c{i}_delta = {sch.delta}: the schedule "
+                                                           f"c{i}(t) = {sch.base} + {sch.delta} exp(-{sch.rate} t) "
+                                                           "must stay > 0")
         self.schedules = schedules
 
     def current_gains(self) -> tuple[np.ndarray, float, float, float]:

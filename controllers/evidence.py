@@ -1,0 +1,125 @@
+"""Closed-loop evidence without the master: every law x plant x parameter set in the pure loop.
+
+``python -m controllers.evidence`` prints the metrics table (markdown) that docs/controllers.md
+shows beside the thesis's claims; ``--update docs/controllers.md`` rewrites the table between
+the ``<!-- evidence:begin -->`` / ``<!-- evidence:end -->`` markers (a test checks the document
+holds what this module computes).
+
+Experiment (the thesis's task): plant at its default preset (``thesis-ch3`` single mass,
+``thesis-ch4`` double mass; one extra row: the long-pendulum ``thesis-appendix-a`` plant with
+its own LQR design), upright at rest at 0, reference step 0 -> 0.05 m at t = 0, 10 s, plant
+step 1 ms, law sampled at 1 ms with zero-order hold, +-10 V. Metrics: ``harness.metrics``.
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from fmus.params import preset
+
+from .catalog import KINDS, LAWS, PARAMETER_SETS, default_preset, make_law
+from .simulate import run_loop
+
+#: The thesis's qualitative result per law and plant (reference/thesis-data.md section 2).
+THESIS_CLAIMS = {
+    ("PID", "single-mass"): "does not work (tuner gains too large to realize)",
+    ("PID", "double-mass"): "does not work",
+    ("CascadePID", "single-mass"): "(not in the thesis)",
+    ("CascadePID", "double-mass"): "(not in the thesis)",
+    ("LQR", "single-mass"): "meets the goal with heavy oscillation",
+    ("LQR", "double-mass"): "heavy oscillation; pendulum falls when the carts stop",
+    ("HSMC", "single-mass"): "meets the goal; integral term removes the error",
+    ("HSMC", "double-mass"): "meets the goal, steady-state error 5.575 mm",
+    ("AdaptiveHSMC", "single-mass"): "reaches the position faster than HSMC",
+    ("AdaptiveHSMC", "double-mass"): "smaller steady-state error and settling time than HSMC",
+}
+
+BEGIN, END = "<!-- evidence:begin -->", "<!-- evidence:end -->"
+
+
+@dataclass(frozen=True)
+class Row:
+    """One closed-loop run of the table."""
+
+    law: str
+    kind: str
+    parameter_set: str
+    plant_preset: str
+    metrics: dict
+
+
+def runs() -> list[Row]:
+    """Every law x plant kind x parameter set, plus LQR on the long pendulum with its own design."""
+    rows = []
+    for law in LAWS:
+        for kind in KINDS:
+            for ps in PARAMETER_SETS[law][kind]:
+                name = default_preset(kind)
+                r = run_loop(make_law(law, kind, ps), preset(name))
+                rows.append(Row(law, kind, ps, name, r.metrics))
+    long = preset("thesis-appendix-a")
+    r = run_loop(make_law("LQR", "single-mass", "thesis", design_params=long), long)
+    rows.append(Row("LQR", "single-mass", "thesis", "thesis-appendix-a", r.metrics))
+    return rows
+
+
+def _fmt(value: float | None, scale: float = 1.0, digits: int = 2) -> str:
+    return "-" if value is None else f"{value * scale:.{digits}f}"
+
+
+def verdict(m: dict) -> str:
+    """Does the run do the task? ``yes`` / what fails."""
+    if not m["upright"]:
+        return "no: pendulum falls"
+    if m["settling_time_s"] is None:
+        return "no: cart not settled in 10 s"
+    return "yes"
+
+
+def table(rows: Sequence[Row]) -> str:
+    """The markdown table."""
+    out = ["| law | plant (preset) | set | task done | settling s | overshoot mm | ss error mm | max angle rad "
+           "| peak V | rms V | thesis says |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        m = r.metrics
+        angle = "-" if m["max_abs_angle_rad"] is None else (f"{m['max_abs_angle_rad']:.3f}"
+                                                             if m["max_abs_angle_rad"] < 1 else
+                                                             f"{m['max_abs_angle_rad']:.1f} (fell)")
+        out.append(f"| {r.law} | {r.kind} ({r.plant_preset}) | {r.parameter_set} | {verdict(m)} "
+                   f"| {_fmt(m['settling_time_s'])} | {_fmt(m['overshoot_m'], 1e3)} "
+                   f"| {_fmt(m['steady_state_error_m'], 1e3, 3)} | {angle} | {_fmt(m['peak_voltage_V'], 1, 1)} "
+                   f"| {_fmt(m['rms_voltage_V'])} | {THESIS_CLAIMS[(r.law, r.kind)]} |")
+    return "\n".join(out) + "\n"
+
+
+def update(path: Path, text: str) -> bool:
+    """Replace the block between the markers in ``path``; True if the file changed."""
+    doc = path.read_text()
+    if BEGIN not in doc or END not in doc:
+        raise SystemExit(f"{path}: markers {BEGIN} / {END} not found")
+    new = re.sub(re.escape(BEGIN) + ".*?" + re.escape(END), lambda _: f"{BEGIN}\n{text}{END}", doc, flags=re.S)
+    if new != doc:
+        path.write_text(new)
+    return new != doc
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m controllers.evidence", description=__doc__.splitlines()[0])
+    parser.add_argument("--update", type=Path, help="rewrite the table block in this markdown file")
+    args = parser.parse_args(argv)
+    text = table(runs())
+    if args.update:
+        changed = update(args.update, text)
+        print(f"{args.update}: {'updated' if changed else 'unchanged'}")
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
