@@ -172,7 +172,10 @@ TUNED_CASCADE: dict[str, CascadeGains] = {
     "double-mass": CascadeGains(Kp_th=21.99, Kd_th=3.015, Kp_x=1.255, Kd_x=6.134, Ki_x=0.4976, Kv_m=3.239),
 }
 TUNED_HSMC: dict[str, HSMCGains] = {
-    "single-mass": replace(thesis_hsmc_gains("single-mass"), c=(5.63, 2.46), k=76.7, KI=1540.0),
+    # derivative filter 10 ms (not 2 ms): with 4096-count encoders the faster filter lets the
+    # quantization noise through the high reaching gain (the voltage chatters, the cart never settles)
+    "single-mass": replace(thesis_hsmc_gains("single-mass"), c=(5.63, 2.46), k=76.7, KI=1540.0,
+                           derivative_time_constant=0.01),
 }
 TUNED_ADAPTIVE: dict[str, tuple[HSMCGains, AdaptiveSchedules]] = {
     # k(t) = 76.7 - 60 e^-t, c2(t) = 2.46 - e^-3t: a gentle start (no saturation, no overshoot), full
@@ -229,7 +232,8 @@ def _state_dim(state: str) -> dict[str, int]:
     return _STATE_DIM["position" if state.endswith("position") else "velocity"]
 
 
-def _design_states(kind: str) -> tuple[str, ...]:
+def design_states(kind: str) -> tuple[str, ...]:
+    """States of the design model (``fmus.physics`` order without the motor current)."""
     from fmus.physics import state_names
     return state_names(kind)[:-1]
 
@@ -327,7 +331,7 @@ def _coefficient_states(kind: str) -> dict[str, tuple[str, str]]:
 
 
 def _lqr_specs(kind: str) -> list[ParamSpec]:
-    states = _design_states(kind)
+    states = design_states(kind)
     specs = []
     for s in states:
         dim = _state_dim(s)
@@ -390,7 +394,8 @@ def _hsmc_values(kind: str, g: HSMCGains, use_thesis: bool) -> dict[str, Any]:
     v: dict[str, Any] = {f"c{i + 1}": float(c) for i, c in enumerate(g.c)}
     v["lambda1"] = float(g.lam[0])
     v["lambda2"] = float(g.top_weight if kind == "single-mass" else g.lam[1])
-    v.update(k=g.k, eta=g.eta, KI=g.KI, use_thesis_coefficients=use_thesis)
+    v.update(k=g.k, eta=g.eta, KI=g.KI, derivative_time_constant=g.derivative_time_constant,
+             use_thesis_coefficients=use_thesis)
     return v
 
 
@@ -423,7 +428,7 @@ def set_values(law: str, kind: str, parameter_set: str) -> dict[str, Any]:
         g = TUNED_CASCADE[kind]
         return {f: getattr(g, f) for f in CascadeGains.UNITS}
     if law == "LQR":
-        states = _design_states(kind)
+        states = design_states(kind)
         if kind == "single-mass":
             Q, R, factor, poles = thesis_single_mass_Q(), THESIS_SINGLE_MASS_R, 0.0, THESIS_SINGLE_MASS_OBSERVER_POLES
             tau = 0.0
@@ -480,7 +485,7 @@ def design_params_from(kind: str, values: Mapping[str, Any]) -> PlantParams:
 
 def lqr_design_from(kind: str, v: Mapping[str, Any], backend: str = "control"):
     """The LQR design the flat values describe (``controllers.design.design_lqr``)."""
-    states = _design_states(kind)
+    states = design_states(kind)
     model = design_model(_design_params(kind, v))
     Q = np.diag([float(v[f"Q_{s}"]) for s in states])
     factor = float(v["observer_pole_factor"])

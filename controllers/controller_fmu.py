@@ -70,8 +70,8 @@ class ControllerFmu(FmuBase):
                                description=spec.description, check=None if is_bool else spec.check)
         self._gains: dict[str, float] = {}
         if self.law == "LQR":
-            from .catalog import _design_states  # noqa: PLC0415 -- private helper of the same package
-            for state in _design_states(kind):
+            from .catalog import design_states  # noqa: PLC0415
+            for state in design_states(kind):
                 name = f"K_{state}"
                 unit = "V/" + STATE_UNITS[state]
                 if "/" in STATE_UNITS[state]:

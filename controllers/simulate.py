@@ -54,8 +54,14 @@ class LoopResult:
         return self.states[:, self.state_names.index(name)]
 
 
+#: Encoder resolutions of the IP02 (4096 counts/rev): cart 2.275e-5 m/count, pendulum 1.534e-3 rad/count.
+ENCODER_RESOLUTION = {"cart_position": 2.275e-5, "active_cart_position": 2.275e-5,
+                      "passive_cart_position": 2.275e-5, "pendulum_angle": 2 * 3.141592653589793 / 4096}
+
+
 def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, plant_step: float = 1e-3,
-             reference: Callable[[float], float] | float = 0.05, x0: Sequence[float] | None = None) -> LoopResult:
+             reference: Callable[[float], float] | float = 0.05, x0: Sequence[float] | None = None,
+             quantize: bool = False) -> LoopResult:
     """Simulate the closed loop and compute its metrics (``harness.metrics``).
 
     Parameters
@@ -72,6 +78,9 @@ def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, pla
         ``r(t)`` [m], or a constant.
     x0 : sequence of float, optional
         Initial plant state (``fmus.physics`` order); upright at rest at 0 by default.
+    quantize : bool
+        Round the measurements to whole encoder counts (``ENCODER_RESOLUTION``) before the law,
+        as the rig's encoders do.
 
     Raises
     ------
@@ -93,12 +102,14 @@ def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, pla
     volts = np.full(n_steps + 1, np.nan)
     failure = None
     u = 0.0
+    res = np.array([ENCODER_RESOLUTION[n] for n in MEASURED[plant.kind]])
     for i in range(n_steps + 1):
         t = i * plant_step
         states[i] = plant.x
         refs[i] = ref(t)
         if i % n_sub == 0:
-            u = law.step(plant.measured(), refs[i])
+            y = np.asarray(plant.measured())
+            u = law.step(np.round(y / res) * res if quantize else y, refs[i])
         volts[i] = u
         if i == n_steps:
             break

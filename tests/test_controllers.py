@@ -113,12 +113,29 @@ def test_adaptive_hsmc_improves_on_hsmc_as_the_thesis_claims() -> None:
 
 def test_tuned_adaptive_hsmc_is_gentler_than_tuned_hsmc() -> None:
     """Single mass, tuned sets: the schedules remove the overshoot and the saturation at the start
-    without a slower settling."""
+    for a settling time within 5 %."""
     h = loop("HSMC", "single-mass", "tuned").metrics
     a = loop("AdaptiveHSMC", "single-mass", "tuned").metrics
     assert a["overshoot_m"] < 0.1 * h["overshoot_m"]
     assert a["peak_voltage_V"] < 0.5 * h["peak_voltage_V"]
-    assert a["settling_time_s"] <= 1.02 * h["settling_time_s"]
+    assert a["settling_time_s"] <= 1.05 * h["settling_time_s"]
+
+
+@pytest.mark.parametrize("law", ["HSMC", "AdaptiveHSMC", "LQR", "CascadePID"])
+def test_single_mass_default_sets_survive_encoder_quantization(law: str) -> None:
+    """4096-count encoders (the rig's): the single-mass default sets still settle within 10 s."""
+    r = run_loop(make_law(law, "single-mass"), plant("single-mass"), quantize=True)
+    assert reaches_and_balances(r.metrics), r.metrics
+
+
+def test_fast_derivative_filter_lets_quantization_through_the_tuned_hsmc() -> None:
+    """Why the tuned single-mass HSMC filters its differences with 10 ms: with 2 ms the encoder
+    counts make the voltage chatter and the cart does not settle."""
+    fast = run_loop(make_law("HSMC", "single-mass", derivative_time_constant=0.002), plant("single-mass"),
+                    quantize=True).metrics
+    slow = run_loop(make_law("HSMC", "single-mass"), plant("single-mass"), quantize=True).metrics
+    assert fast["rms_voltage_V"] > 2 * slow["rms_voltage_V"]
+    assert fast["settling_time_s"] is None
 
 
 def test_thesis_coefficients_and_linearization_agree_for_the_double_mass() -> None:

@@ -5,7 +5,7 @@ import re
 from pathlib import Path
 
 from controllers.catalog import TUNED_CASCADE, TUNED_HSMC
-from controllers.evidence import BEGIN, END, runs, table
+from controllers.evidence import BEGIN, END, document
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "controllers.md"
 
@@ -13,7 +13,7 @@ DOC = Path(__file__).resolve().parents[1] / "docs" / "controllers.md"
 def test_evidence_table_in_the_docs_is_current() -> None:
     text = DOC.read_text()
     block = text[text.index(BEGIN) + len(BEGIN):text.index(END)].strip()
-    assert block == table(runs()).strip(), "run: python -m controllers.evidence --update docs/controllers.md"
+    assert block == document().strip(), "run: python -m controllers.evidence --update docs/controllers.md"
 
 
 def test_tuned_gains_in_the_docs_match_the_catalog() -> None:
@@ -25,3 +25,4 @@ def test_tuned_gains_in_the_docs_match_the_catalog() -> None:
             assert float(cell) == getattr(TUNED_CASCADE[kind], name), (name, kind)
     g = TUNED_HSMC["single-mass"]
     assert f"`c1 = {g.c[0]}`, `c2 = {g.c[1]}`, `k = {g.k}`, `KI = {g.KI:g}`" in text
+    assert f"`tau = {g.derivative_time_constant * 1e3:g} ms`" in text
