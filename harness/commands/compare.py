@@ -3,6 +3,7 @@
     ipcosim compare [--out DIR] [--robustness [--samples N]] [--scenarios a,b,...] [--stop-time S]
                     [--workers W] [--scheduler ADDR] [--seed S]
 
+FMUs missing from ``build/fmus`` (a fresh checkout) are built first, as ``ipcosim build`` does.
 Writes ``DIR/report.md``, ``DIR/report.html`` (self-contained), ``DIR/figures/<plant>.png``,
 ``DIR/metrics.csv`` / ``metrics.json`` and, with ``--robustness``, one resumable sweep per
 scenario under ``DIR/robustness/<scenario>/``.
@@ -95,10 +96,25 @@ def main(args: argparse.Namespace) -> int:
 
     results: dict[str, dict[str, Any]] = {}
     specs, spec_names = [], []
+    built = False
     for name in names:
         try:
-            specs.append(spec_for(name, stop_time=args.stop_time, series=True,
-                                  parameter_set=_pset(name, args.parameter_set)))
+            try:
+                spec = spec_for(name, stop_time=args.stop_time, series=True,
+                                parameter_set=_pset(name, args.parameter_set))
+            except FileNotFoundError as exc:
+                if built or "ipcosim build" not in str(exc):
+                    raise
+                # a fresh checkout: build the FMUs once (as 'ipcosim build' does), then go on
+                from fmus.build import build_all
+                from harness.ssp import BUILD_FMU_DIR
+
+                print(f"compare: FMUs missing; building them into {BUILD_FMU_DIR}", file=sys.stderr)
+                build_all(BUILD_FMU_DIR)
+                built = True
+                spec = spec_for(name, stop_time=args.stop_time, series=True,
+                                parameter_set=_pset(name, args.parameter_set))
+            specs.append(spec)
             spec_names.append(name)
         except (IpcosimError, OSError, ValueError) as exc:
             results[name] = {"status": "error", "error": one_line(exc).split(": ", 1)[-1]}
