@@ -21,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "sweep", help="robustness sweep: many runs of a scenario with varied parameters",
         description="Run a scenario many times with parameters drawn or stepped by --vary, in parallel "
                     "(local processes or a Dask cluster), and report the success rate (upright and settled "
-                    "within the +-2 %% band) and the distribution of every metric.",
+                    "within the +-2 % band) and the distribution of every metric.",
         epilog="FORM: uniform(a,b) | normal(mean,std) | grid(start,stop,n) | [v1,v2,...] | number, each "
                "optionally *nominal (relative to the scenario's value). Example: "
                "--vary 'plant.Mp=uniform(0.8,1.2)*nominal' --vary 'plant.K=grid(100,180,5)'")
