@@ -150,6 +150,9 @@ class FMUSlave(Slave):
     def _log(self, env: Any, instance_name: bytes | None, status: int, category: bytes | None,
              message: bytes | None) -> None:
         text = message.decode("utf-8", "replace") if message else ""
+        lines = [line for line in text.splitlines() if line.strip()]
+        if len(lines) > 1 and lines[0].startswith("Fatal py exception encountered"):
+            text = lines[-1]  # pythonfmu's wrapper line, then the exception's text: report the latter (fmus/fmi.py)
         text = " ".join(text.split())  # one line
         if len(text) > 400:
             text = text[:397] + "..."
