@@ -305,3 +305,13 @@ def test_wilson_interval_and_summary():
     assert s["success_rate"] == pytest.approx(1 / 3) and s["metrics"]["m"]["mean"] == 2.0
     assert s["counts"] == {"ok": 1, "fell": 1, "error": 1}
     assert math.isnan(wilson_interval(0, 0)[0])
+
+
+def test_parameter_figure(tmp_path):
+    from harness.studies.robustness import plot_parameters
+
+    rows = [{"status": s, "plant.K": k, "itae_position": v} for s, k, v in
+            [("ok", 140.0, 0.1), ("fell", 110.0, 30.0), ("error", 100.0, None), ("unsettled", 120.0, 1.0)]]
+    path = plot_parameters(rows, ["plant.K", "plant.absent"], "itae_position", tmp_path)
+    assert path == tmp_path / "parameters.png" and path.stat().st_size > 5000
+    assert plot_parameters(rows, ["plant.absent"], "itae_position", tmp_path / "none") is None

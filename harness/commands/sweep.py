@@ -90,6 +90,11 @@ def main(args: argparse.Namespace) -> int:
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     md = robustness.summary_markdown(summary, title=f"Robustness of {spec.name}")
     figures = robustness.plot_distributions(result.rows, spec.metric_names, out / "figures", title=spec.name)
+    metric = "itae_position" if "itae_position" in spec.metric_names else spec.metric_names[0]
+    by_param = robustness.plot_parameters(result.rows, [v.name for v in varies], metric, out / "figures",
+                                          title=f"{spec.name}: {metric} against each varied parameter")
+    if by_param is not None:
+        figures.insert(0, by_param)
     md += "\n" + "\n".join(f"![{p.stem}](figures/{p.name})" for p in figures) + "\n"
     (out / "summary.md").write_text(md)
     lo, hi = summary["success_ci95"]

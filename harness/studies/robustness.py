@@ -159,3 +159,53 @@ def plot_distributions(rows: Sequence[Mapping[str, Any]], metric_names: Sequence
         plt.close(fig)
         paths.append(path)
     return paths
+
+
+STATUS_COLORS = {"ok": "tab:green", "unsettled": "tab:orange", "fell": "tab:red", "error": "black"}
+
+
+def plot_parameters(rows: Sequence[Mapping[str, Any]], parameters: Sequence[str], metric: str, out_dir: Path,
+                    title: str = "") -> Path | None:
+    """Which parameter values fail: one panel per varied parameter, ``metric`` against the
+    parameter's value, each run coloured by its status. Written to ``out_dir/parameters.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    parameters = [p for p in parameters if any(isinstance(r.get(p), (int, float)) for r in rows)]
+    if not parameters:
+        return None
+    out_dir.mkdir(parents=True, exist_ok=True)
+    n = len(parameters)
+    cols = min(n, 3)
+    nrows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols, 3.2 * nrows), dpi=100, squeeze=False)
+    for ax, name in zip(axes.ravel(), parameters):
+        for status, color in STATUS_COLORS.items():
+            pts = [(r[name], r.get(metric)) for r in rows if r["status"] == status
+                   and isinstance(r.get(name), (int, float))]
+            if not pts:
+                continue
+            xs = [p[0] for p in pts]
+            ys = [p[1] if isinstance(p[1], (int, float)) and math.isfinite(p[1]) else math.nan for p in pts]
+            if status == "error":
+                finite = [y for r in rows for y in [r.get(metric)] if isinstance(y, (int, float)) and math.isfinite(y)]
+                ys = [min(finite) if finite else 0.0] * len(xs)
+            ax.scatter(xs, ys, s=12, color=color, label=f"{status} ({len(xs)})", alpha=0.8)
+        ax.set_xlabel(name)
+        ax.set_ylabel(metric)
+        ax.grid(True, alpha=0.3)
+        values = [y for r in rows for y in [r.get(metric)] if isinstance(y, (int, float)) and math.isfinite(y)]
+        if values and min(values) > 0 and max(values) / min(values) > 100:
+            ax.set_yscale("log")
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    axes[0][0].legend(fontsize=7)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path = out_dir / "parameters.png"
+    fig.savefig(path)
+    plt.close(fig)
+    return path
