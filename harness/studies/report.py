@@ -380,7 +380,9 @@ def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str
              "task). Success (status ok) = the pendulum stays within 0.35 rad and the cart ends inside the +-2 % "
              "band; 'fell' = the pendulum left 0.35 rad; 'unsettled' = upright but not inside the band at the end. "
              "Cost J = ITAE(x - r) + 0.1 ITAE(angle) + 1e-4 ISE(voltage), infinite when the pendulum falls. "
-             "Angle reversals count swings of the pendulum larger than 0.005 rad (an oscillation measure).")
+             "Angle reversals count swings of the pendulum larger than 0.005 rad (an oscillation measure). "
+             "Gains: the controller parameter set each scenario ran with (thesis = the thesis's values, tuned = "
+             "the controller design's retuned values); the claims are judged on these runs.")
     settings = ", ".join(f"{k} {v}" for k, v in meta.items() if k != "packages")
 
     md = ["# IP02 controller comparison", "", intro, ""]
