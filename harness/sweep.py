@@ -25,6 +25,7 @@ Failures
 """
 from __future__ import annotations
 
+import atexit
 import concurrent.futures as cf
 import csv
 import functools
@@ -166,9 +167,22 @@ def _read_tracks(track_dir: Path) -> list[int]:
     return sorted(indices)
 
 
+def _quick_exit() -> None:
+    """Leave a worker process without the interpreter's teardown (registered first, so it runs
+    after every other exit handler, e.g. the runners' FMU release). A worker has nothing left
+    to tear down once its results are sent, and unloading FMUs during the teardown has been
+    seen to abort ("corrupted double-linked list") after many runs in one process."""
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    finally:
+        os._exit(0)
+
+
 def _worker_init() -> None:
     # The parent handles Ctrl-C (it stops the pool); workers must not die half-way on it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    atexit.register(_quick_exit)
 
 
 class LocalExecutor:
