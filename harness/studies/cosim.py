@@ -9,7 +9,6 @@ values (``--set`` semantics).
 from __future__ import annotations
 
 import hashlib
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
