@@ -1,4 +1,4 @@
-"""docs/plant.md's parameter tables match fmus.params (the doc cannot go stale silently)."""
+"""The parameter tables of docs/plant.md and README.md match fmus.params (the docs cannot go stale silently)."""
 from __future__ import annotations
 
 import re
@@ -8,7 +8,9 @@ import pytest
 
 from fmus.params import PLANT_KINDS, PRESETS, parameter_info, preset
 
-DOC = Path(__file__).resolve().parents[1] / "docs" / "plant.md"
+ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "plant.md"
+README = ROOT / "README.md"
 
 
 def doc_table(name: str) -> dict[str, tuple[float, str]]:
@@ -32,3 +34,33 @@ def test_parameter_tables_match_presets(name: str) -> None:
         value, unit = rows[info["name"]]
         assert value == pytest.approx(getattr(params, info["name"]), rel=1e-5), info["name"]
         assert unit == info["unit"]
+
+
+def readme_table() -> tuple[list[str], dict[str, tuple[list[str], str]]]:
+    """README's one table: preset columns, then per parameter (cells per preset, unit)."""
+    text = README.read_text()
+    header = re.search(r"^\| parameter \| (.+?) \| unit \| meaning \| source \|$", text, re.M)
+    assert header, "README.md: parameter table header not found"
+    presets = [c.strip() for c in header.group(1).split("|")]
+    rows = {}
+    for m in re.finditer(r"^\| `(\w+)` \| (.+)$", text[header.end():], re.M):
+        cells = [c.strip() for c in m.group(2).rstrip("|").split("|")]
+        rows[m.group(1)] = (cells[:len(presets)], cells[len(presets)])
+    return presets, rows
+
+
+def test_readme_parameter_table_matches_presets() -> None:
+    presets, rows = readme_table()
+    assert sorted(presets) == sorted(PRESETS)
+    for col, name in enumerate(presets):
+        kind = PRESETS[name][0]
+        params = preset(name)
+        for info in parameter_info(PLANT_KINDS[kind]):
+            assert info["name"] in rows, f"README.md lacks parameter {info['name']}"
+            cells, unit = rows[info["name"]]
+            assert float(cells[col]) == pytest.approx(getattr(params, info["name"]), rel=1e-5), (name, info["name"])
+            assert unit == info["unit"], info["name"]
+        names = {i["name"] for i in parameter_info(PLANT_KINDS[kind])}
+        for pname, (cells, _) in rows.items():
+            if pname not in names:
+                assert cells[col] == "-", f"README.md gives {pname} a value for {name}, which has no such parameter"
