@@ -47,7 +47,6 @@ from typing import Any, Sequence
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 
 from fmus.linearize import LinearModel, linearize
 from fmus.params import PlantParams
@@ -241,6 +240,7 @@ def place_gain(A: np.ndarray, B: np.ndarray, poles: Sequence[complex], backend: 
             import control
             G = np.asarray(control.place(A, B, p), dtype=float)
         elif backend == "scipy":
+            import scipy.signal  # imported here: ~0.5 s, needed only by observer placement
             G = scipy.signal.place_poles(A, B, p, method="YT").gain_matrix
         else:
             raise DesignError("backend", f"unknown design backend {backend!r}; expected one of {BACKENDS}")
