@@ -1,7 +1,7 @@
 """Closed-loop evidence without the master: every law x plant x parameter set in the pure loop.
 
 ``python -m controllers.evidence`` prints the metrics table (markdown) that docs/controllers.md and README.md
-shows beside the thesis's claims; ``--update docs/controllers.md`` rewrites the table between
+show beside the thesis's claims; ``--update docs/controllers.md`` rewrites the table between
 the ``<!-- evidence:begin -->`` / ``<!-- evidence:end -->`` markers (a test checks the document
 holds what this module computes).
 
