@@ -503,7 +503,13 @@ class HSMC(DiscreteLaw):
         self.models = tuple(models)
         self._A = np.array([m.a for m in models], dtype=float)
         self._b = np.array([m.b for m in models], dtype=float)
-        self._check_denominator(gains)
+        self._den = self._check_denominator(gains)
+        # Constants of the top layer, as plain floats for the per-sample arithmetic:
+        # S_n = sum alpha_r (c_r pos_r + vel_r),  S_n' = sum alpha_r c_r vel_r + w . x + den u  (w = alpha A).
+        alpha = gains.alphas()
+        self._alpha = tuple(float(a) for a in alpha)
+        self._w = tuple(float(w) for w in alpha @ self._A)
+        self._c = tuple(float(ci) for ci in gains.c)
         tau = gains.derivative_time_constant
         self._d = [FilteredDerivative(self.sample_period, tau) for _ in range(n_layers)]
         self.reset()
@@ -524,38 +530,35 @@ class HSMC(DiscreteLaw):
         for d in self._d:
             d.reset()
 
-    def _state(self, y: np.ndarray, r: float) -> np.ndarray:
-        """Design-model state estimate in error coordinates (fmus.physics order without the current)."""
+    def _state(self, y: np.ndarray, r: float) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+        """Design-model state estimate in error coordinates (fmus.physics order without the current),
+        and the (positions, velocities) of the subsystems: pendulum, pendulum cart, (motor cart)."""
+        d = self._d
         if self.kind == "single-mass":
-            xc, th = y[0] - r, y[1]
-            return np.array([xc, self._d[1].update(y[0]), th, self._d[0].update(th)])
-        xa, xc, th = y[0] - r, y[1] - r, y[2]
-        return np.array([xa, self._d[2].update(y[0]), xc, self._d[1].update(y[1]), th, self._d[0].update(th)])
+            xc, th = float(y[0]) - r, float(y[1])
+            xcd, thd = d[1].update(float(y[0])), d[0].update(th)
+            return (xc, xcd, th, thd), (th, xc), (thd, xcd)
+        xa, xc, th = float(y[0]) - r, float(y[1]) - r, float(y[2])
+        xad, xcd, thd = d[2].update(float(y[0])), d[1].update(float(y[1])), d[0].update(th)
+        return (xa, xad, xc, xcd, th, thd), (th, xc, xa), (thd, xcd, xad)
 
-    def _subsystems(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(positions, velocities) per subsystem: pendulum, pendulum cart, (motor cart)."""
-        if self.kind == "single-mass":
-            return np.array([x[2], x[0]]), np.array([x[3], x[1]])
-        return np.array([x[4], x[2], x[0]]), np.array([x[5], x[3], x[1]])
-
-    def current_gains(self) -> tuple[np.ndarray, float, float, float]:
+    def current_gains(self) -> tuple[tuple[float, ...], float, float, float]:
         """(c, k, eta, KI) in effect at the law's time (constant for HSMC)."""
         g = self.gains
-        return np.asarray(g.c, dtype=float), g.k, g.eta, g.KI
+        return self._c, g.k, g.eta, g.KI
 
     def _compute(self, y: np.ndarray, r: float) -> float:
-        x = self._state(y, r)
+        x, pos, vel = self._state(y, r)
         c, k, eta, KI = self.current_gains()
-        g = self.gains
-        alpha = g.alphas()
-        pos, vel = self._subsystems(x)
-        s = c * pos + vel
-        S = float(alpha @ s)
-        f = self._A @ x
-        num = float(alpha @ (c * vel + f))
-        den = float(alpha @ self._b)
+        S = num = 0.0
+        for a, ci, p, v in zip(self._alpha, c, pos, vel):
+            S += a * (ci * p + v)
+            num += a * ci * v
+        for w, xi in zip(self._w, x):
+            num += w * xi
+        den = self._den
         integral = self.integral + S * self.sample_period
-        u_rest = -(num + k * S + eta * math.tanh(g.tanh_gain * S)) / den
+        u_rest = -(num + k * S + eta * math.tanh(self.gains.tanh_gain * S)) / den
         u = u_rest - KI * integral / den
         if abs(u) <= self.voltage_limit or (u > 0) != (-KI * S / den > 0):
             self.integral = integral
@@ -608,10 +611,10 @@ class AdaptiveHSMC(HSMC):
                                                            "must stay > 0")
         self.schedules = schedules
 
-    def current_gains(self) -> tuple[np.ndarray, float, float, float]:
+    def current_gains(self) -> tuple[tuple[float, ...], float, float, float]:
         t = self.time
         g, sc = self.gains, self.schedules
-        c = np.array([s(t) if s is not None else ci for s, ci in zip(sc.c or (None,) * len(g.c), g.c)])
+        c = tuple(s(t) if s is not None else ci for s, ci in zip(sc.c or (None,) * len(self._c), self._c))
         k = sc.k(t) if sc.k is not None else g.k
         eta = sc.eta(t) if sc.eta is not None else g.eta
         KI = sc.KI(t) if sc.KI is not None else g.KI

@@ -130,12 +130,20 @@ def test_single_mass_default_sets_survive_encoder_quantization(law: str) -> None
 
 def test_fast_derivative_filter_lets_quantization_through_the_tuned_hsmc() -> None:
     """Why the tuned single-mass HSMC filters its differences with 10 ms: with 2 ms the encoder
-    counts make the voltage chatter and the cart does not settle."""
-    fast = run_loop(make_law("HSMC", "single-mass", derivative_time_constant=0.002), plant("single-mass"),
-                    quantize=True).metrics
-    slow = run_loop(make_law("HSMC", "single-mass"), plant("single-mass"), quantize=True).metrics
-    assert fast["rms_voltage_V"] > 2 * slow["rms_voltage_V"]
-    assert fast["settling_time_s"] is None
+    counts make the voltage chatter and the cart wanders out of the settling band for most of the
+    run (whether it happens to be inside the band in the last instants is chance, so the share of
+    time outside is what is checked)."""
+    runs = {tau: run_loop(make_law("HSMC", "single-mass", derivative_time_constant=tau), plant("single-mass"),
+                          quantize=True) for tau in (0.002, 0.01)}
+
+    def share_outside_after_2s(r) -> float:
+        late = r.time >= 2.0
+        return float(np.mean(np.abs(r.states[late, 0] - 0.05) > TOL))
+
+    fast, slow = runs[0.002], runs[0.01]
+    assert fast.metrics["rms_voltage_V"] > 2 * slow.metrics["rms_voltage_V"]
+    assert share_outside_after_2s(fast) > 0.5
+    assert share_outside_after_2s(slow) == 0.0 and slow.metrics["settling_time_s"] < 2.0
 
 
 def test_thesis_coefficients_and_linearization_agree_for_the_double_mass() -> None:
