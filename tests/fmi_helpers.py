@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import shutil
+import subprocess
 from ctypes import byref
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -66,3 +67,21 @@ def vdmcheck_script(root: Path) -> Path | None:
 
 def java_available() -> bool:
     return shutil.which("java") is not None
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def assert_vdmcheck_clean(fmu: Path) -> None:
+    """Run VDMCheck2 on ``fmu`` and fail on any finding; skip where Java (or the tool and Maven) is absent."""
+    import pytest
+
+    if not java_available():
+        pytest.skip("java not installed: VDMCheck2 cannot run")
+    script = vdmcheck_script(ROOT)
+    if script is None:
+        if shutil.which("mvn") is None:
+            pytest.skip("VDMCheck2 not fetched and mvn not installed (make vdmcheck)")
+        pytest.fail("VDMCheck2 missing: run `make vdmcheck`")
+    out = subprocess.run([str(script), str(fmu)], capture_output=True, text=True, timeout=300)
+    assert "No errors found" in out.stdout, out.stdout + out.stderr

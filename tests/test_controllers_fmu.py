@@ -4,8 +4,6 @@ closed-loop trajectory through fmpy as the pure loop, and one clear FMI error pe
 from __future__ import annotations
 
 import math
-import shutil
-import subprocess
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree
@@ -17,7 +15,7 @@ from fmpy.validation import validate_fmu
 from controllers.catalog import KINDS, LAWS, make_law, model_name, schema
 from controllers.reference import reference_at
 from controllers.simulate import run_loop
-from fmi_helpers import instantiate, java_available, vdmcheck_script
+from fmi_helpers import assert_vdmcheck_clean, instantiate
 from fmus.params import DEFAULT_PRESET, preset
 from fmus.physics import MEASURED
 
@@ -105,15 +103,7 @@ def test_fmpy_validation_has_no_problems(controller_fmus, model: str) -> None:
 
 @pytest.mark.parametrize("model", MODELS + ["Setpoint"])
 def test_vdmcheck_reports_no_errors(controller_fmus, model: str) -> None:
-    if not java_available():
-        pytest.skip("java not installed: VDMCheck2 cannot run")
-    script = vdmcheck_script(ROOT)
-    if script is None:
-        if shutil.which("mvn") is None:
-            pytest.skip("VDMCheck2 not fetched and mvn not installed (make vdmcheck)")
-        pytest.fail("VDMCheck2 missing: run `make vdmcheck`")
-    out = subprocess.run([str(script), str(controller_fmus[model])], capture_output=True, text=True, timeout=300)
-    assert "No errors found" in out.stdout, out.stdout + out.stderr
+    assert_vdmcheck_clean(controller_fmus[model])
 
 
 @pytest.mark.parametrize("model", MODELS)

@@ -4,7 +4,6 @@ tunable/fixed parameters, and the incremental build."""
 from __future__ import annotations
 
 import shutil
-import subprocess
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree
@@ -13,7 +12,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from fmi_helpers import instantiate, java_available, vdmcheck_script
+from fmi_helpers import assert_vdmcheck_clean, instantiate
 from fmus.build import BuildError, build_all, check_fmu
 from fmus.fmi import FmuBase, FmuError, parse_unit
 
@@ -241,15 +240,7 @@ def test_messages_need_logging_on(probe_fmu: Path, probe_dir: Path) -> None:
 
 @pytest.mark.integration
 def test_probe_passes_vdmcheck(probe_fmu: Path) -> None:
-    script = vdmcheck_script(ROOT)
-    if not java_available():
-        pytest.skip("java not installed: VDMCheck2 cannot run")
-    if script is None:
-        if shutil.which("mvn") is None:
-            pytest.skip("VDMCheck2 not fetched and mvn not installed (make vdmcheck)")
-        pytest.fail("VDMCheck2 missing: run `make vdmcheck`")
-    out = subprocess.run([str(script), str(probe_fmu)], capture_output=True, text=True, timeout=300)
-    assert "No errors found" in out.stdout, out.stdout + out.stderr
+    assert_vdmcheck_clean(probe_fmu)
 
 
 @pytest.mark.integration

@@ -8,8 +8,6 @@ the step with a clear message and leaves the motor at 0 V; validate_fmu and VDMC
 from __future__ import annotations
 
 import math
-import shutil
-import subprocess
 import zipfile
 from pathlib import Path
 
@@ -18,7 +16,7 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from fmi_helpers import instantiate, java_available, vdmcheck_script
+from fmi_helpers import assert_vdmcheck_clean, instantiate
 from harness.hil.inproc import register_rig, unregister_rig
 from harness.hil.rig import RigConfig, VirtualRig
 from harness.hil.server import RigServer
@@ -144,15 +142,7 @@ def test_adapter_passes_validate_fmu(kind, hil_fmus):
 
 @pytest.mark.parametrize("kind", ["single-mass", "double-mass"])
 def test_adapter_passes_vdmcheck(kind, hil_fmus):
-    script = vdmcheck_script(ROOT)
-    if not java_available():
-        pytest.skip("java not installed: VDMCheck2 cannot run")
-    if script is None:
-        if shutil.which("mvn") is None:
-            pytest.skip("VDMCheck2 not fetched and mvn not installed (make vdmcheck)")
-        pytest.fail("VDMCheck2 missing: run `make vdmcheck`")
-    out = subprocess.run([str(script), str(hil_fmus[kind])], capture_output=True, text=True, timeout=300)
-    assert "No errors found" in out.stdout, out.stdout + out.stderr
+    assert_vdmcheck_clean(hil_fmus[kind])
 
 
 # --- lockstep equivalence -------------------------------------------------------------------------

@@ -31,7 +31,9 @@ MEASURED = {"single-mass": ("cart_position", "pendulum_angle"),
 RES = {"cart_position": CART_RES, "active_cart_position": CART_RES, "passive_cart_position": CART_RES,
        "pendulum_angle": PEND_RES}
 
-pytestmark = pytest.mark.integration
+# The open-loop scenarios leave plant.voltage unconnected on purpose (manipulators drive it).
+pytestmark = [pytest.mark.integration,
+              pytest.mark.filterwarnings("ignore:.*plant.voltage is not connected:harness.system.UnconnectedInputWarning")]
 
 
 @pytest.fixture(scope="session")

@@ -5,8 +5,6 @@ errors for bad parameters and non-finite states."""
 from __future__ import annotations
 
 import math
-import shutil
-import subprocess
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree
@@ -16,7 +14,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from fmi_helpers import instantiate, java_available, vdmcheck_script
+from fmi_helpers import assert_vdmcheck_clean, instantiate
 from fmus.params import DEFAULT_PRESET, PLANT_KINDS, parameter_info, preset
 from fmus.physics import MEASURED, STATE_UNITS, state_names
 from fmus.plant import Plant
@@ -60,15 +58,7 @@ def test_fmpy_validation_has_no_problems(plant_fmus: dict[str, Path], kind: str)
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_vdmcheck_reports_no_errors(plant_fmus: dict[str, Path], kind: str) -> None:
-    if not java_available():
-        pytest.skip("java not installed: VDMCheck2 cannot run")
-    script = vdmcheck_script(ROOT)
-    if script is None:
-        if shutil.which("mvn") is None:
-            pytest.skip("VDMCheck2 not fetched and mvn not installed (make vdmcheck)")
-        pytest.fail("VDMCheck2 missing: run `make vdmcheck`")
-    out = subprocess.run([str(script), str(plant_fmus[kind])], capture_output=True, text=True, timeout=300)
-    assert "No errors found" in out.stdout, out.stdout + out.stderr
+    assert_vdmcheck_clean(plant_fmus[kind])
 
 
 @pytest.mark.parametrize("kind", KINDS)
