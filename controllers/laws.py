@@ -501,21 +501,20 @@ class HSMC(DiscreteLaw):
             _check_finite(f"b{i}", m.b)
         self.gains = gains
         self.models = tuple(models)
-        self._A = np.array([m.a for m in models], dtype=float)
-        self._b = np.array([m.b for m in models], dtype=float)
-        self._den = self._check_denominator(gains)
         # Constants of the top layer, as plain floats for the per-sample arithmetic:
-        # S_n = sum alpha_r (c_r pos_r + vel_r),  S_n' = sum alpha_r c_r vel_r + w . x + den u  (w = alpha A).
+        # S_n = sum alpha_r (c_r pos_r + vel_r),  S_n' = sum alpha_r c_r vel_r + w . x + den u,
+        # with w = alpha A and den = alpha . b.
         alpha = gains.alphas()
+        self._den = self._check_denominator(gains, float(alpha @ np.array([m.b for m in models], dtype=float)))
         self._alpha = tuple(float(a) for a in alpha)
-        self._w = tuple(float(w) for w in alpha @ self._A)
+        self._w = tuple(float(w) for w in alpha @ np.array([m.a for m in models], dtype=float))
         self._c = tuple(float(ci) for ci in gains.c)
         tau = gains.derivative_time_constant
         self._d = [FilteredDerivative(self.sample_period, tau) for _ in range(n_layers)]
         self.reset()
 
-    def _check_denominator(self, gains: HSMCGains) -> float:
-        den = float(gains.alphas() @ self._b)
+    @staticmethod
+    def _check_denominator(gains: HSMCGains, den: float) -> float:
         if not math.isfinite(den) or abs(den) < gains.denominator_min:
             raise LawParameterError("lambda", f"parameters lambda1, lambda2: the HSMC denominator sum(alpha_r b_r) "
                                               f"= {den:.6g} is below denominator_min = {gains.denominator_min:g}: the "
