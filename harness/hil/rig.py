@@ -451,21 +451,20 @@ class VirtualRig:
 
     # --- card operations (every one syncs the wallclock first) ------------------------------------
 
-    def _check_ao(self, channels: Sequence[int]) -> list[int]:
-        chans = as_channels(channels, "analog output")
+    @staticmethod
+    def _check_channels(channels: Sequence[int], what: str, count: int) -> list[int]:
+        chans = as_channels(channels, what)
         for c in chans:
-            if c >= ANALOG_OUTPUTS:
-                raise HILError(ErrorCode.BAD_CHANNEL, f"analog output channel {c} does not exist "
-                                                      f"(the card has 0..{ANALOG_OUTPUTS - 1})")
+            if c >= count:
+                raise HILError(ErrorCode.BAD_CHANNEL, f"{what} channel {c} does not exist "
+                                                      f"(the card has 0..{count - 1})")
         return chans
 
+    def _check_ao(self, channels: Sequence[int]) -> list[int]:
+        return self._check_channels(channels, "analog output", ANALOG_OUTPUTS)
+
     def _check_enc(self, channels: Sequence[int]) -> list[int]:
-        chans = as_channels(channels, "encoder")
-        for c in chans:
-            if c >= ENCODER_INPUTS:
-                raise HILError(ErrorCode.BAD_CHANNEL, f"encoder channel {c} does not exist "
-                                                      f"(the card has 0..{ENCODER_INPUTS - 1})")
-        return chans
+        return self._check_channels(channels, "encoder", ENCODER_INPUTS)
 
     def write_analog(self, channels: Sequence[int], volts: Sequence[float]) -> None:
         """Write analog outputs [V] (DAC-quantized; refused after a watchdog expiry)."""
