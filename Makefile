@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 VDMCHECK_VERSION := 1.1.3
 VDMCHECK_DIR := tools/vdmcheck
 
-.PHONY: all venv fmus demo test bench vdmcheck clean
+.PHONY: all venv fmus demo test lint bench vdmcheck clean
 
 all: test
 
@@ -36,11 +36,14 @@ demo: fmus
 	$(BIN)/ipcosim run single-mass-lqr --plot --out out/demo
 	@echo "out/demo/metrics.json:" && cat out/demo/metrics.json
 
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
 test: fmus vdmcheck
 	$(BIN)/python -m pytest
 
 bench: fmus
-	$(BIN)/python -m harness.bench
+	$(BIN)/python -m benchmarks.bench
 
 clean:
 	rm -rf build out

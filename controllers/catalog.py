@@ -4,7 +4,7 @@ factory that builds a law from flat parameter values -- the same values a contro
 Each law has a ``thesis`` set (the thesis's numbers, reference/thesis-data.md section 2) and,
 where the thesis's numbers do not do the task on the thesis's own model (move the motor-driven
 cart 0.05 m within 10 s, |angle| < 0.35 rad, within +-10 V), a ``tuned`` set that does
-(``controllers.tuning`` says how it was found; docs/controllers.md says why it was needed).
+(``ipcosim.controllers.tuning`` says how it was found; docs/controllers.md says why it was needed).
 
 =============  ===========================  =========================================
 law            single mass                  double mass
@@ -17,11 +17,11 @@ AdaptiveHSMC   tuned; thesis (too slow)     thesis
 =============  ===========================  =========================================
 
 The first set listed is the default: the FMU parameter defaults are its values, and the SSP
-scenarios bind it (``parameter_sets`` feeds ``harness.ssp_gen``'s ``.ssv`` files).
+scenarios bind it (``parameter_sets`` feeds ``ipcosim.harness.scenario.ssp_gen``'s ``.ssv`` files).
 
-Flat parameter names (``schema``): the law's gains as in ``controllers.laws``; ``sample_period``
+Flat parameter names (``schema``): the law's gains as in ``ipcosim.controllers.laws``; ``sample_period``
 [s]; ``voltage_limit`` [V]; for the model-based laws (LQR, HSMC, AdaptiveHSMC) the design model's
-physical constants as ``model_<name>`` (``fmus.params`` names, defaults = the plant kind's default
+physical constants as ``model_<name>`` (``ipcosim.fmus.params`` names, defaults = the plant kind's default
 preset): the controller's *belief* about the plant, independent of the plant component.
 """
 from __future__ import annotations
@@ -32,15 +32,34 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from fmus.linearize import LinearModel
-from fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, ParameterError, PlantParams, make, parameter_info
-
-from .design import (THESIS_DOUBLE_MASS_OBSERVER_FACTOR, THESIS_DOUBLE_MASS_Q, THESIS_DOUBLE_MASS_R,
-                     THESIS_SINGLE_MASS_OBSERVER_POLES, THESIS_SINGLE_MASS_R, DesignError, design_lqr,
-                     design_model, thesis_single_mass_Q)
-from .errors import ControllerParameterError
-from .laws import (LQR, PID, AdaptiveHSMC, AdaptiveSchedules, CascadeGains, CascadePID, DiscreteLaw, HSMC,
-                   HSMCGains, PIDGains, Schedule, SubsystemModel)
+from ipcosim.controllers.design import (
+    THESIS_DOUBLE_MASS_OBSERVER_FACTOR,
+    THESIS_DOUBLE_MASS_Q,
+    THESIS_DOUBLE_MASS_R,
+    THESIS_SINGLE_MASS_OBSERVER_POLES,
+    THESIS_SINGLE_MASS_R,
+    DesignError,
+    design_lqr,
+    design_model,
+    thesis_single_mass_Q,
+)
+from ipcosim.controllers.errors import ControllerParameterError
+from ipcosim.controllers.laws import (
+    HSMC,
+    LQR,
+    PID,
+    AdaptiveHSMC,
+    AdaptiveSchedules,
+    CascadeGains,
+    CascadePID,
+    DiscreteLaw,
+    HSMCGains,
+    PIDGains,
+    Schedule,
+    SubsystemModel,
+)
+from ipcosim.fmus.linearize import LinearModel
+from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, ParameterError, PlantParams, make, parameter_info
 
 LAWS = ("PID", "CascadePID", "LQR", "HSMC", "AdaptiveHSMC")
 KINDS = ("single-mass", "double-mass")
@@ -166,7 +185,7 @@ def thesis_adaptive(kind: str) -> tuple[HSMCGains, AdaptiveSchedules]:
                                 c=(None, Schedule(c[1], -0.5, 3.0), None))
 
 
-#: Tuned sets (``python -m controllers.tuning``; rounded to 3 significant digits).
+#: Tuned sets (``python -m ipcosim.controllers.tuning``; rounded to 3 significant digits).
 TUNED_CASCADE: dict[str, CascadeGains] = {
     "single-mass": CascadeGains(Kp_th=79.2, Kd_th=12.9, Kp_x=10.9, Kd_x=6.74, Ki_x=6.37),
     "double-mass": CascadeGains(Kp_th=21.99, Kd_th=3.015, Kp_x=1.255, Kd_x=6.134, Ki_x=0.4976, Kv_m=3.239),
@@ -233,8 +252,8 @@ def _state_dim(state: str) -> dict[str, int]:
 
 
 def design_states(kind: str) -> tuple[str, ...]:
-    """States of the design model (``fmus.physics`` order without the motor current)."""
-    from fmus.physics import state_names
+    """States of the design model (``ipcosim.fmus.physics`` order without the motor current)."""
+    from ipcosim.fmus.physics import state_names
     return state_names(kind)[:-1]
 
 
@@ -454,7 +473,7 @@ def set_values(law: str, kind: str, parameter_set: str) -> dict[str, Any]:
 
 
 def parameter_sets(kind: str, law: str) -> dict[str, dict[str, Any]]:
-    """``{set name: {FMU parameter: value}}`` of ``law`` on plant ``kind`` (used by ``harness.ssp_gen``)."""
+    """``{set name: {FMU parameter: value}}`` of ``law`` on plant ``kind`` (used by ``ipcosim.harness.scenario.ssp_gen``)."""
     return {name: set_values(law, kind, name) for name in PARAMETER_SETS[law][kind]}
 
 
@@ -484,7 +503,7 @@ def design_params_from(kind: str, values: Mapping[str, Any]) -> PlantParams:
 
 
 def lqr_design_from(kind: str, v: Mapping[str, Any], backend: str = "control"):
-    """The LQR design the flat values describe (``controllers.design.design_lqr``)."""
+    """The LQR design the flat values describe (``ipcosim.controllers.design.design_lqr``)."""
     states = design_states(kind)
     model = design_model(_design_params(kind, v))
     Q = np.diag([float(v[f"Q_{s}"]) for s in states])

@@ -1,16 +1,16 @@
 """FMI face of the control laws, shared by the ``controllers/fmu_<law>_<plant>.py`` scripts.
 
 Variables (DESIGN.md contract): inputs ``reference`` [m] and the plant's measured positions
-(``fmus.physics.MEASURED``); output ``voltage`` [V]; parameters = ``controllers.catalog.schema``
+(``ipcosim.fmus.physics.MEASURED``); output ``voltage`` [V]; parameters = ``ipcosim.controllers.catalog.schema``
 (every gain and weight with its unit; ``sample_period``, ``voltage_limit``; the model-based laws'
 ``model_*`` design-model constants). The LQR FMUs also publish the gains their weights imply as
 calculated parameters ``K_<state>`` and ``N``.
 
 Initialization: on leaving initialization mode the law is built from the parameters by
-``controllers.catalog.build_law`` -- the LQR redone with the ``scipy`` back end, so a changed
+``ipcosim.controllers.catalog.build_law`` -- the LQR redone with the ``scipy`` back end, so a changed
 weight gives the gains it implies -- and the output at the start time is computed from the
 inputs set during initialization (outputs correct at t = 0). A bad parameter ends there with
-fmi2Fatal and a message naming it (``fmus.fmi``).
+fmi2Fatal and a message naming it (``ipcosim.fmus.fmi``).
 
 Sampling: the output is updated once per sample instant ``t0 + k sample_period`` (k counted as an
 integer from the master's times), from the inputs current at that instant -- the inputs set just
@@ -25,12 +25,11 @@ from typing import Any
 
 import numpy as np
 
-from fmus.fmi import FmuBase, FmuError, StepFailure
-from fmus.physics import MEASURED, STATE_UNITS
-
-from .catalog import model_name, schema
-from .errors import ControllerParameterError
-from .laws import LQR, DiscreteLaw, LawInputError
+from ipcosim.controllers.catalog import model_name, schema
+from ipcosim.controllers.errors import ControllerParameterError
+from ipcosim.controllers.laws import LQR, DiscreteLaw, LawInputError
+from ipcosim.fmus.fmi import FmuBase, FmuError, StepFailure
+from ipcosim.fmus.physics import MEASURED, STATE_UNITS
 
 _INPUT_DOC = {
     "cart_position": "measured cart position (encoder)",
@@ -43,9 +42,9 @@ TICK_TOLERANCE = 1e-6
 
 
 class ControllerFmu(FmuBase):
-    """A discrete control law sampled at ``sample_period`` (``controllers.laws``)."""
+    """A discrete control law sampled at ``sample_period`` (``ipcosim.controllers.laws``)."""
 
-    #: Law name (``controllers.catalog.LAWS``) and plant kind, set by the FMU classes.
+    #: Law name (``ipcosim.controllers.catalog.LAWS``) and plant kind, set by the FMU classes.
     law: str = ""
     kind: str = ""
 
@@ -70,7 +69,7 @@ class ControllerFmu(FmuBase):
                                description=spec.description, check=None if is_bool else spec.check)
         self._gains: dict[str, float] = {}
         if self.law == "LQR":
-            from .catalog import design_states  # noqa: PLC0415
+            from ipcosim.controllers.catalog import design_states  # noqa: PLC0415
             for state in design_states(kind):
                 name = f"K_{state}"
                 unit = "V/" + STATE_UNITS[state]
@@ -88,7 +87,7 @@ class ControllerFmu(FmuBase):
                               getter=(lambda: self._gains["N"]))
 
     def setup(self) -> None:
-        from .catalog import build_law  # noqa: PLC0415
+        from ipcosim.controllers.catalog import build_law  # noqa: PLC0415
 
         values = {s.name: getattr(self, s.name) for s in self._specs}
         try:

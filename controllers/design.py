@@ -12,7 +12,7 @@ Two interchangeable back ends compute the same design:
 The design model is the plant linearized about the upright equilibrium *without* the armature
 inductance (current eliminated: the thesis's App. A.2 and B.3 models; the electrical pole at
 -Ra/La ~ -14 400 rad/s is far outside every design bandwidth and would only make the observer
-stiff). States in ``fmus.physics`` order without the current; outputs are the measured positions.
+stiff). States in ``ipcosim.fmus.physics`` order without the current; outputs are the measured positions.
 
 Design steps (thesis 3.2.2, 4.2.2, App. A.2, B.3)::
 
@@ -48,9 +48,9 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.linalg
 
-from fmus.linearize import LinearModel, linearize
-from fmus.params import PlantParams
-from .errors import ControllerParameterError
+from ipcosim.controllers.errors import ControllerParameterError
+from ipcosim.fmus.linearize import LinearModel, linearize
+from ipcosim.fmus.params import PlantParams
 
 
 class DesignError(ControllerParameterError):

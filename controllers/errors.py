@@ -1,13 +1,13 @@
 """Exception classes of the controller package.
 
 Inside a controller FMU only the ``fmus`` and ``controllers`` packages are packed (see
-``fmus.build``), so the project base class is imported when available and replaced by a
+``ipcosim.fmus.build``), so the project base class is imported when available and replaced by a
 plain ``Exception`` subclass otherwise; every error still subclasses the fitting built-in.
 """
 from __future__ import annotations
 
 try:
-    from harness.errors import IpcosimError
+    from ipcosim.harness.errors import IpcosimError
 except ImportError:  # pragma: no cover - inside an FMU
     class IpcosimError(Exception):  # type: ignore[no-redef]
         """Base of every error ipcosim reports as one line to the user."""

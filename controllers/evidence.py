@@ -1,6 +1,6 @@
 """Closed-loop evidence without the master: every law x plant x parameter set in the pure loop.
 
-``python -m controllers.evidence`` prints the metrics table (markdown) that docs/controllers.md and README.md
+``python -m ipcosim.controllers.evidence`` prints the metrics table (markdown) that docs/controllers.md and README.md
 show beside the thesis's claims; ``--update docs/controllers.md`` rewrites the table between
 the ``<!-- evidence:begin -->`` / ``<!-- evidence:end -->`` markers (a test checks the document
 holds what this module computes).
@@ -8,7 +8,7 @@ holds what this module computes).
 Experiment (the thesis's task): plant at its default preset (``thesis-ch3`` single mass,
 ``thesis-ch4`` double mass; one extra row: the long-pendulum ``thesis-appendix-a`` plant with
 its own LQR design), upright at rest at 0, reference step 0 -> 0.05 m at t = 0, 10 s, plant
-step 1 ms, law sampled at 1 ms with zero-order hold, +-10 V. Metrics: ``harness.metrics``.
+step 1 ms, law sampled at 1 ms with zero-order hold, +-10 V. Metrics: ``ipcosim.harness.metrics``.
 """
 from __future__ import annotations
 
@@ -19,10 +19,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from fmus.params import preset
-
-from .catalog import KINDS, LAWS, PARAMETER_SETS, default_preset, make_law
-from .simulate import run_loop
+from ipcosim.controllers.catalog import KINDS, LAWS, PARAMETER_SETS, default_preset, make_law
+from ipcosim.controllers.simulate import run_loop
+from ipcosim.fmus.params import preset
 
 #: The thesis's qualitative result per law and plant (reference/thesis-data.md section 2).
 THESIS_CLAIMS = {
@@ -119,7 +118,7 @@ def update(path: Path, text: str) -> bool:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m controllers.evidence", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m ipcosim.controllers.evidence", description=__doc__.splitlines()[0])
     parser.add_argument("--update", type=Path, help="rewrite the table block in this markdown file")
     args = parser.parse_args(argv)
     text = document()

@@ -1,5 +1,5 @@
 """FMU ``AdaptiveHSMCDoubleMass``: hierarchical sliding-mode control with time-scheduled gains, for the IP02 double-mass carts."""
-from controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class AdaptiveHSMCDoubleMass(ControllerFmu):

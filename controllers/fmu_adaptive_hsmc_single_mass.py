@@ -1,5 +1,5 @@
 """FMU ``AdaptiveHSMCSingleMass``: hierarchical sliding-mode control with time-scheduled gains, for the IP02 single-mass cart."""
-from controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class AdaptiveHSMCSingleMass(ControllerFmu):

@@ -1,5 +1,5 @@
 """FMU ``CascadePIDDoubleMass``: cascade PID: inner loop on the pendulum angle, outer loop on the cart position, for the IP02 double-mass carts."""
-from controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class CascadePIDDoubleMass(ControllerFmu):

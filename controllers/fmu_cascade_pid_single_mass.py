@@ -1,5 +1,5 @@
 """FMU ``CascadePIDSingleMass``: cascade PID: inner loop on the pendulum angle, outer loop on the cart position, for the IP02 single-mass cart."""
-from controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class CascadePIDSingleMass(ControllerFmu):

@@ -1,5 +1,5 @@
 """FMU ``HSMCDoubleMass``: hierarchical sliding-mode control, for the IP02 double-mass carts."""
-from controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class HSMCDoubleMass(ControllerFmu):

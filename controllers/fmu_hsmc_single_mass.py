@@ -1,5 +1,5 @@
 """FMU ``HSMCSingleMass``: hierarchical sliding-mode control, for the IP02 single-mass cart."""
-from controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class HSMCSingleMass(ControllerFmu):

@@ -1,5 +1,5 @@
 """FMU ``LQRDoubleMass``: LQR state feedback on a discrete Luenberger (current) estimator, designed at initialization, for the IP02 double-mass carts."""
-from controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class LQRDoubleMass(ControllerFmu):

@@ -1,5 +1,5 @@
 """FMU ``LQRSingleMass``: LQR state feedback on a discrete Luenberger (current) estimator, designed at initialization, for the IP02 single-mass cart."""
-from controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class LQRSingleMass(ControllerFmu):

@@ -1,5 +1,5 @@
 """FMU ``PIDDoubleMass``: the thesis's single-loop PID on the motor-cart position error, for the IP02 double-mass carts."""
-from controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class PIDDoubleMass(ControllerFmu):

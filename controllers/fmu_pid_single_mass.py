@@ -1,5 +1,5 @@
 """FMU ``PIDSingleMass``: the thesis's single-loop PID on the motor-cart position error, for the IP02 single-mass cart."""
-from controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class PIDSingleMass(ControllerFmu):

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from controllers.errors import ControllerParameterError
-from controllers.reference import check_reference, reference_at
-from fmus.fmi import FmuBase, FmuError
+from ipcosim.controllers.errors import ControllerParameterError
+from ipcosim.controllers.reference import check_reference, reference_at
+from ipcosim.fmus.fmi import FmuBase, FmuError
 
 
 class Setpoint(FmuBase):

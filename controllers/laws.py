@@ -3,7 +3,7 @@
 Every law is a small class with explicit state:
 
 * ``step(measurements, reference) -> voltage`` is called once per sample instant k T with the
-  plant's measured positions (``fmus.physics.MEASURED[kind]`` order: cart position and pendulum
+  plant's measured positions (``ipcosim.fmus.physics.MEASURED[kind]`` order: cart position and pendulum
   angle for the single mass; active cart, passive cart and pendulum angle for the double mass)
   and the reference position of the motor-driven cart; it returns the voltage to hold until the
   next instant, already limited to ``+-voltage_limit``.
@@ -16,7 +16,7 @@ A law never reads a true velocity: velocities come from filtered differentiation
 while the output is saturated in the direction the integrator pushes (conditional integration,
 the clamping anti-windup).
 
-Sign conventions (``fmus.physics``): a positive voltage pushes the motor cart towards +x; the
+Sign conventions (``ipcosim.fmus.physics``): a positive voltage pushes the motor cart towards +x; the
 pendulum angle is counter-clockwise from upright, so pushing the cart towards +x makes the
 angle grow, and the pendulum leans towards +x for a *negative* angle.
 """
@@ -28,9 +28,9 @@ from typing import Sequence
 
 import numpy as np
 
-from fmus.physics import MEASURED
-from .design import DesignError, LQRDesign, check_sample_period, output_filter
-from .errors import ControllerParameterError, IpcosimError
+from ipcosim.controllers.design import DesignError, LQRDesign, check_sample_period, output_filter
+from ipcosim.controllers.errors import ControllerParameterError, IpcosimError
+from ipcosim.fmus.physics import MEASURED
 
 KINDS = ("single-mass", "double-mass")
 G = 9.81
@@ -330,14 +330,14 @@ class CascadePID(DiscreteLaw):
 # ============================================================================================ LQR
 
 class LQR(DiscreteLaw):
-    """LQR state feedback on a discrete current estimator, ``u = sat(-K x^ + N r)`` (see ``controllers.design``).
+    """LQR state feedback on a discrete current estimator, ``u = sat(-K x^ + N r)`` (see ``ipcosim.controllers.design``).
 
     Parameters
     ----------
     kind : str
         Plant kind.
     design : LQRDesign
-        From ``controllers.design.design_lqr`` (its ``sample_period`` is the law's).
+        From ``ipcosim.controllers.design.design_lqr`` (its ``sample_period`` is the law's).
     voltage_limit : float
         [V].
     output_filter_time_constant : float
@@ -530,7 +530,7 @@ class HSMC(DiscreteLaw):
             d.reset()
 
     def _state(self, y: np.ndarray, r: float) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
-        """Design-model state estimate in error coordinates (fmus.physics order without the current),
+        """Design-model state estimate in error coordinates (ipcosim.fmus.physics order without the current),
         and the (positions, velocities) of the subsystems: pendulum, pendulum cart, (motor cart)."""
         d = self._d
         if self.kind == "single-mass":

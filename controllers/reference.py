@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-from .errors import ControllerParameterError
+from ipcosim.controllers.errors import ControllerParameterError
 
 #: ``waveform`` codes of the Setpoint FMU.
 STEP, RAMP, SQUARE = 0, 1, 2

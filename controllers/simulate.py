@@ -1,6 +1,6 @@
 """Closed loop without the master: the nonlinear plant and a discrete law in one pure loop.
 
-The plant (``fmus.plant.Plant``) advances in steps of ``plant_step`` (1 ms) with the voltage held;
+The plant (``ipcosim.fmus.plant.Plant``) advances in steps of ``plant_step`` (1 ms) with the voltage held;
 the law runs at its own ``sample_period`` (an integer multiple of ``plant_step``) and its output
 is held in between (zero-order hold). At each sample instant the law reads the measured
 positions and the reference *at that instant* (zero-delay sampling, the same order the master
@@ -13,13 +13,12 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from fmus.params import PlantParams
-from fmus.physics import MEASURED, MOTOR_CART
-from fmus.plant import Plant, PlantStepError
-from harness.errors import IpcosimError
-from harness.metrics import compute_metrics
-
-from .laws import DiscreteLaw
+from ipcosim.controllers.laws import DiscreteLaw
+from ipcosim.fmus.params import PlantParams
+from ipcosim.fmus.physics import MEASURED, MOTOR_CART
+from ipcosim.fmus.plant import Plant, PlantStepError
+from ipcosim.harness.errors import IpcosimError
+from ipcosim.harness.metrics import compute_metrics
 
 
 class LoopError(IpcosimError, ValueError):
@@ -42,7 +41,7 @@ class LoopResult:
     """
 
     time: np.ndarray
-    states: np.ndarray        # (n_samples, n_states) in fmus.physics order
+    states: np.ndarray        # (n_samples, n_states) in ipcosim.fmus.physics order
     state_names: tuple[str, ...]
     reference: np.ndarray
     voltage: np.ndarray
@@ -62,7 +61,7 @@ ENCODER_RESOLUTION = {"cart_position": 2.275e-5, "active_cart_position": 2.275e-
 def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, plant_step: float = 1e-3,
              reference: Callable[[float], float] | float = 0.05, x0: Sequence[float] | None = None,
              quantize: bool = False) -> LoopResult:
-    """Simulate the closed loop and compute its metrics (``harness.metrics``).
+    """Simulate the closed loop and compute its metrics (``ipcosim.harness.metrics``).
 
     Parameters
     ----------
@@ -77,7 +76,7 @@ def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, pla
     reference : callable or float
         ``r(t)`` [m], or a constant.
     x0 : sequence of float, optional
-        Initial plant state (``fmus.physics`` order); upright at rest at 0 by default.
+        Initial plant state (``ipcosim.fmus.physics`` order); upright at rest at 0 by default.
     quantize : bool
         Round the measurements to whole encoder counts (``ENCODER_RESOLUTION``) before the law,
         as the rig's encoders do.

@@ -1,4 +1,4 @@
-"""How the ``tuned`` parameter sets were found (reproducible: ``python -m controllers.tuning``).
+"""How the ``tuned`` parameter sets were found (reproducible: ``python -m ipcosim.controllers.tuning``).
 
 CascadePID and HSMC are, on the linearized plant with ideal derivatives, linear state
 feedbacks with a particular parameterization (plus an integrator; the HSMC's tanh is linearized). Their ``tuned`` sets minimize
@@ -13,10 +13,10 @@ damping ratio >= 0.3 and magnitude <= 40 rad/s (a bandwidth limit: encoder quant
 through the derivative filters, and a 1 ms sample period far above the loop's dynamics). Search: Nelder-Mead, first on a feasibility measure (largest real part
 minus damping margin) from the thesis's values and perturbations of them, then on J from the
 feasible points. The result is then checked on the nonlinear plant with the sampled law, its
-derivative filters and the voltage limit (``tests/test_controllers.py``, ``controllers.evidence``).
+derivative filters and the voltage limit (``tests/test_controllers.py``, ``ipcosim.controllers.evidence``).
 The search uses constraints tightened by ``TUNING_MARGIN`` (2 %) so that the optimum -- which lies
 on a constraint boundary, often as a double pole -- still meets the nominal constraints after
-rounding; the numbers in ``controllers.catalog`` are rounded to the fewest significant digits
+rounding; the numbers in ``ipcosim.controllers.catalog`` are rounded to the fewest significant digits
 (at least 3) with which they do.
 """
 from __future__ import annotations
@@ -28,9 +28,8 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import minimize
 
-from fmus.linearize import LinearModel
-
-from .laws import G, CascadeGains, HSMCGains, SubsystemModel
+from ipcosim.controllers.laws import CascadeGains, G, HSMCGains, SubsystemModel
+from ipcosim.fmus.linearize import LinearModel
 
 POSITION_SCALE = 0.01    # m
 ANGLE_SCALE = 0.05       # rad
@@ -220,10 +219,9 @@ def tune_hsmc(model: LinearModel, base: HSMCGains, models: Sequence[SubsystemMod
 
 
 def main() -> None:  # pragma: no cover - documentation aid
-    from fmus.params import preset
-
-    from .catalog import default_preset, subsystem_models, thesis_hsmc_gains
-    from .design import design_model
+    from ipcosim.controllers.catalog import default_preset, subsystem_models, thesis_hsmc_gains
+    from ipcosim.controllers.design import design_model
+    from ipcosim.fmus.params import preset
     for kind in ("single-mass", "double-mass"):
         model = design_model(preset(default_preset(kind)))
         print(kind, "cascade:", tune_cascade(model, CascadeGains(), with_motor_damping=kind == "double-mass"))

@@ -5,7 +5,7 @@ An FMU script is one file per FMU, ``fmus/fmu_<snake_model_name>.py`` or
 The class only copies values in and out; the physics or the control law lives in a
 pure module. Example::
 
-    from fmus.fmi import FmuBase, StepFailure
+    from ipcosim.fmus.fmi import FmuBase, StepFailure
 
     class Integrator(FmuBase):
         '''Integrates its input (first docstring line = modelDescription description).'''

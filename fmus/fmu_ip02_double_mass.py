@@ -1,5 +1,5 @@
 """FMU ``IP02DoubleMass``: the IP02 active cart spring-coupled to a passive cart with a pendulum (thesis ch. 4)."""
-from fmus.plant_fmu import PlantFmu
+from ipcosim.fmus.plant_fmu import PlantFmu
 
 
 class IP02DoubleMass(PlantFmu):

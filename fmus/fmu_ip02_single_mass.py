@@ -1,5 +1,5 @@
 """FMU ``IP02SingleMass``: the Quanser IP02 single-mass cart with a free pendulum (thesis ch. 3)."""
-from fmus.plant_fmu import PlantFmu
+from ipcosim.fmus.plant_fmu import PlantFmu
 
 
 class IP02SingleMass(PlantFmu):

@@ -2,10 +2,10 @@
 ``fmu_ip02_hil_double_mass.py``.
 
 The adapter stands in for a plant FMU: the same input ``voltage`` [V] and the same
-encoder-measured outputs (``fmus.physics.MEASURED``: ``cart_position``,
+encoder-measured outputs (``ipcosim.fmus.physics.MEASURED``: ``cart_position``,
 ``pendulum_angle``; or ``active_cart_position``, ``passive_cart_position``,
 ``pendulum_angle``), so a scenario swaps simulation for hardware by swapping one
-component. It drives a data-acquisition card through :mod:`harness.hil` (a real Q4 with
+component. It drives a data-acquisition card through :mod:`ipcosim.harness.hil` (a real Q4 with
 Quanser's package, or the virtual rig), at volts-and-counts level:
 
 * **start** (leaving initialization): open the card (``card_uri``), refuse a rig whose
@@ -35,8 +35,8 @@ import math
 import weakref
 from typing import Any
 
-from .fmi import FmuBase, FmuError, StepFailure
-from .physics import MEASURED, STATE_UNITS
+from ipcosim.fmus.fmi import FmuBase, FmuError, StepFailure
+from ipcosim.fmus.physics import MEASURED, STATE_UNITS
 
 #: Default card: the virtual rig of ``ipcosim rig serve`` on its default address.
 DEFAULT_CARD_URI = "q4:0@tcpip://127.0.0.1:18920"
@@ -60,7 +60,7 @@ _CHANNELS = {"cart_position": ("cart_encoder_channel", 0, "cart_calibration", CA
 
 
 def _valid_uri(value: str) -> str | None:
-    from harness.hil import HILError, parse_card_uri
+    from ipcosim.harness.hil import HILError, parse_card_uri
     try:
         parse_card_uri(value)
     except HILError as exc:
@@ -156,7 +156,7 @@ class HilFmu(FmuBase):
     # --- lifecycle ---------------------------------------------------------------------------------
 
     def setup(self) -> None:
-        from harness.hil import HILError, open_uri
+        from ipcosim.harness.hil import HILError, open_uri
 
         self._enc = [int(getattr(self, _CHANNELS[n][0])) for n in self._outputs]
         self._cal = [float(getattr(self, _CHANNELS[n][2])) for n in self._outputs]
@@ -197,7 +197,7 @@ class HilFmu(FmuBase):
         self._base_ns = None
 
     def step(self, t: float, h: float) -> None:
-        from harness.hil import ErrorCode, HILError, count_difference
+        from ipcosim.harness.hil import ErrorCode, HILError, count_difference
 
         card = self._holder.get("card")
         if card is None:

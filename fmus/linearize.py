@@ -1,7 +1,7 @@
 """Linearization of the nonlinear plants about the upright equilibrium.
 
 The Jacobians are taken from the same right-hand side the simulation integrates
-(``fmus.physics``), by central differences (step 1e-6; the model is smooth, so the
+(``ipcosim.fmus.physics``), by central differences (step 1e-6; the model is smooth, so the
 truncation error is ~1e-12 relative). Coulomb friction is left out (b = 0), as in the
 thesis: it has no derivative at rest.
 """
@@ -11,8 +11,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .params import DoubleMassParams, PlantParams, kind_of
-from .physics import MEASURED, rhs_for, rhs_no_inductance, state_names
+from ipcosim.fmus.params import DoubleMassParams, PlantParams, kind_of
+from ipcosim.fmus.physics import MEASURED, rhs_for, rhs_no_inductance, state_names
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ def linearize(params: PlantParams, inductance: bool = True) -> LinearModel:
     Parameters
     ----------
     params : SingleMassParams or DoubleMassParams
-        Physical parameters (``fmus.params.preset``).
+        Physical parameters (``ipcosim.fmus.params.preset``).
     inductance : bool
         Keep the motor current as a state (5 or 7 states). If False the inductance is
         neglected and the current eliminated algebraically (4 or 6 states), as in the
@@ -65,7 +65,7 @@ def linearize(params: PlantParams, inductance: bool = True) -> LinearModel:
     Returns
     -------
     LinearModel
-        States in ``fmus.physics`` order (current last); outputs are the measured positions.
+        States in ``ipcosim.fmus.physics`` order (current last); outputs are the measured positions.
     """
     if isinstance(params, DoubleMassParams):
         p = replace(params, b1=0.0, b2=0.0)

@@ -9,7 +9,7 @@ Every value carries its unit and its source. Sources:
   reproduce eq. 3.24, App. A.2, eq. 4.23 and App. B.3 (see ``docs/plant.md``).
 * ``assumed`` -- not given by the thesis (Coulomb friction is unknown: default 0).
 
-The plant equations (``fmus.physics``) use the parameters exactly as named here.
+The plant equations (``ipcosim.fmus.physics``) use the parameters exactly as named here.
 Derived quantities (e.g. the equivalent cart mass including the reflected rotor
 inertia) are properties, never stored twice.
 """

@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from typing import Callable, Sequence
 
-from .params import DoubleMassParams, PlantParams, SingleMassParams, kind_of
+from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, kind_of
 
 SINGLE_STATES = ("cart_position", "cart_velocity", "pendulum_angle", "pendulum_velocity", "motor_current")
 DOUBLE_STATES = ("active_cart_position", "active_cart_velocity", "passive_cart_position",

@@ -6,10 +6,17 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .integrator import FastETDRK4
-from .params import DoubleMassParams, PlantParams, SingleMassParams, kind_of, validate
-from .physics import (MEASURED, clip_voltage, rhs_for, single_mass_from_momentum, single_mass_momentum_rhs,
-                      single_mass_to_momentum, state_names)
+from ipcosim.fmus.integrator import FastETDRK4
+from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, kind_of, validate
+from ipcosim.fmus.physics import (
+    MEASURED,
+    clip_voltage,
+    rhs_for,
+    single_mass_from_momentum,
+    single_mass_momentum_rhs,
+    single_mass_to_momentum,
+    state_names,
+)
 
 
 class PlantStepError(FloatingPointError):
@@ -17,7 +24,7 @@ class PlantStepError(FloatingPointError):
 
 
 def single_mass_internal_rhs(p: SingleMassParams) -> Callable[..., tuple[float, ...]]:
-    """``f(xc, p1, th, p2, i, vA)``: ``fmus.physics.single_mass_momentum_rhs`` with the parameters folded
+    """``f(xc, p1, th, p2, i, vA)``: ``ipcosim.fmus.physics.single_mass_momentum_rhs`` with the parameters folded
     into constants and the voltage already clipped (same arithmetic; checked equal in the tests)."""
     sin, cos, tanh = math.sin, math.cos, math.tanh
     ml = 0.5 * p.Mp * p.Lp
@@ -40,7 +47,7 @@ def single_mass_internal_rhs(p: SingleMassParams) -> Callable[..., tuple[float, 
 
 
 def double_mass_internal_rhs(p: DoubleMassParams) -> Callable[..., tuple[float, ...]]:
-    """``f(xa, xa', xc, xc', th, th', i, vA)``: ``fmus.physics.double_mass_rhs`` with the parameters folded
+    """``f(xa, xa', xc, xc', th, th', i, vA)``: ``ipcosim.fmus.physics.double_mass_rhs`` with the parameters folded
     into constants and the voltage already clipped (same arithmetic; checked equal in the tests)."""
     sin, cos, tanh = math.sin, math.cos, math.tanh
     K, kf, ke, ra, la = p.K, p.force_per_amp, p.emf_per_velocity, p.Ra, p.La
@@ -71,10 +78,10 @@ def double_mass_internal_rhs(p: DoubleMassParams) -> Callable[..., tuple[float, 
 class Plant:
     """Nonlinear IP02 plant advanced in fixed steps with the voltage held over each step.
 
-    The integrator is ETDRK4 (``fmus.integrator``) with the stiff linear part taken at the
+    The integrator is ETDRK4 (``ipcosim.fmus.integrator``) with the stiff linear part taken at the
     upright equilibrium, on an internal state in which the motor current enters the slow
     equations with constant coefficients: the momentum form ``[xc, p1, th, p2, i]`` for the
-    single mass (``fmus.physics``), the plain state for the double mass (there the current
+    single mass (``ipcosim.fmus.physics``), the plain state for the double mass (there the current
     drives only the active cart, whose mass matrix is constant).
 
     Parameters
@@ -82,7 +89,7 @@ class Plant:
     params : SingleMassParams or DoubleMassParams
         Physical parameters (validated on construction).
     x0 : sequence of float, optional
-        Initial state in ``fmus.physics.state_names(kind)`` order; zeros by default.
+        Initial state in ``ipcosim.fmus.physics.state_names(kind)`` order; zeros by default.
     t0 : float
         Initial time [s].
     """
@@ -191,6 +198,6 @@ class Plant:
         return dict(zip(self.state_names, self._xl))
 
     def measured(self) -> tuple[float, ...]:
-        """The encoder-measured positions (``fmus.physics.MEASURED``)."""
+        """The encoder-measured positions (``ipcosim.fmus.physics.MEASURED``)."""
         v = self.values()
         return tuple(v[n] for n in MEASURED[self.kind])

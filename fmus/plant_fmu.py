@@ -1,9 +1,9 @@
 """FMI face of the IP02 plants, shared by ``fmu_ip02_single_mass.py`` and ``fmu_ip02_double_mass.py``.
 
 Variables (contract in DESIGN.md): input ``voltage`` [V]; outputs = the full state, the
-encoder-measured positions first (``fmus.physics.MEASURED``), then the velocities and
+encoder-measured positions first (``ipcosim.fmus.physics.MEASURED``), then the velocities and
 ``motor_current``; parameters ``initial_<state>`` and every physical constant of
-``fmus.params`` under its own name, unit and description (defaults = the plant's default
+``ipcosim.fmus.params`` under its own name, unit and description (defaults = the plant's default
 thesis preset; the long-pendulum preset ``thesis-appendix-a`` is ``Lp = 0.6413``).
 
 No output depends directly on ``voltage`` (the voltage acts through the integrated
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from .fmi import FmuBase, StepFailure
-from .params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, make, parameter_info
-from .physics import MEASURED, STATE_UNITS, state_names
-from .plant import Plant, PlantStepError
+from ipcosim.fmus.fmi import FmuBase, StepFailure
+from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, make, parameter_info
+from ipcosim.fmus.physics import MEASURED, STATE_UNITS, state_names
+from ipcosim.fmus.plant import Plant, PlantStepError
 
 _STATE_DOC = {
     "cart_position": "cart position (encoder), positive to the right",
@@ -33,7 +33,7 @@ _STATE_DOC = {
 
 
 class PlantFmu(FmuBase):
-    """Nonlinear IP02 plant advanced by ``fmus.plant.Plant`` (ETDRK4), voltage held over each step."""
+    """Nonlinear IP02 plant advanced by ``ipcosim.fmus.plant.Plant`` (ETDRK4), voltage held over each step."""
 
     #: 'single-mass' or 'double-mass' (set by the FMU classes).
     kind: str = ""

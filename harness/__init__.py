@@ -2,10 +2,10 @@
 
 Public API (imported lazily, so that ``import harness`` stays cheap)::
 
-    harness.run(scenario_or_path, stop_time=None, step=None, overrides=None, swaps=None, ...) -> Result
-    harness.prepare(scenario_or_path, ...) -> Prepared      # .run(overrides=...) many times
+    ipcosim.harness.run(scenario_or_path, stop_time=None, step=None, overrides=None, swaps=None, ...) -> Result
+    ipcosim.harness.prepare(scenario_or_path, ...) -> Prepared      # .run(overrides=...) many times
     harness.Result, harness.SimulationError
-    harness.swap_aliases                                     # --swap alias registry
+    ipcosim.harness.swap_aliases                                     # --swap alias registry
     harness.Observer, harness.Manipulator                    # extension points
 """
 from __future__ import annotations
@@ -13,12 +13,12 @@ from __future__ import annotations
 from typing import Any
 
 _EXPORTS = {
-    "run": "harness.api", "prepare": "harness.api", "Prepared": "harness.api",
-    "Result": "harness.results", "SimulationError": "harness.results",
-    "swap_aliases": "harness.system", "register_swap_alias": "harness.system", "SwapTarget": "harness.system",
-    "SwapRequest": "harness.system",
-    "Observer": "harness.observers", "Manipulator": "harness.manipulators",
-    "load_scenario": "harness.ssp",
+    "run": "ipcosim.harness.api", "prepare": "ipcosim.harness.api", "Prepared": "ipcosim.harness.api",
+    "Result": "ipcosim.harness.master.results", "SimulationError": "ipcosim.harness.master.results",
+    "swap_aliases": "ipcosim.harness.scenario.system", "register_swap_alias": "ipcosim.harness.scenario.system", "SwapTarget": "ipcosim.harness.scenario.system",
+    "SwapRequest": "ipcosim.harness.scenario.system",
+    "Observer": "ipcosim.harness.master.observers", "Manipulator": "ipcosim.harness.master.manipulators",
+    "load_scenario": "ipcosim.harness.scenario.ssp",
 }
 
 __all__ = sorted(_EXPORTS)

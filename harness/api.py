@@ -3,12 +3,12 @@ scenario (parameter sweeps) that share the loaded, checked and extracted FMUs.
 
 Example::
 
-    import harness
+    import ipcosim.harness
 
-    result = harness.run("single-mass-lqr", stop_time=5.0, overrides={"plant.Mp": 0.2})
+    result = ipcosim.harness.run("single-mass-lqr", stop_time=5.0, overrides={"plant.Mp": 0.2})
     result.metrics["settling_time_s"], result["plant.cart_position"]
 
-    with harness.prepare("double-mass-hsmc") as prepared:      # load and extract once
+    with ipcosim.harness.prepare("double-mass-hsmc") as prepared:      # load and extract once
         for mp in (0.10, 0.12, 0.14):
             r = prepared.run(overrides={"plant.Mp": mp}, raise_on_error=False)
 """
@@ -22,15 +22,15 @@ import zipfile
 from pathlib import Path, PurePosixPath
 from typing import Any, Mapping, Sequence
 
-from .algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
-from .errors import UsageError
-from .execution import Execution, SlaveFactory
-from .manipulators import Manipulator
-from .observers import Observer, Progress, realtime_observer
-from .results import Result, SimulationError
-from .slave import FMUSlave, load_library
-from .ssp import Scenario, load_scenario, select_parameter_set
-from .system import SwapTarget, System, bind, warn_all, with_overrides
+from ipcosim.harness.errors import UsageError
+from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
+from ipcosim.harness.master.execution import Execution, SlaveFactory
+from ipcosim.harness.master.manipulators import Manipulator
+from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
+from ipcosim.harness.master.results import Result, SimulationError
+from ipcosim.harness.master.slave import FMUSlave, load_library
+from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
+from ipcosim.harness.scenario.system import SwapTarget, System, bind, warn_all, with_overrides
 
 
 class Prepared:
@@ -162,7 +162,7 @@ class Prepared:
             overrides: Mapping[str, Any] | None = None, *, out_dir: str | os.PathLike[str] | None = None,
             variables: Sequence[str] | None = None, plot: bool = False, raise_on_error: bool = True,
             **kwargs: Any) -> Result:
-        """Run once; see :func:`harness.run` for the parameters.
+        """Run once; see :func:`ipcosim.harness.run` for the parameters.
 
         Raises
         ------
@@ -255,7 +255,7 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
     progress : bool
         Show a progress bar on stderr (a terminal) for runs longer than a second.
     observers, manipulators : sequences
-        Extra observers and manipulators (see :mod:`harness.observers`, :mod:`harness.manipulators`).
+        Extra observers and manipulators (see :mod:`ipcosim.harness.master.observers`, :mod:`ipcosim.harness.master.manipulators`).
     record_every : int
         Record every n-th communication point.
     raise_on_error : bool

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from harness.errors import IpcosimError
+from ipcosim.harness.errors import IpcosimError
 
 #: |angle| limit of the task [rad] (about 20 degrees, the lab software's pendulum limit).
 UPRIGHT_LIMIT_RAD = 0.35

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .results import Result
+    from ipcosim.harness.master.results import Result
 
 POSITIONS = (("plant.cart_position", "cart"), ("plant.active_cart_position", "active cart"),
              ("plant.passive_cart_position", "passive cart"))

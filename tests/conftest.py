@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="session")
 def plant_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """``{"single-mass": IP02SingleMass.fmu, "double-mass": IP02DoubleMass.fmu}`` built for this session."""
-    from fmus.build import build_all
+    from ipcosim.fmus.build import build_all
 
     out = tmp_path_factory.mktemp("plant-fmus")
     scripts = [ROOT / "fmus" / "fmu_ip02_single_mass.py", ROOT / "fmus" / "fmu_ip02_double_mass.py"]

@@ -9,8 +9,15 @@ from pathlib import Path
 from typing import Any
 
 from fmpy import extract, read_model_description
-from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, free)
+from fmpy.fmi2 import (
+    FMU2Slave,
+    calloc,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+    free,
+)
 from fmpy.logging import addLoggerProxy
 
 _COUNTER = [0]
@@ -85,3 +92,27 @@ def assert_vdmcheck_clean(fmu: Path) -> None:
         pytest.fail("VDMCheck2 missing: run `make vdmcheck`")
     out = subprocess.run([str(script), str(fmu)], capture_output=True, text=True, timeout=300)
     assert "No errors found" in out.stdout, out.stdout + out.stderr
+
+
+def loaded_copies(module_suffix: str) -> list:
+    """Every loaded copy of a project module: the host's (``ipcosim.<suffix>``) and each FMU's
+    private one (``_ipcosim_<model>_<hash>.<suffix>``, see ``ipcosim.fmus.build``)."""
+    import sys
+
+    return [m for name, m in list(sys.modules.items())
+            if m is not None and (name == f"ipcosim.{module_suffix}"
+                                  or (name.startswith("_ipcosim_") and name.split(".", 1)[-1] == module_suffix))]
+
+
+def open_tcpip_cards() -> list:
+    """The TCP/IP cards open in this process, in the host or inside any FMU."""
+    return [card for m in loaded_copies("harness.hil.tcpip") for card in list(m.OPEN_CARDS)]
+
+
+def private_resource(names: list[str], path: str) -> bool:
+    """True if the FMU archive listing ``names`` carries ``path`` (e.g. ``fmus/fmi.py``) in its
+    private runtime package ``resources/_ipcosim_<model>_<hash>/``."""
+    import re
+
+    pattern = re.compile(r"resources/_ipcosim_[a-z0-9_]+_[0-9a-f]{10}/" + re.escape(path) + "$")
+    return any(pattern.match(n) for n in names)

@@ -1,13 +1,13 @@
 """Mock components for testing the master without FMUs: models, Python slaves and a builder
-that turns them into a bound System (as harness.system.bind would from an SSD and FMUs)."""
+that turns them into a bound System (as ipcosim.harness.scenario.system.bind would from an SSD and FMUs)."""
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from harness.slave import DISCARD, ERROR, OK, PySlave
-from harness.ssp import Component, Connection, Connector, Experiment, Scenario
-from harness.system import Instance, Model, System, Variable, bind
+from ipcosim.harness.master.slave import DISCARD, ERROR, OK, PySlave
+from ipcosim.harness.scenario.ssp import Component, Connection, Connector, Experiment, Scenario
+from ipcosim.harness.scenario.system import Instance, Model, System, Variable, bind
 
 
 def model(name: str, inputs: Sequence[str] = (), outputs: Sequence[str] = (),
@@ -34,7 +34,7 @@ def system(components: Sequence[tuple[str, Model]], connections: Sequence[tuple[
            stop_time: float = 1.0, step: float = 0.01,
            bindings: dict[str, dict[str, float]] | None = None, units: dict | None = None) -> System:
     """A System of mock models; ``connections`` as ("a.y", "b.u") pairs."""
-    from harness.ssp import Parameter, ParameterSet
+    from ipcosim.harness.scenario.ssp import Parameter, ParameterSet
 
     comps = []
     for name, m in components:
@@ -96,7 +96,7 @@ class Factory:
         slave = Behaviour(instance, **spec)
         if instance.name in self.fail_instantiate:
             def boom() -> None:
-                from harness.slave import SlaveError
+                from ipcosim.harness.master.slave import SlaveError
 
                 slave.calls.append("instantiate-failed")
                 raise SlaveError(f"component {instance.name}: fmi2Instantiate failed")

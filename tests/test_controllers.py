@@ -9,17 +9,42 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from controllers.catalog import (LAWS, PARAMETER_SETS, TUNED_CASCADE, TUNED_HSMC, build_law, default_preset,
-                                 make_law, parameter_sets, schema, set_values, subsystem_models,
-                                 thesis_adaptive, thesis_hsmc_gains, thesis_subsystem_models)
-from controllers.design import design_model
-from controllers.errors import ControllerParameterError
-from controllers.laws import (PID, AdaptiveHSMC, AdaptiveSchedules, FilteredDerivative, HSMC, HSMCGains,
-                              LawInputError, LawParameterError, PIDGains, Schedule, SubsystemModel, saturate)
-from controllers.reference import RAMP, SQUARE, STEP, reference_at
-from controllers.simulate import LoopError, run_loop
-from controllers.tuning import MIN_DAMPING, MIN_DECAY, cascade_feedback, hsmc_feedback, step_cost
-from fmus.params import preset
+from ipcosim.controllers.catalog import (
+    LAWS,
+    PARAMETER_SETS,
+    TUNED_CASCADE,
+    TUNED_HSMC,
+    build_law,
+    default_preset,
+    make_law,
+    parameter_sets,
+    schema,
+    set_values,
+    subsystem_models,
+    thesis_adaptive,
+    thesis_hsmc_gains,
+    thesis_subsystem_models,
+)
+from ipcosim.controllers.design import design_model
+from ipcosim.controllers.errors import ControllerParameterError
+from ipcosim.controllers.laws import (
+    HSMC,
+    PID,
+    AdaptiveHSMC,
+    AdaptiveSchedules,
+    FilteredDerivative,
+    HSMCGains,
+    LawInputError,
+    LawParameterError,
+    PIDGains,
+    Schedule,
+    SubsystemModel,
+    saturate,
+)
+from ipcosim.controllers.reference import RAMP, SQUARE, STEP, reference_at
+from ipcosim.controllers.simulate import LoopError, run_loop
+from ipcosim.controllers.tuning import MIN_DAMPING, MIN_DECAY, cascade_feedback, hsmc_feedback, step_cost
+from ipcosim.fmus.params import preset
 
 KINDS = ["single-mass", "double-mass"]
 TOL = 0.05 * 0.02  # the settling band: 2 % of the 0.05 m step
@@ -212,7 +237,7 @@ def test_thesis_hsmc_single_mass_has_a_slow_linear_closed_loop() -> None:
     """The linear analysis explains the thesis set's slowness: a pole pair near -0.32 rad/s."""
     model = design_model(plant("single-mass"))
     F, Fz, S = hsmc_feedback(model, thesis_hsmc_gains("single-mass"), subsystem_models(model))
-    from controllers.tuning import augmented_closed_loop
+    from ipcosim.controllers.tuning import augmented_closed_loop
     ev = np.linalg.eigvals(augmented_closed_loop(model, F, Fz, S))
     assert np.max(ev.real) < 0
     assert -0.5 < np.max(ev.real) < -0.1

@@ -1,4 +1,4 @@
-"""controllers.design: the thesis's LQR designs reproduced, both back ends agree, the discrete
+"""ipcosim.controllers.design: the thesis's LQR designs reproduced, both back ends agree, the discrete
 estimator has the mapped poles, and bad design inputs are rejected naming the input."""
 from __future__ import annotations
 
@@ -7,14 +7,27 @@ import math
 import numpy as np
 import pytest
 
-from controllers.catalog import build_law, lqr_design_for, make_law, schema
-from controllers.design import (THESIS_DOUBLE_MASS_K, THESIS_DOUBLE_MASS_Q, THESIS_DOUBLE_MASS_R,
-                                THESIS_SINGLE_MASS_OBSERVER_POLES, THESIS_SINGLE_MASS_R, DesignError, check_weights,
-                                design_lqr, design_model, output_filter, place_gain, reference_gain,
-                                sampled_closed_loop_poles, thesis_single_mass_Q, zoh)
-from controllers.errors import ControllerParameterError
-from fmus.linearize import LinearModel
-from fmus.params import preset
+from ipcosim.controllers.catalog import build_law, lqr_design_for, make_law, schema
+from ipcosim.controllers.design import (
+    THESIS_DOUBLE_MASS_K,
+    THESIS_DOUBLE_MASS_Q,
+    THESIS_DOUBLE_MASS_R,
+    THESIS_SINGLE_MASS_OBSERVER_POLES,
+    THESIS_SINGLE_MASS_R,
+    DesignError,
+    check_weights,
+    design_lqr,
+    design_model,
+    output_filter,
+    place_gain,
+    reference_gain,
+    sampled_closed_loop_poles,
+    thesis_single_mass_Q,
+    zoh,
+)
+from ipcosim.controllers.errors import ControllerParameterError
+from ipcosim.fmus.linearize import LinearModel
+from ipcosim.fmus.params import preset
 
 
 def test_double_mass_K_reproduces_the_thesis_within_0_1_percent() -> None:

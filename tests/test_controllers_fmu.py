@@ -10,14 +10,14 @@ from xml.etree import ElementTree
 
 import numpy as np
 import pytest
+from fmi_helpers import assert_vdmcheck_clean, instantiate
 from fmpy.validation import validate_fmu
 
-from controllers.catalog import KINDS, LAWS, make_law, model_name, schema
-from controllers.reference import reference_at
-from controllers.simulate import run_loop
-from fmi_helpers import assert_vdmcheck_clean, instantiate
-from fmus.params import DEFAULT_PRESET, preset
-from fmus.physics import MEASURED
+from ipcosim.controllers.catalog import KINDS, LAWS, make_law, model_name, schema
+from ipcosim.controllers.reference import reference_at
+from ipcosim.controllers.simulate import run_loop
+from ipcosim.fmus.params import DEFAULT_PRESET, preset
+from ipcosim.fmus.physics import MEASURED
 
 pytestmark = pytest.mark.integration
 
@@ -30,7 +30,7 @@ H = 1e-3
 @pytest.fixture(scope="session")
 def controller_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """Every controller FMU and Setpoint, built for this session: ``{model name: path}``."""
-    from fmus.build import build_all
+    from ipcosim.fmus.build import build_all
 
     out = tmp_path_factory.mktemp("controller-fmus")
     results = build_all(out, scripts=sorted((ROOT / "controllers").glob("fmu_*.py")))
@@ -264,8 +264,8 @@ def test_bad_parameter_is_an_fmi_error_naming_it(controller_fmus, model: str, pa
 
 def test_hsmc_denominator_case_is_really_degenerate() -> None:
     """The HSMCSingleMass case above: lambda1 b1 + lambda2 b2 ~ 0 for the default design model."""
-    from controllers.catalog import subsystem_models
-    from controllers.design import design_model
+    from ipcosim.controllers.catalog import subsystem_models
+    from ipcosim.controllers.design import design_model
 
     b = [m.b for m in subsystem_models(design_model(preset("thesis-ch3")))]
     assert abs(-0.22473333333333334 * b[0] + b[1]) < 1e-3

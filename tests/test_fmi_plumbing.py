@@ -1,4 +1,4 @@
-"""fmus.fmi (the shared FMU plumbing over pythonfmu 0.7.0) and fmus.build: model description
+"""ipcosim.fmus.fmi (the shared FMU plumbing over pythonfmu 0.7.0) and ipcosim.fmus.build: model description
 content, the status codes and log messages an importer sees, several instances per process,
 tunable/fixed parameters, and the incremental build."""
 from __future__ import annotations
@@ -9,12 +9,12 @@ from pathlib import Path
 from xml.etree import ElementTree
 
 import pytest
+from fmi_helpers import assert_vdmcheck_clean, instantiate, private_resource
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from fmi_helpers import assert_vdmcheck_clean, instantiate
-from fmus.build import BuildError, build_all, check_fmu
-from fmus.fmi import FmuBase, FmuError, parse_unit
+from ipcosim.fmus.build import BuildError, build_all, check_fmu
+from ipcosim.fmus.fmi import FmuBase, FmuError, parse_unit
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBE = Path(__file__).resolve().parent / "data" / "fmu_plumbing_probe.py"
@@ -127,7 +127,7 @@ def start(fmu: Path, unzip: Path, **params: float):
 def test_probe_fmu_is_valid(probe_fmu: Path) -> None:
     assert validate_fmu(str(probe_fmu)) == []
     names = zipfile.ZipFile(probe_fmu).namelist()
-    assert "resources/fmus/fmi.py" in names
+    assert private_resource(names, "fmus/fmi.py") and not any(n.startswith("resources/fmus/") for n in names)
     assert not any("__pycache__" in n for n in names)
 
 
@@ -272,7 +272,7 @@ def test_check_fmu_rejects_undefined_units(tmp_path: Path) -> None:
 
 
 def test_discover_finds_the_fmu_scripts() -> None:
-    from fmus.build import discover
+    from ipcosim.fmus.build import discover
     scripts = discover(ROOT)
     names = {s.name for s in scripts}
     assert {"fmu_ip02_single_mass.py", "fmu_ip02_double_mass.py"} <= names

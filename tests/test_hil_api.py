@@ -7,10 +7,10 @@ import types
 import numpy as np
 import pytest
 
-from harness.errors import IpcosimError
-from harness.hil import ErrorCode, HILError, open_card, open_uri, parse_card_uri
-from harness.hil.inproc import VirtualCard, get_rig, register_rig, unregister_rig
-from harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.harness.errors import IpcosimError
+from ipcosim.harness.hil import ErrorCode, HILError, open_card, open_uri, parse_card_uri
+from ipcosim.harness.hil.inproc import VirtualCard, get_rig, register_rig, unregister_rig
+from ipcosim.harness.hil.rig import RigConfig, VirtualRig
 
 
 @pytest.mark.parametrize("uri, expected", [
@@ -166,7 +166,7 @@ def test_inproc_creates_a_rig_from_the_query():
 
 
 def test_swap_alias_picks_the_adapter_by_plant_kind(tmp_path, monkeypatch):
-    from harness.hil.swap import HilSwapError, card_clock, find_adapter, plant_kind
+    from ipcosim.harness.hil.swap import HilSwapError, card_clock, find_adapter, plant_kind
 
     assert plant_kind("x", "IP02SingleMass", set()) == "single-mass"
     assert plant_kind("x", "IP02DoubleMass", set()) == "double-mass"

@@ -9,13 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from harness.hil import ErrorCode, HILError, open_card
+from ipcosim.harness.hil import ErrorCode, HILError, open_card
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def ipcosim(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "harness.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", *args], capture_output=True, text=True,
                           timeout=timeout, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)))
 
 
@@ -24,7 +24,7 @@ def rig_process():
     procs = []
 
     def start(*extra: str) -> tuple[subprocess.Popen, int]:
-        proc = subprocess.Popen([sys.executable, "-m", "harness.cli", "rig", "serve", "--port", "0",
+        proc = subprocess.Popen([sys.executable, "-m", "ipcosim.harness.cli", "rig", "serve", "--port", "0",
                                  "--duration", "120", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)))
         procs.append(proc)

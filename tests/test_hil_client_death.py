@@ -12,15 +12,15 @@ from pathlib import Path
 
 import pytest
 
-from harness.hil.rig import RigConfig, VirtualRig
-from harness.hil.server import RigServer
+from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.harness.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT = 0.5   # [s] long enough that a stall of a loaded VM does not trip it before the test does
 
 CLIENT = """
 import sys, time
-from harness.hil import open_card
+from ipcosim.harness.hil import open_card
 card = open_card("q4", sys.argv[1], timeout=1.0)
 card.write_analog([0], [0.0])
 card.watchdog_set_analog_expiration_state([0], [0.0])

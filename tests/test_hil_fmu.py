@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fmi_helpers import assert_vdmcheck_clean, instantiate, open_tcpip_cards, private_resource
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from fmi_helpers import assert_vdmcheck_clean, instantiate
-from harness.hil.inproc import register_rig, unregister_rig
-from harness.hil.rig import RigConfig, VirtualRig
-from harness.hil.server import RigServer
+from ipcosim.harness.hil.inproc import register_rig, unregister_rig
+from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.harness.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
 CART_RES, PEND_RES = 2.275e-5, 1.534e-3        # thesis-data.md, encoders
@@ -35,7 +35,7 @@ pytestmark = pytest.mark.integration
 
 @pytest.fixture(scope="session")
 def hil_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    from fmus.build import build_all
+    from ipcosim.fmus.build import build_all
 
     out = tmp_path_factory.mktemp("hil-fmus")
     scripts = [ROOT / "fmus" / "fmu_ip02_hil_single_mass.py", ROOT / "fmus" / "fmu_ip02_hil_double_mass.py"]
@@ -137,7 +137,8 @@ def test_adapter_has_exactly_the_plants_connectors(kind, hil_fmus, plant_fmus):
 def test_adapter_passes_validate_fmu(kind, hil_fmus):
     assert validate_fmu(str(hil_fmus[kind])) == []
     names = zipfile.ZipFile(hil_fmus[kind]).namelist()
-    assert "resources/harness/hil/api.py" in names and not any("__pycache__" in n for n in names)
+    assert private_resource(names, "harness/hil/api.py") and not any("__pycache__" in n for n in names)
+    assert not private_resource(names, "harness/hil/server.py") and not private_resource(names, "harness/cli/__init__.py")
 
 
 @pytest.mark.parametrize("kind", ["single-mass", "double-mass"])
@@ -322,13 +323,12 @@ def test_second_adapter_is_refused_while_the_first_controls_the_rig(hil_fmus, un
 
 
 def test_garbage_on_the_adapters_connection_is_dropped_and_the_session_goes_on(hil_fmus, unzipped):
-    from harness.hil.protocol import Msg, encode_frame
-    from harness.hil.tcpip import OPEN_CARDS
+    from ipcosim.harness.hil.protocol import Msg, encode_frame
 
     with RigServer(VirtualRig(RigConfig(pendulum_limit=None)), "127.0.0.1", 0) as srv:
         hil = start_adapter(hil_fmus["single-mass"], unzipped(hil_fmus["single-mass"]), f"q4:{srv.uri}")
         assert init_status(hil) == OK
-        card = next(c for c in OPEN_CARDS if c.card_id == srv.uri)
+        card = next(c for c in open_tcpip_cards() if c.card_id == srv.uri)
         for k in range(200):
             if k == 50:
                 card._sock.send(b"\x13\x37 not a frame")

@@ -8,13 +8,24 @@ import time
 
 import pytest
 
-from harness.hil import ErrorCode, HILError, open_card
-from harness.hil.protocol import (HEADER_SIZE, MAGIC, MAX_PAYLOAD, PROTOCOL_VERSION, REPLY_BIT, FrameDecoder, Msg,
-                                  Reader, encode_frame, pack_channels, pack_doubles, pack_text)
-from harness.hil.rig import RigConfig, VirtualRig
-from harness.hil.server import RigServer
-from harness.hil.tcpip import TcpipCard
-
+from ipcosim.harness.hil import ErrorCode, HILError, open_card
+from ipcosim.harness.hil.protocol import (
+    HEADER_SIZE,
+    MAGIC,
+    MAX_PAYLOAD,
+    PROTOCOL_VERSION,
+    REPLY_BIT,
+    FrameDecoder,
+    Msg,
+    Reader,
+    encode_frame,
+    pack_channels,
+    pack_doubles,
+    pack_text,
+)
+from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.harness.hil.server import RigServer
+from ipcosim.harness.hil.tcpip import TcpipCard
 
 # --- framing (pure) -----------------------------------------------------------------------------
 
@@ -73,7 +84,7 @@ def test_decoder_never_raises_on_random_bytes():
 
 
 def test_reader_rejects_short_and_trailing_payloads():
-    from harness.hil.protocol import DecodeError
+    from ipcosim.harness.hil.protocol import DecodeError
     r = Reader(pack_channels([0, 1]))
     assert r.channels() == [0, 1]
     r.end()

@@ -6,12 +6,19 @@ import math
 import numpy as np
 import pytest
 
-from fmus.params import preset
-from fmus.plant import Plant
-from harness.hil import ErrorCode, HILError, count_difference
-from harness.hil.api import INT32_MAX
-from harness.hil.rig import (CART_M_PER_COUNT, DAC_LSB, END_STOP_M, PENDULUM_RAD_PER_COUNT, RigConfig, VirtualRig,
-                             dac_quantize)
+from ipcosim.fmus.params import preset
+from ipcosim.fmus.plant import Plant
+from ipcosim.harness.hil import ErrorCode, HILError, count_difference
+from ipcosim.harness.hil.api import INT32_MAX
+from ipcosim.harness.hil.rig import (
+    CART_M_PER_COUNT,
+    DAC_LSB,
+    END_STOP_M,
+    PENDULUM_RAD_PER_COUNT,
+    RigConfig,
+    VirtualRig,
+    dac_quantize,
+)
 
 # Thesis facts (thesis-data.md, section 1 table and section 3)
 THESIS_CART_RES = 2.275e-5
@@ -103,7 +110,7 @@ def test_set_encoder_counts_zeroes_at_the_current_position():
 
 
 def test_lockstep_rig_steps_the_plant_physics_exactly():
-    """One source of truth: the rig's motion is fmus.plant.Plant, step for step."""
+    """One source of truth: the rig's motion is ipcosim.fmus.plant.Plant, step for step."""
     r = rig()
     plant = Plant(preset("thesis-ch3"))
     volts = [k * LSB for k in (128, 128, -256, 0, 512, 64)]   # DAC-exact values

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.hil.rig import RigConfig, VirtualRig
-from harness.hil.server import RigServer
+from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.harness.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
 CART_RES, PEND_RES = 2.275e-5, 1.534e-3          # thesis-data.md, encoders
@@ -33,13 +33,13 @@ RES = {"cart_position": CART_RES, "active_cart_position": CART_RES, "passive_car
 
 # The open-loop scenarios leave plant.voltage unconnected on purpose (manipulators drive it).
 pytestmark = [pytest.mark.integration,
-              pytest.mark.filterwarnings("ignore:.*plant.voltage is not connected:harness.system.UnconnectedInputWarning")]
+              pytest.mark.filterwarnings("ignore:.*plant.voltage is not connected:ipcosim.harness.scenario.system.UnconnectedInputWarning")]
 
 
 @pytest.fixture(scope="session")
 def fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Every FMU of the project, built for this session."""
-    from fmus.build import build_all
+    from ipcosim.fmus.build import build_all
 
     out = tmp_path_factory.mktemp("all-fmus")
     build_all(out)
@@ -70,7 +70,7 @@ def serve(**config) -> RigServer:
 
 
 def ipcosim(args: list[str], env: dict, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "harness.cli", *args], capture_output=True, text=True, env=env,
+    return subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", *args], capture_output=True, text=True, env=env,
                           timeout=timeout, cwd=ROOT)
 
 
@@ -79,7 +79,7 @@ def error_lines(stderr: str) -> list[str]:
 
 
 def volt_schedule(n_steps: int):
-    from harness.manipulators import ScheduledValues
+    from ipcosim.harness.master.manipulators import ScheduledValues
 
     changes = []
     for k in range(0, n_steps, 100):
@@ -93,14 +93,14 @@ def volt_schedule(n_steps: int):
 @pytest.mark.parametrize("kind", ["single-mass", "double-mass"])
 def test_open_loop_voltage_sequence_through_the_swap_matches_the_plant_within_one_count(kind, env, tmp_path,
                                                                                          monkeypatch):
-    import harness
+    import ipcosim.harness
 
     scn = open_loop_scenario(kind, tmp_path / "scn")
     n = 1500
-    sim = harness.run(scn, stop_time=n * 1e-3, manipulators=[volt_schedule(n)])
+    sim = ipcosim.harness.run(scn, stop_time=n * 1e-3, manipulators=[volt_schedule(n)])
     with serve(plant=kind, cart_limit=None, pendulum_limit=None) as srv:
         monkeypatch.setenv("IPCOSIM_HIL_URI", f"q4:{srv.uri}")
-        hil = harness.run(scn, stop_time=n * 1e-3, swaps={"plant": "hil"}, manipulators=[volt_schedule(n)])
+        hil = ipcosim.harness.run(scn, stop_time=n * 1e-3, swaps={"plant": "hil"}, manipulators=[volt_schedule(n)])
         assert srv.rig.time() == pytest.approx(n * 1e-3, abs=1e-9)     # lockstep: exactly the run's time
     assert hil.metadata["components"]["plant"]["model"].startswith("IP02HIL")
     assert "period_jitter_p99_s" not in hil.metrics                     # lockstep rig: no pacing
@@ -125,12 +125,12 @@ def test_scenarios_meet_the_task_through_the_adapter(kind, law, env, monkeypatch
     HSMC's 5.575 mm steady-state error as meeting the goal). Encoder quantization makes the
     voltage chatter (a limit cycle of a few counts), so the band is the task's, not the
     simulation's."""
-    import harness
+    import ipcosim.harness
 
     scenario = f"{kind}-{law}"
     with serve(plant=kind) as srv:
         monkeypatch.setenv("IPCOSIM_HIL_URI", f"q4:{srv.uri}")
-        hil = harness.run(scenario, swaps={"plant": "hil"}, raise_on_error=False)
+        hil = ipcosim.harness.run(scenario, swaps={"plant": "hil"}, raise_on_error=False)
         assert not srv.rig.status().limit_tripped
         assert srv.rig.time() == pytest.approx(10.0, abs=1e-9)
     assert hil.error is None, hil.error
@@ -144,16 +144,16 @@ def test_scenarios_meet_the_task_through_the_adapter(kind, law, env, monkeypatch
 def test_with_ideal_encoders_the_hil_run_reproduces_the_simulation(scenario, env, monkeypatch):
     """Encoders of 1e-9 m (rad) per count: what is left between the HIL run and the simulation is
     the 12-bit DAC (4.9 mV steps) -- the adapter path itself adds nothing."""
-    import harness
+    import ipcosim.harness
 
     kind = scenario.split("-mass")[0] + "-mass"
-    sim = harness.run(scenario)
+    sim = ipcosim.harness.run(scenario)
     fine = {f"plant.{p}": 1e-9 for p in ("cart_calibration", "pendulum_calibration")}
     if kind == "double-mass":
         fine["plant.passive_cart_calibration"] = 1e-9
     with serve(plant=kind, cart_m_per_count=1e-9, pendulum_rad_per_count=1e-9) as srv:
         monkeypatch.setenv("IPCOSIM_HIL_URI", f"q4:{srv.uri}")
-        hil = harness.run(scenario, swaps={"plant": "hil"}, overrides=fine)
+        hil = ipcosim.harness.run(scenario, swaps={"plant": "hil"}, overrides=fine)
     for name in MEASURED[kind]:
         a, b = np.asarray(hil[f"plant.{name}"]), np.asarray(sim[f"plant.{name}"])
         bound = 2e-4 if name != "pendulum_angle" else 1e-3
@@ -165,13 +165,13 @@ def test_with_ideal_encoders_the_hil_run_reproduces_the_simulation(scenario, env
 # --- pacing ----------------------------------------------------------------------------------------
 
 def test_a_hil_run_on_a_real_time_rig_is_paced_by_itself(env, tmp_path, monkeypatch):
-    import harness
+    import ipcosim.harness
 
     scn = open_loop_scenario("single-mass", tmp_path / "scn")
     # no limits: a stall of the master lets the real-time rig run on, and the open-loop pendulum falls
     with serve(clock="wallclock", tick=5e-4, cart_limit=None, pendulum_limit=None) as srv:
         monkeypatch.setenv("IPCOSIM_HIL_URI", f"q4:{srv.uri}")
-        result = harness.run(scn, stop_time=0.3, swaps={"plant": "hil"},
+        result = ipcosim.harness.run(scn, stop_time=0.3, swaps={"plant": "hil"},
                              overrides={"plant.voltage": 0.5, "plant.watchdog_timeout": 2.0})   # robust to a VM stall
     m = result.metrics
     for key in ("period_jitter_p50_s", "period_jitter_p99_s", "period_jitter_max_s", "overruns",
@@ -183,14 +183,14 @@ def test_a_hil_run_on_a_real_time_rig_is_paced_by_itself(env, tmp_path, monkeypa
 
 
 def test_realtime_flag_paces_a_simulated_run(env, tmp_path):
-    import harness
+    import ipcosim.harness
 
     scn = open_loop_scenario("single-mass", tmp_path / "scn")
-    result = harness.run(scn, stop_time=0.2, overrides={"plant.voltage": 0.5}, realtime=True)
+    result = ipcosim.harness.run(scn, stop_time=0.2, overrides={"plant.voltage": 0.5}, realtime=True)
     m = result.metrics
     assert m["realtime_steps"] == 200 and "card_overruns" not in m
     assert m["real_time_factor"] <= 1.001                    # deadlines t0 + n*h: never ahead of real time
-    unpaced = harness.run(scn, stop_time=0.2, overrides={"plant.voltage": 0.5})
+    unpaced = ipcosim.harness.run(scn, stop_time=0.2, overrides={"plant.voltage": 0.5})
     assert "period_jitter_p50_s" not in unpaced.metrics
 
 
@@ -236,7 +236,7 @@ def test_limit_trip_ends_the_run_naming_the_limit_and_the_amplifier_stays_off(en
 
 
 def test_second_client_is_refused(env, tmp_path):
-    from harness.hil import open_card
+    from ipcosim.harness.hil import open_card
 
     scn = open_loop_scenario("single-mass", tmp_path / "scn")
     with serve() as srv:
@@ -263,17 +263,18 @@ def test_quanser_backend_asked_for_but_not_installed(env, tmp_path):
 
 
 def test_malformed_and_out_of_order_messages_mid_run_are_dropped_and_the_run_goes_on(env, tmp_path, monkeypatch):
-    import harness
-    from harness.hil.protocol import Msg, encode_frame
-    from harness.hil.tcpip import OPEN_CARDS
-    from harness.manipulators import Manipulator
+    from fmi_helpers import open_tcpip_cards
+
+    import ipcosim.harness
+    from ipcosim.harness.hil.protocol import Msg, encode_frame
+    from ipcosim.harness.master.manipulators import Manipulator
 
     class Injector(Manipulator):
         def next_tick(self, n):
             return 100 if n < 100 else None
 
         def step(self, execution, n):
-            card = next(iter(OPEN_CARDS))
+            card = next(iter(open_tcpip_cards()))
             card._sock.send(b"\xde\xad garbage")
             card._sock.send(encode_frame(Msg.WRITE_ANALOG, 2, b"\x00\x01"))                 # replayed seq
             card._sock.send(encode_frame(Msg.WRITE_ANALOG, card._seq + 1000, b"\x00\x09"))  # bad payload
@@ -282,7 +283,7 @@ def test_malformed_and_out_of_order_messages_mid_run_are_dropped_and_the_run_goe
     scn = open_loop_scenario("single-mass", tmp_path / "scn")
     with serve(cart_limit=None, pendulum_limit=None) as srv:
         monkeypatch.setenv("IPCOSIM_HIL_URI", f"q4:{srv.uri}")
-        result = harness.run(scn, stop_time=0.3, swaps={"plant": "hil"}, overrides={"plant.voltage": 0.625},
+        result = ipcosim.harness.run(scn, stop_time=0.3, swaps={"plant": "hil"}, overrides={"plant.voltage": 0.625},
                              manipulators=[Injector()])
         counters = dict(srv.counters)
     assert result.error is None
@@ -297,7 +298,7 @@ def test_master_dies_and_the_rigs_watchdog_puts_the_motor_at_zero(env, tmp_path)
     scn = open_loop_scenario("single-mass", tmp_path / "scn")
     with serve(clock="wallclock", tick=5e-4, cart_limit=None, pendulum_limit=None) as srv:
         rig = srv.rig
-        proc = subprocess.Popen([sys.executable, "-m", "harness.cli", "run", str(scn), "--swap", "plant=hil",
+        proc = subprocess.Popen([sys.executable, "-m", "ipcosim.harness.cli", "run", str(scn), "--swap", "plant=hil",
                                  "--set", "plant.voltage=1.5", "--set", f"plant.watchdog_timeout={WD}",
                                  "--stop-time", "60", "--out", str(tmp_path / "o"),
                                  "--quiet"], env=dict(env, IPCOSIM_HIL_URI=f"q4:{srv.uri}"), cwd=ROOT,

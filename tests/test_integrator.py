@@ -1,6 +1,6 @@
 """The fixed-step ETDRK4 plant integrator: accuracy against a tight-tolerance Radau reference,
 the f-form stage matrices against the textbook scheme, and the constant-folded right-hand
-sides against ``fmus.physics``."""
+sides against ``ipcosim.fmus.physics``."""
 from __future__ import annotations
 
 import math
@@ -10,10 +10,10 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from fmus.integrator import ETDRK4, FastETDRK4, etdrk4_f_form
-from fmus.params import preset
-from fmus.physics import double_mass_rhs, rhs_for, single_mass_momentum_rhs, single_mass_to_momentum
-from fmus.plant import Plant, double_mass_internal_rhs, single_mass_internal_rhs
+from ipcosim.fmus.integrator import ETDRK4, FastETDRK4, etdrk4_f_form
+from ipcosim.fmus.params import preset
+from ipcosim.fmus.physics import double_mass_rhs, rhs_for, single_mass_momentum_rhs, single_mass_to_momentum
+from ipcosim.fmus.plant import Plant, double_mass_internal_rhs, single_mass_internal_rhs
 
 H = 1e-3
 #: Open-loop experiment: 2 s, a +5 V pulse from 0.1 s to 0.3 s (edges on the 1 ms grid).

@@ -6,8 +6,8 @@ import sys
 import numpy as np
 import pytest
 
-from fmus.linearize import linearize
-from fmus.params import ParameterError, UnknownPresetError, preset
+from ipcosim.fmus.linearize import linearize
+from ipcosim.fmus.params import ParameterError, UnknownPresetError, preset
 
 # thesis eq. 3.24, state [th, th', xc, xc', i]
 EQ_3_24_A = [[0, 1, 0, 0, 0],
@@ -101,7 +101,7 @@ def test_appendix_b3_without_inductance():
 
 def test_linearization_is_the_jacobian_of_the_nonlinear_model():
     """A small perturbation of the nonlinear model follows A x + B u to first order."""
-    from fmus.physics import rhs_for
+    from ipcosim.fmus.physics import rhs_for
     p = preset("thesis-ch3")
     m = linearize(p)
     dx = np.array([1e-5, -2e-5, 3e-5, 1e-5, -1e-5])
@@ -110,7 +110,7 @@ def test_linearization_is_the_jacobian_of_the_nonlinear_model():
 
 
 def test_cli_json_format():
-    out = subprocess.run([sys.executable, "-m", "harness.cli", "linearize", "double-mass", "--no-inductance",
+    out = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "linearize", "double-mass", "--no-inductance",
                           "--json"], capture_output=True, text=True, check=True).stdout
     doc = json.loads(out)
     assert set(doc) >= {"A", "B", "C", "D", "states", "poles"}
@@ -128,7 +128,7 @@ def test_cli_json_format():
     (["linearize", "single-mass", "--set", "Mx=1", "--json"], "no parameter 'Mx'"),
 ])
 def test_cli_bad_input_one_line(argv, needle):
-    r = subprocess.run([sys.executable, "-m", "harness.cli", *argv], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", *argv], capture_output=True, text=True)
     assert r.returncode != 0
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and needle in lines[0], r.stderr

@@ -9,15 +9,24 @@ import warnings
 
 import numpy as np
 import pytest
+from master_mocks import (
+    DISCARD,
+    ERROR,
+    LOOP_CONNECTIONS,
+    OK,
+    Factory,
+    loop_factory,
+    loop_models,
+    loop_system,
+    model,
+    system,
+)
 
-from harness.algorithm import AlgebraicLoopError, StepSizeError, gauss_seidel_order
-from harness.api import Prepared
-from harness.manipulators import ScheduledValues
-from harness.observers import Observer, Progress
-from harness.system import BindingError, UnconnectedInputWarning
-
-from master_mocks import (DISCARD, ERROR, OK, Factory, LOOP_CONNECTIONS, loop_factory, loop_models, loop_system,
-                          model, system)
+from ipcosim.harness.api import Prepared
+from ipcosim.harness.master.algorithm import AlgebraicLoopError, StepSizeError, gauss_seidel_order
+from ipcosim.harness.master.manipulators import ScheduledValues
+from ipcosim.harness.master.observers import Observer, Progress
+from ipcosim.harness.scenario.system import BindingError, UnconnectedInputWarning
 
 K, H = 5.0, 0.01
 
@@ -352,7 +361,7 @@ def test_unconnected_input_is_a_warning_naming_it():
     assert any("input plant.voltage is not connected" in w for w in sysm.warnings)
     with pytest.warns(UnconnectedInputWarning, match="plant.voltage"):
         Prepared(system=sysm, slave_factory=loop_factory(), warn=False)  # no warning yet...
-        from harness.system import warn_all
+        from ipcosim.harness.scenario.system import warn_all
         warn_all(sysm)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -361,7 +370,7 @@ def test_unconnected_input_is_a_warning_naming_it():
 
 
 def test_units_convert_through_their_definitions_and_mismatches_are_refused():
-    from harness.ssp import Unit
+    from ipcosim.harness.scenario.ssp import Unit
 
     m = Unit("m", (0, 1, 0, 0, 0, 0, 0, 0))
     mm = Unit("mm", (0, 1, 0, 0, 0, 0, 0, 0), factor=1e-3)

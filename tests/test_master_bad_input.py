@@ -9,11 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from harness import cli
-from harness.slave import FMUSlave
-
 from ssd_helpers import component, connection, connector, ssd, write_scenario
+
+from ipcosim.harness import cli
+from ipcosim.harness.master.slave import FMUSlave
 
 pytestmark = pytest.mark.integration
 DATA = Path(__file__).resolve().parent / "data"
@@ -21,7 +20,7 @@ DATA = Path(__file__).resolve().parent / "data"
 
 @pytest.fixture(scope="session")
 def test_fmus(tmp_path_factory) -> dict[str, Path]:
-    from fmus.build import build_all
+    from ipcosim.fmus.build import build_all
 
     out = tmp_path_factory.mktemp("master-test-fmus")
     results = build_all(out, scripts=[DATA / "fmu_master_source.py", DATA / "fmu_master_gain.py"])
@@ -256,13 +255,13 @@ def test_fmu_failure_writes_results_so_far_and_frees_every_instance(tmp_path, ca
 
 def test_fmu_raising_an_exception_is_fatal_and_reported_with_its_message(tmp_path, test_fmus):
     # In its own process: pythonfmu 0.7.0 releases objects twice after a Python exception in
-    # an FMU (see fmus.fmi), which can corrupt the heap of a process that goes on loading FMUs
+    # an FMU (see ipcosim.fmus.fmi), which can corrupt the heap of a process that goes on loading FMUs
     # for a long time, as a test session does; the command line exits right after the run.
     import subprocess
     import sys
 
     folder = scenario(tmp_path, test_fmus, comps=[SRC(fail_time=0.5, fail_mode=2.0), GAIN])
-    proc = subprocess.run([sys.executable, "-m", "harness.cli", "run", str(folder), "--out", str(tmp_path / "out"),
+    proc = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "run", str(folder), "--out", str(tmp_path / "out"),
                            "--quiet"], capture_output=True, text=True, timeout=120)
     errors = [l for l in proc.stderr.splitlines() if l.strip() and "warning:" not in l]
     assert proc.returncode == 1 and len(errors) == 1, proc.stderr
@@ -273,13 +272,13 @@ def test_fmu_raising_an_exception_is_fatal_and_reported_with_its_message(tmp_pat
     assert data["time"][-1] == 0.5 and len(data) == 51
 
 
-@pytest.mark.filterwarnings("ignore::harness.system.UnconnectedInputWarning")
+@pytest.mark.filterwarnings("ignore::ipcosim.harness.scenario.system.UnconnectedInputWarning")
 def test_fmu_failure_through_the_api_keeps_the_partial_result(tmp_path, test_fmus):
-    import harness
+    import ipcosim.harness
 
     folder = scenario(tmp_path, test_fmus, comps=[SRC(fail_time=0.2, fail_mode=1.0), GAIN])
-    with pytest.raises(harness.SimulationError) as info:
-        harness.run(folder)
+    with pytest.raises(ipcosim.harness.SimulationError) as info:
+        ipcosim.harness.run(folder)
     assert len(info.value.result.data) == 21 and "fmi2Discard" in str(info.value)
-    result = harness.run(folder, raise_on_error=False)
+    result = ipcosim.harness.run(folder, raise_on_error=False)
     assert result.error.startswith("component src (MasterSource): fmi2DoStep returned fmi2Discard")

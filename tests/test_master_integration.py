@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import harness
-from harness.crosscheck import run_libcosim
-from harness.ssp import load_scenario
+import ipcosim.harness
+from ipcosim.harness.scenario.ssp import load_scenario
+from ipcosim.harness.studies.crosscheck import run_libcosim
 
 pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,8 +29,8 @@ def built(tmp_path_factory) -> Path:
     ready = os.environ.get("IPCOSIM_TEST_BUILD")
     if ready:
         return Path(ready)
-    from fmus.build import build_all
-    from harness.ssp_pack import pack_all
+    from ipcosim.fmus.build import build_all
+    from ipcosim.harness.scenario.ssp_pack import pack_all
 
     out = tmp_path_factory.mktemp("master-build")
     build_all(out / "fmus")
@@ -39,7 +39,7 @@ def built(tmp_path_factory) -> Path:
 
 
 def measured(kind: str) -> list[str]:
-    from fmus.physics import MEASURED
+    from ipcosim.fmus.physics import MEASURED
 
     return list(MEASURED[kind])
 
@@ -57,7 +57,7 @@ def test_every_scenario_is_packed_and_runs_in_libcosim_and_ours(built):
         assert len(lib) == 50 and all(np.isfinite(lib[c]).all() for c in cols), name
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # the project's scenarios leave no input unconnected
-            ours = harness.run(ssp, stop_time=0.05)
+            ours = ipcosim.harness.run(ssp, stop_time=0.05)
         assert len(ours.data) == 51 and ours.metadata["order"] == ["setpoint", "plant", "controller"]
 
 
@@ -67,7 +67,7 @@ def test_libcosim_agrees_with_our_jacobi_to_1e_9(built, name):
     cols = ([f"plant.{m}" for m in measured(plant_kind(name))] + ["plant.motor_current", "controller.voltage",
                                                                    "setpoint.reference"])
     lib, _ = run_libcosim(ssp, 2.0, 1e-3, cols)
-    ours = harness.run(ssp, stop_time=2.0, step=1e-3, algorithm="jacobi")
+    ours = ipcosim.harness.run(ssp, stop_time=2.0, step=1e-3, algorithm="jacobi")
     assert np.array_equal(ours["time"][1:], lib["time"])  # the same integer-nanosecond time grid
     for c in cols:
         assert np.max(np.abs(ours[c][1:] - lib[c])) <= 1e-9, c
@@ -82,19 +82,19 @@ def _setpoint(scenario) -> tuple[float, float]:
 
 @pytest.mark.parametrize("name, law", [("single-mass-lqr", "LQR"), ("double-mass-hsmc", "HSMC")])
 def test_cosimulation_equals_a_monolithic_loop_of_the_pure_models(built, name, law):
-    """Plant (fmus.plant.Plant) and control law (controllers' class) in one loop: the voltage
+    """Plant (ipcosim.fmus.plant.Plant) and control law (controllers' class) in one loop: the voltage
     is held over each 1 ms step (zero-order hold), the law samples the positions and the
     reference at every sample instant, the first sample at t = 0 (setpoint, plant,
     controller: the master's Gauss-Seidel order)."""
-    from controllers.catalog import make_law
-    from fmus.params import DEFAULT_PRESET, preset
-    from fmus.plant import Plant
+    from ipcosim.controllers.catalog import make_law
+    from ipcosim.fmus.params import DEFAULT_PRESET, preset
+    from ipcosim.fmus.plant import Plant
 
     kind = plant_kind(name)
     scenario = load_scenario(built / "ssp" / f"{name}.ssp")
     bound = scenario.bound_sets[0] if scenario.bound_sets else None
     stop, h = 3.0, 1e-3
-    result = harness.run(built / "ssp" / f"{name}.ssp", stop_time=stop, step=h)
+    result = ipcosim.harness.run(built / "ssp" / f"{name}.ssp", stop_time=stop, step=h)
     amplitude, step_time = _setpoint(scenario)
     ctrl = make_law(law, kind, bound)
     m = round(ctrl.sample_period / h)
@@ -124,7 +124,7 @@ def test_cosimulation_equals_a_monolithic_loop_of_the_pure_models(built, name, l
 def test_demo_run_writes_results_metrics_and_plot(built, tmp_path):
     out = tmp_path / "demo"
     env = {**os.environ, "IPCOSIM_FMU_PATH": str(built / "fmus")}
-    proc = subprocess.run([sys.executable, "-m", "harness.cli", "run", "single-mass-lqr", "--plot", "--out", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "run", "single-mass-lqr", "--plot", "--out", str(out)],
                           capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert {p.name for p in out.iterdir()} >= {"results.csv", "metrics.json", "plot.png"}
@@ -138,9 +138,9 @@ def test_demo_run_writes_results_metrics_and_plot(built, tmp_path):
 
 
 def test_prepared_runs_many_times_with_different_overrides(built):
-    from harness.slave import FMUSlave
+    from ipcosim.harness.master.slave import FMUSlave
 
-    with harness.prepare(built / "ssp" / "single-mass-lqr.ssp") as prepared:
+    with ipcosim.harness.prepare(built / "ssp" / "single-mass-lqr.ssp") as prepared:
         a = prepared.run(0.5, overrides={"plant.Mp": 0.2303})
         b = prepared.run(0.5, overrides={"plant.Mp": 0.30})
         c = prepared.run(0.5, overrides={"plant.Mp": 0.2303})
@@ -148,23 +148,23 @@ def test_prepared_runs_many_times_with_different_overrides(built):
         assert not np.array_equal(a["plant.pendulum_angle"], b["plant.pendulum_angle"])
         assert b.metadata["overrides"] == {"plant.Mp": 0.30}
         assert len(prepared._libraries) == 3  # each FMU loaded once for all runs
-    default = harness.run(built / "ssp" / "single-mass-lqr.ssp", stop_time=0.5)
+    default = ipcosim.harness.run(built / "ssp" / "single-mass-lqr.ssp", stop_time=0.5)
     assert np.array_equal(default.data, a.data)  # Mp = 0.2303 is the FMU's default
     assert isinstance(FMUSlave, type)
 
 
 def test_parameter_set_selection_changes_the_controller(built):
     ssp = built / "ssp" / "single-mass-hsmc.ssp"
-    tuned = harness.run(ssp, stop_time=1.0)
-    thesis = harness.run(ssp, stop_time=1.0, parameter_set="thesis")
+    tuned = ipcosim.harness.run(ssp, stop_time=1.0)
+    thesis = ipcosim.harness.run(ssp, stop_time=1.0, parameter_set="thesis")
     assert tuned.metadata["parameter_set"] == "tuned" and thesis.metadata["parameter_set"] == "thesis"
     assert not np.array_equal(tuned["controller.voltage"], thesis["controller.voltage"])
     with pytest.raises(Exception, match="has no parameter set 'best'"):
-        harness.run(ssp, stop_time=1.0, parameter_set="best")
+        ipcosim.harness.run(ssp, stop_time=1.0, parameter_set="best")
 
 
 def test_controller_sample_period_sets_its_step_multiple(built):
-    r = harness.run(built / "ssp" / "single-mass-lqr.ssp", stop_time=1.0,
+    r = ipcosim.harness.run(built / "ssp" / "single-mass-lqr.ssp", stop_time=1.0,
                     overrides={"controller.sample_period": 0.002})
     assert r.metadata["step_multiples"]["controller"] == 2
     u = r["controller.voltage"]

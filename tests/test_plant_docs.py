@@ -1,4 +1,4 @@
-"""The parameter tables of docs/plant.md and README.md match fmus.params (the docs cannot go stale silently)."""
+"""The parameter tables of docs/plant.md and README.md match ipcosim.fmus.params (the docs cannot go stale silently)."""
 from __future__ import annotations
 
 import re
@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from fmus.params import PLANT_KINDS, PRESETS, parameter_info, preset
+from ipcosim.fmus.params import PLANT_KINDS, PRESETS, parameter_info, preset
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "plant.md"

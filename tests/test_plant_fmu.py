@@ -11,13 +11,13 @@ from xml.etree import ElementTree
 
 import numpy as np
 import pytest
+from fmi_helpers import assert_vdmcheck_clean, instantiate
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from fmi_helpers import assert_vdmcheck_clean, instantiate
-from fmus.params import DEFAULT_PRESET, PLANT_KINDS, parameter_info, preset
-from fmus.physics import MEASURED, STATE_UNITS, state_names
-from fmus.plant import Plant
+from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, parameter_info, preset
+from ipcosim.fmus.physics import MEASURED, STATE_UNITS, state_names
+from ipcosim.fmus.plant import Plant
 
 pytestmark = pytest.mark.integration
 
@@ -159,7 +159,7 @@ def test_instances_are_independent(plant_fmus, unzipped, kind: str) -> None:
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_many_instances(plant_fmus, unzipped, kind: str) -> None:
-    """The FMU script's class defines no method, so only fmus.fmi's compensation keeps the script
+    """The FMU script's class defines no method, so only ipcosim.fmus.fmi's compensation keeps the script
     module alive across pythonfmu 0.7.0's per-instantiation reference release."""
     import gc
     for k in range(8):

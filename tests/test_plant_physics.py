@@ -1,4 +1,4 @@
-"""Physics sanity of the stepped plant (fmus.plant.Plant): rest, equilibria and their stability,
+"""Physics sanity of the stepped plant (ipcosim.fmus.plant.Plant): rest, equilibria and their stability,
 energy balance, mirror symmetry, direction of the motor force, amplifier limit, Coulomb
 friction, and the failure report for a non-finite state."""
 from __future__ import annotations
@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from fmus.params import preset
-from fmus.plant import Plant, PlantStepError
+from ipcosim.fmus.params import preset
+from ipcosim.fmus.plant import Plant, PlantStepError
 
 H = 1e-3
 ANGLE = {"thesis-ch3": 2, "thesis-appendix-a": 2, "thesis-ch4": 4}
@@ -88,7 +88,7 @@ def test_energy_never_increases_without_input(name: str) -> None:
 
 @pytest.mark.parametrize("name", PRESETS)
 def test_energy_balance_with_input(name: str) -> None:
-    """E(T) - E(0) = int (vA i - Ra i^2 - viscous losses) dt, with the damping terms of fmus.physics.
+    """E(T) - E(0) = int (vA i - Ra i^2 - viscous losses) dt, with the damping terms of ipcosim.fmus.physics.
 
     Fine steps (20 us) resolve the current's 70 us time constant for the power integral."""
     params = preset(name)

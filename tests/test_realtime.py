@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from harness.realtime import Pacer, wait_until
+from ipcosim.harness.master.realtime import Pacer, wait_until
 
 
 class SimClock:

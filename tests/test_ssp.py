@@ -7,15 +7,20 @@ from pathlib import Path
 
 import pytest
 from lxml import etree
-
-from harness.ssp import (NS, ScenarioError, ScenarioNotFoundError, load_scenario, scenario_names,
-                         select_parameter_set)
-from harness.ssp_gen import CONTROLLERS, PLANTS, ssd_text
-from harness.ssp_pack import pack
-from harness.system import unit_conversion
-from harness.ssp import Unit
-
 from ssd_helpers import component, connection, connector, ssd, ssv, write_scenario
+
+from ipcosim.harness.scenario.ssp import (
+    NS,
+    ScenarioError,
+    ScenarioNotFoundError,
+    Unit,
+    load_scenario,
+    scenario_names,
+    select_parameter_set,
+)
+from ipcosim.harness.scenario.ssp_gen import CONTROLLERS, PLANTS, ssd_text
+from ipcosim.harness.scenario.ssp_pack import pack
+from ipcosim.harness.scenario.system import unit_conversion
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPECTED = sorted(f"{p}-{c}" for p in ("single-mass", "double-mass")
@@ -50,9 +55,9 @@ def test_the_ten_scenarios_exist_and_follow_the_contract():
 
 
 def test_scenario_files_are_what_the_generator_writes():
-    """The committed files equal what ``python -m harness.ssp_gen`` writes from the controllers'
+    """The committed files equal what ``python -m ipcosim.harness.scenario.ssp_gen`` writes from the controllers'
     catalog (so a changed parameter set cannot silently diverge from the scenarios)."""
-    from harness.ssp_gen import _ssv, parameter_sets
+    from ipcosim.harness.scenario.ssp_gen import _ssv, parameter_sets
 
     for name in EXPECTED:
         plant = name[:11]
@@ -209,7 +214,7 @@ def test_schema_rejects_what_fmpy_reads_carelessly(tmp_path):
 
 
 def test_list_prints_one_line_per_scenario(capsys):
-    from harness import cli
+    from ipcosim.harness import cli
 
     assert cli.main(["list"]) == 0
     lines = capsys.readouterr().out.splitlines()

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from harness.cli import main as cli_main
-from harness.sweep import read_results
+from ipcosim.harness.cli import main as cli_main
+from ipcosim.harness.studies.sweep import read_results
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.integration
@@ -18,7 +18,7 @@ pytestmark = pytest.mark.integration
 @pytest.fixture(scope="session")
 def study_fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Every FMU of the project (setpoint, controllers, plants), built for this session."""
-    from fmus.build import build_all, discover
+    from ipcosim.fmus.build import build_all, discover
 
     scripts = discover(ROOT)
     names = {p.name for p in scripts}
@@ -77,7 +77,7 @@ def test_compare_report_on_two_scenarios(fmu_env, tmp_path, capsys):
 def test_tune_writes_autotuned_set_beside_the_scenario(fmu_env, tmp_path, capsys):
     scenario = tmp_path / "single-mass-lqr"
     shutil.copytree(ROOT / "ssp" / "single-mass-lqr", scenario)
-    from harness.ssp import load_scenario
+    from ipcosim.harness.scenario.ssp import load_scenario
 
     sc = load_scenario(scenario)
     controller = sc.component("controller")
@@ -96,9 +96,9 @@ def test_tune_writes_autotuned_set_beside_the_scenario(fmu_env, tmp_path, capsys
     assert set(bound) <= set(values)           # the complete set: a drop-in replacement
     report = (tmp_path / "t" / "tune.md").read_text()
     assert f"| controller.{name} |" in report
-    import harness
+    import ipcosim.harness
 
-    result = harness.run(scenario, stop_time=0.5, parameter_set="autotuned")
+    result = ipcosim.harness.run(scenario, stop_time=0.5, parameter_set="autotuned")
     assert result.ok and math.isfinite(result.metrics["max_abs_angle_rad"])
 
 

@@ -16,11 +16,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.cli import main as cli_main
-from harness.studies.robustness import summarize, wilson_interval
-from harness.studies.runners import PurePlantSpec, SyntheticSpec, classify_task
-from harness.sweep import (Case, DaskExecutor, LocalExecutor, SchedulerError, SweepMismatchError, VaryError,
-                           case_seed, make_cases, parse_all, parse_vary, read_results, run_sweep)
+from ipcosim.harness.cli import main as cli_main
+from ipcosim.harness.studies.robustness import summarize, wilson_interval
+from ipcosim.harness.studies.runners import PurePlantSpec, SyntheticSpec, classify_task
+from ipcosim.harness.studies.sweep import (
+    Case,
+    DaskExecutor,
+    SchedulerError,
+    SweepMismatchError,
+    VaryError,
+    case_seed,
+    make_cases,
+    parse_all,
+    parse_vary,
+    read_results,
+    run_sweep,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMS = {"plant.Mp": 0.2, "plant.K": 140.0, "controller.c1": 4.7}
@@ -179,8 +190,8 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
     calls2.mkdir()
     script = textwrap.dedent(f"""
         import sys
-        from harness.sweep import run_sweep, make_cases, parse_all
-        from harness.studies.runners import SyntheticSpec
+        from ipcosim.harness.studies.sweep import run_sweep, make_cases, parse_all
+        from ipcosim.harness.studies.runners import SyntheticSpec
         if __name__ == "__main__":
             spec = SyntheticSpec(delay_s=0.3, calls_dir={str(calls1)!r})
             cases = make_cases(parse_all(["model.x=uniform(0,2)"], spec.parameters), spec.parameters,
@@ -308,7 +319,7 @@ def test_wilson_interval_and_summary():
 
 
 def test_parameter_figure(tmp_path):
-    from harness.studies.robustness import plot_parameters
+    from ipcosim.harness.studies.robustness import plot_parameters
 
     rows = [{"status": s, "plant.K": k, "itae_position": v} for s, k, v in
             [("ok", 140.0, 0.1), ("fell", 110.0, 30.0), ("error", 100.0, None), ("unsettled", 120.0, 1.0)]]

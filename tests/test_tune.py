@@ -7,12 +7,19 @@ import math
 import numpy as np
 import pytest
 
-from harness.cli import main as cli_main
-from harness.studies import cost as costmod
-from harness.studies.runners import PurePlantSpec
-from harness.studies.tune import (TuneError, parse_bounds, parse_params, plan_population, read_ssv_values,
-                                  ssv_text, tune)
-from harness.sweep import LocalExecutor
+from ipcosim.harness.cli import main as cli_main
+from ipcosim.harness.studies import cost as costmod
+from ipcosim.harness.studies.runners import PurePlantSpec
+from ipcosim.harness.studies.sweep import LocalExecutor
+from ipcosim.harness.studies.tune import (
+    TuneError,
+    parse_bounds,
+    parse_params,
+    plan_population,
+    read_ssv_values,
+    ssv_text,
+    tune,
+)
 
 
 def test_cost_terms_analytic():

@@ -2,7 +2,7 @@
 
 Open a card by type and id (the Quanser convention), or by one URI ``[TYPE:]ID``::
 
-    from harness.hil import open_card
+    from ipcosim.harness.hil import open_card
     card = open_card("q4", "0@tcpip://127.0.0.1:18920")   # virtual rig over the network
     card = open_card("q4", "0@inproc://bench")              # virtual rig in this process
     card = open_card("q4", "0")                             # a real Q4 (Quanser package)
@@ -15,7 +15,16 @@ from __future__ import annotations
 
 import urllib.parse
 
-from .api import Card, CardInfo, ErrorCode, HILError, RigStatus, StepResult, count_difference, wrap_int32
+from ipcosim.harness.hil.api import (
+    Card,
+    CardInfo,
+    ErrorCode,
+    HILError,
+    RigStatus,
+    StepResult,
+    count_difference,
+    wrap_int32,
+)
 
 DEFAULT_CARD_TYPE = "q4"
 DEFAULT_URI = "q4:0@tcpip://127.0.0.1:18920"
@@ -69,7 +78,7 @@ def open_card(card_type: str, card_id: str, *, timeout: float = 1.0, plant: str 
     """
     number, sep, rest = card_id.partition("@")
     if not sep:
-        from .quanser import QuanserCard
+        from ipcosim.harness.hil.quanser import QuanserCard
         return QuanserCard(card_type, card_id)
     scheme, sep2, where = rest.partition("://")
     if not sep2:
@@ -82,11 +91,11 @@ def open_card(card_type: str, card_id: str, *, timeout: float = 1.0, plant: str 
             port = None
         if not parsed.hostname or port is None:
             raise HILError(ErrorCode.BAD_URI, f"card id {card_id!r}: expected N@tcpip://HOST:PORT")
-        from .tcpip import TcpipCard
+        from ipcosim.harness.hil.tcpip import TcpipCard
         return TcpipCard(card_type, card_id, parsed.hostname, port, timeout=timeout, name=name)
     if scheme == "inproc":
-        from .inproc import VirtualCard, get_rig
-        from .rig import RigConfig
+        from ipcosim.harness.hil.inproc import VirtualCard, get_rig
+        from ipcosim.harness.hil.rig import RigConfig
         rig_name, _, query = where.partition("?")
         opts = dict(urllib.parse.parse_qsl(query))
         unknown = set(opts) - {"plant", "clock"}

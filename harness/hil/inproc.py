@@ -11,12 +11,27 @@ from typing import Sequence
 
 import numpy as np
 
-from .api import Card, ErrorCode, HILError, RigStatus, StepResult
-from .rig import NS, RigConfig, VirtualRig, to_ns
+from ipcosim.harness.hil.api import Card, ErrorCode, HILError, RigStatus, StepResult
+from ipcosim.harness.hil.rig import NS, RigConfig, VirtualRig, to_ns
 
-_RIGS: dict[str, VirtualRig] = {}
-_OWNERS: dict[int, "VirtualCard"] = {}
-_LOCK = threading.Lock()
+
+def _process_registry() -> tuple[dict, dict, threading.Lock]:
+    """The one registry of in-process rigs of this process, whatever copy of this module asks.
+
+    Every FMU carries its own private copy of this module (``ipcosim.fmus.build``), so a
+    module-level dict would give each FMU, and the host, a registry of its own. The registry
+    lives on the ``threading`` module instead: a standard-library module every copy shares.
+    Its layout (rigs by name, controlling card by rig id, a lock) is versioned by the name.
+    """
+    key = "_ipcosim_inproc_registry_v1"
+    registry = getattr(threading, key, None)
+    if registry is None:
+        registry = ({}, {}, threading.Lock())
+        setattr(threading, key, registry)
+    return registry
+
+
+_RIGS, _OWNERS, _LOCK = _process_registry()
 
 
 def register_rig(name: str, rig: VirtualRig) -> VirtualRig:
@@ -41,6 +56,32 @@ def get_rig(name: str, config: RigConfig | None = None) -> VirtualRig:
         return rig
 
 
+class _SameErrors:
+    """Calls into a rig, with its ``HILError`` made this module's own.
+
+    A rig registered by the host (or another FMU) raises the ``HILError`` of its own copy of
+    the HIL package, which this copy's ``except HILError`` would not catch; the error is
+    re-raised as this copy's class with the same code and message.
+    """
+
+    def __init__(self, rig: VirtualRig) -> None:
+        self._rig = rig
+
+    def __getattr__(self, name: str):  # noqa: ANN204 -- forwards any rig method
+        method = getattr(self._rig, name)
+
+        def call(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+            try:
+                return method(*args, **kwargs)
+            except HILError:
+                raise
+            except Exception as exc:
+                if type(exc).__name__ == "HILError" and hasattr(exc, "code") and hasattr(exc, "message"):
+                    raise HILError(exc.code, exc.message) from None
+                raise
+        return call
+
+
 class VirtualCard(Card):
     """A card on an in-process :class:`VirtualRig` (one controlling card per rig)."""
 
@@ -61,7 +102,7 @@ class VirtualCard(Card):
     def _check(self) -> VirtualRig:
         if self._closed:
             raise HILError(ErrorCode.NOT_OPEN, f"card {self.info.card_id} is closed")
-        return self.rig
+        return _SameErrors(self.rig)  # type: ignore[return-value]
 
     def write_analog(self, channels: Sequence[int], volts: Sequence[float]) -> None:
         self._check().write_analog(channels, volts)

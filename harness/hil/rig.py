@@ -1,6 +1,6 @@
 """The virtual IP02 rig: the plant physics behind a model of the Q4 card, the amplifier and the lab.
 
-One source of truth: the motion is :class:`fmus.plant.Plant` (the same object the plant
+One source of truth: the motion is :class:`ipcosim.fmus.plant.Plant` (the same object the plant
 FMUs step). Around it the rig models what a controller meets on the real bench:
 
 * **DAC** -- 12 bits over +-10 V (two's-complement codes -2048..2047, 1 LSB = 20/4096 V);
@@ -19,7 +19,7 @@ FMUs step). Around it the rig models what a controller meets on the real bench:
   writes) until :meth:`VirtualRig.reset` (the operator's reset).
 * **Hard end stops** at +-0.407 m (half the 0.814 m track): a cart reaching one stops
   dead (inelastic; its outward velocity is set to zero).
-* **Watchdog** -- as on the Q4 (see :mod:`harness.hil.api`), timed on the rig's clock.
+* **Watchdog** -- as on the Q4 (see :mod:`ipcosim.harness.hil.api`), timed on the rig's clock.
   Expiry forces the analog outputs to their expiration states (0 V unless configured)
   and latches: writes are refused until ``watchdog_clear``.
 * **Noise and latency** (optional) -- Gaussian count noise of standard deviation
@@ -45,11 +45,19 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from fmus.params import DEFAULT_PRESET, PRESETS, preset
-from fmus.physics import MEASURED
-from fmus.plant import Plant, PlantStepError
-
-from .api import (CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite, wrap_int32)
+from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, preset
+from ipcosim.fmus.physics import MEASURED
+from ipcosim.fmus.plant import Plant, PlantStepError
+from ipcosim.harness.hil.api import (
+    CardInfo,
+    ErrorCode,
+    HILError,
+    RigStatus,
+    StepResult,
+    as_channels,
+    as_finite,
+    wrap_int32,
+)
 
 # Q4 card and IP02 facts (thesis-data.md section 1 table and section 3).
 ANALOG_OUTPUTS = 4
@@ -95,9 +103,9 @@ class RigConfig:
     preset : str, optional
         Physical parameter preset (default: the plant's thesis preset).
     params : mapping
-        Physical parameter overrides (``fmus.params`` names).
+        Physical parameter overrides (``ipcosim.fmus.params`` names).
     initial_state : mapping
-        Initial values by state name (``fmus.physics.state_names``); others 0.
+        Initial values by state name (``ipcosim.fmus.physics.state_names``); others 0.
     clock : str
         ``lockstep`` or ``wallclock``.
     tick : float, optional
@@ -568,7 +576,7 @@ class VirtualRig:
 
     def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
              until_ns: int, reload: bool = True) -> StepResult:
-        """One sample period (see :meth:`harness.hil.api.Card.step`); ``until_ns`` is rig time.
+        """One sample period (see :meth:`ipcosim.harness.hil.api.Card.step`); ``until_ns`` is rig time.
 
         Lockstep: advance to ``until_ns`` (an instant before the rig's time is an error).
         Wallclock: wait (outside the lock) until the rig's clock reaches ``until_ns``.

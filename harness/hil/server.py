@@ -1,7 +1,7 @@
-"""TCP server of the virtual rig (protocol: :mod:`harness.hil.protocol`).
+"""TCP server of the virtual rig (protocol: :mod:`ipcosim.harness.hil.protocol`).
 
 One thread accepts connections, one thread serves each connection; every request goes
-to the :class:`~harness.hil.rig.VirtualRig` (itself thread-safe). Nothing a client sends
+to the :class:`~ipcosim.harness.hil.rig.VirtualRig` (itself thread-safe). Nothing a client sends
 can stop the server: bad input is dropped and counted (``RigServer.counters``), an
 unexpected exception while serving a request becomes an ``INTERNAL`` error reply.
 """
@@ -14,11 +14,25 @@ import threading
 import time
 from typing import Callable
 
-from .api import ErrorCode, HILError
-from .protocol import (FLAG_AMPLIFIER, FLAG_LIMIT, FLAG_WD_EXPIRED, FLAG_WD_RUNNING, PROTOCOL_VERSION, REPLY_BIT,
-                       DecodeError, Frame, FrameDecoder, Msg, Reader, encode_frame, pack_ints, pack_text,
-                       reply_payload)
-from .rig import NS, VirtualRig
+from ipcosim.harness.hil.api import ErrorCode, HILError
+from ipcosim.harness.hil.protocol import (
+    FLAG_AMPLIFIER,
+    FLAG_LIMIT,
+    FLAG_WD_EXPIRED,
+    FLAG_WD_RUNNING,
+    PROTOCOL_VERSION,
+    REPLY_BIT,
+    DecodeError,
+    Frame,
+    FrameDecoder,
+    Msg,
+    Reader,
+    encode_frame,
+    pack_ints,
+    pack_text,
+    reply_payload,
+)
+from ipcosim.harness.hil.rig import NS, VirtualRig
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 18920

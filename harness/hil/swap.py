@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from . import DEFAULT_URI, HILError, parse_card_uri
+from ipcosim.harness.hil import DEFAULT_URI, HILError, parse_card_uri
 
 ADAPTERS = {"single-mass": "IP02HILSingleMass", "double-mass": "IP02HILDoubleMass"}
 PLANT_MODELS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}
@@ -40,7 +40,7 @@ def plant_kind(scenario_name: str, model_name: str | None, connectors: set[str])
 
 def find_adapter(model: str, near: Path | None = None) -> Path:
     """The adapter FMU file ``<model>.fmu``: next to ``near``, in IPCOSIM_FMU_PATH, in build/fmus."""
-    from harness.ssp import fmu_search_path
+    from ipcosim.harness.scenario.ssp import fmu_search_path
 
     dirs = ([near] if near is not None else []) + [Path(d) for d in fmu_search_path()]
     for d in dirs:
@@ -61,7 +61,7 @@ def card_clock(uri: str) -> str:
     if rest.startswith("inproc://"):
         from urllib.parse import parse_qsl
 
-        from .inproc import _RIGS
+        from ipcosim.harness.hil.inproc import _RIGS
         name, _, query = rest[len("inproc://"):].partition("?")
         rig = _RIGS.get(name)
         if rig is not None:
@@ -70,7 +70,7 @@ def card_clock(uri: str) -> str:
     if rest.startswith("tcpip://"):
         from urllib.parse import urlsplit
 
-        from .tcpip import TcpipCard
+        from ipcosim.harness.hil.tcpip import TcpipCard
         where = urlsplit(f"tcp://{rest[len('tcpip://'):]}")
         try:
             card = TcpipCard(card_type, card_id, where.hostname or "", where.port or 0, timeout=1.0,
@@ -83,9 +83,9 @@ def card_clock(uri: str) -> str:
     return "wallclock"
 
 
-def resolve_hil(request):  # noqa: ANN001, ANN201 -- harness.system.SwapRequest -> SwapTarget
-    """Resolver of the ``hil`` alias (registered with :func:`harness.system.register_swap_alias`)."""
-    from harness.system import SwapTarget
+def resolve_hil(request):  # noqa: ANN001, ANN201 -- ipcosim.harness.scenario.system.SwapRequest -> SwapTarget
+    """Resolver of the ``hil`` alias (registered with :func:`ipcosim.harness.scenario.system.register_swap_alias`)."""
+    from ipcosim.harness.scenario.system import SwapTarget
 
     model = request.model
     connectors = {c.name for c in request.scenario.component(request.component).connectors} \
@@ -101,7 +101,7 @@ def resolve_hil(request):  # noqa: ANN001, ANN201 -- harness.system.SwapRequest 
 
 def register() -> None:
     """Register the ``hil`` alias with the master."""
-    from harness.system import register_swap_alias
+    from ipcosim.harness.scenario.system import register_swap_alias
 
     register_swap_alias("hil", resolve_hil)
 

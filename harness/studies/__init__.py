@@ -1,2 +1,2 @@
 """Studies at scale: parameter variation grammar, run specifications, robustness, tuning
-and the controller comparison report. The sweep engine itself is ``harness.sweep``."""
+and the controller comparison report. The sweep engine itself is ``ipcosim.harness.studies.sweep``."""

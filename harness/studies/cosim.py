@@ -1,4 +1,4 @@
-"""The co-simulation run spec: one scenario, run through the master (``harness.prepare``).
+"""The co-simulation run spec: one scenario, run through the master (``ipcosim.harness.prepare``).
 
 Made in the parent from the scenario (parsed and bound, nothing extracted) so that
 ``--vary`` and ``--params`` are checked against the scenario's real parameters; each worker
@@ -15,7 +15,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from harness.studies.runners import RunFailure, Runner, RunSpec
+from ipcosim.harness.studies.runners import RunFailure, Runner, RunSpec
 
 #: Extra result columns of a co-simulation run beyond the task metrics and cost terms.
 TIMING_METRICS = ("wall_time_s", "real_time_factor")
@@ -81,10 +81,10 @@ class CosimSpec(RunSpec):
         IpcosimError
             Unknown scenario, unreadable SSD/FMU, unknown ``--set`` names (one line each).
         """
-        from harness.api import Prepared
-        from harness.metrics import METRIC_KEYS
-        from harness.studies.cost import COST_TERMS
-        from harness.system import with_overrides
+        from ipcosim.harness.api import Prepared
+        from ipcosim.harness.metrics import METRIC_KEYS
+        from ipcosim.harness.scenario.system import with_overrides
+        from ipcosim.harness.studies.cost import COST_TERMS
 
         prepared = Prepared(scenario, parameter_set=parameter_set, slave_factory=_no_slave, warn=False)
         system = prepared.system
@@ -142,10 +142,15 @@ class CosimSpec(RunSpec):
 
     def build(self) -> Runner:
         """Load the scenario and extract its FMUs (once per worker); return the run function."""
-        from harness.api import Prepared
-        from harness.results import (ANGLE_COLUMNS, POSITION_COLUMNS, REFERENCE_COLUMNS, VOLTAGE_COLUMNS,
-                                     first_column)
-        from harness.studies.cost import cost_terms, series
+        from ipcosim.harness.api import Prepared
+        from ipcosim.harness.master.results import (
+            ANGLE_COLUMNS,
+            POSITION_COLUMNS,
+            REFERENCE_COLUMNS,
+            VOLTAGE_COLUMNS,
+            first_column,
+        )
+        from ipcosim.harness.studies.cost import cost_terms, series
 
         location = self.location
         if self.archive is not None:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from harness.studies.robustness import fmt
+from ipcosim.harness.studies.robustness import fmt
 
 PLANTS = ("single-mass", "double-mass")
 CONTROLLERS = ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")
@@ -351,7 +351,7 @@ def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str
     out_dir : Path
         Report folder.
     robustness : mapping, optional
-        Scenario name -> ``harness.studies.robustness.summarize`` output.
+        Scenario name -> ``ipcosim.harness.studies.robustness.summarize`` output.
     robustness_note : str
         How the robustness column was obtained.
     meta : mapping, optional
@@ -405,7 +405,7 @@ def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str
     md_path = out_dir / "report.md"
     md_path.write_text("\n".join(md))
 
-    body = [f"<h1>IP02 controller comparison</h1>", f"<p>{html.escape(intro)}</p>"]
+    body = ["<h1>IP02 controller comparison</h1>", f"<p>{html.escape(intro)}</p>"]
     if settings:
         body.append(f"<p>Settings: {html.escape(settings)}.</p>")
     body += ["<h2>Metrics (plant x controller)</h2>", _html_table(header, rows)]

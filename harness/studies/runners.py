@@ -8,7 +8,7 @@ a dict of metrics; it may raise, and the engine records the exception as a faile
 
 Specs here:
 
-* :class:`CosimSpec` (in ``harness.studies.cosim``): the real FMI co-simulation of a scenario.
+* :class:`CosimSpec` (in ``ipcosim.harness.studies.cosim``): the real FMI co-simulation of a scenario.
 * :class:`PurePlantSpec`: the pure-Python single-mass plant under a discrete LQR state
   feedback, no FMUs -- a fast, deterministic stand-in with the same metrics, used to test the
   engine and to check a cluster set-up quickly (scenario name ``pure:single-mass-lqr``).
@@ -26,7 +26,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from harness.errors import IpcosimError
+from ipcosim.harness.errors import IpcosimError
 
 #: A per-worker run function: (parameter values, seed) -> metrics.
 Runner = Callable[[Mapping[str, float], int], dict]
@@ -149,13 +149,13 @@ worker process abruptly (as a crashing FMU would) when ``model.x > crash_above``
 
 @dataclass
 class PurePlantSpec(RunSpec):
-    """The single-mass plant (``fmus.plant.Plant``) under a discrete LQR state feedback.
+    """The single-mass plant (``ipcosim.fmus.plant.Plant``) under a discrete LQR state feedback.
 
     The controller samples the true state every ``controller.sample_period`` and holds
     ``u = -K (x - [r, 0, 0, 0])`` (clipped to ``controller.voltage_limit``); ``K`` is the LQR
     gain of the nominal plant's 4-state model for ``Q = diag(q_position, q_velocity, q_angle,
     q_angular_velocity)``, ``R = r_voltage``. The reference steps to ``setpoint.amplitude`` at
-    ``setpoint.step_time``. Plant parameters are the ``fmus.params`` names under ``plant.``.
+    ``setpoint.step_time``. Plant parameters are the ``ipcosim.fmus.params`` names under ``plant.``.
     """
 
     stop_time: float = 5.0
@@ -173,9 +173,9 @@ class PurePlantSpec(RunSpec):
     SETPOINT_DEFAULTS = {"setpoint.amplitude": 0.05, "setpoint.step_time": 0.0}
 
     def __post_init__(self) -> None:
-        from fmus.params import preset
-        from harness.metrics import METRIC_KEYS
-        from harness.studies.cost import COST_TERMS
+        from ipcosim.fmus.params import preset
+        from ipcosim.harness.metrics import METRIC_KEYS
+        from ipcosim.harness.studies.cost import COST_TERMS
 
         plant = preset(self.preset)
         params = {f"plant.{f.name}": float(getattr(plant, f.name)) for f in fields(plant)}
@@ -189,10 +189,10 @@ class PurePlantSpec(RunSpec):
                 "with_series": self.with_series, "parameters": dict(self.parameters)}
 
     def build(self) -> Runner:
-        from fmus.linearize import linearize
-        from fmus.params import preset, with_values
-        from fmus.plant import Plant
-        from harness.studies.cost import series, task_metrics
+        from ipcosim.fmus.linearize import linearize
+        from ipcosim.fmus.params import preset, with_values
+        from ipcosim.fmus.plant import Plant
+        from ipcosim.harness.studies.cost import series, task_metrics
 
         nominal_plant = preset(self.preset)
         design = linearize(nominal_plant, inductance=False)

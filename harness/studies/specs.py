@@ -3,10 +3,10 @@ from __future__ import annotations
 
 from typing import Mapping
 
-from harness.errors import UsageError
-from harness.studies.runners import PurePlantSpec, RunSpec
+from ipcosim.harness.errors import UsageError
+from ipcosim.harness.studies.runners import PurePlantSpec, RunSpec
 
-#: Scenario names served without FMUs (pure-Python stand-ins, see ``harness.studies.runners``).
+#: Scenario names served without FMUs (pure-Python stand-ins, see ``ipcosim.harness.studies.runners``).
 PURE_SCENARIOS = {"pure:single-mass-lqr": PurePlantSpec}
 
 
@@ -64,7 +64,7 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
                 raise UsageError(f"--set {unknown[0]}: {scenario} has no parameter {unknown[0]!r}")
             spec.parameters = {**spec.parameters, **overrides}
         return spec
-    from harness.studies.cosim import CosimSpec
+    from ipcosim.harness.studies.cosim import CosimSpec
 
     return CosimSpec.from_scenario(scenario, stop_time=stop_time, step=step, overrides=overrides, series=series,
                                    parameter_set=parameter_set)
@@ -73,11 +73,11 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
 def for_executor(spec: RunSpec, executor: object) -> RunSpec:
     """The spec to send to ``executor``: on a Dask cluster, co-simulation specs carry their
     scenario and FMUs (workers may be other machines); locally, workers read the files."""
-    from harness.sweep import DaskExecutor
+    from ipcosim.harness.studies.sweep import DaskExecutor
 
     if not isinstance(executor, DaskExecutor):
         return spec
-    from harness.studies.runners import MultiSpec
+    from ipcosim.harness.studies.runners import MultiSpec
 
     if isinstance(spec, MultiSpec):
         return MultiSpec(specs=[for_executor(s, executor) for s in spec.specs], name=spec.name)

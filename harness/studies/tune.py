@@ -1,7 +1,7 @@
 """Automatic gain tuning: differential evolution over controller parameters, evaluated in
 parallel by the sweep engine.
 
-The cost of a gain set is :func:`harness.studies.cost.cost` of one run of the scenario with
+The cost of a gain set is :func:`ipcosim.harness.studies.cost.cost` of one run of the scenario with
 those gains (ITAE of the cart position + weighted ITAE of the angle + weighted ISE of the
 voltage; infinite when the pendulum falls). ``scipy.optimize.differential_evolution`` proposes a
 population per generation; its ``workers`` map hands the whole generation to the sweep engine,
@@ -21,11 +21,11 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from harness.errors import UsageError
-from harness.studies import cost as costmod
-from harness.studies.robustness import fmt
-from harness.studies.runners import RunSpec
-from harness.studies.vary import Case, case_seed
+from ipcosim.harness.errors import UsageError
+from ipcosim.harness.studies import cost as costmod
+from ipcosim.harness.studies.robustness import fmt
+from ipcosim.harness.studies.runners import RunSpec
+from ipcosim.harness.studies.vary import Case, case_seed
 
 #: Default search range around a nominal value g: [g / DEFAULT_FACTOR, g * DEFAULT_FACTOR].
 DEFAULT_FACTOR = 2.0
@@ -122,7 +122,7 @@ class SweepMap:
     def __init__(self, spec: RunSpec, names: Sequence[str], executor: Any, seed: int,
                  w_angle: float, w_voltage: float, budget: int,
                  on_row: Callable[[dict[str, Any]], None] | None = None) -> None:
-        from harness.sweep import run_sweep
+        from ipcosim.harness.studies.sweep import run_sweep
 
         self._run_sweep = run_sweep
         self.spec, self.names, self.executor, self.seed = spec, list(names), executor, seed
@@ -193,7 +193,7 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
     """
     from scipy.optimize import differential_evolution
 
-    from harness.sweep import open_executor
+    from ipcosim.harness.studies.sweep import open_executor
 
     dims = len(names)
     popsize, maxiter = plan_population(budget - 1, dims)
@@ -273,7 +273,7 @@ def tuned_parameter_set(scenario: str, best: Mapping[str, float],
     if len(components) == 1:
         component = components.pop()
         try:
-            from harness.ssp import load_scenario, select_parameter_set
+            from ipcosim.harness.scenario.ssp import load_scenario, select_parameter_set
 
             sc = load_scenario(scenario)
             if parameter_set:

@@ -1,5 +1,5 @@
 """Test FMU for the master: a gain with direct feed-through, and a lag without it."""
-from fmus.fmi import FmuBase
+from ipcosim.fmus.fmi import FmuBase
 
 
 class MasterGain(FmuBase):

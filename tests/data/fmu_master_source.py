@@ -1,7 +1,7 @@
 """Test FMU for the master: a constant source that fails on demand after ``fail_time``."""
 import math
 
-from fmus.fmi import FmuBase, StepFailure
+from ipcosim.fmus.fmi import FmuBase, StepFailure
 
 
 class MasterSource(FmuBase):

@@ -1,12 +1,12 @@
-"""A small FMU exercising fmus.fmi: feed-through and integrating outputs, an integer output,
+"""A small FMU exercising ipcosim.fmus.fmi: feed-through and integrating outputs, an integer output,
 checked and tunable parameters, step failures and exceptions on demand."""
 import math
 
-from fmus.fmi import FmuBase, StepFailure, positive
+from ipcosim.fmus.fmi import FmuBase, StepFailure, positive
 
 
 class PlumbingProbe(FmuBase):
-    """Integrates its input; fails on demand (test FMU for fmus.fmi)."""
+    """Integrates its input; fails on demand (test FMU for ipcosim.fmus.fmi)."""
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)

@@ -1,0 +1,38 @@
+"""ipcosim: FMI co-simulation of the Quanser IP02 inverted pendulum (single and double mass).
+
+This file is the top of the one import package, ``ipcosim``; its subpackages are the
+top-level folders of the source tree (``pyproject.toml``, ``package-dir``)::
+
+    ipcosim.fmus         fmus/         plant physics, plant FMUs, the HIL adapter FMU
+    ipcosim.controllers  controllers/  control-law design, discrete laws, controller FMUs
+    ipcosim.harness      harness/      master, scenario loader, HIL rig, studies, CLI
+    ipcosim/ssp          ssp/          the shipped SSP scenarios (package data)
+
+The public Python API is re-exported here lazily, so ``import ipcosim`` stays cheap::
+
+    import ipcosim
+    result = ipcosim.run("single-mass-lqr", stop_time=5.0)
+    result.metrics["settling_time_s"]
+"""
+from __future__ import annotations
+
+from typing import Any
+
+__version__ = "0.2.0"
+
+_EXPORTS = {
+    "run": "ipcosim.harness.api", "prepare": "ipcosim.harness.api", "Prepared": "ipcosim.harness.api",
+    "Result": "ipcosim.harness.master.results", "SimulationError": "ipcosim.harness.master.results",
+    "load_scenario": "ipcosim.harness.scenario.ssp", "scenario_names": "ipcosim.harness.scenario.ssp",
+    "IpcosimError": "ipcosim.harness.errors",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'ipcosim' has no attribute {name!r}")

@@ -1,0 +1,172 @@
+"""Plant FMU step cost (``make bench``): the median cost of one communication step of
+``IP02SingleMass`` and ``IP02DoubleMass`` through fmpy -- ``fmi2SetReal(voltage)``,
+``fmi2DoStep(h = 1 ms)``, ``fmi2GetReal(every output)`` -- beside the same cycle on a
+trivial pythonfmu FMU (one input copied to one output: the floor that pythonfmu, the
+embedded interpreter and fmpy's ctypes calls cost) measured in the same run. The
+difference is what the plant model adds (target: <= 40 us). The same trivial FMU written
+on ``ipcosim.fmus.fmi.FmuBase`` (what the shared plumbing adds) and the pure ``Plant.do_step``
+cost are printed for reference.
+
+Method: all FMUs are built into a temporary folder and instantiated once; then rounds of
+``CYCLES`` cycles alternate between the FMUs (so that drifts of the machine hit all of them
+alike) and the median per-cycle time over ``ROUNDS`` rounds is reported.
+"""
+from __future__ import annotations
+
+import math
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable
+
+ROUNDS = int(os.environ.get("IPCOSIM_BENCH_ROUNDS", "40"))
+CYCLES = int(os.environ.get("IPCOSIM_BENCH_CYCLES", "250"))
+H = 1e-3
+TARGET_US = 40.0
+
+TRIVIAL_SCRIPT = '''
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+
+
+class TrivialBench(Fmi2Slave):
+    """One input copied to one output."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.u = 0.0
+        self.y = 0.0
+        self.register_variable(Real("u", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous))
+        self.register_variable(Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous))
+
+    def do_step(self, current_time, step_size):
+        self.y = self.u
+        return True
+'''
+
+
+FMUBASE_SCRIPT = '''
+from ipcosim.fmus.fmi import FmuBase
+
+
+class TrivialFmuBaseBench(FmuBase):
+    """One input copied to one output, on ipcosim.fmus.fmi.FmuBase."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.add_input("u", start=0.0, unit="V", description="input")
+        self.add_output("y", unit="V", description="copy of u", initial_depends_on=())
+
+    def step(self, t, h):
+        self.y = self.u
+'''
+
+
+def _cycle(fmu_path: Path, input_name: str, workdir: Path) -> tuple[Callable[[int], float], Callable[[], None]]:
+    """An fmpy instance of the FMU and a function timing ``n`` cycles (returns seconds)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    md = read_model_description(str(fmu_path))
+    unzip = extract(str(fmu_path), unzipdir=str(workdir / fmu_path.stem))
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName=fmu_path.stem)
+    slave.instantiate(loggingOn=True)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    if "initial_pendulum_angle" in {v.name for v in md.modelVariables}:
+        vr = next(v.valueReference for v in md.modelVariables if v.name == "initial_pendulum_angle")
+        slave.setReal([vr], [math.pi])  # hanging: a bounded motion however long the bench runs
+    slave.exitInitializationMode()
+    vin = [next(v.valueReference for v in md.modelVariables if v.name == input_name)]
+    outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
+    step = [0]
+    set_real, do_step, get_real = slave.setReal, slave.doStep, slave.getReal
+
+    def timed(n: int) -> float:
+        k = step[0]
+        t0 = time.perf_counter()
+        for j in range(k, k + n):
+            set_real(vin, [2.0 * math.sin(0.01 * j)])
+            do_step(j * H, H)
+            get_real(outs)
+        elapsed = time.perf_counter() - t0
+        step[0] = k + n
+        return elapsed
+
+    def close() -> None:
+        slave.terminate()
+        slave.freeInstance()
+
+    return timed, close
+
+
+def _pure_plant_us(kind: str) -> float:
+    from ipcosim.fmus.params import DEFAULT_PRESET, preset
+    from ipcosim.fmus.plant import Plant
+
+    plant = Plant(preset(DEFAULT_PRESET[kind]))
+    x = plant.x.copy()
+    x[2 if kind == "single-mass" else 4] = math.pi
+    plant.set_state(x)
+    samples = []
+    for r in range(ROUNDS):
+        t0 = time.perf_counter()
+        for j in range(r * CYCLES, (r + 1) * CYCLES):
+            plant.do_step(j * H, H, 2.0 * math.sin(0.01 * j))
+        samples.append((time.perf_counter() - t0) / CYCLES * 1e6)
+    return statistics.median(samples)
+
+
+def measure() -> dict[str, float]:
+    """Median microseconds per cycle for 'floor', 'single-mass', 'double-mass' (+ '*-pure')."""
+    from pythonfmu import FmuBuilder
+
+    from ipcosim.fmus.build import ROOT, build_all
+
+    with tempfile.TemporaryDirectory(prefix="ipcosim-bench-") as tmp:
+        work = Path(tmp)
+        script = work / "fmu_trivial_bench.py"
+        script.write_text(TRIVIAL_SCRIPT)
+        trivial = Path(FmuBuilder.build_FMU(script, dest=work / "fmus"))
+        base_script = work / "fmu_trivial_fmubase_bench.py"
+        base_script.write_text(FMUBASE_SCRIPT)
+        (base,) = build_all(work / "fmus", scripts=[base_script])
+        plants = {r.fmu.stem: r.fmu for r in build_all(work / "fmus", scripts=[
+            ROOT / "fmus" / "fmu_ip02_single_mass.py", ROOT / "fmus" / "fmu_ip02_double_mass.py"])}
+        cases = {"floor": _cycle(trivial, "u", work),
+                 "fmubase": _cycle(base.fmu, "u", work),
+                 "single-mass": _cycle(plants["IP02SingleMass"], "voltage", work),
+                 "double-mass": _cycle(plants["IP02DoubleMass"], "voltage", work)}
+        try:
+            for timed, _ in cases.values():  # warm-up
+                timed(CYCLES)
+            samples: dict[str, list[float]] = {name: [] for name in cases}
+            for _ in range(ROUNDS):
+                for name, (timed, _) in cases.items():
+                    samples[name].append(timed(CYCLES) / CYCLES * 1e6)
+        finally:
+            for _, close in cases.values():
+                close()
+    result = {name: statistics.median(s) for name, s in samples.items()}
+    for kind in ("single-mass", "double-mass"):
+        result[f"{kind}-pure"] = _pure_plant_us(kind)
+    return result
+
+
+def run() -> list[str]:
+    """Lines for ``make bench``."""
+    m = measure()
+    floor = m["floor"]
+    lines = [f"plant FMU cycle through fmpy (setReal voltage, doStep h = 1 ms, getReal all outputs), "
+             f"median of {ROUNDS} x {CYCLES} cycles:",
+             f"floor (trivial pythonfmu FMU, 1 in / 1 out): {floor:7.1f} us",
+             f"same on ipcosim.fmus.fmi.FmuBase:                    {m['fmubase']:7.1f} us  (plumbing adds "
+             f"{m['fmubase'] - floor:.1f} us)"]
+    for kind in ("single-mass", "double-mass"):
+        added = m[kind] - floor
+        verdict = "ok" if added <= TARGET_US else "OVER TARGET"
+        lines.append(f"{kind:<12} plant FMU:                 {m[kind]:7.1f} us  -> adds {added:5.1f} us over the floor "
+                     f"(target <= {TARGET_US:g} us: {verdict}); pure Plant.do_step {m[kind + '-pure']:5.1f} us")
+    return lines

@@ -1,0 +1,5 @@
+import sys
+
+from ipcosim.harness.cli import main
+
+sys.exit(main())

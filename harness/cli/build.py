@@ -1,0 +1,39 @@
+"""``ipcosim build``: the FMUs into ``OUT/fmus`` and, when available, the SSP archives into ``OUT/ssp``."""
+from __future__ import annotations
+
+import argparse
+import importlib
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("build", help="build the FMUs (and SSP archives) into build/",
+                       description="Build every FMU script (fmus/fmu_*.py, controllers/fmu_*.py) into OUT/fmus/ "
+                                   "and pack the SSP scenarios into OUT/ssp/. Unchanged FMUs are not rebuilt.")
+    from ipcosim.harness.paths import BUILD_DIR
+
+    p.add_argument("--out", default=BUILD_DIR, type=Path,
+                   help=f"output folder (default: {BUILD_DIR})")
+    p.add_argument("--force", action="store_true", help="rebuild every FMU even if its sources are unchanged")
+    p.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    from ipcosim.fmus.build import build_all
+
+    out: Path = args.out
+    for result in build_all(out / "fmus", force=args.force):
+        print(f"{'built' if result.built else 'up to date'}: {result.fmu}")
+    pack_ssp(out)
+    return 0
+
+
+def pack_ssp(out: Path) -> None:
+    """Hook for the SSP packer: calls ``ipcosim.harness.scenario.ssp_pack.pack_all(out)`` if that module exists."""
+    try:
+        ssp_pack = importlib.import_module("ipcosim.harness.scenario.ssp_pack")
+    except ModuleNotFoundError as exc:
+        if exc.name == "ipcosim.harness.scenario.ssp_pack":
+            return
+        raise
+    ssp_pack.pack_all(out)

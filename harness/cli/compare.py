@@ -1,0 +1,194 @@
+"""``ipcosim compare``: run every scenario and write the controller comparison report.
+
+    ipcosim compare [--out DIR] [--robustness [--samples N]] [--scenarios a,b,...] [--stop-time S]
+                    [--workers W] [--scheduler ADDR] [--seed S]
+
+FMUs missing from ``build/fmus`` (a fresh checkout) are built first, as ``ipcosim build`` does.
+Writes ``DIR/report.md``, ``DIR/report.html`` (self-contained), ``DIR/figures/<plant>.png``,
+``DIR/metrics.csv`` / ``metrics.json`` and, with ``--robustness``, one resumable sweep per
+scenario under ``DIR/robustness/<scenario>/``.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "compare", help="run every scenario and write the controller comparison report",
+        description="Run every plant x controller scenario and write a Markdown and a self-contained HTML "
+                    "report: metrics table, overlaid time series per plant and the thesis's claims beside "
+                    "the measured numbers.")
+    p.add_argument("--out", default="out/compare", help="report folder (default out/compare)")
+    p.add_argument("--scenarios", help="comma-separated scenario names (default: every scenario in ssp/)")
+    p.add_argument("--robustness", action="store_true",
+                   help="add a robustness column: success rate under +-20 %% uniform uncertainty of the masses, "
+                        "friction (viscous damping) and spring stiffness")
+    p.add_argument("--samples", type=int, default=20, help="robustness runs per scenario (default 20)")
+    p.add_argument("--seed", type=int, default=0, help="robustness seed (default 0)")
+    p.add_argument("--parameter-set", metavar="NAME",
+                   help="bind this parameter set in every scenario that has it, e.g. thesis (default: each "
+                        "scenario's own binding)")
+    p.add_argument("--stop-time", type=float, help="simulated seconds per run (default: the scenarios')")
+    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU cores)")
+    p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler address tcp://HOST:PORT")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=main)
+
+
+def available_scenarios() -> list[str]:
+    """Scenario folders of the project, in report order (known plant x controller first)."""
+    from ipcosim.harness.studies.report import SCENARIOS
+
+    try:
+        from ipcosim.harness.scenario.ssp import SCENARIO_DIR
+    except ImportError:
+        return []
+    found = sorted(p.name for p in SCENARIO_DIR.iterdir() if (p / "SystemStructure.ssd").exists()) \
+        if SCENARIO_DIR.is_dir() else []
+    return [s for s in SCENARIOS if s in found] + [s for s in found if s not in SCENARIOS]
+
+
+def plant_kind(scenario: str, spec: Any) -> str:
+    """``single-mass`` or ``double-mass`` for a scenario (by name, else by its parameters)."""
+    for kind in ("double-mass", "single-mass"):
+        if kind in scenario:
+            return kind
+    return "double-mass" if "plant.K" in spec.parameters else "single-mass"
+
+
+def _pset(scenario: str, wanted: str | None) -> str | None:
+    """``wanted`` if the scenario has that parameter set, else None (its default binding)."""
+    if not wanted:
+        return None
+    try:
+        from ipcosim.harness.scenario.ssp import load_scenario
+
+        return wanted if wanted in load_scenario(scenario).parameter_sets else None
+    except Exception:  # noqa: BLE001 -- reported when the scenario itself is loaded
+        return None
+
+
+def main(args: argparse.Namespace) -> int:
+    from ipcosim.harness.errors import IpcosimError, UsageError
+    from ipcosim.harness.studies import robustness as rob
+    from ipcosim.harness.studies.cost import cost
+    from ipcosim.harness.studies.report import render
+    from ipcosim.harness.studies.runners import SCENARIO_PARAM, MultiSpec
+    from ipcosim.harness.studies.specs import for_executor, spec_for
+    from ipcosim.harness.studies.sweep import (
+        make_cases,
+        one_line,
+        open_executor,
+        package_versions,
+        parse_all,
+        run_sweep,
+    )
+    from ipcosim.harness.studies.vary import Case, case_seed
+
+    names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else available_scenarios()
+    if not names:
+        raise UsageError("no scenarios found (ssp/<plant>-<controller>/SystemStructure.ssd); "
+                         "pass --scenarios or run 'ipcosim build'")
+    if args.samples < 1:
+        raise UsageError(f"--samples {args.samples}: need at least 1")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    results: dict[str, dict[str, Any]] = {}
+    specs, spec_names = [], []
+    built = False
+    for name in names:
+        try:
+            try:
+                spec = spec_for(name, stop_time=args.stop_time, series=True,
+                                parameter_set=_pset(name, args.parameter_set))
+            except FileNotFoundError as exc:
+                if built or "ipcosim build" not in str(exc):
+                    raise
+                # a fresh checkout: build the FMUs once (as 'ipcosim build' does), then go on
+                from ipcosim.fmus.build import build_all
+                from ipcosim.harness.scenario.ssp import BUILD_FMU_DIR
+
+                print(f"compare: FMUs missing; building them into {BUILD_FMU_DIR}", file=sys.stderr)
+                build_all(BUILD_FMU_DIR)
+                built = True
+                spec = spec_for(name, stop_time=args.stop_time, series=True,
+                                parameter_set=_pset(name, args.parameter_set))
+            specs.append(spec)
+            spec_names.append(name)
+        except (IpcosimError, OSError, ValueError) as exc:
+            results[name] = {"status": "error", "error": one_line(exc).split(": ", 1)[-1]}
+            print(f"compare: {name}: {results[name]['error']}", file=sys.stderr)
+
+    executor = open_executor(args.workers, args.scheduler)
+    print(f"compare: {len(spec_names)} scenarios on {executor.description}", file=sys.stderr)
+    summaries: dict[str, dict[str, Any]] = {}
+    try:
+        if specs:
+            multi = for_executor(MultiSpec(specs=specs), executor)
+            cases = [Case(index=i, params={SCENARIO_PARAM: float(i)}, seed=case_seed(args.seed, i))
+                     for i in range(len(specs))]
+            sweep = run_sweep(multi, cases, executor=executor, progress=not args.quiet)
+            for row in sweep.rows:
+                name = spec_names[row["index"]]
+                row = {k: v for k, v in row.items() if k != SCENARIO_PARAM}
+                row["cost"] = cost(row) if row["status"] != "error" else math.inf
+                row["gains"] = getattr(specs[row["index"]], "gains", "") or ""
+                results[name] = row
+        if args.robustness:
+            for name, spec in zip(spec_names, specs):
+                plain = spec_for(name, stop_time=args.stop_time, parameter_set=_pset(name, args.parameter_set))
+                varies = parse_all(rob.default_vary(plant_kind(name, plain), plain.parameters), plain.parameters)
+                cases = make_cases(varies, plain.parameters, samples=args.samples, seed=args.seed)
+                if not args.quiet:
+                    print(f"compare: robustness of {name}, {len(cases)} runs", file=sys.stderr)
+                res = run_sweep(for_executor(plain, executor), cases, executor=executor,
+                                out_dir=out / "robustness" / name,
+                                progress=not args.quiet,
+                                extra_metadata={"vary": [v.text for v in varies], "seed": args.seed})
+                summaries[name] = rob.summarize(res.rows, plain.metric_names)
+    except KeyboardInterrupt:
+        executor.abort()
+        print(f"ipcosim compare: interrupted; robustness runs finished so far are kept under "
+              f"{out / 'robustness'} and reused by the same command", file=sys.stderr)
+        return 130
+    finally:
+        executor.close()
+
+    note = ""
+    if args.robustness:
+        note = (f"Robust success: share of {args.samples} runs per scenario (seed {args.seed}) that stay upright and "
+                f"settle in the +-2 % band when the masses, viscous friction and spring stiffness are each drawn "
+                f"uniformly within +-20 % of nominal (Wilson 95 % interval); per-run results under robustness/.")
+    meta = {"scenarios": len(names), "stop time": f"{args.stop_time:g} s" if args.stop_time else "scenario default",
+            "executor": executor.description, "packages": package_versions()}
+    files = render(results, out, robustness=summaries or None, robustness_note=note, meta=meta)
+
+    keys: dict[str, None] = {"scenario": None}
+    for row in results.values():
+        for k in row:
+            if k not in ("series", "params"):
+                keys.setdefault(k, None)
+    with open(out / "metrics.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(list(keys))
+        for name, row in results.items():
+            w.writerow([name if k == "scenario" else ("" if row.get(k) is None else row.get(k)) for k in keys])
+    clean = {n: {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                 for k, v in r.items() if k != "series"} for n, r in results.items()}
+    (out / "metrics.json").write_text(json.dumps({"results": clean, "robustness": summaries}, indent=2) + "\n")
+    print(f"report: {files['markdown']}, {files['html']}")
+    ok = sum(1 for r in results.values() if r.get("status") == "ok")
+    print(f"{len(results)} scenarios: {ok} succeed, "
+          f"{sum(1 for r in results.values() if r.get('status') == 'error')} failed to run")
+    if results and all(r.get("status") == "error" for r in results.values()):
+        first = next(iter(results.items()))
+        raise IpcosimError(f"every scenario failed to run; {first[0]}: {first[1].get('error')}")
+    return 0

@@ -1,0 +1,29 @@
+"""``ipcosim list``: the project's scenarios, one line each."""
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("list", help="list the scenarios", description="List the SSP scenarios of ssp/, one line each.")
+    p.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    from ipcosim.harness.scenario.ssp import SCENARIO_DIR, ScenarioError, load_scenario, scenario_names
+
+    names = scenario_names()
+    if not names:
+        print(f"no scenarios in {SCENARIO_DIR}")
+        return 0
+    width = max(len(n) for n in names)
+    for name in names:
+        try:
+            sc = load_scenario(name)
+        except ScenarioError as exc:
+            print(f"{name:{width}s}  (broken: {exc})")
+            continue
+        sets = ", ".join(sorted(sc.parameter_sets)) or "-"
+        exp = sc.experiment
+        print(f"{name:{width}s}  {sc.description}  [{exp.stop_time:g} s at {exp.step_size:g} s; sets: {sets}]")
+    return 0

@@ -1,0 +1,94 @@
+"""``ipcosim run``: co-simulate a scenario; write results.csv, metrics.json (and plot.png)."""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="co-simulate a scenario (SSP folder or archive)",
+                       description="Run an SSP scenario with the fmpy-based master and write DIR/results.csv "
+                                   "(time, then component.variable), DIR/metrics.json and, with --plot, DIR/plot.png.")
+    p.add_argument("scenario", metavar="SCENARIO|PATH",
+                   help="scenario name (see `ipcosim list`), scenario folder, SystemStructure.ssd or .ssp archive")
+    p.add_argument("--stop-time", metavar="S", help="simulated time [s] (default: the scenario's, 10 s)")
+    p.add_argument("--step", metavar="H", help="communication step [s] (default: the scenario's, 0.001 s)")
+    p.add_argument("--set", action="append", default=[], metavar="COMP.VAR=VALUE",
+                   help="override a parameter or input start value, e.g. --set plant.Mp=0.2 (repeatable)")
+    p.add_argument("--swap", action="append", default=[], metavar="COMPONENT=FMU_OR_ALIAS",
+                   help="replace a component by another FMU with compatible connectors, e.g. --swap plant=hil")
+    p.add_argument("--realtime", action="store_true", help="pace the run to wall-clock time")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: out/<scenario>)")
+    p.add_argument("--plot", action="store_true", help="also write DIR/plot.png")
+    p.add_argument("--parameter-set", metavar="NAME",
+                   help="bind this parameter set of the scenario (thesis, tuned...) instead of the default")
+    p.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"], default="gauss-seidel",
+                   help="co-simulation algorithm (default gauss-seidel, ordered by the FMUs' dependencies)")
+    p.add_argument("--record", action="append", default=[], metavar="VAR[,VAR...]",
+                   help="columns of results.csv: names or patterns like 'plant.*' (default: every connector)")
+    p.add_argument("--fmu-dir", action="append", default=[], metavar="DIR",
+                   help="extra folder to look for FMUs in (also IPCOSIM_FMU_PATH; default build/fmus)")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.set_defaults(func=main)
+
+
+def _number(option: str, text: str | None) -> float | None:
+    from ipcosim.harness.errors import UsageError
+
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise UsageError(f"{option} {text!r}: not a number of seconds") from None
+    if not (math.isfinite(value) and value > 0):
+        raise UsageError(f"{option} {text}: must be a positive number of seconds")
+    return value
+
+
+def _scenario_label(text: str) -> str:
+    p = Path(text)
+    if p.name == "SystemStructure.ssd":
+        return p.parent.name
+    return p.stem if p.suffix == ".ssp" else (p.name or text)
+
+
+def main(args: argparse.Namespace) -> int:
+    import warnings
+
+    from ipcosim.harness.api import Prepared
+    from ipcosim.harness.master.results import json_safe
+    from ipcosim.harness.scenario.system import parse_set_options, parse_swap_options
+
+    stop = _number("--stop-time", args.stop_time)
+    step = _number("--step", args.step)
+    overrides = parse_set_options(args.set)
+    swaps = parse_swap_options(args.swap)
+    variables = [v.strip() for item in args.record for v in item.split(",") if v.strip()] or None
+    out = Path(args.out) if args.out else Path("out") / _scenario_label(args.scenario)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        prepared = Prepared(args.scenario, parameter_set=args.parameter_set, swaps=swaps, fmu_dirs=args.fmu_dir,
+                            algorithm=args.algorithm, warn=False)
+    with prepared:
+        for note in prepared.system.warnings:
+            print(f"ipcosim run: warning: {note}", file=sys.stderr)
+        if not args.quiet:
+            for note in prepared.system.notes:
+                print(f"note: {note}")
+        result = prepared.run(stop, step, overrides, out_dir=out, variables=variables, plot=args.plot,
+                              realtime=True if args.realtime else None, progress=not args.quiet)
+    if not args.quiet:
+        m = json_safe(result.metrics)
+        meta = result.metadata
+        print(f"{meta['scenario']}: {meta['stop_time'] - meta['start_time']:g} s simulated in "
+              f"{m['wall_time_s']:.3f} s ({m['real_time_factor']:.1f}x real time), "
+              f"{meta['algorithm']}, step {meta['step']:g} s, order {' -> '.join(meta['order'])}")
+        for key, value in m.items():
+            if key in ("wall_time_s", "real_time_factor"):
+                continue
+            print(f"  {key:22s} {value if not isinstance(value, float) else f'{value:.6g}'}")
+        print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if args.plot else ""))
+    return 0

@@ -1,0 +1,133 @@
+"""``ipcosim tune``: find controller gains that minimise the documented cost.
+
+    ipcosim tune SCENARIO --params controller.c1,controller.lambda1 [--budget N]
+                 [--bounds controller.c1=1:10 ...] [--workers W] [--scheduler ADDR] [--seed S]
+
+Starts from the scenario's ``thesis`` parameter set when it has one (the thesis's gains; else
+its default binding, or ``--parameter-set``). Writes the tuned parameter set as
+``autotuned.ssv`` beside the scenario (``ssp/<scenario>/autotuned.ssv``: the complete controller
+set with the tuned values, so ``ipcosim run SCENARIO --parameter-set autotuned`` runs it; for a
+scenario without a folder, into ``--out``), and into ``--out`` (default ``out/tune/<scenario>``)
+``tune.md`` (before/after table) and ``evaluations.csv`` (every run).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "tune", help="tune controller gains by differential evolution over parallel runs",
+        description="Minimise J = ITAE(cart position error) + w_angle ITAE(angle) + w_voltage ISE(voltage) "
+                    "(infinite when the pendulum falls) over the given parameters with scipy's differential "
+                    "evolution; each generation runs in parallel on the sweep engine.")
+    p.add_argument("scenario", help="scenario name or path (or pure:single-mass-lqr)")
+    p.add_argument("--params", required=True, metavar="COMP.VAR,...", help="parameters to tune, comma-separated")
+    p.add_argument("--bounds", action="append", default=[], metavar="COMP.VAR=LOW:HIGH",
+                   help="search range (default: nominal/2 .. nominal*2)")
+    p.add_argument("--budget", type=int, default=200, help="maximum number of runs (default 200)")
+    p.add_argument("--seed", type=int, default=0, help="optimiser seed (default 0)")
+    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU cores)")
+    p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler address tcp://HOST:PORT")
+    p.add_argument("--set", action="append", default=[], metavar="COMP.VAR=VALUE",
+                   help="fixed parameter value in every run")
+    p.add_argument("--stop-time", type=float, help="simulated seconds per run (default: the scenario's)")
+    p.add_argument("--step", type=float, help="communication step [s] (default: the scenario's)")
+    p.add_argument("--w-angle", type=float, default=None, help="weight of ITAE(angle) [m/rad] (default 0.1)")
+    p.add_argument("--w-voltage", type=float, default=None, help="weight of ISE(voltage) [m s/V^2] (default 1e-4)")
+    p.add_argument("--parameter-set", metavar="NAME",
+                   help="start from this parameter set of the scenario (default: thesis when it exists)")
+    p.add_argument("--ssv", help="where to write the tuned parameter set (default: autotuned.ssv beside the scenario)")
+    p.add_argument("--out", help="report folder (default out/tune/<scenario>)")
+    p.add_argument("--quiet", action="store_true", help="no per-generation progress")
+    p.set_defaults(func=main)
+
+
+def _scenario_dir(scenario: str) -> Path | None:
+    """The scenario's folder (where its .ssv files live), or None."""
+    path = Path(scenario)
+    if path.is_dir():
+        return path
+    if path.suffix == ".ssp" and path.exists():
+        return path.parent
+    try:
+        from ipcosim.harness.scenario.ssp import SCENARIO_DIR
+    except ImportError:
+        return None
+    candidate = SCENARIO_DIR / scenario
+    return candidate if candidate.is_dir() else None
+
+
+def main(args: argparse.Namespace) -> int:
+    from ipcosim.harness.cli.sweep import default_out
+    from ipcosim.harness.studies import cost as costmod
+    from ipcosim.harness.studies import tune as tunemod
+    from ipcosim.harness.studies.specs import PURE_SCENARIOS, for_executor, parse_set, spec_for
+    from ipcosim.harness.studies.sweep import open_executor
+
+    overrides = parse_set(args.set)
+    pset = args.parameter_set
+    if pset is None and args.scenario not in PURE_SCENARIOS:
+        from ipcosim.harness.scenario.ssp import load_scenario
+
+        if "thesis" in load_scenario(args.scenario).parameter_sets:
+            pset = "thesis"
+    spec = spec_for(args.scenario, stop_time=args.stop_time, step=args.step, overrides=overrides,
+                    parameter_set=pset)
+    names = tunemod.parse_params(args.params, spec.parameters)
+    bounds = tunemod.parse_bounds(args.bounds, names, spec.parameters)
+    w_angle = costmod.W_ANGLE if args.w_angle is None else args.w_angle
+    w_voltage = costmod.W_VOLTAGE if args.w_voltage is None else args.w_voltage
+    tunemod.plan_population(args.budget - 1, len(names))  # checks the budget before starting workers
+    out = Path(args.out) if args.out else default_out(args.scenario, "tune")
+    out.mkdir(parents=True, exist_ok=True)
+    scenario_dir = _scenario_dir(args.scenario)
+    if args.ssv:
+        ssv_path = Path(args.ssv)
+    elif scenario_dir is not None and Path(args.scenario).suffix == ".ssp":
+        ssv_path = scenario_dir / f"{Path(args.scenario).stem}.autotuned.ssv"
+    else:
+        ssv_path = (scenario_dir or out) / "autotuned.ssv"
+
+    executor = open_executor(args.workers, args.scheduler)
+    print(f"tune {spec.name}: {', '.join(names)} within "
+          f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in bounds)}, budget {args.budget} runs on "
+          f"{executor.description}", file=sys.stderr)
+    try:
+        res = tunemod.tune(for_executor(spec, executor), names, bounds, budget=args.budget, executor=executor,
+                           seed=args.seed,
+                           w_angle=w_angle, w_voltage=w_voltage, progress=not args.quiet)
+    except KeyboardInterrupt:
+        executor.abort()
+        print("ipcosim tune: interrupted; nothing written", file=sys.stderr)
+        return 130
+    finally:
+        executor.close()
+
+    tunemod.write_evaluations(out / "evaluations.csv", res.evaluations, names)
+    scenario_hash = getattr(spec, "scenario_hash", "") or spec.key
+    description = (f"ipcosim tune {spec.name} (scenario hash {scenario_hash}): J = {res.best_cost:.6g} "
+                   f"(scenario gains: {res.nominal_cost:.6g}), {len(res.evaluations)} runs, seed {args.seed}, "
+                   f"w_angle {w_angle:g}, w_voltage {w_voltage:g}")
+    values, component = tunemod.tuned_parameter_set(args.scenario, res.best, pset)
+    ssv_path.parent.mkdir(parents=True, exist_ok=True)
+    ssv_path.write_text(tunemod.ssv_text(values, name="autotuned", description=description))
+    if component is not None:
+        usage = (f"It is the complete `{component}` parameter set ({pset or 'default'} with the tuned values): "
+                 f"`ipcosim run {args.scenario} --parameter-set autotuned` runs it.")
+    else:
+        usage = "It holds the tuned values as component.variable (apply them with --set)."
+    table = tunemod.before_after_markdown(res, f"{pset} gains" if pset else "scenario gains")
+    improved = res.best_cost < res.nominal_cost
+    report = (f"# Tuning {spec.name}\n\n{description}.\n\n"
+              f"Cost J = ITAE(x - r) + {w_angle:g} ITAE(theta) + {w_voltage:g} ISE(u); infinite when the "
+              f"pendulum falls.\n\n{table}\n"
+              + ("" if improved else "The optimiser found nothing better than the scenario's gains; "
+                                     "the written set repeats them.\n")
+              + f"\nTuned parameter set: `{ssv_path}`. {usage}\n")
+    (out / "tune.md").write_text(report)
+    print(table, end="")
+    print(f"tuned parameter set: {ssv_path}\nreport: {out / 'tune.md'}, runs: {out / 'evaluations.csv'}")
+    return 0

@@ -1,1 +1,0 @@
-"""Sub-commands of the ``ipcosim`` command line (see ``harness.cli``)."""

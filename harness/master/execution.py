@@ -1,0 +1,520 @@
+"""The execution: owns the slaves, the algorithm, the observers and the manipulators of one
+run, and runs the FMI 2.0 lifecycle::
+
+    instantiate -> setupExperiment -> parameter bindings, overrides (start values)
+    -> enterInitializationMode -> propagate outputs to inputs until a fixed point
+    -> exitInitializationMode -> steps (manipulators, algorithm, observers)
+    -> terminate -> freeInstance (every instance, also after a failure)
+
+Parameters are set before entering initialization mode, where SSP 1.0 puts parameter
+bindings and where libcosim sets start values, so FMUs that derive quantities on entering
+initialization see them. Runtime values live here (the value vector), never on the parsed
+scenario.
+
+Values: all Real connectors of all components share one ``ctypes`` double vector (per
+component its outputs, then its inputs); each component reads its outputs into and sets its
+inputs from its own slice of it with one call, and the vector is copied to the record after
+every step.
+"""
+from __future__ import annotations
+
+import ctypes
+import math
+import time as _time
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from ipcosim.harness.master.algorithm import (
+    ALGORITHMS,
+    GAUSS_SEIDEL,
+    Block,
+    InitializationError,
+    StepSizeError,
+    TimeBase,
+    compile_loop,
+    gauss_seidel_order,
+    step_multiples,
+)
+from ipcosim.harness.master.manipulators import Manipulator, Overrides
+from ipcosim.harness.master.observers import Observer
+from ipcosim.harness.master.results import Result, SimulationError, task_metrics
+from ipcosim.harness.master.slave import FMUSlave, Slave
+from ipcosim.harness.scenario.system import Instance, System, Variable
+
+SlaveFactory = Callable[[Instance], Slave]
+
+#: Ticks run between two looks at the record for non-finite values (and at KeyboardInterrupt).
+CHUNK = 512
+
+
+class NonFiniteError(SimulationError, FloatingPointError):
+    """A component produced a NaN or infinite output."""
+
+
+class Execution:
+    """One run of a bound system.
+
+    Parameters
+    ----------
+    system : System
+        From :func:`ipcosim.harness.scenario.system.bind`.
+    step : float
+        Communication step [s] (the master's tick).
+    stop_time : float
+        End of the run [s].
+    start_time : float, optional
+        Start [s]; default the scenario's DefaultExperiment startTime.
+    algorithm : str
+        ``gauss-seidel`` (default) or ``jacobi``.
+    overrides : mapping of (component, variable) to value
+        Start values applied after the bindings (already checked).
+    observers, manipulators : sequences
+        See :mod:`ipcosim.harness.master.observers`, :mod:`ipcosim.harness.master.manipulators`.
+    slave_factory : callable, optional
+        ``factory(instance) -> Slave``; default :class:`FMUSlave` on ``unzip_dirs``.
+    unzip_dirs : mapping of component name to Path
+        Extracted FMUs (for the default factory).
+    record_every : int
+        Record every n-th communication point.
+    max_init_iterations : int
+        Bound on the initialization fixed-point iterations.
+    """
+
+    def __init__(self, system: System, step: float, stop_time: float, start_time: float | None = None,
+                 algorithm: str = GAUSS_SEIDEL, overrides: Mapping[tuple[str, str], Any] | None = None,
+                 observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
+                 slave_factory: SlaveFactory | None = None, unzip_dirs: Mapping[str, Path] | None = None,
+                 record_every: int = 1, max_init_iterations: int = 20) -> None:
+        if algorithm not in ALGORITHMS:
+            raise StepSizeError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
+        self.system = system
+        self.algorithm = algorithm
+        start = system.scenario.experiment.start_time if start_time is None else float(start_time)
+        self.timebase = TimeBase.make(start, stop_time, step)
+        if not (isinstance(record_every, int) and record_every >= 1):
+            raise StepSizeError(f"record_every = {record_every!r} must be a positive integer")
+        self.record_every = record_every
+        self.max_init_iterations = max_init_iterations
+        self.overrides = dict(overrides or {})
+        self.observers = list(observers)
+        self.manipulators = [Overrides(self.overrides)] + list(manipulators)
+        self.unzip_dirs = dict(unzip_dirs or {})
+        self.slave_factory = slave_factory or self._fmu_slave
+        self.instances = list(system.instances)
+        self.index = {inst.name: i for i, inst in enumerate(self.instances)}
+        self.multiples = step_multiples(system, self._planned_value, self.timebase.step)
+        if algorithm == GAUSS_SEIDEL:
+            self.order = [self.index[n] for n in gauss_seidel_order(system)]
+        else:
+            self.order = list(range(len(self.instances)))
+        self.init_order = self.order
+        self._layout()
+        self.slaves: list[Slave] = []
+        self.tick = 0
+        self.init_iterations = 0
+        self._loop_source = ""
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def n_ticks(self) -> int:
+        return self.timebase.ticks
+
+    @property
+    def step_size(self) -> float:
+        return self.timebase.step
+
+    @property
+    def start_time(self) -> float:
+        return self.timebase.start
+
+    @property
+    def stop_time(self) -> float:
+        return self.timebase.time(self.timebase.ticks)
+
+    def time_of(self, n: int) -> float:
+        """Simulated time after ``n`` ticks."""
+        return self.timebase.time(n)
+
+    @property
+    def component_order(self) -> list[str]:
+        return [self.instances[i].name for i in self.order]
+
+    # ------------------------------------------------------------------ setup
+    def _planned_value(self, comp: str, var: str) -> Any:
+        if (comp, var) in self.overrides:
+            return self.overrides[(comp, var)]
+        return self.system.instance(comp).start_value(var)
+
+    def _fmu_slave(self, instance: Instance) -> Slave:
+        return FMUSlave(instance, self.unzip_dirs[instance.name])
+
+    def _layout(self) -> None:
+        """Place every Real connector in the value vector; build the record columns."""
+        self._real_outputs: list[list[Variable]] = []
+        self._real_inputs: list[list[Variable]] = []
+        offsets = []
+        pos = 0
+        for inst in self.instances:
+            outs = [v for v in inst.outputs if v.type in ("Real", "Float64")]
+            ins = [v for v in inst.inputs if v.type in ("Real", "Float64")]
+            self._real_outputs.append(outs)
+            self._real_inputs.append(ins)
+            offsets.append((pos, pos + len(outs)))
+            pos += len(outs) + len(ins)
+        self.n_values = pos
+        self.values_c = (ctypes.c_double * (pos + 1))()  # +1: empty slices still map one element
+        self.values = np.ctypeslib.as_array(self.values_c)[:pos]
+        self._out_offset = [o for o, _ in offsets]
+        self._in_offset = [i for _, i in offsets]
+        self._slot: dict[tuple[str, str], int] = {}
+        for k, inst in enumerate(self.instances):
+            for j, v in enumerate(self._real_outputs[k]):
+                self._slot[(inst.name, v.name)] = self._out_offset[k] + j
+            for j, v in enumerate(self._real_inputs[k]):
+                self._slot[(inst.name, v.name)] = self._in_offset[k] + j
+                start = self._planned_value(inst.name, v.name)
+                self.values[self._in_offset[k] + j] = float(start) if start is not None else 0.0
+        self.output_slots = np.array([self._out_offset[k] + j for k in range(len(self.instances))
+                                      for j in range(len(self._real_outputs[k]))], dtype=int)
+        # record columns: every Real connector in SSD order; connected inputs are the
+        # transformed source values (what the connection delivers at that time)
+        self.columns: list[tuple[str, int, tuple[int, float, float] | None]] = []
+        for k, inst in enumerate(self.instances):
+            for v in inst.connectors:
+                if v.type not in ("Real", "Float64"):
+                    continue
+                name = f"{inst.name}.{v.name}"
+                link = self.system.link_into(inst.name, v.name)
+                if link is not None:
+                    src = self._slot[(link.src, link.src_var.name)]
+                    self.columns.append((name, self._slot[(inst.name, v.name)], (src, link.factor, link.offset)))
+                else:
+                    self.columns.append((name, self._slot[(inst.name, v.name)], None))
+
+    def _blocks(self) -> list[Block]:
+        blocks = []
+        for k, (inst, slave) in enumerate(zip(self.instances, self.slaves)):
+            handle, do_step, get_real, set_real = slave.raw()
+            outs, ins = self._real_outputs[k], self._real_inputs[k]
+            n_out, n_in = len(outs), len(ins)
+            out_values = (ctypes.c_double * max(n_out, 1)).from_buffer(self.values_c, 8 * self._out_offset[k])
+            in_values = (ctypes.c_double * max(n_in, 1)).from_buffer(self.values_c, 8 * self._in_offset[k])
+            transfers = []
+            for j, v in enumerate(ins):
+                link = self.system.link_into(inst.name, v.name)
+                if link is None:
+                    continue
+                src = self.index[link.src]
+                src_j = [x.name for x in self._real_outputs[src]].index(link.src_var.name)
+                transfers.append((j, src, src_j, float(link.factor), float(link.offset)))
+            m = self.multiples[inst.name]
+            private = (ctypes.c_double * max(n_out, 1))() if (m > 1 and self.algorithm != GAUSS_SEIDEL) else None
+            blocks.append(Block(index=k, name=inst.name, handle=handle, do_step=do_step, get_real=get_real,
+                                set_real=set_real, out_vrs=(ctypes.c_uint * max(n_out, 1))(*[v.vr for v in outs]),
+                                in_vrs=(ctypes.c_uint * max(n_in, 1))(*[v.vr for v in ins]),
+                                out_values=out_values, in_values=in_values, n_out=n_out, n_in=n_in,
+                                multiple=m, private_out=private, transfers=tuple(transfers)))
+        return blocks
+
+    # ------------------------------------------------------------------ manipulation API
+    def set_start(self, component: str, variable: str, value: Any) -> None:
+        """Set a start value (instantiated state; used by manipulators' ``initialize``)."""
+        slave = self.slaves[self.index[component]]
+        var = self.instances[self.index[component]].model.variables[variable]
+        slave.set_values([var], [value])
+        slot = self._slot.get((component, variable))
+        if slot is not None and var.causality == "input":
+            self.values[slot] = float(value)
+
+    def set_real(self, component: str, variable: str, value: float) -> None:
+        """Set a Real variable now (manipulators' ``step``). For an input connector the value
+        is also what the next batched set sends; a connected input is overwritten by its
+        connection at the component's next step."""
+        slot = self._slot.get((component, variable))
+        var = self.instances[self.index[component]].model.variables[variable]
+        if slot is not None and var.causality == "input":
+            self.values[slot] = float(value)
+        self.slaves[self.index[component]].set_values([var], [float(value)])
+
+    def get(self, component: str, variable: str) -> float:
+        """Current value of a Real connector (from the value vector)."""
+        return float(self.values[self._slot[(component, variable)]])
+
+    # ------------------------------------------------------------------ run
+    def run(self) -> Result:
+        """Run the lifecycle; always returns a Result (``result.error`` set on failure).
+
+        Every instance is terminated (when FMI allows it) and freed, also after a failure or
+        a KeyboardInterrupt (which is re-raised after cleanup).
+        """
+        n_rows = self.n_ticks // self.record_every + 1
+        self.record = np.zeros((n_rows, max(self.n_values, 1)))
+        rows = 0
+        error: BaseException | None = None
+        interrupted: BaseException | None = None
+        wall0 = _time.perf_counter()
+        wall_loop = 0.0
+        try:
+            self._instantiate()
+            self._initialize()
+            self.record[0, :self.n_values] = self.values
+            rows = 1
+            self._check_finite(0, 1)
+            for obs in self.observers:
+                obs.start(self)
+            loop_t0 = _time.perf_counter()
+            rows = self._step_all()
+            wall_loop = _time.perf_counter() - loop_t0
+        except KeyboardInterrupt as exc:
+            interrupted = error = exc
+            rows = min(self.tick // self.record_every + 1, n_rows) if rows else 0
+        except Exception as exc:  # noqa: BLE001 -- reported in the Result, cleanup below
+            error = exc
+            if isinstance(exc, _TickFailure):
+                rows = exc.rows
+        finally:
+            cleanup_error = self._cleanup()
+            if error is None and cleanup_error is not None:
+                error = cleanup_error
+            for obs in self.observers:
+                try:
+                    obs.finish(self, error)
+                except Exception as exc:  # noqa: BLE001
+                    error = error or exc
+        wall = _time.perf_counter() - wall0
+        result = self._result(rows, error, wall, wall_loop)
+        if interrupted is not None:
+            result.error = f"interrupted at t = {self.time_of(self.tick):.6g} s"
+            result.metadata["error"] = result.error
+            interrupted.result = result  # type: ignore[attr-defined]  -- for callers that save it
+            raise interrupted
+        return result
+
+    def _instantiate(self) -> None:
+        for inst in self.instances:
+            slave = self.slave_factory(inst)
+            self.slaves.append(slave)
+            slave.instantiate()
+        for slave in self.slaves:
+            slave.setup_experiment(self.start_time, self.stop_time)
+        for slave, inst in zip(self.slaves, self.instances):
+            if inst.parameters:
+                slave.set_values([v for v, _ in inst.parameters], [x for _, x in inst.parameters])
+        for man in self.manipulators:
+            man.initialize(self)
+
+    def _initialize(self) -> None:
+        """Enter initialization mode, propagate to a fixed point, exit initialization mode."""
+        for slave in self.slaves:
+            slave.enter_initialization_mode()
+        self.blocks = self._blocks()
+        for b in self.blocks:  # every output as the FMUs compute it from their start values
+            self._get_outputs(b, None)
+        changed: list[str] = []
+        for it in range(1, self.max_init_iterations + 1):
+            changed = self._sweep()
+            self.init_iterations = it
+            if not changed:
+                break
+        else:
+            raise InitializationError(
+                f"initialization did not reach a fixed point in {self.max_init_iterations} iterations; "
+                f"still changing: {', '.join(changed)}", changed)
+        if self.algorithm == GAUSS_SEIDEL:
+            # Leave initialization mode component by component in step order, handing each the
+            # outputs its upstream components computed on leaving (FMUs whose outputs are
+            # "calculated" may compute them only in fmi2ExitInitializationMode).
+            for idx in self.order:
+                b = self.blocks[idx]
+                self._transfer(b, [])
+                if b.n_in:
+                    status = b.set_real(b.handle, b.in_vrs, b.n_in, b.in_values)
+                    if status > 1:
+                        raise self.slaves[idx].fail("fmi2SetReal", status, self.start_time)
+                self.slaves[idx].exit_initialization_mode()
+                self._get_outputs(b, self.start_time)
+        else:
+            # Jacobi: every component leaves from the values of initialization mode, then the
+            # outputs are read (what libcosim does); they reach the inputs at the first step.
+            for idx in self.order:
+                self.slaves[idx].exit_initialization_mode()
+            for b in self.blocks:
+                self._get_outputs(b, self.start_time)
+        self._run_loop, self._loop_source = compile_loop(self.blocks, self.order, self.algorithm, self.timebase,
+                                                         self.record_every)
+
+    def _sweep(self) -> list[str]:
+        """One pass in step order: transfer, set inputs, read outputs; returns changed inputs."""
+        changed: list[str] = []
+        for idx in self.init_order:
+            b = self.blocks[idx]
+            self._transfer(b, changed)
+            if b.n_in:
+                status = b.set_real(b.handle, b.in_vrs, b.n_in, b.in_values)
+                if status > 1:
+                    raise self.slaves[idx].fail("fmi2SetReal", status, self.start_time)
+            self._get_outputs(b, None)
+        return changed
+
+    def _transfer(self, b: Block, changed: list[str]) -> None:
+        """Copy connected outputs into ``b``'s inputs; append the names of inputs that changed."""
+        inputs = self._real_inputs[b.index]
+        for k, src, j, factor, offset in b.transfers:
+            new = factor * self.blocks[src].out_values[j] + offset
+            old = b.in_values[k]
+            if not (new == old or (math.isnan(new) and math.isnan(old))):
+                b.in_values[k] = new
+                changed.append(f"{b.name}.{inputs[k].name}")
+
+    def _get_outputs(self, b: Block, t: float | None) -> None:
+        if b.n_out:
+            status = b.get_real(b.handle, b.out_vrs, b.n_out, b.out_values)
+            if status > 1:
+                raise self.slaves[b.index].fail("fmi2GetReal", status, t if t is not None else self.start_time)
+
+    def _step_all(self) -> int:
+        """Run every tick in chunks between observer/manipulator events; returns rows recorded."""
+        N = self.n_ticks
+        rec_addr = self.record.ctypes.data
+        row_bytes = self.record.shape[1] * 8
+        va = ctypes.addressof(self.values_c)
+        run = self._run_loop
+        every = self.record_every
+        due_man = {id(m): m.next_tick(-1) for m in self.manipulators}
+        due_obs = {id(o): o.next_tick(0) for o in self.observers}
+        n = 0
+        while n < N:
+            for man in self.manipulators:
+                if due_man[id(man)] == n:
+                    man.step(self, n)
+                    due_man[id(man)] = man.next_tick(n)
+            target = min(N, n + CHUNK)
+            for k in (*due_man.values(), *due_obs.values()):
+                if k is not None and n < k < target:
+                    target = k
+            failure = run(n, target, rec_addr, va, row_bytes)
+            if failure is not None:
+                fn, idx, function, status = failure
+                rows = fn // every + 1
+                self.tick = fn
+                self._check_finite(n // every + 1, rows)
+                err = self.slaves[idx].fail(function, status, self.time_of(fn))
+                raise _TickFailure(str(err), rows, err)
+            self._check_finite(n // every + 1, target // every + 1)
+            n = self.tick = target
+            for obs in self.observers:
+                if due_obs[id(obs)] == n:
+                    obs.step(self, n)
+                    due_obs[id(obs)] = obs.next_tick(n)
+        return N // every + 1
+
+    def _check_finite(self, row0: int, row1: int, failing: bool = False) -> None:
+        if row1 <= row0 or not len(self.output_slots):
+            return
+        block = self.record[row0:row1][:, self.output_slots]
+        if np.isfinite(block).all():
+            return
+        bad = ~np.isfinite(block)
+        bad_row = int(np.argmax(bad.any(axis=1)))
+        row = row0 + bad_row
+        # of the outputs that went bad in that row, blame the one of the earliest component in
+        # step order (the others most likely computed theirs from it)
+        rank = {idx: pos for pos, idx in enumerate(self.order)}
+        slots = [int(self.output_slots[c]) for c in np.flatnonzero(bad[bad_row])]
+        slot = min(slots, key=lambda s: (rank[self._slot_owner(s)], s))
+        k = self._slot_owner(slot)
+        inst = self.instances[k]
+        var = self._real_outputs[k][slot - self._out_offset[k]].name
+        t = self.time_of(row * self.record_every)
+        msg = (f"component {inst.name} ({inst.model.name}): output {inst.name}.{var} = "
+               f"{float(self.record[row, slot])} at t = {t:.6g} s (non-finite value)")
+        raise _TickFailure(msg, row + 1, NonFiniteError(msg))
+
+    def _slot_owner(self, slot: int) -> int:
+        """Index of the component whose outputs hold value-vector slot ``slot``."""
+        for k in range(len(self.instances)):
+            if self._out_offset[k] <= slot < self._in_offset[k]:
+                return k
+        raise KeyError(slot)
+
+    def _cleanup(self) -> BaseException | None:
+        """Terminate (where FMI allows) and free every instantiated slave; first error returned."""
+        first: BaseException | None = None
+        for slave in self.slaves:
+            try:
+                if slave.state not in ("failed", "failed-instantiate"):
+                    slave.terminate()
+            except Exception as exc:  # noqa: BLE001 -- keep freeing the others
+                first = first or exc
+            finally:
+                try:
+                    slave.free()
+                except Exception as exc:  # noqa: BLE001
+                    first = first or exc
+        return first
+
+    # ------------------------------------------------------------------ result
+    def _result(self, rows: int, error: BaseException | None, wall: float, wall_loop: float) -> Result:
+        rec = self.record[:rows]
+        names = ["time"] + [n for n, _, _ in self.columns]
+        data = np.zeros(rows, dtype=[(n, "f8") for n in names])
+        ticks = np.arange(rows) * self.record_every
+        if self.timebase.step_ns is not None:
+            data["time"] = (self.timebase.start_ns + ticks * self.timebase.step_ns) / 1e9
+        else:
+            data["time"] = self.timebase.start + ticks * self.timebase.step
+        for name, slot, link in self.columns:
+            if link is None:
+                data[name] = rec[:, slot]
+            else:
+                src, factor, offset = link
+                data[name] = factor * rec[:, src] + offset
+        simulated = float(data["time"][-1] - data["time"][0]) if rows else 0.0
+        metrics: dict[str, Any] = {}
+        if rows >= 2:
+            try:
+                metrics.update(task_metrics(data))
+            except Exception as exc:  # noqa: BLE001 -- metrics must not hide the run's result
+                metrics["metrics_error"] = str(exc)
+        metrics["wall_time_s"] = wall
+        metrics["real_time_factor"] = simulated / wall if wall > 0 else None
+        for obs in self.observers:
+            try:
+                metrics.update(obs.metrics())
+            except Exception as exc:  # noqa: BLE001
+                metrics.setdefault("observer_errors", []).append(str(exc))
+        message = None
+        if error is not None:
+            message = _one_line(error)
+        sc = self.system.scenario
+        metadata: dict[str, Any] = {
+            "scenario": sc.name, "origin": sc.origin, "algorithm": self.algorithm,
+            "start_time": self.start_time, "stop_time": self.stop_time, "step": self.step_size,
+            "ticks": self.n_ticks, "ticks_done": self.tick if error is not None else self.n_ticks,
+            "record_every": self.record_every, "order": self.component_order, "step_multiples": dict(self.multiples),
+            "initialization_iterations": self.init_iterations,
+            "components": {i.name: {"model": i.model.name, "guid": i.model.guid,
+                                    "fmu": str(i.model.path) if i.model.path else None,
+                                    "swapped_from": i.swapped_from} for i in self.instances},
+            "overrides": {f"{c}.{v}": x for (c, v), x in self.overrides.items()},
+            "warnings": list(self.system.warnings), "notes": list(self.system.notes), "wall_time_s": wall, "loop_wall_time_s": wall_loop,
+            "status": "ok" if error is None else "failed", "error": message,
+            "fmu_messages": {s.name: s.messages()[-5:] for s in self.slaves if s.messages()},
+        }
+        return Result(data=data, metrics=metrics, metadata=metadata, error=message)
+
+
+class _TickFailure(SimulationError):
+    """Internal: a failure inside the stepping loop, with the number of complete record rows."""
+
+    def __init__(self, message: str, rows: int, cause: BaseException | None = None) -> None:
+        super().__init__(message)
+        self.rows = rows
+        self.cause = cause
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__

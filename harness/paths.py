@@ -1,0 +1,43 @@
+"""Where ipcosim finds its scenarios and puts what it builds.
+
+Scenarios ship inside the package (``ipcosim/ssp``, package data). Built FMUs and SSP
+archives go to ``build/`` of the source checkout when ipcosim runs from one (an editable
+install: the package root holds ``pyproject.toml``), and otherwise to a per-user cache
+folder, ``$XDG_CACHE_HOME/ipcosim/<version>`` (default ``~/.cache/ipcosim/<version>``), so
+that an installed wheel never writes into site-packages.
+"""
+from __future__ import annotations
+
+import os
+from importlib import metadata
+from pathlib import Path
+
+#: The ``ipcosim`` package folder (the source checkout in an editable install).
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+#: The scenarios shipped with the package: one folder each.
+SCENARIO_DIR = PACKAGE_ROOT / "ssp"
+
+
+def in_checkout() -> bool:
+    """True when ipcosim runs from its source checkout (``pyproject.toml`` beside the package)."""
+    return (PACKAGE_ROOT / "pyproject.toml").is_file()
+
+
+def _version() -> str:
+    try:
+        return metadata.version("ipcosim")
+    except metadata.PackageNotFoundError:
+        return "dev"
+
+
+def default_build_dir() -> Path:
+    """The default output folder of ``ipcosim build`` (see the module docstring)."""
+    if in_checkout():
+        return PACKAGE_ROOT / "build"
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return cache / "ipcosim" / _version()
+
+
+BUILD_DIR = default_build_dir()
+BUILD_FMU_DIR = BUILD_DIR / "fmus"
+BUILD_SSP_DIR = BUILD_DIR / "ssp"

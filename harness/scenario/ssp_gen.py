@@ -1,0 +1,197 @@
+"""Writes the project's ten SSP scenarios (``ssp/<plant>-<controller>/``) from one table, so
+that they stay consistent: ``python -m ipcosim.harness.scenario.ssp_gen`` (the files are committed; run it
+after changing a component's connectors or a parameter set).
+
+Each scenario: ``SystemStructure.ssd`` (SSP 1.0) with the components ``setpoint``
+(``Setpoint``), ``controller`` (``<Law><Plant>``) and ``plant`` (``IP02<Plant>``), referencing
+``resources/<Model>.fmu``; connections by variable name; the default experiment 0..10 s at a
+1 ms step (``DefaultExperiment`` plus the OSP annotation libcosim reads); the setpoint's step
+0 -> 0.05 m at t = 0 as inline parameter values; and the controller's parameter sets as
+``.ssv`` files (``thesis``, and ``tuned`` where the controller design has one), the SSD
+binding ``tuned`` when it exists, else ``thesis``. The file names of the sets are the set
+names; ``ipcosim run --parameter-set thesis`` binds another one.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any, Mapping
+from xml.sax.saxutils import quoteattr
+
+from ipcosim.harness.scenario.ssp import NS, SCENARIO_DIR
+
+PLANTS = {
+    "single-mass": {"model": "IP02SingleMass", "suffix": "SingleMass", "description": "single-mass cart"},
+    "double-mass": {"model": "IP02DoubleMass", "suffix": "DoubleMass", "description": "double-mass (spring-coupled) carts"},
+}
+CONTROLLERS = {
+    "pid": ("PID", "the thesis's single-loop PID on the cart position"),
+    "cascade-pid": ("CascadePID", "cascade PID: inner loop on the pendulum angle, outer loop on the cart position"),
+    "lqr": ("LQR", "LQR state feedback with a Luenberger observer"),
+    "hsmc": ("HSMC", "hierarchical sliding-mode control"),
+    "adaptive-hsmc": ("AdaptiveHSMC", "hierarchical sliding-mode control with scheduled gains"),
+}
+STATE_UNITS = {"cart_position": "m", "cart_velocity": "m/s", "active_cart_position": "m",
+               "active_cart_velocity": "m/s", "passive_cart_position": "m", "passive_cart_velocity": "m/s",
+               "pendulum_angle": "rad", "pendulum_velocity": "rad/s", "motor_current": "A"}
+UNITS = {"m": {"m": 1}, "rad": {"rad": 1}, "V": {"kg": 1, "m": 2, "s": -3, "A": -1}, "A": {"A": 1},
+         "m/s": {"m": 1, "s": -1}, "rad/s": {"rad": 1, "s": -1}, "s": {"s": 1}}
+STOP_TIME = 10.0
+STEP = 1e-3
+AMPLITUDE = 0.05
+STEP_TIME = 0.0
+
+
+def scenario_names() -> list[str]:
+    return [f"{p}-{c}" for p in PLANTS for c in CONTROLLERS]
+
+
+def plant_signals(plant: str) -> tuple[list[str], list[str]]:
+    """(measured outputs, all outputs in FMU order) of a plant kind."""
+    from ipcosim.fmus.physics import MEASURED, state_names
+
+    measured = list(MEASURED[plant])
+    outputs = measured + [n for n in state_names(plant) if n not in measured]
+    return measured, outputs
+
+
+def parameter_sets(plant: str, controller: str) -> dict[str, dict[str, Any]]:
+    """The controller's named parameter sets (``thesis``, ``tuned``): variable -> value.
+
+    Taken from ``ipcosim.controllers.catalog.parameter_sets(plant, law)`` when the controller design
+    provides it; empty otherwise.
+    """
+    try:
+        from ipcosim.controllers.catalog import parameter_sets as catalog_sets  # type: ignore[import-not-found]
+    except ImportError:
+        return {}
+    return {k: dict(v) for k, v in catalog_sets(plant, CONTROLLERS[controller][0]).items() if v}
+
+
+def _ssv(name: str, values: Mapping[str, Any], description: str) -> str:
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             f'<ssv:ParameterSet xmlns:ssv="{NS["ssv"]}" version="1.0" name={quoteattr(name)}'
+             + (f" description={quoteattr(description)}" if description else "") + ">",
+             "  <ssv:Parameters>"]
+    for key, value in values.items():
+        lines.append(f"    <ssv:Parameter name={quoteattr(key)}>{_ssv_value(value)}</ssv:Parameter>")
+    lines += ["  </ssv:Parameters>", "</ssv:ParameterSet>", ""]
+    return "\n".join(lines)
+
+
+def _ssv_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return f'<ssv:Boolean value="{str(value).lower()}"/>'
+    if isinstance(value, int):
+        return f'<ssv:Integer value="{value}"/>'
+    return f'<ssv:Real value="{float(value)!r}"/>'
+
+
+def _connector(name: str, kind: str, unit: str) -> str:
+    return f'          <ssd:Connector name="{name}" kind="{kind}"><ssc:Real unit="{unit}"/></ssd:Connector>'
+
+
+def ssd_text(plant: str, controller: str, default_set: str | None, sample_period: float | None) -> str:
+    """The SystemStructure.ssd of one scenario."""
+    p = PLANTS[plant]
+    law, law_doc = CONTROLLERS[controller]
+    name = f"{plant}-{controller}"
+    measured, outputs = plant_signals(plant)
+    ctrl_model = f"{law}{p['suffix']}"
+    description = f"IP02 {p['description']}: {law_doc}; the motor-driven cart moves 0 -> {AMPLITUDE} m"
+    L = ['<?xml version="1.0" encoding="UTF-8"?>',
+         f'<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" xmlns:ssc="{NS["ssc"]}"',
+         f'    xmlns:ssv="{NS["ssv"]}" xmlns:osp="{NS["osp"]}"',
+         f'    version="1.0" name="{name}" generationTool="ipcosim (ipcosim.harness.scenario.ssp_gen)">',
+         f'  <ssd:System name="{name}" description={quoteattr(description)}>',
+         "    <ssd:Elements>",
+         '      <ssd:Component name="setpoint" type="application/x-fmu-sharedlibrary" source="resources/Setpoint.fmu">',
+         "        <ssd:Connectors>",
+         _connector("reference", "output", "m"),
+         "        </ssd:Connectors>",
+         "        <ssd:ParameterBindings>",
+         "          <ssd:ParameterBinding>",
+         "            <ssd:ParameterValues>",
+         '              <ssv:ParameterSet version="1.0" name="experiment">',
+         "                <ssv:Parameters>",
+         f'                  <ssv:Parameter name="amplitude"><ssv:Real value="{AMPLITUDE!r}" unit="m"/></ssv:Parameter>',
+         f'                  <ssv:Parameter name="step_time"><ssv:Real value="{STEP_TIME!r}" unit="s"/></ssv:Parameter>',
+         "                </ssv:Parameters>",
+         "              </ssv:ParameterSet>",
+         "            </ssd:ParameterValues>",
+         "          </ssd:ParameterBinding>",
+         "        </ssd:ParameterBindings>",
+         "      </ssd:Component>",
+         f'      <ssd:Component name="controller" type="application/x-fmu-sharedlibrary" source="resources/{ctrl_model}.fmu">',
+         "        <ssd:Connectors>",
+         _connector("reference", "input", "m")]
+    L += [_connector(m, "input", STATE_UNITS[m]) for m in measured]
+    L += [_connector("voltage", "output", "V"), "        </ssd:Connectors>"]
+    if default_set:
+        L += ["        <ssd:ParameterBindings>",
+              f'          <ssd:ParameterBinding source="{default_set}.ssv"/>',
+              "        </ssd:ParameterBindings>"]
+    if sample_period:
+        L += ["        <ssd:Annotations>",
+              f'          <ssc:Annotation type="com.opensimulationplatform"><osp:StepSizeHint value="{sample_period!r}"/></ssc:Annotation>',
+              "        </ssd:Annotations>"]
+    L += ["      </ssd:Component>",
+          f'      <ssd:Component name="plant" type="application/x-fmu-sharedlibrary" source="resources/{p["model"]}.fmu">',
+          "        <ssd:Connectors>",
+          _connector("voltage", "input", "V")]
+    L += [_connector(o, "output", STATE_UNITS[o]) for o in outputs]
+    L += ["        </ssd:Connectors>", "      </ssd:Component>", "    </ssd:Elements>", "    <ssd:Connections>",
+          '      <ssd:Connection startElement="setpoint" startConnector="reference" endElement="controller" endConnector="reference"/>']
+    L += [f'      <ssd:Connection startElement="plant" startConnector="{m}" endElement="controller" endConnector="{m}"/>'
+          for m in measured]
+    L += ['      <ssd:Connection startElement="controller" startConnector="voltage" endElement="plant" endConnector="voltage"/>',
+          "    </ssd:Connections>", "  </ssd:System>", "  <ssd:Units>"]
+    for unit, exps in UNITS.items():
+        attrs = " ".join(f'{k}="{v}"' for k, v in exps.items())
+        L.append(f'    <ssc:Unit name="{unit}"><ssc:BaseUnit {attrs}/></ssc:Unit>')
+    L += ["  </ssd:Units>",
+          f'  <ssd:DefaultExperiment startTime="0.0" stopTime="{STOP_TIME!r}">',
+          "    <ssd:Annotations>",
+          '      <ssc:Annotation type="com.opensimulationplatform">',
+          f'        <osp:Algorithm><osp:FixedStepAlgorithm baseStepSize="{STEP!r}"/></osp:Algorithm>',
+          "      </ssc:Annotation>",
+          "    </ssd:Annotations>",
+          "  </ssd:DefaultExperiment>",
+          "</ssd:SystemStructureDescription>", ""]
+    return "\n".join(L)
+
+
+def write_scenarios(root: Path = SCENARIO_DIR, names: list[str] | None = None) -> list[Path]:
+    """Write (or rewrite) the scenario folders; returns the files written."""
+    written = []
+    for plant in PLANTS:
+        for controller in CONTROLLERS:
+            name = f"{plant}-{controller}"
+            if names and name not in names:
+                continue
+            folder = root / name
+            folder.mkdir(parents=True, exist_ok=True)
+            sets = parameter_sets(plant, controller)
+            default = "tuned" if "tuned" in sets else ("thesis" if "thesis" in sets else None)
+            for set_name, values in sets.items():
+                path = folder / f"{set_name}.ssv"
+                path.write_text(_ssv(set_name, values, f"{name}: {set_name} controller parameters"))
+                written.append(path)
+            period = sets.get(default or "", {}).get("sample_period", STEP)
+            path = folder / "SystemStructure.ssd"
+            path.write_text(ssd_text(plant, controller, default, float(period)))
+            written.append(path)
+    return written
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", help="scenarios to write (default: all ten)")
+    args = parser.parse_args(argv)
+    for path in write_scenarios(names=args.names or None):
+        print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

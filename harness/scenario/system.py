@@ -1,0 +1,619 @@
+"""A scenario bound to its FMUs: every connector and connection checked against the FMUs'
+model descriptions before anything is instantiated (parse first, then run).
+
+:func:`bind` turns a :class:`ipcosim.harness.scenario.ssp.Scenario` into an immutable :class:`System`: one
+:class:`Instance` per component (its FMU's interface as a :class:`Model`, its connectors as
+FMU variables, its bound parameter values) and resolved :class:`Link` s (value references,
+linear transformation and unit conversion folded into one factor and offset). Component
+swaps (``--swap plant=hil``) are applied here, checked for compatible connectors.
+"""
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+from ipcosim.harness.errors import IpcosimError
+from ipcosim.harness.scenario.ssp import BASE_UNITS, Connector, Scenario, Unit
+
+SUPPORTED_CONNECTION_TYPES = ("Real",)
+
+
+class BindingError(IpcosimError, ValueError):
+    """A scenario that does not match its FMUs (missing FMU or variable, wrong kind, type or unit)."""
+
+
+class FMUNotFoundError(BindingError, FileNotFoundError):
+    """A component's FMU file does not exist."""
+
+
+class UnconnectedInputWarning(UserWarning):
+    """An input connector that no connection feeds (it keeps its start value)."""
+
+
+# --------------------------------------------------------------------------- FMU interface
+@dataclass(frozen=True)
+class Variable:
+    """One FMU variable (what the master needs of a ``ScalarVariable``)."""
+
+    name: str
+    vr: int
+    type: str  # Real | Integer | Boolean | String | Enumeration
+    causality: str = "local"
+    variability: str = "continuous"
+    initial: str | None = None
+    unit: str | None = None
+    start: Any = None
+    description: str = ""
+
+    @property
+    def settable(self) -> bool:
+        """Whether a start value may be set before initialization (FMI 2.0 rules)."""
+        if self.variability == "constant":
+            return False
+        if self.causality == "input":
+            return True
+        return self.causality == "parameter" or self.initial in ("exact", "approx")
+
+
+@dataclass(frozen=True)
+class Model:
+    """The interface of one FMU (from its modelDescription.xml).
+
+    Attributes
+    ----------
+    feedthrough : mapping of str to frozenset of str
+        For each output, the inputs it depends on directly (ModelStructure; an output with
+        no ``dependencies`` attribute depends on every input, as FMI 2.0 says).
+    """
+
+    name: str
+    variables: Mapping[str, Variable]
+    feedthrough: Mapping[str, frozenset[str]]
+    path: Path | None = None
+    guid: str = ""
+    model_identifier: str = ""
+    fmi_version: str = "2.0"
+    units: Mapping[str, Unit] = field(default_factory=dict)
+    can_handle_variable_step: bool = True
+
+    def inputs(self) -> list[Variable]:
+        return [v for v in self.variables.values() if v.causality == "input"]
+
+    def outputs(self) -> list[Variable]:
+        return [v for v in self.variables.values() if v.causality == "output"]
+
+
+_MODEL_CACHE: dict[tuple[str, float, int], Model] = {}
+
+
+def read_model(path: Path, display: str | None = None) -> Model:
+    """Read an FMU's model description into a :class:`Model` (cached per file version).
+
+    Raises
+    ------
+    BindingError
+        If the file is not a readable FMI 2.0 co-simulation FMU.
+    """
+    path = Path(path)
+    display = display or os.fspath(path)
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_mtime, stat.st_size)
+    if key in _MODEL_CACHE:
+        return _MODEL_CACHE[key]
+    from fmpy import read_model_description
+
+    try:
+        md = read_model_description(str(path), validate=False)
+    except Exception as exc:  # noqa: BLE001 -- fmpy raises assorted exceptions
+        raise BindingError(f"{display}: not a readable FMU ({str(exc).splitlines()[0] if str(exc) else exc!r})") from None
+    if md.fmiVersion != "2.0":
+        raise BindingError(f"{display}: FMI {md.fmiVersion} FMU; only FMI 2.0 is supported")
+    if md.coSimulation is None:
+        raise BindingError(f"{display}: does not support co-simulation")
+    variables = {}
+    for v in md.modelVariables:
+        unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
+        variables[v.name] = Variable(name=v.name, vr=int(v.valueReference), type=v.type,
+                                     causality=v.causality or "local", variability=v.variability or "continuous",
+                                     initial=v.initial, unit=unit, start=_start_value(v.type, v.start),
+                                     description=v.description or "")
+    inputs = frozenset(n for n, v in variables.items() if v.causality == "input")
+    feedthrough = {}
+    for u in md.outputs:
+        if u.dependencies is None:
+            feedthrough[u.variable.name] = inputs
+        else:
+            feedthrough[u.variable.name] = frozenset(d.name for d in u.dependencies if d.name in inputs)
+    for name, v in variables.items():  # outputs missing from ModelStructure: assume the worst
+        if v.causality == "output" and name not in feedthrough:
+            feedthrough[name] = inputs
+    units = {}
+    for u in md.unitDefinitions:
+        b = u.baseUnit
+        if b is None:
+            units[u.name] = Unit(u.name, (0,) * len(BASE_UNITS))
+        else:
+            units[u.name] = Unit(u.name, tuple(int(getattr(b, k)) for k in BASE_UNITS), float(b.factor),
+                                 float(b.offset))
+    model = Model(name=md.modelName, variables=variables, feedthrough=feedthrough, path=path.resolve(),
+                  guid=md.guid, model_identifier=md.coSimulation.modelIdentifier, fmi_version=md.fmiVersion,
+                  units=units,
+                  can_handle_variable_step=bool(md.coSimulation.canHandleVariableCommunicationStepSize))
+    _MODEL_CACHE[key] = model
+    return model
+
+
+def _start_value(type_: str, start: Any) -> Any:
+    if start is None:
+        return None
+    try:
+        if type_ in ("Real", "Float64", "Float32"):
+            return float(start)
+        if type_ in ("Integer", "Enumeration"):
+            return int(start)
+        if type_ == "Boolean":
+            return str(start).strip().lower() in ("true", "1")
+    except ValueError:
+        return None
+    return start
+
+
+# --------------------------------------------------------------------------- bound system
+@dataclass(frozen=True)
+class Instance:
+    """A component bound to its FMU.
+
+    Attributes
+    ----------
+    connectors : tuple of Variable
+        The SSD connectors of the component, as FMU variables, in SSD order.
+    parameters : tuple of (Variable, value)
+        Start values from the parameter bindings, in the order they are applied.
+    swapped_from : str or None
+        The original FMU when ``--swap`` replaced this component.
+    realtime : bool
+        The component asks for real-time pacing (hardware in the loop).
+    """
+
+    name: str
+    model: Model
+    connectors: tuple[Variable, ...]
+    parameters: tuple[tuple[Variable, Any], ...] = ()
+    step_size_hint: float | None = None
+    swapped_from: str | None = None
+    realtime: bool = False
+
+    @property
+    def inputs(self) -> tuple[Variable, ...]:
+        return tuple(v for v in self.connectors if v.causality == "input")
+
+    @property
+    def outputs(self) -> tuple[Variable, ...]:
+        return tuple(v for v in self.connectors if v.causality == "output")
+
+    def start_value(self, name: str) -> Any:
+        """The value a variable starts with: the last binding that sets it, else the FMU's start."""
+        value = self.model.variables[name].start
+        for var, v in self.parameters:
+            if var.name == name:
+                value = v
+        return value
+
+
+@dataclass(frozen=True)
+class Link:
+    """A resolved connection: ``dst = factor * src + offset`` (transformation and unit conversion)."""
+
+    src: str
+    src_var: Variable
+    dst: str
+    dst_var: Variable
+    factor: float = 1.0
+    offset: float = 0.0
+
+    @property
+    def src_name(self) -> str:
+        return f"{self.src}.{self.src_var.name}"
+
+    @property
+    def dst_name(self) -> str:
+        return f"{self.dst}.{self.dst_var.name}"
+
+
+@dataclass(frozen=True)
+class System:
+    """A scenario bound to its FMUs; immutable, ready to be prepared and run."""
+
+    scenario: Scenario
+    instances: tuple[Instance, ...]
+    links: tuple[Link, ...]
+    warnings: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()  # informational (swaps), not warnings
+
+    def instance(self, name: str) -> Instance:
+        for inst in self.instances:
+            if inst.name == name:
+                return inst
+        raise KeyError(name)
+
+    def link_into(self, component: str, variable: str) -> Link | None:
+        for link in self.links:
+            if link.dst == component and link.dst_var.name == variable:
+                return link
+        return None
+
+    @property
+    def realtime(self) -> bool:
+        return any(i.realtime for i in self.instances)
+
+
+# --------------------------------------------------------------------------- swaps
+@dataclass(frozen=True)
+class SwapTarget:
+    """What a swap puts in place of a component.
+
+    Attributes
+    ----------
+    fmu : Path
+        The replacement FMU.
+    parameters : mapping of str to value
+        Start values for the replacement (e.g. the HIL adapter's card URI).
+    realtime : bool
+        Run the scenario paced to wall-clock time when this component is present.
+    description : str
+        One line for messages and metadata.
+    """
+
+    fmu: Path
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    realtime: bool = False
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class SwapRequest:
+    """The context an alias resolver gets: which component of which scenario is swapped."""
+
+    scenario: Scenario
+    component: str
+    model: Model | None  # the original FMU's interface (None if its FMU is missing)
+
+
+#: Swap aliases: ``--swap plant=hil`` looks up ``hil`` here. A resolver takes a SwapRequest and
+#: returns a SwapTarget. Modules listed in ``SWAP_ALIAS_PROVIDERS`` are imported on first use
+#: so that they can register their aliases (``ipcosim.harness.scenario.system.swap_aliases['hil'] = resolver``).
+swap_aliases: dict[str, Callable[[SwapRequest], SwapTarget]] = {}
+SWAP_ALIAS_PROVIDERS: tuple[str, ...] = ("ipcosim.harness.hil.swap",)
+_providers_loaded = False
+
+
+def register_swap_alias(name: str, resolver: Callable[[SwapRequest], SwapTarget]) -> None:
+    """Make ``--swap COMPONENT=name`` resolve through ``resolver``."""
+    swap_aliases[name] = resolver
+
+
+def _load_alias_providers() -> None:
+    global _providers_loaded
+    if _providers_loaded:
+        return
+    _providers_loaded = True
+    import importlib
+
+    for module in SWAP_ALIAS_PROVIDERS:
+        try:
+            importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name != module:
+                raise
+
+
+def resolve_swap(scenario: Scenario, component: str, target: str | os.PathLike[str] | SwapTarget,
+                 model: Model | None) -> SwapTarget:
+    """A SwapTarget for ``--swap component=target`` (an FMU path or a registered alias)."""
+    if isinstance(target, SwapTarget):
+        return target
+    text = os.fspath(target)
+    if text.endswith(".fmu") or os.sep in text or "/" in text:
+        path = Path(text)
+        if not path.is_file():
+            raise FMUNotFoundError(f"--swap {component}={text}: FMU file does not exist")
+        return SwapTarget(fmu=path.resolve(), description=f"FMU {text}")
+    _load_alias_providers()
+    if text not in swap_aliases:
+        known = ", ".join(sorted(swap_aliases)) or "none registered"
+        raise BindingError(f"--swap {component}={text}: not an .fmu file and not a known alias (aliases: {known})")
+    return swap_aliases[text](SwapRequest(scenario, component, model))
+
+
+# --------------------------------------------------------------------------- units
+def _unit_table(scenario: Scenario, *models: Model) -> dict[str, Unit]:
+    table: dict[str, Unit] = {}
+    for m in models:
+        table.update(m.units)
+    table.update(scenario.units)
+    return table
+
+
+def unit_conversion(src: str | None, dst: str | None, table: Mapping[str, Unit]) -> tuple[float, float] | None:
+    """Factor and offset converting a value in unit ``src`` to unit ``dst``; None if incompatible.
+
+    Equal names (or a missing unit on either side) convert with (1, 0). Different names convert
+    when both are defined with the same base-unit exponents.
+    """
+    if src is None or dst is None or src == dst:
+        return (1.0, 0.0)
+    a, b = table.get(src), table.get(dst)
+    if a is None or b is None or a.exponents != b.exponents:
+        return None
+    # value_SI = factor * v + offset
+    return (a.factor / b.factor, (a.offset - b.offset) / b.factor)
+
+
+# --------------------------------------------------------------------------- binding
+def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
+         fmu_files: Mapping[str, Path] | None = None, models: Mapping[str, Model] | None = None,
+         strict_parameters: bool = True) -> System:
+    """Check a scenario against its FMUs and resolve it into a :class:`System`.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    swaps : mapping of component name to FMU path, alias or SwapTarget, optional
+        Components to replace (``--swap``), each checked for compatible connectors.
+    fmu_files : mapping of component name to Path, optional
+        FMU files to use instead of the scenario's resolved ones (archive members extracted
+        by the caller).
+    models : mapping of component name to Model, optional
+        Ready model interfaces (tests with mock slaves); bypasses reading FMU files.
+    strict_parameters : bool
+        An unknown parameter in a binding is an error (True) or a warning (False; SSP allows
+        ignoring it). Bindings of swapped components are always lenient.
+
+    Raises
+    ------
+    FMUNotFoundError, BindingError
+        Naming the file, component and variable.
+    """
+    swaps = dict(swaps or {})
+    fmu_files = dict(fmu_files or {})
+    models = dict(models or {})
+    origin = scenario.origin
+    for comp in swaps:
+        if comp not in {c.name for c in scenario.components}:
+            raise BindingError(f"--swap {comp}=...: scenario {scenario.name!r} has no component {comp!r} "
+                               f"(components: {', '.join(c.name for c in scenario.components)})")
+    notes: list[str] = []
+    infos: list[str] = []
+    instances: list[Instance] = []
+    for comp in scenario.components:
+        model = models.get(comp.name)
+        if model is None:
+            fmu = fmu_files.get(comp.name, comp.fmu)
+            if fmu is None or not Path(fmu).is_file():
+                if comp.name in swaps:
+                    model = None
+                else:
+                    raise FMUNotFoundError(f"{origin}: component {comp.name!r}: FMU {comp.source} not found "
+                                           f"(run `ipcosim build`, or give its folder with --fmu-dir / IPCOSIM_FMU_PATH)")
+            else:
+                model = read_model(Path(fmu), f"{origin}: component {comp.name!r} ({comp.source})")
+        swapped_from, realtime, extra = None, False, {}
+        if comp.name in swaps:
+            target = resolve_swap(scenario, comp.name, swaps[comp.name], model)
+            swapped_from = model.path.name if model is not None and model.path else comp.source
+            realtime = target.realtime
+            extra = dict(target.parameters)
+            model = read_model(target.fmu, f"--swap {comp.name}={target.fmu}")
+            infos.append(f"component {comp.name!r}: {swapped_from} swapped for {target.description or target.fmu.name}")
+        where = f"{origin}: component {comp.name!r} ({model.path.name if model.path else comp.source})"
+        connectors = []
+        for c in comp.connectors:
+            var = model.variables.get(c.name)
+            if var is None:
+                if swapped_from is not None and not _is_connected(scenario, comp.name, c.name):
+                    infos.append(f"component {comp.name!r}: unconnected connector {c.name!r} is not in the swapped-in FMU "
+                                 f"and is left out")
+                    continue
+                raise BindingError(f"{where}: connector {c.name!r} is not a variable of the FMU"
+                                   + (" (swapped-in FMU lacks a connected connector)" if swapped_from else ""))
+            _check_connector(c, var, where, _unit_table(scenario, model))
+            connectors.append(var)
+        params: list[tuple[Variable, Any]] = []
+        for pset in comp.bindings:
+            for p in pset.parameters:
+                var = model.variables.get(p.name)
+                src = pset.source or "inline ParameterValues"
+                if var is None:
+                    msg = f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which the FMU does not have"
+                    if strict_parameters and swapped_from is None:
+                        raise BindingError(msg)
+                    notes.append(msg + "; ignored")
+                    continue
+                if not var.settable:
+                    raise BindingError(f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which is "
+                                       f"{var.causality}/{var.variability} and cannot be set")
+                params.append((var, convert_value(var, p.value, f"{where}: {src}: {p.name}")))
+        for name, value in extra.items():
+            var = model.variables.get(name)
+            if var is None or not var.settable:
+                raise BindingError(f"--swap {comp.name}: the swapped-in FMU has no settable variable {name!r}")
+            params.append((var, convert_value(var, value, f"--swap {comp.name}: {name}")))
+        instances.append(Instance(name=comp.name, model=model, connectors=tuple(connectors), parameters=tuple(params),
+                                  step_size_hint=comp.step_size_hint, swapped_from=swapped_from, realtime=realtime))
+
+    by_name = {i.name: i for i in instances}
+    links: list[Link] = []
+    fed: dict[str, str] = {}
+    for conn in scenario.connections:
+        a, b = by_name[conn.start_element], by_name[conn.end_element]
+        va, vb = a.model.variables.get(conn.start_connector), b.model.variables.get(conn.end_connector)
+        for inst, v, cname in ((a, va, conn.start_connector), (b, vb, conn.end_connector)):
+            if v is None:
+                raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: FMU of component "
+                                   f"{inst.name!r} ({inst.model.path.name if inst.model.path else inst.model.name}) "
+                                   f"has no variable {cname!r}")
+        kinds = (va.causality, vb.causality)
+        if kinds == ("input", "output"):
+            a, b, va, vb = b, a, vb, va  # SSP start/end do not imply direction
+            src_name, dst_name = conn.end, conn.start
+        elif kinds == ("output", "input"):
+            src_name, dst_name = conn.start, conn.end
+        elif kinds[0] == kinds[1] and kinds[0] in ("output", "input"):
+            raise BindingError(f"{origin}: connection {conn.start} -> {conn.end} connects two {kinds[0]}s; "
+                               f"a connection must join one output to one input")
+        else:
+            raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: {conn.start} is {kinds[0]}, "
+                               f"{conn.end} is {kinds[1]}; only output -> input connections are supported")
+        if va.type != vb.type:
+            raise BindingError(f"{origin}: connection {src_name} -> {dst_name}: type {va.type} does not match {vb.type}")
+        if va.type not in SUPPORTED_CONNECTION_TYPES:
+            raise BindingError(f"{origin}: connection {src_name} -> {dst_name}: {va.type} connections are not supported "
+                               f"(only Real)")
+        if dst_name in fed:
+            raise BindingError(f"{origin}: input {dst_name} is connected twice (from {fed[dst_name]} and {src_name})")
+        fed[dst_name] = src_name
+        ua = _connector_unit(scenario, a.name, va)
+        ub = _connector_unit(scenario, b.name, vb)
+        factor, offset = conn.factor, conn.offset
+        if not conn.suppress_unit_conversion:
+            conv = unit_conversion(ua, ub, _unit_table(scenario, a.model, b.model))
+            if conv is None:
+                raise BindingError(f"{origin}: connection {src_name} -> {dst_name}: unit {ua!r} does not match "
+                                   f"{ub!r} (mismatched units; define both in <ssd:Units> to convert, or set "
+                                   f"suppressUnitConversion)")
+            # transformation first, then unit conversion
+            factor, offset = factor * conv[0], offset * conv[0] + conv[1]
+        links.append(Link(a.name, va, b.name, vb, factor, offset))
+
+    for inst in instances:
+        for v in inst.inputs:
+            if f"{inst.name}.{v.name}" not in fed:
+                start = inst.start_value(v.name)
+                notes.append(f"{origin}: input {inst.name}.{v.name} is not connected; it keeps its start value "
+                             f"{start!r}")
+    return System(scenario=scenario, instances=tuple(instances), links=tuple(links), warnings=tuple(notes),
+                  notes=tuple(infos))
+
+
+def _is_connected(scenario: Scenario, comp: str, connector: str) -> bool:
+    return any((c.start_element == comp and c.start_connector == connector)
+               or (c.end_element == comp and c.end_connector == connector) for c in scenario.connections)
+
+
+def _connector_unit(scenario: Scenario, comp: str, var: Variable) -> str | None:
+    c = next((x for x in scenario.component(comp).connectors if x.name == var.name), None)
+    return (c.unit if c is not None and c.unit else None) or var.unit
+
+
+def _check_connector(c: Connector, var: Variable, where: str, units: Mapping[str, Unit]) -> None:
+    kind_ok = {"input": ("input",), "output": ("output",), "parameter": ("parameter",),
+               "calculatedParameter": ("calculatedParameter",), "inout": ("input", "output")}
+    if var.causality not in kind_ok.get(c.kind, ()):
+        raise BindingError(f"{where}: connector {c.name!r} is declared {c.kind} but the FMU variable is {var.causality}")
+    if c.type is not None and c.type != var.type:
+        raise BindingError(f"{where}: connector {c.name!r} is declared {c.type} but the FMU variable is {var.type}")
+    if c.unit and var.unit and unit_conversion(c.unit, var.unit, units) != (1.0, 0.0):
+        raise BindingError(f"{where}: connector {c.name!r} has unit {c.unit!r} but the FMU variable has {var.unit!r}")
+
+
+def convert_value(var: Variable, value: Any, what: str) -> Any:
+    """``value`` (a string from the command line or a typed value) as the variable's type.
+
+    Raises
+    ------
+    BindingError
+        ``what`` is not a valid value of the variable's type.
+    """
+    t = var.type
+    try:
+        if t in ("Real", "Float64", "Float32"):
+            if isinstance(value, bool):
+                raise ValueError
+            return float(value)
+        if t in ("Integer", "Enumeration"):
+            if isinstance(value, float) and value.is_integer():
+                return int(value)
+            if isinstance(value, bool):
+                raise ValueError
+            return int(value)
+        if t == "Boolean":
+            if isinstance(value, bool):
+                return value
+            text = str(value).strip().lower()
+            if text in ("true", "1"):
+                return True
+            if text in ("false", "0"):
+                return False
+            raise ValueError
+        if t == "String":
+            return str(value)
+    except (TypeError, ValueError):
+        raise BindingError(f"{what}: {value!r} is not a valid {t} value") from None
+    raise BindingError(f"{what}: variables of type {t} cannot be set")
+
+
+def with_overrides(system: System, overrides: Mapping[str, Any]) -> tuple[System, dict[tuple[str, str], Any]]:
+    """Check ``--set comp.var=value`` overrides against the system.
+
+    Returns the system unchanged and the overrides keyed by (component, variable) with
+    values converted to the variables' types.
+
+    Raises
+    ------
+    BindingError
+        Unknown component or variable, a variable that cannot be set (output, local,
+        constant), a connected input, or a value that does not parse.
+    """
+    out: dict[tuple[str, str], Any] = {}
+    for key, value in overrides.items():
+        comp, sep, var = str(key).partition(".")
+        if not sep or not comp or not var:
+            raise BindingError(f"--set {key}={value}: expected COMPONENT.VARIABLE=VALUE")
+        try:
+            inst = system.instance(comp)
+        except KeyError:
+            raise BindingError(f"--set {key}={value}: no component {comp!r} (components: "
+                               f"{', '.join(i.name for i in system.instances)})") from None
+        v = inst.model.variables.get(var)
+        where = f"--set {key}={value}: component {comp!r} ({inst.model.path.name if inst.model.path else inst.model.name})"
+        if v is None:
+            raise BindingError(f"{where} has no variable {var!r}")
+        if not v.settable:
+            raise BindingError(f"{where}: {var!r} is {v.causality}/{v.variability} and cannot be set")
+        link = system.link_into(comp, var)
+        if link is not None:
+            raise BindingError(f"{where}: input {var!r} is connected to {link.src_name}; set the source instead")
+        out[(comp, var)] = convert_value(v, value, f"--set {key}")
+    return system, out
+
+
+def parse_set_options(items: Sequence[str]) -> dict[str, str]:
+    """``["plant.Mp=0.2", ...]`` as ``{"plant.Mp": "0.2"}``; values stay strings until checked."""
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise BindingError(f"--set {item!r}: expected COMPONENT.VARIABLE=VALUE")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def parse_swap_options(items: Sequence[str]) -> dict[str, str]:
+    """``["plant=hil"]`` as ``{"plant": "hil"}``."""
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise BindingError(f"--swap {item!r}: expected COMPONENT=FMU_OR_ALIAS")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def warn_all(system: System) -> None:
+    """Issue the system's notes as UnconnectedInputWarning / UserWarning."""
+    for note in system.warnings:
+        category = UnconnectedInputWarning if "is not connected" in note else UserWarning
+        warnings.warn(note, category, stacklevel=3)
