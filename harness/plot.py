@@ -21,6 +21,9 @@ def plot_result(result: "Result", path: str | Path, title: str | None = None) ->
     voltage [V]. Panels whose signals the result lacks are left out; with none of them, every
     recorded column is drawn in one panel.
     """
+    from ipcosim.harness.errors import require
+
+    require("matplotlib")
     import matplotlib
 
     matplotlib.use("Agg")

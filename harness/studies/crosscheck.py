@@ -40,6 +40,9 @@ def run_libcosim(ssp: str | os.PathLike[str], stop_time: float, step: float,
     wall : float
         Seconds spent in ``simulate_until`` (the simulation proper, including initialization).
     """
+    from ipcosim.harness.errors import require
+
+    require("libcosimpy")
     from libcosimpy.CosimEnums import CosimVariableType
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level

@@ -249,6 +249,9 @@ def check_claims(results: Results) -> list[tuple[Claim, Verdict]]:
 def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
     """Thesis-style overlaid time series of every controller on one plant: cart position with the
     reference, pendulum angle and voltage, one line per controller. None if no series."""
+    from ipcosim.harness.errors import require
+
+    require("matplotlib")
     import matplotlib
 
     matplotlib.use("Agg")

@@ -125,6 +125,9 @@ def plot_distributions(rows: Sequence[Mapping[str, Any]], metric_names: Sequence
     list of Path
         The written figures, ``out_dir/<metric>.png``.
     """
+    from ipcosim.harness.errors import require
+
+    require("matplotlib")
     import matplotlib
 
     matplotlib.use("Agg")
@@ -168,6 +171,9 @@ def plot_parameters(rows: Sequence[Mapping[str, Any]], parameters: Sequence[str]
                     title: str = "") -> Path | None:
     """Which parameter values fail: one panel per varied parameter, ``metric`` against the
     parameter's value, each run coloured by its status. Written to ``out_dir/parameters.png``."""
+    from ipcosim.harness.errors import require
+
+    require("matplotlib")
     import matplotlib
 
     matplotlib.use("Agg")

@@ -307,6 +307,9 @@ class DaskExecutor:
     """
 
     def __init__(self, scheduler: Any, timeout: float = 5.0) -> None:
+        from ipcosim.harness.errors import require
+
+        require("distributed")
         from distributed import Client
 
         self._own = not isinstance(scheduler, Client)
