@@ -44,6 +44,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("ipcosim: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (`ipcosim list | head`): nothing to report
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except Exception as exc:  # noqa: BLE001 -- the CLI's one-line error contract
         if args.debug:
             raise
