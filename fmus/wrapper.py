@@ -1,41 +1,57 @@
-"""pythonfmu's C++ wrapper binary: the pinned version, and the one-instruction fix every FMU build applies.
+"""pythonfmu's C++ wrapper binary: the pinned version, and the two edits every FMU build applies.
 
 Every ipcosim FMU runs inside pythonfmu 0.7.0's FMI wrapper (``binaries/linux64/<Model>.so``,
-a copy of ``pythonfmu/resources/binaries/linux64/libpythonfmu-export.so``). That binary keeps
-its interpreter guard (``PyState``) in a static ``std::shared_ptr`` and resets the same
-pointer again from a library destructor (``__attribute__((destructor)) onLibraryUnload ->
-finalizePythonInterpreter: pyState = nullptr``). When a process exits, glibc runs the C++
-static destructors (``__cxa_atexit``) *before* the ELF destructors (``_dl_fini``), so
-``finalizePythonInterpreter`` releases a ``shared_ptr`` that was already destroyed: it
-decrements the use count inside the freed control block and, when the freed memory still
-reads 1, destroys the ``PyState`` and frees the block a second time. That double free
-corrupts the heap of every host that loaded one of these FMUs, whichever host it is; the
-abort follows later at whatever free meets the damage (``corrupted double-linked list`` in
-libgfortran's exit handler, or inside ``Py_FinalizeEx``). Valgrind names it on every exit::
+a copy of ``pythonfmu/resources/binaries/linux64/libpythonfmu-export.so``). Each FMU binary
+keeps its own interpreter guard (``PyState``) in a static ``std::shared_ptr``; the guard's
+thread calls ``Py_Initialize`` when it finds Python uninitialized (a host that is not Python)
+and ``Py_Finalize`` when the guard is destroyed. Two behaviours of that binary crash hosts at
+exit; :func:`patch_binary` answers each with the smallest edit of the machine code:
 
-    Invalid read of size 4
-       at finalizePythonInterpreter (in .../binaries/linux64/Setpoint.so)
-       by _dl_call_fini / _dl_fini / __run_exit_handlers / exit
-     Address ... is 8 bytes inside a block of size 128 free'd
-       at operator delete / __run_exit_handlers / exit
-     Block was alloc'd at operator new / pythonfmu::createInstance / fmi2Instantiate
+1. **Double free at every exit, in every host.** The library also resets the static pointer
+   from an ELF destructor (``__attribute__((destructor)) onLibraryUnload ->
+   finalizePythonInterpreter: pyState = nullptr``). At process exit glibc runs the C++ static
+   destructors (``__cxa_atexit``) *before* the ELF destructors (``_dl_fini``), so
+   ``finalizePythonInterpreter`` releases a ``shared_ptr`` already destroyed: it decrements the
+   use count inside the freed control block and, when the freed memory still reads 1, destroys
+   the ``PyState`` and frees the block again. The heap is corrupted and the process aborts at
+   some later free (``corrupted double-linked list`` in libgfortran's exit handler, in fmpy
+   and pytest processes). Valgrind shows it on every exit::
 
-The fix (:func:`patch_binary`): ``finalizePythonInterpreter`` returns at once (its first
-instruction after ``endbr64`` becomes ``ret``). The static destructor alone then releases
-the ``PyState`` exactly once at exit. Nothing is lost: the library carries GNU-unique
-symbols, so the dynamic loader never unloads it (``dlclose`` is a no-op) and the destructor
-path only ever ran at exit. Where the wrapper initialized Python itself (a host that is not
-Python), that single release still finalizes the interpreter at exit, on the wrapper's own
-thread, as pythonfmu intends.
+       Invalid read of size 4
+          at finalizePythonInterpreter (in .../binaries/linux64/Setpoint.so)
+          by _dl_call_fini / _dl_fini / __run_exit_handlers / exit
+        Address ... is 8 bytes inside a block of size 128 free'd
+          at operator delete / __run_exit_handlers / exit
+        Block was alloc'd at operator new / pythonfmu::createInstance / fmi2Instantiate
 
-The patch is applied to the exact binary of pythonfmu 0.7.0 only (SHA-256 checked before and
-after); any other pythonfmu fails the build with one line naming the pinned version.
+   Edit: ``finalizePythonInterpreter`` returns at once (after ``endbr64``, ``push %rbp`` ->
+   ``ret``); the static destructor alone releases the guard, once. Nothing else changes: the
+   library carries GNU-unique symbols, so the loader never unloads it (``dlclose`` is a no-op)
+   and that destructor only ever ran at exit.
+
+2. **Py_Finalize from an exit handler, in hosts that are not Python.** The guard of the
+   binary that initialized Python is destroyed by its ``__cxa_atexit`` handler, which makes
+   its thread call ``Py_Finalize`` while the process is exiting: the exit handlers of every
+   library loaded after it (NumPy's, SciPy's C++ extension modules, other FMUs) have already
+   run, and the finalizer's garbage collection frees objects whose native state is gone
+   (SIGSEGV in ``Py_FinalizeEx -> finalize_modules -> gc -> _uarray Function::clear ->
+   dict_dealloc -> _PyObject_Free``, in 5 of 8 exits of a C host).
+   Edit: in ``PyState::Worker`` the branch taken only by the thread that initialized Python,
+   ``call PyEval_RestoreThread; call Py_Finalize`` become no-ops: an interpreter an FMU
+   started stays alive, with the GIL released, until the process ends (the operating system
+   reclaims it; a host's own exit handlers may still call ``fmi2FreeInstance``). Python-level
+   ``atexit`` hooks of the FMU code do not run; the FMU runtime registers none.
+
+The edits are made on the exact binary of pythonfmu 0.7.0 only (SHA-256 checked before and
+after, and the original bytes at each site); any other pythonfmu fails the build with one line
+naming the pinned version. The win64 binary is left as pythonfmu ships it.
 """
 from __future__ import annotations
 
 import hashlib
 import struct
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import pythonfmu
@@ -45,13 +61,30 @@ __all__ = ["PINNED_VERSION", "PATCH_ID", "WrapperError", "check_pythonfmu", "pat
 #: The pythonfmu release whose wrapper binary the patch and the glue in ``ipcosim.fmus.fmi`` answer.
 PINNED_VERSION = "0.7.0"
 #: Names the patch in the build stamp, so FMUs built before (or after) a change of it are rebuilt.
-PATCH_ID = "finalizePythonInterpreter-ret-1"
-_SYMBOL = b"finalizePythonInterpreter"
+PATCH_ID = "pythonfmu-0.7.0-exit-2"
 _ORIGINAL_SHA256 = "4be156a552c16f30eb4395805c59855d8d4086056d0f165442565f6c5fbac0c9"
-_PATCHED_SHA256 = "808689806994c9ac5b7ce4b0ffb1bb801cb50b5718e7d93bfc3d1131feabd2c9"
-_ENDBR64 = bytes.fromhex("f30f1efa")
-_PUSH_RBP = 0x55
-_RET = 0xC3
+_PATCHED_SHA256 = "1087129bcbeb8bef99fbdf6df9f7a090175343c2da86c0bcffcbfe97db797651"
+_NOP5 = bytes.fromhex("0f1f440000")
+
+
+@dataclass(frozen=True)
+class _Site:
+    """One edit: at ``offset`` bytes into the exported function ``symbol``, ``old`` becomes ``new``."""
+
+    symbol: bytes
+    offset: int
+    old: bytes
+    new: bytes
+
+
+_SITES = (
+    # 1. finalizePythonInterpreter: after endbr64, ``push %rbp`` -> ``ret``.
+    _Site(b"finalizePythonInterpreter", 4, bytes.fromhex("55"), bytes.fromhex("c3")),
+    # 2. PyState::Worker, the branch taken only where the wrapper initialized Python itself:
+    #    ``call PyEval_RestoreThread; call Py_Finalize`` -> two 5-byte no-ops.
+    _Site(b"_ZN9pythonfmu7PyState6WorkerEv", 0xAC, bytes.fromhex("e83f25feffe81a27feff"),
+          _NOP5 + _NOP5),
+)
 
 
 class WrapperError(RuntimeError):
@@ -94,7 +127,7 @@ def _symbol_offset(elf: bytes, name: bytes) -> int:
 
 
 def patch_binary(data: bytes) -> bytes:
-    """pythonfmu 0.7.0's linux64 wrapper with ``finalizePythonInterpreter`` reduced to ``ret`` (module docstring).
+    """pythonfmu 0.7.0's linux64 wrapper with the two exit-time edits of the module docstring.
 
     Parameters
     ----------
@@ -117,11 +150,12 @@ def patch_binary(data: bytes) -> bytes:
     if digest != _ORIGINAL_SHA256:
         raise WrapperError(f"wrapper binary (sha256 {digest[:16]}...) is not pythonfmu {PINNED_VERSION}'s "
                            f"libpythonfmu-export.so; reinstall pythonfmu=={PINNED_VERSION}")
-    at = _symbol_offset(data, _SYMBOL)
-    if data[at:at + 4] != _ENDBR64 or data[at + 4] != _PUSH_RBP:
-        raise WrapperError(f"wrapper binary: {_SYMBOL.decode()} does not start as expected")
     patched = bytearray(data)
-    patched[at + 4] = _RET
+    for site in _SITES:
+        at = _symbol_offset(data, site.symbol) + site.offset
+        if data[at:at + len(site.old)] != site.old:
+            raise WrapperError(f"wrapper binary: unexpected code at {site.symbol.decode()}+{site.offset:#x}")
+        patched[at:at + len(site.old)] = site.new
     result = bytes(patched)
     if hashlib.sha256(result).hexdigest() != _PATCHED_SHA256:
         raise WrapperError("wrapper binary: the patched binary does not have the expected checksum")
