@@ -171,3 +171,12 @@ def test_fmpy_unloads_and_reloads_one_fmu_while_another_stays(loop_args: list[st
     # the cycled binary really left the process each time (the kept one was loaded first)
     assert [f"unloaded {k}" for k in range(cycles)] == [line for line in lines if line.startswith("unloaded")]
     assert lines[-1] == f"kept stepped {cycles * 10 + 1}"
+
+
+def test_c_host_without_libpython_fails_in_one_line(c_host: Path, loop_args: list[str]) -> None:
+    env = {k: v for k, v in c_host_env(libpython()).items() if k != "LD_PRELOAD"}
+    result = subprocess.run([str(c_host), "0.01", "0.001"] + loop_args[:3], env=env, capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Setpoint: dlopen failed" in lines[0] and "undefined symbol: _Py" in lines[0], lines
