@@ -123,6 +123,7 @@ def measure() -> dict[str, float]:
     """Median microseconds per cycle for 'floor', 'single-mass', 'double-mass' (+ '*-pure')."""
     from pythonfmu import FmuBuilder
 
+    from ipcosim.fmus import wrapper
     from ipcosim.fmus.build import ROOT, build_all
 
     with tempfile.TemporaryDirectory(prefix="ipcosim-bench-") as tmp:
@@ -130,6 +131,7 @@ def measure() -> dict[str, float]:
         script = work / "fmu_trivial_bench.py"
         script.write_text(TRIVIAL_SCRIPT)
         trivial = Path(FmuBuilder.build_FMU(script, dest=work / "fmus"))
+        wrapper.patch_fmu(trivial)  # as every project FMU: pythonfmu 0.7.0's exit-time double free
         base_script = work / "fmu_trivial_fmubase_bench.py"
         base_script.write_text(FMUBASE_SCRIPT)
         (base,) = build_all(work / "fmus", scripts=[base_script])

@@ -31,6 +31,8 @@ from xml.etree import ElementTree
 
 import pythonfmu
 
+from ipcosim.fmus import wrapper
+
 ROOT = Path(__file__).resolve().parent.parent
 #: Folders holding FMU scripts (``fmu_*.py``).
 SCRIPT_DIRS: tuple[str, ...] = ("fmus", "controllers")
@@ -123,7 +125,7 @@ def _privatize(text: str, private: str) -> str:
 
 def _digest(script: Path, files: Iterable[Path], root: Path = ROOT) -> str:
     h = hashlib.sha256()
-    h.update(f"pythonfmu {pythonfmu.__version__}\n".encode())
+    h.update(f"pythonfmu {pythonfmu.__version__} {wrapper.PATCH_ID}\n".encode())
     h.update(script.read_bytes())
     for f in files:
         h.update(str(f.relative_to(root)).encode())
@@ -181,6 +183,10 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
     BuildError
         If pythonfmu fails or the result does not pass ``check_fmu``.
     """
+    try:
+        wrapper.check_pythonfmu()
+    except wrapper.WrapperError as exc:
+        raise BuildError(f"{script}: {exc}") from exc
     fmu_dir.mkdir(parents=True, exist_ok=True)
     files = runtime_modules(script, root)
     digest = digest or _digest(script, files, root)
@@ -198,6 +204,10 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
             except Exception as exc:  # noqa: BLE001 -- one line naming the script
                 raise BuildError(f"{script}: pythonfmu build failed: {type(exc).__name__}: {exc}") from exc
             check_fmu(built)
+            try:
+                wrapper.patch_fmu(built)  # pythonfmu 0.7.0's exit-time double free (ipcosim.fmus.wrapper)
+            except wrapper.WrapperError as exc:
+                raise BuildError(f"{script}: {exc}") from exc
             target = fmu_dir / built.name
             tmp_target = fmu_dir / f".{built.name}.{os.getpid()}.tmp"
             shutil.copyfile(built, tmp_target)
