@@ -681,7 +681,8 @@ class Execution:
         for name, kind, slot, link in self.typed_columns:
             src, mapping = link if link is not None else (slot, {})
             if kind == "string":
-                values = [row[src].decode("utf-8", "replace") if row is not None else "" for row in self.record_s[:rows]]
+                values = [row[src].decode("utf-8", "replace") if row is not None else ""
+                          for row in self.record_s[:rows]]
                 data[name] = np.array(values, dtype=object) if rows else values
                 continue
             col = ints[:, src]

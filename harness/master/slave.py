@@ -468,7 +468,9 @@ class FMU3Slave(FMUSlave):
                     worst = max(worst, g32(c, vr, 1, tmp, 1))
                     out[i] = tmp[0]
                 else:
-                    worst = max(worst, g64(c, vr, 1, ctypes.byref(out, 8 * i), 1))
+                    tmp64 = (ctypes.c_double * 1)()
+                    worst = max(worst, g64(c, vr, 1, tmp64, 1))
+                    out[i] = tmp64[0]
             return worst
 
         def set_real(c: Any, vrs: Any, n: int, vals: Any) -> int:
@@ -516,7 +518,8 @@ class FMU3Slave(FMUSlave):
 
 
 def load_library(instance: Instance, unzip_dir: Path) -> Any:
-    """An FMPy ``FMU2Slave`` (``FMU3Slave`` for FMI 3.0) with the FMU's shared library loaded and its functions resolved.
+    """An FMPy ``FMU2Slave`` (``FMU3Slave`` for FMI 3.0) with the FMU's shared library loaded and its
+    functions resolved.
 
     One such object can serve many consecutive instances (fmi2Instantiate ... fmi2FreeInstance)
     of the component, which saves loading and resolving on every run of a sweep.
