@@ -138,7 +138,8 @@ def read_model(path: Path, display: str | None = None) -> Model:
     variables = {}
     for v in md.modelVariables:
         unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
-        variables[v.name] = Variable(name=v.name, vr=int(v.valueReference), type=v.type,
+        type_ = f"{v.type}[]" if getattr(v, "dimensions", None) else v.type  # FMI 3.0 arrays: not carried
+        variables[v.name] = Variable(name=v.name, vr=int(v.valueReference), type=type_,
                                      causality=v.causality or "local", variability=v.variability or "continuous",
                                      initial=v.initial, unit=unit, start=_start_value(v.type, v.start),
                                      description=v.description or "")
