@@ -279,3 +279,11 @@ def test_default_step_and_stop_time_come_from_the_fmus(tmp_path, fmus):
                       name="nostop")
     r = run(folder)
     assert r.metadata["step"] == pytest.approx(0.1) and r["time"][-1] == pytest.approx(1.0)
+
+
+def test_an_integer_only_fmu_writes_its_integer_column_and_record_selects_it(tmp_path, fmus, capsys):
+    folder = scenario(tmp_path, fmus, [comp("stair", "Stair", only=("counter",))], stop=0.5)
+    rc = cli.main(["run", str(folder), "--out", str(tmp_path / "out"), "--quiet", "--record", "stair.counter"])
+    assert rc == 0, capsys.readouterr().err
+    header, rows = read_csv(tmp_path / "out" / "results.csv")
+    assert header == ["time", "stair.counter"] and [r[1] for r in rows] == [str(k) for k in range(1, 7)]
