@@ -240,6 +240,10 @@ def test_multi_rate_component_steps_exactly_to_the_stop_time(tmp_path, fmus):
     assert r["c.steps"][-1] == 4 and r["c.reached"][-1] == pytest.approx(1.0, abs=1e-12)
     assert r["c.integral"][-1] == pytest.approx(integral, abs=1e-12)
     assert list(r["c.steps"]) == [0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 4]
+    # Jacobi: inputs read at the start of each period (y at 0, 0.3, 0.6, 0.9), outputs published at its end
+    jac = run(folder, overrides={"src.step_time": 0.5}, algorithm="jacobi")
+    assert list(jac["c.steps"]) == [0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 4]
+    assert jac["c.integral"][-1] == pytest.approx(0.3 + 0.1, abs=1e-12)
     # the same component alone, against FMPy (which takes the shorter last step too)
     alone = scenario(tmp_path, fmus, [comp("c", "Counter", hint=0.3)], stop=1.0, step=0.1, name="alone")
     ref = fmpy_result(fmus["Counter"], 1.0, 0.3)

@@ -380,31 +380,46 @@ def generate_loop(blocks: Sequence[Block], order: Sequence[int], algorithm: str,
     Every component's last step ends at the stop time: a component whose last period is partial
     (or a run whose last tick is short) takes a shorter last step there.
     """
-    ns: dict[str, Any] = {"memmove": ctypes.memmove}
-    N = time.ticks
-    for b in blocks:
-        i = b.index
-        ns.update({f"c{i}": b.handle, f"ds{i}": b.do_step, f"gr{i}": b.get_real, f"sr{i}": b.set_real,
-                   f"vo{i}": b.out_vrs, f"vi{i}": b.in_vrs, f"O{i}": b.out_values, f"I{i}": b.in_values,
-                   f"P{i}": b.private_out, f"h{i}": time.span(b.multiple), f"hl{i}": time.last_step(b.multiple)})
-        for k, ch in enumerate(b.channels):
-            ns.update({f"G{i}_{k}": ch.get, f"S{i}_{k}": ch.set, f"O{i}_{k}": ch.out_values,
-                       f"I{i}_{k}": ch.in_values, f"P{i}_{k}": ch.private_out})
-            for t in ch.transfers:
-                if t[3]:
-                    ns[f"M{i}_{k}_{t[0]}"] = t[3]
-    L: list[str] = ["def run(n0, n1, rb, va, rs):"]
-    L.append("    for n in range(n0, n1):")
-    ind = "        "
-    L.append(f"{ind}t = {time.expr('n')}")
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
+    em = _Emitter(blocks, time)
+    em.lines += ["def run(n0, n1, rb, va, rs):", "    for n in range(n0, n1):", f"{IND}t = {time.expr('n')}"]
+    if algorithm == GAUSS_SEIDEL:
+        _gauss_seidel(em, order)
+    else:
+        _jacobi(em, order)
+    _record(em.lines, em.ns, IND, record_every, typed)
+    em.lines.append("    return None")
+    return "\n".join(em.lines) + "\n", em.ns
 
-    def partial(b: Block) -> bool:
+
+IND = "        "
+
+
+class _Emitter:
+    """Source lines of the loop for each block: transfers, batched sets, the step, batched gets."""
+
+    def __init__(self, blocks: Sequence[Block], time: TimeBase) -> None:
+        self.blocks, self.time, self.lines = blocks, time, []
+        self.ns: dict[str, Any] = {"memmove": ctypes.memmove}
+        for b in blocks:
+            i = b.index
+            self.ns.update({f"c{i}": b.handle, f"ds{i}": b.do_step, f"gr{i}": b.get_real, f"sr{i}": b.set_real,
+                            f"vo{i}": b.out_vrs, f"vi{i}": b.in_vrs, f"O{i}": b.out_values, f"I{i}": b.in_values,
+                            f"P{i}": b.private_out, f"h{i}": time.span(b.multiple),
+                            f"hl{i}": time.last_step(b.multiple)})
+            for k, ch in enumerate(b.channels):
+                self.ns.update({f"G{i}_{k}": ch.get, f"S{i}_{k}": ch.set, f"O{i}_{k}": ch.out_values,
+                                f"I{i}_{k}": ch.in_values, f"P{i}_{k}": ch.private_out})
+                self.ns.update({f"M{i}_{k}_{t[0]}": t[3] for t in ch.transfers if t[3]})
+
+    def partial(self, b: Block) -> bool:
         """Whether the component's last step differs from its regular one."""
-        return N % b.multiple != 0 or time.short_last
+        return self.time.ticks % b.multiple != 0 or self.time.short_last
 
-    def transfers(b: Block, indent: str) -> None:
-        for t in b.transfers:
-            k, src, j, factor, offset = t
+    def transfers(self, b: Block, indent: str) -> None:
+        L = self.lines
+        for k, src, j, factor, offset in b.transfers:
             expr = f"O{src}[{j}]"
             if factor != 1.0:
                 expr = f"{factor!r} * {expr}"
@@ -413,15 +428,15 @@ def generate_loop(blocks: Sequence[Block], order: Sequence[int], algorithm: str,
             L.append(f"{indent}I{b.index}[{k}] = {expr}")
         for c, ch in enumerate(b.channels):
             for k, src, j, mapping in ch.transfers:
-                sc = _channel_index(blocks[src], ch.kind)
+                sc = _channel_index(self.blocks[src], ch.kind)
                 if mapping:
                     L.append(f"{indent}x = O{src}_{sc}[{j}]")
                     L.append(f"{indent}I{b.index}_{c}[{k}] = M{b.index}_{c}_{k}.get(x, x)")
                 else:
                     L.append(f"{indent}I{b.index}_{c}[{k}] = O{src}_{sc}[{j}]")
 
-    def set_inputs(b: Block, indent: str) -> None:
-        i = b.index
+    def set_inputs(self, b: Block, indent: str) -> None:
+        i, L = b.index, self.lines
         if b.n_in:
             L.append(f"{indent}s = sr{i}(c{i}, vi{i}, {b.n_in}, I{i})")
             L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2SetReal', s)")
@@ -430,70 +445,71 @@ def generate_loop(blocks: Sequence[Block], order: Sequence[int], algorithm: str,
                 L.append(f"{indent}s = S{i}_{c}(I{i}_{c})")
                 L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2Set{FMI_NAME[ch.kind]}', s)")
 
-    def step(b: Block, indent: str, start: str, private: bool, h: str) -> None:
-        i = b.index
+    def step(self, b: Block, indent: str, start: str, private: bool, h: str) -> None:
+        i, L = b.index, self.lines
+        target = "P" if private else "O"
         L.append(f"{indent}s = ds{i}(c{i}, {start}, {h}, 1)")
         L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2DoStep', s)")
         if b.n_out:
-            L.append(f"{indent}s = gr{i}(c{i}, vo{i}, {b.n_out}, {'P' if private else 'O'}{i})")
+            L.append(f"{indent}s = gr{i}(c{i}, vo{i}, {b.n_out}, {target}{i})")
             L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2GetReal', s)")
         for c, ch in enumerate(b.channels):
             if ch.n_out:
-                L.append(f"{indent}s = G{i}_{c}({'P' if private else 'O'}{i}_{c})")
+                L.append(f"{indent}s = G{i}_{c}({target}{i}_{c})")
                 L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2Get{FMI_NAME[ch.kind]}', s)")
 
-    if algorithm == GAUSS_SEIDEL:
-        for idx in order:
-            b = blocks[idx]
-            i, m = b.index, b.multiple
-            h = f"h{i}" if not partial(b) else f"(h{i} if n != {N - 1} else hl{i})"
-            if m == 1:
-                transfers(b, ind)
-                set_inputs(b, ind)
-                step(b, ind, "t", False, h)
-            else:
-                last = f" or n == {N - 1}" if partial(b) else ""
-                L.append(f"{ind}if (n + 1) % {m} == 0{last}:")
-                transfers(b, ind + "    ")
-                set_inputs(b, ind + "    ")
-                step(b, ind + "    ", time.expr(f"(n // {m}) * {m}"), False, h)
-    elif algorithm == JACOBI:
-        # phase 1: every component starting a step reads the values of t_n
-        for idx in order:
-            b = blocks[idx]
-            cond = "" if b.multiple == 1 else f"if n % {b.multiple} == 0:"
-            inner = ind if not cond else ind + "    "
-            if cond and (b.transfers or b.n_in or b.channels):
-                L.append(f"{ind}{cond}")
-            transfers(b, inner)
-            set_inputs(b, inner)
-        # phase 2: step (a partial last period starts at p0 with the shorter step)
-        for idx in order:
-            b = blocks[idx]
-            i, m = b.index, b.multiple
-            p0 = ((N - 1) // m) * m
-            h = f"h{i}" if not partial(b) else f"(h{i} if n != {p0} else hl{i})"
-            if m == 1:
-                step(b, ind, "t", False, h)
-            else:
-                L.append(f"{ind}if n % {m} == 0:")
-                step(b, ind + "    ", "t", True, h)
-        # phase 3: publish the outputs of multi-rate components at the end of their period
-        for idx in order:
-            b = blocks[idx]
-            if b.multiple > 1 and (b.n_out or b.channels):
-                last = f" or n == {N - 1}" if partial(b) else ""
-                L.append(f"{ind}if (n + 1) % {b.multiple} == 0{last}:")
-                if b.n_out:
-                    L.append(f"{ind}    O{b.index}[:] = P{b.index}")
-                for c, ch in enumerate(b.channels):
-                    if ch.n_out:
-                        L.append(f"{ind}    O{b.index}_{c}[:] = P{b.index}_{c}[:{ch.n_out}]")
-    else:
-        raise ValueError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
-    _record(L, ns, ind, record_every, typed)
-    L.append("    return None")
-    return "\n".join(L) + "\n", ns
+
+def _gauss_seidel(em: _Emitter, order: Sequence[int]) -> None:
+    """Each component in order: transfers, set, step (multi-rate: at the end of its period)."""
+    N = em.time.ticks
+    for idx in order:
+        b = em.blocks[idx]
+        i, m = b.index, b.multiple
+        h = f"h{i}" if not em.partial(b) else f"(h{i} if n != {N - 1} else hl{i})"
+        if m == 1:
+            em.transfers(b, IND)
+            em.set_inputs(b, IND)
+            em.step(b, IND, "t", False, h)
+        else:
+            last = f" or n == {N - 1}" if em.partial(b) else ""
+            em.lines.append(f"{IND}if (n + 1) % {m} == 0{last}:")
+            em.transfers(b, IND + "    ")
+            em.set_inputs(b, IND + "    ")
+            em.step(b, IND + "    ", em.time.expr(f"(n // {m}) * {m}"), False, h)
+
+
+def _jacobi(em: _Emitter, order: Sequence[int]) -> None:
+    """Every component reads the values of ``t_n``, then all step; multi-rate outputs are
+    published at the end of their period (a partial last period starts with the shorter step)."""
+    N, L = em.time.ticks, em.lines
+    for idx in order:
+        b = em.blocks[idx]
+        cond = "" if b.multiple == 1 else f"if n % {b.multiple} == 0:"
+        inner = IND if not cond else IND + "    "
+        if cond and (b.transfers or b.n_in or any(ch.transfers or ch.n_in for ch in b.channels)):
+            L.append(f"{IND}{cond}")
+        em.transfers(b, inner)
+        em.set_inputs(b, inner)
+    for idx in order:
+        b = em.blocks[idx]
+        i, m = b.index, b.multiple
+        p0 = ((N - 1) // m) * m
+        h = f"h{i}" if not em.partial(b) else f"(h{i} if n != {p0} else hl{i})"
+        if m == 1:
+            em.step(b, IND, "t", False, h)
+        else:
+            L.append(f"{IND}if n % {m} == 0:")
+            em.step(b, IND + "    ", "t", True, h)
+    for idx in order:
+        b = em.blocks[idx]
+        if b.multiple > 1 and (b.n_out or any(ch.n_out for ch in b.channels)):
+            last = f" or n == {N - 1}" if em.partial(b) else ""
+            L.append(f"{IND}if (n + 1) % {b.multiple} == 0{last}:")
+            if b.n_out:
+                L.append(f"{IND}    O{b.index}[:] = P{b.index}")
+            for c, ch in enumerate(b.channels):
+                if ch.n_out:
+                    L.append(f"{IND}    O{b.index}_{c}[:] = P{b.index}_{c}[:{ch.n_out}]")
 
 
 def _channel_index(block: Block, kind: str) -> int:
