@@ -30,7 +30,15 @@ from ipcosim.harness.master.observers import Observer, Progress, realtime_observ
 from ipcosim.harness.master.results import Result, SimulationError
 from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
-from ipcosim.harness.scenario.system import SwapTarget, System, bind, warn_all, with_overrides
+from ipcosim.harness.scenario.system import (
+    SwapTarget,
+    System,
+    bind,
+    default_step,
+    default_stop_time,
+    warn_all,
+    with_overrides,
+)
 
 
 class Prepared:
@@ -139,13 +147,12 @@ class Prepared:
                   manipulators: Sequence[Manipulator] = (), realtime: bool | None = None, progress: bool = False,
                   record_every: int = 1, max_init_iterations: int = 20) -> Execution:
         """A ready :class:`Execution` (checked: step, stop time, overrides, step multiples)."""
-        exp = self.scenario.experiment
-        stop = exp.stop_time if stop_time is None else stop_time
-        h = exp.step_size if step is None else step
+        stop, why_stop = (stop_time, "") if stop_time is not None else default_stop_time(self.system)
+        h, why_step = (step, "") if step is not None else default_step(self.system)
         if stop is None:
-            raise StepSizeError(f"{self.scenario.origin}: no DefaultExperiment stopTime; give --stop-time")
+            raise StepSizeError(f"{why_stop}; give --stop-time")
         if h is None:
-            raise StepSizeError(f"{self.scenario.origin}: no default step size; give --step")
+            raise StepSizeError(f"{why_step}; give --step")
         _, values = with_overrides(self.system, overrides or {})
         observers = list(observers)
         if progress:

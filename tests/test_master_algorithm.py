@@ -148,8 +148,7 @@ def test_sample_period_that_the_step_does_not_divide_is_rejected():
 
 
 @pytest.mark.parametrize("kw, match", [({"stop_time": 0.0}, "stop time"), ({"stop_time": -1.0}, "stop time"),
-                                       ({"step": 0.0}, "step size"), ({"step": -0.01}, "step size"),
-                                       ({"stop_time": 1.005}, "whole number of steps")])
+                                       ({"step": 0.0}, "step size"), ({"step": -0.01}, "step size")])
 def test_bad_stop_time_or_step(kw, match):
     args = {"stop_time": 1.0, "step": H, **kw}
     f = loop_factory()
@@ -215,7 +214,9 @@ def _failing_plant(status):
 def test_failing_step_keeps_results_up_to_the_failure_and_frees_every_instance(status, name):
     f = loop_factory(plant={"step_fn": _failing_plant(status)})
     r = run(loop_system(), f, stop_time=1.0, step=H)
-    assert r.error == f"component plant (Plant): fmi2DoStep returned {name} at t = 0.5 s"
+    # a Discard says what the FMU's status query returned (here: not terminated)
+    query = " (the status query returned false, the FMU did not end the simulation)" if status == DISCARD else ""
+    assert r.error == f"component plant (Plant): fmi2DoStep returned {name} at t = 0.5 s{query}"
     assert r["time"][-1] == 0.5 and len(r.data) == 51
     x, _ = expected_gauss_seidel(50)
     assert np.array_equal(r["plant.position"], x)

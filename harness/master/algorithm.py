@@ -28,7 +28,7 @@ from __future__ import annotations
 import ctypes
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from ipcosim.harness.errors import IpcosimError
 from ipcosim.harness.scenario.system import Instance, Link, System
@@ -182,13 +182,19 @@ def gauss_seidel_order(system: System) -> list[str]:
 # --------------------------------------------------------------------------- time base
 @dataclass(frozen=True)
 class TimeBase:
-    """Integer-tick time: ``t_n = t0 + n h``, from integer nanoseconds when possible."""
+    """Integer-tick time: ``t_n = t0 + n h``, from integer nanoseconds when possible.
+
+    When the run is not a whole number of steps, the last tick is shorter: it ends at the stop
+    time exactly (``short_last``); :meth:`time` of the last tick is the stop time.
+    """
 
     start: float
     step: float
     ticks: int
     start_ns: int | None
     step_ns: int | None
+    stop: float = float("nan")
+    short_last: bool = False
 
     @classmethod
     def make(cls, start: float, stop: float, step: float) -> "TimeBase":
@@ -199,33 +205,70 @@ class TimeBase:
                                 f"{start:g} s")
         span = stop - start
         ticks = round(span / step)
-        if ticks < 1 or abs(ticks * step - span) > 1e-9 * max(span, step):
-            raise StepSizeError(f"--stop-time {stop:g} s: the run of {span:g} s is not a whole number of "
-                                f"steps of {step:g} s")
+        short = ticks < 1 or abs(ticks * step - span) > 1e-9 * max(span, step)
+        if short:
+            ticks = math.ceil(span / step)
         step_ns = round(step * 1e9)
         start_ns = round(start * 1e9)
         exact = (abs(step_ns - step * 1e9) <= 1e-6 * max(1.0, step * 1e9) and step_ns > 0
                  and abs(start_ns - start * 1e9) <= 1e-6 * max(1.0, abs(start) * 1e9)
                  and start_ns + ticks * step_ns < 2 ** 53)
-        return cls(float(start), float(step), int(ticks), start_ns if exact else None, step_ns if exact else None)
+        base = cls(float(start), float(step), int(ticks), start_ns if exact else None, step_ns if exact else None)
+        end = float(stop) if short else base._regular(ticks)
+        return cls(base.start, base.step, base.ticks, base.start_ns, base.step_ns, end, short)
 
-    def time(self, n: int) -> float:
-        """``t_n``."""
+    def _regular(self, n: int) -> float:
         if self.step_ns is not None:
             return (self.start_ns + n * self.step_ns) / 1e9
         return self.start + n * self.step
 
+    def time(self, n: int) -> float:
+        """``t_n`` (the stop time for the last tick count)."""
+        if n >= self.ticks and self.short_last:
+            return self.stop
+        return self._regular(n)
+
     def span(self, m: int) -> float:
-        """The duration of ``m`` ticks."""
+        """The duration of ``m`` regular ticks."""
         if self.step_ns is not None:
             return (m * self.step_ns) / 1e9
         return m * self.step
 
+    def last_step(self, m: int) -> float:
+        """The step of a component with step multiple ``m`` over its last (maybe partial) period."""
+        p0 = ((self.ticks - 1) // m) * m
+        if p0 + m == self.ticks and not self.short_last:
+            return self.span(m)
+        return self.time(self.ticks) - self._regular(p0)
+
     def expr(self, n_expr: str) -> str:
-        """Python source computing the time of tick ``n_expr``."""
+        """Python source computing the time of regular tick ``n_expr``."""
         if self.step_ns is not None:
             return f"({self.start_ns} + ({n_expr}) * {self.step_ns}) / 1e9"
         return f"{self.start!r} + ({n_expr}) * {self.step!r}"
+
+
+def check_last_steps(time: TimeBase, multiples: Mapping[str, int], instances: Sequence[Instance]) -> None:
+    """Every component steps exactly to the stop time: a component whose last step is shorter
+    than its regular one must be able to change its step (canHandleVariableCommunicationStepSize).
+
+    Raises
+    ------
+    StepSizeError
+        Naming the components that cannot, and why their last step is shorter.
+    """
+    bad = []
+    for inst in instances:
+        m = multiples[inst.name]
+        if not inst.model.can_handle_variable_step and abs(time.last_step(m) - time.span(m)) > 1e-12 * time.span(m):
+            bad.append(f"{inst.name} ({inst.model.name}: step {time.span(m):g} s, last step "
+                       f"{time.last_step(m):.6g} s)")
+    if bad:
+        span = time.time(time.ticks) - time.start
+        raise StepSizeError(f"the run of {span:g} s is not a whole number of steps of "
+                            + ", ".join(bad) + ", which cannot take a shorter last step "
+                            "(canHandleVariableCommunicationStepSize=\"false\"); choose --stop-time or --step so "
+                            "that every component's step divides the run")
 
 
 def step_multiples(system: System, values: Callable[[str, str], Any], step: float) -> dict[str, int]:
@@ -265,6 +308,30 @@ def step_multiples(system: System, values: Callable[[str, str], Any], step: floa
 
 
 # --------------------------------------------------------------------------- loop generation
+#: FMI 2.0 name of each value kind's getter/setter (for messages).
+FMI_NAME = {"integer": "Integer", "boolean": "Boolean", "string": "String"}
+
+
+@dataclass
+class Channel:
+    """One component's connectors of one non-Real value kind and their bound get/set.
+
+    ``out_values``/``in_values`` are ``c_int`` array views (Integer, Boolean) or lists of bytes
+    (String); ``transfers`` are ``(input index, source block, source output index, mapping)``
+    with ``mapping`` a dict of an SSP mapping transformation or None.
+    """
+
+    kind: str
+    get: Callable[[Any], int]
+    set: Callable[[Any], int]
+    out_values: Any
+    in_values: Any
+    n_out: int
+    n_in: int
+    transfers: tuple[tuple[int, int, int, dict[int, int] | None], ...] = ()
+    private_out: Any = None  # Jacobi multi-rate: outputs are read here and published later
+
+
 @dataclass
 class Block:
     """One component's place in the value vector and its raw FMI functions."""
@@ -285,103 +352,190 @@ class Block:
     private_out: Any = None  # Jacobi multi-rate: outputs are read here and published later
     # transfers into this component's inputs: (input index, source block, source output index, factor, offset)
     transfers: tuple[tuple[int, int, int, float, float], ...] = ()
+    #: Integer, Boolean and String connectors (none in a Real-only system: the loop is then unchanged).
+    channels: tuple[Channel, ...] = ()
+
+
+@dataclass
+class TypedRecord:
+    """Where the loop records the non-Real values: the ``c_int`` vector's rows (address, row
+    bytes, vector address) and a list of String rows filled by ``snapshot()``."""
+
+    int_address: int = 0
+    int_row_bytes: int = 0
+    int_vector: int = 0
+    strings: list | None = None
+    snapshot: Callable[[], tuple] | None = None
 
 
 def generate_loop(blocks: Sequence[Block], order: Sequence[int], algorithm: str, time: TimeBase,
-                  record_every: int = 1) -> tuple[str, dict[str, Any]]:
+                  record_every: int = 1, typed: TypedRecord | None = None) -> tuple[str, dict[str, Any]]:
     """Python source of the stepping loop and its namespace.
 
     The generated ``run(n0, n1, rec_address, value_address, row_bytes)`` steps ticks
     ``n0 .. n1-1``; after tick ``n`` it copies the value vector into record row
     ``(n + 1) // record_every`` when ``(n + 1) % record_every == 0``. It returns None, or
     ``(n, block index, function name, status)`` for the first call that returned more than
-    fmi2Warning.
+    fmi2Warning (or a ``do_step`` that returned :data:`~ipcosim.harness.master.slave.TERMINATE`).
+    Every component's last step ends at the stop time: a component whose last period is partial
+    (or a run whose last tick is short) takes a shorter last step there.
     """
-    ns: dict[str, Any] = {"memmove": ctypes.memmove}
-    for b in blocks:
-        i = b.index
-        ns.update({f"c{i}": b.handle, f"ds{i}": b.do_step, f"gr{i}": b.get_real, f"sr{i}": b.set_real,
-                   f"vo{i}": b.out_vrs, f"vi{i}": b.in_vrs, f"O{i}": b.out_values, f"I{i}": b.in_values,
-                   f"P{i}": b.private_out, f"h{i}": time.span(b.multiple)})
-    L: list[str] = ["def run(n0, n1, rb, va, rs):"]
-    L.append("    for n in range(n0, n1):")
-    ind = "        "
-    L.append(f"{ind}t = {time.expr('n')}")
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
+    em = _Emitter(blocks, time)
+    em.lines += ["def run(n0, n1, rb, va, rs):", "    for n in range(n0, n1):", f"{IND}t = {time.expr('n')}"]
+    if algorithm == GAUSS_SEIDEL:
+        _gauss_seidel(em, order)
+    else:
+        _jacobi(em, order)
+    _record(em.lines, em.ns, IND, record_every, typed)
+    em.lines.append("    return None")
+    return "\n".join(em.lines) + "\n", em.ns
 
-    def transfers(b: Block, indent: str) -> None:
-        for t in b.transfers:
-            k, src, j, factor, offset = t
+
+IND = "        "
+
+
+class _Emitter:
+    """Source lines of the loop for each block: transfers, batched sets, the step, batched gets."""
+
+    def __init__(self, blocks: Sequence[Block], time: TimeBase) -> None:
+        self.blocks, self.time, self.lines = blocks, time, []
+        self.ns: dict[str, Any] = {"memmove": ctypes.memmove}
+        for b in blocks:
+            i = b.index
+            self.ns.update({f"c{i}": b.handle, f"ds{i}": b.do_step, f"gr{i}": b.get_real, f"sr{i}": b.set_real,
+                            f"vo{i}": b.out_vrs, f"vi{i}": b.in_vrs, f"O{i}": b.out_values, f"I{i}": b.in_values,
+                            f"P{i}": b.private_out, f"h{i}": time.span(b.multiple),
+                            f"hl{i}": time.last_step(b.multiple)})
+            for k, ch in enumerate(b.channels):
+                self.ns.update({f"G{i}_{k}": ch.get, f"S{i}_{k}": ch.set, f"O{i}_{k}": ch.out_values,
+                                f"I{i}_{k}": ch.in_values, f"P{i}_{k}": ch.private_out})
+                self.ns.update({f"M{i}_{k}_{t[0]}": t[3] for t in ch.transfers if t[3]})
+
+    def partial(self, b: Block) -> bool:
+        """Whether the component's last step differs from its regular one."""
+        return self.time.ticks % b.multiple != 0 or self.time.short_last
+
+    def transfers(self, b: Block, indent: str) -> None:
+        L = self.lines
+        for k, src, j, factor, offset in b.transfers:
             expr = f"O{src}[{j}]"
             if factor != 1.0:
                 expr = f"{factor!r} * {expr}"
             if offset != 0.0:
                 expr = f"{expr} + {offset!r}"
             L.append(f"{indent}I{b.index}[{k}] = {expr}")
+        for c, ch in enumerate(b.channels):
+            for k, src, j, mapping in ch.transfers:
+                sc = _channel_index(self.blocks[src], ch.kind)
+                if mapping:
+                    L.append(f"{indent}x = O{src}_{sc}[{j}]")
+                    L.append(f"{indent}I{b.index}_{c}[{k}] = M{b.index}_{c}_{k}.get(x, x)")
+                else:
+                    L.append(f"{indent}I{b.index}_{c}[{k}] = O{src}_{sc}[{j}]")
 
-    def set_inputs(b: Block, indent: str, fn_time: str) -> None:
+    def set_inputs(self, b: Block, indent: str) -> None:
+        i, L = b.index, self.lines
         if b.n_in:
-            L.append(f"{indent}s = sr{b.index}(c{b.index}, vi{b.index}, {b.n_in}, I{b.index})")
-            L.append(f"{indent}if s > 1: return (n, {b.index}, 'fmi2SetReal', s)")
+            L.append(f"{indent}s = sr{i}(c{i}, vi{i}, {b.n_in}, I{i})")
+            L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2SetReal', s)")
+        for c, ch in enumerate(b.channels):
+            if ch.n_in:
+                L.append(f"{indent}s = S{i}_{c}(I{i}_{c})")
+                L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2Set{FMI_NAME[ch.kind]}', s)")
 
-    def step(b: Block, indent: str, start: str, target: str) -> None:
-        i = b.index
-        L.append(f"{indent}s = ds{i}(c{i}, {start}, h{i}, 1)")
+    def step(self, b: Block, indent: str, start: str, private: bool, h: str) -> None:
+        i, L = b.index, self.lines
+        target = "P" if private else "O"
+        L.append(f"{indent}s = ds{i}(c{i}, {start}, {h}, 1)")
         L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2DoStep', s)")
         if b.n_out:
-            L.append(f"{indent}s = gr{i}(c{i}, vo{i}, {b.n_out}, {target})")
+            L.append(f"{indent}s = gr{i}(c{i}, vo{i}, {b.n_out}, {target}{i})")
             L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2GetReal', s)")
+        for c, ch in enumerate(b.channels):
+            if ch.n_out:
+                L.append(f"{indent}s = G{i}_{c}({target}{i}_{c})")
+                L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2Get{FMI_NAME[ch.kind]}', s)")
 
-    if algorithm == GAUSS_SEIDEL:
-        for idx in order:
-            b = blocks[idx]
-            if b.multiple == 1:
-                transfers(b, ind)
-                set_inputs(b, ind, "t")
-                step(b, ind, "t", f"O{b.index}")
-            else:
-                L.append(f"{ind}if (n + 1) % {b.multiple} == 0:")
-                transfers(b, ind + "    ")
-                set_inputs(b, ind + "    ", "")
-                step(b, ind + "    ", time.expr(f"n + 1 - {b.multiple}"), f"O{b.index}")
-    elif algorithm == JACOBI:
-        # phase 1: every component starting a step reads the values of t_n
-        for idx in order:
-            b = blocks[idx]
-            cond = "" if b.multiple == 1 else f"if n % {b.multiple} == 0:"
-            inner = ind if not cond else ind + "    "
-            if cond and (b.transfers or b.n_in):
-                L.append(f"{ind}{cond}")
-            transfers(b, inner)
-            set_inputs(b, inner, "t")
-        # phase 2: step
-        for idx in order:
-            b = blocks[idx]
-            if b.multiple == 1:
-                step(b, ind, "t", f"O{b.index}")
-            else:
-                L.append(f"{ind}if n % {b.multiple} == 0:")
-                step(b, ind + "    ", "t", f"P{b.index}")
-        # phase 3: publish the outputs of multi-rate components at the end of their period
-        for idx in order:
-            b = blocks[idx]
-            if b.multiple > 1 and b.n_out:
-                L.append(f"{ind}if (n + 1) % {b.multiple} == 0:")
-                L.append(f"{ind}    O{b.index}[:] = P{b.index}")
-    else:
-        raise ValueError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
+
+def _gauss_seidel(em: _Emitter, order: Sequence[int]) -> None:
+    """Each component in order: transfers, set, step (multi-rate: at the end of its period)."""
+    N = em.time.ticks
+    for idx in order:
+        b = em.blocks[idx]
+        i, m = b.index, b.multiple
+        h = f"h{i}" if not em.partial(b) else f"(h{i} if n != {N - 1} else hl{i})"
+        if m == 1:
+            em.transfers(b, IND)
+            em.set_inputs(b, IND)
+            em.step(b, IND, "t", False, h)
+        else:
+            last = f" or n == {N - 1}" if em.partial(b) else ""
+            em.lines.append(f"{IND}if (n + 1) % {m} == 0{last}:")
+            em.transfers(b, IND + "    ")
+            em.set_inputs(b, IND + "    ")
+            em.step(b, IND + "    ", em.time.expr(f"(n // {m}) * {m}"), False, h)
+
+
+def _jacobi(em: _Emitter, order: Sequence[int]) -> None:
+    """Every component reads the values of ``t_n``, then all step; multi-rate outputs are
+    published at the end of their period (a partial last period starts with the shorter step)."""
+    N, L = em.time.ticks, em.lines
+    for idx in order:
+        b = em.blocks[idx]
+        cond = "" if b.multiple == 1 else f"if n % {b.multiple} == 0:"
+        inner = IND if not cond else IND + "    "
+        if cond and (b.transfers or b.n_in or any(ch.transfers or ch.n_in for ch in b.channels)):
+            L.append(f"{IND}{cond}")
+        em.transfers(b, inner)
+        em.set_inputs(b, inner)
+    for idx in order:
+        b = em.blocks[idx]
+        i, m = b.index, b.multiple
+        p0 = ((N - 1) // m) * m
+        h = f"h{i}" if not em.partial(b) else f"(h{i} if n != {p0} else hl{i})"
+        if m == 1:
+            em.step(b, IND, "t", False, h)
+        else:
+            L.append(f"{IND}if n % {m} == 0:")
+            em.step(b, IND + "    ", "t", True, h)
+    for idx in order:
+        b = em.blocks[idx]
+        if b.multiple > 1 and (b.n_out or any(ch.n_out for ch in b.channels)):
+            last = f" or n == {N - 1}" if em.partial(b) else ""
+            L.append(f"{IND}if (n + 1) % {b.multiple} == 0{last}:")
+            if b.n_out:
+                L.append(f"{IND}    O{b.index}[:] = P{b.index}")
+            for c, ch in enumerate(b.channels):
+                if ch.n_out:
+                    L.append(f"{IND}    O{b.index}_{c}[:] = P{b.index}_{c}[:{ch.n_out}]")
+
+
+def _channel_index(block: Block, kind: str) -> int:
+    return next(k for k, ch in enumerate(block.channels) if ch.kind == kind)
+
+
+def _record(L: list[str], ns: dict[str, Any], ind: str, record_every: int, typed: TypedRecord | None) -> None:
+    """The lines that copy the values into the record after a tick."""
+    rows: list[str] = ["memmove(rb + ROW * rs, va, rs)"]
+    if typed is not None and typed.int_row_bytes:
+        ns.update({"rbi": typed.int_address, "rsi": typed.int_row_bytes, "vai": typed.int_vector})
+        rows.append("memmove(rbi + ROW * rsi, vai, rsi)")
+    if typed is not None and typed.strings is not None:
+        ns.update({"SREC": typed.strings, "snap": typed.snapshot})
+        rows.append("SREC[ROW] = snap()")
     if record_every == 1:
-        L.append(f"{ind}memmove(rb + (n + 1) * rs, va, rs)")
+        L.extend(f"{ind}{r.replace('ROW', '(n + 1)')}" for r in rows)
     else:
         L.append(f"{ind}if (n + 1) % {record_every} == 0:")
-        L.append(f"{ind}    memmove(rb + ((n + 1) // {record_every}) * rs, va, rs)")
-    L.append("    return None")
-    return "\n".join(L) + "\n", ns
+        L.extend(f"{ind}    {r.replace('ROW', f'((n + 1) // {record_every})')}" for r in rows)
 
 
 def compile_loop(blocks: Sequence[Block], order: Sequence[int], algorithm: str, time: TimeBase,
-                 record_every: int = 1) -> tuple[Callable[..., Any], str]:
+                 record_every: int = 1, typed: TypedRecord | None = None) -> tuple[Callable[..., Any], str]:
     """The stepping loop as a function (see :func:`generate_loop`) and its source."""
-    source, ns = generate_loop(blocks, order, algorithm, time, record_every)
+    source, ns = generate_loop(blocks, order, algorithm, time, record_every, typed)
     code = compile(source, "<ipcosim stepping loop>", "exec")
     exec(code, ns)  # noqa: S102 -- source generated above from the system's structure only
     return ns["run"], source

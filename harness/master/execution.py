@@ -30,9 +30,12 @@ from ipcosim.harness.master.algorithm import (
     ALGORITHMS,
     GAUSS_SEIDEL,
     Block,
+    Channel,
     InitializationError,
     StepSizeError,
     TimeBase,
+    TypedRecord,
+    check_last_steps,
     compile_loop,
     gauss_seidel_order,
     step_multiples,
@@ -40,8 +43,8 @@ from ipcosim.harness.master.algorithm import (
 from ipcosim.harness.master.manipulators import Manipulator, Overrides
 from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.results import Result, SimulationError, task_metrics
-from ipcosim.harness.master.slave import FMUSlave, Slave
-from ipcosim.harness.scenario.system import Instance, System, Variable
+from ipcosim.harness.master.slave import DISCARD, TERMINATE, FMUSlave, Slave
+from ipcosim.harness.scenario.system import Instance, System, Variable, kind_of
 
 SlaveFactory = Callable[[Instance], Slave]
 
@@ -105,6 +108,7 @@ class Execution:
         self.instances = list(system.instances)
         self.index = {inst.name: i for i, inst in enumerate(self.instances)}
         self.multiples = step_multiples(system, self._planned_value, self.timebase.step)
+        check_last_steps(self.timebase, self.multiples, self.instances)
         if algorithm == GAUSS_SEIDEL:
             self.order = [self.index[n] for n in gauss_seidel_order(system)]
         else:
@@ -115,6 +119,7 @@ class Execution:
         self.tick = 0
         self.init_iterations = 0
         self._loop_source = ""
+        self.terminated_by: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ properties
     @property
@@ -157,8 +162,8 @@ class Execution:
         offsets = []
         pos = 0
         for inst in self.instances:
-            outs = [v for v in inst.outputs if v.type in ("Real", "Float64")]
-            ins = [v for v in inst.inputs if v.type in ("Real", "Float64")]
+            outs = [v for v in inst.outputs if kind_of(v.type) == "real"]
+            ins = [v for v in inst.inputs if kind_of(v.type) == "real"]
             self._real_outputs.append(outs)
             self._real_inputs.append(ins)
             offsets.append((pos, pos + len(outs)))
@@ -183,7 +188,7 @@ class Execution:
         self.columns: list[tuple[str, int, tuple[int, float, float] | None]] = []
         for k, inst in enumerate(self.instances):
             for v in inst.connectors:
-                if v.type not in ("Real", "Float64"):
+                if kind_of(v.type) != "real":
                     continue
                 name = f"{inst.name}.{v.name}"
                 link = self.system.link_into(inst.name, v.name)
@@ -192,6 +197,102 @@ class Execution:
                     self.columns.append((name, self._slot[(inst.name, v.name)], (src, link.factor, link.offset)))
                 else:
                     self.columns.append((name, self._slot[(inst.name, v.name)], None))
+        self._layout_typed()
+
+    def _layout_typed(self) -> None:
+        """Place the Integer and Boolean connectors in one ``c_int`` vector (per component:
+        integer outputs, inputs, boolean outputs, inputs) and the String connectors in lists
+        per component; describe every record column's kind in one place, ``column_kinds``
+        (``time``, then every connector in SSD order: ``real``, ``integer``, ``boolean``, ``string``)."""
+        self._typed: list[dict[str, tuple[list[Variable], list[Variable]]]] = []
+        self._int_offset: dict[tuple[int, str], int] = {}
+        self._strings: dict[int, tuple[list[bytes], list[bytes]]] = {}
+        self._tslot: dict[tuple[str, str], tuple[str, int]] = {}  # (kind, int slot or string index)
+        string_slots: list[tuple[list[bytes], int]] = []
+        pos = 0
+        for k, inst in enumerate(self.instances):
+            groups = {}
+            for kind in ("integer", "boolean", "string"):
+                outs = [v for v in inst.outputs if kind_of(v.type) == kind]
+                ins = [v for v in inst.inputs if kind_of(v.type) == kind]
+                if not (outs or ins):
+                    continue
+                groups[kind] = (outs, ins)
+                if kind == "string":
+                    lists = ([b""] * len(outs), [b""] * len(ins))
+                    self._strings[k] = lists
+                    for lst, vs in zip(lists, (outs, ins)):
+                        for j, v in enumerate(vs):
+                            self._tslot[(inst.name, v.name)] = ("string", len(string_slots))
+                            string_slots.append((lst, j))
+                else:
+                    self._int_offset[(k, kind)] = pos
+                    for j, v in enumerate(outs + ins):
+                        self._tslot[(inst.name, v.name)] = (kind, pos + j)
+                    pos += len(outs) + len(ins)
+            self._typed.append(groups)
+        self.n_ints = pos
+        self.ints_c = (ctypes.c_int * (pos + 1))()
+        self.ints = np.ctypeslib.as_array(self.ints_c)[:pos]
+        self._string_slots = string_slots
+        for (comp, var), (kind, slot) in self._tslot.items():
+            if self.instances[self.index[comp]].model.variables[var].causality == "input":
+                self._store(kind, slot, self._planned_value(comp, var))
+        self.column_kinds: dict[str, str] = {"time": "real"}
+        self.typed_columns: list[tuple[str, str, int, tuple[int, dict[int, int]] | None]] = []
+        for inst in self.instances:
+            for v in inst.connectors:
+                kind = kind_of(v.type)
+                if kind is None:
+                    continue
+                self.column_kinds[f"{inst.name}.{v.name}"] = kind
+                if kind == "real":
+                    continue
+                link = self.system.link_into(inst.name, v.name)
+                src = (self._tslot[(link.src, link.src_var.name)][1], dict(link.mapping)) if link else None
+                self.typed_columns.append((f"{inst.name}.{v.name}", kind, self._tslot[(inst.name, v.name)][1], src))
+
+    def _store(self, kind: str, slot: int, value: Any) -> None:
+        """Put a start value into the typed value store."""
+        if kind == "string":
+            lst, j = self._string_slots[slot]
+            lst[j] = b"" if value is None else (value if isinstance(value, bytes) else str(value).encode())
+        else:
+            self.ints[slot] = int(bool(value)) if kind == "boolean" else int(value or 0)
+
+    def _channels(self, k: int, slave: Slave) -> tuple[Channel, ...]:
+        """The component's Integer, Boolean and String channels (see :class:`Channel`)."""
+        out = []
+        for kind, (outs, ins) in self._typed[k].items():
+            if kind == "string":
+                o_vals, i_vals = self._strings[k]
+            else:
+                off = self._int_offset[(k, kind)]
+                o_vals = (ctypes.c_int * max(len(outs), 1)).from_buffer(self.ints_c, 4 * off)
+                i_vals = (ctypes.c_int * max(len(ins), 1)).from_buffer(self.ints_c, 4 * (off + len(outs)))
+            transfers = []
+            for j, v in enumerate(ins):
+                link = self.system.link_into(self.instances[k].name, v.name)
+                if link is not None:
+                    src = self.index[link.src]
+                    src_j = [x.name for x in self._typed[src][kind][0]].index(link.src_var.name)
+                    transfers.append((j, src, src_j, dict(link.mapping) or None))
+            private = None
+            if self.multiples[self.instances[k].name] > 1 and self.algorithm != GAUSS_SEIDEL and outs:
+                private = [b""] * len(outs) if kind == "string" else (ctypes.c_int * len(outs))()
+            get = slave.channel(kind, outs)[0] if outs else None
+            put = slave.channel(kind, ins)[1] if ins else None
+            out.append(Channel(kind, get, put, o_vals, i_vals, len(outs), len(ins), tuple(transfers), private))
+        return tuple(out)
+
+    def _typed_record(self) -> TypedRecord | None:
+        if not self.n_ints and not self._string_slots:
+            return None
+        slots = self._string_slots
+        return TypedRecord(int_address=self.record_i.ctypes.data, int_row_bytes=4 * self.n_ints if self.n_ints else 0,
+                           int_vector=ctypes.addressof(self.ints_c),
+                           strings=self.record_s if slots else None,
+                           snapshot=(lambda: tuple(lst[j] for lst, j in slots)) if slots else None)
 
     def _blocks(self) -> list[Block]:
         blocks = []
@@ -215,7 +316,8 @@ class Execution:
                                 set_real=set_real, out_vrs=(ctypes.c_uint * max(n_out, 1))(*[v.vr for v in outs]),
                                 in_vrs=(ctypes.c_uint * max(n_in, 1))(*[v.vr for v in ins]),
                                 out_values=out_values, in_values=in_values, n_out=n_out, n_in=n_in,
-                                multiple=m, private_out=private, transfers=tuple(transfers)))
+                                multiple=m, private_out=private, transfers=tuple(transfers),
+                                channels=self._channels(k, slave)))
         return blocks
 
     # ------------------------------------------------------------------ manipulation API
@@ -227,6 +329,9 @@ class Execution:
         slot = self._slot.get((component, variable))
         if slot is not None and var.causality == "input":
             self.values[slot] = float(value)
+        typed = self._tslot.get((component, variable))
+        if typed is not None and var.causality == "input":
+            self._store(typed[0], typed[1], value)
 
     def set_real(self, component: str, variable: str, value: float) -> None:
         """Set a Real variable now (manipulators' ``step``). For an input connector the value
@@ -238,9 +343,15 @@ class Execution:
             self.values[slot] = float(value)
         self.slaves[self.index[component]].set_values([var], [float(value)])
 
-    def get(self, component: str, variable: str) -> float:
-        """Current value of a Real connector (from the value vector)."""
-        return float(self.values[self._slot[(component, variable)]])
+    def get(self, component: str, variable: str) -> Any:
+        """Current value of a connector (from the value store): float, int, bool or str."""
+        if (component, variable) in self._slot:
+            return float(self.values[self._slot[(component, variable)]])
+        kind, slot = self._tslot[(component, variable)]
+        if kind == "string":
+            lst, j = self._string_slots[slot]
+            return lst[j].decode("utf-8", "replace")
+        return bool(self.ints[slot]) if kind == "boolean" else int(self.ints[slot])
 
     # ------------------------------------------------------------------ run
     def run(self) -> Result:
@@ -251,6 +362,8 @@ class Execution:
         """
         n_rows = self.n_ticks // self.record_every + 1
         self.record = np.zeros((n_rows, max(self.n_values, 1)))
+        self.record_i = np.zeros((n_rows, max(self.n_ints, 1)), dtype=np.int32)
+        self.record_s: list[tuple | None] = [None] * n_rows if self._string_slots else []
         rows = 0
         error: BaseException | None = None
         interrupted: BaseException | None = None
@@ -260,6 +373,9 @@ class Execution:
             self._instantiate()
             self._initialize()
             self.record[0, :self.n_values] = self.values
+            self.record_i[0, :self.n_ints] = self.ints
+            if self._string_slots:
+                self.record_s[0] = tuple(lst[j] for lst, j in self._string_slots)
             rows = 1
             self._check_finite(0, 1)
             for obs in self.observers:
@@ -329,10 +445,7 @@ class Execution:
             for idx in self.order:
                 b = self.blocks[idx]
                 self._transfer(b, [])
-                if b.n_in:
-                    status = b.set_real(b.handle, b.in_vrs, b.n_in, b.in_values)
-                    if status > 1:
-                        raise self.slaves[idx].fail("fmi2SetReal", status, self.start_time)
+                self._set_inputs(b)
                 self.slaves[idx].exit_initialization_mode()
                 self._get_outputs(b, self.start_time)
         else:
@@ -343,7 +456,7 @@ class Execution:
             for b in self.blocks:
                 self._get_outputs(b, self.start_time)
         self._run_loop, self._loop_source = compile_loop(self.blocks, self.order, self.algorithm, self.timebase,
-                                                         self.record_every)
+                                                         self.record_every, self._typed_record())
 
     def _sweep(self) -> list[str]:
         """One pass in step order: transfer, set inputs, read outputs; returns changed inputs."""
@@ -351,12 +464,21 @@ class Execution:
         for idx in self.init_order:
             b = self.blocks[idx]
             self._transfer(b, changed)
-            if b.n_in:
-                status = b.set_real(b.handle, b.in_vrs, b.n_in, b.in_values)
-                if status > 1:
-                    raise self.slaves[idx].fail("fmi2SetReal", status, self.start_time)
+            self._set_inputs(b)
             self._get_outputs(b, None)
         return changed
+
+    def _set_inputs(self, b: Block) -> None:
+        """Set every input of ``b`` from the value store (initialization)."""
+        if b.n_in:
+            status = b.set_real(b.handle, b.in_vrs, b.n_in, b.in_values)
+            if status > 1:
+                raise self.slaves[b.index].fail("fmi2SetReal", status, self.start_time)
+        for ch in b.channels:
+            if ch.n_in:
+                status = ch.set(ch.in_values)
+                if status > 1:
+                    raise self.slaves[b.index].fail(f"fmi2Set{ch.kind.capitalize()}", status, self.start_time)
 
     def _transfer(self, b: Block, changed: list[str]) -> None:
         """Copy connected outputs into ``b``'s inputs; append the names of inputs that changed."""
@@ -367,12 +489,27 @@ class Execution:
             if not (new == old or (math.isnan(new) and math.isnan(old))):
                 b.in_values[k] = new
                 changed.append(f"{b.name}.{inputs[k].name}")
+        for ch in b.channels:
+            ins = self._typed[b.index][ch.kind][1]
+            for k, src, j, mapping in ch.transfers:
+                src_ch = next(c for c in self.blocks[src].channels if c.kind == ch.kind)
+                new = src_ch.out_values[j]
+                new = mapping.get(new, new) if mapping else new
+                if ch.in_values[k] != new:
+                    ch.in_values[k] = new
+                    changed.append(f"{b.name}.{ins[k].name}")
 
     def _get_outputs(self, b: Block, t: float | None) -> None:
         if b.n_out:
             status = b.get_real(b.handle, b.out_vrs, b.n_out, b.out_values)
             if status > 1:
                 raise self.slaves[b.index].fail("fmi2GetReal", status, t if t is not None else self.start_time)
+        for ch in b.channels:
+            if ch.n_out:
+                status = ch.get(ch.out_values)
+                if status > 1:
+                    raise self.slaves[b.index].fail(f"fmi2Get{ch.kind.capitalize()}", status,
+                                                    t if t is not None else self.start_time)
 
     def _step_all(self) -> int:
         """Run every tick in chunks between observer/manipulator events; returns rows recorded."""
@@ -394,13 +531,23 @@ class Execution:
             for k in (*due_man.values(), *due_obs.values()):
                 if k is not None and n < k < target:
                     target = k
+            marks = [s.errors_logged for s in self.slaves]
             failure = run(n, target, rec_addr, va, row_bytes)
             if failure is not None:
                 fn, idx, function, status = failure
                 rows = fn // every + 1
                 self.tick = fn
                 self._check_finite(n // every + 1, rows)
-                err = self.slaves[idx].fail(function, status, self.time_of(fn))
+                slave = self.slaves[idx]
+                logged_error = slave.errors_logged > marks[idx]
+                if not logged_error and self._ended_by_fmu(idx, function, status):
+                    return rows
+                err = slave.fail(function, status, self.time_of(fn))
+                if status == DISCARD and function == "fmi2DoStep":
+                    ended, query = slave.terminated()
+                    why = ("but it logged an error in that step: a failure" if ended and logged_error
+                           else "the FMU did not end the simulation")
+                    err = type(err)(f"{err} ({query}, {why})", err.component, err.function, err.status, err.time)
                 raise _TickFailure(str(err), rows, err)
             self._check_finite(n // every + 1, target // every + 1)
             n = self.tick = target
@@ -409,6 +556,23 @@ class Execution:
                     obs.step(self, n)
                     due_obs[id(obs)] = obs.next_tick(n)
         return N // every + 1
+
+    def _ended_by_fmu(self, idx: int, function: str, status: int) -> bool:
+        """Whether a failed ``do_step`` is a component ending the simulation itself (FMI 2.0:
+        fmi2Discard and fmi2GetBooleanStatus(fmi2Terminated) true; FMI 3.0: terminateSimulation).
+        The run then ends normally at ``self.tick``, the last communication point every component
+        reached; the metadata names the component."""
+        if function != "fmi2DoStep" or status not in (DISCARD, TERMINATE):
+            return False
+        slave = self.slaves[idx]
+        ended, query = slave.terminated()
+        if not ended:
+            return False
+        t, t_next = self.time_of(self.tick), self.time_of(self.tick + 1)
+        self.terminated_by = {"component": slave.name, "model": slave.model_name, "time": t,
+                              "note": f"component {slave.describe()} ended the simulation in its step from "
+                                      f"t = {t:.6g} s to {t_next:.6g} s ({query}); the run ends at t = {t:.6g} s"}
+        return True
 
     def _check_finite(self, row0: int, row1: int, failing: bool = False) -> None:
         if row1 <= row0 or not len(self.output_slots):
@@ -458,19 +622,20 @@ class Execution:
     # ------------------------------------------------------------------ result
     def _result(self, rows: int, error: BaseException | None, wall: float, wall_loop: float) -> Result:
         rec = self.record[:rows]
-        names = ["time"] + [n for n, _, _ in self.columns]
-        data = np.zeros(rows, dtype=[(n, "f8") for n in names])
+        data = np.zeros(rows, dtype=[(n, COLUMN_DTYPE[k]) for n, k in self.column_kinds.items()])
         ticks = np.arange(rows) * self.record_every
         if self.timebase.step_ns is not None:
             data["time"] = (self.timebase.start_ns + ticks * self.timebase.step_ns) / 1e9
         else:
             data["time"] = self.timebase.start + ticks * self.timebase.step
+        data["time"][ticks >= self.n_ticks] = self.timebase.time(self.n_ticks)
         for name, slot, link in self.columns:
             if link is None:
                 data[name] = rec[:, slot]
             else:
                 src, factor, offset = link
                 data[name] = factor * rec[:, src] + offset
+        self._typed_result(data, rows)
         simulated = float(data["time"][-1] - data["time"][0]) if rows else 0.0
         metrics: dict[str, Any] = {}
         if rows >= 2:
@@ -492,7 +657,8 @@ class Execution:
         metadata: dict[str, Any] = {
             "scenario": sc.name, "origin": sc.origin, "algorithm": self.algorithm,
             "start_time": self.start_time, "stop_time": self.stop_time, "step": self.step_size,
-            "ticks": self.n_ticks, "ticks_done": self.tick if error is not None else self.n_ticks,
+            "ticks": self.n_ticks,
+            "ticks_done": self.tick if error is not None or self.terminated_by else self.n_ticks,
             "record_every": self.record_every, "order": self.component_order, "step_multiples": dict(self.multiples),
             "initialization_iterations": self.init_iterations,
             "components": {i.name: {"model": i.model.name, "guid": i.model.guid,
@@ -501,9 +667,32 @@ class Execution:
             "overrides": {f"{c}.{v}": x for (c, v), x in self.overrides.items()},
             "warnings": list(self.system.warnings), "notes": list(self.system.notes), "wall_time_s": wall, "loop_wall_time_s": wall_loop,
             "status": "ok" if error is None else "failed", "error": message,
+            "end_time": float(data["time"][-1]) if rows else None, "terminated_by": self.terminated_by,
             "fmu_messages": {s.name: s.messages()[-5:] for s in self.slaves if s.messages()},
         }
+        if self.terminated_by:
+            metadata["notes"].append(self.terminated_by["note"])
         return Result(data=data, metrics=metrics, metadata=metadata, error=message)
+
+    def _typed_result(self, data: np.ndarray, rows: int) -> None:
+        """Fill the Integer, Boolean and String columns (a connected input: what its
+        connection delivers, i.e. the source's value through the mapping)."""
+        ints = self.record_i[:rows]
+        for name, kind, slot, link in self.typed_columns:
+            src, mapping = link if link is not None else (slot, {})
+            if kind == "string":
+                values = [row[src].decode("utf-8", "replace") if row is not None else ""
+                          for row in self.record_s[:rows]]
+                data[name] = np.array(values, dtype=object) if rows else values
+                continue
+            col = ints[:, src]
+            if mapping:
+                col = np.array([mapping.get(int(x), int(x)) for x in col], dtype=np.int64)
+            data[name] = col.astype(bool) if kind == "boolean" else col
+
+
+#: numpy type of a record column of each value kind.
+COLUMN_DTYPE = {"real": "f8", "integer": "i4", "boolean": "?", "string": "O"}
 
 
 class _TickFailure(SimulationError):

@@ -105,14 +105,33 @@ class Result:
 
 
 def write_csv(data: np.ndarray, path: Path, columns: Sequence[str]) -> None:
-    """Write selected fields of a structured array as CSV with full double precision."""
+    """Write selected fields of a structured array as CSV, each column in its type: Real with
+    full double precision, Integer as integers, Boolean as ``true``/``false``, String quoted
+    where CSV needs it (the field's numpy type says which, see ``execution.COLUMN_DTYPE``)."""
     n = len(data)
     with open(path, "w", newline="") as fh:
         fh.write(",".join(columns) + "\n")
         if n == 0:
             return
-        matrix = np.column_stack([np.asarray(data[c], dtype=float) for c in columns])
-        np.savetxt(fh, matrix, fmt="%.17g", delimiter=",")
+        if all(data.dtype[c].kind == "f" for c in columns):
+            matrix = np.column_stack([np.asarray(data[c], dtype=float) for c in columns])
+            np.savetxt(fh, matrix, fmt="%.17g", delimiter=",")
+            return
+        import csv
+
+        text = [_csv_column(data[c]) for c in columns]
+        csv.writer(fh, lineterminator="\n").writerows(zip(*text))
+
+
+def _csv_column(values: np.ndarray) -> list[str]:
+    kind = values.dtype.kind
+    if kind == "f":
+        return ["%.17g" % v for v in values]
+    if kind == "b":
+        return ["true" if v else "false" for v in values]
+    if kind in "iu":
+        return [str(int(v)) for v in values]
+    return [str(v) for v in values]
 
 
 def json_safe(value: Any) -> Any:

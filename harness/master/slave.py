@@ -1,4 +1,4 @@
-"""Slaves: one FMU instance each, driven through FMI 2.0 co-simulation calls.
+"""Slaves: one FMU instance each, driven through FMI 2.0 or FMI 3.0 co-simulation calls.
 
 A slave offers the lifecycle calls (instantiate ... free, each checked) and, for the stepping
 fast path, its raw C-signature functions: ``do_step(c, t, h, flag) -> status``,
@@ -8,7 +8,14 @@ execution's value vector (one batched call per component and step, no per-step a
 
 :class:`FMUSlave` loads an extracted FMU with FMPy's ``FMU2Slave`` and calls the shared
 library's functions directly; :class:`PySlave` is a pure-Python slave with the same calling
-convention (used by tests and for mock components).
+convention (used by tests and for mock components). :class:`FMU3Slave` drives an FMI 3.0
+co-simulation FMU through the same interface (its ``fmi3DoStep`` and typed getters and setters
+adapted to the FMI 2.0 calling convention above; event mode is not used).
+
+Values of the other types travel through *channels* (:meth:`Slave.channel`): per component and
+type (``integer``, ``boolean``, ``string``) a bound ``get(buffer)`` and ``set(buffer)`` over the
+component's connectors of that type, resolved once. Integer and Boolean buffers are ``c_int``
+arrays (the FMI 2.0 representation), String buffers Python lists of ``bytes``.
 """
 from __future__ import annotations
 
@@ -17,13 +24,18 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from ipcosim.harness.errors import IpcosimError
-from ipcosim.harness.scenario.system import Instance, Variable
+from ipcosim.harness.scenario.system import KINDS, Instance, Variable, kind_of  # noqa: F401 -- re-exported
 
 STATUS = {0: "fmi2OK", 1: "fmi2Warning", 2: "fmi2Discard", 3: "fmi2Error", 4: "fmi2Fatal", 5: "fmi2Pending"}
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
+#: Not an FMI status: what a slave's ``do_step`` returns when the FMU completed the step and asked
+#: to end the simulation (FMI 3.0 ``terminateSimulation``); the stepping loop stops on it.
+TERMINATE = 16
 
 RawDoStep = Callable[[Any, float, float, int], int]
 RawGetSet = Callable[[Any, Any, int, Any], int]
+BoundGetSet = Callable[[Any], int]
+
 
 
 class SlaveError(IpcosimError, RuntimeError):
@@ -49,6 +61,10 @@ class Slave:
     name: str = ""
     model_name: str = ""
 
+    #: Messages logged with status fmi2Error or fmi2Fatal so far (a Discard that comes with one is a
+    #: failure even when the FMU reports fmi2Terminated).
+    errors_logged: int = 0
+
     #: FMI state reached: 'created', 'instantiated', 'initialization', 'stepping', 'terminated',
     #: 'failed' (after fmi2Error/fmi2Fatal), 'freed'.
     state: str = "created"
@@ -71,6 +87,16 @@ class Slave:
     def raw(self) -> tuple[Any, RawDoStep, RawGetSet, RawGetSet]:
         """``(handle, do_step, get_real, set_real)`` with C calling conventions (see module doc)."""
         raise NotImplementedError
+
+    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+        """``(get, set)`` for the ``variables`` (all of value kind ``kind``), each taking one
+        buffer (see the module documentation) and returning an FMI status."""
+        raise NotImplementedError
+
+    def terminated(self) -> tuple[bool, str]:
+        """After a Discard from ``do_step``: whether the FMU ended the simulation itself, and
+        what its status query returned (for messages)."""
+        return False, "the slave offers no status query"
 
     def messages(self) -> list[str]:
         """Log messages the slave reported, oldest first (bounded)."""
@@ -131,6 +157,12 @@ class FMUSlave(Slave):
 
     MAX_MESSAGES = 50
 
+    def __new__(cls, instance: Instance, *args: Any, **kwargs: Any) -> "FMUSlave":
+        # one entry point for FMUs of either version: an FMI 3.0 FMU gets the FMI 3.0 slave
+        if cls is FMUSlave and instance.model.fmi_version.startswith("3"):
+            cls = FMU3Slave
+        return super().__new__(cls)
+
     def __init__(self, instance: Instance, unzip_dir: Path, logging_on: bool = True, library: Any = None) -> None:
         self.name = instance.name
         self.model_name = instance.model.name
@@ -157,6 +189,8 @@ class FMUSlave(Slave):
         if len(text) > 400:
             text = text[:397] + "..."
         self._messages.append(f"[{STATUS.get(status, status)}] {text}")
+        if status >= ERROR:
+            self.errors_logged += 1
         del self._messages[:-self.MAX_MESSAGES]
 
     def instantiate(self) -> None:
@@ -283,9 +317,209 @@ class FMUSlave(Slave):
     def raw(self) -> tuple[Any, RawDoStep, RawGetSet, RawGetSet]:
         return self._fmu.component, self._do_step, self._get_real, self._set_real
 
+    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+        f, c, n = self._fmu._functions, self._fmu.component, len(variables)
+        vrs = (ctypes.c_uint * max(n, 1))(*[v.vr for v in variables])
+        if kind in ("integer", "boolean"):
+            name = "Integer" if kind == "integer" else "Boolean"
+            get, put = f[f"fmi2Get{name}"], f[f"fmi2Set{name}"]
+            return (lambda buf: get(c, vrs, n, buf)), (lambda buf: put(c, vrs, n, buf))
+        if kind == "string":
+            get_s, put_s = f["fmi2GetString"], f["fmi2SetString"]
+            tmp = (ctypes.c_char_p * max(n, 1))()
+
+            def get_strings(dst: list) -> int:
+                status = get_s(c, vrs, n, tmp)
+                dst[:] = [x or b"" for x in tmp[:n]]  # copies: the FMU owns its strings
+                return status
+
+            def set_strings(src: list) -> int:
+                return put_s(c, vrs, n, (ctypes.c_char_p * max(n, 1))(*src))
+
+            return get_strings, set_strings
+        raise ValueError(f"no channel for value kind {kind!r}")
+
+    def terminated(self) -> tuple[bool, str]:
+        value = ctypes.c_int(0)
+        status = self._fmu._functions["fmi2GetBooleanStatus"](self._fmu.component, 3, ctypes.byref(value))
+        if status > WARNING:
+            return False, f"fmi2GetBooleanStatus(fmi2Terminated) returned {STATUS.get(status, status)}"
+        return bool(value.value), (f"fmi2GetBooleanStatus(fmi2Terminated) returned "
+                                   f"{'fmi2True' if value.value else 'fmi2False'}")
+
+
+_FMI3_CTYPES = {"Float64": ctypes.c_double, "Float32": ctypes.c_float, "Int8": ctypes.c_int8,
+                "UInt8": ctypes.c_uint8, "Int16": ctypes.c_int16, "UInt16": ctypes.c_uint16,
+                "Int32": ctypes.c_int32, "UInt32": ctypes.c_uint32, "Int64": ctypes.c_int64,
+                "UInt64": ctypes.c_uint64, "Enumeration": ctypes.c_int64, "Boolean": ctypes.c_bool,
+                "String": ctypes.c_char_p}
+
+
+class FMU3Slave(FMUSlave):
+    """An FMI 3.0 co-simulation FMU instance, with the FMI 2.0-style interface of :class:`Slave`.
+
+    Instantiated without event mode and without early return: ``fmi3DoStep``'s
+    ``eventHandlingNeeded`` is ignored, ``terminateSimulation`` ends the run (the loop sees
+    :data:`TERMINATE`). Float32 and the sized integer types are converted to the master's
+    ``c_double`` and ``c_int`` buffers. Use :class:`FMUSlave` as the constructor: it returns
+    this class for an FMI 3.0 model.
+    """
+
+    def instantiate(self) -> None:
+        if self._fmu is None:
+            self._fmu = load_library(self.instance, self.unzip_dir)
+
+        def log(env: Any, status: int, category: bytes | None, message: bytes | None) -> None:
+            self._log(env, None, status, category, message)
+
+        try:
+            self._fmu.instantiate(loggingOn=self.logging_on, logMessage=log)
+        except Exception as exc:  # noqa: BLE001
+            self.state = "failed-instantiate"
+            msgs = self.messages()
+            raise SlaveError(f"component {self.describe()}: fmi3InstantiateCoSimulation failed ({exc})"
+                             + (f": {msgs[-1]}" if msgs else ""), self.name, "fmi3InstantiateCoSimulation") from None
+        self._flags = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
+        self.state = "instantiated"
+
+    def setup_experiment(self, start_time: float, stop_time: float | None) -> None:
+        self._experiment = (float(start_time), stop_time)  # FMI 3.0 takes them on entering initialization
+
+    def enter_initialization_mode(self) -> None:
+        start, stop = getattr(self, "_experiment", (0.0, None))
+        self._call("fmi3EnterInitializationMode", False, 0.0, start, stop is not None, float(stop or 0.0))
+        self.state = "initialization"
+
+    def exit_initialization_mode(self) -> None:
+        self._call("fmi3ExitInitializationMode")
+        self.state = "stepping"
+
+    def terminate(self) -> None:
+        if self.state in ("initialization", "stepping", "step-failed"):
+            self.state = "terminating"
+            self._call("fmi3Terminate")
+            self.state = "terminated"
+
+    def free(self) -> None:
+        if self._fmu is None or self.state in ("freed", "created"):
+            return
+        try:
+            if self._fmu.component is not None:
+                self._fmu.fmi3FreeInstance(self._fmu.component)
+        finally:
+            self.state = "freed"
+            self._fmu.component = None
+            if self._owns_library:
+                try:
+                    self._fmu.freeLibrary()
+                except Exception:  # noqa: BLE001 -- unloading is best effort
+                    pass
+
+    def _typed(self, direction: str, type_: str) -> Callable[..., int]:
+        name = "Int64" if type_ == "Enumeration" else type_
+        return self._fmu._functions[f"fmi3{direction}{name}"]
+
+    def set_values(self, variables: Sequence[Variable], values: Sequence[Any]) -> None:
+        c = self._fmu.component
+        for var, value in zip(variables, values):
+            ct = _FMI3_CTYPES[var.type]
+            v = str(value).encode() if var.type == "String" else value
+            status = self._typed("Set", var.type)(c, (ctypes.c_uint * 1)(var.vr), 1, (ct * 1)(v), 1)
+            if status > WARNING:
+                raise self.fail(f"fmi3Set{var.type} ({var.name})", status)
+
+    def get_values(self, variables: Sequence[Variable]) -> list[Any]:
+        out: list[Any] = []
+        for var in variables:
+            buf = (_FMI3_CTYPES[var.type] * 1)()
+            status = self._typed("Get", var.type)(self._fmu.component, (ctypes.c_uint * 1)(var.vr), 1, buf, 1)
+            if status > WARNING:
+                raise self.fail(f"fmi3Get{var.type} ({var.name})", status)
+            v = buf[0]
+            out.append(v.decode() if isinstance(v, bytes) else v)
+        return out
+
+    def raw(self) -> tuple[Any, RawDoStep, RawGetSet, RawGetSet]:
+        f = self._fmu._functions
+        ds = f["fmi3DoStep"]
+        event, term, early, last = self._flags
+        refs = [ctypes.byref(x) for x in self._flags]
+
+        def do_step(c: Any, t: float, h: float, flag: int) -> int:
+            status = ds(c, t, h, True, *refs)
+            return TERMINATE if status <= WARNING and term.value else status
+
+        types = {v.vr: v.type for v in self.instance.model.variables.values()}
+        return self._fmu.component, do_step, *self._real_io(types)
+
+    def _real_io(self, types: dict[int, str]) -> tuple[RawGetSet, RawGetSet]:
+        f = self._fmu._functions
+        g64, s64, g32, s32 = f["fmi3GetFloat64"], f["fmi3SetFloat64"], f["fmi3GetFloat32"], f["fmi3SetFloat32"]
+        if all(t != "Float32" for t in types.values()):
+            return (lambda c, vrs, n, out: g64(c, vrs, n, out, n)), (lambda c, vrs, n, vals: s64(c, vrs, n, vals, n))
+        one = ctypes.c_float * 1
+
+        def get_real(c: Any, vrs: Any, n: int, out: Any) -> int:
+            worst = OK
+            for i in range(n):
+                vr = (ctypes.c_uint * 1)(vrs[i])
+                if types.get(vrs[i]) == "Float32":
+                    tmp = one()
+                    worst = max(worst, g32(c, vr, 1, tmp, 1))
+                    out[i] = tmp[0]
+                else:
+                    tmp64 = (ctypes.c_double * 1)()
+                    worst = max(worst, g64(c, vr, 1, tmp64, 1))
+                    out[i] = tmp64[0]
+            return worst
+
+        def set_real(c: Any, vrs: Any, n: int, vals: Any) -> int:
+            worst = OK
+            for i in range(n):
+                vr = (ctypes.c_uint * 1)(vrs[i])
+                if types.get(vrs[i]) == "Float32":
+                    worst = max(worst, s32(c, vr, 1, one(vals[i]), 1))
+                else:
+                    worst = max(worst, s64(c, vr, 1, (ctypes.c_double * 1)(vals[i]), 1))
+            return worst
+
+        return get_real, set_real
+
+    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+        c, n = self._fmu.component, len(variables)
+        groups = []  # (positions, vr array, ctypes array type, getter, setter)
+        for type_ in dict.fromkeys(v.type for v in variables):
+            pos = [i for i, v in enumerate(variables) if v.type == type_]
+            vrs = (ctypes.c_uint * len(pos))(*[variables[i].vr for i in pos])
+            groups.append((pos, vrs, _FMI3_CTYPES[type_] * len(pos), self._typed("Get", type_),
+                           self._typed("Set", type_)))
+
+        def get(buf: Any) -> int:
+            worst = OK
+            for pos, vrs, arr, g, _ in groups:
+                tmp = arr()
+                worst = max(worst, g(c, vrs, len(pos), tmp, len(pos)))
+                for k, i in enumerate(pos):
+                    buf[i] = (tmp[k] or b"") if kind == "string" else int(tmp[k])
+            return worst
+
+        def put(buf: Any) -> int:
+            worst = OK
+            for pos, vrs, arr, _, s in groups:
+                worst = max(worst, s(c, vrs, len(pos), arr(*[buf[i] for i in pos]), len(pos)))
+            return worst
+
+        del n
+        return get, put
+
+    def terminated(self) -> tuple[bool, str]:
+        flag = bool(self._flags[1].value)
+        return flag, f"fmi3DoStep set terminateSimulation = {'true' if flag else 'false'}"
+
 
 def load_library(instance: Instance, unzip_dir: Path) -> Any:
-    """An FMPy ``FMU2Slave`` with the FMU's shared library loaded and its functions resolved.
+    """An FMPy ``FMU2Slave`` (``FMU3Slave`` for FMI 3.0) with the FMU's shared library loaded and its
+    functions resolved.
 
     One such object can serve many consecutive instances (fmi2Instantiate ... fmi2FreeInstance)
     of the component, which saves loading and resolving on every run of a sweep.
@@ -296,10 +530,12 @@ def load_library(instance: Instance, unzip_dir: Path) -> Any:
         If the shared library cannot be loaded.
     """
     from fmpy.fmi2 import FMU2Slave
+    from fmpy.fmi3 import FMU3Slave as FMPyFMU3Slave
 
     model = instance.model
+    cls = FMPyFMU3Slave if model.fmi_version.startswith("3") else FMU2Slave
     try:
-        return FMU2Slave(guid=model.guid, unzipDirectory=str(unzip_dir), modelIdentifier=model.model_identifier,
+        return cls(guid=model.guid, unzipDirectory=str(unzip_dir), modelIdentifier=model.model_identifier,
                          instanceName=instance.name)
     except Exception as exc:  # noqa: BLE001 -- fmpy raises bare exceptions
         raise SlaveError(f"component {instance.name} ({model.name}): cannot load the FMU's shared library: {exc}",
@@ -416,3 +652,30 @@ class PySlave(Slave):
             return OK
 
         return None, do_step, get_real, set_real
+
+    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+        vrs = [v.vr for v in variables]
+        convert: Callable[[Any], Any] = {"integer": int, "boolean": lambda x: 1 if x else 0,
+                                         "string": lambda x: x if isinstance(x, bytes) else str(x).encode()}[kind]
+
+        def get(buf: Any) -> int:
+            self.on_get()
+            values = [convert(self.values[vr]) for vr in vrs]
+            if isinstance(buf, list):
+                buf[:] = values
+            else:
+                for i, x in enumerate(values):
+                    buf[i] = x
+            return OK
+
+        def put(buf: Any) -> int:
+            for i, vr in enumerate(vrs):
+                x = buf[i]
+                self.values[vr] = bool(x) if kind == "boolean" else (x.decode() if isinstance(x, bytes) else x)
+            return OK
+
+        return get, put
+
+    def terminated(self) -> tuple[bool, str]:
+        flag = bool(getattr(self, "terminate_requested", False))
+        return flag, f"the status query returned {'true' if flag else 'false'}"

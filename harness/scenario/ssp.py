@@ -111,6 +111,11 @@ class Connection:
     factor: float = 1.0
     offset: float = 0.0
     suppress_unit_conversion: bool = False
+    #: ``LinearTransformation``, ``IntegerMappingTransformation``, ``BooleanMappingTransformation``,
+    #: ``EnumerationMappingTransformation`` or None: which SSP transformation the connection declares.
+    transformation: str | None = None
+    #: The MapEntry pairs (source, target) of a mapping transformation.
+    mapping: tuple[tuple[Any, Any], ...] = ()
 
     @property
     def start(self) -> str:
@@ -546,17 +551,22 @@ def _load(src: _Source, fmu_dirs: Sequence[Path]) -> Scenario:
                 raise ScenarioError(f"{line}: connection names {elem}.{conn}, but component {elem!r} declares "
                                     f"no connector {conn!r}")
         factor, offset = 1.0, 0.0
+        kind, mapping = None, ()
         lt = cxml.find("ssc:LinearTransformation", NS)
         if lt is not None:
+            kind = "LinearTransformation"
             factor, offset = float(lt.get("factor", 1.0)), float(lt.get("offset", 0.0))
             if not (math.isfinite(factor) and math.isfinite(offset)):
                 raise ScenarioError(f"{line}: linear transformation factor/offset must be finite")
-        for other in ("ssc:BooleanMappingTransformation", "ssc:IntegerMappingTransformation",
-                      "ssc:EnumerationMappingTransformation"):
-            if cxml.find(other, NS) is not None:
-                raise ScenarioError(f"{line}: {other} is not supported")
+        for other in ("IntegerMappingTransformation", "BooleanMappingTransformation"):
+            mt = cxml.find(f"ssc:{other}", NS)
+            if mt is not None:
+                kind, mapping = other, _map_entries(mt, other, line)
+        if cxml.find("ssc:EnumerationMappingTransformation", NS) is not None:
+            raise ScenarioError(f"{line}: ssc:EnumerationMappingTransformation is not supported (it maps "
+                                f"enumeration item names; map the values with ssc:IntegerMappingTransformation)")
         suppress = cxml.get("suppressUnitConversion", "false") in ("true", "1")
-        conn = Connection(se, sc, ee, ec, factor, offset, suppress)
+        conn = Connection(se, sc, ee, ec, factor, offset, suppress, kind, mapping)
         connections.append(conn)
         for endpoint in (conn.start, conn.end):
             targets[endpoint] = targets.get(endpoint, 0) + 1
@@ -589,6 +599,20 @@ def _load(src: _Source, fmu_dirs: Sequence[Path]) -> Scenario:
                     description=system_xml.get("description") or "", components=tuple(components),
                     connections=tuple(connections), units=units, experiment=Experiment(start, stop, step),
                     parameter_sets=sets, set_files=set_files)
+
+
+def _map_entries(xml: etree._Element, kind: str, line: str) -> tuple[tuple[Any, Any], ...]:
+    """The (source, target) pairs of a mapping transformation (Boolean values as 0/1)."""
+    def value(text: str | None) -> int:
+        if kind == "BooleanMappingTransformation":
+            return 1 if text in ("true", "1") else 0
+        return int(text)  # schema-validated xs:int
+
+    entries = tuple((value(e.get("source")), value(e.get("target"))) for e in xml.findall("ssc:MapEntry", NS))
+    sources = [a for a, _ in entries]
+    if len(set(sources)) != len(sources):
+        raise ScenarioError(f"{line}: ssc:{kind} maps a source value twice")
+    return entries
 
 
 def _positive(text: str | None, what: str) -> float:

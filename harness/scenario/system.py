@@ -9,6 +9,7 @@ swaps (``--swap plant=hil``) are applied here, checked for compatible connectors
 """
 from __future__ import annotations
 
+import math
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -18,7 +19,25 @@ from typing import Any, Callable, Mapping, Sequence
 from ipcosim.harness.errors import IpcosimError
 from ipcosim.harness.scenario.ssp import BASE_UNITS, Connector, Scenario, Unit
 
-SUPPORTED_CONNECTION_TYPES = ("Real",)
+#: The master's value kinds: how values of each SSP connector type are carried at run time.
+KINDS = ("real", "integer", "boolean", "string")
+#: SSP 1.0 connector type of every FMI 2.0 / 3.0 variable type the master carries.
+SSP_TYPE = {"Real": "Real", "Float64": "Real", "Float32": "Real",
+            "Integer": "Integer", "Int8": "Integer", "UInt8": "Integer", "Int16": "Integer", "UInt16": "Integer",
+            "Int32": "Integer", "UInt32": "Integer", "Int64": "Integer", "UInt64": "Integer",
+            "Enumeration": "Enumeration", "Boolean": "Boolean", "String": "String"}
+_KIND = {"Real": "real", "Integer": "integer", "Enumeration": "integer", "Boolean": "boolean", "String": "string"}
+#: Which SSP transformation is valid for which connector types (SSP 1.0, ssc:GTransformationChoice).
+TRANSFORMATION_TYPES = {"LinearTransformation": ("Real",),
+                        "IntegerMappingTransformation": ("Integer", "Enumeration"),
+                        "BooleanMappingTransformation": ("Boolean",)}
+SUPPORTED_CONNECTION_TYPES = tuple(_KIND)
+
+
+def kind_of(type_: str) -> str | None:
+    """The master's value kind (``real``, ``integer``, ``boolean``, ``string``) of an FMU
+    variable type; None for a type the master does not carry (Binary, Clock)."""
+    return _KIND.get(SSP_TYPE.get(type_, ""))
 
 
 class BindingError(IpcosimError, ValueError):
@@ -78,6 +97,9 @@ class Model:
     fmi_version: str = "2.0"
     units: Mapping[str, Unit] = field(default_factory=dict)
     can_handle_variable_step: bool = True
+    #: The FMU's DefaultExperiment stepSize and stopTime [s] (None when it gives none).
+    default_step: float | None = None
+    default_stop: float | None = None
 
     def inputs(self) -> list[Variable]:
         return [v for v in self.variables.values() if v.causality == "input"]
@@ -109,14 +131,15 @@ def read_model(path: Path, display: str | None = None) -> Model:
         md = read_model_description(str(path), validate=False)
     except Exception as exc:  # noqa: BLE001 -- fmpy raises assorted exceptions
         raise BindingError(f"{display}: not a readable FMU ({str(exc).splitlines()[0] if str(exc) else exc!r})") from None
-    if md.fmiVersion != "2.0":
-        raise BindingError(f"{display}: FMI {md.fmiVersion} FMU; only FMI 2.0 is supported")
+    if md.fmiVersion not in ("2.0", "3.0"):
+        raise BindingError(f"{display}: FMI {md.fmiVersion} FMU; FMI 2.0 and 3.0 are supported")
     if md.coSimulation is None:
         raise BindingError(f"{display}: does not support co-simulation")
     variables = {}
     for v in md.modelVariables:
         unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
-        variables[v.name] = Variable(name=v.name, vr=int(v.valueReference), type=v.type,
+        type_ = f"{v.type}[]" if getattr(v, "dimensions", None) else v.type  # FMI 3.0 arrays: not carried
+        variables[v.name] = Variable(name=v.name, vr=int(v.valueReference), type=type_,
                                      causality=v.causality or "local", variability=v.variability or "continuous",
                                      initial=v.initial, unit=unit, start=_start_value(v.type, v.start),
                                      description=v.description or "")
@@ -141,18 +164,29 @@ def read_model(path: Path, display: str | None = None) -> Model:
     model = Model(name=md.modelName, variables=variables, feedthrough=feedthrough, path=path.resolve(),
                   guid=md.guid, model_identifier=md.coSimulation.modelIdentifier, fmi_version=md.fmiVersion,
                   units=units,
-                  can_handle_variable_step=bool(md.coSimulation.canHandleVariableCommunicationStepSize))
+                  can_handle_variable_step=bool(md.coSimulation.canHandleVariableCommunicationStepSize),
+                  default_step=_positive_or_none(md.defaultExperiment, "stepSize"),
+                  default_stop=_positive_or_none(md.defaultExperiment, "stopTime"))
     _MODEL_CACHE[key] = model
     return model
+
+
+def _positive_or_none(experiment: Any, name: str) -> float | None:
+    try:
+        value = float(getattr(experiment, name, None))  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return None
+    return value if value > 0 and value < float("inf") else None
 
 
 def _start_value(type_: str, start: Any) -> Any:
     if start is None:
         return None
     try:
-        if type_ in ("Real", "Float64", "Float32"):
+        kind = kind_of(type_)
+        if kind == "real":
             return float(start)
-        if type_ in ("Integer", "Enumeration"):
+        if kind == "integer":
             return int(start)
         if type_ == "Boolean":
             return str(start).strip().lower() in ("true", "1")
@@ -213,6 +247,14 @@ class Link:
     dst_var: Variable
     factor: float = 1.0
     offset: float = 0.0
+    #: (source, target) pairs of an Integer or Boolean mapping transformation (Booleans as 0/1);
+    #: values not in the table pass unchanged.
+    mapping: tuple[tuple[int, int], ...] = ()
+
+    @property
+    def kind(self) -> str:
+        """The value kind the link carries (``real``, ``integer``, ``boolean``, ``string``)."""
+        return kind_of(self.src_var.type) or "real"
 
     @property
     def src_name(self) -> str:
@@ -467,17 +509,16 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
         else:
             raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: {conn.start} is {kinds[0]}, "
                                f"{conn.end} is {kinds[1]}; only output -> input connections are supported")
-        if va.type != vb.type:
-            raise BindingError(f"{origin}: connection {src_name} -> {dst_name}: type {va.type} does not match {vb.type}")
-        if va.type not in SUPPORTED_CONNECTION_TYPES:
-            raise BindingError(f"{origin}: connection {src_name} -> {dst_name}: {va.type} connections are not supported "
-                               f"(only Real)")
+        _check_types(conn, va, vb, f"{origin}: connection {src_name} -> {dst_name}")
         if dst_name in fed:
             raise BindingError(f"{origin}: input {dst_name} is connected twice (from {fed[dst_name]} and {src_name})")
         fed[dst_name] = src_name
         ua = _connector_unit(scenario, a.name, va)
         ub = _connector_unit(scenario, b.name, vb)
         factor, offset = conn.factor, conn.offset
+        if SSP_TYPE[va.type] != "Real":
+            links.append(Link(a.name, va, b.name, vb, mapping=tuple(conn.mapping)))
+            continue
         if not conn.suppress_unit_conversion:
             conv = unit_conversion(ua, ub, _unit_table(scenario, a.model, b.model))
             if conv is None:
@@ -498,6 +539,24 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
                   notes=tuple(infos))
 
 
+def _check_types(conn: Any, va: Variable, vb: Variable, where: str) -> None:
+    """SSP 1.0 typing of a connection: one connector type at both ends (FMI 3.0's sized types
+    count as their SSP type: Float32/Float64 as Real, Int8..UInt64 as Integer), and a
+    transformation only where the standard defines it for that type."""
+    ta, tb = SSP_TYPE.get(va.type), SSP_TYPE.get(vb.type)
+    for t, v in ((ta, va), (tb, vb)):
+        if t is None:
+            raise BindingError(f"{where}: {v.type} variables cannot be connected (the master carries Real, "
+                               f"Integer, Enumeration, Boolean and String)")
+    if ta != tb:
+        raise BindingError(f"{where}: connects {va.type} to {vb.type}; SSP 1.0 connects connectors of one type "
+                           f"(ssd:Connection), and defines no transformation between types")
+    kind = conn.transformation if conn is not None else None
+    if kind is not None and ta not in TRANSFORMATION_TYPES[kind]:
+        raise BindingError(f"{where}: ssc:{kind} on a {ta} connection; SSP 1.0 defines it for "
+                           f"{' and '.join(TRANSFORMATION_TYPES[kind])} connectors only")
+
+
 def _is_connected(scenario: Scenario, comp: str, connector: str) -> bool:
     return any((c.start_element == comp and c.start_connector == connector)
                or (c.end_element == comp and c.end_connector == connector) for c in scenario.connections)
@@ -513,7 +572,7 @@ def _check_connector(c: Connector, var: Variable, where: str, units: Mapping[str
                "calculatedParameter": ("calculatedParameter",), "inout": ("input", "output")}
     if var.causality not in kind_ok.get(c.kind, ()):
         raise BindingError(f"{where}: connector {c.name!r} is declared {c.kind} but the FMU variable is {var.causality}")
-    if c.type is not None and c.type != var.type:
+    if c.type is not None and c.type != SSP_TYPE.get(var.type, var.type):
         raise BindingError(f"{where}: connector {c.name!r} is declared {c.type} but the FMU variable is {var.type}")
     if c.unit and var.unit and unit_conversion(c.unit, var.unit, units) != (1.0, 0.0):
         raise BindingError(f"{where}: connector {c.name!r} has unit {c.unit!r} but the FMU variable has {var.unit!r}")
@@ -528,12 +587,13 @@ def convert_value(var: Variable, value: Any, what: str) -> Any:
         ``what`` is not a valid value of the variable's type.
     """
     t = var.type
+    kind = kind_of(t)
     try:
-        if t in ("Real", "Float64", "Float32"):
+        if kind == "real":
             if isinstance(value, bool):
                 raise ValueError
             return float(value)
-        if t in ("Integer", "Enumeration"):
+        if kind == "integer":
             if isinstance(value, float) and value.is_integer():
                 return int(value)
             if isinstance(value, bool):
@@ -588,6 +648,47 @@ def with_overrides(system: System, overrides: Mapping[str, Any]) -> tuple[System
             raise BindingError(f"{where}: input {var!r} is connected to {link.src_name}; set the source instead")
         out[(comp, var)] = convert_value(v, value, f"--set {key}")
     return system, out
+
+
+def default_step(system: System) -> tuple[float | None, str]:
+    """The communication step when none is given, and where it comes from.
+
+    The SSD's step (the OSP ``FixedStepAlgorithm`` annotation of its DefaultExperiment; SSP 1.0's
+    DefaultExperiment has no step attribute), else the FMUs' common DefaultExperiment stepSize:
+    the largest step that divides every FMU's (in whole nanoseconds), so each FMU's own step is a
+    whole number of communication steps. ``(None, reason)`` when there is none.
+    """
+    sc = system.scenario
+    if sc.experiment.step_size is not None:
+        return sc.experiment.step_size, f"{sc.origin}: DefaultExperiment (osp:FixedStepAlgorithm baseStepSize)"
+    steps = {i.name: i.model.default_step for i in system.instances if i.model.default_step is not None}
+    if not steps:
+        return None, f"{sc.origin}: no step in the SSD and no FMU gives a DefaultExperiment stepSize"
+    ns = {k: round(v * 1e9) for k, v in steps.items()}
+    if any(n < 1 or abs(n - steps[k] * 1e9) > 1e-6 * steps[k] * 1e9 for k, n in ns.items()):
+        if len(set(steps.values())) == 1:
+            return next(iter(steps.values())), "the FMUs' DefaultExperiment stepSize"
+        return None, (f"{sc.origin}: the FMUs' DefaultExperiment steps ("
+                      + ", ".join(f"{k} {v:g} s" for k, v in steps.items()) + ") have no common step")
+    g = 0
+    for n in ns.values():
+        g = math.gcd(g, n)
+    return g / 1e9, "the FMUs' DefaultExperiment stepSize (" + ", ".join(f"{k} {v:g} s" for k, v in steps.items()) + ")"
+
+
+def default_stop_time(system: System) -> tuple[float | None, str]:
+    """The stop time when none is given: the SSD's DefaultExperiment stopTime, else the FMUs'
+    DefaultExperiment stopTime when those that give one agree; ``(None, reason)`` otherwise."""
+    sc = system.scenario
+    if sc.experiment.stop_time is not None:
+        return sc.experiment.stop_time, f"{sc.origin}: DefaultExperiment stopTime"
+    stops = {i.name: i.model.default_stop for i in system.instances if i.model.default_stop is not None}
+    if len(set(stops.values())) == 1:
+        return next(iter(stops.values())), "the FMUs' DefaultExperiment stopTime"
+    if not stops:
+        return None, f"{sc.origin}: no DefaultExperiment stopTime in the SSD or the FMUs"
+    return None, (f"{sc.origin}: no stopTime in the SSD and the FMUs' differ ("
+                  + ", ".join(f"{k} {v:g} s" for k, v in stops.items()) + ")")
 
 
 def parse_set_options(items: Sequence[str]) -> dict[str, str]:
