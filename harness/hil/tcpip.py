@@ -6,6 +6,7 @@ request/reply exchange of :mod:`ipcosim.harness.hil.protocol`; a reply that does
 """
 from __future__ import annotations
 
+import os
 import select
 import socket
 import struct
@@ -17,6 +18,8 @@ import numpy as np
 
 from ipcosim.harness.hil.api import Card, CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite
 from ipcosim.harness.hil.protocol import (
+    MAX_TOKEN,
+    TOKEN_ENV,
     FLAG_AMPLIFIER,
     FLAG_LIMIT,
     FLAG_WD_EXPIRED,
@@ -56,10 +59,16 @@ class TcpipCard(Card):
         ``control`` (default) or ``monitor`` (status, time and reset only).
     name : str
         Client name shown in the rig's log.
+    token : str, optional
+        The rig's shared access token (default: the ``IPCOSIM_RIG_TOKEN`` environment variable).
     """
 
+    #: The rig leases the session: a client that stays silent longer than the rig's idle timeout
+    #: is dropped (the HIL adapter therefore connects again when stepping begins).
+    leased = True
+
     def __init__(self, card_type: str, card_id: str, host: str, port: int, *, timeout: float = 1.0,
-                 role: str = "control", name: str = "ipcosim") -> None:
+                 role: str = "control", name: str = "ipcosim", token: str | None = None) -> None:
         self.card_type, self.card_id = card_type, card_id
         self.where = f"tcpip://{host}:{port}"
         self.timeout = float(timeout)
@@ -79,8 +88,10 @@ class TcpipCard(Card):
         sock.setblocking(False)
         self._sock = sock
         try:
-            r = self._request(Msg.HELLO, struct.pack("!B", 1 if role == "control" else 0) + pack_text(name),
-                              timeout=max(self.timeout, 2.0))
+            if token is None:
+                token = os.environ.get(TOKEN_ENV, "")
+            r = self._request(Msg.HELLO, struct.pack("!B", 1 if role == "control" else 0) + pack_text(name, 200)
+                              + pack_text(token.strip(), MAX_TOKEN), timeout=max(self.timeout, 2.0))
             plant, clock, n_ao, n_enc, bits, cpr, lo, hi, tick_ns, version = r.take("BBBBBIddqH")
         except HILError:
             self._abort()
