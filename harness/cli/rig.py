@@ -168,7 +168,8 @@ def serve(args: argparse.Namespace) -> int:
     try:
         config = RigConfig(plant=args.plant, preset=args.preset, params=_pairs(args.set, "--set"),
                            initial_state=_pairs(args.initial, "--initial"), clock=args.clock, tick=args.tick,
-                           cart_limit=cart_limit, pendulum_limit=None if pend_limit is None else math.radians(pend_limit),
+                           cart_limit=cart_limit,
+                           pendulum_limit=None if pend_limit is None else math.radians(pend_limit),
                            noise_counts=args.noise_counts, latency=args.latency, seed=args.seed).checked()
         rig = VirtualRig(config)
     except (ValueError, KeyError) as exc:

@@ -207,7 +207,6 @@ class RigServer:
             if end is not None and time.monotonic() >= end:
                 break
             self._stopping.wait(0.1)
-        self._relay_events()
 
     def request_stop(self) -> None:
         """Make :meth:`serve` return (safe from a signal handler); then call :meth:`close`."""
@@ -236,6 +235,7 @@ class RigServer:
         for t in self._threads:
             t.join(timeout=max(0.0, end - time.monotonic()))
         self.rig.stop_clock()
+        self._relay_events(wait=0.2)
 
     def __enter__(self) -> "RigServer":
         return self if self._sock is not None else self.start()
@@ -243,10 +243,15 @@ class RigServer:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _relay_events(self) -> None:
-        with self.rig.lock:
+    def _relay_events(self, wait: float = 0.05) -> None:
+        # never blocks for long: a request may hold the rig (stopping must not wait for it)
+        if not self.rig.lock.acquire(timeout=wait):
+            return
+        try:
             events = list(self.rig.events)
             total = self.rig.event_count
+        finally:
+            self.rig.lock.release()
         new = min(total - self._events_seen, len(events))
         for ev in events[len(events) - new:] if new > 0 else []:
             self.log(f"rig t={ev.time:.4f}s {ev.kind}: {escape(ev.message, 400)}")
@@ -321,6 +326,7 @@ class RigServer:
                 reason = "server stopped"
         except _WriteTimeout:
             reason = f"client did not take a reply within {self.io_timeout:g} s"
+            self.counters["write_timeouts"] += 1
         finally:
             self._count_decoder_drops(session, decoder, seen)
             self._log_drops(session, force=True)

@@ -18,15 +18,15 @@ import numpy as np
 
 from ipcosim.harness.hil.api import Card, CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite
 from ipcosim.harness.hil.protocol import (
-    MAX_TOKEN,
-    TOKEN_ENV,
     FLAG_AMPLIFIER,
     FLAG_LIMIT,
     FLAG_WD_EXPIRED,
     FLAG_WD_RUNNING,
+    MAX_TOKEN,
     PROTOCOL_VERSION,
     REPLY_BIT,
     REPLY_PREFIX,
+    TOKEN_ENV,
     DecodeError,
     FrameDecoder,
     Msg,
@@ -169,7 +169,7 @@ class TcpipCard(Card):
             except BlockingIOError:
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
-                    raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} does not take data")
+                    raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} does not take data") from None
                 select.select([], [self._sock], [], remaining)
 
     def _parse_reply(self, msg: Msg, payload: bytes) -> Reader:
