@@ -359,3 +359,37 @@ def test_wrong_plant_kind_and_missing_quanser_package_are_clear_errors(hil_fmus,
     f = start_adapter(hil_fmus["single-mass"], unzipped(hil_fmus["single-mass"]), "q4:0@tcpip://127.0.0.1:1")
     assert init_status(f) == FATAL and "cannot connect" in f.text()
     f.slave.freeInstance()
+
+
+def test_adapter_presents_the_rigs_token_from_its_parameter_or_the_environment(hil_fmus, unzipped, monkeypatch):
+    monkeypatch.delenv("IPCOSIM_RIG_TOKEN", raising=False)
+    fmu = hil_fmus["single-mass"]
+    with RigServer(VirtualRig(RigConfig()), "127.0.0.1", 0, token="lab-token") as srv:
+        f = start_adapter(fmu, unzipped(fmu), f"q4:{srv.uri}")
+        assert init_status(f) == FATAL and "access token" in f.text()
+        f.slave.freeInstance()
+        f = start_adapter(fmu, unzipped(fmu), f"q4:{srv.uri}")
+        f.slave.setString([f.vr["card_token"]], ["lab-token"])
+        assert init_status(f) == OK, f.text()
+        assert do_step(f, 0.0, 1e-3) == OK
+        free(f)
+        monkeypatch.setenv("IPCOSIM_RIG_TOKEN", "lab-token")
+        f = start_adapter(fmu, unzipped(fmu), f"q4:{srv.uri}")
+        assert init_status(f) == OK, f.text()
+        assert do_step(f, 0.0, 1e-3) == OK
+        free(f)
+
+
+def test_initialization_longer_than_the_watchdog_and_the_lease_does_not_stop_the_first_step(hil_fmus, unzipped):
+    fmu = hil_fmus["single-mass"]
+    with RigServer(VirtualRig(RigConfig(clock="wallclock")), "127.0.0.1", 0, idle_timeout=0.3) as srv:
+        f = start_adapter(fmu, unzipped(fmu), f"q4:{srv.uri}", watchdog_timeout=0.1)
+        assert init_status(f) == OK
+        import time
+        time.sleep(1.0)                         # the other components initialize slowly
+        assert not srv.rig.status().watchdog_expired
+        for k in range(20):
+            f.set(voltage=0.5)
+            assert do_step(f, k * 1e-3, 1e-3) == OK, f.text()
+        assert srv.rig.wd_running and not srv.rig.status().watchdog_expired
+        free(f)
