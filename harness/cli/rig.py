@@ -45,6 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--io-timeout", type=float, default=1.0,
                    help="read/write timeout [s] for a frame begun and for a reply (default 1)")
     s.add_argument("--max-connections", type=int, default=8, help="connections served at once (default 8)")
+    s.add_argument("--rt-priority", type=int, metavar="P",
+                   help="run under SCHED_FIFO at priority P (1..99) where permitted (reported as applied or not)")
+    s.add_argument("--cpu", type=int, metavar="K", help="pin the rig to CPU K where permitted")
     s.add_argument("--stall-after-steps", type=int, metavar="N",
                    help="fault injection: stop answering a controller after N STEP requests")
     s.set_defaults(func=main)
@@ -155,6 +158,10 @@ def _check_numbers(args: argparse.Namespace) -> None:
             raise UsageError(f"{option} {value}: expected a number in [{lo:g}, {hi:g}]")
     if not 1 <= args.max_connections <= 1024:
         raise UsageError(f"--max-connections {args.max_connections}: expected 1..1024")
+    if args.rt_priority is not None and not 1 <= args.rt_priority <= 99:
+        raise UsageError(f"--rt-priority {args.rt_priority}: expected 1..99")
+    if args.cpu is not None and not 0 <= args.cpu <= 4095:
+        raise UsageError(f"--cpu {args.cpu}: expected a CPU number")
 
 
 def serve(args: argparse.Namespace) -> int:
@@ -181,7 +188,15 @@ def serve(args: argparse.Namespace) -> int:
     sys.setswitchinterval(1e-4)   # hand the GIL over quickly between the connection and ticker threads
     import gc
     gc.collect()
-    gc.freeze()                   # start-up objects never again scanned by the collector (shorter pauses)
+    gc.freeze()                   # start-up objects never again scanned by the collector
+    gc.disable()                  # no collection pauses while a controller steps; the server collects
+    #                               between sessions (RigServer._release)
+    from ipcosim.harness.master.realtime import apply_cpu_affinity, apply_sched_fifo
+    undo: list = []
+    setup = {"cpu": apply_cpu_affinity(args.cpu, undo), "sched_fifo": apply_sched_fifo(args.rt_priority, undo)}
+    for what, outcome in setup.items():
+        if not outcome.startswith("not requested"):
+            log(f"ipcosim rig: {what}: {outcome}")
     try:
         server = RigServer(rig, args.host, args.port, stall_after_steps=args.stall_after_steps, log=log,
                            token=_token(args), idle_timeout=args.idle_timeout, io_timeout=args.io_timeout,

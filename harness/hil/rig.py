@@ -220,6 +220,7 @@ class VirtualRig:
         self._ticker: threading.Thread | None = None
         self._stop_ticker = threading.Event()
         self._halted = threading.Event()
+        self._last_step_ns = -NS              # rig time of the last STEP (the ticker rests while they come)
         self.events: collections.deque[RigEvent] = collections.deque(maxlen=1000)
         self.event_count = 0
         self.counters: collections.Counter[str] = collections.Counter()
@@ -313,6 +314,8 @@ class VirtualRig:
         # Every event still happens at its grid instant: a late ticker only computes it later.
         period = max(self.tick_ns / NS, 1e-3)
         while not self._stop_ticker.wait(period):
+            if self.now_ns() - self._last_step_ns < 2 * period * NS:
+                continue    # a controller is stepping: its requests keep the physics up to date
             try:
                 with self.lock:
                     self.sync()
@@ -607,6 +610,12 @@ class VirtualRig:
             if self.lockstep:
                 self._advance_to(until_ns)
         if not self.lockstep:
+            self._last_step_ns = arrival
+            # compute the physics up to shortly before the instant while waiting, so that at the
+            # instant itself at most a tick or two remain to be computed before the reply
+            wait_until_ns(self.now_ns, until_ns - STEP_SPIN_NS, spin_ns=0, abort=self._halted.is_set)
+            with self.lock:
+                self.sync()
             wait_until_ns(self.now_ns, until_ns, spin_ns=STEP_SPIN_NS, abort=self._halted.is_set)
             if self._halted.is_set():
                 raise HILError(ErrorCode.CONNECTION, "the rig is shutting down")

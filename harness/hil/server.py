@@ -25,6 +25,7 @@ threat model.
 from __future__ import annotations
 
 import collections
+import gc
 import hmac
 import ipaddress
 import socket
@@ -369,6 +370,8 @@ class RigServer:
         session.role = "closed"
         self.rig.end_session(reason)
         self.log(f"rig: controlling session ended ({reason}); outputs at their expiration states")
+        if not gc.isenabled():
+            gc.collect()    # the collector is kept out of sessions (ipcosim rig serve): collect between them
 
     # --- requests ------------------------------------------------------------------------------
 

@@ -279,8 +279,8 @@ def realtime_setup() -> tuple[dict[str, str], Callable[[], None]]:
     report["gc"] = "applied: collected and frozen before the loop, disabled during it"
     cpu = _env_number("IPCOSIM_RT_CPU", int, 0, 4095)
     priority = _env_number("IPCOSIM_RT_PRIORITY", int, 1, 99)
-    report["cpu_affinity"] = _apply_affinity(cpu, undo)
-    report["sched_fifo"] = _apply_fifo(priority, undo)
+    report["cpu_affinity"] = apply_cpu_affinity(cpu, undo)
+    report["sched_fifo"] = apply_sched_fifo(priority, undo)
 
     def restore() -> None:
         for fn in reversed(undo):
@@ -291,7 +291,8 @@ def realtime_setup() -> tuple[dict[str, str], Callable[[], None]]:
     return report, restore
 
 
-def _apply_affinity(cpu: int | None, undo: list[Callable[[], None]]) -> str:
+def apply_cpu_affinity(cpu: int | None, undo: list[Callable[[], None]]) -> str:
+    """Pin this process to CPU ``cpu`` (None: not requested); appends the undo to ``undo``; returns the outcome."""
     if cpu is None:
         return "not requested (IPCOSIM_RT_CPU)"
     if not hasattr(os, "sched_setaffinity"):
@@ -305,7 +306,8 @@ def _apply_affinity(cpu: int | None, undo: list[Callable[[], None]]) -> str:
     return f"applied: CPU {cpu}"
 
 
-def _apply_fifo(priority: int | None, undo: list[Callable[[], None]]) -> str:
+def apply_sched_fifo(priority: int | None, undo: list[Callable[[], None]]) -> str:
+    """SCHED_FIFO at ``priority`` (None: not requested); appends the undo to ``undo``; returns the outcome."""
     if priority is None:
         return "not requested (IPCOSIM_RT_PRIORITY)"
     if not hasattr(os, "sched_setscheduler"):
