@@ -266,6 +266,8 @@ def realtime_setup() -> tuple[dict[str, str], Callable[[], None]]:
     undo : callable
         Restores what was changed (called when the run ends).
     """
+    cpu = _env_number("IPCOSIM_RT_CPU", int, 0, 4095)
+    priority = _env_number("IPCOSIM_RT_PRIORITY", int, 1, 99)
     undo: list[Callable[[], None]] = []
     report: dict[str, str] = {}
     # A full collection of a process holding numpy, fmpy and the FMUs takes milliseconds: collect
@@ -277,8 +279,6 @@ def realtime_setup() -> tuple[dict[str, str], Callable[[], None]]:
         undo.append(gc.enable)
     undo.append(gc.unfreeze)
     report["gc"] = "applied: collected and frozen before the loop, disabled during it"
-    cpu = _env_number("IPCOSIM_RT_CPU", int, 0, 4095)
-    priority = _env_number("IPCOSIM_RT_PRIORITY", int, 1, 99)
     report["cpu_affinity"] = apply_cpu_affinity(cpu, undo)
     report["sched_fifo"] = apply_sched_fifo(priority, undo)
 
