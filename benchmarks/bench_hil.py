@@ -74,37 +74,23 @@ def rig(plant: str, rt: bool, tick: float = 2.5e-4, clock: str = "wallclock") ->
                 proc.communicate()
 
 
-@contextmanager
-def environ(**values: str | None) -> Iterator[None]:
-    old = {k: os.environ.get(k) for k in values}
-    try:
-        for k, v in values.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-        yield
-    finally:
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-
-
 def run_scenario(scenario: str, rate: int, *, hil_uri: str | None, rt: bool = False) -> dict[str, Any]:
-    """metrics.json of one run (``error`` added); HIL when ``hil_uri`` is given, else simulated."""
-    import ipcosim.harness
-
+    """metrics.json of one ``ipcosim run`` in its own process, as a user runs it (``error``: its
+    last stderr line if it failed); HIL when ``hil_uri`` is given, else simulated."""
     h = 1.0 / rate
-    overrides: dict[str, Any] = {"controller.sample_period": h}
+    cmd = [sys.executable, "-m", "ipcosim.harness.cli", "run", scenario, "--stop-time", str(STOP_TIME),
+           "--step", str(h), "--set", f"controller.sample_period={h}", "--quiet"]
     if hil_uri:
-        overrides["plant.watchdog_timeout"] = WATCHDOG
-    env = {"IPCOSIM_HIL_URI": hil_uri, "IPCOSIM_RT_PRIORITY": str(RT_PRIORITY) if rt else None}
-    with environ(**env), tempfile.TemporaryDirectory(prefix="ipcosim-bench-hil-") as out:
-        result = ipcosim.harness.run(scenario, stop_time=STOP_TIME, step=h, overrides=overrides,
-                                     swaps={"plant": "hil"} if hil_uri else {}, out_dir=out, raise_on_error=False)
-    return {**result.metrics, "error": result.error}
+        cmd += ["--swap", "plant=hil", "--set", f"plant.watchdog_timeout={WATCHDOG}"]
+    env = {k: v for k, v in os.environ.items() if k not in ("IPCOSIM_HIL_URI", "IPCOSIM_RT_PRIORITY")}
+    env.update({"IPCOSIM_HIL_URI": hil_uri} if hil_uri else {})
+    env.update({"IPCOSIM_RT_PRIORITY": str(RT_PRIORITY)} if rt else {})
+    with tempfile.TemporaryDirectory(prefix="ipcosim-bench-hil-") as out:
+        run = subprocess.run(cmd + ["--out", out], capture_output=True, text=True, env=env, timeout=600)
+        path = Path(out) / "metrics.json"
+        metrics = json.loads(path.read_text()) if path.exists() else {}
+    lines = run.stderr.strip().splitlines()
+    return {**metrics, "error": (lines[-1] if lines else f"exit status {run.returncode}") if run.returncode else None}
 
 
 def describe(label: str, m: dict[str, Any]) -> str:
