@@ -161,12 +161,13 @@ def faults(lines: list[str]) -> None:
     """Master killed / rig killed mid-run: the latencies the fault tests check functionally."""
     with tempfile.TemporaryDirectory(prefix="ipcosim-bench-fault-") as out:
         for victim in ("master", "rig"):
-            with rig("single-mass", False) as (proc, uri):
+            with rig("single-mass", True) as (proc, uri):
                 master = subprocess.Popen([sys.executable, "-m", "ipcosim.harness.cli", "run", "single-mass-lqr",
                                            "--swap", "plant=hil", "--set", f"plant.watchdog_timeout={WATCHDOG}",
                                            "--stop-time", "60", "--out", str(Path(out) / victim), "--quiet"],
-                                          env=dict(os.environ, IPCOSIM_HIL_URI=uri), stdout=subprocess.DEVNULL,
-                                          stderr=subprocess.PIPE, text=True)
+                                          env=dict(os.environ, IPCOSIM_HIL_URI=uri,
+                                                   IPCOSIM_RT_PRIORITY=str(RT_PRIORITY)),
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
                 lines.append(_kill_and_measure(victim, proc, master, uri, Path(out) / victim))
                 print('   ' + lines[-1], flush=True)
 
@@ -182,6 +183,9 @@ def _kill_and_measure(victim: str, rig_proc: subprocess.Popen, master: subproces
         while not mon.status().watchdog_running and time.monotonic() < end:
             time.sleep(0.01)
         time.sleep(1.0)
+        if master.poll() is not None:
+            return f"{'fault: ' + victim + ' killed':30s} not measured: the run had already ended " \
+                   f"({master.communicate()[1].strip().splitlines()[-1:]})"
         if victim == "master":
             master.kill()
             t0 = time.monotonic()
