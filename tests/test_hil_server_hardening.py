@@ -319,6 +319,7 @@ def test_fuzzing_clients_cannot_stop_the_server_answering_a_well_behaved_one(ser
         t.start()
     steps = 0
     t = 0.0
+    started = time.monotonic()
     while time.monotonic() < until:
         t += 1e-3
         res = good.step([0], [0.5], [0, 1], t)              # raises (fails the test) if not answered in 2 s
@@ -332,6 +333,23 @@ def test_fuzzing_clients_cannot_stop_the_server_answering_a_well_behaved_one(ser
     dropped = sum(srv.counters[k] for k in ("malformed", "oversized", "truncated", "out_of_order"))
     assert dropped > 0 and srv.counters["internal_errors"] == 0
     good.close()
+    # the log was not flooded: at most the limiter's burst and rate, plus its summaries of what it held back
+    limit = srv.log.burst + srv.log.rate * (time.monotonic() - started)
+    assert len([line for line in srv.lines if "suppressed" not in line]) <= limit
+
+
+def test_the_log_is_rate_limited_and_says_how_many_lines_it_held_back():
+    from ipcosim.harness.hil.server import RateLimitedLog
+
+    now = [0.0]
+    lines: list[str] = []
+    log = RateLimitedLog(lines.append, rate=10.0, burst=5, clock=lambda: now[0])
+    for k in range(50):
+        log(f"line {k}")
+    assert lines == [f"line {k}" for k in range(5)]
+    now[0] += 0.1                                          # one more line may pass
+    log("later")
+    assert lines[5:] == ["rig: 45 log lines suppressed (more than 10 a second)", "later"]
 
 
 # --- stopping ----------------------------------------------------------------------------------------

@@ -5,8 +5,9 @@ to the :class:`~ipcosim.harness.hil.rig.VirtualRig` (itself thread-safe). Nothin
 can stop or wedge the server:
 
 * bad input is dropped and counted (``RigServer.counters``); the log gets the first drop of
-  a connection and then at most one summary line with counts per ``DROP_LOG_INTERVAL``;
-  everything a client sent that reaches the log is escaped (no forged lines);
+  a connection and then at most one summary line with counts per ``DROP_LOG_INTERVAL``, and
+  the whole log at most 10 lines a second (:class:`RateLimitedLog`: what is held back is
+  counted and reported); everything a client sent that reaches the log is escaped;
 * an unexpected exception while serving a request becomes an ``INTERNAL`` error reply;
 * sessions are leases: a connection that sends no accepted request for ``idle_timeout``
   seconds is closed (a controlling session ends safely with it: 0 V, watchdog stopped);
@@ -96,6 +97,37 @@ class _Session:
         self.drop_logged_at = -1e9
 
 
+class RateLimitedLog:
+    """``log(line)`` passed on at most ``rate`` lines a second on average (bursts of ``burst``);
+    lines beyond are counted and reported in one line once lines may pass again.
+
+    Everything the server logs because of what a client did goes through it: a client that
+    reconnects in a loop, or several at once, cannot flood the log.
+    """
+
+    def __init__(self, log: Callable[[str], None], rate: float = 10.0, burst: int = 30,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self._log, self.rate, self.burst, self._clock = log, float(rate), int(burst), clock
+        self._tokens = float(burst)
+        self._last = clock()
+        self.suppressed = 0
+        self._lock = threading.Lock()
+
+    def __call__(self, line: str) -> None:
+        with self._lock:
+            now = self._clock()
+            self._tokens = min(self.burst, self._tokens + (now - self._last) * self.rate)
+            self._last = now
+            if self._tokens < 1.0:
+                self.suppressed += 1
+                return
+            self._tokens -= 1.0
+            pending, self.suppressed = self.suppressed, 0
+        if pending:
+            self._log(f"rig: {pending} log lines suppressed (more than {self.rate:g} a second)")
+        self._log(line)
+
+
 class _WriteTimeout(Exception):
     """Internal: a client did not take a reply within the write timeout."""
 
@@ -142,7 +174,8 @@ class RigServer:
         self.host = host
         self.port = port
         self.stall_after_steps = stall_after_steps
-        self.log = log or (lambda line: None)
+        self._raw_log = log or (lambda line: None)
+        self.log = RateLimitedLog(self._raw_log)
         self.token = (token or "").strip() or None
         self.idle_timeout = float(idle_timeout)
         self.io_timeout = float(io_timeout)
@@ -255,7 +288,9 @@ class RigServer:
             self.rig.lock.release()
         new = min(total - self._events_seen, len(events))
         for ev in events[len(events) - new:] if new > 0 else []:
-            self.log(f"rig t={ev.time:.4f}s {ev.kind}: {escape(ev.message, 400)}")
+            # safety events always reach the log; session changes (client-driven) are rate-limited
+            log = self.log if ev.kind == "session" else self._raw_log
+            log(f"rig t={ev.time:.4f}s {ev.kind}: {escape(ev.message, 400)}")
         self._events_seen = total
 
     # --- connections ---------------------------------------------------------------------------
