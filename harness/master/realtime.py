@@ -50,7 +50,7 @@ study) can ask for them without new arguments:
 A HIL run's failure that comes from the card (a limit trip, a watchdog expiry, a rig that
 stopped answering or went away) is recorded in metrics.json as ``rig_fault`` (the message)
 with ``upright`` false, whatever the last recorded sample says: the step that tripped is
-never recorded.
+never recorded. :class:`CardFaultRecorder` does the same for runs that are not paced.
 """
 from __future__ import annotations
 
@@ -420,6 +420,20 @@ class RealtimePacer(Observer):
             out["upright"] = False
             out["rig_fault"] = self._fault
         return out
+
+
+class CardFaultRecorder(Observer):
+    """Records, in metrics.json, a run's failure that came from a card (``rig_fault``, ``upright:
+    false``) for runs that are not paced (a lockstep rig); :class:`RealtimePacer` does the same."""
+
+    def __init__(self) -> None:
+        self.fault: str | None = None
+
+    def finish(self, execution, error: BaseException | None) -> None:  # noqa: ANN001
+        self.fault = card_fault(execution, error)
+
+    def metrics(self) -> dict[str, Any]:
+        return {"upright": False, "rig_fault": self.fault} if self.fault is not None else {}
 
 
 def card_fault(execution, error: BaseException | None) -> str | None:  # noqa: ANN001
