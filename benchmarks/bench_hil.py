@@ -106,19 +106,26 @@ def describe(label: str, m: dict[str, Any]) -> str:
             f"[{status}]\n{'':32s}lateness {late}; master SCHED_FIFO: {fifo.split(':')[0]}")
 
 
-def pacer_floor(seconds: float = 3.0, period: float = 1e-3) -> str:
-    """The pacer alone (no work per step): the machine's scheduling floor."""
-    from ipcosim.harness.master.realtime import Pacer
+def pacer_floor(seconds: float = 3.0, period: float = 1e-3, rt: bool = False) -> str:
+    """The pacer alone (no work per step): the machine's scheduling floor (``rt``: under SCHED_FIFO)."""
+    from ipcosim.harness.master.realtime import Pacer, apply_sched_fifo
 
+    undo: list = []
+    fifo = apply_sched_fifo(RT_PRIORITY, undo) if rt else ""
     pacer = Pacer(period)
     pacer.start()
-    for n in range(int(round(seconds / period))):
-        pacer.begin(n)
-        pacer.end(n)
+    try:
+        for n in range(int(round(seconds / period))):
+            pacer.begin(n)
+            pacer.end(n)
+    finally:
+        for fn in undo:
+            fn()
     st = pacer.stats()
-    return (f"{'pacer alone, 1 kHz':30s} jitter p50 {st.period_jitter_p50 * US:6.0f} us  p99 "
+    label = "pacer alone, 1 kHz" + (", rt" if rt else "")
+    return (f"{label:30s} jitter p50 {st.period_jitter_p50 * US:6.0f} us  p99 "
             f"{st.period_jitter_p99 * US:6.0f} us  max {st.period_jitter_max * US:7.0f} us; overruns {st.overruns} "
-            f"of {st.steps}")
+            f"of {st.steps}{'; ' + fifo.split(':')[0] if fifo else ''}")
 
 
 def single_mass(lines: list[str], missed: list[str]) -> None:
@@ -215,7 +222,7 @@ def run() -> list[str]:
     """Print the bench lines (see the module docstring); raises TargetMissed after them if a target is missed."""
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     lines = [f"HIL real time: {STOP_TIME:g} s per run, wallclock virtual rig over TCP on 127.0.0.1 "
-             f"({os.cpu_count()} CPUs, load average {load:.2f} at start)", pacer_floor()]
+             f"({os.cpu_count()} CPUs, load average {load:.2f} at start)", pacer_floor(), pacer_floor(rt=True)]
     for line in lines:
         print(f"   {line}", flush=True)
     missed: list[str] = []
