@@ -8,10 +8,16 @@ encoder-measured outputs (``ipcosim.fmus.physics.MEASURED``: ``cart_position``,
 component. It drives a data-acquisition card through :mod:`ipcosim.harness.hil` (a real Q4 with
 Quanser's package, or the virtual rig), at volts-and-counts level:
 
-* **start** (leaving initialization): open the card (``card_uri``), refuse a rig whose
-  amplifier is latched off by a limit trip, write 0 V, set the watchdog's expiration
-  state to 0 V, zero the encoders, start the watchdog (``watchdog_timeout``). The outputs
-  start at 0 (positions relative to the start, as on the lab rig).
+* **start** (leaving initialization): open the card (``card_uri``; ``card_token`` or the
+  ``IPCOSIM_RIG_TOKEN`` environment variable for a rig served beyond loopback), refuse a rig
+  whose amplifier is latched off by a limit trip or that another client controls, write 0 V,
+  set the watchdog's expiration state to 0 V, zero the encoders. The outputs start at 0
+  (positions relative to the start, as on the lab rig). A virtual rig over TCP leases its
+  session to a client that keeps talking, so that connection is closed again here and
+  re-opened (and checked again) by the first step.
+* **first step**: start the watchdog (``watchdog_timeout``). Arming it only when stepping
+  begins means that however long the other components take to initialize, the watchdog
+  cannot expire before the first step, and the card's sample instants are anchored there.
 * **every step** ``doStep(t, h)``: reload the watchdog, write ``voltage`` (clipped to
   ``+-voltage_limit``, divided by ``amplifier_gain``) to the analog output, let the card's
   clock run to the sample instant ``t + h`` and read the encoders there (one
@@ -123,6 +129,9 @@ class HilFmu(FmuBase):
         self.add_parameter("card_uri", start=DEFAULT_CARD_URI, type_=str, check=_valid_uri,
                            description="card as [TYPE:]ID: q4:0 (Quanser package), "
                                        "q4:0@tcpip://HOST:PORT (virtual rig), q4:0@inproc://NAME")
+        self.add_parameter("card_token", start="", type_=str,
+                           description="shared access token of a virtual rig served beyond loopback "
+                                       "(empty: the IPCOSIM_RIG_TOKEN environment variable)")
         self.add_parameter("analog_channel", start=0, type_=int, check=_channel,
                            description="analog output channel driving the amplifier")
         seen = set()
@@ -150,22 +159,36 @@ class HilFmu(FmuBase):
         self._holder: dict[str, Any] = {}
         self._finalizer = weakref.finalize(self, _close_quietly, self._holder)
         self._base_ns: int | None = None
+        self._armed = False
         self._raw: list[int] = []
         self._unwrapped: list[int] = []
 
     # --- lifecycle ---------------------------------------------------------------------------------
 
     def setup(self) -> None:
-        from ipcosim.harness.hil import HILError, open_uri
-
+        """Leaving initialization: open the card and check it (the watchdog is armed by the first step)."""
         self._enc = [int(getattr(self, _CHANNELS[n][0])) for n in self._outputs]
         self._cal = [float(getattr(self, _CHANNELS[n][2])) for n in self._outputs]
         if len(set(self._enc)) != len(self._enc):
             raise FmuError(f"parameter encoder channels {self._enc}: each measured output needs its own channel")
+        card = self._open_checked()
+        if getattr(card, "leased", False):
+            # A rig that leases its session drops a silent client; the other components' initialization
+            # may take seconds, so the connection is opened again by the first step.
+            _close_quietly(self._holder)
+        self._armed = False
+        self._unwrapped = [0] * len(self._enc)
+        self._pos = [0.0] * len(self._enc)
+        self._base_ns = None
+
+    def _open_checked(self) -> Any:
+        """Open the card, check it (plant kind, amplifier not latched off), 0 V, expiration state, encoders 0."""
+        from ipcosim.harness.hil import HILError, open_uri
+
         where = f"card {self.card_uri}"
         try:
             card = open_uri(self.card_uri, timeout=self.watchdog_timeout, plant=self.kind,
-                            name=f"{self.modelName} {self.instance_name}")
+                            name=f"{self.modelName} {self.instance_name}", token=self.card_token or None)
         except HILError as exc:
             raise FmuError(f"{where}: {exc.message}") from None
         self._holder.update(card=card, ao=int(self.analog_channel))
@@ -184,22 +207,33 @@ class HilFmu(FmuBase):
             card.write_analog([ao], [0.0])
             card.watchdog_set_analog_expiration_state([ao], [0.0])
             card.set_encoder_counts(self._enc, [0] * len(self._enc))
-            card.watchdog_start(self.watchdog_timeout)
-            self._raw = [int(c) for c in card.read_encoder(self._enc)]
         except HILError as exc:
             _close_quietly(self._holder)
             raise FmuError(f"{where}: {exc.message}") from None
         except FmuError:
             _close_quietly(self._holder)
             raise
-        self._unwrapped = [0] * len(self._enc)
-        self._pos = [0.0] * len(self._enc)
-        self._base_ns = None
+        return card
+
+    def _arm(self) -> Any:
+        """The first step: (re)open the card if needed and start its watchdog -- stepping begins now."""
+        from ipcosim.harness.hil import HILError
+
+        try:
+            card = self._holder.get("card") or self._open_checked()
+            card.watchdog_start(self.watchdog_timeout)
+            self._raw = [int(c) for c in card.read_encoder(self._enc)]
+        except FmuError as exc:
+            self._fault(str(exc))
+        except HILError as exc:
+            self._fault(f"card {self.card_uri}: {exc.message}")
+        self._armed = True
+        return card
 
     def step(self, t: float, h: float) -> None:
         from ipcosim.harness.hil import ErrorCode, HILError, count_difference
 
-        card = self._holder.get("card")
+        card = self._arm() if not self._armed else self._holder.get("card")
         if card is None:
             raise StepFailure(f"the card is closed after an earlier fault: {self.last_error or 'unknown'}")
         v = float(self.voltage)

@@ -159,6 +159,9 @@ class Prepared:
             observers.append(Progress())
         if realtime or (realtime is None and self.system.realtime):
             observers.append(realtime_observer())
+        elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
+            from ipcosim.harness.master.realtime import CardFaultRecorder
+            observers.append(CardFaultRecorder())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
                          algorithm=algorithm or self.algorithm, overrides=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,

@@ -197,7 +197,7 @@ def test_open_loop_over_tcp_matches_too(hil_fmus, plant_fmus, unzipped):
 
 # --- safety on start and stop -----------------------------------------------------------------------
 
-def test_start_zeroes_encoders_and_arms_the_watchdog(hil_fmus, unzipped, inproc_rig):
+def test_start_zeroes_encoders_and_the_first_step_arms_the_watchdog(hil_fmus, unzipped, inproc_rig):
     rig = inproc_rig("start", pendulum_limit=None)
     rig.plant.set_state([0.05, 0, 0.1, 0, 0])         # wherever the rig happens to be
     rig.write_analog([0], [3.0])
@@ -206,9 +206,10 @@ def test_start_zeroes_encoders_and_arms_the_watchdog(hil_fmus, unzipped, inproc_
     assert init_status(hil) == OK, hil.text()
     assert list(rig.read_encoder([0, 1])) == [0, 0]
     assert rig.motor_voltage() == 0.0
-    assert rig.wd_running and rig.wd_timeout_ns == 250_000_000
+    assert not rig.wd_running                          # not armed before stepping begins
     hil.set(voltage=2.0)
     assert do_step(hil, 0.0, 1e-3) == OK
+    assert rig.wd_running and rig.wd_timeout_ns == 250_000_000
     assert rig.motor_voltage() == pytest.approx(2.0, abs=LSB)
     assert rig.wd_last_reload_ns == 0                  # reloaded at the start of the step
     hil.slave.terminate()
@@ -313,12 +314,13 @@ def test_second_adapter_is_refused_while_the_first_controls_the_rig(hil_fmus, un
     with RigServer(VirtualRig(RigConfig()), "127.0.0.1", 0) as srv:
         first = start_adapter(hil_fmus["single-mass"], unzipped(hil_fmus["single-mass"]), f"q4:{srv.uri}")
         assert init_status(first) == OK
+        first.set(voltage=0.5)
+        assert do_step(first, 0.0, 1e-3) == OK      # stepping begins: the first adapter controls the rig
         second = start_adapter(hil_fmus["single-mass"], unzipped(hil_fmus["single-mass"]), f"q4:{srv.uri}")
         assert init_status(second) == FATAL
         assert "rig busy" in second.text()
         second.slave.freeInstance()
-        first.set(voltage=0.5)
-        assert do_step(first, 0.0, 1e-3) == OK      # the first session is unaffected
+        assert do_step(first, 1e-3, 1e-3) == OK      # the first session is unaffected
         free(first)
 
 
@@ -328,8 +330,10 @@ def test_garbage_on_the_adapters_connection_is_dropped_and_the_session_goes_on(h
     with RigServer(VirtualRig(RigConfig(pendulum_limit=None)), "127.0.0.1", 0) as srv:
         hil = start_adapter(hil_fmus["single-mass"], unzipped(hil_fmus["single-mass"]), f"q4:{srv.uri}")
         assert init_status(hil) == OK
+        hil.set(voltage=0.625)
+        assert do_step(hil, 0.0, 1e-3) == OK          # the connection of the stepping session
         card = next(c for c in open_tcpip_cards() if c.card_id == srv.uri)
-        for k in range(200):
+        for k in range(1, 200):
             if k == 50:
                 card._sock.send(b"\x13\x37 not a frame")
                 card._sock.send(encode_frame(Msg.WRITE_ANALOG, 1, b"\x00\x01"))   # old seq and bad payload
@@ -355,3 +359,37 @@ def test_wrong_plant_kind_and_missing_quanser_package_are_clear_errors(hil_fmus,
     f = start_adapter(hil_fmus["single-mass"], unzipped(hil_fmus["single-mass"]), "q4:0@tcpip://127.0.0.1:1")
     assert init_status(f) == FATAL and "cannot connect" in f.text()
     f.slave.freeInstance()
+
+
+def test_adapter_presents_the_rigs_token_from_its_parameter_or_the_environment(hil_fmus, unzipped, monkeypatch):
+    monkeypatch.delenv("IPCOSIM_RIG_TOKEN", raising=False)
+    fmu = hil_fmus["single-mass"]
+    with RigServer(VirtualRig(RigConfig()), "127.0.0.1", 0, token="lab-token") as srv:
+        f = start_adapter(fmu, unzipped(fmu), f"q4:{srv.uri}")
+        assert init_status(f) == FATAL and "access token" in f.text()
+        f.slave.freeInstance()
+        f = start_adapter(fmu, unzipped(fmu), f"q4:{srv.uri}")
+        f.slave.setString([f.vr["card_token"]], ["lab-token"])
+        assert init_status(f) == OK, f.text()
+        assert do_step(f, 0.0, 1e-3) == OK
+        free(f)
+        monkeypatch.setenv("IPCOSIM_RIG_TOKEN", "lab-token")
+        f = start_adapter(fmu, unzipped(fmu), f"q4:{srv.uri}")
+        assert init_status(f) == OK, f.text()
+        assert do_step(f, 0.0, 1e-3) == OK
+        free(f)
+
+
+def test_initialization_longer_than_the_watchdog_and_the_lease_does_not_stop_the_first_step(hil_fmus, unzipped):
+    fmu = hil_fmus["single-mass"]
+    with RigServer(VirtualRig(RigConfig(clock="wallclock")), "127.0.0.1", 0, idle_timeout=0.3) as srv:
+        f = start_adapter(fmu, unzipped(fmu), f"q4:{srv.uri}", watchdog_timeout=0.1)
+        assert init_status(f) == OK
+        import time
+        time.sleep(1.0)                         # the other components initialize slowly
+        assert not srv.rig.status().watchdog_expired
+        for k in range(20):
+            f.set(voltage=0.5)
+            assert do_step(f, k * 1e-3, 1e-3) == OK, f.text()
+        assert srv.rig.wd_running and not srv.rig.status().watchdog_expired
+        free(f)

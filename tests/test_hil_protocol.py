@@ -45,7 +45,7 @@ def test_decoder_reassembles_frames_split_at_every_byte():
     for i in range(len(data)):
         got += dec.feed(data[i:i + 1])
     assert [f.seq for f in got] == [1, 2, 3, 4, 5]
-    assert dec.counters == {"garbage": 0, "oversized": 0}
+    assert dec.counters == {"garbage": 0, "oversized": 0, "truncated": 0}
 
 
 def test_decoder_resynchronizes_after_garbage():

@@ -224,6 +224,8 @@ def test_limit_trip_ends_the_run_naming_the_limit_and_the_amplifier_stays_off(en
         assert len(errors) == 1 and "cart limit tripped" in errors[0] and "cart_position" in errors[0] \
             and "0.3" in errors[0], proc.stderr
         assert (tmp_path / "out" / "results.csv").is_file()
+        metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+        assert metrics["upright"] is False and "cart limit tripped" in metrics["rig_fault"]
         assert srv.rig.status().limit_tripped and srv.rig.motor_voltage() == 0.0
         again = ipcosim(args[:-1] + [str(tmp_path / "out2")], e)           # refused until reset
         assert again.returncode != 0 and "reset the rig" in error_lines(again.stderr)[0]
@@ -233,6 +235,7 @@ def test_limit_trip_ends_the_run_naming_the_limit_and_the_amplifier_stays_off(en
         ok = ipcosim(["run", str(scn), "--swap", "plant=hil", "--set", "plant.voltage=0.3", "--stop-time", "0.2",
                       "--out", str(tmp_path / "out3"), "--quiet"], e)
         assert ok.returncode == 0, ok.stderr
+        assert "rig_fault" not in json.loads((tmp_path / "out3" / "metrics.json").read_text())
 
 
 def test_second_client_is_refused(env, tmp_path):

@@ -4,6 +4,7 @@ from __future__ import annotations
 import random
 import time
 
+import numpy as np
 import pytest
 
 from ipcosim.harness.master.realtime import Pacer, wait_until
@@ -116,3 +117,104 @@ def test_a_constant_offset_of_the_cards_clock_is_not_counted_as_lateness():
     st = pacer.stats()
     assert st.overruns == 0 and st.lateness_max < 5e-6
     assert st.period_jitter_max < 5e-6
+
+
+# --- the observer: set-up report, histogram, overrun budget, rig faults -----------------------------
+
+class _Model:
+    def __init__(self, name: str, variables: dict) -> None:
+        self.name, self.variables = name, variables
+
+
+class _Inst:
+    def __init__(self, name: str, variables: tuple[str, ...]) -> None:
+        self.name = name
+        self.model = _Model(name, {v: object() for v in variables})
+
+
+class _Execution:
+    def __init__(self) -> None:
+        self.step_size = 1e-3
+        self.n_ticks = 20
+        self.instances = [_Inst("controller", ("voltage",)),
+                          _Inst("plant", ("voltage", "limit_tripped", "last_error", "overruns"))]
+        self.slaves: list = []
+
+
+def paced(observer, sim: SimClock, late_steps: set[int]) -> None:
+    """Run the observer's hooks over 20 simulated steps, steps in ``late_steps`` taking 3 periods."""
+    from ipcosim.harness.master.realtime import Pacer
+
+    observer.pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep)
+    observer.pacer.start(0)
+    observer.pacer.begin(0)
+    observer._open = True
+    for n in range(1, 21):
+        sim.work(3_000_000 if n in late_steps else 100_000)
+        observer.step(_Execution(), n)
+
+
+def test_lateness_histogram_counts_every_step():
+    from ipcosim.harness.master.realtime import lateness_histogram
+
+    h = lateness_histogram(np.array([0, 49_999, 50_000, 300_000, 1_999_999, 7_000_000]))
+    assert h["<50us"] == 2 and h["50-100us"] == 1 and h["250-500us"] == 1 and h["1000-2000us"] == 1
+    assert h[">=5000us"] == 1 and sum(h.values()) == 6
+
+
+def test_a_run_over_its_overrun_budget_says_so_in_one_line(capsys):
+    from ipcosim.harness.master.realtime import RealtimePacer
+
+    obs = RealtimePacer(overrun_budget=0.05)
+    paced(obs, SimClock(), late_steps={4, 9})           # 4 late starts of 20: 20 % > 5 %
+    obs.finish(_Execution(), None)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "real-time budget exceeded" in err[0] and "budget 5.00 %" in err[0]
+    m = obs.metrics()
+    assert m["overrun_budget_exceeded"] is True and m["overruns"] >= 2
+    within = RealtimePacer(overrun_budget=0.5)
+    paced(within, SimClock(), late_steps={4})
+    within.finish(_Execution(), None)
+    assert not capsys.readouterr().err and within.metrics()["overrun_budget_exceeded"] is False
+
+
+def test_a_fault_of_the_card_makes_the_run_not_upright_whatever_the_last_sample():
+    from ipcosim.harness.master.realtime import RealtimePacer
+
+    obs = RealtimePacer()
+    paced(obs, SimClock(), late_steps=set())
+    message = ("component plant (IP02HILSingleMass): fmi2DoStep returned fmi2Discard at t = 2.5 s: pendulum limit "
+               "tripped: pendulum_angle = +0.3498 rad beyond +-0.3491 rad")
+    obs.finish(_Execution(), RuntimeError(message))
+    m = obs.metrics()
+    assert m["upright"] is False and m["rig_fault"] == message
+    other = RealtimePacer()
+    paced(other, SimClock(), late_steps=set())
+    other.finish(_Execution(), RuntimeError("component controller (LQRSingleMass): fmi2DoStep returned fmi2Error"))
+    assert "rig_fault" not in other.metrics() and "upright" not in other.metrics()
+
+
+def test_realtime_setup_reports_each_option_as_applied_or_not(monkeypatch):
+    import gc
+    import os
+
+    from ipcosim.harness.master.realtime import RealtimeSetupError, realtime_setup
+
+    monkeypatch.delenv("IPCOSIM_RT_PRIORITY", raising=False)
+    monkeypatch.setenv("IPCOSIM_RT_CPU", str(min(os.sched_getaffinity(0))))
+    before = os.sched_getaffinity(0)
+    report, restore = realtime_setup()
+    try:
+        assert report["gc"].startswith("applied") and not gc.isenabled()
+        assert report["cpu_affinity"].startswith("applied: CPU")
+        assert report["sched_fifo"].startswith("not requested")
+    finally:
+        restore()
+    assert gc.isenabled() and os.sched_getaffinity(0) == before
+    monkeypatch.setenv("IPCOSIM_RT_CPU", "4000")
+    report, restore = realtime_setup()
+    restore()
+    assert report["cpu_affinity"].startswith("not applied")
+    monkeypatch.setenv("IPCOSIM_RT_PRIORITY", "nan")
+    with pytest.raises(RealtimeSetupError, match="IPCOSIM_RT_PRIORITY=nan"):
+        realtime_setup()

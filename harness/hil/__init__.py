@@ -55,7 +55,7 @@ def parse_card_uri(uri: str) -> tuple[str, str]:
 
 
 def open_card(card_type: str, card_id: str, *, timeout: float = 1.0, plant: str | None = None,
-              name: str = "ipcosim") -> Card:
+              name: str = "ipcosim", token: str | None = None) -> Card:
     """Open a card; the id selects the backend (see the module docstring).
 
     Parameters
@@ -70,6 +70,9 @@ def open_card(card_type: str, card_id: str, *, timeout: float = 1.0, plant: str 
         inproc: plant kind of a rig created on first use (if the query does not say).
     name : str
         Client name for the rig's log.
+    token : str, optional
+        tcpip: the rig's shared access token (default: the ``IPCOSIM_RIG_TOKEN`` environment
+        variable, or none).
 
     Raises
     ------
@@ -92,7 +95,7 @@ def open_card(card_type: str, card_id: str, *, timeout: float = 1.0, plant: str 
         if not parsed.hostname or port is None:
             raise HILError(ErrorCode.BAD_URI, f"card id {card_id!r}: expected N@tcpip://HOST:PORT")
         from ipcosim.harness.hil.tcpip import TcpipCard
-        return TcpipCard(card_type, card_id, parsed.hostname, port, timeout=timeout, name=name)
+        return TcpipCard(card_type, card_id, parsed.hostname, port, timeout=timeout, name=name, token=token)
     if scheme == "inproc":
         from ipcosim.harness.hil.inproc import VirtualCard, get_rig
         from ipcosim.harness.hil.rig import RigConfig

@@ -72,6 +72,7 @@ class ErrorCode(enum.IntEnum):
     LIMIT_TRIPPED = 13       #: a safety limit latched the amplifier off
     BAD_URI = 14             #: malformed card URI
     INTERNAL = 15            #: the rig failed internally (e.g. non-finite plant state)
+    AUTH = 16                #: missing or wrong access token
 
 
 class HILError(IpcosimError, RuntimeError):

@@ -26,7 +26,8 @@ Requests (``n`` = ``!H`` count, ``ch`` = n x ``!I`` channels, ``V`` = n x ``!d``
 type  name                  request payload                reply body
 ====  ====================  =============================  ==========================
 0x01  HELLO                 role u8 (1 control, 0 monitor), plant u8 (0 single, 1
-                            name: ``!H`` + UTF-8            double), clock u8 (0 lockstep,
+                            name: ``!H`` + UTF-8,           double), clock u8 (0 lockstep,
+                            [token: ``!H`` + UTF-8]
                                                             1 wallclock), n_ao u8, n_enc
                                                             u8, dac_bits u8, counts/rev
                                                             u32, ao min d, ao max d, tick
@@ -54,7 +55,10 @@ type  name                  request payload                reply body
 0x10  BYE                   --                              -- (session ends cleanly)
 ====  ====================  =============================  ==========================
 
-Session rules: the first request of a connection is HELLO. One controlling session at
+Session rules: the first request of a connection is HELLO; a rig started with an access
+token answers a HELLO without the right token with an AUTH error and closes the
+connection. Sessions are leases: a connection that sends no accepted request for the
+rig's idle timeout (a few seconds) is closed, and a controlling session ends with it. One controlling session at
 a time: a second HELLO with role control gets a BUSY error reply and the connection is
 closed. Monitor sessions may only ask STATUS, TIME and (when nobody controls the rig)
 RESET. The rig drops -- without a reply -- and counts: bytes that are not a frame
@@ -77,6 +81,8 @@ MAGIC = b"IPRG"
 HEADER = struct.Struct("!4sBBHII")
 HEADER_SIZE = HEADER.size
 MAX_PAYLOAD = 4096
+MAX_TOKEN = 256             # bytes of an access token
+TOKEN_ENV = "IPCOSIM_RIG_TOKEN"
 MAX_SKIP = 1 << 20          # oversized frames up to this size are skipped exactly; beyond: resync
 REPLY_BIT = 0x80
 REPLY_PREFIX = struct.Struct("!iIq")
@@ -140,7 +146,20 @@ class FrameDecoder:
         self._buf = bytearray()
         self._skip = 0
         self._in_garbage = False
-        self.counters: dict[str, int] = {"garbage": 0, "oversized": 0}
+        self.counters: dict[str, int] = {"garbage": 0, "oversized": 0, "truncated": 0}
+
+    @property
+    def partial(self) -> bool:
+        """True while part of a frame (or of a payload being skipped) waits for more bytes."""
+        return bool(self._buf) or self._skip > 0
+
+    def discard_partial(self) -> None:
+        """Drop an incomplete frame (its sender stopped in the middle: a read timeout); counted."""
+        if self.partial:
+            self._buf.clear()
+            self._skip = 0
+            self._in_garbage = False
+            self.counters["truncated"] += 1
 
     def feed(self, data: bytes) -> list[Frame]:
         """Add received bytes; return the frames now complete."""

@@ -78,6 +78,11 @@ CLOCKS = ("lockstep", "wallclock")
 DEFAULT_TICK = {"lockstep": 1e-3, "wallclock": 5e-4}
 
 NS = 1_000_000_000
+#: Longest stretch of rig time one request may ask for (STEP to an instant, ADVANCE) [ns]: a
+#: client cannot make the rig wait, or compute, for longer than this.
+MAX_REQUEST_SPAN_NS = 10 * NS
+#: Longest watchdog timeout a client may set [s].
+MAX_WATCHDOG_TIMEOUT = 10.0
 
 
 def to_ns(seconds: float) -> int:
@@ -214,6 +219,8 @@ class VirtualRig:
         self._wall0_ns: int | None = None   # wallclock: host time of rig time 0
         self._ticker: threading.Thread | None = None
         self._stop_ticker = threading.Event()
+        self._halted = threading.Event()
+        self._last_step_ns = -NS              # rig time of the last STEP (the ticker rests while they come)
         self.events: collections.deque[RigEvent] = collections.deque(maxlen=1000)
         self.event_count = 0
         self.counters: collections.Counter[str] = collections.Counter()
@@ -307,6 +314,8 @@ class VirtualRig:
         # Every event still happens at its grid instant: a late ticker only computes it later.
         period = max(self.tick_ns / NS, 1e-3)
         while not self._stop_ticker.wait(period):
+            if self.now_ns() - self._last_step_ns < 2 * period * NS:
+                continue    # a controller is stepping: its requests keep the physics up to date
             try:
                 with self.lock:
                     self.sync()
@@ -341,8 +350,9 @@ class VirtualRig:
             if not self.lockstep:
                 self.sync()
                 return
-            if not (math.isfinite(dt) and dt >= 0):
-                raise HILError(ErrorCode.INVALID_ARGUMENT, f"advance: dt = {dt} s must be finite and >= 0")
+            if not (math.isfinite(dt) and 0 <= dt <= MAX_REQUEST_SPAN_NS / NS):
+                raise HILError(ErrorCode.INVALID_ARGUMENT, f"advance: dt = {dt} s must be finite, >= 0 and at "
+                                                           f"most {MAX_REQUEST_SPAN_NS / NS:g} s per request")
             self._advance_to(self._t_ns + to_ns(dt))
 
     def _advance_to(self, target_ns: int) -> None:
@@ -352,6 +362,8 @@ class VirtualRig:
         n = -(-interval // self.tick_ns)
         done = 0
         for k in range(1, n + 1):
+            if self._halted.is_set():
+                raise HILError(ErrorCode.CONNECTION, "the rig is shutting down")
             upto = interval * k // n
             self._substep(upto - done)
             done = upto
@@ -535,8 +547,9 @@ class VirtualRig:
         """Start the watchdog."""
         with self.lock:
             self.sync()
-            if not (math.isfinite(timeout) and timeout > 0):
-                raise HILError(ErrorCode.INVALID_ARGUMENT, f"watchdog_start: timeout = {timeout} s must be > 0")
+            if not (math.isfinite(timeout) and 0 < timeout <= MAX_WATCHDOG_TIMEOUT):
+                raise HILError(ErrorCode.INVALID_ARGUMENT, f"watchdog_start: timeout = {timeout} s must be in "
+                                                           f"(0, {MAX_WATCHDOG_TIMEOUT:g}] s")
             self.wd_timeout_ns = max(1, to_ns(timeout))
             self.wd_running = True
             self.wd_last_reload_ns = self.now_ns()
@@ -587,13 +600,25 @@ class VirtualRig:
             if self.lockstep and until_ns < arrival:
                 raise HILError(ErrorCode.CLOCK, f"step: sample instant {until_ns / NS:.6f} s is before the "
                                                 f"lockstep rig's time {arrival / NS:.6f} s")
+            if until_ns - arrival > MAX_REQUEST_SPAN_NS:
+                raise HILError(ErrorCode.INVALID_ARGUMENT, f"step: sample instant {until_ns / NS:.6f} s is more "
+                                                           f"than {MAX_REQUEST_SPAN_NS / NS:g} s after the rig's "
+                                                           f"time {arrival / NS:.6f} s")
             reloaded = self.watchdog_reload() if reload else True
             self.write_analog(analog_channels, volts)
             enc = self._check_enc(encoder_channels)
             if self.lockstep:
                 self._advance_to(until_ns)
         if not self.lockstep:
-            wait_until_ns(lambda: self.now_ns(), until_ns, spin_ns=0)
+            self._last_step_ns = arrival
+            # compute the physics up to shortly before the instant while waiting, so that at the
+            # instant itself at most a tick or two remain to be computed before the reply
+            wait_until_ns(self.now_ns, until_ns - STEP_SPIN_NS, spin_ns=0, abort=self._halted.is_set)
+            with self.lock:
+                self.sync()
+            wait_until_ns(self.now_ns, until_ns, spin_ns=STEP_SPIN_NS, abort=self._halted.is_set)
+            if self._halted.is_set():
+                raise HILError(ErrorCode.CONNECTION, "the rig is shutting down")
         with self.lock:
             self.sync()
             counts = self.read_encoder(enc, at_ns=until_ns)
@@ -653,6 +678,17 @@ class VirtualRig:
             self.counters["resets"] += 1
             self._event(self._t_ns, "reset", "operator reset: amplifier enabled, limit latch cleared")
 
+    def halt(self, reason: str = "rig stopped") -> None:
+        """Shut down: every wait and computation in progress ends, the outputs go to 0 V, the watchdog stops."""
+        self._halted.set()
+        with self.lock:
+            for ch in range(ANALOG_OUTPUTS):
+                self._ao[ch] = self._applied[ch] = 0.0
+            self._pending.clear()
+            self.wd_running = False
+            self.limits_armed = False
+            self._event(self._t_ns, "halt", f"{reason}: outputs at 0 V")
+
     def motor_voltage(self) -> float:
         """Voltage the amplifier applies to the motor now [V]."""
         with self.lock:
@@ -678,16 +714,21 @@ class VirtualRig:
             return self.plant.values()
 
 
-def wait_until_ns(clock_ns: Callable[[], int], deadline_ns: int, spin_ns: int = 300_000) -> int:
-    """Sleep, then spin, until ``clock_ns() >= deadline_ns``; returns the clock at the end.
+#: How long before a sample instant the rig stops sleeping and polls its clock [ns].
+STEP_SPIN_NS = 150_000
 
-    With ``spin_ns = 0`` it only sleeps (in slices of at most 1 ms): it never holds the GIL
-    while waiting, at the price of waking up some tens of microseconds late.
+
+def wait_until_ns(clock_ns: Callable[[], int], deadline_ns: int, spin_ns: int = 300_000,
+                  abort: Callable[[], bool] = lambda: False) -> int:
+    """Sleep (in slices of at most 1 ms), then poll, until ``clock_ns() >= deadline_ns`` or ``abort()``.
+
+    The last ``spin_ns`` before the deadline are spent polling with ``time.sleep(0)`` between
+    readings, which hands the GIL to the rig's other threads while keeping the wake-up
+    within tens of microseconds of the deadline. Returns the clock at the end.
     """
     now = clock_ns()
-    while now < deadline_ns:
+    while now < deadline_ns and not abort():
         remaining = deadline_ns - now
-        if remaining > spin_ns:
-            time.sleep(min(remaining - spin_ns, 1_000_000) / NS if spin_ns == 0 else (remaining - spin_ns) / NS)
+        time.sleep(min(remaining - spin_ns, 1_000_000) / NS if remaining > spin_ns else 0)
         now = clock_ns()
     return now

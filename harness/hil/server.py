@@ -2,12 +2,33 @@
 
 One thread accepts connections, one thread serves each connection; every request goes
 to the :class:`~ipcosim.harness.hil.rig.VirtualRig` (itself thread-safe). Nothing a client sends
-can stop the server: bad input is dropped and counted (``RigServer.counters``), an
-unexpected exception while serving a request becomes an ``INTERNAL`` error reply.
+can stop or wedge the server:
+
+* bad input is dropped and counted (``RigServer.counters``); the log gets the first drop of
+  a connection and then at most one summary line with counts per ``DROP_LOG_INTERVAL``, and
+  the whole log at most 10 lines a second (:class:`RateLimitedLog`: what is held back is
+  counted and reported); everything a client sent that reaches the log is escaped;
+* an unexpected exception while serving a request becomes an ``INTERNAL`` error reply;
+* sessions are leases: a connection that sends no accepted request for ``idle_timeout``
+  seconds is closed (a controlling session ends safely with it: 0 V, watchdog stopped);
+* at most ``max_connections`` connections; a frame begun must be completed within
+  ``io_timeout`` (read timeout) and a reply taken within ``io_timeout`` (write timeout),
+  or the connection is dropped;
+* every numeric argument is checked by the rig (finite, in range; one request spans at most
+  ``MAX_REQUEST_SPAN_NS`` of rig time; watchdog timeouts are capped);
+* :meth:`RigServer.close` ends every wait and computation in progress within a fraction
+  of a second and leaves the motor at 0 V.
+
+Access: the rig binds loopback by default; any other address needs a shared ``token`` that
+every client presents in its HELLO (compared in constant time). See docs/hil.md for the
+threat model.
 """
 from __future__ import annotations
 
 import collections
+import gc
+import hmac
+import ipaddress
 import socket
 import struct
 import threading
@@ -36,7 +57,33 @@ from ipcosim.harness.hil.rig import NS, VirtualRig
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 18920
+DEFAULT_IDLE_TIMEOUT = 5.0        # [s] lease: a connection silent this long is closed
+DEFAULT_IO_TIMEOUT = 1.0          # [s] to complete a frame begun / to take a reply
+DEFAULT_MAX_CONNECTIONS = 8
+DROP_LOG_INTERVAL = 1.0           # [s] at most one drop summary per connection this often
 _CLOSE = object()
+_ANSWERED = object()
+_POLL = 0.1                       # [s] how often a connection thread looks at the stop flag
+
+
+class RigAccessError(HILError, ValueError):
+    """The server would be reachable from other machines without an access token."""
+
+
+def escape(text: str, limit: int = 80) -> str:
+    """Client-sent text made safe for a one-line log: control and non-ASCII characters escaped, length capped."""
+    out = text[:limit].encode("unicode_escape").decode("ascii").replace('"', '\\"')
+    return out + ("..." if len(text) > limit else "")
+
+
+def is_loopback(host: str) -> bool:
+    """True for 127.0.0.0/8, ::1 and ``localhost``."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 class _Session:
@@ -46,6 +93,43 @@ class _Session:
         self.last_seq = 0
         self.steps = 0
         self.stalled = False
+        self.drops: collections.Counter[str] = collections.Counter()   # not yet logged
+        self.drop_logged_at = -1e9
+
+
+class RateLimitedLog:
+    """``log(line)`` passed on at most ``rate`` lines a second on average (bursts of ``burst``);
+    lines beyond are counted and reported in one line once lines may pass again.
+
+    Everything the server logs because of what a client did goes through it: a client that
+    reconnects in a loop, or several at once, cannot flood the log.
+    """
+
+    def __init__(self, log: Callable[[str], None], rate: float = 10.0, burst: int = 30,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self._log, self.rate, self.burst, self._clock = log, float(rate), int(burst), clock
+        self._tokens = float(burst)
+        self._last = clock()
+        self.suppressed = 0
+        self._lock = threading.Lock()
+
+    def __call__(self, line: str) -> None:
+        with self._lock:
+            now = self._clock()
+            self._tokens = min(self.burst, self._tokens + (now - self._last) * self.rate)
+            self._last = now
+            if self._tokens < 1.0:
+                self.suppressed += 1
+                return
+            self._tokens -= 1.0
+            pending, self.suppressed = self.suppressed, 0
+        if pending:
+            self._log(f"rig: {pending} log lines suppressed (more than {self.rate:g} a second)")
+        self._log(line)
+
+
+class _WriteTimeout(Exception):
+    """Internal: a client did not take a reply within the write timeout."""
 
 
 class RigServer:
@@ -62,16 +146,39 @@ class RigServer:
         session the server stops answering that session (it keeps reading and dropping).
     log : callable, optional
         ``log(line)`` for one-line notices (sessions, refusals, drops, limit trips).
+    token : str, optional
+        Shared access token every client must present; required unless ``host`` is loopback.
+    idle_timeout : float
+        Lease [s]: a connection that sends no accepted request for this long is closed.
+    io_timeout : float
+        Read and write timeout [s]: to complete a frame begun, and to take a reply.
+    max_connections : int
+        Connections served at once; more are closed at once (counted as ``refused``).
+
+    Raises
+    ------
+    ValueError
+        A timeout or limit that is not a finite positive number in range.
     """
 
     def __init__(self, rig: VirtualRig, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  stall_after_steps: int | None = None, log: Callable[[str], None] | None = None,
-                 max_connections: int = 8) -> None:
+                 token: str | None = None, idle_timeout: float = DEFAULT_IDLE_TIMEOUT,
+                 io_timeout: float = DEFAULT_IO_TIMEOUT, max_connections: int = DEFAULT_MAX_CONNECTIONS) -> None:
+        for label, value, hi in (("idle_timeout", idle_timeout, 3600.0), ("io_timeout", io_timeout, 60.0)):
+            if not (isinstance(value, (int, float)) and 0 < value <= hi):   # NaN fails too
+                raise ValueError(f"rig server {label} = {value}: must be in (0, {hi:g}] s")
+        if not (isinstance(max_connections, int) and 1 <= max_connections <= 1024):
+            raise ValueError(f"rig server max_connections = {max_connections}: must be 1..1024")
         self.rig = rig
         self.host = host
         self.port = port
         self.stall_after_steps = stall_after_steps
-        self.log = log or (lambda line: None)
+        self._raw_log = log or (lambda line: None)
+        self.log = RateLimitedLog(self._raw_log)
+        self.token = (token or "").strip() or None
+        self.idle_timeout = float(idle_timeout)
+        self.io_timeout = float(io_timeout)
         self.max_connections = max_connections
         self.counters: collections.Counter[str] = collections.Counter()
         self._lock = threading.Lock()
@@ -85,8 +192,20 @@ class RigServer:
     # --- lifecycle -----------------------------------------------------------------------------
 
     def start(self) -> "RigServer":
-        """Bind, listen and serve in background threads; returns self."""
-        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        """Bind, listen and serve in background threads; returns self.
+
+        Raises
+        ------
+        RigAccessError
+            ``host`` is not a loopback address and no token is set.
+        HILError
+            The address cannot be bound.
+        """
+        if not is_loopback(self.host) and not self.token:
+            raise RigAccessError(ErrorCode.AUTH, f"rig refuses to serve {self.host}: an address other than loopback "
+                                                 f"needs an access token (--token-file FILE or IPCOSIM_RIG_TOKEN)")
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_STREAM)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             sock.bind((self.host, self.port))
@@ -94,8 +213,8 @@ class RigServer:
             sock.close()
             raise HILError(ErrorCode.CONNECTION, f"rig cannot listen on {self.host}:{self.port}: "
                                                  f"{exc.strerror or exc}") from exc
-        sock.listen(4)
-        sock.settimeout(0.2)
+        sock.listen(16)
+        sock.settimeout(_POLL)
         self._sock = sock
         self.port = sock.getsockname()[1]
         self.rig.start_clock()
@@ -122,15 +241,18 @@ class RigServer:
             if end is not None and time.monotonic() >= end:
                 break
             self._stopping.wait(0.1)
-        self._relay_events()
 
     def request_stop(self) -> None:
         """Make :meth:`serve` return (safe from a signal handler); then call :meth:`close`."""
         self._stopping.set()
 
     def close(self) -> None:
-        """Stop serving, close every connection and stop the rig's clock."""
+        """Stop serving: every wait ends, the motor goes to 0 V, connections close, the clock stops.
+
+        Returns within a fraction of a second whatever the clients are doing.
+        """
         self._stopping.set()
+        self.rig.halt("rig server stopping")
         if self._sock is not None:
             try:
                 self._sock.close()
@@ -143,9 +265,11 @@ class RigServer:
                 c.shutdown(socket.SHUT_RDWR)
             except OSError:
                 pass
+        end = time.monotonic() + 0.5
         for t in self._threads:
-            t.join(timeout=5.0)
+            t.join(timeout=max(0.0, end - time.monotonic()))
         self.rig.stop_clock()
+        self._relay_events(wait=0.2)
 
     def __enter__(self) -> "RigServer":
         return self if self._sock is not None else self.start()
@@ -153,13 +277,20 @@ class RigServer:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _relay_events(self) -> None:
-        with self.rig.lock:
+    def _relay_events(self, wait: float = 0.05) -> None:
+        # never blocks for long: a request may hold the rig (stopping must not wait for it)
+        if not self.rig.lock.acquire(timeout=wait):
+            return
+        try:
             events = list(self.rig.events)
             total = self.rig.event_count
+        finally:
+            self.rig.lock.release()
         new = min(total - self._events_seen, len(events))
         for ev in events[len(events) - new:] if new > 0 else []:
-            self.log(f"rig t={ev.time:.4f}s {ev.kind}: {ev.message}")
+            # safety events always reach the log; session changes (client-driven) are rate-limited
+            log = self.log if ev.kind == "session" else self._raw_log
+            log(f"rig t={ev.time:.4f}s {ev.kind}: {escape(ev.message, 400)}")
         self._events_seen = total
 
     # --- connections ---------------------------------------------------------------------------
@@ -193,9 +324,17 @@ class RigServer:
         session = _Session(peer)
         seen = dict(decoder.counters)
         reason = "connection closed"
-        conn.settimeout(0.2)
+        conn.settimeout(_POLL)
+        last_request = partial_since = time.monotonic()
         try:
             while not self._stopping.is_set():
+                now = time.monotonic()
+                if now - last_request > self.idle_timeout:
+                    reason = f"no request for {self.idle_timeout:g} s (lease lapsed)"
+                    self.counters["idle_closed"] += 1
+                    break
+                if decoder.partial and now - partial_since > self.io_timeout:
+                    decoder.discard_partial()       # read timeout: a frame begun was not completed
                 try:
                     data = conn.recv(65536)
                 except socket.timeout:
@@ -205,31 +344,59 @@ class RigServer:
                     break
                 if not data:
                     break
+                if not decoder.partial:
+                    partial_since = time.monotonic()
                 frames = decoder.feed(data)
-                for key, value in decoder.counters.items():
-                    if value > seen[key]:
-                        name = "malformed" if key == "garbage" else key
-                        self.counters[name] += value - seen[key]
-                        self.log(f"rig: dropped {value - seen[key]} {key} input from {peer}")
-                        seen[key] = value
+                self._count_decoder_drops(session, decoder, seen)
                 for frame in frames:
                     if session.stalled:
                         self.counters["stalled_requests"] += 1
                         continue
-                    if self._handle(conn, session, frame) is _CLOSE:
+                    outcome = self._handle(conn, session, frame)
+                    if outcome is _CLOSE:
                         reason = "session closed"
                         return
+                    if outcome is not None:     # an accepted request renews the lease
+                        last_request = time.monotonic()
             if self._stopping.is_set():
                 reason = "server stopped"
+        except _WriteTimeout:
+            reason = f"client did not take a reply within {self.io_timeout:g} s"
+            self.counters["write_timeouts"] += 1
         finally:
+            self._count_decoder_drops(session, decoder, seen)
+            self._log_drops(session, force=True)
             if session.role == "control":
                 self._release(session, f"{peer}: {reason}")
+            elif session.role is None:
+                self.log(f"rig: connection from {peer} closed before a session ({reason})")
             with self._lock:
                 self._conns.discard(conn)
             try:
                 conn.close()
             except OSError:
                 pass
+
+    def _count_decoder_drops(self, session: _Session, decoder: FrameDecoder, seen: dict[str, int]) -> None:
+        for key, value in decoder.counters.items():
+            if value > seen[key]:
+                self._note_drop(session, "malformed" if key == "garbage" else key, value - seen[key])
+                seen[key] = value
+
+    def _note_drop(self, session: _Session, kind: str, count: int = 1) -> None:
+        """Count dropped input; the log gets a summary per connection at most every DROP_LOG_INTERVAL."""
+        self.counters[kind] += count
+        session.drops[kind] += count
+        self._log_drops(session)
+
+    def _log_drops(self, session: _Session, force: bool = False) -> None:
+        now = time.monotonic()
+        if not session.drops or (not force and now - session.drop_logged_at < DROP_LOG_INTERVAL):
+            return
+        what = ", ".join(f"{n} {k.replace('_', '-')}" for k, n in sorted(session.drops.items()))
+        self.log(f"rig: dropped input from {session.peer}: {what}")
+        session.drops.clear()
+        session.drop_logged_at = now
 
     def _release(self, session: _Session, reason: str) -> None:
         with self._lock:
@@ -238,6 +405,8 @@ class RigServer:
         session.role = "closed"
         self.rig.end_session(reason)
         self.log(f"rig: controlling session ended ({reason}); outputs at their expiration states")
+        if not gc.isenabled():
+            gc.collect()    # the collector is kept out of sessions (ipcosim rig serve): collect between them
 
     # --- requests ------------------------------------------------------------------------------
 
@@ -247,14 +416,20 @@ class RigServer:
                  | (FLAG_WD_EXPIRED if st.watchdog_expired else 0) | (FLAG_WD_RUNNING if st.watchdog_running else 0))
         payload = reply_payload(code, flags, int(round(st.time * NS)), body, message)
         try:
+            conn.settimeout(self.io_timeout)
             conn.sendall(encode_frame(frame.type | REPLY_BIT, frame.seq, payload))
+        except socket.timeout:
+            raise _WriteTimeout() from None
         except OSError:
             pass  # the receive loop notices the loss
+        finally:
+            try:
+                conn.settimeout(_POLL)
+            except OSError:
+                pass
 
     def _drop(self, counter: str, session: _Session, frame: Frame, why: str) -> None:
-        self.counters[counter] += 1
-        self.log(f"rig: dropped {counter.replace('_', '-')} message from {session.peer} "
-                 f"(type 0x{frame.type:02x}, seq {frame.seq}): {why}")
+        self._note_drop(session, counter)
 
     def _handle(self, conn: socket.socket, session: _Session, frame: Frame) -> object:
         if frame.version != PROTOCOL_VERSION:
@@ -307,16 +482,23 @@ class RigServer:
         self._send(conn, frame, ErrorCode.OK, body)
         if msg == Msg.BYE:
             return _CLOSE
-        return None
+        return _ANSWERED
 
     def _hello(self, conn: socket.socket, session: _Session, frame: Frame, reader: Reader) -> object:
         role_code = reader.one("B")
-        name = reader.text()
+        name = escape(reader.text())
+        token = reader.text() if reader.pos < len(reader.data) else ""
         reader.end()
         session.last_seq = frame.seq
         if session.role is not None:
             self._send(conn, frame, ErrorCode.PROTOCOL, message="HELLO twice in one connection")
             return None
+        if self.token is not None and not hmac.compare_digest(token.encode("utf-8"), self.token.encode("utf-8")):
+            self.counters["unauthorized"] += 1
+            self.log(f"rig: refused {session.peer} ({name}): {'wrong' if token else 'no'} access token")
+            self._send(conn, frame, ErrorCode.AUTH, message="access token missing or wrong (this rig needs the "
+                                                            "token it was started with: IPCOSIM_RIG_TOKEN)")
+            return _CLOSE
         role = "control" if role_code else "monitor"
         if role == "control":
             with self._lock:
@@ -339,7 +521,7 @@ class RigServer:
                            info.dac_bits, info.counts_per_rev, info.analog_min, info.analog_max,
                            int(round(info.tick * NS)), PROTOCOL_VERSION)
         self._send(conn, frame, ErrorCode.OK, body)
-        return None
+        return _ANSWERED
 
     def _dispatch(self, msg: Msg, r: Reader, session: _Session, frame: Frame, conn: socket.socket) -> object:
         rig = self.rig

@@ -6,6 +6,7 @@ request/reply exchange of :mod:`ipcosim.harness.hil.protocol`; a reply that does
 """
 from __future__ import annotations
 
+import os
 import select
 import socket
 import struct
@@ -21,9 +22,11 @@ from ipcosim.harness.hil.protocol import (
     FLAG_LIMIT,
     FLAG_WD_EXPIRED,
     FLAG_WD_RUNNING,
+    MAX_TOKEN,
     PROTOCOL_VERSION,
     REPLY_BIT,
     REPLY_PREFIX,
+    TOKEN_ENV,
     DecodeError,
     FrameDecoder,
     Msg,
@@ -56,10 +59,16 @@ class TcpipCard(Card):
         ``control`` (default) or ``monitor`` (status, time and reset only).
     name : str
         Client name shown in the rig's log.
+    token : str, optional
+        The rig's shared access token (default: the ``IPCOSIM_RIG_TOKEN`` environment variable).
     """
 
+    #: The rig leases the session: a client that stays silent longer than the rig's idle timeout
+    #: is dropped (the HIL adapter therefore connects again when stepping begins).
+    leased = True
+
     def __init__(self, card_type: str, card_id: str, host: str, port: int, *, timeout: float = 1.0,
-                 role: str = "control", name: str = "ipcosim") -> None:
+                 role: str = "control", name: str = "ipcosim", token: str | None = None) -> None:
         self.card_type, self.card_id = card_type, card_id
         self.where = f"tcpip://{host}:{port}"
         self.timeout = float(timeout)
@@ -79,8 +88,10 @@ class TcpipCard(Card):
         sock.setblocking(False)
         self._sock = sock
         try:
-            r = self._request(Msg.HELLO, struct.pack("!B", 1 if role == "control" else 0) + pack_text(name),
-                              timeout=max(self.timeout, 2.0))
+            if token is None:
+                token = os.environ.get(TOKEN_ENV, "")
+            r = self._request(Msg.HELLO, struct.pack("!B", 1 if role == "control" else 0) + pack_text(name, 200)
+                              + pack_text(token.strip(), MAX_TOKEN), timeout=max(self.timeout, 2.0))
             plant, clock, n_ao, n_enc, bits, cpr, lo, hi, tick_ns, version = r.take("BBBBBIddqH")
         except HILError:
             self._abort()
@@ -158,7 +169,7 @@ class TcpipCard(Card):
             except BlockingIOError:
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
-                    raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} does not take data")
+                    raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} does not take data") from None
                 select.select([], [self._sock], [], remaining)
 
     def _parse_reply(self, msg: Msg, payload: bytes) -> Reader:

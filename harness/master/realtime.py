@@ -28,14 +28,39 @@ metrics.json):
     How late steps started relative to their deadlines.
 ``realtime_steps``
     Number of paced steps.
+``lateness_histogram``
+    Steps by lateness: ``{"<50us": n, "50-100us": n, ..., ">=5ms": n}``.
+``realtime_setup``
+    What the pacer arranged, each item ``applied ...`` or ``not applied: why``: ``gc``
+    (cyclic garbage collection off during the loop, start-up objects frozen), ``cpu_affinity``
+    and ``sched_fifo`` (only when asked for).
+
+Options come from the environment, so that any run (``ipcosim run``, the Python API, a
+study) can ask for them without new arguments:
+
+``IPCOSIM_RT_CPU=K``
+    Pin the process to CPU ``K`` (``os.sched_setaffinity``).
+``IPCOSIM_RT_PRIORITY=P``
+    Run under ``SCHED_FIFO`` at priority ``P`` (1..99) while paced (needs CAP_SYS_NICE or
+    an rtprio limit; otherwise reported as not applied and the run goes on).
+``IPCOSIM_RT_OVERRUN_BUDGET=F``
+    Overruns allowed, as a fraction of the steps (e.g. ``0.005``); a run beyond it says so
+    in one line on stderr at its end, and metrics.json gets ``overrun_budget_exceeded``.
+
+A HIL run's failure that comes from the card (a limit trip, a watchdog expiry, a rig that
+stopped answering or went away) is recorded in metrics.json as ``rig_fault`` (the message)
+with ``upright`` false, whatever the last recorded sample says: the step that tripped is
+never recorded. :class:`CardFaultRecorder` does the same for runs that are not paced.
 """
 from __future__ import annotations
 
 import gc
 import math
+import os
+import sys
 import time
-from dataclasses import dataclass
-from typing import Callable
+from dataclasses import dataclass, field
+from typing import Any, Callable
 
 import numpy as np
 
@@ -44,7 +69,7 @@ from ipcosim.harness.master.observers import Observer
 NS = 1_000_000_000
 
 
-def wait_until(deadline_ns: int, clock_ns: Callable[[], int] = time.perf_counter_ns,
+def wait_until(deadline_ns: int, clock_ns: Callable[[], int] = time.monotonic_ns,
                spin_ns: int = 200_000, sleep: Callable[[float], None] = time.sleep) -> int:
     """Sleep, then spin, until ``clock_ns() >= deadline_ns``.
 
@@ -65,9 +90,8 @@ def wait_until(deadline_ns: int, clock_ns: Callable[[], int] = time.perf_counter
         The clock reading when the wait ended (>= ``deadline_ns``).
     """
     now = clock_ns()
-    remaining = deadline_ns - now
-    if remaining > spin_ns:
-        sleep((remaining - spin_ns) / NS)
+    while deadline_ns - now > spin_ns:      # a sleep may end early (signals): sleep again
+        sleep((deadline_ns - now - spin_ns) / NS)
         now = clock_ns()
     while now < deadline_ns:
         now = clock_ns()
@@ -86,13 +110,15 @@ class RealtimeStats:
     worst_step_time: float
     lateness_p99: float
     lateness_max: float
+    lateness_histogram: dict[str, int] = field(default_factory=dict)
 
-    def as_metrics(self) -> dict[str, float | int]:
+    def as_metrics(self) -> dict[str, Any]:
         """The metrics.json keys (see the module docstring)."""
         return {"period_jitter_p50_s": self.period_jitter_p50, "period_jitter_p99_s": self.period_jitter_p99,
                 "period_jitter_max_s": self.period_jitter_max, "overruns": self.overruns,
                 "worst_step_time_s": self.worst_step_time, "lateness_p99_s": self.lateness_p99,
-                "lateness_max_s": self.lateness_max, "realtime_steps": self.steps}
+                "lateness_max_s": self.lateness_max, "realtime_steps": self.steps,
+                "lateness_histogram": dict(self.lateness_histogram)}
 
     def summary(self) -> str:
         """One line for humans."""
@@ -100,6 +126,20 @@ class RealtimeStats:
         return (f"{self.steps} steps: period jitter p50 {self.period_jitter_p50 * us:.0f} us, "
                 f"p99 {self.period_jitter_p99 * us:.0f} us, max {self.period_jitter_max * us:.0f} us; "
                 f"{self.overruns} overruns; worst step {self.worst_step_time * us:.0f} us")
+
+
+#: Upper edges of the lateness histogram's bins [us] (the last bin is open).
+LATENESS_BINS_US = (50, 100, 250, 500, 1000, 2000, 5000)
+
+
+def lateness_histogram(late_ns: np.ndarray) -> dict[str, int]:
+    """Count steps by lateness into the bins of ``LATENESS_BINS_US`` (keys like ``"100-250us"``)."""
+    edges = np.asarray(LATENESS_BINS_US, dtype=np.int64) * 1000
+    counts = np.bincount(np.searchsorted(edges, np.asarray(late_ns, dtype=np.int64), side="right"),
+                         minlength=len(edges) + 1)
+    labels = [f"<{LATENESS_BINS_US[0]}us"] + [f"{a}-{b}us" for a, b in zip(LATENESS_BINS_US, LATENESS_BINS_US[1:])]
+    labels.append(f">={LATENESS_BINS_US[-1]}us")
+    return {label: int(n) for label, n in zip(labels, counts)}
 
 
 class Pacer:
@@ -121,7 +161,7 @@ class Pacer:
         Lateness beyond which a step counts as an overrun [s] (default ``period / 2``).
     """
 
-    def __init__(self, period: float, *, clock_ns: Callable[[], int] = time.perf_counter_ns,
+    def __init__(self, period: float, *, clock_ns: Callable[[], int] = time.monotonic_ns,
                  sleep: Callable[[float], None] = time.sleep, spin: float = 200e-6,
                  tolerance: float | None = None) -> None:
         if not (math.isfinite(period) and period > 0):
@@ -189,21 +229,110 @@ class Pacer:
                              period_jitter_max=jmax, overruns=int(np.count_nonzero(late > self.tolerance_ns)),
                              worst_step_time=float(dur.max()) / NS if len(dur) else 0.0,
                              lateness_p99=float(np.percentile(late, 99)) / NS if len(late) else 0.0,
-                             lateness_max=float(late.max()) / NS if len(late) else 0.0)
+                             lateness_max=float(late.max()) / NS if len(late) else 0.0,
+                             lateness_histogram=lateness_histogram(late))
 
     def metrics(self) -> dict[str, float | int]:
         """``stats().as_metrics()``."""
         return self.stats().as_metrics()
 
 
+def _env_number(name: str, kind: type, lo: float, hi: float) -> Any:
+    """An optional numeric environment variable in [lo, hi] (None if unset)."""
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return None
+    try:
+        value = kind(text)
+    except ValueError:
+        value = None
+    if value is None or not (lo <= value <= hi):   # NaN fails too
+        raise RealtimeSetupError(f"{name}={text}: expected a number in [{lo:g}, {hi:g}]")
+    return value
+
+
+class RealtimeSetupError(ValueError):
+    """A real-time option (environment variable) with a bad value."""
+
+
+def realtime_setup() -> tuple[dict[str, str], Callable[[], None]]:
+    """Arrange the process for pacing: GC out of the loop, CPU affinity and SCHED_FIFO if asked for.
+
+    Returns
+    -------
+    report : dict
+        ``{"gc": ..., "cpu_affinity": ..., "sched_fifo": ...}``, each ``applied ...`` or
+        ``not applied: why`` (``not requested`` when the option is not set).
+    undo : callable
+        Restores what was changed (called when the run ends).
+    """
+    cpu = _env_number("IPCOSIM_RT_CPU", int, 0, 4095)
+    priority = _env_number("IPCOSIM_RT_PRIORITY", int, 1, 99)
+    undo: list[Callable[[], None]] = []
+    report: dict[str, str] = {}
+    # A full collection of a process holding numpy, fmpy and the FMUs takes milliseconds: collect
+    # once now, freeze what exists (never scanned again) and keep the collector off while paced.
+    gc.collect()
+    gc.freeze()
+    if gc.isenabled():
+        gc.disable()
+        undo.append(gc.enable)
+    undo.append(gc.unfreeze)
+    report["gc"] = "applied: collected and frozen before the loop, disabled during it"
+    report["cpu_affinity"] = apply_cpu_affinity(cpu, undo)
+    report["sched_fifo"] = apply_sched_fifo(priority, undo)
+
+    def restore() -> None:
+        for fn in reversed(undo):
+            try:
+                fn()
+            except OSError:
+                pass
+    return report, restore
+
+
+def apply_cpu_affinity(cpu: int | None, undo: list[Callable[[], None]]) -> str:
+    """Pin this process to CPU ``cpu`` (None: not requested); appends the undo to ``undo``; returns the outcome."""
+    if cpu is None:
+        return "not requested (IPCOSIM_RT_CPU)"
+    if not hasattr(os, "sched_setaffinity"):
+        return "not applied: the OS has no CPU affinity call"
+    try:
+        before = os.sched_getaffinity(0)
+        os.sched_setaffinity(0, {cpu})
+    except OSError as exc:
+        return f"not applied: CPU {cpu}: {exc.strerror or exc}"
+    undo.append(lambda: os.sched_setaffinity(0, before))
+    return f"applied: CPU {cpu}"
+
+
+def apply_sched_fifo(priority: int | None, undo: list[Callable[[], None]]) -> str:
+    """SCHED_FIFO at ``priority`` (None: not requested); appends the undo to ``undo``; returns the outcome."""
+    if priority is None:
+        return "not requested (IPCOSIM_RT_PRIORITY)"
+    if not hasattr(os, "sched_setscheduler"):
+        return "not applied: the OS has no SCHED_FIFO"
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:
+        return f"not applied: SCHED_FIFO priority {priority}: {exc.strerror or exc} (needs CAP_SYS_NICE or rtprio)"
+    undo.append(lambda: os.sched_setscheduler(0, policy, param))
+    return f"applied: SCHED_FIFO priority {priority}"
+
+
 class RealtimePacer(Observer):
     """Observer (``ipcosim.harness.master.observers``) pacing a co-simulation to the wall clock.
 
     Step ``n`` (from ``t_n`` to ``t_n+1``) starts no earlier than ``t0 + n*h`` on the host's
-    clock. Its :meth:`metrics` add the statistics of :class:`RealtimeStats` to metrics.json,
-    plus ``card_overruns``: the sum of the ``overruns`` outputs of the components that have
-    one (the HIL adapter counts the steps whose request reached the card after their sample
-    instant), read after the last step.
+    monotonic clock. The first step is the start-up step of real-time components (the HIL
+    adapter opens its card and arms the watchdog there, whatever the other components'
+    initialization took), and the schedule is anchored when it ends: ``t0`` is the end of
+    step 0. Its :meth:`metrics` add the statistics of :class:`RealtimeStats` to
+    metrics.json, ``realtime_setup`` (see :func:`realtime_setup`), ``card_overruns`` (the sum
+    of the ``overruns`` outputs of the components that have one: steps whose request reached
+    the card after their sample instant) and, after a fault of a card, ``rig_fault`` and
+    ``upright: false``.
 
     Parameters
     ----------
@@ -211,22 +340,26 @@ class RealtimePacer(Observer):
         Busy-wait this long before each deadline [s].
     tolerance : float, optional
         Overrun tolerance [s] (default half a step).
+    overrun_budget : float, optional
+        Allowed overruns as a fraction of the steps (default: ``IPCOSIM_RT_OVERRUN_BUDGET``).
     """
 
-    def __init__(self, spin: float = 200e-6, tolerance: float | None = None) -> None:
+    def __init__(self, spin: float = 200e-6, tolerance: float | None = None,
+                 overrun_budget: float | None = None) -> None:
         self.spin = spin
         self.tolerance = tolerance
+        self.overrun_budget = (overrun_budget if overrun_budget is not None
+                               else _env_number("IPCOSIM_RT_OVERRUN_BUDGET", float, 0.0, 1.0))
         self.pacer: Pacer | None = None
         self._open = False
         self._card_overruns: int | None = None
+        self._setup: dict[str, str] = {}
+        self._restore: Callable[[], None] = lambda: None
+        self._fault: str | None = None
+        self._over_budget: str | None = None
 
     def start(self, execution) -> None:  # noqa: ANN001 -- ipcosim.harness.master.execution.Execution
-        # No cyclic garbage collection while paced: a full collection of a process holding
-        # numpy, fmpy and the FMUs takes milliseconds. Reference counting still frees everything
-        # that is not in a cycle; the collector runs again (and once now) around the run.
-        gc.collect()
-        self._gc_was_enabled = gc.isenabled()
-        gc.disable()
+        self._setup, self._restore = realtime_setup()
         self.pacer = Pacer(execution.step_size, spin=self.spin, tolerance=self.tolerance)
         self.pacer.start(0)
         self.pacer.begin(0)
@@ -242,6 +375,8 @@ class RealtimePacer(Observer):
         if n >= execution.n_ticks:
             self._read_card_overruns(execution)
             return
+        if n == 1:      # the start-up step is done: the real-time schedule starts now
+            self.pacer.start(1)
         self.pacer.begin(n)
         self._open = True
 
@@ -249,8 +384,15 @@ class RealtimePacer(Observer):
         if self._open and self.pacer is not None:
             self.pacer.end()
             self._open = False
-        if getattr(self, "_gc_was_enabled", False):
-            gc.enable()
+        self._restore()
+        self._fault = card_fault(execution, error)
+        if self.pacer is not None and self.overrun_budget is not None:
+            st = self.pacer.stats()
+            if st.steps and st.overruns > self.overrun_budget * st.steps:
+                self._over_budget = (f"real-time budget exceeded: {st.overruns} overruns in {st.steps} steps "
+                                     f"({100 * st.overruns / st.steps:.2f} %, budget "
+                                     f"{100 * self.overrun_budget:.2f} %)")
+                print(f"ipcosim: {self._over_budget}", file=sys.stderr, flush=True)
 
     def _read_card_overruns(self, execution) -> None:  # noqa: ANN001
         total = None
@@ -264,10 +406,47 @@ class RealtimePacer(Observer):
                 pass
         self._card_overruns = total
 
-    def metrics(self) -> dict[str, float | int]:
+    def metrics(self) -> dict[str, Any]:
         if self.pacer is None:
             return {}
-        out = self.pacer.metrics()
+        out: dict[str, Any] = self.pacer.metrics()
+        out["realtime_setup"] = dict(self._setup)
         if self._card_overruns is not None:
             out["card_overruns"] = self._card_overruns
+        if self.overrun_budget is not None:
+            out["overrun_budget"] = self.overrun_budget
+            out["overrun_budget_exceeded"] = self._over_budget is not None
+        if self._fault is not None:
+            out["upright"] = False
+            out["rig_fault"] = self._fault
         return out
+
+
+class CardFaultRecorder(Observer):
+    """Records, in metrics.json, a run's failure that came from a card (``rig_fault``, ``upright:
+    false``) for runs that are not paced (a lockstep rig); :class:`RealtimePacer` does the same."""
+
+    def __init__(self) -> None:
+        self.fault: str | None = None
+
+    def finish(self, execution, error: BaseException | None) -> None:  # noqa: ANN001
+        self.fault = card_fault(execution, error)
+
+    def metrics(self) -> dict[str, Any]:
+        return {"upright": False, "rig_fault": self.fault} if self.fault is not None else {}
+
+
+def card_fault(execution, error: BaseException | None) -> str | None:  # noqa: ANN001
+    """The message of a run's failure if it came from a component driving a card (a HIL adapter), else None.
+
+    An adapter is recognised by its ``limit_tripped`` and ``last_error`` outputs.
+    """
+    if error is None:
+        return None
+    text = str(error).strip()
+    first = text.splitlines()[0] if text else type(error).__name__
+    for inst in execution.instances:
+        names = inst.model.variables
+        if "limit_tripped" in names and "last_error" in names and f"component {inst.name} " in first:
+            return first
+    return None

@@ -1,0 +1,19 @@
+"""Test FMU ``SlowInitLQRSingleMass``: the LQR controller of the single mass, whose initialization
+takes ``INIT_DELAY`` seconds on purpose (a stand-in for a slow design step, a slow licence check...).
+Used by the real-time HIL swap test: the watchdog of the HIL adapter must not run during it."""
+import time
+
+from ipcosim.controllers.controller_fmu import ControllerFmu
+
+INIT_DELAY = 3.0   # [s]
+
+
+class SlowInitLQRSingleMass(ControllerFmu):
+    """LQR of the IP02 single mass whose initialization sleeps INIT_DELAY seconds (test only)."""
+
+    law = "LQR"
+    kind = "single-mass"
+
+    def setup(self) -> None:
+        time.sleep(INIT_DELAY)
+        super().setup()
