@@ -173,10 +173,12 @@ def thesis_adaptive(kind: str) -> tuple[HSMCGains, AdaptiveSchedules]:
     base = thesis_hsmc_gains(kind)
     if kind == "single-mass":
         # c1 = 43.9911 + 3 e^-0.1t, c2 = 0.1766 + 10 e^-150t, k2 = K2 + dKP2 e^-KP2 t = 0.5 + 15 e^-0.1t,
-        # KI = 320 (1 - dKI2 e^-KI2 t) = 320 - 320 e^-0.3t, eta2 = 0.0005
+        # KI = 320 (1 - dKI2 e^-KI2 t) = 320 - 320 e^-0.3t, eta2 = 0.0005; the first layer's by the same
+        # forms: k1 = K1 + dKP e^-KP1 t = 14 e^-0.1t (no K1 in the listing), KI1 = 320 (1 - dKI e^-KI1 t)
         g = replace(base, c=(43.9911, 0.1766), k=0.5, eta=0.0005, KI=320.0)
         return g, AdaptiveSchedules(k=Schedule(0.5, 15.0, 0.1), KI=Schedule(320.0, -320.0, 0.3),
-                                    c=(Schedule(43.9911, 3.0, 0.1), Schedule(0.1766, 10.0, 150.0)))
+                                    c=(Schedule(43.9911, 3.0, 0.1), Schedule(0.1766, 10.0, 150.0)),
+                                    k1=Schedule(0.0, 14.0, 0.1), KI1=Schedule(320.0, -320.0, 4.0))
     # k3 = 9 + 11.5 e^-t, eta3 = 17 + 1.1 e^-2t, c2 = 0.6506 - 0.5 e^-3t, KI = 0
     c = list(base.c)
     c[1] = 0.7 * abs(sum(THESIS_B5[f"a{i}"] for i in range(7, 13)))  # B.6: 0.6506, without the -0.2
@@ -321,7 +323,12 @@ def _hsmc_specs(kind: str, law: str) -> list[ParamSpec]:
             doc = f"thesis App. {'A' if kind == 'single-mass' else 'B'}.5 constant: d({row})/dt per {state}"
         specs.append(ParamSpec(name, value, unit, doc))
     if law == "AdaptiveHSMC":
-        for base in ["k", "eta", "KI"] + [f"c{i + 1}" for i in range(n)]:
+        specs += [ParamSpec("k1", 0.0, "1/s", "first-layer reaching gain: the top layer's law adds "
+                                              "lambda1 (k1 S1 + KI1 int S1) (thesis App. A.6 deltaKP, KP1)",
+                            "nonnegative"),
+                  ParamSpec("KI1", 0.0, "1/s2", "first-layer integral gain (thesis App. A.6 KI1, deltaKI)",
+                            "nonnegative")]
+        for base in ["k", "eta", "KI", "k1", "KI1"] + [f"c{i + 1}" for i in range(n)]:
             unit = next(s.unit for s in specs if s.name == base)
             specs += [ParamSpec(f"{base}_delta", 0.0, unit, f"schedule {base}(t) = {base} + {base}_delta "
                                                             f"exp(-{base}_rate t): initial excess"),
@@ -420,9 +427,9 @@ def _hsmc_values(kind: str, g: HSMCGains, use_thesis: bool) -> dict[str, Any]:
 
 def _schedule_values(g: HSMCGains, s: AdaptiveSchedules) -> dict[str, float]:
     v: dict[str, float] = {}
-    for name in ("k", "eta", "KI"):
+    for name in ("k", "eta", "KI", "k1", "KI1"):
         sch = getattr(s, name)
-        v[name] = sch.base if sch else getattr(g, name)
+        v[name] = sch.base if sch else getattr(g, name, 0.0)
         v[f"{name}_delta"] = sch.delta if sch else 0.0
         v[f"{name}_rate"] = sch.rate if sch else 0.0
     scs = s.c or (None,) * len(g.c)
@@ -586,14 +593,26 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
     else:
         models = subsystem_models(design_model(_design_params(kind, v)))
     if law == "HSMC":
-        return HSMC(kind, g, models, T, vlim)
+        return _through_motor(HSMC(kind, g, models, T, vlim), kind, v)
 
     def sched(name: str) -> Schedule | None:
         return Schedule(float(v[name]), float(v[f"{name}_delta"]), float(v[f"{name}_rate"]))
 
+    def lower(name: str) -> Schedule | None:  # first-layer gains: absent unless set
+        return sched(name) if float(v[name]) or float(v[f"{name}_delta"]) else None
+
     schedules = AdaptiveSchedules(k=sched("k"), eta=sched("eta"), KI=sched("KI"),
-                                  c=tuple(sched(f"c{i + 1}") for i in range(n)))
-    return AdaptiveHSMC(kind, g, models, schedules, T, vlim)
+                                  c=tuple(sched(f"c{i + 1}") for i in range(n)), k1=lower("k1"), KI1=lower("KI1"))
+    return _through_motor(AdaptiveHSMC(kind, g, models, schedules, T, vlim), kind, v)
+
+
+def _through_motor(law: HSMC, kind: str, v: Mapping[str, Any]) -> HSMC:
+    """The App. A.5 constants model a force-driven cart: their law's output is a force, applied through
+    the design model's motor (``HSMC.drive_through_motor``). The other models are voltage models."""
+    if kind == "single-mass" and bool(v["use_thesis_coefficients"]):
+        p = _design_params(kind, v)
+        law.drive_through_motor(p.force_per_amp / p.Ra, p.emf_per_velocity)
+    return law
 
 
 def make_law(law: str, kind: str, parameter_set: str | None = None, design_params: PlantParams | None = None,

@@ -529,6 +529,23 @@ class HSMC(DiscreteLaw):
         for d in self._d:
             d.reset()
 
+    #: Output = force_gain * (law's u) + emf_gain * (motor-cart velocity): 1 and 0 when the subsystem
+    #: models are voltage models; ``drive_through_motor`` sets them for force models.
+    force_gain = 1.0
+    emf_gain = 0.0
+
+    def drive_through_motor(self, force_per_volt: float, emf_per_velocity: float) -> "HSMC":
+        """Treat the law's ``u`` as a force [N] and apply the voltage that makes the motor produce it.
+
+        The cart force of the DC motor (inductance neglected) is ``F = Kf (V - Ke v)`` with
+        ``Kf = N Kt/(Ra rg)`` [N/V] and ``Ke = N Kb/rg`` [V s/m], ``v`` the motor-cart velocity, so
+        ``V = F/Kf + Ke v``. Needed when the subsystem models ``f_i + b_i u`` describe a force-driven
+        cart (the thesis's App. A.5 constants); returns the law.
+        """
+        self.force_gain = 1.0 / _check_positive("force_per_volt", force_per_volt)
+        self.emf_gain = _check_nonneg("emf_per_velocity", emf_per_velocity)
+        return self
+
     def _state(self, y: np.ndarray, r: float) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
         """Design-model state estimate in error coordinates (ipcosim.fmus.physics order without the current),
         and the (positions, velocities) of the subsystems: pendulum, pendulum cart, (motor cart)."""
@@ -540,6 +557,10 @@ class HSMC(DiscreteLaw):
         xa, xc, th = float(y[0]) - r, float(y[1]) - r, float(y[2])
         xad, xcd, thd = d[2].update(float(y[0])), d[1].update(float(y[1])), d[0].update(th)
         return (xa, xad, xc, xcd, th, thd), (th, xc, xa), (thd, xcd, xad)
+
+    def _lower_layer_terms(self, c: tuple[float, ...], pos: tuple[float, ...], vel: tuple[float, ...]) -> float:
+        """Reaching terms of the first layer added to the top layer's (0 for HSMC; see AdaptiveHSMC)."""
+        return 0.0
 
     def current_gains(self) -> tuple[tuple[float, ...], float, float, float]:
         """(c, k, eta, KI) in effect at the law's time (constant for HSMC)."""
@@ -555,9 +576,13 @@ class HSMC(DiscreteLaw):
             num += a * ci * v
         for w, xi in zip(self._w, x):
             num += w * xi
+        num += self._lower_layer_terms(c, pos, vel)
         den = self._den
         integral = self.integral + S * self.sample_period
         u_rest = -(num + k * S + eta * math.tanh(self.gains.tanh_gain * S)) / den
+        if self.emf_gain or self.force_gain != 1.0:  # a force model: the voltage that gives the force
+            den = den / self.force_gain
+            u_rest = u_rest * self.force_gain + self.emf_gain * vel[-1]
         u = u_rest - KI * integral / den
         if abs(u) <= self.voltage_limit or (u > 0) != (-KI * S / den > 0):
             self.integral = integral
@@ -575,6 +600,10 @@ class AdaptiveSchedules:
     eta: Schedule | None = None
     KI: Schedule | None = None
     c: tuple[Schedule | None, ...] = ()
+    #: First-layer reaching gains (thesis App. A.6 KP1/deltaKP, KI1/deltaKI): the top layer's law gains
+    #: ``alpha_1 (k1 S1 + KI1 int S1)``, so that the part of S_n carried by S1 reaches like S1' = -k1 S1 - KI1 int S1.
+    k1: Schedule | None = None
+    KI1: Schedule | None = None
 
 
 class AdaptiveHSMC(HSMC):
@@ -587,7 +616,7 @@ class AdaptiveHSMC(HSMC):
     def __init__(self, kind: str, gains: HSMCGains, models: Sequence[SubsystemModel],
                  schedules: AdaptiveSchedules, sample_period: float = 1e-3, voltage_limit: float = 10.0) -> None:
         super().__init__(kind, gains, models, sample_period, voltage_limit)
-        for name in ("k", "eta", "KI"):
+        for name in ("k", "eta", "KI", "k1", "KI1"):
             sch = getattr(schedules, name)
             if sch is not None:
                 for part in ("base", "delta", "rate"):
@@ -609,6 +638,21 @@ class AdaptiveHSMC(HSMC):
                                                            f"c{i}(t) = {sch.base} + {sch.delta} exp(-{sch.rate} t) "
                                                            "must stay > 0")
         self.schedules = schedules
+
+    def reset(self) -> None:
+        super().reset()
+        self.integral1 = 0.0
+
+    def _lower_layer_terms(self, c: tuple[float, ...], pos: tuple[float, ...], vel: tuple[float, ...]) -> float:
+        sc = self.schedules
+        if sc.k1 is None and sc.KI1 is None:
+            return 0.0
+        t = self.time
+        S1 = c[0] * pos[0] + vel[0]
+        self.integral1 += S1 * self.sample_period
+        k1 = sc.k1(t) if sc.k1 is not None else 0.0
+        KI1 = sc.KI1(t) if sc.KI1 is not None else 0.0
+        return self._alpha[0] * (k1 * S1 + KI1 * self.integral1)
 
     def current_gains(self) -> tuple[tuple[float, ...], float, float, float]:
         t = self.time

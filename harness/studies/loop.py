@@ -192,7 +192,10 @@ def _hsmc(law: HSMC, b: Builder) -> tuple[Lin, list[str]]:
         c = tuple(s.base if s is not None else ci for s, ci in zip(sc.c or (None,) * len(c), law._c))
         k, eta, KI = ((getattr(sc, n).base if getattr(sc, n) is not None else getattr(g, n))
                       for n in ("k", "eta", "KI"))
+        k1, KI1 = (getattr(sc, n).base if getattr(sc, n) is not None else 0.0 for n in ("k1", "KI1"))
         notes.append("schedules frozen at their final values (t -> infinity)")
+    else:
+        k1 = KI1 = 0.0
     if law.kind == "single-mass":
         xc, th = b.input(0), b.input(1)
         vth, vxc = b.derivative(th, T, tau), b.derivative(xc, T, tau)
@@ -206,7 +209,14 @@ def _hsmc(law: HSMC, b: Builder) -> tuple[Lin, list[str]]:
     total = num + S * (k + eta * g.tanh_gain)
     if KI:
         total = total + b.integral(S, T) * KI
-    u = total * (-1.0 / law._den)
+    S1 = pos[0] * c[0] + vel[0]
+    if k1:
+        total = total + S1 * (law._alpha[0] * k1)
+    if KI1:
+        total = total + b.integral(S1, T) * (law._alpha[0] * KI1)
+    u = total * (-law.force_gain / law._den) + vel[-1] * law.emf_gain
+    if law.emf_gain or law.force_gain != 1.0:
+        notes.append("law output is a force, applied through the motor model")
     return u, notes
 
 
