@@ -6,6 +6,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ipcosim.fmus.instruments import Instruments, Readout, end_stop_state
 from ipcosim.fmus.integrator import FastETDRK4
 from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, kind_of, validate
 from ipcosim.fmus.physics import (
@@ -201,3 +202,34 @@ class Plant:
         """The encoder-measured positions (``ipcosim.fmus.physics.MEASURED``)."""
         v = self.values()
         return tuple(v[n] for n in MEASURED[self.kind])
+
+
+class InstrumentedPlant(Plant):
+    """``Plant`` with the bench's instruments (``ipcosim.fmus.instruments``): encoder quantization and
+    seeded noise on the measured positions (``readings``), and track end stops applied after each step.
+
+    With ``Instruments()`` (the default, everything off) it behaves exactly as ``Plant`` and its
+    readings are the true positions.
+    """
+
+    def __init__(self, params: PlantParams, x0: Sequence[float] | None = None, t0: float = 0.0,
+                 instruments: Instruments | None = None) -> None:
+        super().__init__(params, x0, t0)
+        self.instruments = instruments or Instruments()
+        names = self.state_names
+        res = [self.instruments.pendulum_resolution if n == "pendulum_angle" else self.instruments.cart_resolution
+               for n in MEASURED[self.kind]]
+        self._readout = Readout(self.instruments, res)
+        self._carts = [(names.index(n), names.index(n.replace("position", "velocity")))
+                       for n in names if n.endswith("cart_position")]
+        self.end_stop_hits = 0
+        self.readings = self._readout.read(self.measured())
+
+    def do_step(self, t: float, h: float, voltage: float) -> None:
+        """``Plant.do_step``, then the end stops and new readings."""
+        super().do_step(t, h, voltage)
+        stopped = end_stop_state(self._xl, self._carts, self.instruments.end_stop)
+        if stopped is not None:
+            self.set_state(stopped)
+            self.end_stop_hits += 1
+        self.readings = self._readout.read(self.measured())
