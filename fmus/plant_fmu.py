@@ -60,16 +60,17 @@ class PlantFmu(FmuBase):
         names = state_names(kind)
         self._names = names
         self._x = [0.0] * len(names)
-        self.plant: Plant | None = None
+        self.plant: InstrumentedPlant | None = None
         defaults = dict(PRESETS[DEFAULT_PRESET[kind]][1])
         self.add_input("voltage", start=0.0, unit="V",
                        description="amplifier command to the motor (clipped to +-voltage_limit)")
-        order = list(MEASURED[kind]) + [n for n in names if n not in MEASURED[kind]]
-        self._y = [0.0] * len(MEASURED[kind])
+        measured = MEASURED[kind]
+        order = list(measured) + [n for n in names if n not in measured]
+        self._y = [0.0] * len(measured)
         for name in order:
             k = names.index(name)
-            getter = (lambda j=MEASURED[kind].index(name): self._y[j]) if name in MEASURED[kind] \
-                else (lambda k=k: self._x[k])
+            j = measured.index(name) if name in measured else -1
+            getter = (lambda j=j: self._y[j]) if j >= 0 else (lambda k=k: self._x[k])
             self.add_output(name, unit=STATE_UNITS[name], description=_STATE_DOC[name],
                             getter=getter, depends_on=(), initial_depends_on=(f"initial_{name}",))
         for name in names:
