@@ -57,6 +57,8 @@ from ipcosim.controllers.laws import (
     PIDGains,
     Schedule,
     SubsystemModel,
+    SwingUp,
+    SwingUpGains,
 )
 from ipcosim.fmus.linearize import LinearModel
 from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, ParameterError, PlantParams, make, parameter_info
@@ -72,6 +74,8 @@ PARAMETER_SETS: dict[str, dict[str, tuple[str, ...]]] = {
     "LQR": {"single-mass": ("thesis",), "double-mass": ("thesis",)},
     "HSMC": {"single-mass": ("tuned", "thesis"), "double-mass": ("thesis",)},
     "AdaptiveHSMC": {"single-mass": ("tuned", "thesis"), "double-mass": ("thesis",)},
+    # not in the thesis, single mass only: energy swing-up from hanging, balanced by the thesis's LQR
+    "SwingUp": {"single-mass": ("tuned",)},
 }
 
 #: Physical constants that do not enter the design model (no inductance, no Coulomb friction, no limit).
@@ -386,6 +390,13 @@ def _pid_specs() -> list[ParamSpec]:
             for f in ("Kp", "Ki", "Kd", "derivative_time_constant")]
 
 
+def _swing_up_specs() -> list[ParamSpec]:
+    g = SwingUpGains()
+    return [ParamSpec(f, getattr(g, f), SwingUpGains.UNITS[f], SwingUpGains.DOCS[f],
+                      "positive" if f in ("catch_angle", "release_angle") else "nonnegative")
+            for f in SwingUpGains.UNITS]
+
+
 def _cascade_specs() -> list[ParamSpec]:
     g = CascadeGains()
     pos = {"theta_ref_limit": "positive", "derivative_time_constant": "nonnegative"}
@@ -403,6 +414,8 @@ def schema(law: str, kind: str) -> list[ParamSpec]:
         specs += _cascade_specs()
     elif law == "LQR":
         specs += _lqr_specs(kind) + _model_specs(kind)
+    elif law == "SwingUp":
+        specs += _swing_up_specs() + _lqr_specs(kind) + _model_specs(kind)
     else:
         specs += _hsmc_specs(kind, law) + _model_specs(kind)
     values = set_values(law, kind, default_set(law, kind))
@@ -411,9 +424,11 @@ def schema(law: str, kind: str) -> list[ParamSpec]:
 
 def _check(law: str, kind: str) -> None:
     if law not in PARAMETER_SETS:
-        raise CatalogError("law", f"unknown control law {law!r}; expected one of {', '.join(LAWS)}")
+        raise CatalogError("law", f"unknown control law {law!r}; expected one of {', '.join(PARAMETER_SETS)}")
     if kind not in PLANT_SUFFIX:
         raise CatalogError("kind", f"unknown plant kind {kind!r}; expected one of {', '.join(KINDS)}")
+    if kind not in PARAMETER_SETS[law]:
+        raise CatalogError("kind", f"control law {law} is not available for the {kind} plant")
 
 
 def _hsmc_values(kind: str, g: HSMCGains, use_thesis: bool) -> dict[str, Any]:
@@ -453,6 +468,9 @@ def set_values(law: str, kind: str, parameter_set: str) -> dict[str, Any]:
     if law == "CascadePID":
         g = TUNED_CASCADE[kind]
         return {f: getattr(g, f) for f in CascadeGains.UNITS}
+    if law == "SwingUp":
+        g = SwingUpGains()
+        return {**{f: getattr(g, f) for f in SwingUpGains.UNITS}, **set_values("LQR", kind, "thesis")}
     if law == "LQR":
         states = design_states(kind)
         if kind == "single-mass":
@@ -579,6 +597,12 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
     if law == "LQR":
         design = lqr_design_from(kind, v, backend)
         return LQR(kind, design, vlim, output_filter_time_constant=float(v["output_filter_time_constant"]))
+    if law == "SwingUp":
+        balance = LQR(kind, lqr_design_from(kind, v, backend), vlim,
+                      output_filter_time_constant=float(v["output_filter_time_constant"]))
+        p = _design_params(kind, v)
+        cart = (p.Meq + p.Mp, p.Beq, p.force_per_amp / p.Ra, p.emf_per_velocity, p.Mp, p.Lp, p.g)
+        return SwingUp(SwingUpGains(**{f: float(v[f]) for f in SwingUpGains.UNITS}), balance, cart, T, vlim)
     n = 2 if kind == "single-mass" else 3
     c = tuple(float(v[f"c{i + 1}"]) for i in range(n))
     if kind == "single-mass":
@@ -638,7 +662,7 @@ def make_law(law: str, kind: str, parameter_set: str | None = None, design_param
     _check(law, kind)
     values: dict[str, Any] = dict(set_values(law, kind, parameter_set or default_set(law, kind)))
     values.update(sample_period=sample_period, voltage_limit=voltage_limit)
-    if design_params is not None and law in ("LQR", "HSMC", "AdaptiveHSMC"):
+    if design_params is not None and law in ("LQR", "HSMC", "AdaptiveHSMC", "SwingUp"):
         names = {s.name for s in schema(law, kind)}
         for k2, val in vars(design_params).items():
             if f"model_{k2}" in names:

@@ -54,6 +54,14 @@ class Instruments:
         Seed of the noise generator.
     end_stop : float
         Track end stops at +-end_stop [m] for every cart; 0 = none.
+    input_delay : float
+        Transport delay of the voltage [s] (a computation delay), rounded to whole plant steps; 0 = none.
+    tap_time : float
+        When the taps act [s] (the step that starts at or just before it).
+    tap_force_impulse : float
+        Impulse of a force tap on the cart carrying the pendulum [N s]; 0 = none.
+    tap_torque_impulse : float
+        Impulse of a torque tap on the pendulum [N m s], counter-clockwise positive; 0 = none.
     """
 
     cart_resolution: float = 0.0
@@ -61,6 +69,10 @@ class Instruments:
     noise_counts: float = 0.0
     noise_seed: int = 0
     end_stop: float = 0.0
+    input_delay: float = 0.0
+    tap_time: float = 0.0
+    tap_force_impulse: float = 0.0
+    tap_torque_impulse: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -71,7 +83,17 @@ class Instruments:
     @property
     def ideal(self) -> bool:
         """True when every option is off."""
-        return not (self.cart_resolution or self.pendulum_resolution or self.noise_counts or self.end_stop)
+        return not (self.cart_resolution or self.pendulum_resolution or self.noise_counts or self.end_stop
+                    or self.input_delay or self.tap_force_impulse or self.tap_torque_impulse)
+
+
+def tap_velocity_change(mass_matrix: tuple[float, float, float], force_impulse: float,
+                        torque_impulse: float) -> tuple[float, float]:
+    """(cart, pendulum) velocity jumps from impulses on the generalized momenta: ``M dv = (P_F, P_tau)``
+    with ``M = [[m11, m12], [m12, m22]]`` the cart-pendulum mass matrix at the current angle."""
+    m11, m12, m22 = mass_matrix
+    det = m11 * m22 - m12 * m12
+    return ((m22 * force_impulse - m12 * torque_impulse) / det, (m11 * torque_impulse - m12 * force_impulse) / det)
 
 
 def quantize(x: float, resolution: float, phase: float = 0.5) -> float:

@@ -33,6 +33,10 @@ _INSTRUMENT_DOC = (
     ("noise_counts", "1", "standard deviation of Gaussian noise on the measured outputs, in counts; 0 = none"),
     ("noise_seed", "1", "seed of the measurement noise (the same seed gives the same run)"),
     ("end_stop", "m", "track end stops at +-end_stop for every cart (IP02: 0.407); 0 = none"),
+    ("input_delay", "s", "transport delay of the voltage (a computation delay), whole plant steps; 0 = none"),
+    ("tap_time", "s", "time of the taps"),
+    ("tap_force_impulse", "N.s", "impulse of a force tap on the cart carrying the pendulum; 0 = none"),
+    ("tap_torque_impulse", "N.m.s", "impulse of a torque tap on the pendulum (counter-clockwise); 0 = none"),
 )
 
 _STATE_DOC = {

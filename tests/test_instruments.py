@@ -115,3 +115,44 @@ def test_plant_fmu_rejects_a_negative_option(plant_fmus: dict[str, Path], tmp_pa
         f.slave.exitInitializationMode()
     assert any("parameter noise_counts = -1.0" in m[2] for m in f.messages)
     f.slave.freeInstance()
+
+
+def test_tap_changes_the_momenta_by_the_impulses() -> None:
+    """M dv = (P_F, P_tau): the generalized momenta jump by exactly the impulses."""
+    from ipcosim.fmus.instruments import tap_velocity_change
+
+    m = (1.3, -0.02, 0.0087)
+    dv, dw = tap_velocity_change(m, 0.3, 0.01)
+    assert m[0] * dv + m[1] * dw == pytest.approx(0.3, rel=1e-12)
+    assert m[1] * dv + m[2] * dw == pytest.approx(0.01, rel=1e-12)
+
+
+def test_torque_tap_on_the_upright_pendulum_of_the_plant() -> None:
+    p = preset("thesis-ch3")
+    plant = InstrumentedPlant(p, instruments=Instruments(tap_time=0.005, tap_torque_impulse=0.005))
+    for k in range(5):
+        plant.do_step(k * H, H, 0.0)
+    assert plant.state == [0.0] * 5 and not plant.tapped
+    plant.do_step(5 * H, H, 0.0)
+    assert plant.tapped and plant.values()["pendulum_velocity"] > 0.5
+
+
+def test_input_delay_holds_the_voltage_back_whole_steps() -> None:
+    plant = InstrumentedPlant(preset("thesis-ch3"), instruments=Instruments(input_delay=0.003))
+    applied = []
+    for k in range(6):
+        plant.do_step(k * H, H, float(k + 1))
+        applied.append(plant.voltage)
+    assert applied == [0.0, 0.0, 0.0, 1.0, 2.0, 3.0]
+
+
+def test_tap_metrics() -> None:
+    from ipcosim.harness.metrics import tap_metrics
+
+    t = np.arange(0, 5, 1e-3)
+    th = np.where(t < 1.0, 0.0, 0.05 * np.exp(-(t - 1.0) / 0.2) * np.cos(10 * (t - 1.0)))
+    m = tap_metrics(t, th)
+    assert m["peak_angle_after_tap_rad"] == pytest.approx(0.05)
+    # the envelope 0.05 e^(-s/0.2) reaches 0.01 at s = 0.2 ln 5 = 0.32 s; the cosine re-enters a little earlier
+    assert 0.2 < m["recovery_time_s"] <= 0.2 * math.log(5) + 1e-3
+    assert tap_metrics(t, np.zeros_like(t)) == {"peak_angle_after_tap_rad": None, "recovery_time_s": None}
