@@ -43,7 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def available_scenarios() -> list[str]:
-    """Scenario folders of the project, in report order (known plant x controller first)."""
+    """The ten plant x controller scenarios of the project, in report order, plus any other folder
+    that is not one of the generator's variants (swing-up, tap, lab: they pose other tasks)."""
+    from ipcosim.harness.scenario.ssp_gen import VARIANTS
     from ipcosim.harness.studies.report import SCENARIOS
 
     try:
@@ -52,7 +54,7 @@ def available_scenarios() -> list[str]:
         return []
     found = sorted(p.name for p in SCENARIO_DIR.iterdir() if (p / "SystemStructure.ssd").exists()) \
         if SCENARIO_DIR.is_dir() else []
-    return [s for s in SCENARIOS if s in found] + [s for s in found if s not in SCENARIOS]
+    return [s for s in SCENARIOS if s in found] + [s for s in found if s not in SCENARIOS and s not in VARIANTS]
 
 
 def plant_kind(scenario: str, spec: Any) -> str:
