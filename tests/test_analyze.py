@@ -22,7 +22,8 @@ from ipcosim.harness.studies.analyze import (
 )
 from ipcosim.harness.studies.loop import LinearizationError, LinearLaw, linear_law
 
-CASES = [(law, kind, s) for law, per in PARAMETER_SETS.items() for kind, sets in per.items() for s in sets]
+CASES = [(law, kind, s) for law, per in PARAMETER_SETS.items() if law != "SwingUp"  # a nonlinear law: no linear model
+         for kind, sets in per.items() for s in sets]
 
 
 @pytest.mark.parametrize("law_name,kind,pset", CASES)
