@@ -357,6 +357,7 @@ def analyze_loop(loop: Loop, pid_search: bool | None = None) -> dict[str, Any]:
         "loop": "broken at the plant input (voltage); sampled-data loop, ZOH, exact at the sample instants",
         "sample_period_s": loop.T, "closed_loop_stable": stable,
         "closed_loop_spectral_radius": float(np.max(np.abs(cl))),
+        "closed_loop_marginal": bool(not stable and abs(float(np.max(np.abs(cl))) - 1.0) < 1e-7),
         "open_loop_unstable_poles": int(sum(abs(p) > 1 + 1e-9 for p in np.linalg.eigvals(np.asarray(loop.L.A)))),
         "peak_sensitivity": ms, "peak_sensitivity_dB": 20 * math.log10(ms), "peak_sensitivity_frequency_rad_s": w_ms,
         "peak_complementary_sensitivity": mt, "peak_complementary_sensitivity_frequency_rad_s": w_mt,
@@ -406,6 +407,9 @@ def statement(result: Mapping[str, Any]) -> str:
         parts.append(f"The sampled loop is stable: peak sensitivity {result['peak_sensitivity']:.3g} "
                      f"({result['peak_sensitivity_dB']:.1f} dB), delay margin "
                      f"{result['delay_margin_s'] * 1e3:.3g} ms.")
+    elif result["closed_loop_marginal"]:
+        parts.append("The sampled loop is marginally stable (a closed-loop pole at z = 1 to rounding: two integrators "
+                     "of which the loop drives only a combination): no margins are given.")
     else:
         parts.append(f"The sampled loop is unstable (spectral radius {result['closed_loop_spectral_radius']:.4g}): "
                      "its margins do not exist.")
