@@ -5,7 +5,8 @@ Each claim is run with the **thesis's gain sets** on the thesis's own plant mode
 encoder counts, Coulomb friction, end stops, +-10 V), for ``STOP_TIME`` = 20 s, in the pure loop
 (plant step 1 ms, law sampled with zero-order hold). Oscillation is measured by one stated
 metric, ``oscillation_rad``: the RMS of the pendulum angle above ``OSCILLATION_CUTOFF_HZ`` = 1 Hz
-(4th-order Butterworth high-pass, forward and backward, over the run after the first second), i.e. the energy of the angle's wobble, not
+(4th-order Butterworth high-pass, forward and backward, over the run after the first
+second), i.e. the energy of the angle's wobble, not
 of the slow lean that moves the cart.
 
 ``search_lqr_fall`` looks for the smallest departure from the nominal double-mass loop that makes
