@@ -87,3 +87,13 @@ def test_extra_scenarios_through_the_master(scenario, check, fmu_env, tmp_path, 
     m = json.loads((tmp_path / "metrics.json").read_text())
     assert check(m), m
     assert m["peak_voltage_V"] <= 10.0
+
+
+@pytest.mark.integration
+def test_swing_up_fmu_validates(fmu_env) -> None:
+    from fmi_helpers import assert_vdmcheck_clean
+    from fmpy.validation import validate_fmu
+
+    fmu = fmu_env / "SwingUpSingleMass.fmu"
+    assert validate_fmu(str(fmu)) == []
+    assert_vdmcheck_clean(fmu)
