@@ -34,3 +34,16 @@ def test_results_margins_table_is_current() -> None:
     from ipcosim.harness.studies.results import margins_table
 
     assert margins_table() in (ROOT / "docs" / "results.md").read_text()
+
+
+def test_judge_gives_a_verdict_per_claim_on_both_plants() -> None:
+    """Short runs: every claim gets a verdict and evidence on both plants; the PID claims hold on both."""
+    from ipcosim.harness.studies.claims import CLAIMS, judge
+
+    rows = judge(stop_time=3.0)
+    assert [r["claim"] for r in rows] == [c.text for c in CLAIMS]
+    verdicts = {"confirmed", "not confirmed", "confirmed on the lab plant only", "confirmed on the ideal plant only"}
+    for r in rows:
+        assert r["verdict"] in verdicts and r["ideal"]["evidence"] and r["lab"]["evidence"]
+    pid = [r for r in rows if "PID" in r["claim"]]
+    assert len(pid) == 2 and all(r["verdict"] == "confirmed" and "falls at" in r["lab"]["evidence"] for r in pid)

@@ -72,24 +72,28 @@ def pid_statement() -> str:
                        for name in ("single-mass-pid", "double-mass-pid"))
 
 
-def claims_table() -> str:
+def claims_table(rows: list[dict[str, Any]] | None = None) -> str:
+    """Markdown table of ``claims.judge()`` (run now unless given)."""
     from ipcosim.harness.studies.claims import judge
 
+    rows = judge() if rows is None else rows
     lines = ["| claim (thesis) | where | measured as | ideal plant | lab plant | verdict |",
              "|---|---|---|---|---|---|"]
-    for r in judge():
+    for r in rows:
         cell = {n: f"{'holds' if r[n]['holds'] else 'does not hold'}: {r[n]['evidence']}" for n in ("ideal", "lab")}
         lines.append(f"| \"{r['claim']}\" | {r['source']} | {r['form']} | {cell['ideal']} | {cell['lab']} | "
                      f"**{r['verdict']}** |")
     return "\n".join(lines)
 
 
-def fall_table() -> str:
+def fall_table(rows: list[dict[str, Any]] | None = None) -> str:
+    """Markdown table of ``claims.search_lqr_fall()`` (run now unless given)."""
     from ipcosim.harness.studies.claims import search_lqr_fall
 
+    rows = search_lqr_fall() if rows is None else rows
     lines = ["| condition (one at a time) | values tried | smallest that makes it fall | evidence |",
              "|---|---|---|---|"]
-    for r in search_lqr_fall():
+    for r in rows:
         tried = ", ".join(f"{v:g}" for v in r["tried"]) + (f" {r['unit']}" if r["unit"] != "-" else "")
         falls = f"{r['falls_at']:g} {r['unit']}" if r["falls_at"] is not None and r["unit"] != "-" else \
             ("yes" if r["falls_at"] is not None else "none")
