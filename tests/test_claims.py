@@ -45,5 +45,5 @@ def test_judge_gives_a_verdict_per_claim_on_both_plants() -> None:
     verdicts = {"confirmed", "not confirmed", "confirmed on the lab plant only", "confirmed on the ideal plant only"}
     for r in rows:
         assert r["verdict"] in verdicts and r["ideal"]["evidence"] and r["lab"]["evidence"]
-    pid = [r for r in rows if "PID" in r["claim"]]
+    pid = [r for r in rows if r["form"].startswith("thesis PID fails")]
     assert len(pid) == 2 and all(r["verdict"] == "confirmed" and "falls at" in r["lab"]["evidence"] for r in pid)
