@@ -139,7 +139,8 @@ def generate(samples: int = 20, workers: int = 2) -> str:
     """The generated part of docs/results.md."""
     parts = [
         "### The thesis's claims, on its own terms",
-        "Thesis gain sets, thesis models (`thesis-ch3`, `thesis-ch4`), 20 s, pure loop; *ideal* = no friction, "
+        "Thesis gain sets, each on its own model (`thesis-ch3`, `thesis-ch4`; the single-mass LQR on the long "
+        "pendulum it was designed on, `thesis-appendix-a`), 20 s, pure loop; *ideal* = no friction, "
         "exact readings; *lab* = encoder counts, 0.1006 N Coulomb friction on every cart (fitted), end stops, "
         "+-10 V (`ipcosim.fmus.instruments.REALISM`). Oscillation = RMS of the angle above 1 Hz (Butterworth "
         "high-pass) after the first second. ITAE = integral of t |x - r| dt.", claims_table(),
