@@ -57,6 +57,8 @@ from ipcosim.controllers.laws import (
     PIDGains,
     Schedule,
     SubsystemModel,
+    SwingUp,
+    SwingUpGains,
 )
 from ipcosim.fmus.linearize import LinearModel
 from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, ParameterError, PlantParams, make, parameter_info
@@ -72,6 +74,8 @@ PARAMETER_SETS: dict[str, dict[str, tuple[str, ...]]] = {
     "LQR": {"single-mass": ("thesis",), "double-mass": ("thesis",)},
     "HSMC": {"single-mass": ("tuned", "thesis"), "double-mass": ("thesis",)},
     "AdaptiveHSMC": {"single-mass": ("tuned", "thesis"), "double-mass": ("thesis",)},
+    # not in the thesis, single mass only: energy swing-up from hanging, balanced by the thesis's LQR
+    "SwingUp": {"single-mass": ("tuned",)},
 }
 
 #: Physical constants that do not enter the design model (no inductance, no Coulomb friction, no limit).
@@ -173,10 +177,12 @@ def thesis_adaptive(kind: str) -> tuple[HSMCGains, AdaptiveSchedules]:
     base = thesis_hsmc_gains(kind)
     if kind == "single-mass":
         # c1 = 43.9911 + 3 e^-0.1t, c2 = 0.1766 + 10 e^-150t, k2 = K2 + dKP2 e^-KP2 t = 0.5 + 15 e^-0.1t,
-        # KI = 320 (1 - dKI2 e^-KI2 t) = 320 - 320 e^-0.3t, eta2 = 0.0005
+        # KI = 320 (1 - dKI2 e^-KI2 t) = 320 - 320 e^-0.3t, eta2 = 0.0005; the first layer's by the same
+        # forms: k1 = K1 + dKP e^-KP1 t = 14 e^-0.1t (no K1 in the listing), KI1 = 320 (1 - dKI e^-KI1 t)
         g = replace(base, c=(43.9911, 0.1766), k=0.5, eta=0.0005, KI=320.0)
         return g, AdaptiveSchedules(k=Schedule(0.5, 15.0, 0.1), KI=Schedule(320.0, -320.0, 0.3),
-                                    c=(Schedule(43.9911, 3.0, 0.1), Schedule(0.1766, 10.0, 150.0)))
+                                    c=(Schedule(43.9911, 3.0, 0.1), Schedule(0.1766, 10.0, 150.0)),
+                                    k1=Schedule(0.0, 14.0, 0.1), KI1=Schedule(320.0, -320.0, 4.0))
     # k3 = 9 + 11.5 e^-t, eta3 = 17 + 1.1 e^-2t, c2 = 0.6506 - 0.5 e^-3t, KI = 0
     c = list(base.c)
     c[1] = 0.7 * abs(sum(THESIS_B5[f"a{i}"] for i in range(7, 13)))  # B.6: 0.6506, without the -0.2
@@ -321,7 +327,12 @@ def _hsmc_specs(kind: str, law: str) -> list[ParamSpec]:
             doc = f"thesis App. {'A' if kind == 'single-mass' else 'B'}.5 constant: d({row})/dt per {state}"
         specs.append(ParamSpec(name, value, unit, doc))
     if law == "AdaptiveHSMC":
-        for base in ["k", "eta", "KI"] + [f"c{i + 1}" for i in range(n)]:
+        specs += [ParamSpec("k1", 0.0, "1/s", "first-layer reaching gain: the top layer's law adds "
+                                              "lambda1 (k1 S1 + KI1 int S1) (thesis App. A.6 deltaKP, KP1)",
+                            "nonnegative"),
+                  ParamSpec("KI1", 0.0, "1/s2", "first-layer integral gain (thesis App. A.6 KI1, deltaKI)",
+                            "nonnegative")]
+        for base in ["k", "eta", "KI", "k1", "KI1"] + [f"c{i + 1}" for i in range(n)]:
             unit = next(s.unit for s in specs if s.name == base)
             specs += [ParamSpec(f"{base}_delta", 0.0, unit, f"schedule {base}(t) = {base} + {base}_delta "
                                                             f"exp(-{base}_rate t): initial excess"),
@@ -379,6 +390,13 @@ def _pid_specs() -> list[ParamSpec]:
             for f in ("Kp", "Ki", "Kd", "derivative_time_constant")]
 
 
+def _swing_up_specs() -> list[ParamSpec]:
+    g = SwingUpGains()
+    return [ParamSpec(f, getattr(g, f), SwingUpGains.UNITS[f], SwingUpGains.DOCS[f],
+                      "positive" if f in ("catch_angle", "release_angle") else "nonnegative")
+            for f in SwingUpGains.UNITS]
+
+
 def _cascade_specs() -> list[ParamSpec]:
     g = CascadeGains()
     pos = {"theta_ref_limit": "positive", "derivative_time_constant": "nonnegative"}
@@ -396,6 +414,8 @@ def schema(law: str, kind: str) -> list[ParamSpec]:
         specs += _cascade_specs()
     elif law == "LQR":
         specs += _lqr_specs(kind) + _model_specs(kind)
+    elif law == "SwingUp":
+        specs += _swing_up_specs() + _lqr_specs(kind) + _model_specs(kind)
     else:
         specs += _hsmc_specs(kind, law) + _model_specs(kind)
     values = set_values(law, kind, default_set(law, kind))
@@ -404,9 +424,11 @@ def schema(law: str, kind: str) -> list[ParamSpec]:
 
 def _check(law: str, kind: str) -> None:
     if law not in PARAMETER_SETS:
-        raise CatalogError("law", f"unknown control law {law!r}; expected one of {', '.join(LAWS)}")
+        raise CatalogError("law", f"unknown control law {law!r}; expected one of {', '.join(PARAMETER_SETS)}")
     if kind not in PLANT_SUFFIX:
         raise CatalogError("kind", f"unknown plant kind {kind!r}; expected one of {', '.join(KINDS)}")
+    if kind not in PARAMETER_SETS[law]:
+        raise CatalogError("kind", f"control law {law} is not available for the {kind} plant")
 
 
 def _hsmc_values(kind: str, g: HSMCGains, use_thesis: bool) -> dict[str, Any]:
@@ -420,9 +442,9 @@ def _hsmc_values(kind: str, g: HSMCGains, use_thesis: bool) -> dict[str, Any]:
 
 def _schedule_values(g: HSMCGains, s: AdaptiveSchedules) -> dict[str, float]:
     v: dict[str, float] = {}
-    for name in ("k", "eta", "KI"):
+    for name in ("k", "eta", "KI", "k1", "KI1"):
         sch = getattr(s, name)
-        v[name] = sch.base if sch else getattr(g, name)
+        v[name] = sch.base if sch else getattr(g, name, 0.0)
         v[f"{name}_delta"] = sch.delta if sch else 0.0
         v[f"{name}_rate"] = sch.rate if sch else 0.0
     scs = s.c or (None,) * len(g.c)
@@ -446,6 +468,9 @@ def set_values(law: str, kind: str, parameter_set: str) -> dict[str, Any]:
     if law == "CascadePID":
         g = TUNED_CASCADE[kind]
         return {f: getattr(g, f) for f in CascadeGains.UNITS}
+    if law == "SwingUp":
+        g = SwingUpGains()
+        return {**{f: getattr(g, f) for f in SwingUpGains.UNITS}, **set_values("LQR", kind, "thesis")}
     if law == "LQR":
         states = design_states(kind)
         if kind == "single-mass":
@@ -572,6 +597,12 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
     if law == "LQR":
         design = lqr_design_from(kind, v, backend)
         return LQR(kind, design, vlim, output_filter_time_constant=float(v["output_filter_time_constant"]))
+    if law == "SwingUp":
+        balance = LQR(kind, lqr_design_from(kind, v, backend), vlim,
+                      output_filter_time_constant=float(v["output_filter_time_constant"]))
+        p = _design_params(kind, v)
+        cart = (p.Meq + p.Mp, p.Beq, p.force_per_amp / p.Ra, p.emf_per_velocity, p.Mp, p.Lp, p.g)
+        return SwingUp(SwingUpGains(**{f: float(v[f]) for f in SwingUpGains.UNITS}), balance, cart, T, vlim)
     n = 2 if kind == "single-mass" else 3
     c = tuple(float(v[f"c{i + 1}"]) for i in range(n))
     if kind == "single-mass":
@@ -586,14 +617,26 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
     else:
         models = subsystem_models(design_model(_design_params(kind, v)))
     if law == "HSMC":
-        return HSMC(kind, g, models, T, vlim)
+        return _through_motor(HSMC(kind, g, models, T, vlim), kind, v)
 
     def sched(name: str) -> Schedule | None:
         return Schedule(float(v[name]), float(v[f"{name}_delta"]), float(v[f"{name}_rate"]))
 
+    def lower(name: str) -> Schedule | None:  # first-layer gains: absent unless set
+        return sched(name) if float(v[name]) or float(v[f"{name}_delta"]) else None
+
     schedules = AdaptiveSchedules(k=sched("k"), eta=sched("eta"), KI=sched("KI"),
-                                  c=tuple(sched(f"c{i + 1}") for i in range(n)))
-    return AdaptiveHSMC(kind, g, models, schedules, T, vlim)
+                                  c=tuple(sched(f"c{i + 1}") for i in range(n)), k1=lower("k1"), KI1=lower("KI1"))
+    return _through_motor(AdaptiveHSMC(kind, g, models, schedules, T, vlim), kind, v)
+
+
+def _through_motor(law: HSMC, kind: str, v: Mapping[str, Any]) -> HSMC:
+    """The App. A.5 constants model a force-driven cart: their law's output is a force, applied through
+    the design model's motor (``HSMC.drive_through_motor``). The other models are voltage models."""
+    if kind == "single-mass" and bool(v["use_thesis_coefficients"]):
+        p = _design_params(kind, v)
+        law.drive_through_motor(p.force_per_amp / p.Ra, p.emf_per_velocity)
+    return law
 
 
 def make_law(law: str, kind: str, parameter_set: str | None = None, design_params: PlantParams | None = None,
@@ -619,7 +662,7 @@ def make_law(law: str, kind: str, parameter_set: str | None = None, design_param
     _check(law, kind)
     values: dict[str, Any] = dict(set_values(law, kind, parameter_set or default_set(law, kind)))
     values.update(sample_period=sample_period, voltage_limit=voltage_limit)
-    if design_params is not None and law in ("LQR", "HSMC", "AdaptiveHSMC"):
+    if design_params is not None and law in ("LQR", "HSMC", "AdaptiveHSMC", "SwingUp"):
         names = {s.name for s in schema(law, kind)}
         for k2, val in vars(design_params).items():
             if f"model_{k2}" in names:

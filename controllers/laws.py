@@ -529,6 +529,23 @@ class HSMC(DiscreteLaw):
         for d in self._d:
             d.reset()
 
+    #: Output = force_gain * (law's u) + emf_gain * (motor-cart velocity): 1 and 0 when the subsystem
+    #: models are voltage models; ``drive_through_motor`` sets them for force models.
+    force_gain = 1.0
+    emf_gain = 0.0
+
+    def drive_through_motor(self, force_per_volt: float, emf_per_velocity: float) -> "HSMC":
+        """Treat the law's ``u`` as a force [N] and apply the voltage that makes the motor produce it.
+
+        The cart force of the DC motor (inductance neglected) is ``F = Kf (V - Ke v)`` with
+        ``Kf = N Kt/(Ra rg)`` [N/V] and ``Ke = N Kb/rg`` [V s/m], ``v`` the motor-cart velocity, so
+        ``V = F/Kf + Ke v``. Needed when the subsystem models ``f_i + b_i u`` describe a force-driven
+        cart (the thesis's App. A.5 constants); returns the law.
+        """
+        self.force_gain = 1.0 / _check_positive("force_per_volt", force_per_volt)
+        self.emf_gain = _check_nonneg("emf_per_velocity", emf_per_velocity)
+        return self
+
     def _state(self, y: np.ndarray, r: float) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
         """Design-model state estimate in error coordinates (ipcosim.fmus.physics order without the current),
         and the (positions, velocities) of the subsystems: pendulum, pendulum cart, (motor cart)."""
@@ -540,6 +557,10 @@ class HSMC(DiscreteLaw):
         xa, xc, th = float(y[0]) - r, float(y[1]) - r, float(y[2])
         xad, xcd, thd = d[2].update(float(y[0])), d[1].update(float(y[1])), d[0].update(th)
         return (xa, xad, xc, xcd, th, thd), (th, xc, xa), (thd, xcd, xad)
+
+    def _lower_layer_terms(self, c: tuple[float, ...], pos: tuple[float, ...], vel: tuple[float, ...]) -> float:
+        """Reaching terms of the first layer added to the top layer's (0 for HSMC; see AdaptiveHSMC)."""
+        return 0.0
 
     def current_gains(self) -> tuple[tuple[float, ...], float, float, float]:
         """(c, k, eta, KI) in effect at the law's time (constant for HSMC)."""
@@ -555,9 +576,13 @@ class HSMC(DiscreteLaw):
             num += a * ci * v
         for w, xi in zip(self._w, x):
             num += w * xi
+        num += self._lower_layer_terms(c, pos, vel)
         den = self._den
         integral = self.integral + S * self.sample_period
         u_rest = -(num + k * S + eta * math.tanh(self.gains.tanh_gain * S)) / den
+        if self.emf_gain or self.force_gain != 1.0:  # a force model: the voltage that gives the force
+            den = den / self.force_gain
+            u_rest = u_rest * self.force_gain + self.emf_gain * vel[-1]
         u = u_rest - KI * integral / den
         if abs(u) <= self.voltage_limit or (u > 0) != (-KI * S / den > 0):
             self.integral = integral
@@ -575,6 +600,10 @@ class AdaptiveSchedules:
     eta: Schedule | None = None
     KI: Schedule | None = None
     c: tuple[Schedule | None, ...] = ()
+    #: First-layer reaching gains (thesis App. A.6 KP1/deltaKP, KI1/deltaKI): the top layer's law gains
+    #: ``alpha_1 (k1 S1 + KI1 int S1)``, so that the part of S_n carried by S1 reaches like S1' = -k1 S1 - KI1 int S1.
+    k1: Schedule | None = None
+    KI1: Schedule | None = None
 
 
 class AdaptiveHSMC(HSMC):
@@ -587,7 +616,7 @@ class AdaptiveHSMC(HSMC):
     def __init__(self, kind: str, gains: HSMCGains, models: Sequence[SubsystemModel],
                  schedules: AdaptiveSchedules, sample_period: float = 1e-3, voltage_limit: float = 10.0) -> None:
         super().__init__(kind, gains, models, sample_period, voltage_limit)
-        for name in ("k", "eta", "KI"):
+        for name in ("k", "eta", "KI", "k1", "KI1"):
             sch = getattr(schedules, name)
             if sch is not None:
                 for part in ("base", "delta", "rate"):
@@ -610,6 +639,21 @@ class AdaptiveHSMC(HSMC):
                                                            "must stay > 0")
         self.schedules = schedules
 
+    def reset(self) -> None:
+        super().reset()
+        self.integral1 = 0.0
+
+    def _lower_layer_terms(self, c: tuple[float, ...], pos: tuple[float, ...], vel: tuple[float, ...]) -> float:
+        sc = self.schedules
+        if sc.k1 is None and sc.KI1 is None:
+            return 0.0
+        t = self.time
+        S1 = c[0] * pos[0] + vel[0]
+        self.integral1 += S1 * self.sample_period
+        k1 = sc.k1(t) if sc.k1 is not None else 0.0
+        KI1 = sc.KI1(t) if sc.KI1 is not None else 0.0
+        return self._alpha[0] * (k1 * S1 + KI1 * self.integral1)
+
     def current_gains(self) -> tuple[tuple[float, ...], float, float, float]:
         t = self.time
         g, sc = self.gains, self.schedules
@@ -618,3 +662,116 @@ class AdaptiveHSMC(HSMC):
         eta = sc.eta(t) if sc.eta is not None else g.eta
         KI = sc.KI(t) if sc.KI is not None else g.KI
         return c, k, eta, KI
+
+
+# ============================================================================ Swing-up (not in the thesis)
+
+@dataclass(frozen=True)
+class SwingUpGains:
+    """Energy-based swing-up (Astrom & Furuta, *Automatica* 36, 2000) with a hand-over to a balancing law.
+
+    Pendulum energy about the pivot, zero upright at rest (``J = Mp Lp^2/3``, ``l = Lp/2``)::
+
+        E = J th'^2 / 2 + Mp g l (cos th - 1)                  (-2 Mp g l hanging at rest)
+
+    Since ``dE/dt = Mp l cos(th) th' xc''`` (without pivot friction), the cart acceleration
+
+        a = sat_amax( k_energy g (E0 - E)/(2 Mp g l) sign(th' cos th) ) - kx xc - kv xc'
+
+    pumps the energy to ``E0 = energy_target * 2 Mp g l``; ``kx``, ``kv`` keep the cart near the centre
+    of the track. The acceleration is turned into volts by the design model's cart and motor,
+    ``V = ((Meq + Mp) a + Beq xc')/Kf + Ke xc'``. Within ``catch_angle`` of upright the balancing law
+    takes over (its estimator started from the swing-up's estimates); beyond ``release_angle`` the
+    swing-up takes over again. A hanging start needs a kick: sign(0) is taken as +1.
+    """
+
+    # a grid search on thesis-ch3 (ideal and with encoder counts and 0.1 N Coulomb friction): the
+    # smallest track excursion among the sets that swing up and stay up on both
+    k_energy: float = 20.0
+    accel_limit: float = 4.0       # m/s^2
+    kx: float = 4.0                # 1/s^2
+    kv: float = 4.0                # 1/s
+    energy_target: float = 0.05    # fraction of 2 Mp g l
+    catch_angle: float = 0.3       # rad
+    release_angle: float = 0.7     # rad
+    derivative_time_constant: float = 0.005  # s
+
+    UNITS = {"k_energy": "1", "accel_limit": "m/s2", "kx": "1/s2", "kv": "1/s", "energy_target": "1",
+             "catch_angle": "rad", "release_angle": "rad", "derivative_time_constant": "s"}
+    DOCS = {"k_energy": "energy-pumping gain: cart acceleration g k_energy per unit of normalized energy error",
+            "accel_limit": "largest cart acceleration the swing-up asks for",
+            "kx": "cart-centring gain on the position during the swing-up",
+            "kv": "cart-centring gain on the velocity during the swing-up",
+            "energy_target": "pendulum energy aimed at, as a fraction of 2 Mp g l (0 = upright at rest)",
+            "catch_angle": "|angle| from upright below which the balancing LQR takes over",
+            "release_angle": "|angle| from upright above which the swing-up takes over again",
+            "derivative_time_constant": "velocity estimates during the swing-up: filtered differences"}
+
+
+def wrap_angle(th: float) -> float:
+    """``th`` wrapped to [-pi, pi) (upright = 0)."""
+    return (th + math.pi) % (2 * math.pi) - math.pi
+
+
+class SwingUp(DiscreteLaw):
+    """Swing-up from hanging and hand-over to a balancing LQR (``SwingUpGains``), single mass only.
+
+    Parameters
+    ----------
+    gains : SwingUpGains
+    balance : LQR
+        The balancing law (same sample period and limit).
+    cart : tuple of float
+        ``(Meq + Mp, Beq, Kf, Ke, Mp, Lp, g)`` of the design model: cart mass [kg], viscous damping
+        [N s/m], force per volt N Kt/(Ra rg) [N/V], back-EMF per velocity N Kb/rg [V s/m], pendulum
+        mass [kg] and length [m], gravity [m/s^2].
+    """
+
+    def __init__(self, gains: SwingUpGains, balance: "LQR", cart: tuple[float, ...],
+                 sample_period: float = 1e-3, voltage_limit: float = 10.0) -> None:
+        super().__init__("single-mass", sample_period, voltage_limit)
+        for f in fields(gains):
+            _check_nonneg(f.name, getattr(gains, f.name))
+        if not 0 < gains.catch_angle < gains.release_angle:
+            raise LawParameterError("catch_angle", f"parameters catch_angle = {gains.catch_angle} rad and "
+                                                   f"release_angle = {gains.release_angle} rad: need "
+                                                   "0 < catch < release")
+        self.gains = gains
+        self.balance = balance
+        self.m, self.beq, self.kf, self.ke, mp, lp, g = (float(v) for v in cart)
+        self.J, self.mgl = mp * lp * lp / 3, mp * g * lp / 2
+        self.mgl2 = 2 * self.mgl
+        tau = gains.derivative_time_constant
+        self._dx, self._dth = FilteredDerivative(self.sample_period, tau), FilteredDerivative(self.sample_period, tau)
+        self.reset()
+
+    def reset(self) -> None:
+        super().reset()
+        self.balancing = False
+        self.catches = 0
+        self.energy = 0.0
+        self._dx.reset()
+        self._dth.reset()
+        self.balance.reset()
+
+    def _compute(self, y, r: float) -> float:
+        g = self.gains
+        x, th = float(y[0]), float(y[1])
+        v, w = self._dx.update(x), self._dth.update(th)
+        thw = wrap_angle(th)
+        self.energy = 0.5 * self.J * w * w + self.mgl * (math.cos(th) - 1.0)
+        if self.balancing and abs(thw) > g.release_angle:
+            self.balancing = False
+        if not self.balancing and abs(thw) < g.catch_angle:
+            self.balancing = True
+            self.catches += 1
+            self.balance.reset()
+            self.balance.x_pred = np.array([x, v, thw, w])
+        if self.balancing:
+            self.balance.ticks = self.ticks
+            return self.balance._compute((x, thw), r)
+        s = w * math.cos(th)
+        sign = 1.0 if s >= 0 else -1.0
+        pump = g.k_energy * 9.81 * (g.energy_target * self.mgl2 - self.energy) / self.mgl2 * sign
+        a = saturate(pump, g.accel_limit) - g.kx * (x - r) - g.kv * v
+        return (self.m * a + self.beq * v) / self.kf + self.ke * v

@@ -121,11 +121,21 @@ PLANT_KINDS: dict[str, type] = {"single-mass": SingleMassParams, "double-mass": 
 #: Named presets: (plant kind, overrides of the class defaults, one-line description).
 PRESETS: dict[str, tuple[str, dict[str, float], str]] = {
     "thesis-ch3": ("single-mass", {},
-                   "single mass, short pendulum (0.3371 m): reproduces thesis eq. 3.24 and its poles"),
+                   "single mass, the thesis's MIXED set: the long pendulum's mass (0.2303 kg) on the medium "
+                   "pendulum's length (0.3371 m), no real pendulum; kept because it reproduces thesis eq. 3.24 "
+                   "and its poles (the thesis's ch. 3 model)"),
     "thesis-appendix-a": ("single-mass", {"Lp": 0.6413},
-                          "single mass, long pendulum (0.6413 m): reproduces the App. A.2 4-state A, B"),
+                          "single mass, long pendulum (0.2303 kg, 0.6413 m), physically consistent: reproduces "
+                          "the App. A.2 4-state A, B (the model the thesis designed its LQR on)"),
+    "ip02-medium": ("single-mass", {"Mp": 0.12717, "Lp": 0.337},
+                    "single mass, medium pendulum (0.12717 kg, 0.337 m: the double-mass fit), physically "
+                    "consistent"),
     "thesis-ch4": ("double-mass", {},
                    "double mass, medium pendulum: reproduces thesis eq. 4.23 and App. B.3"),
+    # b2 FITTED (not measured): ipcosim.harness.studies.friction.fit_passive_cart_friction()
+    "thesis-ch4-friction": ("double-mass", {"b2": 0.1006},
+                            "thesis-ch4 plus a passive-cart Coulomb force b2 = 0.1006 N, FITTED so that the "
+                            "thesis's double-mass HSMC leaves the thesis's 5.575 mm steady-state error (20 s)"),
 }
 
 DEFAULT_PRESET = {"single-mass": "thesis-ch3", "double-mass": "thesis-ch4"}

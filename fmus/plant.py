@@ -6,6 +6,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ipcosim.fmus.instruments import Instruments, Readout, end_stop_state, tap_velocity_change
 from ipcosim.fmus.integrator import FastETDRK4
 from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, kind_of, validate
 from ipcosim.fmus.physics import (
@@ -201,3 +202,64 @@ class Plant:
         """The encoder-measured positions (``ipcosim.fmus.physics.MEASURED``)."""
         v = self.values()
         return tuple(v[n] for n in MEASURED[self.kind])
+
+
+class InstrumentedPlant(Plant):
+    """``Plant`` with the bench's instruments (``ipcosim.fmus.instruments``): encoder quantization and
+    seeded noise on the measured positions (``readings``), and track end stops applied after each step.
+
+    With ``Instruments()`` (the default, everything off) it behaves exactly as ``Plant`` and its
+    readings are the true positions.
+    """
+
+    def __init__(self, params: PlantParams, x0: Sequence[float] | None = None, t0: float = 0.0,
+                 instruments: Instruments | None = None) -> None:
+        super().__init__(params, x0, t0)
+        self.instruments = instruments or Instruments()
+        names = self.state_names
+        res = [self.instruments.pendulum_resolution if n == "pendulum_angle" else self.instruments.cart_resolution
+               for n in MEASURED[self.kind]]
+        self._readout = Readout(self.instruments, res)
+        self._carts = [(names.index(n), names.index(n.replace("position", "velocity")))
+                       for n in names if n.endswith("cart_position")]
+        self.end_stop_hits = 0
+        self.tapped = False
+        self._delayed: list[float] = []
+        self.readings = self._readout.read(self.measured())
+
+    def _tap(self, t: float, h: float) -> None:
+        inst = self.instruments
+        if self.tapped or not (inst.tap_force_impulse or inst.tap_torque_impulse) or t + h <= inst.tap_time:
+            return
+        self.tapped = True
+        p = self.params
+        names = self.state_names
+        cart = "cart" if self.kind == "single-mass" else "passive_cart"
+        th = self._xl[names.index("pendulum_angle")]
+        ml = 0.5 * p.Mp * p.Lp
+        m11 = (p.Meq if self.kind == "single-mass" else p.Mc) + p.Mp
+        dv, dw = tap_velocity_change((m11, -ml * math.cos(th), p.Mp * p.Lp * p.Lp / 3.0),
+                                     inst.tap_force_impulse, inst.tap_torque_impulse)
+        x = list(self._xl)
+        x[names.index(f"{cart}_velocity")] += dv
+        x[names.index("pendulum_velocity")] += dw
+        self.set_state(x)
+
+    def _delay(self, h: float, voltage: float) -> float:
+        n = round(self.instruments.input_delay / h)
+        if n <= 0:
+            return voltage
+        if not self._delayed:
+            self._delayed = [0.0] * n
+        self._delayed.append(voltage)
+        return self._delayed.pop(0)
+
+    def do_step(self, t: float, h: float, voltage: float) -> None:
+        """``Plant.do_step`` with the delayed voltage and the taps, then the end stops and new readings."""
+        self._tap(t, h)
+        super().do_step(t, h, self._delay(h, voltage))
+        stopped = end_stop_state(self._xl, self._carts, self.instruments.end_stop)
+        if stopped is not None:
+            self.set_state(stopped)
+            self.end_stop_hits += 1
+        self.readings = self._readout.read(self.measured())

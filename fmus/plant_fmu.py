@@ -9,15 +9,35 @@ thesis preset; the long-pendulum preset ``thesis-appendix-a`` is ``Lp = 0.6413``
 No output depends directly on ``voltage`` (the voltage acts through the integrated
 dynamics), so the model structure declares no feed-through and a master sees no
 algebraic loop. At initialization each output equals its ``initial_*`` parameter.
+
+The measured positions are what the encoders read (``ipcosim.fmus.instruments``): exact by
+default; whole counts with ``cart_resolution`` / ``pendulum_resolution``, plus seeded noise with
+``noise_counts``; ``end_stop`` stops the carts at the ends of the track.
 """
 from __future__ import annotations
 
 from typing import Any
 
 from ipcosim.fmus.fmi import FmuBase, StepFailure
-from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, make, parameter_info
+from ipcosim.fmus.instruments import InstrumentError, Instruments
+from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, ParameterError, make, parameter_info
 from ipcosim.fmus.physics import MEASURED, STATE_UNITS, state_names
-from ipcosim.fmus.plant import Plant, PlantStepError
+from ipcosim.fmus.plant import InstrumentedPlant, PlantStepError
+
+#: Instrument options (``ipcosim.fmus.instruments.Instruments``) as FMU parameters; 0 = off.
+_INSTRUMENT_DOC = (
+    ("cart_resolution", "m", "cart encoder resolution: position outputs are whole counts of it; 0 = exact "
+                             "(IP02: 2.275e-5)"),
+    ("pendulum_resolution", "rad", "pendulum encoder resolution: the angle output is whole counts of it; 0 = exact "
+                                   "(IP02: 1.534e-3)"),
+    ("noise_counts", "1", "standard deviation of Gaussian noise on the measured outputs, in counts; 0 = none"),
+    ("noise_seed", "1", "seed of the measurement noise (the same seed gives the same run)"),
+    ("end_stop", "m", "track end stops at +-end_stop for every cart (IP02: 0.407); 0 = none"),
+    ("input_delay", "s", "transport delay of the voltage (a computation delay), whole plant steps; 0 = none"),
+    ("tap_time", "s", "time of the taps"),
+    ("tap_force_impulse", "N.s", "impulse of a force tap on the cart carrying the pendulum; 0 = none"),
+    ("tap_torque_impulse", "N.m.s", "impulse of a torque tap on the pendulum (counter-clockwise); 0 = none"),
+)
 
 _STATE_DOC = {
     "cart_position": "cart position (encoder), positive to the right",
@@ -44,16 +64,19 @@ class PlantFmu(FmuBase):
         names = state_names(kind)
         self._names = names
         self._x = [0.0] * len(names)
-        self.plant: Plant | None = None
+        self.plant: InstrumentedPlant | None = None
         defaults = dict(PRESETS[DEFAULT_PRESET[kind]][1])
         self.add_input("voltage", start=0.0, unit="V",
                        description="amplifier command to the motor (clipped to +-voltage_limit)")
-        order = list(MEASURED[kind]) + [n for n in names if n not in MEASURED[kind]]
+        measured = MEASURED[kind]
+        order = list(measured) + [n for n in names if n not in measured]
+        self._y = [0.0] * len(measured)
         for name in order:
             k = names.index(name)
+            j = measured.index(name) if name in measured else -1
+            getter = (lambda j=j: self._y[j]) if j >= 0 else (lambda k=k: self._x[k])
             self.add_output(name, unit=STATE_UNITS[name], description=_STATE_DOC[name],
-                            getter=(lambda k=k: self._x[k]), depends_on=(),
-                            initial_depends_on=(f"initial_{name}",))
+                            getter=getter, depends_on=(), initial_depends_on=(f"initial_{name}",))
         for name in names:
             self.add_parameter(f"initial_{name}", start=0.0, unit=STATE_UNITS[name],
                                description=f"initial {_STATE_DOC[name].split(' (')[0]}")
@@ -62,13 +85,21 @@ class PlantFmu(FmuBase):
             self._param_names.append(info["name"])
             self.add_parameter(info["name"], start=defaults.get(info["name"], info["default"]), unit=info["unit"],
                                description=f"{info['doc']} [{info['source']}]")
+        for name, unit, doc in _INSTRUMENT_DOC:
+            self.add_parameter(name, start=0.0, unit=unit, description=doc)
 
     def setup(self) -> None:
         # params.make validates: "parameter Mp = -1.0 kg must be > 0 (pendulum mass)" (ParameterError)
         params = make(self.kind, **{n: getattr(self, n) for n in self._param_names})
         x0 = [getattr(self, f"initial_{n}") for n in self._names]
-        self.plant = Plant(params, x0, t0=self.start_time)
+        try:
+            instruments = Instruments(**{n: (int(getattr(self, n)) if n == "noise_seed" else float(getattr(self, n)))
+                                         for n, _, _ in _INSTRUMENT_DOC})
+        except InstrumentError as exc:
+            raise ParameterError(str(exc).replace("instrument option", "parameter")) from None
+        self.plant = InstrumentedPlant(params, x0, t0=self.start_time, instruments=instruments)
         self._x = self.plant.state
+        self._y = list(self.plant.readings)
 
     def step(self, t: float, h: float) -> None:
         plant = self.plant
@@ -77,3 +108,4 @@ class PlantFmu(FmuBase):
         except (PlantStepError, ValueError) as exc:
             raise StepFailure(str(exc)) from exc
         self._x = plant.state
+        self._y = list(plant.readings)

@@ -137,3 +137,53 @@ def compute_metrics(time: Any, position: Any, reference: Any, angle: Any, voltag
             t_ref = t[int(changed[-1]) + 1] if changed.size else t[0]
             result["settling_time_s"] = float(t[entry] - t_ref)
     return result
+
+
+def wrapped(angle: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi) (upright = 0; a swing-up's angle starts at pi)."""
+    return (np.asarray(angle, dtype=float) + math.pi) % (2 * math.pi) - math.pi
+
+
+def upright_metrics(time: Any, position: Any, angle: Any) -> dict[str, Any]:
+    """Metrics of a run that need not start upright (a swing-up): ``time_to_upright_s`` (from which
+    on ``|wrapped angle| < UPRIGHT_LIMIT_RAD`` to the end of the run; None if it does not end
+    upright) and ``track_used_m`` (largest ``|position|`` of the motor-driven cart)."""
+    t = _as_1d("time", time, None)
+    th = np.abs(wrapped(_as_1d("angle", angle, t.size)))
+    x = _as_1d("position", position, t.size)
+    down = np.nonzero(~(th < UPRIGHT_LIMIT_RAD))[0]
+    if down.size == 0:
+        t_up: float | None = float(t[0])
+    elif down[-1] == t.size - 1:
+        t_up = None
+    else:
+        t_up = float(t[down[-1] + 1])
+    out = {"time_to_upright_s": t_up, "track_used_m": _finite_or_none(float(np.max(np.abs(x))))}
+    out.update(tap_metrics(t, angle))
+    return out
+
+
+#: Band the pendulum must re-enter (and stay in) after a tap to count as recovered [rad].
+RECOVERY_BAND_RAD = 0.01
+
+
+def tap_metrics(time: Any, angle: Any) -> dict[str, Any]:
+    """``peak_angle_after_tap_rad`` (largest ``|angle|`` from the instant the angle first leaves its
+    initial value by more than 1e-6 rad: the tap, for a pendulum at rest upright) and
+    ``recovery_time_s`` (from that instant until ``|angle|`` is inside +-RECOVERY_BAND_RAD for
+    good; None if it ends outside). Both None when the angle never moves. On a step-task run they
+    describe the step's angle excursion instead."""
+    t = _as_1d("time", time, None)
+    th = wrapped(_as_1d("angle", angle, t.size))
+    moved = np.nonzero(np.abs(th - th[0]) > 1e-6)[0]
+    if moved.size == 0 or not np.all(np.isfinite(th)):
+        return {"peak_angle_after_tap_rad": None, "recovery_time_s": None}
+    k0 = int(moved[0])
+    outside = np.nonzero(np.abs(th[k0:]) >= RECOVERY_BAND_RAD)[0]
+    if outside.size == 0:
+        rec: float | None = 0.0
+    elif k0 + outside[-1] == t.size - 1:
+        rec = None
+    else:
+        rec = float(t[k0 + outside[-1] + 1] - t[k0])
+    return {"peak_angle_after_tap_rad": float(np.max(np.abs(th[k0:]))), "recovery_time_s": rec}

@@ -28,7 +28,9 @@ EXPECTED = sorted(f"{p}-{c}" for p in ("single-mass", "double-mass")
 
 
 def test_the_ten_scenarios_exist_and_follow_the_contract():
-    assert scenario_names() == EXPECTED
+    from ipcosim.harness.scenario.ssp_gen import VARIANTS
+
+    assert scenario_names() == sorted(EXPECTED + list(VARIANTS))
     for name in EXPECTED:
         sc = load_scenario(name)  # schema-validated
         assert sc.name == name
@@ -217,6 +219,28 @@ def test_list_prints_one_line_per_scenario(capsys):
     from ipcosim.harness import cli
 
     assert cli.main(["list"]) == 0
+    from ipcosim.harness.scenario.ssp_gen import VARIANTS
+
     lines = capsys.readouterr().out.splitlines()
-    assert [l.split()[0] for l in lines] == EXPECTED
-    assert all("10 s at 0.001 s" in l and "sets:" in l for l in lines)
+    assert [l.split()[0] for l in lines] == sorted(EXPECTED + list(VARIANTS))
+    assert all("at 0.001 s" in l and "sets:" in l for l in lines)
+    assert all("10 s at 0.001 s" in l for l in lines if l.split()[0] in EXPECTED)
+
+
+def test_variant_scenarios_are_what_the_generator_writes():
+    """single-mass-swing-up, single-mass-lqr-tap, double-mass-hsmc-lab: committed files = generator output,
+    and their plant start values and experiments load as written."""
+    from ipcosim.harness.scenario.ssp_gen import VARIANTS, variant_files
+
+    for name, (plant, law, _, amplitude, stop_time, plant_values) in VARIANTS.items():
+        files = variant_files(name)
+        assert sorted(p.name for p in (ROOT / "ssp" / name).iterdir()) == sorted(files)
+        for file, text in files.items():
+            assert (ROOT / "ssp" / name / file).read_text() == text, (name, file)
+        sc = load_scenario(name)
+        assert sc.component("controller").source == f"resources/{law}{PLANTS[plant]['suffix']}.fmu"
+        assert sc.experiment.stop_time == stop_time
+        bound = {p.name: p.value for b in sc.component("plant").bindings for p in b.parameters}
+        assert bound == plant_values
+        assert {p.name: p.value for b in sc.component("setpoint").bindings for p in b.parameters}["amplitude"] == \
+            amplitude

@@ -45,6 +45,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from ipcosim.fmus.instruments import end_stop_state
 from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, preset
 from ipcosim.fmus.physics import MEASURED
 from ipcosim.fmus.plant import Plant, PlantStepError
@@ -391,19 +392,14 @@ class VirtualRig:
         self._check_limits()
 
     def _end_stops(self) -> None:
-        x = self.plant.x
-        stop = self.config.end_stop
-        hit = False
-        for ip, iv, name in self._carts:
-            if abs(x[ip]) > stop:
-                side = math.copysign(1.0, x[ip])
-                x[ip] = side * stop
-                if x[iv] * side > 0:
-                    x[iv] = 0.0
-                hit = True
+        x = self.plant.state
+        stopped = end_stop_state(x, [(ip, iv) for ip, iv, _ in self._carts], self.config.end_stop)
+        if stopped is None:
+            return
+        for ip, _, name in self._carts:
+            if stopped[ip] != x[ip]:
                 self.counters[f"end_stop:{name}"] += 1
-        if hit:
-            self.plant.set_state(x)
+        self.plant.set_state(stopped)
 
     def _record_history(self) -> None:
         self._history.append((self._t_ns, self.plant.x.copy()))

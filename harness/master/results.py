@@ -172,6 +172,10 @@ def task_metrics(data: np.ndarray) -> dict[str, Any]:
         from ipcosim.harness.metrics import compute_metrics
     except ImportError:
         return {}
-    return dict(compute_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
-                                np.asarray(data[ref], float), np.asarray(data[ang], float),
-                                np.asarray(data[volt], float)))
+    out = dict(compute_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
+                               np.asarray(data[ref], float), np.asarray(data[ang], float),
+                               np.asarray(data[volt], float)))
+    from ipcosim.harness.metrics import upright_metrics
+    out.update(upright_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
+                               np.asarray(data[ang], float)))
+    return out

@@ -41,9 +41,22 @@ STEP = 1e-3
 AMPLITUDE = 0.05
 STEP_TIME = 0.0
 
+#: Scenarios beyond the ten: (plant, law, description, setpoint amplitude [m], stop time [s], plant start values).
+#: The lab values are ``ipcosim.fmus.instruments.REALISM["lab"]`` (written out so the files stay literal).
+_LAB_DOUBLE = {"b1": 0.1006, "b2": 0.1006, "cart_resolution": 2.275e-05, "pendulum_resolution": 0.0015339807878856412,
+               "end_stop": 0.407}
+VARIANTS: dict[str, tuple[str, str, str, float, float, dict[str, float]]] = {
+    "single-mass-swing-up": ("single-mass", "SwingUp", "energy swing-up from hanging, hand-over to the thesis's LQR; "
+                             "the cart stays at 0", 0.0, 15.0, {"initial_pendulum_angle": 3.141592653589793}),
+    "single-mass-lqr-tap": ("single-mass", "LQR", "the thesis's LQR holding the cart at 0; a torque tap of 0.005 N m s "
+                            "on the pendulum at t = 2 s", 0.0, 10.0, {"tap_time": 2.0, "tap_torque_impulse": 0.005}),
+    "double-mass-hsmc-lab": ("double-mass", "HSMC", "the thesis's HSMC on the lab plant (encoder counts, Coulomb "
+                             "friction, end stops); the active cart moves 0 -> 0.05 m", AMPLITUDE, 20.0, _LAB_DOUBLE),
+}
+
 
 def scenario_names() -> list[str]:
-    return [f"{p}-{c}" for p in PLANTS for c in CONTROLLERS]
+    return [f"{p}-{c}" for p in PLANTS for c in CONTROLLERS] + list(VARIANTS)
 
 
 def plant_signals(plant: str) -> tuple[list[str], list[str]]:
@@ -91,14 +104,21 @@ def _connector(name: str, kind: str, unit: str) -> str:
     return f'          <ssd:Connector name="{name}" kind="{kind}"><ssc:Real unit="{unit}"/></ssd:Connector>'
 
 
-def ssd_text(plant: str, controller: str, default_set: str | None, sample_period: float | None) -> str:
-    """The SystemStructure.ssd of one scenario."""
+def ssd_text(plant: str, controller: str, default_set: str | None, sample_period: float | None,
+             variant: str | None = None) -> str:
+    """The SystemStructure.ssd of one scenario (``variant``: a name of ``VARIANTS``; then ``controller``
+    is ignored)."""
     p = PLANTS[plant]
-    law, law_doc = CONTROLLERS[controller]
-    name = f"{plant}-{controller}"
+    amplitude, stop_time, plant_values = AMPLITUDE, STOP_TIME, {}
+    if variant is None:
+        law, law_doc = CONTROLLERS[controller]
+        name = f"{plant}-{controller}"
+        description = f"IP02 {p['description']}: {law_doc}; the motor-driven cart moves 0 -> {AMPLITUDE} m"
+    else:
+        _, law, law_doc, amplitude, stop_time, plant_values = VARIANTS[variant]
+        name, description = variant, f"IP02 {p['description']}: {law_doc}"
     measured, outputs = plant_signals(plant)
     ctrl_model = f"{law}{p['suffix']}"
-    description = f"IP02 {p['description']}: {law_doc}; the motor-driven cart moves 0 -> {AMPLITUDE} m"
     L = ['<?xml version="1.0" encoding="UTF-8"?>',
          f'<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" xmlns:ssc="{NS["ssc"]}"',
          f'    xmlns:ssv="{NS["ssv"]}" xmlns:osp="{NS["osp"]}"',
@@ -114,7 +134,7 @@ def ssd_text(plant: str, controller: str, default_set: str | None, sample_period
          "            <ssd:ParameterValues>",
          '              <ssv:ParameterSet version="1.0" name="experiment">',
          "                <ssv:Parameters>",
-         f'                  <ssv:Parameter name="amplitude"><ssv:Real value="{AMPLITUDE!r}" unit="m"/></ssv:Parameter>',
+         f'                  <ssv:Parameter name="amplitude"><ssv:Real value="{amplitude!r}" unit="m"/></ssv:Parameter>',
          f'                  <ssv:Parameter name="step_time"><ssv:Real value="{STEP_TIME!r}" unit="s"/></ssv:Parameter>',
          "                </ssv:Parameters>",
          "              </ssv:ParameterSet>",
@@ -140,7 +160,15 @@ def ssd_text(plant: str, controller: str, default_set: str | None, sample_period
           "        <ssd:Connectors>",
           _connector("voltage", "input", "V")]
     L += [_connector(o, "output", STATE_UNITS[o]) for o in outputs]
-    L += ["        </ssd:Connectors>", "      </ssd:Component>", "    </ssd:Elements>", "    <ssd:Connections>",
+    L += ["        </ssd:Connectors>"]
+    if plant_values:
+        L += ["        <ssd:ParameterBindings>", "          <ssd:ParameterBinding>", "            <ssd:ParameterValues>",
+              '              <ssv:ParameterSet version="1.0" name="plant">', "                <ssv:Parameters>"]
+        L += [f'                  <ssv:Parameter name="{k}"><ssv:Real value="{float(v)!r}"/></ssv:Parameter>'
+              for k, v in plant_values.items()]
+        L += ["                </ssv:Parameters>", "              </ssv:ParameterSet>", "            </ssd:ParameterValues>",
+              "          </ssd:ParameterBinding>", "        </ssd:ParameterBindings>"]
+    L += ["      </ssd:Component>", "    </ssd:Elements>", "    <ssd:Connections>",
           '      <ssd:Connection startElement="setpoint" startConnector="reference" endElement="controller" endConnector="reference"/>']
     L += [f'      <ssd:Connection startElement="plant" startConnector="{m}" endElement="controller" endConnector="{m}"/>'
           for m in measured]
@@ -150,7 +178,7 @@ def ssd_text(plant: str, controller: str, default_set: str | None, sample_period
         attrs = " ".join(f'{k}="{v}"' for k, v in exps.items())
         L.append(f'    <ssc:Unit name="{unit}"><ssc:BaseUnit {attrs}/></ssc:Unit>')
     L += ["  </ssd:Units>",
-          f'  <ssd:DefaultExperiment startTime="0.0" stopTime="{STOP_TIME!r}">',
+          f'  <ssd:DefaultExperiment startTime="0.0" stopTime="{float(stop_time)!r}">',
           "    <ssd:Annotations>",
           '      <ssc:Annotation type="com.opensimulationplatform">',
           f'        <osp:Algorithm><osp:FixedStepAlgorithm baseStepSize="{STEP!r}"/></osp:Algorithm>',
@@ -181,7 +209,28 @@ def write_scenarios(root: Path = SCENARIO_DIR, names: list[str] | None = None) -
             path = folder / "SystemStructure.ssd"
             path.write_text(ssd_text(plant, controller, default, float(period)))
             written.append(path)
+    for name, (plant, law, *_rest) in VARIANTS.items():
+        if names and name not in names:
+            continue
+        folder = root / name
+        folder.mkdir(parents=True, exist_ok=True)
+        for file, text in variant_files(name).items():
+            (folder / file).write_text(text)
+            written.append(folder / file)
     return written
+
+
+def variant_files(name: str) -> dict[str, str]:
+    """``{file name: text}`` of a ``VARIANTS`` scenario: its SSD and its controller's parameter sets."""
+    from ipcosim.controllers.catalog import parameter_sets as catalog_sets
+
+    plant, law = VARIANTS[name][:2]
+    sets = {k: dict(v) for k, v in catalog_sets(plant, law).items() if v}
+    default = "tuned" if "tuned" in sets else "thesis"
+    files = {f"{s}.ssv": _ssv(s, v, f"{name}: {s} controller parameters") for s, v in sets.items()}
+    files["SystemStructure.ssd"] = ssd_text(plant, "", default, float(sets[default].get("sample_period", STEP)),
+                                            variant=name)
+    return files
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,10 @@
+"""FMU ``SwingUpSingleMass``: energy swing-up from hanging with a hand-over to the thesis's LQR, IP02 single mass."""
+from ipcosim.controllers.controller_fmu import ControllerFmu
+
+
+class SwingUpSingleMass(ControllerFmu):
+    """Energy swing-up from hanging, balanced by an LQR near upright (IP02 single-mass cart); output the motor
+    voltage, sampled at sample_period."""
+
+    law = "SwingUp"
+    kind = "single-mass"

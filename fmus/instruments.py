@@ -1,0 +1,178 @@
+"""What stands between the plant's motion and a controller on the bench: encoders, noise, end stops.
+
+Options of the one plant model (``ipcosim.fmus.plant.Plant``), shared by the plant FMUs and the
+virtual rig (``ipcosim.harness.hil.rig``), so that simulation and the rig behave alike. Plain
+Python floats and the standard library only (this module runs inside the plant FMUs).
+
+* **Encoder quantization**: a reading is ``floor(x / resolution + phase) * resolution``, the
+  count a quadrature counter holds (``phase = 0.5``: count edges half a count either side of the
+  zero, so a reading is the nearest count). Resolution 0 = exact readings.
+* **Measurement noise**: Gaussian, standard deviation in counts (or in SI units when the
+  resolution is 0), from a generator seeded by ``noise_seed``: the same seed gives the same run.
+* **Track end stops**: a cart that reaches ``+-end_stop`` stops dead there (inelastic: its
+  outward velocity is set to zero). 0 = no end stops.
+
+The amplifier's saturation is the plant parameter ``voltage_limit``; Coulomb and viscous friction
+per cart are the plant parameters ``b``/``b1``/``b2`` and ``Beq``/``Ba``/``Bc``/``Bp``.
+
+Two option sets (``REALISM``): ``ideal`` (everything off: exact, noise-free readings, no end
+stops, no Coulomb friction, an amplifier that does not saturate within +-1 kV) and ``lab`` (the IP02
+on its track, values and sources in ``LAB_SOURCES``).
+"""
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass, fields
+from typing import Sequence
+
+#: IP02 encoders: 4096 counts/rev; cart through the 1.48 cm position pinion, pendulum direct.
+CART_M_PER_COUNT = 2.275e-5
+PENDULUM_RAD_PER_COUNT = 2 * math.pi / 4096
+#: Half the 0.814 m track: where a cart hits the end of the rack.
+END_STOP_M = 0.407
+
+
+class InstrumentError(ValueError):
+    """An instrument option that is not finite or out of range (names the option)."""
+
+
+@dataclass(frozen=True)
+class Instruments:
+    """Encoders, noise and end stops of a plant (all off by default: the ideal plant).
+
+    Parameters
+    ----------
+    cart_resolution : float
+        Cart encoder resolution [m/count]; 0 = exact readings.
+    pendulum_resolution : float
+        Pendulum encoder resolution [rad/count]; 0 = exact readings.
+    noise_counts : float
+        Standard deviation of Gaussian noise on every reading [counts] (the resolution's unit;
+        SI units where the resolution is 0); 0 = none.
+    noise_seed : int
+        Seed of the noise generator.
+    end_stop : float
+        Track end stops at +-end_stop [m] for every cart; 0 = none.
+    input_delay : float
+        Transport delay of the voltage [s] (a computation delay), rounded to whole plant steps; 0 = none.
+    tap_time : float
+        When the taps act [s] (the step that starts at or just before it).
+    tap_force_impulse : float
+        Impulse of a force tap on the cart carrying the pendulum [N s]; 0 = none.
+    tap_torque_impulse : float
+        Impulse of a torque tap on the pendulum [N m s], counter-clockwise positive; 0 = none.
+    """
+
+    cart_resolution: float = 0.0
+    pendulum_resolution: float = 0.0
+    noise_counts: float = 0.0
+    noise_seed: int = 0
+    end_stop: float = 0.0
+    input_delay: float = 0.0
+    tap_time: float = 0.0
+    tap_force_impulse: float = 0.0
+    tap_torque_impulse: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise InstrumentError(f"instrument option {f.name} = {v!r} must be a finite number >= 0")
+
+    @property
+    def ideal(self) -> bool:
+        """True when every option is off."""
+        return not (self.cart_resolution or self.pendulum_resolution or self.noise_counts or self.end_stop
+                    or self.input_delay or self.tap_force_impulse or self.tap_torque_impulse)
+
+
+def tap_velocity_change(mass_matrix: tuple[float, float, float], force_impulse: float,
+                        torque_impulse: float) -> tuple[float, float]:
+    """(cart, pendulum) velocity jumps from impulses on the generalized momenta: ``M dv = (P_F, P_tau)``
+    with ``M = [[m11, m12], [m12, m22]]`` the cart-pendulum mass matrix at the current angle."""
+    m11, m12, m22 = mass_matrix
+    det = m11 * m22 - m12 * m12
+    return ((m22 * force_impulse - m12 * torque_impulse) / det, (m11 * torque_impulse - m12 * force_impulse) / det)
+
+
+def quantize(x: float, resolution: float, phase: float = 0.5) -> float:
+    """The reading of a counter of ``resolution`` per count at position ``x`` (exact if 0)."""
+    if not resolution:
+        return x
+    return math.floor(x / resolution + phase) * resolution
+
+
+class Readout:
+    """Turns true positions into readings: quantization, then seeded noise.
+
+    Parameters
+    ----------
+    instruments : Instruments
+    resolutions : sequence of float
+        Resolution of each measured channel (``Instruments.cart_resolution`` or
+        ``pendulum_resolution``, in the plant's ``MEASURED`` order).
+    """
+
+    def __init__(self, instruments: Instruments, resolutions: Sequence[float]) -> None:
+        self.instruments = instruments
+        self.resolutions = tuple(float(r) for r in resolutions)
+        self._rng = random.Random(int(instruments.noise_seed))
+
+    def read(self, positions: Sequence[float]) -> tuple[float, ...]:
+        """Readings of the true ``positions`` (one noise draw per channel and call)."""
+        sigma = self.instruments.noise_counts
+        out = []
+        for x, res in zip(positions, self.resolutions):
+            y = quantize(x, res)
+            if sigma:
+                y += self._rng.gauss(0.0, sigma) * (res or 1.0)
+                y = quantize(y, res)
+            out.append(y)
+        return tuple(out)
+
+
+def end_stop_state(x: Sequence[float], carts: Sequence[tuple[int, int]], stop: float) -> list[float] | None:
+    """The state after the end stops at ``+-stop`` (``carts``: (position, velocity) indices), or
+    None if no cart is beyond them."""
+    if not stop:
+        return None
+    out = None
+    for ip, iv in carts:
+        if abs(x[ip]) > stop:
+            out = list(x) if out is None else out
+            side = math.copysign(1.0, x[ip])
+            out[ip] = side * stop
+            if out[iv] * side > 0:
+                out[iv] = 0.0
+    return out
+
+
+#: The two option sets (instrument options and plant-parameter overrides per plant kind).
+REALISM: dict[str, dict[str, object]] = {
+    "ideal": {"instruments": Instruments(),
+              "single-mass": {"b": 0.0, "voltage_limit": 1000.0},
+              "double-mass": {"b1": 0.0, "b2": 0.0, "voltage_limit": 1000.0}},
+    "lab": {"instruments": Instruments(cart_resolution=CART_M_PER_COUNT, pendulum_resolution=PENDULUM_RAD_PER_COUNT,
+                                       noise_counts=0.0, end_stop=END_STOP_M),
+            "single-mass": {"b": 0.1006, "voltage_limit": 10.0},
+            "double-mass": {"b1": 0.1006, "b2": 0.1006, "voltage_limit": 10.0}},
+}
+
+LAB_SOURCES = {
+    "cart_resolution": "IP02: 4096 counts/rev encoder on the 1.48 cm position pinion (2.275e-5 m/count)",
+    "pendulum_resolution": "IP02: 4096 counts/rev pendulum encoder (1.534e-3 rad/count)",
+    "noise_counts": "0: optical quadrature encoders have no analog noise; their error is the count itself",
+    "end_stop": "IP02: 0.814 m track, end stops at +-0.407 m",
+    "voltage_limit": "Q4 analog output range +-10 V, amplifier gain 1",
+    "b, b1, b2": "FITTED, not measured: 0.1006 N is the passive-cart Coulomb force that reproduces the thesis's "
+                 "5.575 mm double-mass HSMC error (ipcosim.harness.studies.friction); assumed the same for every cart",
+}
+
+
+def realism(name: str, kind: str) -> tuple[Instruments, dict[str, float]]:
+    """``(instruments, plant-parameter overrides)`` of the option set ``name`` for plant ``kind``."""
+    if name not in REALISM:
+        raise InstrumentError(f"unknown realism preset {name!r}; known: {', '.join(REALISM)}")
+    entry = REALISM[name]
+    return entry["instruments"], dict(entry[kind])  # type: ignore[return-value,arg-type]

@@ -1,0 +1,47 @@
+"""``ipcosim analyze``: margins, sensitivity and Bode/Nyquist plots of a scenario's loop."""
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("analyze", help="linear analysis of a scenario's loop (margins, sensitivity, Bode/Nyquist)",
+                       description="Break the scenario's loop at the plant input and report gain, phase and delay "
+                                   "margins, the sensitivity peak, the sampled-data closed-loop poles and the limit "
+                                   "that the plant's right-half-plane zero and pole put on a position-only "
+                                   "controller. Writes DIR/bode.png, DIR/nyquist.png and DIR/analysis.json.")
+    p.add_argument("scenario", help="scenario name (see `ipcosim list`) or folder")
+    p.add_argument("--parameter-set", metavar="NAME", help="bind this parameter set (thesis, tuned...)")
+    p.add_argument("--set", action="append", default=[], metavar="COMP.VAR=VALUE",
+                   help="override a controller or plant parameter, e.g. --set plant.Mp=0.2 (repeatable)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: out/analyze/<scenario>)")
+    p.set_defaults(func=main)
+
+
+def _fmt(v: float | None, spec: str, unit: str = "") -> str:
+    return "-" if v is None else f"{format(v, spec)}{unit}"
+
+
+def main(args: argparse.Namespace) -> int:
+    from ipcosim.harness.studies.analyze import analyze
+    from ipcosim.harness.studies.specs import parse_set
+
+    out = args.out or f"out/analyze/{args.scenario.rstrip('/').split('/')[-1]}"
+    r = analyze(args.scenario, parameter_set=args.parameter_set, overrides=parse_set(args.set), out_dir=out)
+    if args.json:
+        print(json.dumps(r))
+        return 0
+    gm = r["gain_margin"] or {}
+    print(f"{r['scenario']} ({r['law']}, {r['parameter_set']}), T = {r['sample_period_s'] * 1e3:g} ms, "
+          f"loop broken at the plant input")
+    print(f"  closed loop stable: {'yes' if r['closed_loop_stable'] else 'no'} "
+          f"(spectral radius {r['closed_loop_spectral_radius']:.6g})")
+    print(f"  gain margin: x{_fmt(gm.get('upper'), '.4g')} / x{_fmt(gm.get('lower'), '.4g')}; "
+          f"phase margin {_fmt(r['phase_margin_deg'], '.3g', ' deg')}; "
+          f"delay margin {_fmt(r['delay_margin_s'] and r['delay_margin_s'] * 1e3, '.3g', ' ms')}")
+    print(f"  peak sensitivity {_fmt(r['peak_sensitivity'], '.4g')}")
+    print(f"  {r['statement']}")
+    print(f"  figures: {r['figures']['bode']}, {r['figures']['nyquist']}")
+    return 0

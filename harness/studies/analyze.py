@@ -1,0 +1,520 @@
+"""Linear analysis of a scenario's closed loop: margins, sensitivity, closed-loop poles, limits.
+
+The loop is broken at the plant input (the voltage). The plant is the scenario's plant linearized
+about upright *with* the motor inductance (``ipcosim.fmus.linearize``), discretized exactly with a
+zero-order hold at the controller's sample period; the controller is the law of the scenario's
+controller component as a linear discrete system (``ipcosim.harness.studies.loop``). Their product
+``L(z) = -C(z) P(z)`` is the loop transfer function at the plant input of the sampled-data loop,
+exact at the sample instants, so ``L(e^{jwT})`` for ``0 < w < pi/T`` is its frequency response.
+
+Reported (``analyze``):
+
+* closed-loop poles (eigenvalues of the interconnection; ``z`` and ``s = ln(z)/T``) and stability;
+* gain margins: the range of a real gain ``k`` in front of the plant for which the loop stays
+  stable (upper and lower limits: a loop around an unstable plant has both), from the phase
+  crossovers, each limit checked by the closed-loop poles just inside and outside it;
+* phase margin at every gain crossover and the delay margin ``min (PM_i mod 2 pi) / w_i``;
+* peak of the sensitivity ``S = 1/(1 + L)`` and of ``T = L/(1 + L)`` over frequency;
+* the plant's right-half-plane zeros and poles from the voltage to the motor-cart position and
+  the lower bound they put on ``||S||inf`` and ``||T||inf`` of *every* stabilizing controller
+  that measures that position only (Skogestad & Postlethwaite, *Multivariable Feedback
+  Control*, Thm. 5.3): ``|(z + p)/(z - p)|`` for one real RHP zero ``z`` and one RHP pole ``p``;
+  the same for the sampled plant, ``|1 - conj(p) z| / |z - p|`` outside the unit circle.
+
+Not part of the FMU runtime: it needs python-control, numpy and, for the figures, matplotlib.
+"""
+from __future__ import annotations
+
+import cmath
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import control
+import numpy as np
+
+from ipcosim.controllers.catalog import KINDS, LAWS, build_law, model_name
+from ipcosim.fmus.linearize import linearize
+from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, ParameterError, preset
+from ipcosim.harness.errors import IpcosimError, UsageError
+from ipcosim.harness.studies.loop import LinearLaw, linear_law
+
+PLANT_MODELS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}
+
+
+class AnalysisError(IpcosimError, ValueError):
+    """A scenario whose loop cannot be analysed (no controller or plant this module knows)."""
+
+
+# ----------------------------------------------------------------------------- the loop
+@dataclass(frozen=True)
+class Loop:
+    """The sampled-data loop broken at the plant input.
+
+    Attributes
+    ----------
+    plant : control.StateSpace
+        Discrete plant, voltage -> measured positions (ZOH, sample period ``T``).
+    plant_continuous : control.StateSpace
+        The same, continuous (with the inductance).
+    controller : LinearLaw
+        Measured positions -> voltage.
+    L : control.StateSpace
+        ``-C(z) P(z)``: the loop transfer function at the plant input (1 x 1, discrete).
+    """
+
+    law: str
+    kind: str
+    T: float
+    plant: Any
+    plant_continuous: Any
+    controller: LinearLaw
+    L: Any
+    law_object: Any = None
+    plant_values: Mapping[str, float] = field(default_factory=dict)
+
+
+def make_loop(law_name: str, kind: str, law_values: Mapping[str, Any], plant_values: Mapping[str, float]) -> Loop:
+    """The loop of ``law_name`` (flat catalog values) around the ``kind`` plant (preset overrides).
+
+    Raises
+    ------
+    ControllerParameterError, ParameterError
+        A bad law or plant parameter (naming it).
+    """
+    law = build_law(law_name, kind, dict(law_values))
+    params = preset(DEFAULT_PRESET[kind], **dict(plant_values))
+    model = linearize(params, inductance=True)
+    pc = control.ss(model.A, model.B, model.C, model.D)
+    return loop_from(pc, linear_law(law), law_name, kind, law, dict(plant_values))
+
+
+def loop_from(plant_continuous: Any, controller: LinearLaw, law: str = "", kind: str = "",
+              law_object: Any = None, plant_values: Mapping[str, float] | None = None) -> Loop:
+    """The loop of a continuous plant (voltage -> measurements) sampled with a zero-order hold at
+    the controller's period, closed by ``controller`` (``u = C(z) y``)."""
+    pd = control.c2d(plant_continuous, controller.T, method="zoh")
+    cd = control.ss(controller.A, controller.B, controller.C, controller.D, controller.T)
+    L = -control.series(pd, cd)
+    return Loop(law, kind, controller.T, pd, plant_continuous, controller, L, law_object, dict(plant_values or {}))
+
+
+def _binding_values(component) -> dict[str, Any]:
+    values: dict[str, Any] = {}
+    for pset in component.bindings:
+        for p in pset.parameters:
+            values[p.name] = p.value
+    return values
+
+
+def scenario_loop(scenario: str, parameter_set: str | None = None,
+                  overrides: Mapping[str, float] | None = None) -> tuple[Loop, dict[str, Any]]:
+    """The loop of a scenario's ``controller`` and ``plant`` components (``--set`` overrides).
+
+    Returns
+    -------
+    (Loop, dict)
+        The loop and a description (scenario, law, kind, parameter set, plant parameters set).
+    """
+    from pathlib import PurePosixPath
+
+    from ipcosim.harness.scenario.ssp import load_scenario, select_parameter_set
+
+    sc = load_scenario(scenario)
+    if parameter_set:
+        sc = select_parameter_set(sc, parameter_set)
+    try:
+        ctrl, plant = sc.component("controller"), sc.component("plant")
+    except KeyError as exc:
+        raise AnalysisError(str(exc).strip("'\"")) from None
+    ctrl_model, plant_model = PurePosixPath(ctrl.source).stem, PurePosixPath(plant.source).stem
+    found = [(lw, k) for lw in LAWS for k in KINDS if model_name(lw, k) == ctrl_model]
+    if not found:
+        raise AnalysisError(f"{sc.origin}: controller {ctrl_model!r} is not a law of the catalog; analyze "
+                            f"knows {', '.join(model_name(lw, k) for lw in LAWS for k in KINDS)}")
+    kind_plant = PLANT_MODELS.get(plant_model)
+    if kind_plant is None:
+        raise AnalysisError(f"{sc.origin}: plant {plant_model!r} is not a plant model analyze knows "
+                            f"({', '.join(PLANT_MODELS)})")
+    law_name, kind = found[0]
+    law_values, plant_values = _binding_values(ctrl), _binding_values(plant)
+    for key, value in (overrides or {}).items():
+        comp, _, var = key.partition(".")
+        if comp not in ("controller", "plant"):
+            raise UsageError(f"--set {key}: analyze uses the controller's and plant's parameters only")
+        (law_values if comp == "controller" else plant_values)[var] = value
+    phys = {f for f in PLANT_KINDS[kind_plant].__dataclass_fields__}
+    plant_phys = {k: float(v) for k, v in plant_values.items() if k in phys}
+    try:
+        loop = make_loop(law_name, kind, law_values, plant_phys)
+    except ParameterError as exc:
+        raise AnalysisError(f"{sc.origin}: plant: {exc}") from None
+    used = parameter_set or (sc.bound_sets[0] if sc.bound_sets else "default")
+    return loop, {"scenario": sc.name, "law": law_name, "kind": kind, "controller": ctrl_model,
+                  "parameter_set": used, "plant_parameters": plant_phys}
+
+
+# ----------------------------------------------------------------------------- frequency response
+def frequency_grid(T: float, n: int = 6000, w_min: float = 1e-2) -> np.ndarray:
+    """Log-spaced frequencies [rad/s] from ``w_min`` to the Nyquist frequency pi/T."""
+    return np.logspace(math.log10(w_min), math.log10(math.pi / T), n)
+
+
+def loop_response(loop: Loop, w: np.ndarray) -> np.ndarray:
+    """``L(e^{jwT})`` at the frequencies ``w`` [rad/s]."""
+    A, B, C, D = (np.asarray(m) for m in (loop.L.A, loop.L.B, loop.L.C, loop.L.D))
+    n = A.shape[0]
+    out = np.empty(len(w), dtype=complex)
+    eye = np.eye(n)
+    for i, wi in enumerate(w):
+        z = cmath.exp(1j * wi * loop.T)
+        out[i] = (C @ np.linalg.solve(z * eye - A, B) + D)[0, 0]
+    return out
+
+
+def closed_loop_poles(loop: Loop, gain: float = 1.0) -> np.ndarray:
+    """Poles (z) of the loop closed with ``gain`` in front of the plant (u_plant = gain u_ctrl)."""
+    return np.linalg.eigvals(np.asarray(control.feedback(loop.L * gain, 1, sign=-1).A))
+
+
+def is_stable(poles: np.ndarray, tol: float = 1e-9) -> bool:
+    """All discrete poles strictly inside the unit circle."""
+    return bool(np.all(np.abs(poles) < 1.0 - tol))
+
+
+def _crossings(w: np.ndarray, f: np.ndarray) -> list[int]:
+    return [i for i in range(len(w) - 1) if f[i] == 0 or (f[i] < 0) != (f[i + 1] < 0)]
+
+
+def _refine(loop: Loop, w0: float, w1: float, fn, iters: int = 60) -> float:
+    f0 = fn(loop_response(loop, np.array([w0]))[0])
+    for _ in range(iters):
+        wm = math.sqrt(w0 * w1)
+        fm = fn(loop_response(loop, np.array([wm]))[0])
+        if (fm < 0) == (f0 < 0):
+            w0, f0 = wm, fm
+        else:
+            w1 = wm
+    return math.sqrt(w0 * w1)
+
+
+def gain_margins(loop: Loop, w: np.ndarray, Lw: np.ndarray) -> dict[str, Any]:
+    """Range of real gains in front of the plant that keep the loop stable (around k = 1)."""
+    candidates = []
+    for i in _crossings(w, Lw.imag):
+        wc = _refine(loop, w[i], w[i + 1], lambda v: v.imag)
+        Lc = loop_response(loop, np.array([wc]))[0]
+        if Lc.real < 0:
+            candidates.append((-1.0 / Lc.real, wc))
+    L_nyq = loop_response(loop, np.array([math.pi / loop.T]))[0]  # z = -1: L is real there
+    if L_nyq.real < 0:
+        candidates.append((-1.0 / L_nyq.real, math.pi / loop.T))
+    upper = [(k, wc) for k, wc in candidates if k > 1.0]
+    lower = [(k, wc) for k, wc in candidates if 0 < k < 1.0]
+    up = min(upper) if upper else (math.inf, None)
+    lo = max(lower) if lower else (0.0, None)
+    return {"upper": up[0], "upper_frequency_rad_s": up[1], "lower": lo[0], "lower_frequency_rad_s": lo[1]}
+
+
+def phase_margins(loop: Loop, w: np.ndarray, Lw: np.ndarray) -> list[dict[str, float]]:
+    """Phase margin and delay margin at every gain crossover (|L| = 1)."""
+    out = []
+    for i in _crossings(w, np.abs(Lw) - 1.0):
+        wc = _refine(loop, w[i], w[i + 1], lambda v: abs(v) - 1.0)
+        Lc = loop_response(loop, np.array([wc]))[0]
+        pm = math.degrees(cmath.phase(-Lc))  # angle of L measured from -180 deg
+        delay = math.radians(pm % 360.0) / wc
+        out.append({"frequency_rad_s": wc, "phase_margin_deg": pm, "delay_margin_s": delay})
+    return out
+
+
+def peak(loop: Loop, w: np.ndarray, values: np.ndarray) -> tuple[float, float]:
+    """Largest value on the grid and its frequency."""
+    i = int(np.argmax(values))
+    return float(values[i]), float(w[i])
+
+
+# ----------------------------------------------------------------------------- limits
+def _rhp(values: np.ndarray, discrete: bool) -> list[complex]:
+    if discrete:
+        return [complex(v) for v in values if abs(v) > 1.0 + 1e-9]
+    return [complex(v) for v in values if v.real > 1e-9]
+
+
+def _bound(zeros: list[complex], poles: list[complex], discrete: bool) -> float:
+    """Thm. 5.3 lower bound on ||S||inf (= on ||T||inf for one zero and one pole)."""
+    best = 1.0
+    for z in zeros:
+        prod = 1.0
+        for p in poles:
+            num = abs(1 - p.conjugate() * z) if discrete else abs(z + p.conjugate())
+            prod *= num / abs(z - p)
+        best = max(best, prod)
+    return best
+
+
+def position_only_limit(loop: Loop) -> dict[str, Any]:
+    """RHP zeros/poles of voltage -> motor-cart position and the bound on ||S||inf they impose.
+
+    The bound holds for every linear time-invariant controller that stabilizes the plant from
+    that one measurement. It also gives the smallest multiplicative input uncertainty that some
+    such loop cannot survive: robust stability needs ``||T||inf < 1/delta``.
+    """
+    pc, pd = loop.plant_continuous[0, 0], loop.plant[0, 0]
+    zc, pcp = _rhp(control.zeros(pc), False), _rhp(control.poles(pc), False)
+    zd, pdp = _rhp(control.zeros(pd), True), _rhp(control.poles(pd), True)
+    bc, bd = _bound(zc, pcp, False), _bound(zd, pdp, True)
+    uses_only_position = bool(np.all(loop.controller.B[:, 1:] == 0) and np.all(loop.controller.D[:, 1:] == 0))
+    return {"output": "motor-cart position", "rhp_zeros_rad_s": [z.real for z in zc],
+            "rhp_poles_rad_s": [p.real for p in pcp], "sensitivity_peak_lower_bound": bc,
+            "sensitivity_peak_lower_bound_dB": 20 * math.log10(bc),
+            "sampled_rhp_zeros_z": [z.real for z in zd], "sampled_rhp_poles_z": [p.real for p in pdp],
+            "sampled_sensitivity_peak_lower_bound": bd,
+            "largest_tolerable_input_uncertainty": 1.0 / bc,
+            "strongly_stabilizable": _parity_interlacing(zc, pcp, pc),
+            "controller_uses_this_output_only": uses_only_position}
+
+
+def _parity_interlacing(zeros: list[complex], poles: list[complex], pc) -> bool:
+    """Youla's parity interlacing property: a stable controller can stabilize the plant iff the
+    number of real RHP poles between every pair of real RHP zeros (infinity counts when the plant
+    is strictly proper) is even."""
+    real_z = sorted(z.real for z in zeros if abs(z.imag) < 1e-9)
+    if np.allclose(np.asarray(pc.D), 0):
+        real_z.append(math.inf)
+    real_p = [p.real for p in poles if abs(p.imag) < 1e-9]
+    return all(sum(1 for p in real_p if a < p < b) % 2 == 0 for a, b in zip(real_z, real_z[1:]))
+
+
+def _closed_loop_matrix(pd, lin: LinearLaw) -> np.ndarray:
+    Ap, Bp, Cp = (np.asarray(m) for m in (pd.A, pd.B, pd.C))
+    top = np.hstack([Ap + Bp @ lin.D @ Cp, Bp @ lin.C])
+    bottom = np.hstack([lin.B @ Cp, lin.A])
+    return np.vstack([top, bottom])
+
+
+def pid_gain_search(loop: Loop) -> dict[str, Any]:
+    """Signed log grid of PID gains (the law's own filter and sample period): how many stabilize.
+
+    Evidence beside the parity-interlacing argument, not a proof: the grid spans Kp 0.1..1e7 V/m,
+    Ki 0.1..1e9 V/(m s), Kd 0.01..1e4 V s/m, each with both signs and zero.
+    """
+    from ipcosim.controllers.laws import PID, PIDGains
+
+    tau = float(loop.law_object.gains.derivative_time_constant) if loop.law == "PID" else 1e-3
+
+    def signed(lo: int, hi: int, n: int) -> np.ndarray:
+        v = np.logspace(lo, hi, n)
+        return np.concatenate([-v[::-1], [0.0], v])
+
+    kps, kis, kds = signed(-1, 7, 17), signed(-1, 9, 11), signed(-2, 4, 13)
+    stable, best = 0, math.inf
+    for kp in kps:
+        for ki in kis:
+            for kd in kds:
+                law = PID(loop.kind, PIDGains(kp, ki, kd, tau), loop.T, 1e9)
+                rho = float(np.max(np.abs(np.linalg.eigvals(_closed_loop_matrix(loop.plant, linear_law(law))))))
+                best = min(best, rho)
+                stable += rho < 1.0
+    return {"gain_sets": int(len(kps) * len(kis) * len(kds)), "stabilizing": int(stable),
+            "smallest_spectral_radius": best}
+
+
+
+# ----------------------------------------------------------------------------- the report
+def _poles_json(zs: np.ndarray, T: float) -> list[dict[str, float]]:
+    out = []
+    for z in sorted(zs, key=lambda v: -abs(v)):
+        s = cmath.log(z) / T if abs(z) > 0 else complex(-math.inf, 0.0)
+        out.append({"z_re": float(z.real), "z_im": float(z.imag), "z_abs": float(abs(z)),
+                    "s_re": float(s.real), "s_im": float(s.imag)})
+    return out
+
+
+def analyze_loop(loop: Loop, pid_search: bool | None = None) -> dict[str, Any]:
+    """Margins, sensitivity peaks, closed-loop poles and the position-only limit of a loop.
+
+    Parameters
+    ----------
+    loop : Loop
+        From ``make_loop`` or ``scenario_loop``.
+    pid_search : bool, optional
+        Run ``pid_gain_search`` (default: for a PID loop).
+
+    Returns
+    -------
+    dict
+        JSON-ready; margins are ``None`` when the closed loop is unstable (they do not apply).
+    """
+    w = frequency_grid(loop.T)
+    Lw = loop_response(loop, w)
+    cl = closed_loop_poles(loop)
+    stable = is_stable(cl)
+    S, Tc = np.abs(1.0 / (1.0 + Lw)), np.abs(Lw / (1.0 + Lw))
+    ms, w_ms = peak(loop, w, S)
+    mt, w_mt = peak(loop, w, Tc)
+    out: dict[str, Any] = {
+        "loop": "broken at the plant input (voltage); sampled-data loop, ZOH, exact at the sample instants",
+        "sample_period_s": loop.T, "closed_loop_stable": stable,
+        "closed_loop_spectral_radius": float(np.max(np.abs(cl))),
+        "closed_loop_marginal": bool(not stable and abs(float(np.max(np.abs(cl))) - 1.0) < 1e-7),
+        "open_loop_unstable_poles": int(sum(abs(p) > 1 + 1e-9 for p in np.linalg.eigvals(np.asarray(loop.L.A)))),
+        "peak_sensitivity": ms, "peak_sensitivity_dB": 20 * math.log10(ms), "peak_sensitivity_frequency_rad_s": w_ms,
+        "peak_complementary_sensitivity": mt, "peak_complementary_sensitivity_frequency_rad_s": w_mt,
+        "modulus_margin": 1.0 / ms, "notes": list(loop.controller.notes),
+        "closed_loop_poles": _poles_json(cl, loop.T),
+        "position_only_limit": position_only_limit(loop),
+    }
+    if stable:
+        gm = gain_margins(loop, w, Lw)
+        pms = phase_margins(loop, w, Lw)
+        gm["upper_dB"] = 20 * math.log10(gm["upper"]) if math.isfinite(gm["upper"]) else None
+        gm["lower_dB"] = 20 * math.log10(gm["lower"]) if gm["lower"] > 0 else None
+        gm["checked"] = _check_gain_limits(loop, gm)
+        out["gain_margin"] = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in gm.items()}
+        out["phase_margins"] = pms
+        worst = min(pms, key=lambda d: abs(d["phase_margin_deg"])) if pms else None
+        out["phase_margin_deg"] = worst["phase_margin_deg"] if worst else None
+        out["delay_margin_s"] = min(d["delay_margin_s"] for d in pms) if pms else None
+        out["delay_margin_samples"] = out["delay_margin_s"] / loop.T if pms else None
+    else:  # no margins, and the frequency-domain peaks describe no stable loop
+        out.update(gain_margin=None, phase_margins=[], phase_margin_deg=None, delay_margin_s=None,
+                   delay_margin_samples=None, peak_sensitivity=None, peak_sensitivity_dB=None,
+                   peak_sensitivity_frequency_rad_s=None, peak_complementary_sensitivity=None,
+                   peak_complementary_sensitivity_frequency_rad_s=None, modulus_margin=None)
+    if pid_search if pid_search is not None else loop.law == "PID":
+        out["pid_gain_search"] = pid_gain_search(loop)
+    out["statement"] = statement(out)
+    return out
+
+
+def _check_gain_limits(loop: Loop, gm: dict[str, Any]) -> bool:
+    """The closed loop is stable just inside each gain limit and unstable just outside it."""
+    ok = True
+    for key, inside, outside in (("upper", 0.999, 1.001), ("lower", 1.001, 0.999)):
+        k = gm[key]
+        if k and math.isfinite(k):
+            ok &= is_stable(closed_loop_poles(loop, k * inside)) and not is_stable(closed_loop_poles(loop, k * outside))
+    return bool(ok)
+
+
+def statement(result: Mapping[str, Any]) -> str:
+    """One paragraph: what the numbers say about the loop and the position-only limit."""
+    lim = result["position_only_limit"]
+    z, p = lim["rhp_zeros_rad_s"], lim["rhp_poles_rad_s"]
+    parts = []
+    if result["closed_loop_stable"]:
+        parts.append(f"The sampled loop is stable: peak sensitivity {result['peak_sensitivity']:.3g} "
+                     f"({result['peak_sensitivity_dB']:.1f} dB), delay margin "
+                     f"{result['delay_margin_s'] * 1e3:.3g} ms.")
+    elif result["closed_loop_marginal"]:
+        parts.append("The sampled loop is marginally stable (a closed-loop pole at z = 1 to rounding: two integrators "
+                     "of which the loop drives only a combination): no margins are given.")
+    else:
+        parts.append(f"The sampled loop is unstable (spectral radius {result['closed_loop_spectral_radius']:.4g}): "
+                     "its margins do not exist.")
+    if z and p:
+        parts.append(
+            f"From the voltage to the motor-cart position the plant has a right-half-plane zero at "
+            f"{', '.join(f'{v:.4g}' for v in z)} rad/s and a right-half-plane pole at "
+            f"{', '.join(f'{v:.4g}' for v in p)} rad/s. Every linear controller that measures that position only "
+            f"and stabilizes the loop has ||S||inf = ||T||inf >= |(z + p)/(z - p)| = "
+            f"{lim['sensitivity_peak_lower_bound']:.4g} ({lim['sensitivity_peak_lower_bound_dB']:.1f} dB; sampled "
+            f"at {result['sample_period_s'] * 1e3:g} ms: >= {lim['sampled_sensitivity_peak_lower_bound']:.4g}), so a "
+            f"multiplicative input uncertainty of {100 * lim['largest_tolerable_input_uncertainty']:.2g} % can "
+            "destabilize it.")
+        if not lim["controller_uses_this_output_only"]:
+            parts.append("This controller also measures the pendulum angle, so the bound does not bind it.")
+        if not lim["strongly_stabilizable"]:
+            parts.append("Between the zero and the zero at infinity lies an odd number of real poles (parity "
+                         "interlacing): only an unstable controller can stabilize the plant from this "
+                         "measurement, so no PID (poles at z = 1 and inside the unit circle) can.")
+    search = result.get("pid_gain_search")
+    if search:
+        parts.append(f"A signed grid of {search['gain_sets']} PID gain sets stabilizes the sampled loop in "
+                     f"{search['stabilizing']} cases (smallest spectral radius "
+                     f"{search['smallest_spectral_radius']:.4g}).")
+    return " ".join(parts)
+
+
+# ----------------------------------------------------------------------------- figures
+def plot_loop(loop: Loop, result: Mapping[str, Any], out_dir: str, title: str) -> dict[str, str]:
+    """Write ``bode.png`` (|L|, |S|, |T| and the phase of L) and ``nyquist.png`` (L, and a zoom
+    on -1 with the modulus-margin circle) into ``out_dir``; returns their paths."""
+    from pathlib import Path
+
+    from ipcosim.harness.errors import require
+
+    require("matplotlib")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    w = frequency_grid(loop.T, 3000)
+    Lw = loop_response(loop, w)
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
+    for vals, label in ((Lw, "|L|"), (1 / (1 + Lw), "|S|"), (Lw / (1 + Lw), "|T|")):
+        ax1.semilogx(w, 20 * np.log10(np.abs(vals)), label=label)
+    ax1.axhline(0, color="k", lw=0.5)
+    ax1.set_ylabel("magnitude [dB]")
+    ax1.legend()
+    ax1.set_title(title)
+    ax2.semilogx(w, np.degrees(np.unwrap(np.angle(Lw))))
+    ax2.set_ylabel("phase of L [deg]")
+    ax2.set_xlabel("frequency [rad/s]")
+    for ax in (ax1, ax2):
+        ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    bode = out / "bode.png"
+    fig.savefig(bode, dpi=110)
+    plt.close(fig)
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 5))
+    for ax, lim in ((ax1, None), (ax2, 3.0)):
+        ax.plot(Lw.real, Lw.imag, "b-", lw=1, label="L(e^{jwT}), w > 0")
+        ax.plot(Lw.real, -Lw.imag, "b--", lw=0.7, label="w < 0")
+        ax.plot([-1], [0], "r+", ms=12)
+        if result.get("modulus_margin"):
+            t = np.linspace(0, 2 * np.pi, 200)
+            r = result["modulus_margin"]
+            ax.plot(-1 + r * np.cos(t), r * np.sin(t), "r:", label="1/Ms around -1")
+        if lim:
+            ax.set_xlim(-1 - lim, -1 + lim)
+            ax.set_ylim(-lim, lim)
+            ax.set_title("around -1")
+        ax.set_xlabel("Re L")
+        ax.set_ylabel("Im L")
+        ax.grid(True, alpha=0.3)
+    ax1.set_title(title)
+    ax1.legend(fontsize=8)
+    fig.tight_layout()
+    nyq = out / "nyquist.png"
+    fig.savefig(nyq, dpi=110)
+    plt.close(fig)
+    return {"bode": str(bode), "nyquist": str(nyq)}
+
+
+def analyze(scenario: str, *, parameter_set: str | None = None, overrides: Mapping[str, float] | None = None,
+            out_dir: str | None = None) -> dict[str, Any]:
+    """Analyse a scenario's loop (see the module docstring); with ``out_dir`` also write the
+    figures and ``analysis.json`` there.
+
+    Examples
+    --------
+    >>> r = analyze("single-mass-lqr")                       # doctest: +SKIP
+    >>> r["closed_loop_stable"], round(r["delay_margin_s"], 4)  # doctest: +SKIP
+    (True, 0.0179)
+    """
+    import json
+    from pathlib import Path
+
+    loop, info = scenario_loop(scenario, parameter_set, overrides)
+    result = {**info, **analyze_loop(loop)}
+    if out_dir is not None:
+        result["figures"] = plot_loop(loop, result, out_dir, f"{info['scenario']} ({info['parameter_set']}): "
+                                                             "loop at the plant input")
+        (Path(out_dir) / "analysis.json").write_text(json.dumps(result, indent=2))
+    return result

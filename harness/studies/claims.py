@@ -1,0 +1,284 @@
+"""The thesis's claims judged on its own terms, and the conditions under which its double-mass LQR falls.
+
+Each claim is run with the **thesis's gain sets** on the thesis's own plant model (``thesis-ch3``,
+``thesis-ch4``; the single-mass LQR on the long pendulum it was designed on,
+``thesis-appendix-a``), once on the ``ideal`` and once on the ``lab`` plant (``ipcosim.fmus.instruments``:
+encoder counts, Coulomb friction, end stops, +-10 V), for ``STOP_TIME`` = 20 s, in the pure loop
+(plant step 1 ms, law sampled with zero-order hold). Oscillation is measured by one stated
+metric, ``oscillation_rad``: the RMS of the pendulum angle above ``OSCILLATION_CUTOFF_HZ`` = 1 Hz
+(4th-order Butterworth high-pass, forward and backward, over the run after the first
+second), i.e. the energy of the angle's wobble, not
+of the slow lean that moves the cart.
+
+``search_lqr_fall`` looks for the smallest departure from the nominal double-mass loop that makes
+the thesis's LQR let the pendulum fall (|angle| >= 0.35 rad): a transport delay of the voltage,
+encoder quantization, Coulomb friction, a lower voltage limit, a longer sample period, or the
+output filters left out -- one at a time, each from small to large.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from ipcosim.controllers.catalog import make_law
+from ipcosim.fmus.instruments import Instruments, realism
+from ipcosim.fmus.params import preset
+from ipcosim.fmus.physics import MOTOR_CART
+from ipcosim.fmus.plant import InstrumentedPlant, PlantStepError
+from ipcosim.harness.metrics import UPRIGHT_LIMIT_RAD, compute_metrics
+
+STOP_TIME = 20.0
+PLANT_STEP = 1e-3
+OSCILLATION_CUTOFF_HZ = 1.0
+PRESET = {"single-mass": "thesis-ch3", "double-mass": "thesis-ch4"}
+
+
+@dataclass
+class Run:
+    """Metrics of one pure-loop run (``run``)."""
+
+    metrics: dict[str, Any]
+    oscillation_rad: float
+    itae: float
+    fell_at: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def done(self) -> bool:
+        """Upright and settled (the thesis's task)."""
+        return bool(self.metrics["upright"] and self.metrics["settling_time_s"] is not None)
+
+
+def oscillation(time: np.ndarray, angle: np.ndarray, cutoff_hz: float = OSCILLATION_CUTOFF_HZ) -> float:
+    """RMS [rad] of the angle's content above ``cutoff_hz`` after the first second."""
+    from scipy.signal import butter, sosfiltfilt
+
+    keep = time >= 1.0
+    if np.count_nonzero(keep) < 100:
+        return 0.0
+    sos = butter(4, cutoff_hz, "highpass", fs=1.0 / float(time[1] - time[0]), output="sos")
+    return float(np.sqrt(np.mean(sosfiltfilt(sos, angle[keep]) ** 2)))
+
+
+def run(law, kind: str, params, instruments: Instruments | None = None, stop_time: float = STOP_TIME,
+        amplitude: float = 0.05) -> Run:
+    """Step 0 -> ``amplitude`` of the motor cart at t = 0; the law sees the plant's readings."""
+    plant = InstrumentedPlant(params, instruments=instruments)
+    n, every = round(stop_time / PLANT_STEP), round(law.sample_period / PLANT_STEP)
+    names = plant.state_names
+    ia, im = names.index("pendulum_angle"), MOTOR_CART[kind]
+    t = np.arange(n + 1) * PLANT_STEP
+    x, th, v = np.full(n + 1, np.nan), np.full(n + 1, np.nan), np.zeros(n + 1)
+    x[0], th[0] = plant.state[im], plant.state[ia]
+    u, fell = 0.0, None
+    for k in range(n):
+        if k % every == 0:
+            u = law.step(plant.readings, amplitude)
+        v[k] = u
+        try:
+            plant.do_step(k * PLANT_STEP, PLANT_STEP, u)
+        except PlantStepError:
+            break
+        s = plant.state
+        x[k + 1], th[k + 1] = s[im], s[ia]
+        if fell is None and abs(s[ia]) >= UPRIGHT_LIMIT_RAD:
+            fell = (k + 1) * PLANT_STEP
+        if abs(s[ia]) > 1.5:  # well past falling: stop
+            break
+    v[-1] = v[-2]
+    ok = np.isfinite(x)
+    m = compute_metrics(t[ok], x[ok], np.full(ok.sum(), amplitude), th[ok], v[ok])
+    m["upright"] = bool(m["upright"] and ok.all())
+    itae = float(np.trapezoid(t[ok] * np.abs(x[ok] - amplitude), t[ok]))
+    return Run(m, oscillation(t[ok], th[ok]), itae, fell)
+
+
+def plant_for(kind: str, realism_name: str, **overrides: float):
+    """(params, instruments) of the thesis's plant on the ``ideal`` or ``lab`` option set."""
+    inst, phys = realism(realism_name, kind)
+    return preset(PRESET[kind], **{**phys, **overrides}), inst
+
+
+#: The model each thesis design was made on, where it is not the kind's default preset: the thesis
+#: designed its single-mass LQR on the long pendulum (App. A.2).
+OWN_MODEL = {("LQR", "single-mass"): "thesis-appendix-a"}
+
+
+def thesis_runs(realism_name: str, stop_time: float = STOP_TIME) -> dict[tuple[str, str], Run]:
+    """Every law with the thesis's gain set, on both plants (CascadePID: no thesis set, left out), each
+    on its own model (``OWN_MODEL``: plant and design model; else the kind's thesis preset)."""
+    out = {}
+    for kind in ("single-mass", "double-mass"):
+        for law in ("PID", "LQR", "HSMC", "AdaptiveHSMC"):
+            own = OWN_MODEL.get((law, kind))
+            inst, phys = realism(realism_name, kind)
+            params = preset(own or PRESET[kind], **phys)
+            design = {"design_params": preset(own)} if own else {}
+            out[(law, kind)] = run(make_law(law, kind, "thesis", **design), kind, params, inst, stop_time)
+    return out
+
+
+# ----------------------------------------------------------------------------- the claims
+@dataclass(frozen=True)
+class Claim:
+    """A claim of the thesis, where it is made, its measurable form and its check."""
+
+    text: str
+    source: str
+    form: str
+    check: Callable[[Mapping[tuple[str, str], Run]], tuple[bool, str]]
+
+
+def _fmt(r: Run) -> str:
+    m = r.metrics
+    st = f"settles {m['settling_time_s']:.2f} s" if m["settling_time_s"] is not None else "not settled"
+    up = "upright" if m["upright"] else f"falls at {r.fell_at:.2f} s" if r.fell_at else "falls"
+    err = m["steady_state_error_m"]
+    return f"{up}, {st}, error {err * 1e3:.2f} mm, oscillation {r.oscillation_rad * 1e3:.2f} mrad" \
+        if err is not None else f"{up}, {st}"
+
+
+def _fails(kind: str):
+    def check(R):
+        r = R[("PID", kind)]
+        return (not r.done), _fmt(r)
+    return check
+
+
+def _lqr_single(R):
+    lqr, hsmc = R[("LQR", "single-mass")], R[("HSMC", "single-mass")]
+    return (lqr.done and lqr.oscillation_rad > 2 * hsmc.oscillation_rad,
+            f"LQR: {_fmt(lqr)}; HSMC oscillation {hsmc.oscillation_rad * 1e3:.2f} mrad")
+
+
+def _hsmc_integral(R):
+    r = R[("HSMC", "single-mass")]
+    err = r.metrics["steady_state_error_m"]
+    return bool(err is not None and err < 1e-3 and r.metrics["upright"]), _fmt(r)
+
+
+def _adaptive_faster(kind: str, error_too: bool):
+    def check(R):
+        a, h = R[("AdaptiveHSMC", kind)], R[("HSMC", kind)]
+        ta, th = a.metrics["settling_time_s"], h.metrics["settling_time_s"]
+        faster = ta is not None and (th is None or ta < th)
+        if error_too:
+            ea, eh = a.metrics["steady_state_error_m"], h.metrics["steady_state_error_m"]
+            faster = faster and ea is not None and eh is not None and ea < eh
+        return bool(faster and a.metrics["upright"]), f"adaptive: {_fmt(a)}; HSMC: {_fmt(h)}"
+    return check
+
+
+def _fewer_oscillations(R):
+    lqr, hsmc = R[("LQR", "single-mass")], R[("HSMC", "single-mass")]
+    return (hsmc.metrics["upright"] and hsmc.oscillation_rad < 0.5 * lqr.oscillation_rad,
+            f"HSMC {hsmc.oscillation_rad * 1e3:.2f} mrad vs LQR {lqr.oscillation_rad * 1e3:.2f} mrad")
+
+
+def _hsmc_better(R):
+    parts, ok = [], True
+    for kind in ("single-mass", "double-mass"):
+        h, lq, p = R[("HSMC", kind)], R[("LQR", kind)], R[("PID", kind)]
+        better = h.metrics["upright"] and (not lq.metrics["upright"] or h.itae < lq.itae) and \
+            (not p.metrics["upright"] or h.itae < p.itae)
+        ok = ok and better
+        pid = "PID fell" if not p.metrics["upright"] else f"PID {p.itae * 1e3:.2f} mm s^2"
+        lqr = f"LQR {lq.itae * 1e3:.2f} mm s^2" + ("" if lq.metrics["upright"] else " (fell)")
+        parts.append(f"{kind}: ITAE HSMC {h.itae * 1e3:.2f} mm s^2, {lqr}, {pid}")
+    return ok, "; ".join(parts)
+
+
+def _double_lqr_falls(R):
+    r = R[("LQR", "double-mass")]
+    return (not r.metrics["upright"]), _fmt(r)
+
+
+def _double_hsmc(R):
+    r = R[("HSMC", "double-mass")]
+    err = r.metrics["steady_state_error_m"]
+    return bool(r.metrics["upright"] and err is not None and err >= 1e-3), _fmt(r) + " (thesis: 5.575 mm)"
+
+
+CLAIMS: tuple[Claim, ...] = (
+    Claim("PID control does not work for this system.", "3.2.1", "thesis PID fails the task (single mass)",
+          _fails("single-mass")),
+    Claim("It meets the criterion, but has a lot of oscillations.", "3.2.2, Fig. 3.9 (simulation)",
+          "single-mass LQR does the task, oscillation > 2x the HSMC's", _lqr_single),
+    Claim("an integral controller can eliminate the steady-state error", "ch. 5, Fig. 3.11",
+          "single-mass HSMC upright with error < 1 mm at 20 s", _hsmc_integral),
+    Claim("the settling time has been reduced", "3.2.4, Fig. 3.12", "single-mass adaptive HSMC settles before HSMC",
+          _adaptive_faster("single-mass", False)),
+    Claim("it has decreased oscillations greatly", "3.3, Fig. 3.19 (experiment)",
+          "single-mass HSMC oscillation < half the LQR's", _fewer_oscillations),
+    Claim("HSMC could give a better result than PID and LQR", "ch. 5",
+          "HSMC upright with a lower ITAE than LQR and PID, both plants", _hsmc_better),
+    Claim("PID control cannot work for this system", "4.2.1, Fig. 4.7", "thesis PID fails the task (double mass)",
+          _fails("double-mass")),
+    Claim("a lot of oscillations and that would cause the pendulum fall when the carts stop", "4.2.2, Fig. 4.9",
+          "double-mass LQR lets the pendulum fall", _double_lqr_falls),
+    Claim("it always has a steady-state error of 0.005575m", "4.2.3, Fig. 4.11 (simulation)",
+          "double-mass HSMC upright, error >= 1 mm", _double_hsmc),
+    Claim("the steady-state error and settling time have been decreased", "4.2.4, Fig. 4.12",
+          "double-mass adaptive HSMC settles sooner with a smaller error than HSMC",
+          _adaptive_faster("double-mass", True)),
+)
+
+
+def judge(stop_time: float = STOP_TIME) -> list[dict[str, Any]]:
+    """Each claim's verdict and evidence on the ideal and the lab plant."""
+    runs = {name: thesis_runs(name, stop_time) for name in ("ideal", "lab")}
+    rows = []
+    for c in CLAIMS:
+        row: dict[str, Any] = {"claim": c.text, "source": c.source, "form": c.form}
+        for name, R in runs.items():
+            ok, evidence = c.check(R)
+            row[name] = {"holds": bool(ok), "evidence": evidence}
+        holds = [row[n]["holds"] for n in runs]
+        row["verdict"] = ("confirmed" if all(holds) else "not confirmed" if not any(holds)
+                          else "confirmed on the lab plant only" if row["lab"]["holds"] else
+                          "confirmed on the ideal plant only")
+        rows.append(row)
+    return rows
+
+
+# ----------------------------------------------------------------------------- the LQR fall search
+def _lqr_case(sample_period: float = 1e-3, voltage_limit: float = 10.0, filters: bool = True,
+              stop_time: float = STOP_TIME, **bench: float) -> Run:
+    kind = "double-mass"
+    phys = {k: bench.pop(k) for k in ("b1", "b2") if k in bench}
+    params = preset(PRESET[kind], voltage_limit=10.0, **phys)
+    law = make_law("LQR", kind, "thesis", sample_period=sample_period, voltage_limit=voltage_limit,
+                   **({} if filters else {"output_filter_time_constant": 0.0}))
+    return run(law, kind, params, Instruments(**bench), stop_time)
+
+
+#: One condition at a time, from small to large (label, unit, values, keyword for ``_lqr_case``).
+FALL_CONDITIONS: tuple[tuple[str, str, tuple[float, ...], Callable[[float], dict[str, Any]]], ...] = (
+    ("voltage transport delay", "ms", (1, 2, 3, 4, 5, 6, 7, 8, 10, 12), lambda v: {"input_delay": v * 1e-3}),
+    ("encoder quantization (IP02 counts x factor)", "x", (1, 2, 4, 8),
+     lambda v: {"cart_resolution": 2.275e-5 * v, "pendulum_resolution": 2 * math.pi / 4096 * v}),
+    ("Coulomb friction on both carts", "N", (0.1006, 0.2, 0.4, 0.8), lambda v: {"b1": v, "b2": v}),
+    ("voltage limit", "V", (8.0, 6.0, 4.0, 2.0), lambda v: {"voltage_limit": v}),
+    ("sample period", "ms", (2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0), lambda v: {"sample_period": v * 1e-3}),
+    ("output filters left out", "-", (1.0,), lambda v: {"filters": False}),
+)
+
+
+def search_lqr_fall(stop_time: float = STOP_TIME) -> list[dict[str, Any]]:
+    """For each condition: the smallest value that makes the thesis's double-mass LQR fall (or None)."""
+    rows = []
+    for label, unit, values, kw in FALL_CONDITIONS:
+        found, last = None, None
+        for value in values:
+            r = _lqr_case(stop_time=stop_time, **kw(value))
+            last = r
+            if not r.metrics["upright"]:
+                found = (value, r)
+                break
+        rows.append({"condition": label, "unit": unit, "tried": list(values),
+                     "falls_at": found[0] if found else None,
+                     "evidence": _fmt(found[1]) if found else f"largest tried: {_fmt(last)}"})
+    return rows
