@@ -1,7 +1,7 @@
 """Baselines: a run's trajectories saved as CSV to compare later runs against.
 
 A baseline file is a CSV like ``results.csv`` (header ``time,component.variable,...``) holding
-the recorded columns at no more than :data:`MAX_ROWS` communication points (every n-th
+the recorded columns (10 significant digits) at no more than :data:`MAX_ROWS` communication points (every n-th
 point, always the first and the last; the points are samples of the run, not interpolated).
 :func:`compare` evaluates a new run at the baseline's times (linear interpolation, exact on
 a shared grid) and reports, per column, the largest deviation against its tolerance.
@@ -47,15 +47,14 @@ def save_baseline(result: "Result", path: str | os.PathLike[str], columns: Seque
     Path
         The file written.
     """
-    from ipcosim.harness.master.results import write_csv
-
     names = result.select(columns)
     n = len(result.data)
     stride = max(1, math.ceil((n - 1) / (MAX_ROWS - 1))) if n > 1 else 1
     rows = np.unique(np.r_[np.arange(0, n, stride), n - 1]) if n else np.arange(0)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_csv(result.data[rows], path, names)
+    matrix = np.column_stack([np.asarray(result.data[c][rows], dtype=float) for c in names])
+    np.savetxt(path, matrix, fmt="%.10g", delimiter=",", header=",".join(names), comments="")
     return path
 
 

@@ -181,8 +181,8 @@ def build_fmu(script: str | os.PathLike[str], *, files: Sequence[str | os.PathLi
     script : path
         The FMU script (the model is named after its class).
     files : sequence of path
-        Further files the FMU needs at run time (your own modules, data), packed into its
-        ``resources/`` beside the script.
+        Further files or package folders the FMU needs at run time (your own modules, data),
+        packed into its ``resources/`` beside the script.
     out : path, optional
         Output folder (default: ``build/`` beside the script).
 
@@ -219,7 +219,7 @@ def build_fmu(script: str | os.PathLike[str], *, files: Sequence[str | os.PathLi
     script = Path(script).resolve()
     extra = [Path(f).resolve() for f in files]
     for f in [script, *extra]:
-        if not f.is_file():
+        if not f.exists():
             raise FMUBuildError(f"build_fmu: {f} does not exist")
     target = Path(out) if out is not None else script.parent / "build"
     target.mkdir(parents=True, exist_ok=True)
@@ -228,7 +228,8 @@ def build_fmu(script: str | os.PathLike[str], *, files: Sequence[str | os.PathLi
         stamps = json.loads(stamps_file.read_text())
     except (OSError, ValueError):
         stamps = {}
-    digest = _digest([script, *runtime_modules(script), *extra])
+    contents = [p for f in extra for p in ([f] if f.is_file() else sorted(f.rglob("*.py")))]
+    digest = _digest([script, *runtime_modules(script), *contents])
     entry = stamps.get(str(script))
     if entry and entry.get("sha256") == digest and (target / entry["fmu"]).is_file():
         return target / entry["fmu"]

@@ -37,9 +37,12 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", f"{HIL_MARKER}: hardware-in-the-loop test; {NO_RIG}")
 
 
-def pytest_runtest_setup(item: pytest.Item) -> None:
-    if item.get_closest_marker(HIL_MARKER) and not item.config.getoption("--ipcosim-rig"):
-        pytest.skip(NO_RIG)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if config.getoption("--ipcosim-rig"):
+        return
+    for item in items:
+        if item.get_closest_marker(HIL_MARKER):
+            item.add_marker(pytest.mark.skip(reason=NO_RIG))
 
 
 class Cosim:
