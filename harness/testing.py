@@ -32,12 +32,10 @@ class CheckFailed(IpcosimError, AssertionError):
 
 
 def describe(result: "Result") -> str:
-    """``scenario [swaps, settings]``: which run a message is about."""
+    """``scenario [swaps, overrides]``: which run a message is about."""
     meta = result.metadata
     items = [f"{k}={Path(str(v)).name}" for k, v in (meta.get("swaps") or {}).items()]
     items += [f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in _overrides(meta).items()]
-    if meta.get("parameter_set"):
-        items.insert(0, f"set {meta['parameter_set']}")
     return f"{meta.get('scenario', 'run')}" + (f" [{', '.join(items)}]" if items else "")
 
 
@@ -168,7 +166,8 @@ def assert_close_to(result: "Result", reference_csv: str | os.PathLike[str], col
     --------
     >>> import ipcosim, pathlib, tempfile
     >>> base = pathlib.Path(tempfile.mkdtemp()) / "lqr.csv"
-    >>> r = ipcosim.run("single-mass-lqr", stop_time=1.0, save_baseline=base, record=["plant.*"])
+    >>> r = ipcosim.run("single-mass-lqr", stop_time=1.0, save_baseline=base,
+    ...                 record=["plant.cart_position", "plant.pendulum_angle"])
     >>> ipcosim.assert_close_to(r, base, tol={"plant.cart_position": 1e-6, "plant.pendulum_angle": 1e-6})
     """
     from ipcosim.harness.baseline import BaselineError, compare, load_baseline, plot_difference
