@@ -18,6 +18,7 @@ Importing this module costs nothing but pytest: ipcosim's master loads on first 
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +56,7 @@ class Cosim:
 
     def run(self, scenario: str, **options: Any) -> Any:
         """:func:`ipcosim.run` with ``out`` under the test's ``tmp_path`` (see its parameters)."""
+        __tracebackhide__ = True
         import ipcosim
         from ipcosim.harness.options import scenario_label
 
@@ -117,7 +119,26 @@ _COSIM_KEY = pytest.StashKey[Cosim]()
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Any:
     outcome = yield
     report = outcome.get_result()
+    if report.failed and call.excinfo is not None and _is_setup_error(call.excinfo.value):
+        report.longrepr = _one_line(item, call.excinfo)
     runner = item.stash.get(_COSIM_KEY, None)
     if runner is not None and runner.runs and report.failed:
         report.sections.append(("ipcosim runs (results.csv, metrics.json)", runner.report()))
 
+
+
+def _is_setup_error(exc: BaseException) -> bool:
+    """An ipcosim error about the inputs (option, scenario, FMU): not a failed check or run."""
+    errors = sys.modules.get("ipcosim.harness.errors")
+    testing = sys.modules.get("ipcosim.harness.testing")
+    results = sys.modules.get("ipcosim.harness.master.results")
+    if errors is None or not isinstance(exc, errors.IpcosimError):
+        return False
+    return not ((testing and isinstance(exc, testing.CheckFailed)) or (results and isinstance(exc, results.SimulationError)))
+
+
+def _one_line(item: pytest.Item, excinfo: pytest.ExceptionInfo[BaseException]) -> str:
+    """``test_file.py:LINE: ErrorClass: message``, the line of the test that made the call."""
+    here = [e for e in excinfo.traceback if str(e.path) == str(item.path)]
+    where = f"{item.path}:{here[-1].lineno + 1}" if here else item.nodeid
+    return f"{where}: {type(excinfo.value).__name__}: {excinfo.value}"

@@ -47,6 +47,7 @@ def _overrides(meta: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _column(result: "Result", candidates: Sequence[str], what: str) -> np.ndarray:
+    __tracebackhide__ = True  # pytest shows the test's line, not this helper's
     name = first_column(result.columns, candidates)
     if name is None:
         raise CheckFailed(f"{describe(result)}: no {what} recorded (looked for {', '.join(candidates)})")
@@ -54,6 +55,7 @@ def _column(result: "Result", candidates: Sequence[str], what: str) -> np.ndarra
 
 
 def _fail(result: "Result", text: str) -> None:
+    __tracebackhide__ = True
     where = (result.metadata.get("files") or {}).get("results")
     raise CheckFailed(f"{describe(result)}: {text}" + (f"\n  results: {where}" if where else ""))
 
@@ -70,6 +72,7 @@ def assert_upright(result: "Result", limit_rad: float = 0.35) -> None:
     ...
     ipcosim.harness.testing.CheckFailed: single-mass-lqr: the pendulum left +-1e-06 rad: ...
     """
+    __tracebackhide__ = True
     t, angle = np.asarray(result["time"], float), _column(result, ANGLE_COLUMNS, "pendulum angle")
     bad = ~(np.abs(angle) < limit_rad)
     if result.error:
@@ -82,6 +85,7 @@ def assert_upright(result: "Result", limit_rad: float = 0.35) -> None:
 
 
 def _step_target(result: "Result") -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    __tracebackhide__ = True
     t = np.asarray(result["time"], float)
     x = _column(result, POSITION_COLUMNS, "cart position")
     r = _column(result, REFERENCE_COLUMNS, "reference")
@@ -114,6 +118,7 @@ def assert_settles(result: "Result", within_s: float, band: float = 0.02) -> Non
     >>> import ipcosim
     >>> ipcosim.assert_settles(ipcosim.run("single-mass-lqr", stop_time=6.0), within_s=5.0)
     """
+    __tracebackhide__ = True
     if result.error:
         _fail(result, f"the run failed: {result.error}")
     t, x, r, r_final = _step_target(result)
@@ -135,6 +140,7 @@ def assert_steady_state(result: "Result", error_m: float, fraction: float = 0.1)
     >>> import ipcosim
     >>> ipcosim.assert_steady_state(ipcosim.run("single-mass-lqr", stop_time=6.0), error_m=0.002)
     """
+    __tracebackhide__ = True
     if result.error:
         _fail(result, f"the run failed: {result.error}")
     t, x, r, _ = _step_target(result)
@@ -170,6 +176,7 @@ def assert_close_to(result: "Result", reference_csv: str | os.PathLike[str], col
     ...                 record=["plant.cart_position", "plant.pendulum_angle"])
     >>> ipcosim.assert_close_to(r, base, tol={"plant.cart_position": 1e-6, "plant.pendulum_angle": 1e-6})
     """
+    __tracebackhide__ = True
     from ipcosim.harness.baseline import BaselineError, compare, load_baseline, plot_difference
 
     baseline = load_baseline(reference_csv)
