@@ -197,7 +197,8 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
             staged_script.write_text(_privatize(script.read_text(), private))
             out = Path(tmp) / "out"
             try:
-                built = Path(pythonfmu.FmuBuilder.build_FMU(staged_script, dest=out, project_files=[package, *project_files]))
+                built = Path(pythonfmu.FmuBuilder.build_FMU(staged_script, dest=out,
+                                                            project_files=[package, *project_files]))
             except Exception as exc:  # noqa: BLE001 -- one line naming the script
                 raise BuildError(f"{script}: pythonfmu build failed: {type(exc).__name__}: {exc}") from exc
             check_fmu(built)

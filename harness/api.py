@@ -23,13 +23,13 @@ from pathlib import Path, PurePosixPath
 from typing import Any, Mapping, Sequence
 
 from ipcosim.harness.errors import UsageError
-from ipcosim.harness.options import RunOptions
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
 from ipcosim.harness.master.results import Result, SimulationError
 from ipcosim.harness.master.slave import FMUSlave, load_library
+from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
 from ipcosim.harness.scenario.system import SwapTarget, System, bind, warn_all, with_overrides
 

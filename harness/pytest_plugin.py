@@ -134,7 +134,9 @@ def _is_setup_error(exc: BaseException) -> bool:
     results = sys.modules.get("ipcosim.harness.master.results")
     if errors is None or not isinstance(exc, errors.IpcosimError):
         return False
-    return not ((testing and isinstance(exc, testing.CheckFailed)) or (results and isinstance(exc, results.SimulationError)))
+    checked = testing is not None and isinstance(exc, testing.CheckFailed)
+    failed_run = results is not None and isinstance(exc, results.SimulationError)
+    return not (checked or failed_run)
 
 
 def _one_line(item: pytest.Item, excinfo: pytest.ExceptionInfo[BaseException]) -> str:
