@@ -11,8 +11,12 @@ top-level folders of the source tree (``pyproject.toml``, ``package-dir``)::
 The public Python API is re-exported here lazily, so ``import ipcosim`` stays cheap::
 
     import ipcosim
-    result = ipcosim.run("single-mass-lqr", stop_time=5.0)
-    result.metrics["settling_time_s"]
+    result = ipcosim.run("single-mass-lqr", stop_time=5.0, set={"plant.Mp": "1.1*nominal"})
+    result.metrics["settling_time_s"], result.data["plant.cart_position"]
+    ipcosim.assert_settles(result, within_s=3.0)
+
+See docs/api.md; the pytest plugin (fixtures ``cosim``, ``ipcosim_fmus``) is
+``ipcosim.harness.pytest_plugin``.
 """
 from __future__ import annotations
 
@@ -21,10 +25,19 @@ from typing import Any
 __version__ = "0.2.0"
 
 _EXPORTS = {
-    "run": "ipcosim.harness.api", "prepare": "ipcosim.harness.api", "Prepared": "ipcosim.harness.api",
+    "run": "ipcosim.harness.public", "scenarios": "ipcosim.harness.public", "build": "ipcosim.harness.public",
+    "build_fmu": "ipcosim.harness.public", "ScenarioInfo": "ipcosim.harness.public",
+    "FMUBuildError": "ipcosim.harness.public", "linearize": "ipcosim.harness.public",
+    "RunOptions": "ipcosim.harness.options",
+    "prepare": "ipcosim.harness.api", "Prepared": "ipcosim.harness.api",
     "Result": "ipcosim.harness.master.results", "SimulationError": "ipcosim.harness.master.results",
     "load_scenario": "ipcosim.harness.scenario.ssp", "scenario_names": "ipcosim.harness.scenario.ssp",
-    "IpcosimError": "ipcosim.harness.errors",
+    "IpcosimError": "ipcosim.harness.errors", "UsageError": "ipcosim.harness.errors",
+    "assert_upright": "ipcosim.harness.testing", "assert_settles": "ipcosim.harness.testing",
+    "assert_steady_state": "ipcosim.harness.testing", "assert_close_to": "ipcosim.harness.testing",
+    "settling_time": "ipcosim.harness.testing", "cases": "ipcosim.harness.testing", "Case": "ipcosim.harness.testing",
+    "CheckFailed": "ipcosim.harness.testing", "save_baseline": "ipcosim.harness.baseline",
+    "load_baseline": "ipcosim.harness.baseline",
 }
 
 __all__ = sorted(_EXPORTS)

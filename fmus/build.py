@@ -155,7 +155,8 @@ def _load_stamps(fmu_dir: Path) -> dict[str, dict[str, str]]:
         return {}
 
 
-def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | None = None) -> Path:
+def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | None = None,
+              project_files: Iterable[Path] = ()) -> Path:
     """Build one FMU script into ``fmu_dir`` (written atomically) and check it.
 
     The FMU's ``resources/`` gets the script and the project modules it imports
@@ -172,6 +173,8 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
         The ``ipcosim`` package folder the script's imports resolve in.
     digest : str, optional
         Source digest (default: computed) that names the private package.
+    project_files : iterable of Path
+        Further files for the FMU's ``resources/`` as they are (a user's own modules, data).
 
     Returns
     -------
@@ -200,7 +203,8 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
             staged_script.write_text(_privatize(script.read_text(), private))
             out = Path(tmp) / "out"
             try:
-                built = Path(pythonfmu.FmuBuilder.build_FMU(staged_script, dest=out, project_files=[package]))
+                built = Path(pythonfmu.FmuBuilder.build_FMU(staged_script, dest=out,
+                                                            project_files=[package, *project_files]))
             except Exception as exc:  # noqa: BLE001 -- one line naming the script
                 raise BuildError(f"{script}: pythonfmu build failed: {type(exc).__name__}: {exc}") from exc
             check_fmu(built)

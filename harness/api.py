@@ -29,6 +29,7 @@ from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
 from ipcosim.harness.master.results import Result, SimulationError
 from ipcosim.harness.master.slave import FMUSlave, load_library
+from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
 from ipcosim.harness.scenario.system import (
     SwapTarget,
@@ -282,3 +283,62 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
         return prepared.run(stop_time, step, overrides, out_dir=out_dir, variables=variables, plot=plot,
                             raise_on_error=raise_on_error, realtime=realtime, progress=progress, observers=observers,
                             manipulators=manipulators, start_time=start_time, record_every=record_every)
+
+
+def prepare_with(options: RunOptions, *, warn: bool = True) -> Prepared:
+    """A :class:`Prepared` scenario for ``options`` (scenario, parameter set, swaps, FMU folders, algorithm)."""
+    return Prepared(options.scenario, parameter_set=options.parameter_set, swaps=options.swap,
+                    fmu_dirs=options.fmu_dirs, algorithm=options.algorithm, warn=warn)
+
+
+def run_with(options: RunOptions, prepared: Prepared | None = None) -> Result:
+    """Run once as ``options`` say: the one path behind ``ipcosim run`` and :func:`ipcosim.run`.
+
+    Writes ``options.out`` and ``options.save_baseline`` when given; relative ``set`` values
+    (``"1.1*nominal"``) are resolved against the values the scenario binds.
+
+    Raises
+    ------
+    IpcosimError
+        A bad option, scenario or FMU (one line naming it); SimulationError for a failed run
+        (its ``result`` holds what was computed, already written to ``options.out``).
+    """
+    if prepared is None:
+        with prepare_with(options) as own:
+            return run_with(options, own)
+    overrides = resolve_relative(prepared.system, options.set)
+    result = prepared.run(options.stop_time, options.step, overrides, out_dir=options.out,
+                          variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
+                          progress=options.progress)
+    if options.save_baseline is not None:
+        from ipcosim.harness.baseline import save_baseline
+
+        result.metadata.setdefault("files", {})["baseline"] = str(
+            save_baseline(result, options.save_baseline, list(options.record) or None))
+    return result
+
+
+def resolve_relative(system: System, overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """``overrides`` with values relative to the scenario's (``"1.1*nominal"``, the ``--vary``
+    grammar's scaling) turned into numbers: the value the scenario binds to the variable
+    (else the FMU's start value) times the factor.
+
+    Raises
+    ------
+    UsageError
+        A relative value for an unknown component or variable, or one without a numeric nominal.
+    """
+    out: dict[str, Any] = {}
+    for key, value in overrides.items():
+        body = value.replace(" ", "") if isinstance(value, str) else ""
+        if "nominal" not in body:
+            out[key] = value
+            continue
+        factor = body.removesuffix("*nominal") if body.endswith("*nominal") else body.removeprefix("nominal*")
+        comp, _, var = key.partition(".")
+        try:
+            out[key] = float(factor) * float(system.instance(comp).start_value(var))
+        except (KeyError, TypeError, ValueError):
+            raise UsageError(f"--set {key}={value}: expected NUMBER*nominal on a numeric variable of the "
+                             f"scenario") from None
+    return out

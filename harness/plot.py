@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
+
     from ipcosim.harness.master.results import Result
 
 POSITIONS = (("plant.cart_position", "cart"), ("plant.active_cart_position", "active cart"),
@@ -15,7 +17,18 @@ POSITIONS = (("plant.cart_position", "cart"), ("plant.active_cart_position", "ac
 
 
 def plot_result(result: "Result", path: str | Path, title: str | None = None) -> Path:
-    """Write the three-panel figure of a run to ``path`` (PNG); returns the path.
+    """Write the three-panel figure of a run (:func:`figure`) to ``path`` (PNG); returns the path."""
+    import matplotlib.pyplot as plt
+
+    fig = figure(result, title, backend="Agg")
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def figure(result: "Result", title: str | None = None, backend: str | None = None) -> "Figure":
+    """The three-panel matplotlib figure of a run.
 
     Panels: (1) reference and cart position(s) [m], (2) pendulum angle [deg], (3) controller
     voltage [V]. Panels whose signals the result lacks are left out; with none of them, every
@@ -26,7 +39,8 @@ def plot_result(result: "Result", path: str | Path, title: str | None = None) ->
     require("matplotlib")
     import matplotlib
 
-    matplotlib.use("Agg")
+    if backend:
+        matplotlib.use(backend)
     import matplotlib.pyplot as plt
 
     cols = result.columns
@@ -60,7 +74,4 @@ def plot_result(result: "Result", path: str | Path, title: str | None = None) ->
     status = "" if result.ok else "  [FAILED]"
     fig.suptitle(f"{name}{extra}{status}")
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig

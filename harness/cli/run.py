@@ -2,9 +2,7 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
-from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -30,56 +28,31 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="columns of results.csv: names or patterns like 'plant.*' (default: every connector)")
     p.add_argument("--fmu-dir", action="append", default=[], metavar="DIR",
                    help="extra folder to look for FMUs in (also IPCOSIM_FMU_PATH; default build/fmus)")
+    p.add_argument("--save-baseline", metavar="FILE",
+                   help="also write the recorded columns (see --record) as a baseline CSV for assert_close_to")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=main)
-
-
-def _number(option: str, text: str | None) -> float | None:
-    from ipcosim.harness.errors import UsageError
-
-    if text is None:
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        raise UsageError(f"{option} {text!r}: not a number of seconds") from None
-    if not (math.isfinite(value) and value > 0):
-        raise UsageError(f"{option} {text}: must be a positive number of seconds")
-    return value
-
-
-def _scenario_label(text: str) -> str:
-    p = Path(text)
-    if p.name == "SystemStructure.ssd":
-        return p.parent.name
-    return p.stem if p.suffix == ".ssp" else (p.name or text)
 
 
 def main(args: argparse.Namespace) -> int:
     import warnings
 
-    from ipcosim.harness.api import Prepared
+    from ipcosim.harness.api import prepare_with, run_with
     from ipcosim.harness.master.results import json_safe
-    from ipcosim.harness.scenario.system import parse_set_options, parse_swap_options
+    from ipcosim.harness.options import RunOptions
 
-    stop = _number("--stop-time", args.stop_time)
-    step = _number("--step", args.step)
-    overrides = parse_set_options(args.set)
-    swaps = parse_swap_options(args.swap)
-    variables = [v.strip() for item in args.record for v in item.split(",") if v.strip()] or None
-    out = Path(args.out) if args.out else Path("out") / _scenario_label(args.scenario)
+    options = RunOptions.from_args(args)
+    out = options.out
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        prepared = Prepared(args.scenario, parameter_set=args.parameter_set, swaps=swaps, fmu_dirs=args.fmu_dir,
-                            algorithm=args.algorithm, warn=False)
+        prepared = prepare_with(options, warn=False)
     with prepared:
         for note in prepared.system.warnings:
             print(f"ipcosim run: warning: {note}", file=sys.stderr)
         if not args.quiet:
             for note in prepared.system.notes:
                 print(f"note: {note}")
-        result = prepared.run(stop, step, overrides, out_dir=out, variables=variables, plot=args.plot,
-                              realtime=True if args.realtime else None, progress=not args.quiet)
+        result = run_with(options, prepared)
     if not args.quiet:
         m = json_safe(result.metrics)
         meta = result.metadata
@@ -90,5 +63,6 @@ def main(args: argparse.Namespace) -> int:
             if key in ("wall_time_s", "real_time_factor"):
                 continue
             print(f"  {key:22s} {value if not isinstance(value, float) else f'{value:.6g}'}")
-        print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if args.plot else ""))
+        print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if args.plot else "")
+              + (f", baseline {options.save_baseline}" if options.save_baseline else ""))
     return 0

@@ -84,6 +84,19 @@ class Result:
             chosen.update(hits)
         return [c for c in cols if c in chosen]
 
+    def plot(self, path: str | Path | None = None) -> Any:
+        """The run's figure: reference and cart position(s), pendulum angle, voltage.
+
+        Parameters
+        ----------
+        path : path, optional
+            Write the figure there as PNG and return the path; without it, return the
+            matplotlib Figure (to show or save).
+        """
+        from ipcosim.harness.plot import figure, plot_result
+
+        return figure(self) if path is None else plot_result(self, path)
+
     def write(self, out_dir: str | Path, variables: Sequence[str] | None = None, plot: bool = False) -> dict[str, Path]:
         """Write ``results.csv``, ``metrics.json`` (and ``plot.png``) into ``out_dir``.
 

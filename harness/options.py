@@ -1,0 +1,149 @@
+"""The options of one run: the single object behind ``ipcosim run`` and :func:`ipcosim.run`.
+
+The command line builds a :class:`RunOptions` from its arguments (:meth:`RunOptions.from_args`),
+the Python API from keywords (:meth:`RunOptions.create`); both hand it to
+:func:`ipcosim.harness.api.run_with`. A check that fails names the option the way the command
+line spells it (``--stop-time -1: must be a positive number of seconds``), so the API raises
+the same one-line message the command line prints.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from ipcosim.harness.errors import UsageError
+
+ALGORITHM_CHOICES = ("gauss-seidel", "jacobi")
+
+
+def _seconds(option: str, value: Any) -> float | None:
+    """A positive, finite number of seconds (text or number), or None."""
+    if value is None:
+        return None
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise UsageError(f"{option} {value!r}: not a number of seconds") from None
+    if not (math.isfinite(number) and number > 0):
+        raise UsageError(f"{option} {value}: must be a positive number of seconds")
+    return number
+
+
+def _pairs(option: str, items: Mapping[str, Any] | Sequence[str] | None) -> dict[str, Any]:
+    """``{"a.b": v}`` from a mapping or from ``["a.b=v", ...]`` (the command line's form)."""
+    if items is None:
+        return {}
+    if isinstance(items, Mapping):
+        return {str(k): v for k, v in items.items()}
+    if isinstance(items, str):
+        items = [items]
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = str(item).partition("=")
+        if not sep or not key.strip() or not value.strip():
+            form = "COMPONENT.VARIABLE=VALUE" if option == "--set" else "COMPONENT=FMU_OR_ALIAS"
+            raise UsageError(f"{option} {item!r}: expected {form}")
+        out[key.strip()] = value.strip()
+    return out
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Everything that defines one run of a scenario (see ``ipcosim run --help``).
+
+    Attributes
+    ----------
+    scenario : str or path
+        Scenario name (``single-mass-lqr``), folder, SystemStructure.ssd or ``.ssp`` archive.
+    stop_time, step : float or None
+        Simulated time and communication step [s]; None: the scenario's DefaultExperiment.
+    set : dict
+        ``{"component.variable": value}`` start values; a value ``"1.1*nominal"`` is
+        relative to the value the scenario binds.
+    swap : dict
+        ``{"component": FMU path or alias}``, e.g. ``{"plant": "hil"}``.
+    parameter_set : str or None
+        The scenario's parameter set (``thesis``, ``tuned``) instead of its default.
+    realtime : bool or None
+        Pace to wall-clock time; None: only when a swapped-in component asks for it.
+    out : Path or None
+        Folder for ``results.csv`` and ``metrics.json`` (and ``plot.png``); None writes nothing.
+    plot : bool
+        Also write ``plot.png``.
+    record : tuple of str
+        Columns of results.csv (names or patterns such as ``plant.*``); empty: every connector.
+    algorithm : str
+        ``gauss-seidel`` or ``jacobi``.
+    fmu_dirs : tuple of Path
+        Extra folders to look for FMUs in.
+    save_baseline : Path or None
+        Also write the recorded columns as a baseline CSV (see :mod:`ipcosim.harness.baseline`).
+    progress : bool
+        Show a progress bar on a terminal.
+    """
+
+    scenario: str | os.PathLike[str]
+    stop_time: float | None = None
+    step: float | None = None
+    set: dict[str, Any] = field(default_factory=dict)
+    swap: dict[str, Any] = field(default_factory=dict)
+    parameter_set: str | None = None
+    realtime: bool | None = None
+    out: Path | None = None
+    plot: bool = False
+    record: tuple[str, ...] = ()
+    algorithm: str = "gauss-seidel"
+    fmu_dirs: tuple[Path, ...] = ()
+    save_baseline: Path | None = None
+    progress: bool = False
+
+    def __post_init__(self) -> None:
+        if self.algorithm not in ALGORITHM_CHOICES:
+            raise UsageError(f"--algorithm {self.algorithm}: expected one of {', '.join(ALGORITHM_CHOICES)}")
+        if not os.fspath(self.scenario):
+            raise UsageError("scenario: empty name")
+
+    @classmethod
+    def create(cls, scenario: str | os.PathLike[str], *, stop_time: Any = None, step: Any = None,
+               set: Mapping[str, Any] | Sequence[str] | None = None,  # noqa: A002 -- the option's name
+               swap: Mapping[str, Any] | Sequence[str] | None = None, parameter_set: str | None = None,
+               realtime: bool | None = None, out: str | os.PathLike[str] | None = None, plot: bool = False,
+               record: Sequence[str] | str | None = None, algorithm: str = "gauss-seidel",
+               fmu_dirs: Sequence[str | os.PathLike[str]] | None = None,
+               save_baseline: str | os.PathLike[str] | None = None, progress: bool = False) -> "RunOptions":
+        """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
+
+        Raises
+        ------
+        UsageError
+            A value the command line would reject, with the command line's message.
+        """
+        if isinstance(record, str):
+            record = [record]
+        columns = tuple(v.strip() for item in (record or ()) for v in str(item).split(",") if v.strip())
+        return cls(scenario=scenario, stop_time=_seconds("--stop-time", stop_time), step=_seconds("--step", step),
+                   set=_pairs("--set", set), swap=_pairs("--swap", swap), parameter_set=parameter_set,
+                   realtime=realtime, out=Path(out) if out is not None else None, plot=plot, record=columns,
+                   algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
+                   save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress)
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> "RunOptions":
+        """The options of an ``ipcosim run`` command line (default ``--out``: ``out/<scenario>``)."""
+        out = Path(args.out) if args.out else Path("out") / scenario_label(args.scenario)
+        return cls.create(args.scenario, stop_time=args.stop_time, step=args.step, set=args.set, swap=args.swap,
+                          parameter_set=args.parameter_set, realtime=True if args.realtime else None, out=out,
+                          plot=args.plot, record=args.record, algorithm=args.algorithm, fmu_dirs=args.fmu_dir,
+                          save_baseline=args.save_baseline, progress=not args.quiet)
+
+
+def scenario_label(text: str | os.PathLike[str]) -> str:
+    """A short name for a scenario given by name or path (``single-mass-lqr``)."""
+    p = Path(text)
+    if p.name == "SystemStructure.ssd":
+        return p.parent.name
+    return p.stem if p.suffix == ".ssp" else (p.name or os.fspath(text))

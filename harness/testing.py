@@ -1,0 +1,264 @@
+"""Checks of a run that read like a control engineer's test report, and small case lists.
+
+Each ``assert_*`` takes a :class:`~ipcosim.harness.master.results.Result` (``ipcosim.run`` or
+the pytest plugin's ``cosim.run``) and raises :class:`CheckFailed` (an ``AssertionError``)
+whose message starts with the run (scenario, swaps, settings) and says in physical units what
+was expected and what happened, e.g.::
+
+    single-mass-lqr [controller=MyControllerSingleMass.fmu]: the pendulum fell: |angle| reached
+    0.35 rad (20.1 deg) at t = 0.412 s (limit 0.35 rad)
+
+They are re-exported at the top: ``ipcosim.assert_upright`` and so on.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
+import numpy as np
+
+from ipcosim.harness.errors import IpcosimError, UsageError
+from ipcosim.harness.master.results import ANGLE_COLUMNS, POSITION_COLUMNS, REFERENCE_COLUMNS, first_column
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ipcosim.harness.master.results import Result
+
+
+class CheckFailed(IpcosimError, AssertionError):
+    """A run that does not meet a check (the message says how, in physical units)."""
+
+
+def describe(result: "Result") -> str:
+    """``scenario [swaps, overrides]``: which run a message is about."""
+    meta = result.metadata
+    items = [f"{k}={Path(str(v)).name}" for k, v in (meta.get("swaps") or {}).items()]
+    items += [f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in _overrides(meta).items()]
+    return f"{meta.get('scenario', 'run')}" + (f" [{', '.join(items)}]" if items else "")
+
+
+def _overrides(meta: Mapping[str, Any]) -> dict[str, Any]:
+    raw = meta.get("overrides") or {}
+    if isinstance(raw, Mapping):
+        return {(".".join(k) if isinstance(k, tuple) else str(k)): v for k, v in raw.items()}
+    return {}
+
+
+def _column(result: "Result", candidates: Sequence[str], what: str) -> np.ndarray:
+    __tracebackhide__ = True  # pytest shows the test's line, not this helper's
+    name = first_column(result.columns, candidates)
+    if name is None:
+        raise CheckFailed(f"{describe(result)}: no {what} recorded (looked for {', '.join(candidates)})")
+    return np.asarray(result[name], dtype=float)
+
+
+def _fail(result: "Result", text: str) -> None:
+    __tracebackhide__ = True
+    where = (result.metadata.get("files") or {}).get("results")
+    raise CheckFailed(f"{describe(result)}: {text}" + (f"\n  results: {where}" if where else ""))
+
+
+def assert_upright(result: "Result", limit_rad: float = 0.35) -> None:
+    """Check that the pendulum stayed up: ``|angle| < limit_rad`` at every recorded point.
+
+    Examples
+    --------
+    >>> import ipcosim
+    >>> ipcosim.assert_upright(ipcosim.run("single-mass-lqr", stop_time=0.5))
+    >>> ipcosim.assert_upright(ipcosim.run("single-mass-lqr", stop_time=0.5), limit_rad=1e-6)
+    Traceback (most recent call last):
+    ...
+    ipcosim.harness.testing.CheckFailed: single-mass-lqr: the pendulum left +-1e-06 rad: ...
+    """
+    __tracebackhide__ = True
+    t, angle = np.asarray(result["time"], float), _column(result, ANGLE_COLUMNS, "pendulum angle")
+    bad = ~(np.abs(angle) < limit_rad)
+    if result.error:
+        _fail(result, f"the run failed at t = {t[-1]:.3f} s: {result.error}")
+    if bad.any():
+        k = int(np.argmax(bad))
+        peak = float(np.nanmax(np.abs(angle))) if np.isfinite(angle).any() else float("nan")
+        _fail(result, f"the pendulum left +-{limit_rad:g} rad: |angle| = {abs(angle[k]):.3g} rad "
+                      f"({np.degrees(abs(angle[k])):.1f} deg) at t = {t[k]:.3f} s, peak {peak:.3g} rad")
+
+
+def _step_target(result: "Result") -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    __tracebackhide__ = True
+    t = np.asarray(result["time"], float)
+    x = _column(result, POSITION_COLUMNS, "cart position")
+    r = _column(result, REFERENCE_COLUMNS, "reference")
+    return t, x, r, float(r[-1])
+
+
+def settling_time(result: "Result", band: float = 0.02) -> float | None:
+    """Time [s] from the last change of the reference to the cart's last entry into
+    ``reference +- band * |step|`` (None: outside the band at the end, or no step)."""
+    t, x, r, r_final = _step_target(result)
+    step = r_final - x[0]
+    if step == 0 or not np.isfinite(x).all():
+        return None
+    outside = np.abs(x - r_final) > band * abs(step)
+    if outside[-1]:
+        return None
+    idx = np.flatnonzero(outside)
+    entry = int(idx[-1]) + 1 if idx.size else 0
+    changed = np.flatnonzero(r[1:entry + 1] != r[:entry])
+    t_ref = t[int(changed[-1]) + 1] if changed.size else t[0]
+    return float(t[entry] - t_ref)
+
+
+def assert_settles(result: "Result", within_s: float, band: float = 0.02) -> None:
+    """Check that the cart settles into ``reference +- band * |step|`` within ``within_s`` seconds
+    of the reference step, and stays there to the end of the run.
+
+    Examples
+    --------
+    >>> import ipcosim
+    >>> ipcosim.assert_settles(ipcosim.run("single-mass-lqr", stop_time=6.0), within_s=5.0)
+    """
+    __tracebackhide__ = True
+    if result.error:
+        _fail(result, f"the run failed: {result.error}")
+    t, x, r, r_final = _step_target(result)
+    half = band * abs(r_final - x[0])
+    ts = settling_time(result, band)
+    where = f"the +-{band * 100:g} % band ({r_final - half:.4g}..{r_final + half:.4g} m)"
+    if ts is None:
+        _fail(result, f"the cart did not settle within {within_s:g} s: it is outside {where} at the end of "
+                      f"the run (x = {x[-1]:.4g} m at t = {t[-1]:.3f} s, target {r_final:.4g} m)")
+    elif ts > within_s:
+        _fail(result, f"the cart settled after {ts:.3f} s, not within {within_s:g} s (last entry into {where})")
+
+
+def assert_steady_state(result: "Result", error_m: float, fraction: float = 0.1) -> None:
+    """Check ``|mean(position - reference)|`` over the last ``fraction`` of the run is at most ``error_m``.
+
+    Examples
+    --------
+    >>> import ipcosim
+    >>> ipcosim.assert_steady_state(ipcosim.run("single-mass-lqr", stop_time=6.0), error_m=0.002)
+    """
+    __tracebackhide__ = True
+    if result.error:
+        _fail(result, f"the run failed: {result.error}")
+    t, x, r, _ = _step_target(result)
+    tail = t >= t[-1] - fraction * (t[-1] - t[0])
+    err = float(abs(np.mean(x[tail] - r[tail])))
+    if not err <= error_m:
+        _fail(result, f"steady-state error {err * 1e3:.3g} mm over {t[tail][0]:.2f}..{t[-1]:.2f} s exceeds "
+                      f"{error_m * 1e3:.3g} mm (cart at {np.mean(x[tail]):.5g} m, reference {np.mean(r[tail]):.5g} m)")
+
+
+def assert_close_to(result: "Result", reference_csv: str | os.PathLike[str], columns: Sequence[str] | None = None,
+                    tol: float | Mapping[str, float] = 1e-3) -> None:
+    """Check a run against a baseline CSV (``ipcosim run ... --save-baseline FILE``), column by column.
+
+    Parameters
+    ----------
+    result : Result
+    reference_csv : path
+        The baseline (or any results.csv); the run is evaluated at its times.
+    columns : sequence of str, optional
+        Columns to compare (default: every column of the baseline).
+    tol : float or mapping
+        Largest allowed ``|run - baseline|`` per column, in the column's unit; one number for all.
+
+    On failure, a figure of the difference (``baseline-diff.png``) is written beside the run's
+    results (or into a temporary folder) and named in the message.
+
+    Examples
+    --------
+    >>> import ipcosim, pathlib, tempfile
+    >>> base = pathlib.Path(tempfile.mkdtemp()) / "lqr.csv"
+    >>> r = ipcosim.run("single-mass-lqr", stop_time=1.0, save_baseline=base,
+    ...                 record=["plant.cart_position", "plant.pendulum_angle"])
+    >>> ipcosim.assert_close_to(r, base, tol={"plant.cart_position": 1e-6, "plant.pendulum_angle": 1e-6})
+    """
+    __tracebackhide__ = True
+    from ipcosim.harness.baseline import BaselineError, compare, load_baseline, plot_difference
+
+    baseline = load_baseline(reference_csv)
+    try:
+        diffs, traces = compare(result, baseline, columns, tol)
+    except BaselineError as exc:
+        _fail(result, f"cannot compare with baseline {reference_csv}: {exc}")
+    bad = [d for d in diffs if not d.ok]
+    if not bad:
+        return
+    where = (result.metadata.get("files") or {}).get("results")
+    folder = Path(where).parent if where else Path(tempfile.mkdtemp(prefix="ipcosim-diff-"))
+    figure = plot_difference(baseline, traces, diffs, folder / "baseline-diff.png")
+    lines = [f"{d.column}: max |run - baseline| = {d.max_abs:.3g} at t = {d.at_time:.3f} s "
+             f"({'ok' if d.ok else 'exceeds'} tol {d.tol:.3g})" for d in diffs]
+    _fail(result, f"differs from baseline {reference_csv} in {len(bad)} of {len(diffs)} columns:\n    "
+          + "\n    ".join(lines) + f"\n  difference plot: {figure}")
+
+
+# --------------------------------------------------------------------------- cases
+PLANTS = ("single-mass", "double-mass")
+
+
+@dataclass(frozen=True)
+class Case:
+    """One robustness case: a plant and the start values to set (``set`` accepts ``X*nominal``).
+
+    ``scenario(controller)`` is the scenario name, e.g. ``case.scenario("lqr")`` ->
+    ``single-mass-lqr``.
+    """
+
+    plant: str
+    set: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def id(self) -> str:
+        return "-".join([self.plant, *(f"{k}={v}" for k, v in self.set.items())])
+
+    def scenario(self, controller: str) -> str:
+        return f"{self.plant}-{controller}"
+
+
+def cases(plants: Sequence[str] = PLANTS, vary: Mapping[str, str | Sequence[float]] | None = None) -> list[Any]:
+    """Parametrization over plants and parameter values, for ``pytest.mark.parametrize``.
+
+    Parameters
+    ----------
+    plants : sequence of str
+        ``single-mass`` and/or ``double-mass``.
+    vary : mapping, optional
+        ``component.variable`` -> a list of values, or a deterministic ``--vary`` form:
+        ``"[0.9, 1.1]*nominal"``, ``"grid(0.8, 1.2, 3)*nominal"``, ``"[0.2, 0.25]"``.
+        Every combination of the values is one case per plant (keep it small).
+
+    Returns
+    -------
+    list
+        ``pytest.param(Case, id=...)`` when pytest is importable, else the :class:`Case` s.
+
+    Examples
+    --------
+    >>> import ipcosim
+    >>> [p.id for p in ipcosim.cases(plants=["single-mass"], vary={"plant.Mp": "[0.9,1.1]*nominal"})]
+    ['single-mass-plant.Mp=0.9*nominal', 'single-mass-plant.Mp=1.1*nominal']
+    """
+    import itertools
+
+    from ipcosim.harness.studies.vary import parse_vary
+
+    for p in plants:
+        if p not in PLANTS:
+            raise UsageError(f"cases: unknown plant {p!r} (expected {', '.join(PLANTS)})")
+    axes: list[list[tuple[str, Any]]] = []
+    for name, form in (vary or {}).items():
+        text = form if isinstance(form, str) else "[" + ",".join(repr(float(v)) for v in form) + "]"
+        v = parse_vary(f"{name}={text}")
+        if v.is_random:
+            raise UsageError(f"cases: {name}={text}: random forms make tests flaky; give a list or grid(...)")
+        axes.append([(name, f"{p:g}*nominal" if v.relative else p) for p in v.points(1.0)])
+    out = [Case(plant, dict(combo)) for plant in plants for combo in itertools.product(*axes)]
+    try:
+        import pytest
+    except ImportError:  # pragma: no cover -- pytest is how cases are used
+        return out
+    return [pytest.param(c, id=c.id) for c in out]
