@@ -14,73 +14,83 @@ integrate the linear part exactly through matrix exponentials and the non-stiff
 remainder ``n`` with the 4th-order exponential Runge-Kutta scheme of Cox and Matthews
 (ETDRK4, J. Comput. Phys. 176, 2002). The matrix functions e^{hL}, phi_1, phi_2,
 phi_3 are computed once per step size from one ``expm`` of an augmented block matrix
-(Al-Mohy and Higham; no cancellation for the singular L of a free cart). Four
+(Al-Mohy and Higham; no cancellation for the singular L of a free cart), in plain Python
+(``ipcosim.fmus.expm``: the FMU runtime imports no numpy). Four
 right-hand-side calls per step, one step per communication interval. The accuracy
 is measured in ``tests/test_integrator.py`` against scipy's Radau at rtol 1e-10.
 """
 from __future__ import annotations
 
+from operator import mul
 from typing import Callable, Sequence
 
-import numpy as np
-from scipy.linalg import expm
+from ipcosim.fmus.expm import Matrix, as_matrix, expm, identity, lincomb, matmul, matvec
 
 
-def phi_functions(M: np.ndarray, order: int = 3) -> list[np.ndarray]:
+def phi_functions(M: Sequence[Sequence[float]], order: int = 3) -> list[Matrix]:
     """Return ``[e^M, phi_1(M), ..., phi_order(M)]`` for a square matrix ``M``.
 
     ``phi_k(z) = sum_j z^j / (j + k)!``, computed as the top block row of the exponential
     of the block matrix ``[[M, I, 0..], [0, 0, I, ..], ..., [0 ... 0]]``.
     """
-    n = M.shape[0]
-    Z = np.zeros((n * (order + 1), n * (order + 1)))
-    Z[:n, :n] = M
+    M = as_matrix(M)
+    n = len(M)
+    size = n * (order + 1)
+    Z = [[0.0] * size for _ in range(size)]
+    for i in range(n):
+        Z[i][:n] = M[i]
     for k in range(order):
-        Z[k * n:(k + 1) * n, (k + 1) * n:(k + 2) * n] = np.eye(n)
+        for i in range(n):
+            Z[k * n + i][(k + 1) * n + i] = 1.0
     top = expm(Z)[:n]
-    return [top[:, k * n:(k + 1) * n] for k in range(order + 1)]
+    return [[row[k * n:(k + 1) * n] for row in top] for k in range(order + 1)]
+
+
+def _scaled(c: float, M: Matrix) -> Matrix:
+    return [[c * v for v in row] for row in M]
 
 
 class ETDRK4:
-    """ETDRK4 stepper for ``x' = L x + n(x)`` with a fixed step ``h``.
+    """ETDRK4 stepper for ``x' = L x + n(x)`` with a fixed step ``h`` (the textbook form).
 
     Parameters
     ----------
-    L : ndarray (n, n)
+    L : nested sequence (n x n)
         The stiff linear part.
-    nonlinear : callable
-        ``nonlinear(x) -> ndarray`` the remainder ``f(x) - L x`` (inputs held constant).
     h : float
         Step size [s].
     """
 
-    def __init__(self, L: np.ndarray, h: float) -> None:
-        self.L = np.array(L, dtype=float)
-        self.h = float(h)
-        E, p1, p2, p3 = phi_functions(self.L * h)
-        Eh, q1 = phi_functions(self.L * (h / 2), order=1)
+    def __init__(self, L: Sequence[Sequence[float]], h: float) -> None:
+        self.L = as_matrix(L)
+        self.h = h = float(h)
+        E, p1, p2, p3 = phi_functions(_scaled(h, self.L))
+        Eh, q1 = phi_functions(_scaled(h / 2, self.L), order=1)
         self.E = E
         self.E2 = Eh
-        self.P2 = (h / 2) * q1
-        self.F1 = h * (p1 - 3 * p2 + 4 * p3)
-        self.F2 = 2 * h * (p2 - 2 * p3)
-        self.F3 = h * (4 * p3 - p2)
+        self.P2 = _scaled(h / 2, q1)
+        self.F1 = lincomb((h, p1), (-3 * h, p2), (4 * h, p3))
+        self.F2 = lincomb((2 * h, p2), (-4 * h, p3))
+        self.F3 = lincomb((4 * h, p3), (-h, p2))
 
-    def step(self, x: np.ndarray, nonlinear: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-        """Advance ``x`` by one step ``h``; returns the new state (a new array)."""
-        E2x = self.E2 @ x
+    def step(self, x: Sequence[float], nonlinear: Callable[[list[float]], Sequence[float]]) -> list[float]:
+        """Advance ``x`` by one step ``h``; returns the new state (a new list)."""
+        x = [float(v) for v in x]
+        E2x = matvec(self.E2, x)
         P2 = self.P2
-        nx = nonlinear(x)
-        a = E2x + P2 @ nx
-        na = nonlinear(a)
-        b = E2x + P2 @ na
-        nb = nonlinear(b)
-        c = self.E2 @ a + P2 @ (2.0 * nb - nx)
-        nc = nonlinear(c)
-        return self.E @ x + self.F1 @ nx + self.F2 @ (na + nb) + self.F3 @ nc
+        nx = list(nonlinear(x))
+        a = [u + v for u, v in zip(E2x, matvec(P2, nx))]
+        na = list(nonlinear(a))
+        b = [u + v for u, v in zip(E2x, matvec(P2, na))]
+        nb = list(nonlinear(b))
+        c = [u + v for u, v in zip(matvec(self.E2, a), matvec(P2, [2.0 * p - q for p, q in zip(nb, nx)]))]
+        nc = list(nonlinear(c))
+        parts = (matvec(self.E, x), matvec(self.F1, nx), matvec(self.F2, [p + q for p, q in zip(na, nb)]),
+                 matvec(self.F3, nc))
+        return [sum(col) for col in zip(*parts)]
 
 
-def etdrk4_f_form(L: np.ndarray, h: float) -> list[np.ndarray]:
+def etdrk4_f_form(L: Sequence[Sequence[float]], h: float) -> list[Matrix]:
     """ETDRK4 rewritten on the full right-hand side ``f = L x + n``: stage matrices.
 
     Every ETDRK4 stage (``a``, ``b``, ``c``) and the result are linear in the start value
@@ -97,37 +107,36 @@ def etdrk4_f_form(L: np.ndarray, h: float) -> list[np.ndarray]:
 
     Parameters
     ----------
-    L : ndarray (n, n)
+    L : nested sequence (n x n)
         The stiff linear part.
     h : float
         Step size [s].
 
     Returns
     -------
-    list of ndarray
-        ``[S_0 (n, 2n), S_1 (n, 3n), S_2 (n, 4n), S_3 (n, 5n)]``.
+    list of Matrix
+        ``[S_0 (n x 2n), S_1 (n x 3n), S_2 (n x 4n), S_3 (n x 5n)]`` as lists of rows.
     """
     s = ETDRK4(L, h)
     L = s.L
-    n = L.shape[0]
+    n = len(L)
     width = 5 * n
-    eye = np.eye(n)
+    eye = identity(n)
 
-    def block(k: int) -> np.ndarray:  # selects f of stage k (0 = x itself, 1..4 = f_x..f_c)
-        m = np.zeros((n, width))
-        m[:, k * n:(k + 1) * n] = eye
-        return m
+    def block(k: int) -> Matrix:  # selects f of stage k (0 = x itself, 1..4 = f_x..f_c)
+        return [[0.0] * (k * n) + eye[i] + [0.0] * (width - (k + 1) * n) for i in range(n)]
 
     X, Fx, Fa, Fb, Fc = (block(k) for k in range(5))
-    Nx = Fx - L @ X
-    A = s.E2 @ X + s.P2 @ Nx
-    Na = Fa - L @ A
-    B = s.E2 @ X + s.P2 @ Na
-    Nb = Fb - L @ B
-    C = s.E2 @ A + s.P2 @ (2.0 * Nb - Nx)
-    Nc = Fc - L @ C
-    out = s.E @ X + s.F1 @ Nx + s.F2 @ (Na + Nb) + s.F3 @ Nc
-    return [A[:, :2 * n].copy(), B[:, :3 * n].copy(), C[:, :4 * n].copy(), out.copy()]
+    Nx = lincomb((1.0, Fx), (-1.0, matmul(L, X)))
+    A = lincomb((1.0, matmul(s.E2, X)), (1.0, matmul(s.P2, Nx)))
+    Na = lincomb((1.0, Fa), (-1.0, matmul(L, A)))
+    B = lincomb((1.0, matmul(s.E2, X)), (1.0, matmul(s.P2, Na)))
+    Nb = lincomb((1.0, Fb), (-1.0, matmul(L, B)))
+    C = lincomb((1.0, matmul(s.E2, A)), (1.0, matmul(s.P2, lincomb((2.0, Nb), (-1.0, Nx)))))
+    Nc = lincomb((1.0, Fc), (-1.0, matmul(L, C)))
+    out = lincomb((1.0, matmul(s.E, X)), (1.0, matmul(s.F1, Nx)), (1.0, matmul(s.F2, lincomb((1.0, Na), (1.0, Nb)))),
+                  (1.0, matmul(s.F3, Nc)))
+    return [[row[:2 * n] for row in A], [row[:3 * n] for row in B], [row[:4 * n] for row in C], out]
 
 
 class FastETDRK4:
@@ -135,27 +144,24 @@ class FastETDRK4:
 
     Parameters
     ----------
-    L : ndarray (n, n)
+    L : nested sequence (n x n)
         The stiff linear part (Jacobian of ``f`` at a reference point).
     h : float
         Step size [s].
     """
 
-    def __init__(self, L: np.ndarray, h: float) -> None:
+    def __init__(self, L: Sequence[Sequence[float]], h: float) -> None:
         self.h = float(h)
-        self.n = L.shape[0]
+        self.n = len(L)
         self.S0, self.S1, self.S2, self.S3 = etdrk4_f_form(L, h)
-        self._buf = np.zeros(5 * self.n)
 
     def step(self, x: Sequence[float], f: Callable[..., Sequence[float]], *args: float) -> list[float]:
         """Advance ``x`` by ``h`` for ``x' = f(*x, *args)``; returns the new state as a list."""
-        n, buf = self.n, self._buf
-        buf[:n] = x
-        buf[n:2 * n] = f(*x, *args)
-        a = (self.S0 @ buf[:2 * n]).tolist()
-        buf[2 * n:3 * n] = f(*a, *args)
-        b = (self.S1 @ buf[:3 * n]).tolist()
-        buf[3 * n:4 * n] = f(*b, *args)
-        c = (self.S2 @ buf[:4 * n]).tolist()
-        buf[4 * n:] = f(*c, *args)
-        return (self.S3 @ buf).tolist()
+        buf = [*x, *f(*x, *args)]
+        a = [sum(map(mul, row, buf)) for row in self.S0]
+        buf.extend(f(*a, *args))
+        b = [sum(map(mul, row, buf)) for row in self.S1]
+        buf.extend(f(*b, *args))
+        c = [sum(map(mul, row, buf)) for row in self.S2]
+        buf.extend(f(*c, *args))
+        return [sum(map(mul, row, buf)) for row in self.S3]

@@ -2,9 +2,7 @@
 from __future__ import annotations
 
 import math
-from typing import Callable, Sequence
-
-import numpy as np
+from typing import Any, Callable, Sequence
 
 from ipcosim.fmus.integrator import FastETDRK4
 from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, kind_of, validate
@@ -113,24 +111,33 @@ class Plant:
         self._limit = params.voltage_limit
         self.t = float(t0)
         self.voltage = 0.0
-        self.x = np.zeros(len(self.state_names))
-        self._xl: list[float] = self.x.tolist()
+        self._xl: list[float] = [0.0] * len(self.state_names)
         self._z: list[float] = list(self._to_int(self._xl, params))
         if x0 is not None:
             self.set_state(x0)
 
     def set_state(self, x: Sequence[float]) -> None:
         """Replace the state vector (checked for length and finiteness)."""
-        x = np.asarray(x, dtype=float)
-        if x.shape != (len(self.state_names),):
+        try:
+            values = [float(v) for v in x]
+        except (TypeError, ValueError):
+            raise ValueError(f"{self.kind} state must be a sequence of numbers, got {x!r}") from None
+        if len(values) != len(self.state_names):
             raise ValueError(f"{self.kind} state needs {len(self.state_names)} values "
-                             f"({', '.join(self.state_names)}), got {x.shape}")
-        if not np.all(np.isfinite(x)):
-            bad = [f"{n} = {v}" for n, v in zip(self.state_names, x) if not math.isfinite(v)]
+                             f"({', '.join(self.state_names)}), got {len(values)}")
+        bad = [f"{n} = {v}" for n, v in zip(self.state_names, values) if not math.isfinite(v)]
+        if bad:
             raise ValueError(f"initial state is not finite: {', '.join(bad)}")
-        self.x = x.copy()
-        self._xl = self.x.tolist()
+        self._xl = values
         self._z = list(self._to_int(self._xl, self.params))
+
+    @property
+    def x(self) -> Any:
+        """The state as a numpy array (a copy; for analysis code -- the FMUs use :attr:`state`,
+        which needs no numpy)."""
+        import numpy as np  # noqa: PLC0415 -- off the FMU runtime's path
+
+        return np.array(self._xl)
 
     def derivatives(self, voltage: float | None = None) -> tuple[float, ...]:
         """Right-hand side at the current state (for the voltage held now, or ``voltage``)."""
@@ -167,7 +174,6 @@ class Plant:
                                  f"(h = {h:g} s, voltage = {voltage:g} V); state at t: {state}")
         self._z = z
         self._xl = list(x)
-        self.x = np.array(self._xl)
         self.voltage = voltage
         self.t = t + h
 
@@ -176,18 +182,18 @@ class Plant:
         """The state as a list of floats (a copy), ``state_names`` order."""
         return list(self._xl)
 
-    def _internal_jacobian(self, eps: float = 1e-6) -> np.ndarray:
+    def _internal_jacobian(self, eps: float = 1e-6) -> list[list[float]]:
         """Jacobian of the internal right-hand side at the upright equilibrium (the stiff linear part)."""
         n = len(self.state_names)
-        L = np.empty((n, n))
+        cols = []
         for j in range(n):
             dz = [0.0] * n
             dz[j] = eps
             fp = self._irhs(dz, 0.0, self.params)
             dz[j] = -eps
             fm = self._irhs(dz, 0.0, self.params)
-            L[:, j] = [(a - b) / (2 * eps) for a, b in zip(fp, fm)]
-        return L
+            cols.append([(a - b) / (2 * eps) for a, b in zip(fp, fm)])
+        return [list(row) for row in zip(*cols)]
 
     def applied_voltage(self) -> float:
         """Voltage after the amplifier's limit [V]."""
