@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ast
 import hashlib
+import importlib
 import json
 import os
 import re
@@ -146,6 +147,19 @@ def _stage_runtime(files: Iterable[Path], root: Path, dest: Path, private: str) 
     return target
 
 
+def _write_build_files(staged_script: Path, package: Path) -> None:
+    """Store the files the script's FMU class asks for (``FmuBase.build_files``) in its private package.
+
+    The staged script is imported here, in the build process, as pythonfmu's builder imports it next.
+    """
+    sys.path.insert(0, str(staged_script.parent))
+    module = importlib.import_module(staged_script.stem)
+    for cls in vars(module).values():
+        if isinstance(cls, type) and cls.__module__ == module.__name__ and hasattr(cls, "build_files"):
+            for name, text in cls.build_files().items():
+                (package / name).write_text(text)
+
+
 def _load_stamps(fmu_dir: Path) -> dict[str, dict[str, str]]:
     try:
         return json.loads((fmu_dir / STAMP_FILE).read_text())
@@ -192,6 +206,7 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
             package = _stage_runtime(files, root, stage, private)
             staged_script = stage / script.name
             staged_script.write_text(_privatize(script.read_text(), private))
+            _write_build_files(staged_script, package)
             out = Path(tmp) / "out"
             try:
                 built = Path(pythonfmu.FmuBuilder.build_FMU(staged_script, dest=out, project_files=[package]))

@@ -400,6 +400,12 @@ class FmuBase(Fmi2Slave):
     def teardown(self) -> None:
         """Called by ``terminate``."""
 
+    @classmethod
+    def build_files(cls) -> dict[str, str]:
+        """``{file name: text}`` the build stores next to the FMU's private package's modules
+        (e.g. data computed at build time with tools the FMU must not need at run time)."""
+        return {}
+
     # --- FMI entry points (called by pythonfmu's C wrapper) ----------------------------------
 
     def setup_experiment(self, start_time: float, stop_time: float | None = None,
