@@ -4,11 +4,11 @@ Run as a script in a fresh interpreter (``tests/test_fmu_runtime.py``)::
 
     python fmu_runtime_driver.py UNZIPPED_DIR SPEC_JSON [--block numpy,scipy,control,fmpy,ipcosim]
 
-``SPEC_JSON`` holds ``{"params": {name: value}, "steps": N, "step_size": h}``. The driver puts the
+``SPEC_JSON`` holds ``{"params": {name: value}, "steps": N, "step_size": h, "watch": [parameter, ...]}``. The driver puts the
 FMU's ``resources/`` first on ``sys.path``, imports the module named in ``slavemodule.txt``,
 instantiates its FMU class with ``instance_name``/``resources``/``visible``, runs
 setup_experiment, enter/exit initialization and ``steps`` steps with deterministic inputs, and
-prints one JSON document: the outputs after initialization and after each step, the import
+prints one JSON document: the outputs (and watched parameters) after initialization and after each step, the import
 attempts the blocker refused, the blocked names found in ``sys.modules`` at the end, and the
 error text if initialization failed.
 
@@ -70,7 +70,9 @@ def run(unzipped: Path, spec: dict) -> dict:
     variables = _variables(unzipped)
     by_name = {v["name"]: v for v in variables}
     inputs = [v for v in variables if v["causality"] == "input" and v["type"] == "Real"]
-    watched = [v for v in variables if v["causality"] in ("output", "calculatedParameter") and v["type"] == "Real"]
+    extra = set(spec.get("watch", ()))
+    watched = [v for v in variables if v["type"] == "Real"
+               and (v["causality"] in ("output", "calculatedParameter") or v["name"] in extra)]
     slave.setup_experiment(0.0)
     slave.enter_initialization_mode()
     for name, value in spec.get("params", {}).items():
@@ -80,7 +82,7 @@ def run(unzipped: Path, spec: dict) -> dict:
     try:
         slave.exit_initialization_mode()
     except Exception as exc:  # noqa: BLE001 -- reported to the test
-        return {"error": str(exc).strip().splitlines()[-1]}
+        return {"error": str(exc).strip()}
     rows = [slave.get_real([v["vr"] for v in watched])]
     h = float(spec.get("step_size", 1e-3))
     for i in range(int(spec.get("steps", 20))):
