@@ -99,6 +99,7 @@ import re
 import sys
 import traceback
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Iterable, NoReturn, Sequence
 from xml.etree.ElementTree import Element, SubElement
 
@@ -470,6 +471,7 @@ class FmuBase(Fmi2Slave):
     def exit_initialization_mode(self) -> None:
         error = None
         try:
+            self._own_resources_first()
             self.check_parameters()
             self.setup()
         except Exception as exc:  # noqa: BLE001 -- reported through the FMI logger
@@ -477,6 +479,26 @@ class FmuBase(Fmi2Slave):
         if error is not None:
             self._fail(error)
         self.initialized = True
+
+    def _own_resources_first(self) -> None:
+        """Make this instance's ``resources/`` the first place its private package imports from.
+
+        A process that loads one FMU build twice from two extraction folders (a master that
+        extracts per run) shares one copy of the private package, imported from the first
+        folder, which may be gone by now; a module imported lazily (off the default path, e.g.
+        the design stack) must then come from this instance's folder (same build, same files).
+        """
+        top = __name__.split(".", 1)[0]
+        if not top.startswith("_ipcosim_") or not self.resources:
+            return
+        root = Path(self.resources) / top
+        for name, module in list(sys.modules.items()):
+            path = getattr(module, "__path__", None)
+            if path is None or not (name == top or name.startswith(top + ".")):
+                continue
+            folder = str(root.joinpath(*name.split(".")[1:]))
+            if folder not in path and Path(folder).is_dir():
+                path.insert(0, folder)
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         try:

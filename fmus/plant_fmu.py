@@ -12,7 +12,7 @@ algebraic loop. At initialization each output equals its ``initial_*`` parameter
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 from ipcosim.fmus.fmi import FmuBase, StepFailure
 from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, make, parameter_info
@@ -49,11 +49,14 @@ class PlantFmu(FmuBase):
         self.add_input("voltage", start=0.0, unit="V",
                        description="amplifier command to the motor (clipped to +-voltage_limit)")
         order = list(MEASURED[kind]) + [n for n in names if n not in MEASURED[kind]]
+        #: value reference of each output -> its index in the state (fast path of get_real)
+        self._state_index: dict[int, int] = {}
         for name in order:
             k = names.index(name)
-            self.add_output(name, unit=STATE_UNITS[name], description=_STATE_DOC[name],
-                            getter=(lambda k=k: self._x[k]), depends_on=(),
-                            initial_depends_on=(f"initial_{name}",))
+            info = self.add_output(name, unit=STATE_UNITS[name], description=_STATE_DOC[name],
+                                   getter=(lambda k=k: self._x[k]), depends_on=(),
+                                   initial_depends_on=(f"initial_{name}",))
+            self._state_index[info.value_reference] = k
         for name in names:
             self.add_parameter(f"initial_{name}", start=0.0, unit=STATE_UNITS[name],
                                description=f"initial {_STATE_DOC[name].split(' (')[0]}")
@@ -62,6 +65,14 @@ class PlantFmu(FmuBase):
             self._param_names.append(info["name"])
             self.add_parameter(info["name"], start=defaults.get(info["name"], info["default"]), unit=info["unit"],
                                description=f"{info['doc']} [{info['source']}]")
+
+    def get_real(self, vrs: Sequence[int]) -> list[float]:
+        # the master's per-step read of the outputs: straight from the state list
+        x, index = self._x, self._state_index
+        try:
+            return [x[index[vr]] for vr in vrs]
+        except KeyError:
+            return super().get_real(vrs)
 
     def setup(self) -> None:
         # params.make validates: "parameter Mp = -1.0 kg must be > 0 (pendulum mass)" (ParameterError)
@@ -76,4 +87,4 @@ class PlantFmu(FmuBase):
             plant.do_step(t, h, self.voltage)
         except (PlantStepError, ValueError) as exc:
             raise StepFailure(str(exc)) from exc
-        self._x = plant.state
+        self._x = plant._xl  # the plant replaces (never mutates) this list on each step
