@@ -20,6 +20,7 @@ import hashlib
 import importlib
 import json
 import os
+import py_compile
 import re
 import shutil
 import sys
@@ -125,6 +126,8 @@ def _privatize(text: str, private: str) -> str:
 def _digest(script: Path, files: Iterable[Path], root: Path = ROOT) -> str:
     h = hashlib.sha256()
     h.update(f"pythonfmu {pythonfmu.__version__}\n".encode())
+    h.update(Path(__file__).read_bytes())  # how the FMU is made (packing, stored design, bytecode)
+    h.update(sys.implementation.cache_tag.encode())
     h.update(script.read_bytes())
     for f in files:
         h.update(str(f.relative_to(root)).encode())
@@ -212,6 +215,7 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
                 built = Path(pythonfmu.FmuBuilder.build_FMU(staged_script, dest=out, project_files=[package]))
             except Exception as exc:  # noqa: BLE001 -- one line naming the script
                 raise BuildError(f"{script}: pythonfmu build failed: {type(exc).__name__}: {exc}") from exc
+            _add_bytecode(built, Path(tmp) / "pyc")
             check_fmu(built)
             target = fmu_dir / built.name
             tmp_target = fmu_dir / f".{built.name}.{os.getpid()}.tmp"
@@ -225,6 +229,29 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
         for name in [m for m in sys.modules if m == private or m.startswith(private + ".")
                      or m == script.stem]:
             del sys.modules[name]
+
+
+def _add_bytecode(fmu: Path, work: Path) -> None:
+    """Add hash-checked bytecode of every Python file under ``resources/`` to the FMU archive.
+
+    An FMU is extracted afresh for each run, so without bytecode its modules are compiled again at
+    every load (a good part of a cold run). The ``.pyc`` files are for the building interpreter's
+    version (``sys.implementation.cache_tag``; others ignore them and compile) and checked against
+    the source's hash, not its time stamp (extraction does not keep time stamps), so a changed
+    source is never run from stale bytecode.
+    """
+    tag = sys.implementation.cache_tag
+    with zipfile.ZipFile(fmu, "a") as z:
+        sources = [n for n in z.namelist() if n.startswith("resources/") and n.endswith(".py")]
+        for k, name in enumerate(sources):
+            src = work / f"{k}.py"
+            src.parent.mkdir(parents=True, exist_ok=True)
+            src.write_bytes(z.read(name))
+            pyc = work / f"{k}.pyc"
+            py_compile.compile(str(src), cfile=str(pyc), dfile=name.removeprefix("resources/"), doraise=True,
+                               invalidation_mode=py_compile.PycInvalidationMode.CHECKED_HASH)
+            folder, _, file = name.rpartition("/")
+            z.write(pyc, f"{folder}/__pycache__/{file[:-3]}.{tag}.pyc")
 
 
 def check_fmu(fmu: Path) -> None:
