@@ -62,6 +62,9 @@ _INPUT_DOC = {
     "passive_cart_position": "measured position of the passive cart carrying the pendulum (encoder)",
     "pendulum_angle": "measured pendulum angle from upright, counter-clockwise positive (encoder)",
 }
+#: Shipped designs read (or designed) in this process, by file name (the FMU class is re-created
+#: on every instantiation by pythonfmu's wrapper; this module is not).
+_SHIPPED: dict[str, dict[str, Any]] = {}
 #: Slack when deciding whether the end of a step is a sample instant, in sample periods.
 TICK_TOLERANCE = 1e-6
 
@@ -94,7 +97,7 @@ class ControllerFmu(FmuBase):
                                description=spec.description, check=None if is_bool else spec.check)
         self._gain_specs = lqr_gain_specs(kind) if self.law == "LQR" else []
         if self._gain_specs:
-            shipped = type(self).shipped_design()["gains"]
+            shipped = type(self).shipped_design(self.resources)["gains"]
             for spec in self._gain_specs:
                 self.add_parameter(spec.name, start=shipped[spec.name], unit=spec.unit,
                                    description=f"{spec.description}; designed at build time for the default "
@@ -104,23 +107,27 @@ class ControllerFmu(FmuBase):
     # --- the design stored in the FMU --------------------------------------------------------------
 
     @classmethod
-    def shipped_file(cls) -> Path:
-        """Where the build stores the shipped design: next to the FMU's private package's modules."""
-        return Path(__file__).resolve().parents[1] / f"shipped_{model_name(cls.law, cls.kind)}.json"
+    def shipped_name(cls) -> str:
+        """File name of the shipped design inside the FMU's private package."""
+        return f"shipped_{model_name(cls.law, cls.kind)}.json"
 
     @classmethod
-    def shipped_design(cls) -> dict[str, Any]:
+    def shipped_design(cls, resources: str | None = None) -> dict[str, Any]:
         """``{"design": {parameter: value}, "gains": {gain: value}}`` for the default parameters.
 
-        Read from :meth:`shipped_file` inside a built FMU; elsewhere (the source tree) designed
-        now with the design stack, once per class.
+        Read from the private package in the FMU's ``resources`` folder; elsewhere (the source tree)
+        designed now with the design stack. Once per process and model.
         """
-        cached = cls.__dict__.get("_shipped")
-        if cached is None:
-            path = cls.shipped_file()
-            cached = json.loads(path.read_text()) if path.is_file() else cls.design_record()
-            cls._shipped = cached
-        return cached
+        name = cls.shipped_name()
+        record = _SHIPPED.get(name)
+        if record is None:
+            package = __name__.split(".", 1)[0]
+            candidates = [Path(__file__).resolve().parents[1] / name]
+            if resources:
+                candidates.insert(0, Path(resources) / package / name)
+            path = next((c for c in candidates if c.is_file()), None)
+            record = _SHIPPED[name] = json.loads(path.read_text()) if path else cls.design_record()
+        return record
 
     @classmethod
     def design_record(cls) -> dict[str, Any]:
@@ -135,7 +142,7 @@ class ControllerFmu(FmuBase):
         """Files the build adds to the FMU's private package: the LQR's shipped design."""
         if cls.law != "LQR":
             return {}
-        return {cls.shipped_file().name: json.dumps(cls.design_record(), indent=1, sort_keys=True)}
+        return {cls.shipped_name(): json.dumps(cls.design_record(), indent=1, sort_keys=True)}
 
     # --- initialization ----------------------------------------------------------------------------
 
@@ -144,7 +151,7 @@ class ControllerFmu(FmuBase):
         name = model_name(self.law, self.kind)
         if self.law != "LQR":
             return build_law(self.law, self.kind, values)
-        shipped = type(self).shipped_design()
+        shipped = type(self).shipped_design(self.resources)
         gains = {s.name: float(getattr(self, s.name)) for s in self._gain_specs}
         changed = [n for n in lqr_design_parameters(self.kind) if float(values[n]) != shipped["design"][n]]
         set_gains = [n for n, v in gains.items() if v != shipped["gains"][n]]

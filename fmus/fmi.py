@@ -260,6 +260,7 @@ class FmuBase(Fmi2Slave):
         self._parameters_dirty = False
         self._getters: dict[type, dict[int, Callable[[], Any]]] = {t: {} for t in _TYPES}
         self._setters: dict[type, dict[int, Callable[[Any], None]]] = {t: {} for t in _TYPES}
+        self._own_resources_first()
 
     # --- declaring variables -----------------------------------------------------------------
 
