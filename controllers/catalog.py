@@ -34,7 +34,6 @@ from ipcosim.controllers.errors import ControllerParameterError, DesignError
 from ipcosim.controllers.laws import (
     HSMC,
     LQR,
-    LQRCoefficients,
     PID,
     AdaptiveHSMC,
     AdaptiveSchedules,
@@ -42,6 +41,7 @@ from ipcosim.controllers.laws import (
     CascadePID,
     DiscreteLaw,
     HSMCGains,
+    LQRCoefficients,
     PIDGains,
     Schedule,
     SubsystemModel,
@@ -56,8 +56,8 @@ from ipcosim.controllers.thesis import (
     THESIS_SINGLE_MASS_R,
 )
 from ipcosim.fmus.linearize import LinearModel, linear_matrices
-from ipcosim.fmus.physics import MEASURED
 from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, ParameterError, PlantParams, make, parameter_info
+from ipcosim.fmus.physics import MEASURED
 
 LAWS = ("PID", "CascadePID", "LQR", "HSMC", "AdaptiveHSMC")
 KINDS = ("single-mass", "double-mass")

@@ -52,7 +52,7 @@ from ipcosim.controllers.catalog import (
     schema,
 )
 from ipcosim.controllers.errors import ControllerParameterError
-from ipcosim.controllers.laws import LQR, DiscreteLaw, LawInputError
+from ipcosim.controllers.laws import DiscreteLaw, LawInputError
 from ipcosim.fmus.fmi import FmuBase, FmuError, StepFailure
 from ipcosim.fmus.physics import MEASURED, STATE_UNITS
 
@@ -183,9 +183,8 @@ class ControllerFmu(FmuBase):
     def _sample(self) -> float:
         law = self._controller
         assert law is not None
-        y = [getattr(self, n) for n in self._measured]
         try:
-            return float(law.step(y, float(self.reference)))
+            return float(law.step([getattr(self, n) for n in self._measured], self.reference))
         except LawInputError as exc:
             raise StepFailure(str(exc)) from None
 

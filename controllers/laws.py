@@ -173,14 +173,14 @@ class DiscreteLaw:
 
     def _inputs(self, measurements: Sequence[float], reference: float) -> tuple[tuple[float, ...], float]:
         try:
-            y = tuple(float(v) for v in measurements)
+            y = tuple(map(float, measurements))
         except (TypeError, ValueError):
             raise LawInputError(f"{type(self).__name__}: measurements must be numbers, got {measurements!r}") from None
         if len(y) != len(self.measured):
             raise LawInputError(f"{type(self).__name__}: expected {len(self.measured)} measurements "
                                 f"({', '.join(self.measured)}), got {len(y)}")
-        bad = [n for n, v in zip(self.measured, y) if not math.isfinite(v)]
-        if bad:
+        if not all(map(math.isfinite, y)):
+            bad = [n for n, v in zip(self.measured, y) if not math.isfinite(v)]
             raise LawInputError(f"{type(self).__name__}: measurement {', '.join(bad)} is not finite "
                                 f"at t = {self.time:.6g} s")
         r = float(reference)
@@ -389,7 +389,8 @@ class LQRCoefficients:
             return tuple(tuple(float(v) for v in row) for row in as_matrix(m))
         return cls(states=tuple(design.model.states), outputs=tuple(design.model.outputs),
                    sample_period=float(design.sample_period), K=rows(design.K)[0], N=float(design.N),
-                   M=rows(design.M), Ad=rows(design.Ad), Bd=tuple(r[0] for r in rows(design.Bd)), C=rows(design.model.C))
+                   M=rows(design.M), Ad=rows(design.Ad), Bd=tuple(r[0] for r in rows(design.Bd)),
+                   C=rows(design.model.C))
 
 
 def _right_inverse(C: Sequence[Sequence[float]]) -> Matrix:
@@ -401,7 +402,8 @@ def _right_inverse(C: Sequence[Sequence[float]]) -> Matrix:
 
 
 class LQR(DiscreteLaw):
-    """LQR state feedback on a discrete current estimator, ``u = sat(-K x^ + N r)`` (see ``ipcosim.controllers.design``).
+    """LQR state feedback on a discrete current estimator, ``u = sat(-K x^ + N r)``
+    (see ``ipcosim.controllers.design``).
 
     Parameters
     ----------
@@ -450,14 +452,15 @@ class LQR(DiscreteLaw):
     def _compute(self, y: Sequence[float], r: float) -> float:
         d = self.coefficients
         yf = self._filter(y)
-        if self.x_pred is None:  # plant assumed at rest at the measured positions
-            self.x_pred = [_dot(row, yf) for row in self._Cpinv]
         xp = self.x_pred
-        innovation = [v - _dot(row, xp) for v, row in zip(yf, d.C)]
-        self.x_hat = x_hat = [a + _dot(row, innovation) for a, row in zip(xp, d.M)]
-        u = -_dot(d.K, x_hat) + d.N * r
-        u_applied = saturate(u, self.voltage_limit)
-        self.x_pred = [_dot(row, x_hat) + b * u_applied for row, b in zip(d.Ad, d.Bd)]
+        if xp is None:  # plant assumed at rest at the measured positions
+            xp = [sum(map(mul, row, yf)) for row in self._Cpinv]
+        innovation = [v - sum(map(mul, row, xp)) for v, row in zip(yf, d.C)]
+        self.x_hat = x_hat = [a + sum(map(mul, row, innovation)) for a, row in zip(xp, d.M)]
+        u = d.N * r - sum(map(mul, d.K, x_hat))
+        limit = self.voltage_limit
+        u_applied = limit if u > limit else (-limit if u < -limit else u)
+        self.x_pred = [sum(map(mul, row, x_hat)) + b * u_applied for row, b in zip(d.Ad, d.Bd)]
         return u
 
 

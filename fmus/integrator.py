@@ -23,7 +23,6 @@ is measured in ``tests/test_integrator.py`` against scipy's Radau at rtol 1e-10.
 """
 from __future__ import annotations
 
-from operator import mul
 from typing import Any, Callable, Sequence
 
 from ipcosim.fmus.expm import Matrix, as_matrix, expm, identity, lincomb, matmul, matvec

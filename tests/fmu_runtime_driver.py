@@ -4,7 +4,7 @@ Run as a script in a fresh interpreter (``tests/test_fmu_runtime.py``)::
 
     python fmu_runtime_driver.py UNZIPPED_DIR SPEC_JSON [--block numpy,scipy,control,fmpy,ipcosim]
 
-``SPEC_JSON`` holds ``{"params": {name: value}, "steps": N, "step_size": h, "watch": [parameter, ...]}``. The driver puts the
+``SPEC_JSON`` holds ``{"params": {name: value}, "steps": N, "step_size": h, "watch": [name, ...]}``. The driver puts the
 FMU's ``resources/`` first on ``sys.path``, imports the module named in ``slavemodule.txt``,
 instantiates its FMU class with ``instance_name``/``resources``/``visible``, runs
 setup_experiment, enter/exit initialization and ``steps`` steps with deterministic inputs, and

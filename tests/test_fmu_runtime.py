@@ -116,3 +116,18 @@ def test_gains_set_directly_need_no_design_stack(unzipped_fmus, tmp_path: Path) 
     assert all(got[n] == v for n, v in gains.items())
     conflict = drive(folder, {"steps": 1, "params": {"R": 0.5, **gains}}, True, tmp_path)
     assert "parameters R and K_" in conflict["error"]
+
+
+def test_cli_run_imports_no_analysis_stack(unzipped_fmus, tmp_path: Path) -> None:
+    """``ipcosim run`` without --plot loads neither the plotting, design nor cluster stacks (cold-start cost)."""
+    fmu_dir = next(iter(unzipped_fmus.values())).parent / "fmus"
+    code = ("import sys\nfrom ipcosim.harness.cli import main\n"
+            f"rc = main(['run', 'single-mass-lqr', '--stop-time', '0.05', '--quiet', '--fmu-dir', {str(fmu_dir)!r}, "
+            f"'--out', {str(tmp_path / 'out')!r}])\n"
+            "print(rc, sorted({m.split('.')[0] for m in sys.modules} & {'matplotlib', 'scipy', 'control', 'dask', "
+            "'distributed', 'pandas'}))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "0 []"
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert metrics["wall_time_s"] > 0 and metrics["loop_real_time_factor"] > metrics["real_time_factor"] > 0

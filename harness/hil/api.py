@@ -49,7 +49,6 @@ import time
 from dataclasses import dataclass, field
 from typing import Sequence
 
-
 from ipcosim.harness.errors import IpcosimError
 
 

@@ -14,7 +14,6 @@ import time
 import weakref
 from typing import Sequence
 
-
 from ipcosim.harness.hil.api import Card, CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite
 from ipcosim.harness.hil.protocol import (
     FLAG_AMPLIFIER,

@@ -498,8 +498,8 @@ class Execution:
                                     "fmu": str(i.model.path) if i.model.path else None,
                                     "swapped_from": i.swapped_from} for i in self.instances},
             "overrides": {f"{c}.{v}": x for (c, v), x in self.overrides.items()},
-            "warnings": list(self.system.warnings), "notes": list(self.system.notes), "wall_time_s": wall, "loop_wall_time_s": wall_loop,
-            "simulated_s": simulated,
+            "warnings": list(self.system.warnings), "notes": list(self.system.notes),
+            "wall_time_s": wall, "loop_wall_time_s": wall_loop, "simulated_s": simulated,
             "status": "ok" if error is None else "failed", "error": message,
             "fmu_messages": {s.name: s.messages()[-5:] for s in self.slaves if s.messages()},
         }
