@@ -131,3 +131,28 @@ def test_cli_run_imports_no_analysis_stack(unzipped_fmus, tmp_path: Path) -> Non
     assert out.stdout.strip().splitlines()[-1] == "0 []"
     metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert metrics["wall_time_s"] > 0 and metrics["loop_real_time_factor"] > metrics["real_time_factor"] > 0
+
+
+def test_redesign_after_the_first_extraction_is_gone(unzipped_fmus, tmp_path: Path) -> None:
+    """One FMU build loaded from two extraction folders shares one private package; when the first
+    folder is deleted, the second instance's lazily imported design modules come from its own folder."""
+    import shutil
+
+    from fmi_helpers import instantiate
+
+    fmu = unzipped_fmus["LQRDoubleMass"].parent / "fmus" / "LQRDoubleMass.fmu"
+    first = instantiate(fmu, tmp_path / "first")
+    first.slave.setupExperiment(startTime=0.0)
+    first.slave.enterInitializationMode()
+    first.slave.exitInitializationMode()  # the shipped gains: no design module imported
+    first.slave.terminate()
+    first.slave.freeInstance()
+    shutil.rmtree(tmp_path / "first")
+    second = instantiate(fmu, tmp_path / "second")
+    second.slave.setupExperiment(startTime=0.0)
+    second.slave.enterInitializationMode()
+    second.set(sample_period=0.002)
+    second.slave.exitInitializationMode()  # redesign: imports the private design module now
+    assert second.get("K_pendulum_angle")[0] != 0.0, second.text()
+    second.slave.terminate()
+    second.slave.freeInstance()
