@@ -543,7 +543,7 @@ def lqr_gain_specs(kind: str) -> list[ParamSpec]:
     current-estimator gain ``M_<state>_<output>`` (``x^ = x- + M (y - C x-)``), design-model order.
 
     A controller FMU ships them designed for its default parameters; setting them replaces the
-    design (the native FMUs take them under the same names).
+    design (one set of names for the gains of every flavour of the FMU).
     """
     states, outputs = design_states(kind), MEASURED[kind]
     specs = [ParamSpec(f"K_{s}", 0.0, _unit_div({"V": 1}, _state_dim(s)),

@@ -202,6 +202,9 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
     files = runtime_modules(script, root)
     digest = digest or _digest(script, files, root)
     private = private_package(script.stem.removeprefix("fmu_"), digest)
+    # an FMU of this build loaded earlier in this process (from an extraction folder that may be
+    # gone) must not stand in for the staged sources the build imports
+    _forget_modules(private, script.stem)
     saved_path = list(sys.path)
     try:
         with tempfile.TemporaryDirectory(prefix="ipcosim-build-") as tmp:
@@ -226,9 +229,13 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
         sys.path[:] = saved_path  # pythonfmu's builder leaves the script folder on sys.path
         # ... and its import of the script leaves the staged (now deleted) private package in
         # sys.modules, where an FMU of the same build loaded later in this process would find it.
-        for name in [m for m in sys.modules if m == private or m.startswith(private + ".")
-                     or m == script.stem]:
-            del sys.modules[name]
+        _forget_modules(private, script.stem)
+
+
+def _forget_modules(private: str, script_module: str) -> None:
+    """Drop the private package and the script module from ``sys.modules`` (live objects keep theirs)."""
+    for name in [m for m in sys.modules if m == private or m.startswith(private + ".") or m == script_module]:
+        del sys.modules[name]
 
 
 def _add_bytecode(fmu: Path, work: Path) -> None:

@@ -156,3 +156,25 @@ def test_redesign_after_the_first_extraction_is_gone(unzipped_fmus, tmp_path: Pa
     assert second.get("K_pendulum_angle")[0] != 0.0, second.text()
     second.slave.terminate()
     second.slave.freeInstance()
+
+
+def test_build_in_a_process_that_loaded_the_same_build_from_a_deleted_folder(unzipped_fmus, tmp_path: Path) -> None:
+    """The build imports its staged sources, not the copy of the same private package an FMU loaded
+    earlier in this process from a folder that is gone."""
+    import shutil
+
+    from fmi_helpers import instantiate
+
+    from ipcosim.fmus.build import build_all
+
+    fmu = unzipped_fmus["LQRSingleMass"].parent / "fmus" / "LQRSingleMass.fmu"
+    loaded = instantiate(fmu, tmp_path / "loaded")
+    loaded.slave.setupExperiment(startTime=0.0)
+    loaded.slave.enterInitializationMode()
+    loaded.slave.exitInitializationMode()
+    loaded.slave.terminate()
+    loaded.slave.freeInstance()
+    shutil.rmtree(tmp_path / "loaded")
+    (result,) = build_all(tmp_path / "rebuilt", scripts=[ROOT / "controllers" / "fmu_lqr_single_mass.py"])
+    assert result.built and result.fmu.name == fmu.name
+    assert zipfile.ZipFile(result.fmu).namelist() == zipfile.ZipFile(fmu).namelist()
