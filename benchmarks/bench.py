@@ -1,7 +1,9 @@
 """``make bench`` (``python -m benchmarks.bench [NAME ...]``): run every ``benchmarks/bench_*.py``.
 
 Each bench module exposes ``run() -> list[str]``, the lines to print; its module docstring
-says what it measures. Modules run one after the other, in name order, each in a fresh
+says what it measures. A module whose figures miss a target raises :class:`TargetMissed` with
+its lines and the targets missed (``benchmarks.targets``): they are printed and the run exits
+non-zero. Modules run one after the other, in name order, each in a fresh
 interpreter: FMUs loaded in-process put their resources on ``sys.path`` (pythonfmu's wrapper
 does), which would change what a later module imports. A module that fails prints one error
 line and the others still run (exit status 1).
@@ -15,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 from typing import Sequence
+
+from benchmarks.targets import TargetMissed
 
 HERE = Path(__file__).resolve().parent
 
@@ -30,6 +34,12 @@ def run_one(name: str) -> int:
     start = time.perf_counter()
     try:
         lines = importlib.import_module(name).run()
+    except TargetMissed as exc:
+        for line in exc.lines:
+            print(f"   {line}", flush=True)
+        for line in exc.missed:
+            print(f"   TARGET MISSED: {line}", flush=True)
+        return 1
     except Exception as exc:  # noqa: BLE001 -- one line, the other benches still run
         text = str(exc).strip()
         print(f"   error: {type(exc).__name__}: {text.splitlines()[0] if text else ''}", flush=True)

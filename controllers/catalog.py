@@ -30,20 +30,7 @@ import math
 from dataclasses import dataclass, replace
 from typing import Any, Mapping
 
-import numpy as np
-
-from ipcosim.controllers.design import (
-    THESIS_DOUBLE_MASS_OBSERVER_FACTOR,
-    THESIS_DOUBLE_MASS_Q,
-    THESIS_DOUBLE_MASS_R,
-    THESIS_SINGLE_MASS_OBSERVER_POLES,
-    THESIS_SINGLE_MASS_R,
-    DesignError,
-    design_lqr,
-    design_model,
-    thesis_single_mass_Q,
-)
-from ipcosim.controllers.errors import ControllerParameterError
+from ipcosim.controllers.errors import ControllerParameterError, DesignError
 from ipcosim.controllers.laws import (
     HSMC,
     LQR,
@@ -54,14 +41,25 @@ from ipcosim.controllers.laws import (
     CascadePID,
     DiscreteLaw,
     HSMCGains,
+    LQRCoefficients,
     PIDGains,
     Schedule,
     SubsystemModel,
     SwingUp,
     SwingUpGains,
+    zoh_lists,
 )
-from ipcosim.fmus.linearize import LinearModel
+from ipcosim.controllers.thesis import (
+    THESIS_DOUBLE_MASS_OBSERVER_FACTOR,
+    THESIS_DOUBLE_MASS_Q_DIAGONAL,
+    THESIS_DOUBLE_MASS_R,
+    THESIS_SINGLE_MASS_OBSERVER_POLES,
+    THESIS_SINGLE_MASS_Q_DIAGONAL,
+    THESIS_SINGLE_MASS_R,
+)
+from ipcosim.fmus.linearize import LinearModel, linear_matrices
 from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, ParameterError, PlantParams, make, parameter_info
+from ipcosim.fmus.physics import MEASURED
 
 LAWS = ("PID", "CascadePID", "LQR", "HSMC", "AdaptiveHSMC")
 KINDS = ("single-mass", "double-mass")
@@ -112,12 +110,23 @@ def subsystem_rows(kind: str) -> tuple[str, ...]:
 
 def subsystem_models(model: LinearModel) -> list[SubsystemModel]:
     """``f_i = A[row_i] . x``, ``b_i = B[row_i]`` from a design model (no inductance)."""
-    kind = "single-mass" if "cart_position" in model.states else "double-mass"
+    return _subsystems(model.A, [row[0] for row in model.B], model.states)
+
+
+def _subsystems(A, B, states) -> list[SubsystemModel]:  # noqa: ANN001 -- lists or arrays
+    kind = "single-mass" if "cart_position" in states else "double-mass"
     out = []
     for row in subsystem_rows(kind):
-        i = model.states.index(row)
-        out.append(SubsystemModel(a=tuple(float(v) for v in model.A[i]), b=float(model.B[i, 0])))
+        i = states.index(row)
+        out.append(SubsystemModel(a=tuple(float(v) for v in A[i]), b=float(B[i])))
     return out
+
+
+def design_subsystem_models(kind: str, values: Mapping[str, Any]) -> list[SubsystemModel]:
+    """The subsystem models of the design model the flat ``model_*`` values describe (plain Python:
+    the linearization of ``ipcosim.fmus.linearize.linear_matrices``, no numpy)."""
+    A, B, states, _ = linear_matrices(_design_params(kind, values), inductance=False)
+    return _subsystems(A, B, states)
 
 
 # App. A.5 (single mass). These turn out to be the linearization of a cart + pendulum driven by a
@@ -259,7 +268,7 @@ def _state_dim(state: str) -> dict[str, int]:
 
 def design_states(kind: str) -> tuple[str, ...]:
     """States of the design model (``ipcosim.fmus.physics`` order without the motor current)."""
-    from ipcosim.fmus.physics import state_names
+    from ipcosim.fmus.physics import state_names  # noqa: PLC0415
     return state_names(kind)[:-1]
 
 
@@ -474,12 +483,12 @@ def set_values(law: str, kind: str, parameter_set: str) -> dict[str, Any]:
     if law == "LQR":
         states = design_states(kind)
         if kind == "single-mass":
-            Q, R, factor, poles = thesis_single_mass_Q(), THESIS_SINGLE_MASS_R, 0.0, THESIS_SINGLE_MASS_OBSERVER_POLES
-            tau = 0.0
+            Q, R, factor = THESIS_SINGLE_MASS_Q_DIAGONAL, THESIS_SINGLE_MASS_R, 0.0
+            poles, tau = THESIS_SINGLE_MASS_OBSERVER_POLES, 0.0
         else:
-            Q, R, factor, poles = THESIS_DOUBLE_MASS_Q, THESIS_DOUBLE_MASS_R, THESIS_DOUBLE_MASS_OBSERVER_FACTOR, None
-            tau = 0.0008
-        v: dict[str, Any] = {f"Q_{s}": float(Q[i, i]) for i, s in enumerate(states)}
+            Q, R, factor = THESIS_DOUBLE_MASS_Q_DIAGONAL, THESIS_DOUBLE_MASS_R, THESIS_DOUBLE_MASS_OBSERVER_FACTOR
+            poles, tau = None, 0.0008
+        v: dict[str, Any] = {f"Q_{s}": float(Q[i]) for i, s in enumerate(states)}
         v.update(R=float(R), observer_pole_factor=factor, output_filter_time_constant=tau)
         if poles is not None:
             upper = [p for p in poles if p.imag >= 0]
@@ -528,7 +537,12 @@ def design_params_from(kind: str, values: Mapping[str, Any]) -> PlantParams:
 
 
 def lqr_design_from(kind: str, v: Mapping[str, Any], backend: str = "control"):
-    """The LQR design the flat values describe (``ipcosim.controllers.design.design_lqr``)."""
+    """The LQR design the flat values describe (``ipcosim.controllers.design.design_lqr``; numpy, scipy
+    and, for ``backend="control"``, python-control are imported here)."""
+    import numpy as np  # noqa: PLC0415 -- the design stack, imported only to design
+
+    from ipcosim.controllers.design import design_lqr, design_model  # noqa: PLC0415
+
     states = design_states(kind)
     model = design_model(_design_params(kind, v))
     Q = np.diag([float(v[f"Q_{s}"]) for s in states])
@@ -545,6 +559,64 @@ def lqr_design_from(kind: str, v: Mapping[str, Any], backend: str = "control"):
                           sample_period=float(v["sample_period"]), backend=backend)
     except DesignError as exc:
         raise DesignError(_fmu_name(exc.parameter, kind), _fmu_message(exc, kind)) from None
+
+
+# ============================================================ LQR gains without the design stack
+
+def lqr_gain_specs(kind: str) -> list[ParamSpec]:
+    """The LQR's gains as flat parameters: ``K_<state>`` and ``N`` (``u = -K x^ + N r``) and the
+    current-estimator gain ``M_<state>_<output>`` (``x^ = x- + M (y - C x-)``), design-model order.
+
+    A controller FMU ships them designed for its default parameters; setting them replaces the
+    design (one set of names for the gains of every flavour of the FMU).
+    """
+    states, outputs = design_states(kind), MEASURED[kind]
+    specs = [ParamSpec(f"K_{s}", 0.0, _unit_div({"V": 1}, _state_dim(s)),
+                       f"LQR gain on the estimated {s} (u = -K x^ + N r)") for s in states]
+    specs.append(ParamSpec("N", 0.0, "V/m", "reference gain N = -1/(C1 (A - B K)^-1 B)"))
+    specs += [ParamSpec(f"M_{s}_{o}", 0.0, _unit_div(_state_dim(s), _state_dim(o)),
+                        f"current-estimator gain from the {o} innovation to the estimated {s}")
+              for s in states for o in outputs]
+    return specs
+
+
+#: LQR parameters that only the design stack turns into gains (weights, observer poles).
+def lqr_weight_parameters(kind: str) -> tuple[str, ...]:
+    """Names of the LQR parameters that enter only through the design (``Q_*``, ``R``, ``observer_*``)."""
+    return tuple(s.name for s in _lqr_specs(kind) if s.name != "output_filter_time_constant")
+
+
+def lqr_design_parameters(kind: str) -> tuple[str, ...]:
+    """Every LQR parameter the gains depend on: weights, observer poles, ``model_*``, ``sample_period``."""
+    return (*lqr_weight_parameters(kind), *(s.name for s in _model_specs(kind)), "sample_period")
+
+
+def lqr_gains(law: LQR) -> dict[str, float]:
+    """``{K_<state>, N, M_<state>_<output>: value}`` of an LQR law (``lqr_gain_specs`` names)."""
+    c = law.coefficients
+    out = {f"K_{s}": k for s, k in zip(c.states, c.K)}
+    out["N"] = c.N
+    out.update({f"M_{s}_{o}": m for s, row in zip(c.states, c.M) for o, m in zip(c.outputs, row)})
+    return out
+
+
+def lqr_from_gains(kind: str, values: Mapping[str, Any], gains: Mapping[str, float]) -> LQR:
+    """An LQR law from flat values and given gains, in plain Python (no numpy, scipy or python-control).
+
+    The zero-order-hold model ``Ad, Bd`` comes from the ``model_*`` values and ``sample_period``
+    (``ipcosim.fmus.linearize.linear_matrices`` and a plain-Python matrix exponential); ``K``, ``N``
+    and ``M`` are taken as given.
+    """
+    A, B, states, outputs = linear_matrices(_design_params(kind, values), inductance=False)
+    T = float(values["sample_period"])
+    Ad, Bd = zoh_lists(A, B, T)
+    coef = LQRCoefficients(states=states, outputs=outputs, sample_period=T,
+                           K=tuple(float(gains[f"K_{s}"]) for s in states), N=float(gains["N"]),
+                           M=tuple(tuple(float(gains[f"M_{s}_{o}"]) for o in outputs) for s in states),
+                           Ad=tuple(map(tuple, Ad)), Bd=tuple(Bd),
+                           C=tuple(tuple(1.0 if s == o else 0.0 for s in states) for o in outputs))
+    return LQR(kind, coef, float(values["voltage_limit"]),
+               output_filter_time_constant=float(values["output_filter_time_constant"]))
 
 
 def _fmu_name(parameter: str, kind: str) -> str:
@@ -615,7 +687,7 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
     if bool(v["use_thesis_coefficients"]):
         models = models_from_coefficients(kind, {k: float(v[k]) for k in thesis_coefficients(kind)})
     else:
-        models = subsystem_models(design_model(_design_params(kind, v)))
+        models = design_subsystem_models(kind, v)
     if law == "HSMC":
         return _through_motor(HSMC(kind, g, models, T, vlim), kind, v)
 
@@ -684,4 +756,5 @@ def lqr_design_for(kind: str, params: PlantParams, sample_period: float = 1e-3, 
 __all__ = ["LAWS", "KINDS", "PARAMETER_SETS", "ParamSpec", "schema", "set_values", "parameter_sets", "defaults",
            "build_law", "make_law", "model_name", "default_set", "default_preset", "subsystem_models",
            "thesis_subsystem_models", "thesis_hsmc_gains", "thesis_adaptive", "lqr_design_for",
-           "design_params_from", "TUNED_CASCADE", "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]
+           "design_params_from", "lqr_gain_specs", "lqr_design_parameters", "lqr_weight_parameters", "lqr_gains",
+           "lqr_from_gains", "TUNED_CASCADE", "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]

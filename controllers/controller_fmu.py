@@ -3,14 +3,29 @@
 Variables (DESIGN.md contract): inputs ``reference`` [m] and the plant's measured positions
 (``ipcosim.fmus.physics.MEASURED``); output ``voltage`` [V]; parameters = ``ipcosim.controllers.catalog.schema``
 (every gain and weight with its unit; ``sample_period``, ``voltage_limit``; the model-based laws'
-``model_*`` design-model constants). The LQR FMUs also publish the gains their weights imply as
-calculated parameters ``K_<state>`` and ``N``.
+``model_*`` design-model constants). The LQR FMUs also have the gains as parameters
+(``ipcosim.controllers.catalog.lqr_gain_specs``): ``K_<state>``, ``N`` and the estimator gain
+``M_<state>_<output>``.
 
-Initialization: on leaving initialization mode the law is built from the parameters by
-``ipcosim.controllers.catalog.build_law`` -- the LQR redone with the ``scipy`` back end, so a changed
-weight gives the gains it implies -- and the output at the start time is computed from the
-inputs set during initialization (outputs correct at t = 0). A bad parameter ends there with
-fmi2Fatal and a message naming it (``ipcosim.fmus.fmi``).
+Runtime: on its default path an FMU imports only the Python standard library. The laws run on
+plain floats (``ipcosim.controllers.laws``); the HSMC laws' design model is a plain-Python
+linearization. The LQR's gains for the parameter values an FMU ships with are designed when the
+FMU is built and stored in it (``shipped_<Model>.json`` in its private package, start values of
+the gain parameters). On leaving initialization mode:
+
+* no design parameter changed (``catalog.lqr_design_parameters``: weights, observer poles,
+  ``model_*``, ``sample_period``) -> the gain parameters as set (the shipped ones, or the user's);
+* a design parameter changed and no gain was set -> the gains are redesigned with the ``scipy``
+  back end, importing numpy and scipy only then; if they are missing, initialization fails
+  with one line naming the parameter and saying that the gains can be set instead; after
+  initialization the gain parameters read the gains in effect;
+* gains set and ``model_*`` or ``sample_period`` changed -> the given gains, with the
+  zero-order-hold model recomputed in plain Python; gains set together with a changed weight or
+  observer pole -> an error naming both (the two ways of fixing the gains contradict each other).
+
+The output at the start time is computed from the inputs set during initialization (outputs
+correct at t = 0). A bad parameter ends there with fmi2Fatal and a message naming it
+(``ipcosim.fmus.fmi``).
 
 Sampling: the output is updated once per sample instant ``t0 + k sample_period`` (k counted as an
 integer from the master's times), from the inputs current at that instant -- the inputs set just
@@ -21,13 +36,23 @@ sample period, or one that skips a sample instant, fails with fmi2Discard.
 """
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ipcosim.controllers.catalog import model_name, schema
+from ipcosim.controllers.catalog import (
+    build_law,
+    defaults,
+    lqr_design_parameters,
+    lqr_from_gains,
+    lqr_gain_specs,
+    lqr_gains,
+    lqr_weight_parameters,
+    model_name,
+    schema,
+)
 from ipcosim.controllers.errors import ControllerParameterError
-from ipcosim.controllers.laws import LQR, DiscreteLaw, LawInputError
+from ipcosim.controllers.laws import DiscreteLaw, LawInputError
 from ipcosim.fmus.fmi import FmuBase, FmuError, StepFailure
 from ipcosim.fmus.physics import MEASURED, STATE_UNITS
 
@@ -37,6 +62,9 @@ _INPUT_DOC = {
     "passive_cart_position": "measured position of the passive cart carrying the pendulum (encoder)",
     "pendulum_angle": "measured pendulum angle from upright, counter-clockwise positive (encoder)",
 }
+#: Shipped designs read (or designed) in this process, by file name (the FMU class is re-created
+#: on every instantiation by pythonfmu's wrapper; this module is not).
+_SHIPPED: dict[str, dict[str, Any]] = {}
 #: Slack when deciding whether the end of a step is a sample instant, in sample periods.
 TICK_TOLERANCE = 1e-6
 
@@ -67,48 +95,96 @@ class ControllerFmu(FmuBase):
             self.add_parameter(spec.name, start=bool(spec.default) if is_bool else float(spec.default),
                                type_=bool if is_bool else float, unit=None if is_bool else spec.unit,
                                description=spec.description, check=None if is_bool else spec.check)
-        self._gains: dict[str, float] = {}
-        if self.law == "LQR":
-            from ipcosim.controllers.catalog import design_states  # noqa: PLC0415
-            for state in design_states(kind):
-                name = f"K_{state}"
-                unit = "V/" + STATE_UNITS[state]
-                if "/" in STATE_UNITS[state]:
-                    num, den = STATE_UNITS[state].split("/")
-                    unit = f"V.{den}/{num}"
-                self._gains[name] = 0.0
-                self.add_variable(name, "calculatedParameter", unit=unit,
-                                  description=f"LQR gain on the estimated {state} (u = -K x^ + N r), computed "
-                                              "from the weights at initialization",
-                                  getter=(lambda n=name: self._gains[n]))
-            self._gains["N"] = 0.0
-            self.add_variable("N", "calculatedParameter", unit="V/m",
-                              description="reference gain N = -1/(C1 (A - B K)^-1 B), computed at initialization",
-                              getter=(lambda: self._gains["N"]))
+        self._gain_specs = lqr_gain_specs(kind) if self.law == "LQR" else []
+        if self._gain_specs:
+            shipped = type(self).shipped_design(self.resources)["gains"]
+            for spec in self._gain_specs:
+                self.add_parameter(spec.name, start=shipped[spec.name], unit=spec.unit,
+                                   description=f"{spec.description}; designed at build time for the default "
+                                               "parameters, redesigned at initialization when a design "
+                                               "parameter changes (then it reads the gain in effect)")
 
-    def setup(self) -> None:
-        from ipcosim.controllers.catalog import build_law  # noqa: PLC0415
+    # --- the design stored in the FMU --------------------------------------------------------------
 
+    @classmethod
+    def shipped_name(cls) -> str:
+        """File name of the shipped design inside the FMU's private package."""
+        return f"shipped_{model_name(cls.law, cls.kind)}.json"
+
+    @classmethod
+    def shipped_design(cls, resources: str | None = None) -> dict[str, Any]:
+        """``{"design": {parameter: value}, "gains": {gain: value}}`` for the default parameters.
+
+        Read from the private package in the FMU's ``resources`` folder; elsewhere (the source tree)
+        designed now with the design stack. Once per process and model.
+        """
+        name = cls.shipped_name()
+        record = _SHIPPED.get(name)
+        if record is None:
+            package = __name__.split(".", 1)[0]
+            candidates = [Path(__file__).resolve().parents[1] / name]
+            if resources:
+                candidates.insert(0, Path(resources) / package / name)
+            path = next((c for c in candidates if c.is_file()), None)
+            record = _SHIPPED[name] = json.loads(path.read_text()) if path else cls.design_record()
+        return record
+
+    @classmethod
+    def design_record(cls) -> dict[str, Any]:
+        """Design the gains for the default parameters (imports numpy and scipy): the shipped design."""
+        values = defaults(cls.law, cls.kind)
+        law = build_law(cls.law, cls.kind, values, backend="scipy")
+        design = {name: values[name] for name in lqr_design_parameters(cls.kind)}
+        return {"model": model_name(cls.law, cls.kind), "design": design, "gains": lqr_gains(law)}
+
+    @classmethod
+    def build_files(cls) -> dict[str, str]:
+        """Files the build adds to the FMU's private package: the LQR's shipped design."""
+        if cls.law != "LQR":
+            return {}
+        return {cls.shipped_name(): json.dumps(cls.design_record(), indent=1, sort_keys=True)}
+
+    # --- initialization ----------------------------------------------------------------------------
+
+    def _build_law(self) -> DiscreteLaw:
         values = {s.name: getattr(self, s.name) for s in self._specs}
+        name = model_name(self.law, self.kind)
+        if self.law != "LQR":
+            return build_law(self.law, self.kind, values)
+        shipped = type(self).shipped_design(self.resources)
+        gains = {s.name: float(getattr(self, s.name)) for s in self._gain_specs}
+        changed = [n for n in lqr_design_parameters(self.kind) if float(values[n]) != shipped["design"][n]]
+        set_gains = [n for n, v in gains.items() if v != shipped["gains"][n]]
+        weights = [n for n in changed if n in lqr_weight_parameters(self.kind)]
+        if set_gains and weights:
+            raise FmuError(f"{name}: parameters {weights[0]} and {set_gains[0]} were both set: give either the "
+                           "design (weights, observer poles) or the gains K_*, N, M_*, not both")
+        if not changed or set_gains:
+            return lqr_from_gains(self.kind, values, gains)
         try:
             law = build_law(self.law, self.kind, values, backend="scipy")
+        except ImportError as exc:
+            raise FmuError(f"{name}: parameter {changed[0]} = {values[changed[0]]:g} differs from the shipped "
+                           f"design, and redesigning the gains needs numpy and scipy ({exc}); install them in "
+                           "this Python, or keep the design parameters and set the gains K_*, N, M_* instead") from None
+        for gain, value in lqr_gains(law).items():
+            setattr(self, gain, value)
+        return law
+
+    def setup(self) -> None:
+        try:
+            law = self._build_law()
         except ControllerParameterError as exc:
             raise FmuError(f"{model_name(self.law, self.kind)}: {exc}") from None
         self._controller = law
-        if isinstance(law, LQR):
-            d = law.design
-            for i, state in enumerate(d.model.states):
-                self._gains[f"K_{state}"] = float(d.K[0, i])
-            self._gains["N"] = float(d.N)
         self._tick = 0
         self.voltage = self._sample()
 
     def _sample(self) -> float:
         law = self._controller
         assert law is not None
-        y = np.array([getattr(self, n) for n in self._measured], dtype=float)
         try:
-            return float(law.step(y, float(self.reference)))
+            return float(law.step([getattr(self, n) for n in self._measured], self.reference))
         except LawInputError as exc:
             raise StepFailure(str(exc)) from None
 

@@ -48,20 +48,21 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.linalg
 
-from ipcosim.controllers.errors import ControllerParameterError
+# DesignError, check_sample_period and the thesis's numbers live in numpy-free modules (the FMU runtime
+# reads them); they are re-exported here.
+from ipcosim.controllers.errors import DesignError  # noqa: F401
+from ipcosim.controllers.laws import check_sample_period
+from ipcosim.controllers.thesis import (  # noqa: F401
+    THESIS_DOUBLE_MASS_K,
+    THESIS_DOUBLE_MASS_OBSERVER_FACTOR,
+    THESIS_DOUBLE_MASS_Q_DIAGONAL,
+    THESIS_DOUBLE_MASS_R,
+    THESIS_SINGLE_MASS_OBSERVER_POLES,
+    THESIS_SINGLE_MASS_Q_DIAGONAL,
+    THESIS_SINGLE_MASS_R,
+)
 from ipcosim.fmus.linearize import LinearModel, linearize
 from ipcosim.fmus.params import PlantParams
-
-
-class DesignError(ControllerParameterError):
-    """A controller design input is invalid or the design is impossible.
-
-    Attributes
-    ----------
-    parameter : str
-        Name of the offending design input (e.g. ``Q``, ``R``, ``observer_poles``, ``sample_period``).
-    """
-
 
 BACKENDS = ("control", "scipy")
 
@@ -73,21 +74,10 @@ PBH_TOLERANCE = 1e-10
 
 def thesis_single_mass_Q() -> np.ndarray:
     """App. A.2 state weights for ``[xc, xc', th, th']``: Bryson-style q_i = w / (a * x_max^2)."""
-    return np.diag([200 / (2.534 * 0.1 ** 2), 50 / (2 * 0.09211 ** 2), 100 / (3.2 * 0.016 ** 2),
-                    0.008 / (1.1 * 0.0072 ** 2)])
+    return np.diag(THESIS_SINGLE_MASS_Q_DIAGONAL)
 
 
-THESIS_SINGLE_MASS_R = 1.0 / 36.0
-#: App. A.2 observer poles: 40 * [-4 +- 0.5j, -3 +- 0.2j] rad/s.
-THESIS_SINGLE_MASS_OBSERVER_POLES = tuple(40 * p for p in (-4 + 0.5j, -4 - 0.5j, -3 + 0.2j, -3 - 0.2j))
-THESIS_DOUBLE_MASS_Q = np.diag([32.0, 0.5, 19.0, 2.0, 1700.0, 0.4])
-THESIS_DOUBLE_MASS_R = 0.15 / 36.0
-#: App. B.3: observer poles = observer_pole_factor * eig(A - B K) with factor 2 * 5 = 10.
-THESIS_DOUBLE_MASS_OBSERVER_FACTOR = 10.0
-#: Thesis ch. 4 LQR gain (printed to 1 decimal).
-THESIS_DOUBLE_MASS_K = (1182.2, 38.6, -1292.9, -181.7, 885.9, 87.8)
-
-
+THESIS_DOUBLE_MASS_Q = np.diag(THESIS_DOUBLE_MASS_Q_DIAGONAL)
 # --- checks ------------------------------------------------------------------------------------------
 
 def _finite_matrix(name: str, M: Any, shape: tuple[int, int]) -> np.ndarray:
@@ -123,17 +113,6 @@ def check_weights(Q: Any, R: Any, n: int, m: int = 1) -> tuple[np.ndarray, np.nd
     if r_eig[0] <= 0:
         raise DesignError("R", f"weight R must be positive definite; smallest eigenvalue {r_eig[0]:.6g}")
     return Q, R
-
-
-def check_sample_period(sample_period: float, name: str = "sample_period") -> float:
-    """A sample period must be a positive finite number of seconds."""
-    try:
-        T = float(sample_period)
-    except (TypeError, ValueError):
-        raise DesignError(name, f"{name} = {sample_period!r} s is not a number") from None
-    if not (math.isfinite(T) and T > 0):
-        raise DesignError(name, f"{name} = {T} s must be positive and finite")
-    return T
 
 
 def uncontrollable_modes(A: np.ndarray, B: np.ndarray, tol: float = PBH_TOLERANCE) -> list[complex]:

@@ -21,4 +21,14 @@ class ControllerParameterError(IpcosimError, ValueError):
         self.parameter = parameter
 
 
-__all__ = ["IpcosimError", "ControllerParameterError"]
+class DesignError(ControllerParameterError):
+    """A controller design input is invalid or the design is impossible.
+
+    Attributes
+    ----------
+    parameter : str
+        Name of the offending design input (e.g. ``Q``, ``R``, ``observer_poles``, ``sample_period``).
+    """
+
+
+__all__ = ["IpcosimError", "ControllerParameterError", "DesignError"]

@@ -24,12 +24,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Sequence
+from operator import mul
+from typing import Any, Sequence
 
-import numpy as np
-
-from ipcosim.controllers.design import DesignError, LQRDesign, check_sample_period, output_filter
-from ipcosim.controllers.errors import ControllerParameterError, IpcosimError
+from ipcosim.controllers.errors import ControllerParameterError, DesignError, IpcosimError
+from ipcosim.fmus.expm import Matrix, as_matrix, expm
 from ipcosim.fmus.physics import MEASURED
 
 KINDS = ("single-mass", "double-mass")
@@ -72,6 +71,37 @@ def _check_kind(kind: str) -> str:
     if kind not in KINDS:
         raise LawParameterError("kind", f"unknown plant kind {kind!r}; expected one of {', '.join(KINDS)}")
     return kind
+
+
+def check_sample_period(sample_period: float, name: str = "sample_period") -> float:
+    """A sample period must be a positive finite number of seconds (raises ``DesignError`` naming it)."""
+    try:
+        T = float(sample_period)
+    except (TypeError, ValueError):
+        raise DesignError(name, f"{name} = {sample_period!r} s is not a number") from None
+    if not (math.isfinite(T) and T > 0):
+        raise DesignError(name, f"{name} = {T} s must be positive and finite")
+    return T
+
+
+def zoh_lists(A: Sequence[Sequence[float]], B: Sequence[float], T: float) -> tuple[Matrix, list[float]]:
+    """Exact zero-order-hold discretization ``(Ad, Bd)`` of ``x' = A x + B u`` (one input), in plain Python."""
+    n = len(A)
+    aug = [[float(a) * T for a in row] + [float(b) * T] for row, b in zip(A, B)] + [[0.0] * (n + 1)]
+    E = expm(aug)
+    return [row[:n] for row in E[:n]], [row[n] for row in E[:n]]
+
+
+def output_filter_lists(time_constant: float, sample_period: float) -> tuple[Matrix, list[float], list[float]]:
+    """Discrete ``1/(tau s + 1)^2`` filter (zero-order hold) as ``(Ad, Bd, Cd)`` of a 2-state system,
+    state ``[y1, y2]`` with ``y1' = (u - y1)/tau``, ``y2' = (y1 - y2)/tau``, output ``y2``."""
+    a = 1.0 / time_constant
+    Ad, Bd = zoh_lists([[-a, 0.0], [a, -a]], [a, 0.0], sample_period)
+    return Ad, Bd, [0.0, 1.0]
+
+
+def _dot(a: Sequence[float], b: Sequence[float]) -> float:
+    return sum(map(mul, a, b))
 
 
 def saturate(v: float, limit: float) -> float:
@@ -141,12 +171,15 @@ class DiscreteLaw:
         self.ticks = 0
         self.voltage = 0.0
 
-    def _inputs(self, measurements: Sequence[float], reference: float) -> tuple[np.ndarray, float]:
-        y = np.asarray(measurements, dtype=float).ravel()
-        if y.size != len(self.measured):
+    def _inputs(self, measurements: Sequence[float], reference: float) -> tuple[tuple[float, ...], float]:
+        try:
+            y = tuple(map(float, measurements))
+        except (TypeError, ValueError):
+            raise LawInputError(f"{type(self).__name__}: measurements must be numbers, got {measurements!r}") from None
+        if len(y) != len(self.measured):
             raise LawInputError(f"{type(self).__name__}: expected {len(self.measured)} measurements "
-                                f"({', '.join(self.measured)}), got {y.size}")
-        if not np.all(np.isfinite(y)):
+                                f"({', '.join(self.measured)}), got {len(y)}")
+        if not all(map(math.isfinite, y)):
             bad = [n for n, v in zip(self.measured, y) if not math.isfinite(v)]
             raise LawInputError(f"{type(self).__name__}: measurement {', '.join(bad)} is not finite "
                                 f"at t = {self.time:.6g} s")
@@ -163,17 +196,17 @@ class DiscreteLaw:
         self.ticks += 1
         return v
 
-    def _compute(self, y: np.ndarray, r: float) -> float:  # pragma: no cover - abstract
+    def _compute(self, y: Sequence[float], r: float) -> float:  # pragma: no cover - abstract
         raise NotImplementedError
 
     # positions by meaning
-    def _motor_cart(self, y: np.ndarray) -> float:
+    def _motor_cart(self, y: Sequence[float]) -> float:
         return float(y[0])
 
-    def _pendulum_cart(self, y: np.ndarray) -> float:
+    def _pendulum_cart(self, y: Sequence[float]) -> float:
         return float(y[0] if self.kind == "single-mass" else y[1])
 
-    def _angle(self, y: np.ndarray) -> float:
+    def _angle(self, y: Sequence[float]) -> float:
         return float(y[-1])
 
 
@@ -221,7 +254,7 @@ class PID(DiscreteLaw):
         self.integral = 0.0
         self._d.reset()
 
-    def _compute(self, y: np.ndarray, r: float) -> float:
+    def _compute(self, y: Sequence[float], r: float) -> float:
         g = self.gains
         e = r - self._motor_cart(y)
         de = -self._d.update(self._motor_cart(y))  # derivative on the measurement: no kick at steps
@@ -305,7 +338,7 @@ class CascadePID(DiscreteLaw):
         for d in (self._dth, self._dxp, self._dxm):
             d.reset()
 
-    def _compute(self, y: np.ndarray, r: float) -> float:
+    def _compute(self, y: Sequence[float], r: float) -> float:
         g, T = self.gains, self.sample_period
         xm, xp, th = self._motor_cart(y), self._pendulum_cart(y), self._angle(y)
         vth, vxp, vxm = self._dth.update(th), self._dxp.update(xp), self._dxm.update(xm)
@@ -329,15 +362,56 @@ class CascadePID(DiscreteLaw):
 
 # ============================================================================================ LQR
 
+@dataclass(frozen=True)
+class LQRCoefficients:
+    """Everything the LQR law computes with, as plain floats (design-model state order).
+
+    ``K`` (n), ``N``: the feedback ``u = -K x^ + N r``; ``M`` (n x p): the current-estimator gain;
+    ``Ad`` (n x n), ``Bd`` (n): the zero-order-hold model for ``sample_period``; ``C`` (p x n): the
+    measured rows. Made from an ``ipcosim.controllers.design.LQRDesign`` (:meth:`from_design`) or
+    from gains stored in a controller FMU (no numpy needed).
+    """
+
+    states: tuple[str, ...]
+    outputs: tuple[str, ...]
+    sample_period: float
+    K: tuple[float, ...]
+    N: float
+    M: tuple[tuple[float, ...], ...]
+    Ad: tuple[tuple[float, ...], ...]
+    Bd: tuple[float, ...]
+    C: tuple[tuple[float, ...], ...]
+
+    @classmethod
+    def from_design(cls, design: Any) -> LQRCoefficients:
+        """The coefficients of an ``LQRDesign`` (numpy arrays become tuples of floats)."""
+        def rows(m: Any) -> tuple[tuple[float, ...], ...]:
+            return tuple(tuple(float(v) for v in row) for row in as_matrix(m))
+        return cls(states=tuple(design.model.states), outputs=tuple(design.model.outputs),
+                   sample_period=float(design.sample_period), K=rows(design.K)[0], N=float(design.N),
+                   M=rows(design.M), Ad=rows(design.Ad), Bd=tuple(r[0] for r in rows(design.Bd)),
+                   C=rows(design.model.C))
+
+
+def _right_inverse(C: Sequence[Sequence[float]]) -> Matrix:
+    """``C' (C C')^-1`` (the pseudo-inverse of a full-row-rank C; ``C'`` itself for selection rows)."""
+    from ipcosim.fmus.expm import matmul, solve  # noqa: PLC0415
+
+    Ct = [list(col) for col in zip(*C)]
+    return [list(r) for r in zip(*solve(matmul(as_matrix(C), Ct), [list(r) for r in zip(*Ct)]))]
+
+
 class LQR(DiscreteLaw):
-    """LQR state feedback on a discrete current estimator, ``u = sat(-K x^ + N r)`` (see ``ipcosim.controllers.design``).
+    """LQR state feedback on a discrete current estimator, ``u = sat(-K x^ + N r)``
+    (see ``ipcosim.controllers.design``).
 
     Parameters
     ----------
     kind : str
         Plant kind.
-    design : LQRDesign
-        From ``ipcosim.controllers.design.design_lqr`` (its ``sample_period`` is the law's).
+    design : LQRDesign or LQRCoefficients
+        From ``ipcosim.controllers.design.design_lqr`` (its ``sample_period`` is the law's), or the
+        plain coefficients (what a controller FMU runs on).
     voltage_limit : float
         [V].
     output_filter_time_constant : float
@@ -345,45 +419,48 @@ class LQR(DiscreteLaw):
         discretized) before the estimator: the thesis's double-mass filters, tau = 0.0008 s.
     """
 
-    def __init__(self, kind: str, design: LQRDesign, voltage_limit: float = 10.0,
+    def __init__(self, kind: str, design: Any, voltage_limit: float = 10.0,
                  output_filter_time_constant: float = 0.0) -> None:
-        super().__init__(kind, design.sample_period, voltage_limit)
-        if design.model.outputs != tuple(self.measured):
-            raise LawParameterError("design", f"LQR design is for outputs {design.model.outputs}, the "
+        coef = design if isinstance(design, LQRCoefficients) else LQRCoefficients.from_design(design)
+        super().__init__(kind, coef.sample_period, voltage_limit)
+        if coef.outputs != tuple(self.measured):
+            raise LawParameterError("design", f"LQR design is for outputs {coef.outputs}, the "
                                               f"{kind} plant measures {self.measured}")
         self.design = design
+        self.coefficients = coef
         tau = _check_nonneg("output_filter_time_constant", output_filter_time_constant)
-        self.filter = output_filter(tau, self.sample_period) if tau > 0 else None
-        self._Cpinv = np.linalg.pinv(design.model.C)
+        self.filter = output_filter_lists(tau, self.sample_period) if tau > 0 else None
+        self._Cpinv = _right_inverse(coef.C)
         self.reset()
 
     def reset(self) -> None:
         super().reset()
-        n = self.design.Ad.shape[0]
-        self.x_pred: np.ndarray | None = None
-        self.x_hat = np.zeros(n)
-        self._filt: np.ndarray | None = None
+        self.x_pred: list[float] | None = None
+        self.x_hat = [0.0] * len(self.coefficients.states)
+        self._filt: list[list[float]] | None = None
 
-    def _filter(self, y: np.ndarray) -> np.ndarray:
+    def _filter(self, y: Sequence[float]) -> Sequence[float]:
         if self.filter is None:
             return y
         Ad, Bd, Cd = self.filter
         if self._filt is None:  # start at rest at the first measurement
-            self._filt = np.outer(y, [1.0, 1.0])
-        out = self._filt @ Cd[0]
-        self._filt = self._filt @ Ad.T + np.outer(y, Bd[:, 0])
+            self._filt = [[v, v] for v in y]
+        out = [_dot(s, Cd) for s in self._filt]
+        self._filt = [[_dot(Ad[0], s) + Bd[0] * v, _dot(Ad[1], s) + Bd[1] * v] for s, v in zip(self._filt, y)]
         return out
 
-    def _compute(self, y: np.ndarray, r: float) -> float:
-        d = self.design
+    def _compute(self, y: Sequence[float], r: float) -> float:
+        d = self.coefficients
         yf = self._filter(y)
-        if self.x_pred is None:  # plant assumed at rest at the measured positions
-            self.x_pred = self._Cpinv @ yf
-        C = d.model.C
-        self.x_hat = self.x_pred + d.M @ (yf - C @ self.x_pred)
-        u = float(-(d.K @ self.x_hat)[0] + d.N * r)
-        u_applied = saturate(u, self.voltage_limit)
-        self.x_pred = d.Ad @ self.x_hat + d.Bd[:, 0] * u_applied
+        xp = self.x_pred
+        if xp is None:  # plant assumed at rest at the measured positions
+            xp = [sum(map(mul, row, yf)) for row in self._Cpinv]
+        innovation = [v - sum(map(mul, row, xp)) for v, row in zip(yf, d.C)]
+        self.x_hat = x_hat = [a + sum(map(mul, row, innovation)) for a, row in zip(xp, d.M)]
+        u = d.N * r - sum(map(mul, d.K, x_hat))
+        limit = self.voltage_limit
+        u_applied = limit if u > limit else (-limit if u < -limit else u)
+        self.x_pred = [sum(map(mul, row, x_hat)) + b * u_applied for row, b in zip(d.Ad, d.Bd)]
         return u
 
 
@@ -421,16 +498,16 @@ class HSMCGains:
     derivative_time_constant: float = 0.002
     denominator_min: float = 1e-3
 
-    def alphas(self) -> np.ndarray:
+    def alphas(self) -> tuple[float, ...]:
         """Coefficients alpha_r of s_r in the top layer S_n."""
         n = len(self.c)
-        alpha = np.empty(n)
+        alpha = [0.0] * n
         alpha[n - 1] = self.top_weight
         prod = 1.0
         for r in range(n - 2, -1, -1):  # alpha_r = lambda_r lambda_(r+1) ... lambda_(n-1)
             prod *= self.lam[r]
             alpha[r] = prod
-        return alpha
+        return tuple(alpha)
 
 
 @dataclass(frozen=True)
@@ -505,9 +582,9 @@ class HSMC(DiscreteLaw):
         # S_n = sum alpha_r (c_r pos_r + vel_r),  S_n' = sum alpha_r c_r vel_r + w . x + den u,
         # with w = alpha A and den = alpha . b.
         alpha = gains.alphas()
-        self._den = self._check_denominator(gains, float(alpha @ np.array([m.b for m in models], dtype=float)))
+        self._den = self._check_denominator(gains, _dot(alpha, [float(m.b) for m in models]))
         self._alpha = tuple(float(a) for a in alpha)
-        self._w = tuple(float(w) for w in alpha @ np.array([m.a for m in models], dtype=float))
+        self._w = tuple(_dot(alpha, [float(m.a[j]) for m in models]) for j in range(n_states))
         self._c = tuple(float(ci) for ci in gains.c)
         tau = gains.derivative_time_constant
         self._d = [FilteredDerivative(self.sample_period, tau) for _ in range(n_layers)]
@@ -546,7 +623,7 @@ class HSMC(DiscreteLaw):
         self.emf_gain = _check_nonneg("emf_per_velocity", emf_per_velocity)
         return self
 
-    def _state(self, y: np.ndarray, r: float) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+    def _state(self, y: Sequence[float], r: float) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
         """Design-model state estimate in error coordinates (ipcosim.fmus.physics order without the current),
         and the (positions, velocities) of the subsystems: pendulum, pendulum cart, (motor cart)."""
         d = self._d
@@ -567,7 +644,7 @@ class HSMC(DiscreteLaw):
         g = self.gains
         return self._c, g.k, g.eta, g.KI
 
-    def _compute(self, y: np.ndarray, r: float) -> float:
+    def _compute(self, y: Sequence[float], r: float) -> float:
         x, pos, vel = self._state(y, r)
         c, k, eta, KI = self.current_gains()
         S = num = 0.0
@@ -766,7 +843,7 @@ class SwingUp(DiscreteLaw):
             self.balancing = True
             self.catches += 1
             self.balance.reset()
-            self.balance.x_pred = np.array([x, v, thw, w])
+            self.balance.x_pred = [x, v, thw, w]
         if self.balancing:
             self.balance.ticks = self.ticks
             return self.balance._compute((x, thw), r)

@@ -17,8 +17,10 @@ from __future__ import annotations
 
 import ast
 import hashlib
+import importlib
 import json
 import os
+import py_compile
 import re
 import shutil
 import sys
@@ -126,6 +128,8 @@ def _privatize(text: str, private: str) -> str:
 def _digest(script: Path, files: Iterable[Path], root: Path = ROOT) -> str:
     h = hashlib.sha256()
     h.update(f"pythonfmu {pythonfmu.__version__} {wrapper.PATCH_ID}\n".encode())
+    h.update(Path(__file__).read_bytes())  # how the FMU is made (packing, stored design, bytecode)
+    h.update(sys.implementation.cache_tag.encode())
     h.update(script.read_bytes())
     for f in files:
         h.update(str(f.relative_to(root)).encode())
@@ -146,6 +150,19 @@ def _stage_runtime(files: Iterable[Path], root: Path, dest: Path, private: str) 
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(_privatize(f.read_text(), private))
     return target
+
+
+def _write_build_files(staged_script: Path, package: Path) -> None:
+    """Store the files the script's FMU class asks for (``FmuBase.build_files``) in its private package.
+
+    The staged script is imported here, in the build process, as pythonfmu's builder imports it next.
+    """
+    sys.path.insert(0, str(staged_script.parent))
+    module = importlib.import_module(staged_script.stem)
+    for cls in vars(module).values():
+        if isinstance(cls, type) and cls.__module__ == module.__name__ and hasattr(cls, "build_files"):
+            for name, text in cls.build_files().items():
+                (package / name).write_text(text)
 
 
 def _load_stamps(fmu_dir: Path) -> dict[str, dict[str, str]]:
@@ -194,6 +211,9 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
     files = runtime_modules(script, root)
     digest = digest or _digest(script, files, root)
     private = private_package(script.stem.removeprefix("fmu_"), digest)
+    # an FMU of this build loaded earlier in this process (from an extraction folder that may be
+    # gone) must not stand in for the staged sources the build imports
+    _forget_modules(private, script.stem)
     saved_path = list(sys.path)
     try:
         with tempfile.TemporaryDirectory(prefix="ipcosim-build-") as tmp:
@@ -201,12 +221,14 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
             package = _stage_runtime(files, root, stage, private)
             staged_script = stage / script.name
             staged_script.write_text(_privatize(script.read_text(), private))
+            _write_build_files(staged_script, package)
             out = Path(tmp) / "out"
             try:
                 built = Path(pythonfmu.FmuBuilder.build_FMU(staged_script, dest=out,
                                                             project_files=[package, *project_files]))
             except Exception as exc:  # noqa: BLE001 -- one line naming the script
                 raise BuildError(f"{script}: pythonfmu build failed: {type(exc).__name__}: {exc}") from exc
+            _add_bytecode(built, Path(tmp) / "pyc")
             check_fmu(built)
             try:
                 wrapper.patch_fmu(built)  # pythonfmu 0.7.0's exit-time double free (ipcosim.fmus.wrapper)
@@ -221,9 +243,36 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
         sys.path[:] = saved_path  # pythonfmu's builder leaves the script folder on sys.path
         # ... and its import of the script leaves the staged (now deleted) private package in
         # sys.modules, where an FMU of the same build loaded later in this process would find it.
-        for name in [m for m in sys.modules if m == private or m.startswith(private + ".")
-                     or m == script.stem]:
-            del sys.modules[name]
+        _forget_modules(private, script.stem)
+
+
+def _forget_modules(private: str, script_module: str) -> None:
+    """Drop the private package and the script module from ``sys.modules`` (live objects keep theirs)."""
+    for name in [m for m in sys.modules if m == private or m.startswith(private + ".") or m == script_module]:
+        del sys.modules[name]
+
+
+def _add_bytecode(fmu: Path, work: Path) -> None:
+    """Add hash-checked bytecode of every Python file under ``resources/`` to the FMU archive.
+
+    An FMU is extracted afresh for each run, so without bytecode its modules are compiled again at
+    every load (a good part of a cold run). The ``.pyc`` files are for the building interpreter's
+    version (``sys.implementation.cache_tag``; others ignore them and compile) and checked against
+    the source's hash, not its time stamp (extraction does not keep time stamps), so a changed
+    source is never run from stale bytecode.
+    """
+    tag = sys.implementation.cache_tag
+    with zipfile.ZipFile(fmu, "a") as z:
+        sources = [n for n in z.namelist() if n.startswith("resources/") and n.endswith(".py")]
+        for k, name in enumerate(sources):
+            src = work / f"{k}.py"
+            src.parent.mkdir(parents=True, exist_ok=True)
+            src.write_bytes(z.read(name))
+            pyc = work / f"{k}.pyc"
+            py_compile.compile(str(src), cfile=str(pyc), dfile=name.removeprefix("resources/"), doraise=True,
+                               invalidation_mode=py_compile.PycInvalidationMode.CHECKED_HASH)
+            folder, _, file = name.rpartition("/")
+            z.write(pyc, f"{folder}/__pycache__/{file[:-3]}.{tag}.pyc")
 
 
 def check_fmu(fmu: Path) -> None:

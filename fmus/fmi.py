@@ -99,6 +99,7 @@ import re
 import sys
 import traceback
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Iterable, NoReturn, Sequence
 from xml.etree.ElementTree import Element, SubElement
 
@@ -259,6 +260,7 @@ class FmuBase(Fmi2Slave):
         self._parameters_dirty = False
         self._getters: dict[type, dict[int, Callable[[], Any]]] = {t: {} for t in _TYPES}
         self._setters: dict[type, dict[int, Callable[[Any], None]]] = {t: {} for t in _TYPES}
+        self._own_resources_first()
 
     # --- declaring variables -----------------------------------------------------------------
 
@@ -400,6 +402,12 @@ class FmuBase(Fmi2Slave):
     def teardown(self) -> None:
         """Called by ``terminate``."""
 
+    @classmethod
+    def build_files(cls) -> dict[str, str]:
+        """``{file name: text}`` the build stores next to the FMU's private package's modules
+        (e.g. data computed at build time with tools the FMU must not need at run time)."""
+        return {}
+
     # --- FMI entry points (called by pythonfmu's C wrapper) ----------------------------------
 
     def setup_experiment(self, start_time: float, stop_time: float | None = None,
@@ -464,6 +472,7 @@ class FmuBase(Fmi2Slave):
     def exit_initialization_mode(self) -> None:
         error = None
         try:
+            self._own_resources_first()
             self.check_parameters()
             self.setup()
         except Exception as exc:  # noqa: BLE001 -- reported through the FMI logger
@@ -471,6 +480,26 @@ class FmuBase(Fmi2Slave):
         if error is not None:
             self._fail(error)
         self.initialized = True
+
+    def _own_resources_first(self) -> None:
+        """Make this instance's ``resources/`` the first place its private package imports from.
+
+        A process that loads one FMU build twice from two extraction folders (a master that
+        extracts per run) shares one copy of the private package, imported from the first
+        folder, which may be gone by now; a module imported lazily (off the default path, e.g.
+        the design stack) must then come from this instance's folder (same build, same files).
+        """
+        top = __name__.split(".", 1)[0]
+        if not top.startswith("_ipcosim_") or not self.resources:
+            return
+        root = Path(self.resources) / top
+        for name, module in list(sys.modules.items()):
+            path = getattr(module, "__path__", None)
+            if path is None or not (name == top or name.startswith(top + ".")):
+                continue
+            folder = str(root.joinpath(*name.split(".")[1:]))
+            if folder not in path and Path(folder).is_dir():
+                path.insert(0, folder)
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         try:

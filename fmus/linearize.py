@@ -8,11 +8,13 @@ thesis: it has no derivative at rest.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from ipcosim.fmus.params import DoubleMassParams, PlantParams, kind_of
 from ipcosim.fmus.physics import MEASURED, rhs_for, rhs_no_inductance, state_names
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 @dataclass(frozen=True)
@@ -29,6 +31,8 @@ class LinearModel:
     @property
     def poles(self) -> np.ndarray:
         """Eigenvalues of A, sorted by real part (descending)."""
+        import numpy as np  # noqa: PLC0415 -- numpy only where arrays are asked for
+
         ev = np.linalg.eigvals(self.A)
         return ev[np.lexsort((ev.imag, -ev.real))]
 
@@ -39,15 +43,42 @@ class LinearModel:
                 "poles": [[float(p.real), float(p.imag)] for p in self.poles]}
 
 
-def _jacobian(f, x0: np.ndarray, u0: float, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
-    n = x0.size
-    A = np.empty((n, n))
+def _jacobian(f: Any, n: int, eps: float = 1e-6) -> tuple[list[list[float]], list[float]]:
+    """Central-difference Jacobians ``(A, B)`` of ``f(x, u)`` at ``x = 0, u = 0``, in plain floats."""
+    zero = [0.0] * n
+    cols = []
     for j in range(n):
-        dx = np.zeros(n)
+        dx = [0.0] * n
         dx[j] = eps
-        A[:, j] = (np.asarray(f(x0 + dx, u0)) - np.asarray(f(x0 - dx, u0))) / (2 * eps)
-    B = ((np.asarray(f(x0, u0 + eps)) - np.asarray(f(x0, u0 - eps))) / (2 * eps)).reshape(n, 1)
-    return A, B
+        fp = f(dx, 0.0)
+        dx[j] = -eps
+        fm = f(dx, 0.0)
+        cols.append([(a - b) / (2 * eps) for a, b in zip(fp, fm)])
+    B = [(a - b) / (2 * eps) for a, b in zip(f(zero, eps), f(zero, -eps))]
+    return [list(row) for row in zip(*cols)], B
+
+
+def linear_matrices(params: PlantParams, inductance: bool = True
+                    ) -> tuple[list[list[float]], list[float], tuple[str, ...], tuple[str, ...]]:
+    """``(A, B, states, outputs)`` of :func:`linearize` as plain lists (no numpy: the FMU runtime uses it).
+
+    ``B`` is the single input column as a list; the outputs are the measured positions (``C``
+    selects them).
+    """
+    if isinstance(params, DoubleMassParams):
+        p = replace(params, b1=0.0, b2=0.0)
+    else:
+        p = replace(params, b=0.0)
+    kind = kind_of(p)
+    names = state_names(kind)
+    if inductance:
+        rhs = rhs_for(p)
+        f = lambda x, u: rhs(tuple(x), u, p)  # noqa: E731
+    else:
+        names = names[:-1]
+        f = lambda x, u: rhs_no_inductance(tuple(x), u, p)  # noqa: E731
+    A, B = _jacobian(f, len(names))
+    return A, B, tuple(names), tuple(MEASURED[kind])
 
 
 def linearize(params: PlantParams, inductance: bool = True) -> LinearModel:
@@ -67,22 +98,11 @@ def linearize(params: PlantParams, inductance: bool = True) -> LinearModel:
     LinearModel
         States in ``ipcosim.fmus.physics`` order (current last); outputs are the measured positions.
     """
-    if isinstance(params, DoubleMassParams):
-        p = replace(params, b1=0.0, b2=0.0)
-    else:
-        p = replace(params, b=0.0)
-    kind = kind_of(p)
-    names = state_names(kind)
-    if inductance:
-        rhs = rhs_for(p)
-        f = lambda x, u: rhs(tuple(x), u, p)  # noqa: E731
-    else:
-        names = names[:-1]
-        f = lambda x, u: rhs_no_inductance(tuple(x), u, p)  # noqa: E731
-    A, B = _jacobian(f, np.zeros(len(names)), 0.0)
-    outputs = MEASURED[kind]
+    import numpy as np  # noqa: PLC0415 -- the analysis tools' arrays; the FMU runtime uses linear_matrices
+
+    A, B, names, outputs = linear_matrices(params, inductance)
     C = np.zeros((len(outputs), len(names)))
     for r, name in enumerate(outputs):
         C[r, names.index(name)] = 1.0
     D = np.zeros((len(outputs), 1))
-    return LinearModel(A=A, B=B, C=C, D=D, states=tuple(names), outputs=tuple(outputs))
+    return LinearModel(A=np.array(A), B=np.array(B).reshape(len(names), 1), C=C, D=D, states=names, outputs=outputs)

@@ -16,7 +16,7 @@ default; whole counts with ``cart_resolution`` / ``pendulum_resolution``, plus s
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 from ipcosim.fmus.fmi import FmuBase, StepFailure
 from ipcosim.fmus.instruments import InstrumentError, Instruments
@@ -71,12 +71,17 @@ class PlantFmu(FmuBase):
         measured = MEASURED[kind]
         order = list(measured) + [n for n in names if n not in measured]
         self._y = [0.0] * len(measured)
+        #: value reference of each output -> its index in ``self._out`` (the measured readings, then
+        #: the state): the fast path of get_real
+        self._out_index: dict[int, int] = {}
+        self._out: list[float] = self._y + self._x
         for name in order:
             k = names.index(name)
             j = measured.index(name) if name in measured else -1
             getter = (lambda j=j: self._y[j]) if j >= 0 else (lambda k=k: self._x[k])
-            self.add_output(name, unit=STATE_UNITS[name], description=_STATE_DOC[name],
-                            getter=getter, depends_on=(), initial_depends_on=(f"initial_{name}",))
+            info = self.add_output(name, unit=STATE_UNITS[name], description=_STATE_DOC[name],
+                                   getter=getter, depends_on=(), initial_depends_on=(f"initial_{name}",))
+            self._out_index[info.value_reference] = j if j >= 0 else len(measured) + k
         for name in names:
             self.add_parameter(f"initial_{name}", start=0.0, unit=STATE_UNITS[name],
                                description=f"initial {_STATE_DOC[name].split(' (')[0]}")
@@ -87,6 +92,14 @@ class PlantFmu(FmuBase):
                                description=f"{info['doc']} [{info['source']}]")
         for name, unit, doc in _INSTRUMENT_DOC:
             self.add_parameter(name, start=0.0, unit=unit, description=doc)
+
+    def get_real(self, vrs: Sequence[int]) -> list[float]:
+        # the master's per-step read of the outputs: straight from the readings and the state
+        out, index = self._out, self._out_index
+        try:
+            return [out[index[vr]] for vr in vrs]
+        except KeyError:
+            return super().get_real(vrs)
 
     def setup(self) -> None:
         # params.make validates: "parameter Mp = -1.0 kg must be > 0 (pendulum mass)" (ParameterError)
@@ -100,6 +113,7 @@ class PlantFmu(FmuBase):
         self.plant = InstrumentedPlant(params, x0, t0=self.start_time, instruments=instruments)
         self._x = self.plant.state
         self._y = list(self.plant.readings)
+        self._out = self._y + self._x
 
     def step(self, t: float, h: float) -> None:
         plant = self.plant
@@ -107,5 +121,6 @@ class PlantFmu(FmuBase):
             plant.do_step(t, h, self.voltage)
         except (PlantStepError, ValueError) as exc:
             raise StepFailure(str(exc)) from exc
-        self._x = plant.state
+        self._x = plant._xl  # the plant replaces (never mutates) this list on each step
         self._y = list(plant.readings)
+        self._out = self._y + self._x

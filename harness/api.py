@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import time
 import weakref
 import zipfile
 from pathlib import Path, PurePosixPath
@@ -24,7 +25,7 @@ from typing import Any, Mapping, Sequence
 
 from ipcosim.harness.errors import UsageError
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
-from ipcosim.harness.master.execution import Execution, SlaveFactory
+from ipcosim.harness.master.execution import Execution, SlaveFactory, timing_metrics
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
 from ipcosim.harness.master.results import Result, SimulationError
@@ -73,6 +74,9 @@ class Prepared:
                  fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, algorithm: str = GAUSS_SEIDEL,
                  workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
                  system: System | None = None, warn: bool = True) -> None:
+        t0 = time.perf_counter()
+        #: Seconds spent loading, binding and extracting, charged to the first run's ``wall_time_s``.
+        self.load_seconds = 0.0
         if algorithm not in ALGORITHMS:
             raise UsageError(f"--algorithm {algorithm}: expected one of {', '.join(ALGORITHMS)}")
         self.algorithm = algorithm
@@ -108,6 +112,7 @@ class Prepared:
             warn_all(self.system)
         if slave_factory is None:
             self._extract(work)
+        self.load_seconds = time.perf_counter() - t0
 
     @staticmethod
     def _archive_members(scenario: Scenario, work: Path) -> dict[str, Path]:
@@ -181,6 +186,8 @@ class Prepared:
             If the run failed and ``raise_on_error`` (``.result`` holds the partial result,
             already written to ``out_dir`` when given).
         """
+        t0 = time.perf_counter()
+        load, self.load_seconds = self.load_seconds, 0.0  # the loading belongs to the first run
         execution = self.execution(stop_time, step, overrides, **kwargs)
         try:
             result = execution.run()
@@ -196,9 +203,20 @@ class Prepared:
                                         result.write(out_dir, variables=variables, plot=plot).items()}
         elif variables:
             result.select(variables)  # reject unknown names even when nothing is written
+        self._whole_run_timing(result, load + time.perf_counter() - t0, out_dir)
         if result.error is not None and raise_on_error:
             raise SimulationError(result.error, result)
         return result
+
+    @staticmethod
+    def _whole_run_timing(result: Result, wall: float, out_dir: str | os.PathLike[str] | None) -> None:
+        """Make ``wall_time_s`` the whole run's (load, instantiate, initialize, step, write) and
+        ``real_time_factor`` relative to it; ``metrics.json`` is rewritten with the final figures."""
+        meta = result.metadata
+        result.metrics.update(timing_metrics(meta.get("simulated_s", 0.0), wall, meta.get("loop_wall_time_s", 0.0)))
+        meta["wall_time_s"] = wall
+        if out_dir is not None and "metrics" in meta.get("files", {}):
+            result.write_metrics(Path(meta["files"]["metrics"]))
 
     def _fmu_slave(self, instance: Any) -> FMUSlave:
         """A slave on this preparation's loaded library of the component (loaded on first use

@@ -132,8 +132,16 @@ def test_contract_variables_units_and_structure(controller_fmus, model: str) -> 
     assert unknown.get("index") == str(index["voltage"])
     assert sorted(map(int, unknown.get("dependencies").split())) == sorted(index[n] for n in inputs)
     if law == "LQR":
-        calc = [sv.get("name") for sv in svs if sv.get("causality") == "calculatedParameter"]
-        assert "N" in calc and len(calc) == (5 if kind == "single-mass" else 7)
+        # the gains are parameters too (designed at build time): K per state, N, M per state and output
+        from ipcosim.controllers.catalog import lqr_gain_specs
+        n, p = (4, 2) if kind == "single-mass" else (6, 3)
+        gains = lqr_gain_specs(kind)
+        assert len(gains) == n + 1 + n * p
+        for spec in gains:
+            sv = by_name[spec.name]
+            assert sv.get("causality") == "parameter" and sv.find("Real").get("unit") == spec.unit
+            assert math.isfinite(float(sv.find("Real").get("start")))
+        assert float(by_name["K_pendulum_angle"].find("Real").get("start")) != 0.0
 
 
 @pytest.mark.parametrize("model", ["LQRSingleMass", "HSMCDoubleMass", "CascadePIDSingleMass"])

@@ -128,7 +128,15 @@ def test_probe_fmu_is_valid(probe_fmu: Path) -> None:
     assert validate_fmu(str(probe_fmu)) == []
     names = zipfile.ZipFile(probe_fmu).namelist()
     assert private_resource(names, "fmus/fmi.py") and not any(n.startswith("resources/fmus/") for n in names)
-    assert not any("__pycache__" in n for n in names)
+    # bytecode only as hash-checked .pyc next to its source (never stale bytecode that skips its check)
+    z = zipfile.ZipFile(probe_fmu)
+    pycs = [n for n in names if "__pycache__" in n]
+    assert pycs
+    for n in pycs:
+        folder, _, file = n.rpartition("/__pycache__/")
+        assert f"{folder}/{file.split('.')[0]}.py" in names, n
+        flags = int.from_bytes(z.read(n)[4:8], "little")
+        assert flags == 0b11, f"{n}: not a checked hash-based pyc (flags {flags})"
 
 
 @pytest.mark.integration

@@ -10,6 +10,8 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
+from ipcosim.fmus.expm import SingularMatrixError, solve
+from ipcosim.fmus.expm import expm as pure_expm
 from ipcosim.fmus.integrator import ETDRK4, FastETDRK4, etdrk4_f_form
 from ipcosim.fmus.params import preset
 from ipcosim.fmus.physics import double_mass_rhs, rhs_for, single_mass_momentum_rhs, single_mass_to_momentum
@@ -115,7 +117,26 @@ def test_exact_for_linear_systems() -> None:
 
 def test_stage_matrices_shapes() -> None:
     S = etdrk4_f_form(-np.eye(3), 0.1)
-    assert [s.shape for s in S] == [(3, 6), (3, 9), (3, 12), (3, 15)]
+    assert [np.shape(s) for s in S] == [(3, 6), (3, 9), (3, 12), (3, 15)]
+
+
+@pytest.mark.parametrize("n, scale", [(1, 0.3), (5, 1.0), (14, 4.0), (28, 30.0)])
+def test_pure_python_expm_equals_scipy(n: int, scale: float) -> None:
+    """The runtime's plain-Python expm (no numpy in an FMU) against scipy's, including norms that need squaring."""
+    rng = np.random.default_rng(n)
+    A = rng.normal(size=(n, n)) * scale
+    A[0, 0] = -14.4 * scale  # one stiff entry, as in the plant's h L
+    want = expm(A)
+    got = np.array(pure_expm(A.tolist()))
+    assert np.max(np.abs(got - want)) <= 1e-13 * np.max(np.abs(want))
+
+
+def test_pure_python_solve_and_singular_matrix() -> None:
+    rng = np.random.default_rng(5)
+    A, B = rng.normal(size=(6, 6)), rng.normal(size=(6, 3))
+    assert np.allclose(np.array(solve(A.tolist(), B.tolist())), np.linalg.solve(A, B), rtol=1e-12, atol=1e-13)
+    with pytest.raises(SingularMatrixError):
+        solve([[1.0, 2.0], [2.0, 4.0]], [[1.0], [1.0]])
 
 
 @pytest.mark.parametrize("b", [0.0, 0.7])

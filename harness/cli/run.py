@@ -57,10 +57,11 @@ def main(args: argparse.Namespace) -> int:
         m = json_safe(result.metrics)
         meta = result.metadata
         print(f"{meta['scenario']}: {meta['stop_time'] - meta['start_time']:g} s simulated in "
-              f"{m['wall_time_s']:.3f} s ({m['real_time_factor']:.1f}x real time), "
+              f"{m['wall_time_s']:.3f} s ({m['real_time_factor']:.1f}x real time; stepping loop "
+              f"{m['loop_real_time_factor'] or 0:.1f}x), "
               f"{meta['algorithm']}, step {meta['step']:g} s, order {' -> '.join(meta['order'])}")
         for key, value in m.items():
-            if key in ("wall_time_s", "real_time_factor"):
+            if key in ("wall_time_s", "real_time_factor", "loop_real_time_factor"):
                 continue
             print(f"  {key:22s} {value if not isinstance(value, float) else f'{value:.6g}'}")
         print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if args.plot else "")

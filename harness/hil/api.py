@@ -10,7 +10,7 @@ Quanser HIL API                        :class:`Card`
 =====================================  ============================================
 ``HIL(card_type, card_id)``            :func:`ipcosim.harness.hil.open_card`
 ``write_analog(ch, n, volts)``         ``write_analog(channels, volts)``
-``read_encoder(ch, n, counts)``        ``read_encoder(channels) -> int32 array``
+``read_encoder(ch, n, counts)``        ``read_encoder(channels) -> int32 counts``
 ``set_encoder_counts(ch, n, counts)``  ``set_encoder_counts(channels, counts)``
 ``watchdog_set_analog_expiration_      ``watchdog_set_analog_expiration_state(
 state(ch, n, volts)``                  channels, volts)``
@@ -44,11 +44,10 @@ from __future__ import annotations
 
 import enum
 import math
+import numbers
 import time
 from dataclasses import dataclass, field
 from typing import Sequence
-
-import numpy as np
 
 from ipcosim.harness.errors import IpcosimError
 
@@ -129,7 +128,7 @@ class CardInfo:
 class StepResult:
     """Outcome of :meth:`Card.step`."""
 
-    counts: np.ndarray               #: int32 counts, one per encoder channel asked for
+    counts: Sequence[int]            #: int32 counts, one per encoder channel asked for
     reloaded: bool                   #: watchdog_reload()'s result (True if it had not expired)
     time: float                      #: card time of the sample [s]
     late: float = 0.0                #: how far the card's clock was past the sample instant on arrival [s]
@@ -158,11 +157,11 @@ def as_channels(channels: Sequence[int] | int, what: str = "channels") -> list[i
     HILError
         ``BAD_CHANNEL`` for a negative or non-integer channel.
     """
-    if isinstance(channels, (int, np.integer)):
+    if isinstance(channels, numbers.Integral):
         channels = [int(channels)]
     out = []
     for c in channels:
-        if isinstance(c, (bool, np.bool_)) or not isinstance(c, (int, np.integer)) or c < 0:
+        if isinstance(c, bool) or not isinstance(c, numbers.Integral) or c < 0:
             raise HILError(ErrorCode.BAD_CHANNEL, f"{what}: channel {c!r} is not a non-negative integer")
         out.append(int(c))
     return out
@@ -170,7 +169,7 @@ def as_channels(channels: Sequence[int] | int, what: str = "channels") -> list[i
 
 def as_finite(values: Sequence[float] | float, n: int, what: str) -> list[float]:
     """``n`` finite floats (a scalar is broadcast)."""
-    if isinstance(values, (int, float, np.floating, np.integer)):
+    if isinstance(values, numbers.Real):
         values = [float(values)] * n
     values = [float(v) for v in values]
     if len(values) != n:
@@ -209,7 +208,7 @@ class Card:
         """Set analog outputs [V] (quantized by the DAC)."""
         raise NotImplementedError
 
-    def read_encoder(self, channels: Sequence[int]) -> np.ndarray:
+    def read_encoder(self, channels: Sequence[int]) -> Sequence[int]:
         """Encoder counts (int32) of ``channels``."""
         raise NotImplementedError
 

@@ -6,6 +6,7 @@ request/reply exchange of :mod:`ipcosim.harness.hil.protocol`; a reply that does
 """
 from __future__ import annotations
 
+import numbers
 import os
 import select
 import socket
@@ -13,8 +14,6 @@ import struct
 import time
 import weakref
 from typing import Sequence
-
-import numpy as np
 
 from ipcosim.harness.hil.api import Card, CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite
 from ipcosim.harness.hil.protocol import (
@@ -199,15 +198,15 @@ class TcpipCard(Card):
         ch = as_channels(channels, "analog output")
         self._request(Msg.WRITE_ANALOG, pack_channels(ch) + pack_doubles(as_finite(volts, len(ch), "write_analog")))
 
-    def read_encoder(self, channels: Sequence[int]) -> np.ndarray:
+    def read_encoder(self, channels: Sequence[int]) -> list[int]:
         ch = as_channels(channels, "encoder")
         r = self._request(Msg.READ_ENCODER, pack_channels(ch))
         (n,) = self._body(r, "H", "READ_ENCODER")
-        return np.array(self._body(r, f"{n}i", "READ_ENCODER"), dtype=np.int32)
+        return list(self._body(r, f"{n}i", "READ_ENCODER"))  # int32 on the wire
 
     def set_encoder_counts(self, channels: Sequence[int], counts: Sequence[int]) -> None:
         ch = as_channels(channels, "encoder")
-        if isinstance(counts, (int, np.integer)):
+        if isinstance(counts, numbers.Integral):
             counts = [int(counts)] * len(ch)
         counts = [int(c) for c in counts]
         if len(counts) != len(ch):
@@ -257,7 +256,7 @@ class TcpipCard(Card):
         r = self._request(Msg.STEP, payload, timeout=self.timeout + wait,
                           after="of its sample instant" if self.info.clock == "wallclock" else "")
         reloaded, late_ns, n = self._body(r, "BqH", "STEP")
-        counts = np.array(self._body(r, f"{n}i", "STEP"), dtype=np.int32)
+        counts = list(self._body(r, f"{n}i", "STEP"))  # int32 on the wire
         return StepResult(counts=counts, reloaded=bool(reloaded), time=self._last_rig_ns / NS, late=late_ns / NS,
                           status=self._flags_status())
 

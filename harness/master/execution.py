@@ -643,8 +643,7 @@ class Execution:
                 metrics.update(task_metrics(data))
             except Exception as exc:  # noqa: BLE001 -- metrics must not hide the run's result
                 metrics["metrics_error"] = str(exc)
-        metrics["wall_time_s"] = wall
-        metrics["real_time_factor"] = simulated / wall if wall > 0 else None
+        metrics.update(timing_metrics(simulated, wall, wall_loop))
         for obs in self.observers:
             try:
                 metrics.update(obs.metrics())
@@ -665,7 +664,8 @@ class Execution:
                                     "fmu": str(i.model.path) if i.model.path else None,
                                     "swapped_from": i.swapped_from} for i in self.instances},
             "overrides": {f"{c}.{v}": x for (c, v), x in self.overrides.items()},
-            "warnings": list(self.system.warnings), "notes": list(self.system.notes), "wall_time_s": wall, "loop_wall_time_s": wall_loop,
+            "warnings": list(self.system.warnings), "notes": list(self.system.notes),
+            "wall_time_s": wall, "loop_wall_time_s": wall_loop, "simulated_s": simulated,
             "status": "ok" if error is None else "failed", "error": message,
             "end_time": float(data["time"][-1]) if rows else None, "terminated_by": self.terminated_by,
             "fmu_messages": {s.name: s.messages()[-5:] for s in self.slaves if s.messages()},
@@ -693,6 +693,13 @@ class Execution:
 
 #: numpy type of a record column of each value kind.
 COLUMN_DTYPE = {"real": "f8", "integer": "i4", "boolean": "?", "string": "O"}
+
+
+def timing_metrics(simulated: float, wall: float, loop: float) -> dict[str, float | None]:
+    """``wall_time_s``, ``real_time_factor`` (simulated / wall) and ``loop_real_time_factor``
+    (simulated / stepping-loop seconds) of a run that simulated ``simulated`` seconds."""
+    return {"wall_time_s": wall, "real_time_factor": simulated / wall if wall > 0 else None,
+            "loop_real_time_factor": simulated / loop if loop > 0 else None}
 
 
 class _TickFailure(SimulationError):

@@ -40,7 +40,9 @@ class Result:
         Field ``time`` [s], then one field ``component.variable`` per recorded connector
         (SI units), one row per recorded communication point (row 0 is the initial state).
     metrics : dict
-        ``metrics.json`` content (see DESIGN.md), plus ``wall_time_s`` and ``real_time_factor``.
+        ``metrics.json`` content (see DESIGN.md): the task metrics, ``wall_time_s`` (the whole
+        run: load, instantiate, initialize, step, write), ``real_time_factor`` (simulated /
+        wall_time_s) and ``loop_real_time_factor`` (simulated / stepping-loop seconds).
     metadata : dict
         Scenario, algorithm, step, order, step multiples, FMUs, overrides, swaps, warnings,
         status and error.
@@ -109,12 +111,16 @@ class Result:
         out.mkdir(parents=True, exist_ok=True)
         files = {"results": out / "results.csv", "metrics": out / "metrics.json"}
         write_csv(self.data, files["results"], self.select(variables))
-        files["metrics"].write_text(json.dumps(json_safe(self.metrics), indent=2) + "\n")
         if plot:
             from ipcosim.harness.plot import plot_result
 
             files["plot"] = plot_result(self, out / "plot.png")
+        self.write_metrics(files["metrics"])
         return files
+
+    def write_metrics(self, path: Path) -> None:
+        """Write ``metrics.json``."""
+        path.write_text(json.dumps(json_safe(self.metrics), indent=2) + "\n")
 
 
 def write_csv(data: np.ndarray, path: Path, columns: Sequence[str]) -> None:

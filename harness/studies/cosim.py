@@ -18,7 +18,7 @@ import numpy as np
 from ipcosim.harness.studies.runners import RunFailure, Runner, RunSpec
 
 #: Extra result columns of a co-simulation run beyond the task metrics and cost terms.
-TIMING_METRICS = ("wall_time_s", "real_time_factor")
+TIMING_METRICS = ("wall_time_s", "real_time_factor", "loop_real_time_factor")
 
 
 def _no_slave(instance: Any) -> Any:  # pragma: no cover - never called: binding only
