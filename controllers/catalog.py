@@ -672,9 +672,7 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
     if law == "SwingUp":
         balance = LQR(kind, lqr_design_from(kind, v, backend), vlim,
                       output_filter_time_constant=float(v["output_filter_time_constant"]))
-        p = _design_params(kind, v)
-        cart = (p.Meq + p.Mp, p.Beq, p.force_per_amp / p.Ra, p.emf_per_velocity, p.Mp, p.Lp, p.g)
-        return SwingUp(SwingUpGains(**{f: float(v[f]) for f in SwingUpGains.UNITS}), balance, cart, T, vlim)
+        return swing_up_around(kind, v, balance)
     n = 2 if kind == "single-mass" else 3
     c = tuple(float(v[f"c{i + 1}"]) for i in range(n))
     if kind == "single-mass":
@@ -700,6 +698,15 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
     schedules = AdaptiveSchedules(k=sched("k"), eta=sched("eta"), KI=sched("KI"),
                                   c=tuple(sched(f"c{i + 1}") for i in range(n)), k1=lower("k1"), KI1=lower("KI1"))
     return _through_motor(AdaptiveHSMC(kind, g, models, schedules, T, vlim), kind, v)
+
+
+def swing_up_around(kind: str, v: Mapping[str, Any], balance: LQR) -> SwingUp:
+    """The swing-up law of the flat parameter values ``v`` around the balancing law ``balance``
+    (designed from ``v`` or rebuilt from stored gains: no design stack needed here)."""
+    p = _design_params(kind, v)
+    cart = (p.Meq + p.Mp, p.Beq, p.force_per_amp / p.Ra, p.emf_per_velocity, p.Mp, p.Lp, p.g)
+    return SwingUp(SwingUpGains(**{f: float(v[f]) for f in SwingUpGains.UNITS}), balance, cart,
+                   float(v["sample_period"]), float(v["voltage_limit"]))
 
 
 def _through_motor(law: HSMC, kind: str, v: Mapping[str, Any]) -> HSMC:
@@ -757,4 +764,4 @@ __all__ = ["LAWS", "KINDS", "PARAMETER_SETS", "ParamSpec", "schema", "set_values
            "build_law", "make_law", "model_name", "default_set", "default_preset", "subsystem_models",
            "thesis_subsystem_models", "thesis_hsmc_gains", "thesis_adaptive", "lqr_design_for",
            "design_params_from", "lqr_gain_specs", "lqr_design_parameters", "lqr_weight_parameters", "lqr_gains",
-           "lqr_from_gains", "TUNED_CASCADE", "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]
+           "lqr_from_gains", "swing_up_around", "TUNED_CASCADE", "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]

@@ -49,6 +49,7 @@ from ipcosim.controllers.catalog import (
     lqr_gains,
     lqr_weight_parameters,
     model_name,
+    swing_up_around,
     schema,
 )
 from ipcosim.controllers.errors import ControllerParameterError
@@ -65,6 +66,14 @@ _INPUT_DOC = {
 #: Shipped designs read (or designed) in this process, by file name (the FMU class is re-created
 #: on every instantiation by pythonfmu's wrapper; this module is not).
 _SHIPPED: dict[str, dict[str, Any]] = {}
+#: Laws whose LQR gains are designed at build time and are parameters of the FMU (the swing-up
+#: hands over to an LQR).
+LQR_LAWS = ("LQR", "SwingUp")
+
+
+def _lqr_of(law: DiscreteLaw) -> DiscreteLaw:
+    """The LQR inside ``law`` (the law itself, or a swing-up's balancing law)."""
+    return getattr(law, "balance", law)
 #: Slack when deciding whether the end of a step is a sample instant, in sample periods.
 TICK_TOLERANCE = 1e-6
 
@@ -95,7 +104,7 @@ class ControllerFmu(FmuBase):
             self.add_parameter(spec.name, start=bool(spec.default) if is_bool else float(spec.default),
                                type_=bool if is_bool else float, unit=None if is_bool else spec.unit,
                                description=spec.description, check=None if is_bool else spec.check)
-        self._gain_specs = lqr_gain_specs(kind) if self.law == "LQR" else []
+        self._gain_specs = lqr_gain_specs(kind) if self.law in LQR_LAWS else []
         if self._gain_specs:
             shipped = type(self).shipped_design(self.resources)["gains"]
             for spec in self._gain_specs:
@@ -135,12 +144,12 @@ class ControllerFmu(FmuBase):
         values = defaults(cls.law, cls.kind)
         law = build_law(cls.law, cls.kind, values, backend="scipy")
         design = {name: values[name] for name in lqr_design_parameters(cls.kind)}
-        return {"model": model_name(cls.law, cls.kind), "design": design, "gains": lqr_gains(law)}
+        return {"model": model_name(cls.law, cls.kind), "design": design, "gains": lqr_gains(_lqr_of(law))}
 
     @classmethod
     def build_files(cls) -> dict[str, str]:
         """Files the build adds to the FMU's private package: the LQR's shipped design."""
-        if cls.law != "LQR":
+        if cls.law not in LQR_LAWS:
             return {}
         return {cls.shipped_name(): json.dumps(cls.design_record(), indent=1, sort_keys=True)}
 
@@ -149,7 +158,7 @@ class ControllerFmu(FmuBase):
     def _build_law(self) -> DiscreteLaw:
         values = {s.name: getattr(self, s.name) for s in self._specs}
         name = model_name(self.law, self.kind)
-        if self.law != "LQR":
+        if self.law not in LQR_LAWS:
             return build_law(self.law, self.kind, values)
         shipped = type(self).shipped_design(self.resources)
         gains = {s.name: float(getattr(self, s.name)) for s in self._gain_specs}
@@ -160,14 +169,15 @@ class ControllerFmu(FmuBase):
             raise FmuError(f"{name}: parameters {weights[0]} and {set_gains[0]} were both set: give either the "
                            "design (weights, observer poles) or the gains K_*, N, M_*, not both")
         if not changed or set_gains:
-            return lqr_from_gains(self.kind, values, gains)
+            lqr = lqr_from_gains(self.kind, values, gains)
+            return swing_up_around(self.kind, values, lqr) if self.law == "SwingUp" else lqr
         try:
             law = build_law(self.law, self.kind, values, backend="scipy")
         except ImportError as exc:
             raise FmuError(f"{name}: parameter {changed[0]} = {values[changed[0]]:g} differs from the shipped "
                            f"design, and redesigning the gains needs numpy and scipy ({exc}); install them in "
                            "this Python, or keep the design parameters and set the gains K_*, N, M_* instead") from None
-        for gain, value in lqr_gains(law).items():
+        for gain, value in lqr_gains(_lqr_of(law)).items():
             setattr(self, gain, value)
         return law
 
