@@ -25,9 +25,11 @@ exit; :func:`patch_binary` answers each with the smallest edit of the machine co
         Block was alloc'd at operator new / pythonfmu::createInstance / fmi2Instantiate
 
    Edit: ``finalizePythonInterpreter`` returns at once (after ``endbr64``, ``push %rbp`` ->
-   ``ret``); the static destructor alone releases the guard, once. Nothing else changes: the
-   library carries GNU-unique symbols, so the loader never unloads it (``dlclose`` is a no-op)
-   and that destructor only ever ran at exit.
+   ``ret``); the static destructor alone releases the guard, once, on every path. (When a
+   host's ``dlclose`` does unload a binary, glibc runs the ELF destructors before the
+   library's C++ static destructors, so that path was already in the right order; the first
+   of these binaries loaded in a process is never unloaded, as the later ones bind its
+   GNU-unique symbols.)
 
 2. **Py_Finalize from an exit handler, in hosts that are not Python.** The guard of the
    binary that initialized Python is destroyed by its ``__cxa_atexit`` handler, which makes

@@ -136,12 +136,12 @@ def _commands(host: list[str], loop_args: list[str], stop: str, env: dict[str, s
 
 
 def test_fifty_fmpy_processes_exit_cleanly(loop_args: list[str]) -> None:
-    results = _run_all(_commands([sys.executable, str(HOSTS / "fmpy_host.py")], loop_args, "0.2", None))
+    results = _run_all(_commands([sys.executable, str(HOSTS / "fmpy_host.py")], loop_args, "0.05", None))
     _assert_all_exit_cleanly(results, "fmpy host")
 
 
 def test_fifty_c_host_processes_exit_cleanly(c_host: Path, loop_args: list[str]) -> None:
-    results = _run_all(_commands([str(c_host)], loop_args, "0.2", c_host_env(libpython())))
+    results = _run_all(_commands([str(c_host)], loop_args, "0.05", c_host_env(libpython())))
     _assert_all_exit_cleanly(results, "C host")
 
 
