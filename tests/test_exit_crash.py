@@ -77,13 +77,12 @@ def libpython() -> Path | None:
 def c_host_env(lib: Path) -> dict[str, str]:
     """What a user of a non-Python FMI host sets (docs/other-tools.md): libpython preloaded, PYTHONHOME.
 
-    ``PYTHONPATH`` adds this environment's site-packages: the FMUs' default runtime path is
-    the standard library, but a controller that redesigns its gains at initialization
-    imports the design stack (NumPy, SciPy, python-control) from there.
+    No ``PYTHONPATH``: with their shipped parameters the FMUs run on the standard library of
+    the base interpreter alone (no virtual environment, no numpy), which this proves.
     """
-    env = dict(os.environ, LD_PRELOAD=str(lib), PYTHONHOME=sys.base_prefix,
-               PYTHONPATH=sysconfig.get_paths()["purelib"])
-    env.pop("PYTHONSTARTUP", None)
+    env = dict(os.environ, LD_PRELOAD=str(lib), PYTHONHOME=sys.base_prefix)
+    for name in ("PYTHONSTARTUP", "PYTHONPATH", "VIRTUAL_ENV"):
+        env.pop(name, None)
     return env
 
 
