@@ -9,6 +9,7 @@ start values are the same.
 """
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -113,6 +114,9 @@ def build_one(name: str, python_dir: Path, out_dir: Path, cc: str | None) -> Nat
         (root / "modelDescription.xml").write_bytes(cgen.model_description(model, gid, files))
         if cc:
             compile_sources(root / "sources", files, root / "binaries" / "linux64" / f"{name}.so", cc)
+        (root / "resources").mkdir()
+        (root / "resources" / "native.json").write_text(json.dumps(
+            {"model": name, **model.meta, "paths": model.paths, "python_only": model.python_only}, indent=1))
         (root / "documentation").mkdir()
         (root / "documentation" / "native.txt").write_text(_readme(model))
         out_dir.mkdir(parents=True, exist_ok=True)

@@ -69,6 +69,8 @@ class NativeModel:
     step: list[tuple[str, Any]]
     checked: list[str]                          # slot keys that must stay finite
     python_only: list[str] = field(default_factory=list)   # Python parameters this flavour lacks
+    paths: dict[str, str] = field(default_factory=dict)    # law number path -> native parameter (laws)
+    meta: dict[str, str] = field(default_factory=dict)     # {"role": plant|law|source, "law", "plant"}
     unit_definitions: list[ElementTree.Element] = field(default_factory=list)
 
     def variable(self, name: str) -> Variable:
@@ -179,7 +181,7 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
         states={k: 0.0 for k in zkeys},
         initialize=list(zip(zkeys, started)) + [(f"V:{s}", leaf(f"V:initial_{s}")) for s in states],
         step=list(zip(zkeys, stepped[:n])) + [(f"V:{s}", v) for s, v in zip(states, stepped[n:])],
-        checked=zkeys)
+        checked=zkeys, meta={"role": "plant", "plant": kind, "integrator_step": repr(step)})
 
 
 def _append(variables: list[Variable], extra: list[Variable]) -> None:
@@ -299,7 +301,9 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
     states.update({"S:first": 1.0, "S:tick": 0.0})
     return NativeModel(name=name, kind="sampled", description=description, variables=native_vars,
                        unit_definitions=units, states=states, initialize=step, step=step,
-                       checked=["V:voltage"] + [f"L:{p}" for p in state_paths], python_only=python_only)
+                       checked=["V:voltage"] + [f"L:{p}" for p in state_paths], python_only=python_only,
+                       paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
+                       meta={"role": "law", "law": law, "plant": kind})
 
 
 def _derived_parameters(law: str, kind: str, paths: list[str], values: dict[str, float],
@@ -383,4 +387,4 @@ def setpoint_model(python_fmu: Path) -> NativeModel:
         (ref,) = tracer.trace(lambda: [reference_at(leaf("S:time"), *(leaf(f"V:{a}") for a in args))])
     return NativeModel(name="Setpoint", kind="source", description=description, variables=variables,
                        unit_definitions=units, states={}, initialize=[("V:reference", ref)],
-                       step=[("V:reference", ref)], checked=["V:reference"])
+                       step=[("V:reference", ref)], checked=["V:reference"], meta={"role": "source"})

@@ -30,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="columns of results.csv: names or patterns like 'plant.*' (default: every connector)")
     p.add_argument("--fmu-dir", action="append", default=[], metavar="DIR",
                    help="extra folder to look for FMUs in (also IPCOSIM_FMU_PATH; default build/fmus)")
+    p.add_argument("--fmus", choices=["python", "native"], default="python",
+                   help="FMU flavour: python (build/fmus, default) or native (build/fmus-native: C, from "
+                        "`ipcosim build --native`)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=main)
 
@@ -71,7 +74,7 @@ def main(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         prepared = Prepared(args.scenario, parameter_set=args.parameter_set, swaps=swaps, fmu_dirs=args.fmu_dir,
-                            algorithm=args.algorithm, warn=False)
+                            algorithm=args.algorithm, warn=False, fmus=args.fmus)
     with prepared:
         for note in prepared.system.warnings:
             print(f"ipcosim run: warning: {note}", file=sys.stderr)
