@@ -87,7 +87,7 @@ class Prepared:
             scenario = scenario_or_path
         else:
             if fmus == "native":
-                fmu_dirs = [native_fmu_dir(), *(fmu_dirs or [])]
+                fmu_dirs = [*(fmu_dirs or []), native_fmu_dir()]
             scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
         if parameter_set:
             scenario = select_parameter_set(scenario, parameter_set)
