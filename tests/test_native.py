@@ -192,6 +192,12 @@ def test_every_scenario_trajectory_agrees_between_flavours(native_fmus: tuple[Pa
     for name in names:
         a = run(name, fmu_dirs=[python]).data
         b = run(name, fmu_dirs=[native], fmus="native").data
+        if name.endswith("-mass-pid"):
+            # The thesis PID (2e6 V/m, bang-bang at +-10 V) lets the pendulum fall: that loop takes a 1e-15 rad
+            # change of the initial angle to a 1e-9 difference by t = 0.36 s (single) / 0.49 s (double) in the
+            # Python flavour alone, so rounding-level agreement can only be asked for before that.
+            keep = a["time"] <= 0.25
+            a, b = a[keep], b[keep]
         worst = 0.0
         for col in a.dtype.names:
             scale = max(float(np.max(np.abs(a[col]))), 1e-12)
@@ -218,9 +224,9 @@ def test_set_on_a_plant_constant_redesigns_the_integrator(native_fmus: tuple[Pat
     from ipcosim.harness.api import run
 
     python, native = native_fmus
-    over = {"plant.Mp": 0.2, "controller.sample_period": 0.002}
-    a = run("single-mass-pid", fmu_dirs=[python], overrides=over, stop_time=1.0).data
-    b = run("single-mass-pid", fmu_dirs=[native], fmus="native", overrides=over, stop_time=1.0).data
+    over = {"plant.Mp": 0.16, "plant.La": 3e-4, "controller.voltage_limit": 8.0}
+    a = run("single-mass-lqr", fmu_dirs=[python], overrides=over, stop_time=2.0).data
+    b = run("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides=over, stop_time=2.0).data
     col = "plant.cart_position"
     assert np.max(np.abs(a[col] - b[col])) <= 1e-9 * np.max(np.abs(a[col]))
 
@@ -239,7 +245,8 @@ def test_native_fmus_validate(native_fmus: tuple[Path, Path]) -> None:
         assert validate_fmu(str(fmu)) == [], fmu.name
         md = read_model_description(str(fmu))
         with zipfile.ZipFile(fmu) as z:
-            listed = {f"sources/{f}" for f in md.coSimulation.sources}
+            listed = {f"sources/{f}" for c in md.buildConfigurations for fs in c.sourceFileSets for f in fs.sourceFiles}
+            assert listed == {"sources/model.c", "sources/fmi2glue.c"}
             assert listed <= set(z.namelist()) and f"binaries/linux64/{fmu.stem}.so" in z.namelist()
     assert_vdmcheck_clean(native / "LQRDoubleMass.fmu")
     assert_vdmcheck_clean(native / "IP02SingleMass.fmu")
@@ -260,7 +267,9 @@ def test_same_connectors_as_the_python_flavour(native_fmus: tuple[Path, Path]) -
                 w = b[name]
                 assert (w.valueReference, w.unit, w.type) == (v.valueReference, v.unit, v.type), (fmu.name, name)
                 if v.causality != "calculatedParameter":
-                    assert w.start == v.start, (fmu.name, name)
+                    as_num = (lambda x: None if x is None else  # noqa: E731
+                              float({"true": 1, "false": 0}.get(str(x), x)))
+                    assert as_num(w.start) == as_num(v.start), (fmu.name, name)
 
 
 @pytest.mark.integration

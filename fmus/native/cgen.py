@@ -13,6 +13,7 @@ from ipcosim.fmus.native import tracer
 from ipcosim.fmus.native.models import NativeModel
 
 _KIND = {"plant": "MODEL_KIND_PLANT", "sampled": "MODEL_KIND_SAMPLED", "source": "MODEL_KIND_SOURCE"}
+_BASE_UNITS = {"s": {"s": "1"}, "1": {}}
 _TYPE = {"Real": "VAR_REAL", "Integer": "VAR_INTEGER", "Boolean": "VAR_BOOLEAN"}
 
 
@@ -116,11 +117,18 @@ def model_description(model: NativeModel, gid: str, sources: list[str]) -> bytes
     for s in sources:
         ElementTree.SubElement(files, "File", {"name": s})
     units = {v.unit for v in model.variables if v.unit}
-    if model.unit_definitions:
+    if units:
         ud = ElementTree.SubElement(root, "UnitDefinitions")
+        defined = set()
         for u in model.unit_definitions:
             if u.get("name") in units:
                 ud.append(u)
+                defined.add(u.get("name"))
+        for name in sorted(units - defined):  # units only the native parameters use
+            if name not in _BASE_UNITS:
+                raise ValueError(f"{model.name}: unit {name!r} has no definition")
+            unit = ElementTree.SubElement(ud, "Unit", {"name": name})
+            ElementTree.SubElement(unit, "BaseUnit", _BASE_UNITS[name])
     logs = ElementTree.SubElement(root, "LogCategories")
     for cat in ("logStatusDiscard", "logStatusError"):
         ElementTree.SubElement(logs, "Category", {"name": cat})
