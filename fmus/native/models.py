@@ -152,8 +152,8 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
 
     def step_fn() -> list[Any]:
         p = sym_params()
-        f = rhs_factory(p)
-        vA = physics.clip_voltage(leaf("V:voltage"), p.voltage_limit)
+        f = tracer.local(rhs_factory(p))
+        vA = tracer.local(physics.clip_voltage)(leaf("V:voltage"), p.voltage_limit)
         z = sym_stepper().step([leaf(f"S:z{i}") for i in range(n)], f, vA)
         x = physics.single_mass_from_momentum(z, p) if single else z
         return list(z) + list(x)
@@ -216,8 +216,14 @@ def _trace_step(base: Any, measured: tuple[str, ...]) -> tuple[Any, dict[str, An
         return [u] + [after[k] for k in keys]
 
     from ipcosim.controllers import laws
-    with tracer.math_hooks(laws):
-        out = tracer.trace(fn)
+    saturate, schedule = laws.saturate, laws.Schedule.__call__
+    laws.saturate = tracer.local(saturate)  # pure functions: their branches merged where they return
+    laws.Schedule.__call__ = tracer.local(schedule)  # type: ignore[method-assign]
+    try:
+        with tracer.math_hooks(laws):
+            out = tracer.trace(fn)
+    finally:
+        laws.saturate, laws.Schedule.__call__ = saturate, schedule  # type: ignore[method-assign]
     return out[0], dict(zip(keys, out[1:])), before
 
 

@@ -239,6 +239,29 @@ def _merge(paths: list[tuple[list[tuple[Node, bool]], list[Any]]], depth: int) -
     return [select(cond, x, y) for x, y in zip(a, b)]
 
 
+def local(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn`` with its branches merged where it returns, not at the end of the whole trace.
+
+    For pure functions (a clip, a right-hand side): the paths inside ``fn`` become conditional
+    expressions of its results, so the code after the call is traced once, not once per path.
+    ``fn`` must return a number, a node or a flat tuple/list of them.
+    """
+    def wrapper(*args: Any) -> Any:
+        if _ACTIVE is None or not any(isinstance(a, Node) for a in args):
+            return fn(*args)
+        shape: list[Any] = []
+
+        def run() -> list[Any]:
+            out = fn(*args)
+            if not shape:
+                shape.append(type(out) if isinstance(out, (tuple, list)) else None)
+            return list(out) if shape[0] is not None else [out]
+
+        merged = Tracer().run(run)
+        return merged[0] if shape[0] is None else shape[0](merged)
+    return wrapper
+
+
 def trace(fn: Callable[[], Sequence[Any]]) -> list[Any]:
     """Trace ``fn`` (no arguments; builds its own symbolic inputs) over every branch path."""
     return Tracer().run(fn)

@@ -8,6 +8,7 @@ and a ``--set`` on a parameter the native FMU lacks is an error that names the f
 from __future__ import annotations
 
 import dataclasses
+import shutil
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -110,3 +111,33 @@ def native_overrides(system: Any, overrides: Mapping[str, Any], python_values: M
                 if name in known and inst.model.variables[name].causality == "parameter":
                     out[f"{comp}.{name}"] = value
     return out
+
+
+def write_native_folder(scenario_name: str, dest: Path | str) -> Path:
+    """A copy of scenario folder ``scenario_name`` that any SSP tool runs on the native FMUs.
+
+    ``dest/resources/`` gets the native FMUs and every ``.ssv`` a component binds is rewritten
+    with that component's redesigned native values (:func:`to_native`).
+    """
+    from xml.sax.saxutils import quoteattr
+
+    from ipcosim.harness.scenario.ssp import load_scenario
+
+    dest = Path(dest)
+    scenario, _ = to_native(load_scenario(scenario_name, fmu_dirs=[native_fmu_dir()]))
+    src = scenario.location if scenario.location.is_dir() else scenario.location.parent
+    shutil.copytree(src, dest, dirs_exist_ok=True)
+    (dest / "resources").mkdir(exist_ok=True)
+    for comp in scenario.components:
+        assert comp.fmu is not None
+        shutil.copy(comp.fmu, dest / comp.source)
+        for pset in comp.bindings:
+            if pset.source and pset.source.endswith(".ssv"):
+                rows = [f'    <ssv:Parameter name={quoteattr(p.name)}><ssv:{p.type} value="{p.value!r}"/>'
+                        f'</ssv:Parameter>' for p in pset.parameters]
+                (dest / pset.source).write_text(
+                    '<?xml version="1.0" encoding="UTF-8"?>\n'
+                    '<ssv:ParameterSet xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" '
+                    f'version="1.0" name={quoteattr(pset.name)}>\n  <ssv:Parameters>\n' + "\n".join(rows)
+                    + "\n  </ssv:Parameters>\n</ssv:ParameterSet>\n")
+    return dest
