@@ -129,6 +129,8 @@ def run() -> list[str]:
     else:
         lines.append(f"{SCENARIO} on native FMUs, libcosim: real-time factor {libcosim:.0f}x (target >= "
                      f"{LIBCOSIM_TARGET:g}x: {'ok' if libcosim >= LIBCOSIM_TARGET else 'MISSED'})")
+    load = os.getloadavg()[0]
+    lines.append(f"machine: {os.cpu_count()} cores, load average {load:.1f} during the run (figures scale with it)")
     missed = [line for line in lines if "MISSED" in line]
     if missed:
         for line in lines:

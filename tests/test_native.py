@@ -304,8 +304,8 @@ def test_c_host_runs_native_fmus_without_python(native_fmus: tuple[Path, Path], 
     """50 host processes (the plant under a constant voltage, and the setpoint) exit cleanly, no libpython."""
     from fmpy import read_model_description
 
-    from ipcosim.fmus.plant import Plant
     from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, make
+    from ipcosim.fmus.plant import Plant
 
     _, native = native_fmus
     cmds = []

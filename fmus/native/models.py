@@ -118,7 +118,8 @@ def python_variables(fmu: Path) -> tuple[list[Variable], list[ElementTree.Elemen
 
 def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> NativeModel:
     """The native plant ``name`` (``IP02SingleMass`` / ``IP02DoubleMass``) traced from the Python plant."""
-    from ipcosim.fmus import physics, plant as plant_mod
+    from ipcosim.fmus import physics
+    from ipcosim.fmus import plant as plant_mod
     from ipcosim.fmus.integrator import FastETDRK4
     from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, make
 
