@@ -4,7 +4,9 @@
   the native ``IP02SingleMass``, of the Python one, and of a trivial native FMU (``Setpoint``: the floor of
   fmpy's ctypes calls), medians over alternating rounds;
 * the loop real-time factor of ``single-mass-lqr`` on native FMUs in the ipcosim master (target >= 200x)
-  and in libcosim (``simulate_until`` of 10 s, target >= 2000x).
+  and in libcosim (``simulate_until`` of 10 s, target >= 2000x);
+* a robustness sweep (``plant.Mp`` and ``plant.Beq`` drawn +-20 %, 10 s runs, one worker) on both flavours:
+  wall time per run and their ratio (``IPCOSIM_BENCH_SWEEP_RUNS`` runs each, default 10).
 
 FMUs are built into a temporary folder. A missed target ends the module with an error (exit status 1).
 """
@@ -23,6 +25,7 @@ CYCLES = int(os.environ.get("IPCOSIM_BENCH_CYCLES", "300"))
 MASTER_TARGET = 200.0
 LIBCOSIM_TARGET = 2000.0
 SCENARIO = "single-mass-lqr"
+SWEEP_RUNS = int(os.environ.get("IPCOSIM_BENCH_SWEEP_RUNS", "10"))
 
 
 class TargetMissed(RuntimeError):
@@ -104,6 +107,41 @@ def _libcosim_rtf(tmp: Path) -> float:
     return best
 
 
+def _sweep_ratio(python: Path, native: Path) -> tuple[float, float]:
+    """Seconds per run of the same robustness cases on the Python and on the native FMUs."""
+    import random
+
+    import ipcosim.harness.scenario.flavour as flavour
+    from ipcosim.harness.studies.specs import spec_for
+
+    from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, make
+
+    nominal = make("single-mass", **dict(PRESETS[DEFAULT_PRESET["single-mass"]][1]))
+    rng = random.Random(0)
+    cases = [{"plant.Mp": nominal.Mp * rng.uniform(0.8, 1.2), "plant.Beq": nominal.Beq * rng.uniform(0.8, 1.2)}
+             for _ in range(SWEEP_RUNS)]
+    per_run = []
+    saved_env, saved_dir = os.environ.get("IPCOSIM_FMU_PATH"), flavour.native_fmu_dir
+    os.environ["IPCOSIM_FMU_PATH"] = str(python)
+    flavour.native_fmu_dir = lambda: native  # type: ignore[assignment]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for fmus in ("python", "native"):
+                runner = spec_for(SCENARIO, fmus=fmus).build()
+                t0 = time.perf_counter()
+                for i, case in enumerate(cases):
+                    runner(case, i)
+                per_run.append((time.perf_counter() - t0) / len(cases))
+    finally:
+        flavour.native_fmu_dir = saved_dir  # type: ignore[assignment]
+        if saved_env is None:
+            os.environ.pop("IPCOSIM_FMU_PATH", None)
+        else:
+            os.environ["IPCOSIM_FMU_PATH"] = saved_env
+    return per_run[0], per_run[1]
+
+
 def run() -> list[str]:
     from ipcosim.fmus.build import build_all
     from ipcosim.fmus.native.build import build_native
@@ -118,6 +156,7 @@ def run() -> list[str]:
             libcosim: float | None = _libcosim_rtf_native(tmp)
         except ImportError:
             libcosim = None
+        sweep_py, sweep_native = _sweep_ratio(tmp / "fmus", tmp / "fmus-native")
     lines = [f"plant cycle (set, doStep 1 ms, get 5 outputs) through fmpy: native {c['native plant']:.2f} us, "
              f"python {c['python plant']:.2f} us ({c['python plant'] / c['native plant']:.0f}x), trivial native "
              f"FMU {c['trivial native FMU']:.2f} us; native plant model cost "
@@ -129,6 +168,9 @@ def run() -> list[str]:
     else:
         lines.append(f"{SCENARIO} on native FMUs, libcosim: real-time factor {libcosim:.0f}x (target >= "
                      f"{LIBCOSIM_TARGET:g}x: {'ok' if libcosim >= LIBCOSIM_TARGET else 'MISSED'})")
+    lines.append(f"robustness sweep of {SCENARIO} ({SWEEP_RUNS} runs of 10 s each, one worker): python "
+                 f"{sweep_py:.2f} s/run, native {sweep_native:.3f} s/run, ratio {sweep_py / sweep_native:.1f}x "
+                 f"(a 1000-run sweep: {1000 * sweep_py / 60:.0f} min vs {1000 * sweep_native / 60:.1f} min)")
     load = os.getloadavg()[0]
     lines.append(f"machine: {os.cpu_count()} cores, load average {load:.1f} during the run (figures scale with it)")
     missed = [line for line in lines if "MISSED" in line]
