@@ -112,9 +112,8 @@ def _sweep_ratio(python: Path, native: Path) -> tuple[float, float]:
     import random
 
     import ipcosim.harness.scenario.flavour as flavour
-    from ipcosim.harness.studies.specs import spec_for
-
     from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, make
+    from ipcosim.harness.studies.specs import spec_for
 
     nominal = make("single-mass", **dict(PRESETS[DEFAULT_PRESET["single-mass"]][1]))
     rng = random.Random(0)
