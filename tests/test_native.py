@@ -329,3 +329,28 @@ def test_c_host_runs_native_fmus_without_python(native_fmus: tuple[Path, Path], 
     assert close(float(procs[0].stdout), plant.state[0], 1e-9)
     assert float(procs[1].stdout) == 0.05
     assert math.isfinite(float(procs[0].stdout))
+
+
+@needs_cc
+@pytest.mark.integration
+def test_native_scenario_runs_in_libcosim(native_fmus: tuple[Path, Path], tmp_path: Path,
+                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """libcosim (Jacobi) on a folder with the native FMUs equals the ipcosim master's Jacobi run."""
+    pytest.importorskip("libcosimpy")
+    import ipcosim.harness.scenario.flavour as flavour
+    from ipcosim.harness.api import run
+    from ipcosim.harness.studies.crosscheck import run_libcosim
+
+    _, native = native_fmus
+    monkeypatch.setattr(flavour, "native_fmu_dir", lambda: native)
+    folder = flavour.write_native_folder("single-mass-lqr", tmp_path / "ssp")
+    names = ["plant.cart_position", "plant.pendulum_angle", "controller.voltage"]
+    data, _ = run_libcosim(folder, 2.0, 1e-3, names)
+    ours = run("single-mass-lqr", fmu_dirs=[native], fmus="native", algorithm="jacobi", stop_time=2.0).data
+    t = np.round(ours["time"] / 1e-3).astype(int)
+    index = {k: i for i, k in enumerate(t)}
+    rows = [index[k] for k in np.round(data["time"] / 1e-3).astype(int)]
+    assert len(rows) >= 1990
+    for name in names:
+        scale = float(np.max(np.abs(ours[name])))
+        assert np.max(np.abs(data[name] - ours[name][rows])) <= 1e-9 * scale, name
