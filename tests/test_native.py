@@ -354,3 +354,20 @@ def test_native_scenario_runs_in_libcosim(native_fmus: tuple[Path, Path], tmp_pa
     for name in names:
         scale = float(np.max(np.abs(ours[name])))
         assert np.max(np.abs(data[name] - ours[name][rows])) <= 1e-9 * scale, name
+
+
+@needs_cc
+@pytest.mark.integration
+def test_native_fmu_rejects_a_bad_parameter_by_name(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
+    from fmi_helpers import instantiate
+    from fmpy.fmi1 import FMICallException
+
+    _, native = native_fmus
+    inst = instantiate(native / "IP02SingleMass.fmu", tmp_path / "p")
+    inst.slave.setupExperiment(startTime=0.0)
+    inst.slave.enterInitializationMode()
+    inst.set(Mp=-1.0)
+    with pytest.raises(FMICallException):
+        inst.slave.exitInitializationMode()
+    assert "IP02SingleMass: parameter Mp = -1 must be > 0" in inst.text()
+    inst.slave.freeInstance()

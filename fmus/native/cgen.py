@@ -63,6 +63,8 @@ def model_c(model: NativeModel) -> tuple[str, str]:
     var_rows = [f'    {{{v.vr}u, {v.index}, {_TYPE[v.type]}, {settable.get(v.causality, 0)}, "{v.name}"}},'
                 for v in model.variables]
     checked = [slots[k] for k in model.checked]
+    kinds = {"finite": "CHECK_FINITE", "positive": "CHECK_POSITIVE", "nonnegative": "CHECK_NONNEGATIVE"}
+    check_rows = [f'    {{{slots["V:" + name]}, {kinds[kind]}, "{name}"}},' for name, kind in model.checks.items()]
     period = ("V:integrator_step" if model.kind == "plant" else "V:sample_period" if model.kind == "sampled" else "")
     core = "\n".join(body)
     gid = guid(model, core + str(start))
@@ -84,11 +86,15 @@ def model_c(model: NativeModel) -> tuple[str, str]:
         "",
         f"static const int checked[{max(len(checked), 1)}] = {{{', '.join(map(str, checked)) or '0'}}};",
         "",
+        f"static const ParameterCheck checks[{max(len(check_rows), 1)}] = {{",
+        *(check_rows or ['    {0, CHECK_FINITE, ""},']),
+        "};",
+        "",
         core,
         "const ModelInfo model_info = {",
         f'    "{model.name}", "{gid}", {_KIND[model.kind]}, NV, start_values, variables, {len(model.variables)},',
         f"    checked, {len(checked)}, {slots[period] if period else -1}, "
-        f"{slots['S:tick'] if 'S:tick' in slots else -1},",
+        f"{slots['S:tick'] if 'S:tick' in slots else -1}, checks, {len(check_rows)},",
         "    model_initialize, model_step};",
         "",
     ]

@@ -71,6 +71,7 @@ class NativeModel:
     python_only: list[str] = field(default_factory=list)   # Python parameters this flavour lacks
     paths: dict[str, str] = field(default_factory=dict)    # law number path -> native parameter (laws)
     meta: dict[str, str] = field(default_factory=dict)     # {"role": plant|law|source, "law", "plant"}
+    checks: dict[str, str] = field(default_factory=dict)   # parameter -> finite | positive | nonnegative
     unit_definitions: list[ElementTree.Element] = field(default_factory=list)
 
     def variable(self, name: str) -> Variable:
@@ -182,7 +183,11 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
         states={k: 0.0 for k in zkeys},
         initialize=list(zip(zkeys, started)) + [(f"V:{s}", leaf(f"V:initial_{s}")) for s in states],
         step=list(zip(zkeys, stepped[:n])) + [(f"V:{s}", v) for s, v in zip(states, stepped[n:])],
-        checked=zkeys, meta={"role": "plant", "plant": kind, "integrator_step": repr(step)})
+        checked=zkeys, meta={"role": "plant", "plant": kind, "integrator_step": repr(step)},
+        checks={**{f.name: ("positive" if f.metadata.get("positive") else
+                            "nonnegative" if f.metadata.get("nonnegative") else "finite")
+                   for f in cls.__dataclass_fields__.values()},
+                **{f"initial_{s}": "finite" for s in states}, "integrator_step": "positive"})
 
 
 def _append(variables: list[Variable], extra: list[Variable]) -> None:
@@ -310,7 +315,10 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
                        unit_definitions=units, states=states, initialize=step, step=step,
                        checked=["V:voltage"] + [f"L:{p}" for p in state_paths], python_only=python_only,
                        paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
-                       meta={"role": "law", "law": law, "plant": kind})
+                       meta={"role": "law", "law": law, "plant": kind},
+                       checks={**{p: "finite" for p in {v.name for v in native_vars if v.causality == "parameter"}},
+                               **{s.name: s.constraint for s in catalog.schema(law, kind)
+                                  if s.constraint != "bool" and s.name in {v.name for v in native_vars}}})
 
 
 def _derived_parameters(law: str, kind: str, paths: list[str], values: dict[str, float],
@@ -394,4 +402,5 @@ def setpoint_model(python_fmu: Path) -> NativeModel:
         (ref,) = tracer.trace(lambda: [reference_at(leaf("S:time"), *(leaf(f"V:{a}") for a in args))])
     return NativeModel(name="Setpoint", kind="source", description=description, variables=variables,
                        unit_definitions=units, states={}, initialize=[("V:reference", ref)],
-                       step=[("V:reference", ref)], checked=["V:reference"], meta={"role": "source"})
+                       step=[("V:reference", ref)], checked=["V:reference"], meta={"role": "source"},
+                       checks={a: "finite" for a in args})

@@ -128,9 +128,29 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
     return fmi2OK;
 }
 
+static int parameters_valid(Instance *c) {
+    int i;
+    static const char *const need[] = {"be a finite number", "be > 0", "be >= 0"};
+    for (i = 0; i < c->m->nchecks; i++) {
+        const ParameterCheck *k = &c->m->checks[i];
+        double x = c->v[k->index];
+        int ok = isfinite(x) && (k->kind != CHECK_POSITIVE || x > 0.0) && (k->kind != CHECK_NONNEGATIVE || x >= 0.0);
+        if (!ok) {
+            report(c, fmi2Error, "logStatusError", "%s: parameter %s = %g must %s", c->m->identifier, k->name, x,
+                   need[k->kind]);
+            return 0;
+        }
+    }
+    return 1;
+}
+
 fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     Instance *c = (Instance *)comp;
     if (c == NULL || c->phase != ST_INIT) return fmi2Error;
+    if (!parameters_valid(c)) {
+        c->phase = ST_ERROR;
+        return fmi2Error;
+    }
     if (c->m->period_index >= 0) {
         double p = c->v[c->m->period_index];
         if (!(p > 0.0) || !isfinite(p)) {

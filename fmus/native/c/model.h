@@ -28,6 +28,16 @@ typedef struct {
     const char *name;
 } ModelVariable;
 
+#define CHECK_FINITE 0
+#define CHECK_POSITIVE 1
+#define CHECK_NONNEGATIVE 2
+
+typedef struct {
+    int index;         /* slot in v */
+    int kind;          /* CHECK_FINITE, CHECK_POSITIVE, CHECK_NONNEGATIVE */
+    const char *name;
+} ParameterCheck;
+
 typedef struct {
     const char *identifier;
     const char *guid;
@@ -40,6 +50,8 @@ typedef struct {
     int nchecked;
     int period_index;              /* sample_period (sampled) or integrator_step (plant) slot, else -1 */
     int tick_index;                /* slot of the glue's sample counter (sampled models), else -1 */
+    const ParameterCheck *checks;  /* parameter ranges checked on leaving initialization mode */
+    int nchecks;
     void (*initialize)(double *v, double t0);
     void (*step)(double *v, double t, double h);
 } ModelInfo;
