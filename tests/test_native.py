@@ -371,3 +371,23 @@ def test_native_fmu_rejects_a_bad_parameter_by_name(native_fmus: tuple[Path, Pat
         inst.slave.exitInitializationMode()
     assert "IP02SingleMass: parameter Mp = -1 must be > 0" in inst.text()
     inst.slave.freeInstance()
+
+
+@needs_cc
+@pytest.mark.integration
+def test_crosscheck_layout_validates_and_flavours_agree(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
+    """``make crosscheck``'s tree passes fmpy.cross_check, and each model's reference result is the same
+    in both flavours (each FMU alone on the same input signal)."""
+    from ipcosim.harness.studies.fmi_crosscheck import write_tree
+
+    python, native = native_fmus
+    count, problems = write_tree(tmp_path, {"ipcosim-python": python, "ipcosim-native": native}, "test")
+    assert problems == [] and count == 26
+    base = tmp_path / "fmus" / "2.0" / "cs" / "linux64"
+    for folder in sorted((base / "ipcosim-native" / "test").iterdir()):
+        a = np.genfromtxt(base / "ipcosim-python" / "test" / folder.name / f"{folder.name}_ref.csv", delimiter=",",
+                          names=True)
+        b = np.genfromtxt(folder / f"{folder.name}_ref.csv", delimiter=",", names=True)
+        for col in a.dtype.names:
+            scale = max(float(np.max(np.abs(a[col]))), 1e-12)
+            assert float(np.max(np.abs(a[col] - b[col]))) <= 1e-9 * scale, (folder.name, col)
