@@ -114,7 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     except Exception:  # noqa: BLE001 -- an uninstalled checkout
         version = "dev"
     try:
-        count, problems = write_tree(out, {"ipcosim-python": Path(args.python), "ipcosim-native": Path(args.native)}, version)
+        flavours = {"ipcosim-python": Path(args.python), "ipcosim-native": Path(args.native)}
+        count, problems = write_tree(out, flavours, version)
     except CrossCheckLayoutError as exc:
         print(f"crosscheck: error: {exc}", file=sys.stderr)
         return 1
