@@ -66,6 +66,9 @@ def model_c(model: NativeModel) -> tuple[str, str]:
     kinds = {"finite": "CHECK_FINITE", "positive": "CHECK_POSITIVE", "nonnegative": "CHECK_NONNEGATIVE"}
     check_rows = [f'    {{{slots["V:" + name]}, {kinds[kind]}, "{name}"}},' for name, kind in model.checks.items()]
     period = ("V:integrator_step" if model.kind == "plant" else "V:sample_period" if model.kind == "sampled" else "")
+    by_vr = [-1] * (max(v.vr for v in model.variables) + 1)
+    for i, v in enumerate(model.variables):
+        by_vr[v.vr] = i
     core = "\n".join(body)
     gid = guid(model, core + str(start))
     lines = [
@@ -86,6 +89,8 @@ def model_c(model: NativeModel) -> tuple[str, str]:
         "",
         f"static const int checked[{max(len(checked), 1)}] = {{{', '.join(map(str, checked)) or '0'}}};",
         "",
+        f"static const int by_vr[{len(by_vr)}] = {{{', '.join(map(str, by_vr))}}};",
+        "",
         f"static const ParameterCheck checks[{max(len(check_rows), 1)}] = {{",
         *(check_rows or ['    {0, CHECK_FINITE, ""},']),
         "};",
@@ -94,7 +99,7 @@ def model_c(model: NativeModel) -> tuple[str, str]:
         "const ModelInfo model_info = {",
         f'    "{model.name}", "{gid}", {_KIND[model.kind]}, NV, start_values, variables, {len(model.variables)},',
         f"    checked, {len(checked)}, {slots[period] if period else -1}, "
-        f"{slots['S:tick'] if 'S:tick' in slots else -1}, checks, {len(check_rows)},",
+        f"{slots['S:tick'] if 'S:tick' in slots else -1}, checks, {len(check_rows)}, by_vr, {len(by_vr)},",
         "    model_initialize, model_step};",
         "",
     ]

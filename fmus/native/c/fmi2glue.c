@@ -41,10 +41,8 @@ static void report(Instance *c, fmi2Status status, const char *category, const c
 }
 
 static const ModelVariable *lookup(const Instance *c, fmi2ValueReference vr) {
-    int i;
-    for (i = 0; i < c->m->nvars; i++)
-        if (c->m->vars[i].vr == vr) return &c->m->vars[i];
-    return NULL;
+    if (vr >= (fmi2ValueReference)c->m->nby_vr || c->m->by_vr[vr] < 0) return NULL;
+    return &c->m->vars[c->m->by_vr[vr]];
 }
 
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }

@@ -52,6 +52,8 @@ typedef struct {
     int tick_index;                /* slot of the glue's sample counter (sampled models), else -1 */
     const ParameterCheck *checks;  /* parameter ranges checked on leaving initialization mode */
     int nchecks;
+    const int *by_vr;              /* value reference -> position in vars, or -1 */
+    int nby_vr;
     void (*initialize)(double *v, double t0);
     void (*step)(double *v, double t, double h);
 } ModelInfo;
