@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 VDMCHECK_VERSION := 1.1.3
 VDMCHECK_DIR := tools/vdmcheck
 
-.PHONY: all venv fmus demo test lint bench vdmcheck clean
+.PHONY: all venv fmus demo test lint bench vdmcheck crosscheck clean
 
 all: test
 
@@ -44,6 +44,11 @@ test: fmus vdmcheck
 
 bench: fmus
 	$(BIN)/python -m benchmarks.bench
+
+# The FMUs of both flavours with reference results in the FMI cross-check layout, checked by fmpy.cross_check.
+crosscheck: $(STAMP)
+	$(BIN)/ipcosim build --native
+	$(BIN)/python -m ipcosim.harness.studies.fmi_crosscheck build/crosscheck
 
 clean:
 	rm -rf build out

@@ -73,10 +73,14 @@ class Prepared:
                  swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
                  fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, algorithm: str = GAUSS_SEIDEL,
                  workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
-                 system: System | None = None, warn: bool = True) -> None:
+                 system: System | None = None, warn: bool = True, fmus: str = "python") -> None:
+        from ipcosim.harness.scenario.flavour import check_flavour, native_fmu_dir, to_native
+
         t0 = time.perf_counter()
         #: Seconds spent loading, binding and extracting, charged to the first run's ``wall_time_s``.
         self.load_seconds = 0.0
+        self.fmus = check_flavour(fmus)
+        self._python_values: dict[str, dict[str, Any]] = {}
         if algorithm not in ALGORITHMS:
             raise UsageError(f"--algorithm {algorithm}: expected one of {', '.join(ALGORITHMS)}")
         self.algorithm = algorithm
@@ -95,9 +99,16 @@ class Prepared:
         if isinstance(scenario_or_path, Scenario):
             scenario = scenario_or_path
         else:
+            if fmus == "native":
+                fmu_dirs = [*(fmu_dirs or []), native_fmu_dir()]
             scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
         if parameter_set:
             scenario = select_parameter_set(scenario, parameter_set)
+        if fmus == "native":
+            if scenario.location.is_file():
+                raise UsageError(f"--fmus native: {scenario.origin} is an archive carrying its own FMUs; give the "
+                                 "scenario's name or folder")
+            scenario, self._python_values = to_native(scenario)
         self.scenario = scenario
         if workdir is None:
             self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
@@ -159,6 +170,9 @@ class Prepared:
             raise StepSizeError(f"{why_stop}; give --stop-time")
         if h is None:
             raise StepSizeError(f"{why_step}; give --step")
+        if self.fmus == "native" and overrides:
+            from ipcosim.harness.scenario.flavour import native_overrides
+            overrides = native_overrides(self.system, overrides, self._python_values)
         _, values = with_overrides(self.system, overrides or {})
         observers = list(observers)
         if progress:
@@ -256,7 +270,8 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
         fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, out_dir: str | os.PathLike[str] | None = None,
         variables: Sequence[str] | None = None, plot: bool = False, realtime: bool | None = None,
         progress: bool = False, observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
-        start_time: float | None = None, record_every: int = 1, raise_on_error: bool = True) -> Result:
+        start_time: float | None = None, record_every: int = 1, raise_on_error: bool = True,
+        fmus: str = "python") -> Result:
     """Co-simulate a scenario once.
 
     Parameters
@@ -290,6 +305,8 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
     raise_on_error : bool
         Raise SimulationError on failure (after writing ``out_dir``); else return the partial
         Result with ``error`` set.
+    fmus : {'python', 'native'}
+        FMU flavour: ``build/fmus`` or ``build/fmus-native`` (``ipcosim build --native``).
 
     Returns
     -------
@@ -297,7 +314,7 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
         ``data`` (structured array: ``time`` + ``component.variable``), ``metrics``, ``metadata``.
     """
     with Prepared(scenario_or_path, parameter_set=parameter_set, swaps=swaps, fmu_dirs=fmu_dirs,
-                  algorithm=algorithm) as prepared:
+                  algorithm=algorithm, fmus=fmus) as prepared:
         return prepared.run(stop_time, step, overrides, out_dir=out_dir, variables=variables, plot=plot,
                             raise_on_error=raise_on_error, realtime=realtime, progress=progress, observers=observers,
                             manipulators=manipulators, start_time=start_time, record_every=record_every)
@@ -306,7 +323,7 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
 def prepare_with(options: RunOptions, *, warn: bool = True) -> Prepared:
     """A :class:`Prepared` scenario for ``options`` (scenario, parameter set, swaps, FMU folders, algorithm)."""
     return Prepared(options.scenario, parameter_set=options.parameter_set, swaps=options.swap,
-                    fmu_dirs=options.fmu_dirs, algorithm=options.algorithm, warn=warn)
+                    fmu_dirs=options.fmu_dirs, algorithm=options.algorithm, warn=warn, fmus=options.fmus)
 
 
 def run_with(options: RunOptions, prepared: Prepared | None = None) -> Result:

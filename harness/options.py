@@ -84,6 +84,9 @@ class RunOptions:
         Also write the recorded columns as a baseline CSV (see :mod:`ipcosim.harness.baseline`).
     progress : bool
         Show a progress bar on a terminal.
+    fmus : str
+        FMU flavour: ``python`` (pythonfmu FMUs, default) or ``native`` (C FMUs from
+        ``ipcosim build --native``).
     """
 
     scenario: str | os.PathLike[str]
@@ -100,8 +103,11 @@ class RunOptions:
     fmu_dirs: tuple[Path, ...] = ()
     save_baseline: Path | None = None
     progress: bool = False
+    fmus: str = "python"
 
     def __post_init__(self) -> None:
+        if self.fmus not in ("python", "native"):
+            raise UsageError(f"--fmus {self.fmus}: expected python or native")
         if self.algorithm not in ALGORITHM_CHOICES:
             raise UsageError(f"--algorithm {self.algorithm}: expected one of {', '.join(ALGORITHM_CHOICES)}")
         if not os.fspath(self.scenario):
@@ -114,7 +120,8 @@ class RunOptions:
                realtime: bool | None = None, out: str | os.PathLike[str] | None = None, plot: bool = False,
                record: Sequence[str] | str | None = None, algorithm: str = "gauss-seidel",
                fmu_dirs: Sequence[str | os.PathLike[str]] | None = None,
-               save_baseline: str | os.PathLike[str] | None = None, progress: bool = False) -> "RunOptions":
+               save_baseline: str | os.PathLike[str] | None = None, progress: bool = False,
+               fmus: str = "python") -> "RunOptions":
         """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
 
         Raises
@@ -129,7 +136,8 @@ class RunOptions:
                    set=_pairs("--set", set), swap=_pairs("--swap", swap), parameter_set=parameter_set,
                    realtime=realtime, out=Path(out) if out is not None else None, plot=plot, record=columns,
                    algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
-                   save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress)
+                   save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,
+                   fmus=fmus)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "RunOptions":
@@ -138,7 +146,8 @@ class RunOptions:
         return cls.create(args.scenario, stop_time=args.stop_time, step=args.step, set=args.set, swap=args.swap,
                           parameter_set=args.parameter_set, realtime=True if args.realtime else None, out=out,
                           plot=args.plot, record=args.record, algorithm=args.algorithm, fmu_dirs=args.fmu_dir,
-                          save_baseline=args.save_baseline, progress=not args.quiet)
+                          save_baseline=args.save_baseline, progress=not args.quiet,
+                          fmus=getattr(args, "fmus", "python"))
 
 
 def scenario_label(text: str | os.PathLike[str]) -> str:

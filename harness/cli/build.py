@@ -14,6 +14,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p.add_argument("--out", default=BUILD_DIR, type=Path,
                    help=f"output folder (default: {BUILD_DIR})")
+    p.add_argument("--native", action="store_true",
+                   help="also build the native (C source-code) FMUs into OUT/fmus-native/")
     p.add_argument("--force", action="store_true", help="rebuild every FMU even if its sources are unchanged")
     p.set_defaults(func=main)
 
@@ -25,6 +27,11 @@ def main(args: argparse.Namespace) -> int:
     for result in build_all(out / "fmus", force=args.force):
         print(f"{'built' if result.built else 'up to date'}: {result.fmu}")
     pack_ssp(out)
+    if getattr(args, "native", False):
+        from ipcosim.fmus.native.build import build_native
+
+        for native in build_native(out / "fmus", out / "fmus-native"):
+            print(f"built (native{'' if native.binary else ', sources only'}): {native.fmu}")
     return 0
 
 

@@ -32,6 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "friction (viscous damping) and spring stiffness")
     p.add_argument("--samples", type=int, default=20, help="robustness runs per scenario (default 20)")
     p.add_argument("--seed", type=int, default=0, help="robustness seed (default 0)")
+    p.add_argument("--fmus", choices=["python", "native"], default="python",
+                   help="FMU flavour of the co-simulated scenarios: python (default) or native (C, from "
+                        "`ipcosim build --native`)")
     p.add_argument("--parameter-set", metavar="NAME",
                    help="bind this parameter set in every scenario that has it, e.g. thesis (default: each "
                         "scenario's own binding)")
@@ -132,7 +135,7 @@ def main(args: argparse.Namespace) -> int:
         try:
             try:
                 spec = spec_for(name, stop_time=args.stop_time, series=True,
-                                parameter_set=_pset(name, args.parameter_set))
+                                parameter_set=_pset(name, args.parameter_set), fmus=args.fmus)
             except FileNotFoundError as exc:
                 if built or "ipcosim build" not in str(exc):
                     raise
@@ -144,7 +147,7 @@ def main(args: argparse.Namespace) -> int:
                 build_all(BUILD_FMU_DIR)
                 built = True
                 spec = spec_for(name, stop_time=args.stop_time, series=True,
-                                parameter_set=_pset(name, args.parameter_set))
+                                parameter_set=_pset(name, args.parameter_set), fmus=args.fmus)
             specs.append(spec)
             spec_names.append(name)
         except (IpcosimError, OSError, ValueError) as exc:
@@ -168,7 +171,8 @@ def main(args: argparse.Namespace) -> int:
                 results[name] = row
         if args.robustness:
             for name, spec in zip(spec_names, specs):
-                plain = spec_for(name, stop_time=args.stop_time, parameter_set=_pset(name, args.parameter_set))
+                plain = spec_for(name, stop_time=args.stop_time, parameter_set=_pset(name, args.parameter_set),
+                                 fmus=args.fmus)
                 varies = parse_all(rob.default_vary(plant_kind(name, plain), plain.parameters), plain.parameters)
                 cases = make_cases(varies, plain.parameters, samples=args.samples, seed=args.seed)
                 if not args.quiet:

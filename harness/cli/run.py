@@ -30,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="extra folder to look for FMUs in (also IPCOSIM_FMU_PATH; default build/fmus)")
     p.add_argument("--save-baseline", metavar="FILE",
                    help="also write the recorded columns (see --record) as a baseline CSV for assert_close_to")
+    p.add_argument("--fmus", choices=["python", "native"], default="python",
+                   help="FMU flavour: python (build/fmus, default) or native (build/fmus-native: C, from "
+                        "`ipcosim build --native`)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=main)
 

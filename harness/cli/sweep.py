@@ -35,6 +35,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler address tcp://HOST:PORT")
     p.add_argument("--set", action="append", default=[], metavar="COMP.VAR=VALUE",
                    help="fixed parameter value in every run")
+    p.add_argument("--fmus", choices=["python", "native"], default="python",
+                   help="FMU flavour of the co-simulated scenarios: python (default) or native (C, from "
+                        "`ipcosim build --native`)")
     p.add_argument("--parameter-set", metavar="NAME", help="bind this parameter set of the scenario (thesis, tuned...)")
     p.add_argument("--stop-time", type=float, help="simulated seconds per run (default: the scenario's)")
     p.add_argument("--step", type=float, help="communication step [s] (default: the scenario's)")
@@ -59,7 +62,7 @@ def main(args: argparse.Namespace) -> int:
 
     overrides = parse_set(args.set)
     spec = spec_for(args.scenario, stop_time=args.stop_time, step=args.step, overrides=overrides,
-                    parameter_set=args.parameter_set)
+                    parameter_set=args.parameter_set, fmus=args.fmus)
     varies = parse_all(args.vary, spec.parameters)
     cases = make_cases(varies, spec.parameters, samples=args.samples, seed=args.seed)
     out = Path(args.out) if args.out else default_out(args.scenario)

@@ -37,6 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--step", type=float, help="communication step [s] (default: the scenario's)")
     p.add_argument("--w-angle", type=float, default=None, help="weight of ITAE(angle) [m/rad] (default 0.1)")
     p.add_argument("--w-voltage", type=float, default=None, help="weight of ISE(voltage) [m s/V^2] (default 1e-4)")
+    p.add_argument("--fmus", choices=["python", "native"], default="python",
+                   help="FMU flavour of the co-simulated scenarios: python (default) or native (C, from "
+                        "`ipcosim build --native`)")
     p.add_argument("--parameter-set", metavar="NAME",
                    help="start from this parameter set of the scenario (default: thesis when it exists)")
     p.add_argument("--ssv", help="where to write the tuned parameter set (default: autotuned.ssv beside the scenario)")
@@ -75,7 +78,7 @@ def main(args: argparse.Namespace) -> int:
         if "thesis" in load_scenario(args.scenario).parameter_sets:
             pset = "thesis"
     spec = spec_for(args.scenario, stop_time=args.stop_time, step=args.step, overrides=overrides,
-                    parameter_set=pset)
+                    parameter_set=pset, fmus=args.fmus)
     names = tunemod.parse_params(args.params, spec.parameters)
     bounds = tunemod.parse_bounds(args.bounds, names, spec.parameters)
     w_angle = costmod.W_ANGLE if args.w_angle is None else args.w_angle

@@ -69,11 +69,12 @@ class CosimSpec(RunSpec):
     metric_names: tuple[str, ...] = ()
     fmu_files: dict = field(default_factory=dict)
     archive: bytes | None = field(default=None, repr=False)
+    fmus: str = "python"
 
     @classmethod
     def from_scenario(cls, scenario: str, stop_time: float | None = None, step: float | None = None,
                       overrides: Mapping[str, Any] | None = None, series: bool = False,
-                      parameter_set: str | None = None) -> "CosimSpec":
+                      parameter_set: str | None = None, fmus: str = "python") -> "CosimSpec":
         """Parse and bind a scenario (FMUs are not extracted here) and describe its runs.
 
         Raises
@@ -86,7 +87,7 @@ class CosimSpec(RunSpec):
         from ipcosim.harness.scenario.system import with_overrides
         from ipcosim.harness.studies.cost import COST_TERMS
 
-        prepared = Prepared(scenario, parameter_set=parameter_set, slave_factory=_no_slave, warn=False)
+        prepared = Prepared(scenario, parameter_set=parameter_set, slave_factory=_no_slave, warn=False, fmus=fmus)
         system = prepared.system
         overrides = dict(overrides or {})
         with_overrides(system, overrides)  # unknown or unsettable names: one clear line
@@ -108,7 +109,7 @@ class CosimSpec(RunSpec):
                    parameter_set=parameter_set,
                    gains=parameter_set or ",".join(prepared.scenario.bound_sets) or "FMU defaults", name=prepared.scenario.name or Path(scenario).name,
                    scenario_hash=_hash_files(files), parameters=params,
-                   metric_names=tuple(METRIC_KEYS) + COST_TERMS + TIMING_METRICS, fmu_files=fmu_files)
+                   metric_names=tuple(METRIC_KEYS) + COST_TERMS + TIMING_METRICS, fmu_files=fmu_files, fmus=fmus)
         return spec
 
     def portable(self) -> "CosimSpec":
@@ -136,9 +137,12 @@ class CosimSpec(RunSpec):
         return dataclasses.replace(self, archive=data)
 
     def describe(self) -> dict[str, Any]:
-        return {"name": self.name, "scenario_hash": self.scenario_hash, "location": self.location,
-                "stop_time": self.stop_time, "step": self.step, "overrides": self.overrides,
-                "parameter_set": self.parameter_set, "with_series": self.with_series}
+        out = {"name": self.name, "scenario_hash": self.scenario_hash, "location": self.location,
+               "stop_time": self.stop_time, "step": self.step, "overrides": self.overrides,
+               "parameter_set": self.parameter_set, "with_series": self.with_series}
+        if self.fmus != "python":
+            out["fmus"] = self.fmus
+        return out
 
     def build(self) -> Runner:
         """Load the scenario and extract its FMUs (once per worker); return the run function."""
@@ -162,7 +166,7 @@ class CosimSpec(RunSpec):
             atexit.register(shutil.rmtree, folder, True)
             location = str(Path(folder) / f"{Path(self.location).stem or 'scenario'}.ssp")
             Path(location).write_bytes(self.archive)
-        holder = [Prepared(location, parameter_set=self.parameter_set, warn=False)]
+        holder = [Prepared(location, parameter_set=self.parameter_set, warn=False, fmus=self.fmus)]
         spec = self
 
         def release() -> None:

@@ -27,7 +27,7 @@ def parse_set(items: list[str] | None) -> dict[str, float]:
 
 def spec_for(scenario: str, stop_time: float | None = None, step: float | None = None,
              overrides: Mapping[str, float] | None = None, series: bool = False,
-             parameter_set: str | None = None) -> RunSpec:
+             parameter_set: str | None = None, fmus: str = "python") -> RunSpec:
     """The run specification of a scenario.
 
     Parameters
@@ -44,6 +44,8 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
     parameter_set : str, optional
         Bind this named parameter set of the scenario (``thesis``, ``tuned``, ``autotuned``)
         instead of its default.
+    fmus : {'python', 'native'}
+        FMU flavour of a co-simulated scenario (``ipcosim.harness.scenario.flavour``).
     """
     if stop_time is not None and not stop_time > 0:
         raise UsageError(f"--stop-time {stop_time}: must be positive")
@@ -67,7 +69,7 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
     from ipcosim.harness.studies.cosim import CosimSpec
 
     return CosimSpec.from_scenario(scenario, stop_time=stop_time, step=step, overrides=overrides, series=series,
-                                   parameter_set=parameter_set)
+                                   parameter_set=parameter_set, fmus=fmus)
 
 
 def for_executor(spec: RunSpec, executor: object) -> RunSpec:

@@ -1,0 +1,406 @@
+"""Native models: each plant, control law and the setpoint traced from its Python definition.
+
+A :class:`NativeModel` is what the C generator (``ipcosim.fmus.native.cgen``) needs: the model's
+variables (read from the Python flavour's model description, so names, value references,
+units and start values cannot drift), its internal state slots, and the traced assignments
+of its ``initialize`` and ``step`` functions.
+
+* Plants: the step is ``FastETDRK4.step`` (``ipcosim.fmus.integrator``) over the plant's internal
+  right-hand side (``ipcosim.fmus.plant``), after the amplifier's clip (``ipcosim.fmus.physics``),
+  followed by the conversion of the internal state back to the outputs. The physical constants
+  stay parameters; the integrator's stage matrices (computed in Python for ``integrator_step``)
+  are further parameters ``etdrk4_S<k>_<i>_<j>``.
+* Laws: the law object built by ``ipcosim.controllers.catalog.build_law`` for the default
+  parameter values has every number replaced by a leaf (``ipcosim.fmus.native.leaves``) and its
+  own ``step`` traced twice: once from the reset state (first sample) and once from the state
+  after a sample; a ``first`` flag selects between them. Numbers that a step assigns are state;
+  the others are parameters, named like the Python FMU's parameter they equal
+  (``gain_aliases``) or after their path.
+* Setpoint: ``ipcosim.controllers.reference.reference_at`` at the end of the step.
+"""
+from __future__ import annotations
+
+import copy
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+from xml.etree import ElementTree
+
+import numpy as np
+
+from ipcosim.fmus.native import tracer
+from ipcosim.fmus.native.leaves import c_name, numbers
+from ipcosim.fmus.native.tracer import Node, leaf, select
+
+
+class NativeModelError(RuntimeError):
+    """A model cannot be generated (names the model and the reason)."""
+
+
+@dataclass
+class Variable:
+    """One FMI scalar variable of a native model (``index`` = its slot in the value array)."""
+
+    name: str
+    vr: int
+    causality: str
+    variability: str
+    type: str = "Real"
+    start: float | None = None
+    initial: str | None = None
+    unit: str | None = None
+    description: str = ""
+    index: int = -1
+    depends_on: tuple[str, ...] | None = None
+    initial_depends_on: tuple[str, ...] | None = None
+
+
+@dataclass
+class NativeModel:
+    """Everything the C generator needs for one model (see the module docstring)."""
+
+    name: str
+    kind: str                                   # plant | sampled | source
+    description: str
+    variables: list[Variable]
+    states: dict[str, float]                    # state slot key -> start value
+    initialize: list[tuple[str, Any]]           # (slot key, node) assignments
+    step: list[tuple[str, Any]]
+    checked: list[str]                          # slot keys that must stay finite
+    python_only: list[str] = field(default_factory=list)   # Python parameters this flavour lacks
+    paths: dict[str, str] = field(default_factory=dict)    # law number path -> native parameter (laws)
+    meta: dict[str, str] = field(default_factory=dict)     # {"role": plant|law|source, "law", "plant"}
+    checks: dict[str, str] = field(default_factory=dict)   # parameter -> finite | positive | nonnegative
+    unit_definitions: list[ElementTree.Element] = field(default_factory=list)
+
+    def variable(self, name: str) -> Variable:
+        for v in self.variables:
+            if v.name == name:
+                return v
+        raise KeyError(name)
+
+
+# ============================================================================ the Python flavour
+
+
+def python_variables(fmu: Path) -> tuple[list[Variable], list[ElementTree.Element], str]:
+    """Variables, unit definitions and description of a built Python FMU."""
+    with zipfile.ZipFile(fmu) as z:
+        root = ElementTree.fromstring(z.read("modelDescription.xml"))
+    out = []
+    svs = root.find("ModelVariables")
+    assert svs is not None
+    elems = list(svs)
+    for sv in elems:
+        typ = next(iter(sv))
+        start = typ.get("start")
+        out.append(Variable(name=sv.get("name", ""), vr=int(sv.get("valueReference", "0")),
+                            causality=sv.get("causality", "local"), variability=sv.get("variability", "continuous"),
+                            type=typ.tag, initial=sv.get("initial"), unit=typ.get("unit"),
+                            description=sv.get("description", ""),
+                            start=None if start is None else (1.0 if start == "true" else 0.0 if start == "false"
+                                                              else float(start))))
+    structure = root.find("ModelStructure")
+    names = [v.name for v in out]
+    if structure is not None:
+        for tag, attr in (("Outputs", "depends_on"), ("InitialUnknowns", "initial_depends_on")):
+            sect = structure.find(tag)
+            for u in (sect if sect is not None else []):
+                var = out[int(u.get("index", "0")) - 1]
+                deps = u.get("dependencies")
+                setattr(var, attr, None if deps is None else tuple(names[int(i) - 1] for i in deps.split()))
+    units = list(root.find("UnitDefinitions") or [])
+    return out, units, root.get("description", "")
+
+
+# ============================================================================ plants
+
+
+def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> NativeModel:
+    """The native plant ``name`` (``IP02SingleMass`` / ``IP02DoubleMass``) traced from the Python plant."""
+    from ipcosim.fmus import physics
+    from ipcosim.fmus import plant as plant_mod
+    from ipcosim.fmus.integrator import FastETDRK4
+    from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, make
+
+    variables, units, description = python_variables(python_fmu)
+    cls = PLANT_KINDS[kind]
+    pnames = [f.name for f in cls.__dataclass_fields__.values()]
+    p0 = make(kind, **dict(PRESETS[DEFAULT_PRESET[kind]][1]))
+    concrete = plant_mod.Plant(p0)
+    stepper = FastETDRK4(concrete._L, step)
+    states = physics.state_names(kind)
+    n = len(states)
+    single = kind == "single-mass"
+    rhs_factory = plant_mod.single_mass_internal_rhs if single else plant_mod.double_mass_internal_rhs
+
+    def sym_params() -> Any:
+        p = object.__new__(cls)
+        for pn in pnames:
+            object.__setattr__(p, pn, leaf("V:" + pn))
+        return p
+
+    def sym_stepper() -> FastETDRK4:
+        s = object.__new__(FastETDRK4)
+        s.h, s.n = step, n
+        for k, m in enumerate((stepper.S0, stepper.S1, stepper.S2, stepper.S3)):
+            sym = np.empty(m.shape, dtype=object)
+            for i, j in np.ndindex(m.shape):
+                sym[i, j] = leaf(f"V:etdrk4_S{k}_{i}_{j}")
+            setattr(s, f"S{k}", sym)
+        s._buf = np.zeros(5 * n, dtype=object)
+        return s
+
+    def step_fn() -> list[Any]:
+        p = sym_params()
+        f = tracer.local(rhs_factory(p))
+        vA = tracer.local(physics.clip_voltage)(leaf("V:voltage"), p.voltage_limit)
+        z = sym_stepper().step([leaf(f"S:z{i}") for i in range(n)], f, vA)
+        x = physics.single_mass_from_momentum(z, p) if single else z
+        return list(z) + list(x)
+
+    def init_fn() -> list[Any]:
+        x0 = [leaf(f"V:initial_{s}") for s in states]
+        return list(physics.single_mass_to_momentum(x0, sym_params()) if single else x0)
+
+    with tracer.math_hooks():
+        stepped = tracer.trace(step_fn)
+        started = tracer.trace(init_fn)
+    zkeys = [f"S:z{i}" for i in range(n)]
+    extra = [Variable("integrator_step", 0, "parameter", "fixed", start=step, initial="exact", unit="s",
+                      description="communication step the integrator's coefficients are computed for [s]; every "
+                                  "fmi2DoStep must use it")]
+    for k, m in enumerate((stepper.S0, stepper.S1, stepper.S2, stepper.S3)):
+        for i, j in np.ndindex(m.shape):
+            extra.append(Variable(f"etdrk4_S{k}_{i}_{j}", 0, "parameter", "fixed", start=float(m[i, j]),
+                                  initial="exact", unit="1",
+                                  description=f"ETDRK4 stage matrix S{k}[{i},{j}] (ipcosim.fmus.integrator."
+                                              "etdrk4_f_form), computed for integrator_step"))
+    _append(variables, extra)
+    return NativeModel(
+        name=name, kind="plant", description=description, variables=variables, unit_definitions=units,
+        states={k: 0.0 for k in zkeys},
+        initialize=list(zip(zkeys, started)) + [(f"V:{s}", leaf(f"V:initial_{s}")) for s in states],
+        step=list(zip(zkeys, stepped[:n])) + [(f"V:{s}", v) for s, v in zip(states, stepped[n:])],
+        checked=zkeys, meta={"role": "plant", "plant": kind, "integrator_step": repr(step)},
+        checks={**{f.name: ("positive" if f.metadata.get("positive") else
+                            "nonnegative" if f.metadata.get("nonnegative") else "finite")
+                   for f in cls.__dataclass_fields__.values()},
+                **{f"initial_{s}": "finite" for s in states}, "integrator_step": "positive"})
+
+
+def _append(variables: list[Variable], extra: list[Variable]) -> None:
+    vr = max(v.vr for v in variables) + 1
+    taken = {v.name for v in variables}
+    for v in extra:
+        if v.name in taken:
+            raise NativeModelError(f"native variable {v.name} collides with a Python variable")
+        v.vr = vr
+        vr += 1
+        variables.append(v)
+
+
+# ============================================================================ laws
+
+
+def _trace_step(base: Any, measured: tuple[str, ...]) -> tuple[Any, dict[str, Any], dict[str, float]]:
+    """Trace ``base.step`` from ``base``'s state: (voltage node, {path: new value}, {path: value before})."""
+    keys: list[str] = []
+    before = numbers(base)
+
+    def fn() -> list[Any]:
+        law = copy.deepcopy(base)
+        numbers(law, replace=True)
+        law._inputs = lambda m, r: (np.array(list(m), dtype=object), r)
+        u = law.step([leaf(f"V:{m}") for m in measured], leaf("V:reference"))
+        after = numbers(law)
+        if not keys:
+            keys.extend(sorted(after))
+        elif sorted(after) != keys:
+            raise NativeModelError("a law's state layout depends on a branch")
+        return [u] + [after[k] for k in keys]
+
+    from ipcosim.controllers import laws
+    saturate, schedule = laws.saturate, laws.Schedule.__call__
+    laws.saturate = tracer.local(saturate)  # pure functions: their branches merged where they return
+    laws.Schedule.__call__ = tracer.local(schedule)  # type: ignore[method-assign]
+    try:
+        with tracer.math_hooks(laws):
+            out = tracer.trace(fn)
+    finally:
+        laws.saturate, laws.Schedule.__call__ = saturate, schedule  # type: ignore[method-assign]
+    return out[0], dict(zip(keys, out[1:])), before
+
+
+def gain_aliases(law: str, kind: str, defaults: dict[str, Any],
+                 build: Callable[[dict[str, Any]], Any]) -> tuple[dict[str, str], set[str]]:
+    """Which law numbers equal which Python parameter, found by perturbing each parameter in turn.
+
+    Returns ``({path: parameter}, {parameters that also change other numbers: design-only})``.
+    """
+    base = numbers(build(defaults))
+    alias: dict[str, str] = {}
+    design_only: set[str] = set()
+    for name, value in defaults.items():
+        if isinstance(value, bool):
+            design_only.add(name)
+            continue
+        new = float(value) * 1.25 + 0.01
+        try:
+            moved = numbers(build({**defaults, name: new}))
+        except Exception:  # noqa: BLE001 -- a perturbation the design rejects: not actable natively
+            design_only.add(name)
+            continue
+        if set(moved) != set(base):
+            design_only.add(name)
+            continue
+        for path, v in moved.items():
+            if v != base[path]:
+                if base[path] == float(value) and v == new:
+                    alias[path] = name
+                else:
+                    design_only.add(name)
+    return alias, design_only
+
+
+def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
+    """The native controller ``<Law><Plant>`` traced from ``ipcosim.controllers.laws``."""
+    from ipcosim.controllers import catalog
+    from ipcosim.fmus.physics import MEASURED
+
+    name = catalog.model_name(law, kind)
+    variables, units, description = python_variables(python_fmu)
+    defaults = catalog.defaults(law, kind)
+    build = lambda values: catalog.build_law(law, kind, values, backend="scipy")  # noqa: E731
+    law0 = build(defaults)
+    measured = MEASURED[kind]
+    law1 = copy.deepcopy(law0)
+    law1.step([0.0] * len(measured), 0.0)
+    u1, after1, before1 = _trace_step(law0, measured)
+    u2, after2, before2 = _trace_step(law1, measured)
+    first = leaf("S:first")
+    state_paths = sorted(p for p in set(after1) | set(after2)
+                         if after2.get(p) is not leaf("L:" + p) or p not in before1)
+    updates = [(f"L:{p}", select(first, after1.get(p, leaf("L:" + p)), after2.get(p, leaf("L:" + p))))
+               for p in state_paths]
+    voltage = select(first, u1, u2)
+    step = [("V:voltage", voltage)] + updates + [("S:first", 0.0)]
+    used = _leaves([n for _, n in step if isinstance(n, Node)])
+    param_paths = sorted(k[2:] for k in used if k.startswith("L:") and k[2:] not in state_paths)
+    alias, design_only = gain_aliases(law, kind, defaults, build)
+    alias = {p: a for p, a in alias.items() if a not in design_only}
+    keep = {alias[p] for p in param_paths if p in alias} | {"sample_period", "voltage_limit"}
+    python_only = sorted(v.name for v in variables if v.causality == "parameter" and v.name not in keep)
+    native_vars = [v for v in variables if v.causality != "parameter" or v.name in keep]
+    extra, renamed = _derived_parameters(law, kind, [p for p in param_paths if p not in alias], before2,
+                                         variables)
+    for v in native_vars:
+        if v.causality == "calculatedParameter" and v.name in renamed.values():
+            v.causality, v.variability, v.initial = "parameter", "fixed", "exact"
+    native_vars = [v for v in native_vars if v.causality != "calculatedParameter"]
+    _append(native_vars, extra)
+    for p in param_paths:
+        target = alias.get(p) or renamed[p]
+        var = next(v for v in native_vars if v.name == target)
+        if var.start is None or var.causality == "parameter" and p not in alias:
+            var.start = before2[p]
+        if p in alias and abs(float(var.start) - before2[p]) > 1e-15 * max(1.0, abs(before2[p])):
+            raise NativeModelError(f"{name}: {p} = {before2[p]} but parameter {target} starts at {var.start}")
+    aliases = {f"L:{p}": f"V:{alias.get(p) or renamed[p]}" for p in param_paths}
+    step = [(k, _rename(n, aliases)) for k, n in step]
+    states = {f"L:{p}": float(before1.get(p, 0.0)) for p in state_paths}
+    states.update({"S:first": 1.0, "S:tick": 0.0})
+    return NativeModel(name=name, kind="sampled", description=description, variables=native_vars,
+                       unit_definitions=units, states=states, initialize=step, step=step,
+                       checked=["V:voltage"] + [f"L:{p}" for p in state_paths], python_only=python_only,
+                       paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
+                       meta={"role": "law", "law": law, "plant": kind},
+                       checks={**{p: "finite" for p in {v.name for v in native_vars if v.causality == "parameter"}},
+                               **{s.name: s.constraint for s in catalog.schema(law, kind)
+                                  if s.constraint != "bool" and s.name in {v.name for v in native_vars}}})
+
+
+def _derived_parameters(law: str, kind: str, paths: list[str], values: dict[str, float],
+                        python_vars: list[Variable]) -> tuple[list[Variable], dict[str, str]]:
+    """Native-only parameters for law numbers that equal no Python parameter (LQR gains keep their names)."""
+    from ipcosim.controllers.catalog import design_states
+
+    renamed: dict[str, str] = {}
+    extra: list[Variable] = []
+    calculated = {v.name for v in python_vars if v.causality == "calculatedParameter"}
+    states = design_states(kind)
+    for p in paths:
+        if law == "LQR" and p.startswith("design.K[0,"):
+            renamed[p] = "K_" + states[int(p[len("design.K[0,"):-1])]
+        elif law == "LQR" and p == "design.N":
+            renamed[p] = "N"
+        else:
+            renamed[p] = c_name(p)
+        if renamed[p] in calculated:
+            continue
+        extra.append(Variable(renamed[p], 0, "parameter", "fixed", start=values[p], initial="exact",
+                              description=f"law constant {p} (ipcosim.controllers.laws), computed at build time by "
+                                          "the Python design; see docs/native.md to redesign"))
+    return extra, renamed
+
+
+def _leaves(roots: list[Node]) -> set[str]:
+    seen: set[int] = set()
+    out: set[str] = set()
+    stack = list(roots)
+    while stack:
+        n = stack.pop()
+        if id(n) in seen:
+            continue
+        seen.add(id(n))
+        if n.op == "leaf":
+            out.add(n.name)
+        stack.extend(n.args)
+    return out
+
+
+def _rename(root: Any, mapping: dict[str, str]) -> Any:
+    """The expression with leaves renamed (a fresh graph; interned)."""
+    if not isinstance(root, Node):
+        return root
+    memo: dict[int, Node] = {}
+
+    def go(n: Node) -> Node:
+        got = memo.get(id(n))
+        if got is not None:
+            return got
+        if n.op == "leaf":
+            new = leaf(mapping.get(n.name, n.name))
+        elif n.op == "const":
+            new = n
+        else:
+            args = tuple(go(a) for a in n.args)
+            new = tracer._intern(n.op, args, n.is_bool)
+        memo[id(n)] = new
+        return new
+
+    import sys
+    limit = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(limit, 100000))
+    try:
+        return go(root)
+    finally:
+        sys.setrecursionlimit(limit)
+
+
+# ============================================================================ setpoint
+
+
+def setpoint_model(python_fmu: Path) -> NativeModel:
+    """The native ``Setpoint``: ``reference_at`` traced with every parameter symbolic."""
+    from ipcosim.controllers.reference import reference_at
+
+    variables, units, description = python_variables(python_fmu)
+    args = ("waveform", "amplitude", "step_time", "offset", "ramp_rate", "period")
+    with tracer.math_hooks():
+        (ref,) = tracer.trace(lambda: [reference_at(leaf("S:time"), *(leaf(f"V:{a}") for a in args))])
+    return NativeModel(name="Setpoint", kind="source", description=description, variables=variables,
+                       unit_definitions=units, states={}, initialize=[("V:reference", ref)],
+                       step=[("V:reference", ref)], checked=["V:reference"], meta={"role": "source"},
+                       checks={a: "finite" for a in args})

@@ -1,0 +1,108 @@
+"""Redesign: the native flavour's parameter values for a set of Python-flavour parameter values.
+
+The native controllers take the numbers the Python design computes (LQR gains, discretized
+observer and filter matrices, the HSMC's top-layer constants) as parameters; the native plants
+take the integrator's stage matrices. :func:`redesign` recomputes all of them with the same
+Python design code from the Python flavour's parameters (weights, poles, design model, physical
+constants), which is how ``ipcosim`` runs a scenario whose parameter set was written for the
+Python flavour on native FMUs, and how a user writes a native parameter set for a new design::
+
+    from ipcosim.fmus.native.redesign import redesign
+    values = redesign("build/fmus-native/LQRSingleMass.fmu", {"R": 0.05})   # {native name: value}
+"""
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+
+class NativeParameterError(KeyError):
+    """A parameter the native flavour does not have (names the model and the flavour)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
+def native_info(fmu: Path | str) -> dict[str, Any] | None:
+    """The ``resources/native.json`` of a native FMU, or None for any other FMU."""
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            return json.loads(z.read("resources/native.json"))
+    except (KeyError, zipfile.BadZipFile, FileNotFoundError, IsADirectoryError):
+        return None
+
+
+def redesign(fmu: Path | str | Mapping[str, Any], python_values: Mapping[str, Any]) -> dict[str, float]:
+    """Native parameter values implied by Python-flavour parameter values (others at their defaults).
+
+    Parameters
+    ----------
+    fmu : path or mapping
+        A native FMU (or its ``native.json`` content).
+    python_values : mapping
+        ``{Python-flavour parameter: value}``.
+
+    Returns
+    -------
+    dict
+        ``{native parameter: value}`` for every parameter the redesign computes, plus the given
+        values of parameters both flavours share.
+    """
+    info = fmu if isinstance(fmu, Mapping) else native_info(fmu)
+    if info is None:
+        raise NativeParameterError(f"{fmu} is not a native ipcosim FMU")
+    role = info["role"]
+    if role == "law":
+        return _law(info, python_values)
+    if role == "plant":
+        return _plant(info, python_values)
+    return {k: v for k, v in python_values.items()}
+
+
+def _law(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]:
+    from ipcosim.controllers.catalog import build_law, defaults
+    from ipcosim.fmus.native.leaves import numbers
+
+    full = dict(defaults(info["law"], info["plant"]))
+    full.update(values)
+    law = build_law(info["law"], info["plant"], full, backend="scipy")
+    nums = numbers(law)
+    out = {name: nums[path] for path, name in info["paths"].items()}
+    for name in ("sample_period", "voltage_limit"):
+        out[name] = float(full[name])
+    for name, value in values.items():
+        if name not in info["python_only"]:
+            out.setdefault(name, value)
+    return out
+
+
+def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]:
+    from ipcosim.fmus.integrator import etdrk4_f_form
+    from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, make
+    from ipcosim.fmus.plant import Plant
+
+    kind = info["plant"]
+    fields = set(PLANT_KINDS[kind].__dataclass_fields__)
+    phys = dict(PRESETS[DEFAULT_PRESET[kind]][1])
+    phys.update({k: float(v) for k, v in values.items() if k in fields})
+    step = float(values.get("integrator_step", float(info["integrator_step"])))
+    out: dict[str, float] = {k: v for k, v in values.items()}
+    for k, m in enumerate(etdrk4_f_form(Plant(make(kind, **phys))._L, step)):
+        for i, j in np.ndindex(m.shape):
+            out[f"etdrk4_S{k}_{i}_{j}"] = float(m[i, j])
+    out["integrator_step"] = step
+    return out
+
+
+def check_settable(info: Mapping[str, Any], fmu_name: str, names: list[str], known: set[str]) -> None:
+    """Raise NativeParameterError for the first of ``names`` the native flavour lacks."""
+    for name in names:
+        if name not in known:
+            extra = " (a design parameter of the python flavour only: the native flavour takes the numbers " \
+                    "the design computes; run with --fmus python, or see docs/native.md to redesign)" \
+                if name in info.get("python_only", ()) else ""
+            raise NativeParameterError(f"the native flavour of {fmu_name} has no parameter {name!r}{extra}")
