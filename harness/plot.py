@@ -18,9 +18,9 @@ POSITIONS = (("plant.cart_position", "cart"), ("plant.active_cart_position", "ac
 
 def plot_result(result: "Result", path: str | Path, title: str | None = None) -> Path:
     """Write the three-panel figure of a run (:func:`figure`) to ``path`` (PNG); returns the path."""
+    fig = figure(result, title, backend="Agg")
     import matplotlib.pyplot as plt
 
-    fig = figure(result, title, backend="Agg")
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)
