@@ -111,11 +111,11 @@ class Result:
         out.mkdir(parents=True, exist_ok=True)
         files = {"results": out / "results.csv", "metrics": out / "metrics.json"}
         write_csv(self.data, files["results"], self.select(variables))
+        self.write_metrics(files["metrics"])  # before the plot, which may fail (a missing extra)
         if plot:
             from ipcosim.harness.plot import plot_result
 
             files["plot"] = plot_result(self, out / "plot.png")
-        self.write_metrics(files["metrics"])
         return files
 
     def write_metrics(self, path: Path) -> None:
