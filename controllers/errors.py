@@ -1,16 +1,7 @@
-"""Exception classes of the controller package.
-
-Inside a controller FMU only the ``fmus`` and ``controllers`` packages are packed (see
-``ipcosim.fmus.build``), so the project base class is imported when available and replaced by a
-plain ``Exception`` subclass otherwise; every error still subclasses the fitting built-in.
-"""
+"""Exception classes of the controller package (on the project base, :mod:`ipcosim.errors`)."""
 from __future__ import annotations
 
-try:
-    from ipcosim.harness.errors import IpcosimError
-except ImportError:  # pragma: no cover - inside an FMU
-    class IpcosimError(Exception):  # type: ignore[no-redef]
-        """Base of every error ipcosim reports as one line to the user."""
+from ipcosim.errors import IpcosimError
 
 
 class ControllerParameterError(IpcosimError, ValueError):

@@ -17,7 +17,7 @@ from ipcosim.controllers.laws import DiscreteLaw
 from ipcosim.fmus.params import PlantParams
 from ipcosim.fmus.physics import MEASURED, MOTOR_CART
 from ipcosim.fmus.plant import Plant, PlantStepError
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.metrics import compute_metrics
 
 

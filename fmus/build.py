@@ -41,7 +41,7 @@ SCRIPT_DIRS: tuple[str, ...] = ("fmus", "controllers")
 STAMP_FILE = ".build-stamps.json"
 #: The subpackages of ``ipcosim`` an FMU may carry; anything else it imports must be the
 #: standard library or an optional package imported only off the default path.
-PACKABLE = ("fmus", "controllers", "harness")
+PACKABLE = ("fmus", "controllers", "harness", "errors")
 _IMPORT_RE = re.compile(r"\bipcosim\.(" + "|".join(PACKABLE) + r")\b")
 
 

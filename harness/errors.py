@@ -1,14 +1,10 @@
-"""Project exception classes. Each subclasses the built-in it refines, so callers that do
-not know ipcosim can still catch ValueError, OSError or RuntimeError."""
+"""Errors of the master's side: the base classes (from :mod:`ipcosim.errors`) and the
+missing-extra check for optional dependencies."""
 from __future__ import annotations
 
+from ipcosim.errors import IpcosimError, UsageError
 
-class IpcosimError(Exception):
-    """Base of every error ipcosim reports as one line to the user."""
-
-
-class UsageError(IpcosimError, ValueError):
-    """A bad command-line value (unknown scenario, malformed --set, non-positive step...)."""
+__all__ = ["IpcosimError", "UsageError", "MissingExtraError", "EXTRAS", "require"]
 
 
 class MissingExtraError(IpcosimError, ImportError):
