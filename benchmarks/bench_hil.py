@@ -181,7 +181,7 @@ def faults(lines: list[str]) -> None:
 
 def _kill_and_measure(victim: str, rig_proc: subprocess.Popen, master: subprocess.Popen, uri: str,
                       out: Path) -> str:
-    from ipcosim.harness.hil.tcpip import TcpipCard
+    from ipcosim.fmus.hil.tcpip import TcpipCard
     host_port = uri.split("tcpip://", 1)[1]
     host, port = host_port.rsplit(":", 1)
     mon = TcpipCard("q4", uri, host, int(port), role="monitor", name="bench monitor")

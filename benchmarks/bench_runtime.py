@@ -90,7 +90,7 @@ def init_times(fmu_dir: Path, work: Path) -> dict[str, tuple[float, float]]:
 def _init_ms(fmu: Path, unzip: Path) -> tuple[float, float]:
     """One fresh process: (wall, CPU) milliseconds from instantiate to initialized (a HIL adapter
     against a lockstep virtual rig served by this process)."""
-    from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+    from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
     from ipcosim.harness.hil.server import RigServer
 
     uri, server = "", None

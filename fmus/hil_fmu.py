@@ -5,7 +5,7 @@ The adapter stands in for a plant FMU: the same input ``voltage`` [V] and the sa
 encoder-measured outputs (``ipcosim.fmus.physics.MEASURED``: ``cart_position``,
 ``pendulum_angle``; or ``active_cart_position``, ``passive_cart_position``,
 ``pendulum_angle``), so a scenario swaps simulation for hardware by swapping one
-component. It drives a data-acquisition card through :mod:`ipcosim.harness.hil` (a real Q4 with
+component. It drives a data-acquisition card through :mod:`ipcosim.fmus.hil` (a real Q4 with
 Quanser's package, or the virtual rig), at volts-and-counts level:
 
 * **start** (leaving initialization): open the card (``card_uri``; ``card_token`` or the
@@ -66,7 +66,7 @@ _CHANNELS = {"cart_position": ("cart_encoder_channel", 0, "cart_calibration", CA
 
 
 def _valid_uri(value: str) -> str | None:
-    from ipcosim.harness.hil import HILError, parse_card_uri
+    from ipcosim.fmus.hil import HILError, parse_card_uri
     try:
         parse_card_uri(value)
     except HILError as exc:
@@ -183,7 +183,7 @@ class HilFmu(FmuBase):
 
     def _open_checked(self) -> Any:
         """Open the card, check it (plant kind, amplifier not latched off), 0 V, expiration state, encoders 0."""
-        from ipcosim.harness.hil import HILError, open_uri
+        from ipcosim.fmus.hil import HILError, open_uri
 
         where = f"card {self.card_uri}"
         try:
@@ -217,7 +217,7 @@ class HilFmu(FmuBase):
 
     def _arm(self) -> Any:
         """The first step: (re)open the card if needed and start its watchdog -- stepping begins now."""
-        from ipcosim.harness.hil import HILError
+        from ipcosim.fmus.hil import HILError
 
         try:
             card = self._holder.get("card") or self._open_checked()
@@ -231,7 +231,7 @@ class HilFmu(FmuBase):
         return card
 
     def step(self, t: float, h: float) -> None:
-        from ipcosim.harness.hil import ErrorCode, HILError, count_difference
+        from ipcosim.fmus.hil import ErrorCode, HILError, count_difference
 
         card = self._arm() if not self._armed else self._holder.get("card")
         if card is None:

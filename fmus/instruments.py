@@ -1,7 +1,7 @@
 """What stands between the plant's motion and a controller on the bench: encoders, noise, end stops.
 
 Options of the one plant model (``ipcosim.fmus.plant.Plant``), shared by the plant FMUs and the
-virtual rig (``ipcosim.harness.hil.rig``), so that simulation and the rig behave alike. Plain
+virtual rig (``ipcosim.fmus.hil.rig``), so that simulation and the rig behave alike. Plain
 Python floats and the standard library only (this module runs inside the plant FMUs).
 
 * **Encoder quantization**: a reading is ``floor(x / resolution + phase) * resolution``, the

@@ -106,7 +106,7 @@ def loaded_copies(module_suffix: str) -> list:
 
 def open_tcpip_cards() -> list:
     """The TCP/IP cards open in this process, in the host or inside any FMU."""
-    return [card for m in loaded_copies("harness.hil.tcpip") for card in list(m.OPEN_CARDS)]
+    return [card for m in loaded_copies("fmus.hil.tcpip") for card in list(m.OPEN_CARDS)]
 
 
 def private_resource(names: list[str], path: str) -> bool:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 from ipcosim.harness.hil.server import RigServer
 
 pytestmark = pytest.mark.integration

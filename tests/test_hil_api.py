@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from ipcosim.harness.errors import IpcosimError
-from ipcosim.harness.hil import ErrorCode, HILError, open_card, open_uri, parse_card_uri
-from ipcosim.harness.hil.inproc import VirtualCard, get_rig, register_rig, unregister_rig
-from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.fmus.hil import ErrorCode, HILError, open_card, open_uri, parse_card_uri
+from ipcosim.fmus.hil.inproc import VirtualCard, get_rig, register_rig, unregister_rig
+from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 
 
 @pytest.mark.parametrize("uri, expected", [

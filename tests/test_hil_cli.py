@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from ipcosim.harness.hil import ErrorCode, HILError, open_card
+from ipcosim.fmus.hil import ErrorCode, HILError, open_card
 
 ROOT = Path(__file__).resolve().parents[1]
 

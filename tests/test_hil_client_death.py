@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 from ipcosim.harness.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,7 +20,7 @@ TIMEOUT = 0.5   # [s] long enough that a stall of a loaded VM does not trip it b
 
 CLIENT = """
 import sys, time
-from ipcosim.harness.hil import open_card
+from ipcosim.fmus.hil import open_card
 card = open_card("q4", sys.argv[1], timeout=1.0)
 card.write_analog([0], [0.0])
 card.watchdog_set_analog_expiration_state([0], [0.0])

@@ -17,8 +17,8 @@ from fmi_helpers import assert_vdmcheck_clean, instantiate, open_tcpip_cards, pr
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from ipcosim.harness.hil.inproc import register_rig, unregister_rig
-from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.fmus.hil.inproc import register_rig, unregister_rig
+from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 from ipcosim.harness.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -137,7 +137,8 @@ def test_adapter_has_exactly_the_plants_connectors(kind, hil_fmus, plant_fmus):
 def test_adapter_passes_validate_fmu(kind, hil_fmus):
     assert validate_fmu(str(hil_fmus[kind])) == []
     names = zipfile.ZipFile(hil_fmus[kind]).namelist()
-    assert private_resource(names, "harness/hil/api.py")
+    assert private_resource(names, "fmus/hil/api.py")
+    assert not any("/harness/" in n for n in names), names  # nothing of the master side
     assert all(n.endswith(".pyc") for n in names if "__pycache__" in n)  # only the build's checked bytecode
     assert not private_resource(names, "harness/hil/server.py") and not private_resource(names, "harness/cli/__init__.py")
 
@@ -326,7 +327,7 @@ def test_second_adapter_is_refused_while_the_first_controls_the_rig(hil_fmus, un
 
 
 def test_garbage_on_the_adapters_connection_is_dropped_and_the_session_goes_on(hil_fmus, unzipped):
-    from ipcosim.harness.hil.protocol import Msg, encode_frame
+    from ipcosim.fmus.hil.protocol import Msg, encode_frame
 
     with RigServer(VirtualRig(RigConfig(pendulum_limit=None)), "127.0.0.1", 0) as srv:
         hil = start_adapter(hil_fmus["single-mass"], unzipped(hil_fmus["single-mass"]), f"q4:{srv.uri}")

@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from ipcosim.harness.hil import ErrorCode, HILError, open_card
-from ipcosim.harness.hil.protocol import (
+from ipcosim.fmus.hil import ErrorCode, HILError, open_card
+from ipcosim.fmus.hil.protocol import (
     HEADER_SIZE,
     MAGIC,
     MAX_PAYLOAD,
@@ -23,9 +23,9 @@ from ipcosim.harness.hil.protocol import (
     pack_doubles,
     pack_text,
 )
-from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 from ipcosim.harness.hil.server import RigServer
-from ipcosim.harness.hil.tcpip import TcpipCard
+from ipcosim.fmus.hil.tcpip import TcpipCard
 
 # --- framing (pure) -----------------------------------------------------------------------------
 
@@ -84,7 +84,7 @@ def test_decoder_never_raises_on_random_bytes():
 
 
 def test_reader_rejects_short_and_trailing_payloads():
-    from ipcosim.harness.hil.protocol import DecodeError
+    from ipcosim.fmus.hil.protocol import DecodeError
     r = Reader(pack_channels([0, 1]))
     assert r.channels() == [0, 1]
     r.end()

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pytest
 
-from ipcosim.harness.hil.tcpip import TcpipCard
+from ipcosim.fmus.hil.tcpip import TcpipCard
 
 ROOT = Path(__file__).resolve().parents[1]
 SLOW = ROOT / "tests" / "data" / "slow_init"

@@ -8,9 +8,9 @@ import pytest
 
 from ipcosim.fmus.params import preset
 from ipcosim.fmus.plant import Plant
-from ipcosim.harness.hil import ErrorCode, HILError, count_difference
-from ipcosim.harness.hil.api import INT32_MAX
-from ipcosim.harness.hil.rig import (
+from ipcosim.fmus.hil import ErrorCode, HILError, count_difference
+from ipcosim.fmus.hil.api import INT32_MAX
+from ipcosim.fmus.hil.rig import (
     CART_M_PER_COUNT,
     DAC_LSB,
     END_STOP_M,

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import pytest
 
-from ipcosim.harness.hil import ErrorCode, HILError
-from ipcosim.harness.hil.protocol import HEADER, MAGIC, MAX_PAYLOAD, Msg, encode_frame, pack_channels, pack_text
-from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.fmus.hil import ErrorCode, HILError
+from ipcosim.fmus.hil.protocol import HEADER, MAGIC, MAX_PAYLOAD, Msg, encode_frame, pack_channels, pack_text
+from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 from ipcosim.harness.hil.server import RigAccessError, RigServer, escape
-from ipcosim.harness.hil.tcpip import TcpipCard
+from ipcosim.fmus.hil.tcpip import TcpipCard
 
 ROOT = Path(__file__).resolve().parents[1]
 

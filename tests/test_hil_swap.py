@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipcosim.harness.hil.rig import RigConfig, VirtualRig
+from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 from ipcosim.harness.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -239,7 +239,7 @@ def test_limit_trip_ends_the_run_naming_the_limit_and_the_amplifier_stays_off(en
 
 
 def test_second_client_is_refused(env, tmp_path):
-    from ipcosim.harness.hil import open_card
+    from ipcosim.fmus.hil import open_card
 
     scn = open_loop_scenario("single-mass", tmp_path / "scn")
     with serve() as srv:
@@ -269,7 +269,7 @@ def test_malformed_and_out_of_order_messages_mid_run_are_dropped_and_the_run_goe
     from fmi_helpers import open_tcpip_cards
 
     import ipcosim.harness
-    from ipcosim.harness.hil.protocol import Msg, encode_frame
+    from ipcosim.fmus.hil.protocol import Msg, encode_frame
     from ipcosim.harness.master.manipulators import Manipulator
 
     class Injector(Manipulator):

@@ -71,7 +71,7 @@ def _token(args: argparse.Namespace) -> str | None:
     import os
 
     from ipcosim.harness.errors import UsageError
-    from ipcosim.harness.hil.protocol import MAX_TOKEN, TOKEN_ENV
+    from ipcosim.fmus.hil.protocol import MAX_TOKEN, TOKEN_ENV
 
     if args.token_file:
         try:
@@ -106,7 +106,7 @@ def _pairs(items: list[str], what: str) -> dict[str, float]:
 def main(args: argparse.Namespace) -> int:
     if args.rig_command == "serve":
         return serve(args)
-    from ipcosim.harness.hil.tcpip import TcpipCard
+    from ipcosim.fmus.hil.tcpip import TcpipCard
 
     card = TcpipCard("q4", f"0@tcpip://{args.host}:{args.port}", args.host, args.port, role="monitor",
                      name="ipcosim rig " + args.rig_command, token=_token(args) or "")
@@ -166,7 +166,7 @@ def _check_numbers(args: argparse.Namespace) -> None:
 
 def serve(args: argparse.Namespace) -> int:
     from ipcosim.harness.errors import UsageError
-    from ipcosim.harness.hil.rig import END_STOP_M, RigConfig, VirtualRig
+    from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig
     from ipcosim.harness.hil.server import RigServer, escape
 
     _check_numbers(args)

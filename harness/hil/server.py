@@ -1,7 +1,7 @@
-"""TCP server of the virtual rig (protocol: :mod:`ipcosim.harness.hil.protocol`).
+"""TCP server of the virtual rig (protocol: :mod:`ipcosim.fmus.hil.protocol`).
 
 One thread accepts connections, one thread serves each connection; every request goes
-to the :class:`~ipcosim.harness.hil.rig.VirtualRig` (itself thread-safe). Nothing a client sends
+to the :class:`~ipcosim.fmus.hil.rig.VirtualRig` (itself thread-safe). Nothing a client sends
 can stop or wedge the server:
 
 * bad input is dropped and counted (``RigServer.counters``); the log gets the first drop of
@@ -35,8 +35,8 @@ import threading
 import time
 from typing import Callable
 
-from ipcosim.harness.hil.api import ErrorCode, HILError
-from ipcosim.harness.hil.protocol import (
+from ipcosim.fmus.hil.api import ErrorCode, HILError
+from ipcosim.fmus.hil.protocol import (
     FLAG_AMPLIFIER,
     FLAG_LIMIT,
     FLAG_WD_EXPIRED,
@@ -53,7 +53,7 @@ from ipcosim.harness.hil.protocol import (
     pack_text,
     reply_payload,
 )
-from ipcosim.harness.hil.rig import NS, VirtualRig
+from ipcosim.fmus.hil.rig import NS, VirtualRig
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 18920

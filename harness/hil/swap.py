@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ipcosim.harness.hil import DEFAULT_URI, HILError, parse_card_uri
+from ipcosim.fmus.hil import DEFAULT_URI, HILError, parse_card_uri
 
 ADAPTERS = {"single-mass": "IP02HILSingleMass", "double-mass": "IP02HILDoubleMass"}
 PLANT_MODELS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}
@@ -61,7 +61,7 @@ def card_clock(uri: str) -> str:
     if rest.startswith("inproc://"):
         from urllib.parse import parse_qsl
 
-        from ipcosim.harness.hil.inproc import _RIGS
+        from ipcosim.fmus.hil.inproc import _RIGS
         name, _, query = rest[len("inproc://"):].partition("?")
         rig = _RIGS.get(name)
         if rig is not None:
@@ -70,7 +70,7 @@ def card_clock(uri: str) -> str:
     if rest.startswith("tcpip://"):
         from urllib.parse import urlsplit
 
-        from ipcosim.harness.hil.tcpip import TcpipCard
+        from ipcosim.fmus.hil.tcpip import TcpipCard
         where = urlsplit(f"tcp://{rest[len('tcpip://'):]}")
         try:
             card = TcpipCard(card_type, card_id, where.hostname or "", where.port or 0, timeout=1.0,

@@ -19,7 +19,7 @@ FMUs step). Around it the rig models what a controller meets on the real bench:
   writes) until :meth:`VirtualRig.reset` (the operator's reset).
 * **Hard end stops** at +-0.407 m (half the 0.814 m track): a cart reaching one stops
   dead (inelastic; its outward velocity is set to zero).
-* **Watchdog** -- as on the Q4 (see :mod:`ipcosim.harness.hil.api`), timed on the rig's clock.
+* **Watchdog** -- as on the Q4 (see :mod:`ipcosim.fmus.hil.api`), timed on the rig's clock.
   Expiry forces the analog outputs to their expiration states (0 V unless configured)
   and latches: writes are refused until ``watchdog_clear``.
 * **Noise and latency** (optional) -- Gaussian count noise of standard deviation
@@ -49,7 +49,7 @@ from ipcosim.fmus.instruments import end_stop_state
 from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, preset
 from ipcosim.fmus.physics import MEASURED
 from ipcosim.fmus.plant import Plant, PlantStepError
-from ipcosim.harness.hil.api import (
+from ipcosim.fmus.hil.api import (
     CardInfo,
     ErrorCode,
     HILError,
@@ -585,7 +585,7 @@ class VirtualRig:
 
     def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
              until_ns: int, reload: bool = True) -> StepResult:
-        """One sample period (see :meth:`ipcosim.harness.hil.api.Card.step`); ``until_ns`` is rig time.
+        """One sample period (see :meth:`ipcosim.fmus.hil.api.Card.step`); ``until_ns`` is rig time.
 
         Lockstep: advance to ``until_ns`` (an instant before the rig's time is an error).
         Wallclock: wait (outside the lock) until the rig's clock reaches ``until_ns``.

@@ -14,7 +14,7 @@ Header (``!4sBBHII``)::
                       increasing within a connection); a reply carries its request's number
     length   u32      payload size in bytes, at most MAX_PAYLOAD (4096)
 
-Every reply payload starts with ``!iIq``: error code (``ipcosim.harness.hil.api.ErrorCode``, 0 =
+Every reply payload starts with ``!iIq``: error code (``ipcosim.fmus.hil.api.ErrorCode``, 0 =
 OK), status flags (bit 0 amplifier enabled, 1 limit tripped, 2 watchdog expired, 3
 watchdog running) and the rig's time in nanoseconds. On error a UTF-8 message follows
 (``!H`` length + bytes); on success the type's reply body.

@@ -1,7 +1,7 @@
 """``tcpip`` backend: a :class:`Card` on a virtual rig served by ``ipcosim rig serve``.
 
 Card id ``N@tcpip://HOST:PORT`` (e.g. ``0@tcpip://127.0.0.1:18920``). Every call is one
-request/reply exchange of :mod:`ipcosim.harness.hil.protocol`; a reply that does not come within
+request/reply exchange of :mod:`ipcosim.fmus.hil.protocol`; a reply that does not come within
 ``timeout`` seconds raises ``HILError(TIMEOUT)`` naming the request.
 """
 from __future__ import annotations
@@ -15,8 +15,8 @@ import time
 import weakref
 from typing import Sequence
 
-from ipcosim.harness.hil.api import Card, CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite
-from ipcosim.harness.hil.protocol import (
+from ipcosim.fmus.hil.api import Card, CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite
+from ipcosim.fmus.hil.protocol import (
     FLAG_AMPLIFIER,
     FLAG_LIMIT,
     FLAG_WD_EXPIRED,
@@ -49,7 +49,7 @@ class TcpipCard(Card):
     Parameters
     ----------
     card_type, card_id : str
-        As given to :func:`ipcosim.harness.hil.open_card` (for messages).
+        As given to :func:`ipcosim.fmus.hil.open_card` (for messages).
     host, port : str, int
         The rig's address.
     timeout : float

@@ -8,7 +8,7 @@ sequences instead of (channel array, count, buffer) triples:
 =====================================  ============================================
 Quanser HIL API                        :class:`Card`
 =====================================  ============================================
-``HIL(card_type, card_id)``            :func:`ipcosim.harness.hil.open_card`
+``HIL(card_type, card_id)``            :func:`ipcosim.fmus.hil.open_card`
 ``write_analog(ch, n, volts)``         ``write_analog(channels, volts)``
 ``read_encoder(ch, n, counts)``        ``read_encoder(channels) -> int32 counts``
 ``set_encoder_counts(ch, n, counts)``  ``set_encoder_counts(channels, counts)``
@@ -49,7 +49,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Sequence
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 
 
 class ErrorCode(enum.IntEnum):

@@ -7,7 +7,7 @@ your platform, then ``pip install`` the wheels it provides into the same environ
 ``HILError(BACKEND_MISSING)`` with instructions, never an ImportError traceback.
 
 This class only translates: Python sequences to the typed arrays the Quanser functions
-take, ``quanser.hardware.HILError`` to :class:`ipcosim.harness.hil.api.HILError` (same numeric
+take, ``quanser.hardware.HILError`` to :class:`ipcosim.fmus.hil.api.HILError` (same numeric
 code, Quanser's message). Card time is the host's monotonic clock, so
 :meth:`Card.step` waits for each sample instant on the host (sleep, then spin).
 """
@@ -18,7 +18,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ipcosim.harness.hil.api import Card, CardInfo, ErrorCode, HILError, as_channels, as_finite
+from ipcosim.fmus.hil.api import Card, CardInfo, ErrorCode, HILError, as_channels, as_finite
 
 INSTALL_HINT = ("Quanser's Python HIL package (module quanser.hardware) is not installed; it comes with the "
                 "Quanser SDK or QUARC (pip install the wheels they ship). To run against the virtual rig instead, "
