@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
 from ipcosim.harness.errors import IpcosimError
-from ipcosim.harness.scenario.system import Instance, Link, System
+from ipcosim.harness.master.system import Instance, Link, System
 
 GAUSS_SEIDEL = "gauss-seidel"
 JACOBI = "jacobi"

@@ -44,7 +44,7 @@ from ipcosim.harness.master.manipulators import Manipulator, Overrides
 from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.results import Result, SimulationError, task_metrics
 from ipcosim.harness.master.slave import DISCARD, TERMINATE, FMUSlave, Slave
-from ipcosim.harness.scenario.system import Instance, System, Variable, kind_of
+from ipcosim.harness.master.system import Instance, System, Variable, kind_of
 
 SlaveFactory = Callable[[Instance], Slave]
 
