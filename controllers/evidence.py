@@ -1,6 +1,6 @@
 """Closed-loop evidence without the master: every law x plant x parameter set in the pure loop.
 
-``python -m ipcosim.controllers.evidence`` prints the metrics table (markdown) that docs/controllers.md and README.md
+``python -m ipcosim.controllers.evidence`` prints the metrics table (markdown) that docs/controllers.md
 show beside the thesis's claims; ``--update docs/controllers.md`` rewrites the table between
 the ``<!-- evidence:begin -->`` / ``<!-- evidence:end -->`` markers (a test checks the document
 holds what this module computes).
@@ -101,7 +101,7 @@ def table(rows: Sequence[Row], claims: bool = True) -> str:
 
 
 def document() -> str:
-    """Both tables as they appear in docs/controllers.md and README.md."""
+    """Both tables as they appear in docs/controllers.md."""
     return (table(runs()) + "\nThe same runs (default sets) with the measurements rounded to whole encoder counts "
             "(cart 2.275e-5 m, pendulum 1.534e-3 rad per count):\n\n" + table(runs(quantize=True), claims=False))
 

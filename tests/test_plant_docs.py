@@ -1,4 +1,4 @@
-"""The parameter tables of docs/plant.md and README.md match ipcosim.fmus.params (the docs cannot go stale silently)."""
+"""The parameter tables of docs/plant.md match ipcosim.fmus.params (the docs cannot go stale silently)."""
 from __future__ import annotations
 
 import re
@@ -10,13 +10,14 @@ from ipcosim.fmus.params import PLANT_KINDS, PRESETS, parameter_info, preset
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "plant.md"
-README = ROOT / "README.md"
+README = ROOT / "docs" / "plant.md"  # the table of every preset side by side
 
 
 def doc_table(name: str) -> dict[str, tuple[float, str]]:
     text = DOC.read_text()
     start = text.index(f"#### `{name}`")
-    end = text.find("####", start + 5)
+    ends = [i for i in (text.find("####", start + 5), text.find("\n## ", start)) if i >= 0]
+    end = min(ends) if ends else len(text)
     rows = {}
     for m in re.finditer(r"^\| `(\w+)` \| ([-+0-9.e]+)(?: \*\*\(preset\)\*\*)? \| ([^|]+) \|", text[start:end], re.M):
         rows[m.group(1)] = (float(m.group(2)), m.group(3).strip())
@@ -37,10 +38,10 @@ def test_parameter_tables_match_presets(name: str) -> None:
 
 
 def readme_table() -> tuple[list[str], dict[str, tuple[list[str], str]]]:
-    """README's one table: preset columns, then per parameter (cells per preset, unit)."""
+    """The side-by-side table: preset columns, then per parameter (cells per preset, unit)."""
     text = README.read_text()
-    header = re.search(r"^\| parameter \| (.+?) \| unit \| meaning \| source \|$", text, re.M)
-    assert header, "README.md: parameter table header not found"
+    header = re.search(r"^\| parameter \| (thesis-ch3 \|.+?) \| unit \| meaning \| source \|$", text, re.M)
+    assert header, "docs/plant.md: side-by-side parameter table not found"
     presets = [c.strip() for c in header.group(1).split("|")]
     rows = {}
     for m in re.finditer(r"^\| `(\w+)` \| (.+)$", text[header.end():], re.M):
@@ -56,11 +57,11 @@ def test_readme_parameter_table_matches_presets() -> None:
         kind = PRESETS[name][0]
         params = preset(name)
         for info in parameter_info(PLANT_KINDS[kind]):
-            assert info["name"] in rows, f"README.md lacks parameter {info['name']}"
+            assert info["name"] in rows, f"docs/plant.md lacks parameter {info['name']}"
             cells, unit = rows[info["name"]]
             assert float(cells[col]) == pytest.approx(getattr(params, info["name"]), rel=1e-5), (name, info["name"])
             assert unit == info["unit"], info["name"]
         names = {i["name"] for i in parameter_info(PLANT_KINDS[kind])}
         for pname, (cells, _) in rows.items():
             if pname not in names:
-                assert cells[col] == "-", f"README.md gives {pname} a value for {name}, which has no such parameter"
+                assert cells[col] == "-", f"docs/plant.md gives {pname} a value for {name}, which has no such parameter"

@@ -1,0 +1,7 @@
+"""The co-simulation master: slaves (one FMU instance each), algorithms (Gauss-Seidel,
+Jacobi), the execution that owns them and runs the FMI lifecycle, observers, manipulators,
+real-time pacing and results. ``system`` describes what it runs.
+
+May import: ``ipcosim.errors`` and ``harness.errors``. It knows nothing of pendulums,
+scenario files, studies or the command line: task metrics come in as plug-ins.
+"""

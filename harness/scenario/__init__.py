@@ -1,0 +1,7 @@
+"""Scenarios: SSP files read and schema-checked into a frozen ``Scenario`` (``ssp``), safe
+archive extraction, binding to the FMUs (``system.bind``: parameters, swaps, overrides in one
+place), the scenario generator and the ``.ssp`` packer.
+
+May import: ``harness.master`` (the system types it builds), ``ipcosim.errors``,
+``harness.errors``; ``controllers`` in the generator only.
+"""
