@@ -49,8 +49,8 @@ from ipcosim.controllers.catalog import (
     lqr_gains,
     lqr_weight_parameters,
     model_name,
-    swing_up_around,
     schema,
+    swing_up_around,
 )
 from ipcosim.controllers.errors import ControllerParameterError
 from ipcosim.controllers.laws import DiscreteLaw, LawInputError

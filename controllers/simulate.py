@@ -14,10 +14,10 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ipcosim.controllers.laws import DiscreteLaw
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.params import PlantParams
 from ipcosim.fmus.physics import MEASURED, MOTOR_CART
 from ipcosim.fmus.plant import Plant, PlantStepError
-from ipcosim.errors import IpcosimError
 from ipcosim.harness.metrics import compute_metrics
 
 

@@ -6,8 +6,6 @@ import math
 import numpy as np
 import pytest
 
-from ipcosim.fmus.params import preset
-from ipcosim.fmus.plant import Plant
 from ipcosim.fmus.hil import ErrorCode, HILError, count_difference
 from ipcosim.fmus.hil.api import INT32_MAX
 from ipcosim.fmus.hil.rig import (
@@ -19,6 +17,8 @@ from ipcosim.fmus.hil.rig import (
     VirtualRig,
     dac_quantize,
 )
+from ipcosim.fmus.params import preset
+from ipcosim.fmus.plant import Plant
 
 # Thesis facts (thesis-data.md, section 1 table and section 3)
 THESIS_CART_RES = 2.275e-5

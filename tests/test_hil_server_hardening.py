@@ -20,8 +20,8 @@ import pytest
 from ipcosim.fmus.hil import ErrorCode, HILError
 from ipcosim.fmus.hil.protocol import HEADER, MAGIC, MAX_PAYLOAD, Msg, encode_frame, pack_channels, pack_text
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.harness.hil.server import RigAccessError, RigServer, escape
 from ipcosim.fmus.hil.tcpip import TcpipCard
+from ipcosim.harness.hil.server import RigAccessError, RigServer, escape
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -45,10 +45,6 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from ipcosim.fmus.instruments import end_stop_state
-from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, preset
-from ipcosim.fmus.physics import MEASURED
-from ipcosim.fmus.plant import Plant, PlantStepError
 from ipcosim.fmus.hil.api import (
     CardInfo,
     ErrorCode,
@@ -59,6 +55,10 @@ from ipcosim.fmus.hil.api import (
     as_finite,
     wrap_int32,
 )
+from ipcosim.fmus.instruments import end_stop_state
+from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, preset
+from ipcosim.fmus.physics import MEASURED
+from ipcosim.fmus.plant import Plant, PlantStepError
 
 # Q4 card and IP02 facts (thesis-data.md section 1 table and section 3).
 ANALOG_OUTPUTS = 4

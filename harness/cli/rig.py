@@ -70,8 +70,8 @@ def _token(args: argparse.Namespace) -> str | None:
     """The access token from --token-file, --token or IPCOSIM_RIG_TOKEN (in that order), or None."""
     import os
 
-    from ipcosim.harness.errors import UsageError
     from ipcosim.fmus.hil.protocol import MAX_TOKEN, TOKEN_ENV
+    from ipcosim.harness.errors import UsageError
 
     if args.token_file:
         try:
@@ -165,8 +165,8 @@ def _check_numbers(args: argparse.Namespace) -> None:
 
 
 def serve(args: argparse.Namespace) -> int:
-    from ipcosim.harness.errors import UsageError
     from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig
+    from ipcosim.harness.errors import UsageError
     from ipcosim.harness.hil.server import RigServer, escape
 
     _check_numbers(args)
