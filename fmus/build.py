@@ -172,6 +172,32 @@ def _load_stamps(fmu_dir: Path) -> dict[str, dict[str, str]]:
         return {}
 
 
+def _ensure_binaries(fmu: Path) -> None:
+    """Add pythonfmu's wrapper binaries to ``fmu`` when its builder left them out.
+
+    pythonfmu's wrapper puts every FMU loaded in this process first on ``sys.path``, and that
+    FMU's ``resources`` hold a copy of pythonfmu without binaries; a builder imported from there
+    packs none. The binaries of the installed distribution are added under the model identifier.
+    """
+    from importlib import metadata
+
+    with zipfile.ZipFile(fmu) as z:
+        if any(n.startswith("binaries/") for n in z.namelist()):
+            return
+        root = ElementTree.fromstring(z.read("modelDescription.xml"))
+        entries = [(info, z.read(info)) for info in z.infolist()]
+    identifier = root.find("CoSimulation").get("modelIdentifier")
+    installed = Path(str(metadata.distribution("pythonfmu").locate_file("pythonfmu"))) / "resources" / "binaries"
+    tmp = fmu.with_suffix(".tmp")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:
+        for info, payload in entries:
+            out.writestr(info, payload)
+        for platform, ext in (("linux64", "so"), ("win64", "dll")):
+            for lib in (installed / platform).glob(f"*.{ext}"):
+                out.write(lib, f"binaries/{platform}/{identifier}.{ext}")
+    os.replace(tmp, fmu)
+
+
 def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | None = None,
               project_files: Iterable[Path] = ()) -> Path:
     """Build one FMU script into ``fmu_dir`` (written atomically) and check it.
@@ -228,6 +254,7 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
                                                             project_files=[package, *project_files]))
             except Exception as exc:  # noqa: BLE001 -- one line naming the script
                 raise BuildError(f"{script}: pythonfmu build failed: {type(exc).__name__}: {exc}") from exc
+            _ensure_binaries(built)
             _add_bytecode(built, Path(tmp) / "pyc")
             check_fmu(built)
             try:

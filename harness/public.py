@@ -75,7 +75,7 @@ def run(scenario: str | os.PathLike[str], *, swap: Mapping[str, Any] | None = No
     >>> ipcosim.run("single-mass-lqr", stop_time=-1)
     Traceback (most recent call last):
     ...
-    ipcosim.harness.errors.UsageError: --stop-time -1: must be a positive number of seconds
+    ipcosim.errors.UsageError: --stop-time -1: must be a positive number of seconds
     """
     from ipcosim.harness.api import run_with
 

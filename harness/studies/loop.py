@@ -164,13 +164,15 @@ def _lqr(law: LQR, b: Builder) -> tuple[Lin, list[str]]:
     ys = [b.input(j) for j in range(p)]
     notes = []
     if law.filter is not None:
-        Af, Bf, Cf = law.filter
+        # the law's filter as plain lists: Ad (2 x 2), Bd (2), Cd (2)
+        Af, Bf, Cf = (np.asarray(m, dtype=float) for m in law.filter)
+        Bf, Cf = Bf.reshape(2), Cf.reshape(2)
         filtered = []
         for y in ys:
             xf = [b.state(), b.state()]
-            filtered.append(lsum([xf[i] * Cf[0, i] for i in range(2)]))
+            filtered.append(lsum([xf[i] * Cf[i] for i in range(2)]))
             for i in range(2):
-                b.feed(xf[i], lsum([xf[j] * Af[i, j] for j in range(2)]) + y * Bf[i, 0])
+                b.feed(xf[i], lsum([xf[j] * Af[i, j] for j in range(2)]) + y * Bf[i])
         ys = filtered
         notes.append("output filters 1/(tau s + 1)^2 included")
     xp = [b.state() for _ in range(n)]
