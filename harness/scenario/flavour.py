@@ -107,7 +107,11 @@ def native_overrides(system: Any, overrides: Mapping[str, Any], python_values: M
         if info["role"] in ("law", "plant") and any(v.causality == "parameter"
                                                     for n, v in inst.model.variables.items() if n in values):
             merged = {**python_values.get(comp, {}), **{k: float(v) for k, v in values.items()}}
-            for name, value in redesign(info, merged).items():
+            try:
+                native = redesign(info, merged)
+            except Exception as exc:  # noqa: BLE001 -- the design's own error, named for the component
+                raise FlavourError(f"--set on component {comp!r} (native {info['model']}): {exc}") from None
+            for name, value in native.items():
                 if name in known and inst.model.variables[name].causality == "parameter":
                     out[f"{comp}.{name}"] = value
     return out
