@@ -134,11 +134,13 @@ def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int
     """
     from fmi_helpers import instantiate
 
-    from ipcosim.controllers.catalog import KINDS, LAWS, build_law, defaults, model_name
+    from ipcosim.controllers.catalog import KINDS, LAWS, build_law, defaults, lqr_from_gains, lqr_gains, model_name
     from ipcosim.fmus.physics import MEASURED
 
     law, kind = next((la, k) for la in LAWS for k in KINDS if model_name(la, k) == law_name)
     py = build_law(law, kind, defaults(law, kind), backend="scipy")
+    if law == "LQR":  # what the Python FMU runs on its shipped gains (controller_fmu): ZOH model in plain Python
+        py = lqr_from_gains(kind, defaults(law, kind), lqr_gains(py))
     inst = instantiate(fmu, unzip)
     s = inst.slave
     rng = random.Random(zlib.crc32(law_name.encode()))
@@ -180,14 +182,26 @@ def test_generated_laws_agree_with_python(native_fmus: tuple[Path, Path], tmp_pa
         print(f"{name}: worst relative difference (1 V floor) {worst:.2e} over 10 x 200 samples")
 
 
+#: Scenarios the native flavour refuses, with what the refusal must name: the lab plant's encoders and
+#: the tap are instrument options the native plant lacks; the swing-up law has no native flavour.
+NATIVE_UNSUPPORTED = {"double-mass-hsmc-lab": "parameter cart_resolution = 2.275e-05 must be 0",
+                      "single-mass-lqr-tap": "parameter tap_torque_impulse = 0.005 must be 0",
+                      "single-mass-swing-up": "SwingUpSingleMass"}
+
+
 @needs_cc
 @pytest.mark.integration
 def test_every_scenario_trajectory_agrees_between_flavours(native_fmus: tuple[Path, Path]) -> None:
     from ipcosim.harness.api import run
+    from ipcosim.harness.scenario.flavour import FlavourError
     from ipcosim.harness.scenario.ssp import scenario_names
 
     python, native = native_fmus
     names = [n for n in scenario_names() if n.startswith(("single-mass-", "double-mass-"))]
+    for name, named in NATIVE_UNSUPPORTED.items():
+        with pytest.raises(FlavourError, match=named):
+            run(name, fmu_dirs=[native], fmus="native", stop_time=0.01)
+    names = [n for n in names if n not in NATIVE_UNSUPPORTED]
     assert len(names) >= 10
     for name in names:
         a = run(name, fmu_dirs=[python]).data
@@ -375,6 +389,50 @@ def test_native_fmu_rejects_a_bad_parameter_by_name(native_fmus: tuple[Path, Pat
 
 @needs_cc
 @pytest.mark.integration
+def test_native_plant_refuses_instrument_options_by_name(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
+    """The native plant has ideal instruments: the Python plant's options are there (same value references)
+    but must stay 0, in the FMU itself and through ``--set``; 0 is accepted."""
+    from fmi_helpers import instantiate
+    from fmpy.fmi1 import FMICallException
+
+    from ipcosim.harness.api import run
+    from ipcosim.harness.scenario.flavour import FlavourError
+
+    _, native = native_fmus
+    inst = instantiate(native / "IP02DoubleMass.fmu", tmp_path / "p")
+    inst.slave.setupExperiment(startTime=0.0)
+    inst.slave.enterInitializationMode()
+    inst.set(end_stop=0.407)
+    with pytest.raises(FMICallException):
+        inst.slave.exitInitializationMode()
+    assert "IP02DoubleMass: parameter end_stop = 0.407 must be 0 in the native flavour" in inst.text()
+    inst.slave.freeInstance()
+    with pytest.raises(FlavourError, match="native flavour of IP02SingleMass has no instruments: parameter "
+                                           "input_delay = 0.002 must be 0"):
+        run("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides={"plant.input_delay": 0.002},
+            stop_time=0.01)
+    run("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides={"plant.end_stop": 0.0}, stop_time=0.01)
+
+
+@needs_cc
+@pytest.mark.integration
+def test_set_lqr_gains_acts_alike_on_both_flavours(native_fmus: tuple[Path, Path]) -> None:
+    """``K_*``, ``N``, ``M_*`` are parameters of both flavours under the same names."""
+    from ipcosim.harness.api import run
+
+    python, native = native_fmus
+    over = {"controller.K_cart_position": -35.0, "controller.M_cart_velocity_pendulum_angle": 10.0}
+    a = run("single-mass-lqr", fmu_dirs=[python], overrides=over, stop_time=2.0).data
+    b = run("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides=over, stop_time=2.0).data
+    c = run("single-mass-lqr", fmu_dirs=[native], fmus="native", stop_time=2.0).data
+    col = "plant.cart_position"
+    scale = float(np.max(np.abs(a[col])))
+    assert float(np.max(np.abs(a[col] - b[col]))) <= 1e-9 * scale
+    assert float(np.max(np.abs(b[col] - c[col]))) > 1e-3 * scale  # the gains took effect
+
+
+@needs_cc
+@pytest.mark.integration
 def test_crosscheck_layout_validates_and_flavours_agree(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
     """``make crosscheck``'s tree passes fmpy.cross_check, and each model's reference result is the same
     in both flavours (each FMU alone on the same input signal)."""
@@ -382,7 +440,9 @@ def test_crosscheck_layout_validates_and_flavours_agree(native_fmus: tuple[Path,
 
     python, native = native_fmus
     count, problems = write_tree(tmp_path, {"ipcosim-python": python, "ipcosim-native": native}, "test")
-    assert problems == [] and count == 26
+    # every Python FMU but the HIL adapter (the swing-up controller has no native flavour), every native one
+    expected = len([f for f in python.glob("*.fmu") if "HIL" not in f.stem]) + len(list(native.glob("*.fmu")))
+    assert problems == [] and count == expected == 27
     base = tmp_path / "fmus" / "2.0" / "cs" / "linux64"
     for folder in sorted((base / "ipcosim-native" / "test").iterdir()):
         a = np.genfromtxt(base / "ipcosim-python" / "test" / folder.name / f"{folder.name}_ref.csv", delimiter=",",

@@ -52,8 +52,13 @@ def to_native(scenario: Scenario) -> tuple[Scenario, dict[str, dict[str, Any]]]:
     for comp in scenario.components:
         info = native_info(comp.fmu) if comp.fmu is not None else None
         if info is None:
+            from ipcosim.fmus.native.build import model_names
+
+            model = Path(str(comp.source)).stem
+            hint = (f"{model} has no native flavour (docs/native.md says why)" if model not in model_names()
+                    else "run `ipcosim build --native`")
             raise FlavourError(f"{scenario.origin}: component {comp.name!r}: no native flavour of {comp.source} "
-                               f"(found {comp.fmu}); run `ipcosim build --native`")
+                               f"(found {comp.fmu}); {hint}")
         values = {p.name: p.value for pset in comp.bindings for p in pset.parameters}
         python_values[comp.name] = values
         try:
