@@ -327,9 +327,13 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
     for p in param_paths:
         target = alias.get(p) or renamed[p]
         var = next(v for v in native_vars if v.name == target)
+        if target in python_params and var.start is not None and f"{float(var.start):.16g}" == f"{before2[p]:.16g}":
+            # a Python FMU's model description holds 16 significant digits (pythonfmu), the FMU itself the
+            # exact value (a default, or a gain it ships: K_*, N, M_*), which is the start value here
+            var.start = before2[p]
         if var.start is None or var.causality == "parameter" and p not in alias and target not in python_params:
             var.start = before2[p]
-        if abs(float(var.start) - before2[p]) > 1e-15 * max(1.0, abs(before2[p])):
+        if float(var.start) != before2[p]:
             raise NativeModelError(f"{name}: {p} = {before2[p]} but parameter {target} starts at {var.start}")
     aliases = {f"L:{p}": f"V:{alias.get(p) or renamed[p]}" for p in param_paths}
     step = [(k, _rename(n, aliases)) for k, n in step]
