@@ -8,8 +8,7 @@ conditional expressions), ``Node.__bool__`` asks the active :class:`Tracer`, whi
 outcomes path by path (depth first) and merges the paths' results into C conditional
 expressions ``c ? a : b``. The emitted code is straight-line: every node once, in topological
 order, then the assignments. Floating-point operations map one to one onto C doubles in the
-same order, so the C reproduces the Python results to rounding (exactly, in practice, except
-where numpy sums in another order).
+same order, so the C reproduces the Python results to rounding (exactly, in practice).
 """
 from __future__ import annotations
 
