@@ -2,10 +2,10 @@
 
 A law object (``ipcosim.controllers.laws``) holds its gains, its design matrices and its state as
 plain floats, tuples and lists (a design object also numpy arrays), in attributes of itself and of
-the small project objects it owns (gain dataclasses, derivative filters, the LQR coefficients). :func:`numbers` walks that tree and
-names each number by its path (``gains.k``, ``_d[1].value``, ``design.M[2][0]``); with
-``replace=True`` it swaps every number for the tracer leaf ``L:<path>`` (numpy arrays become object
-arrays), so that one run of the law's own ``step`` traces its arithmetic.
+the small project objects it owns (gain dataclasses, derivative filters, the LQR coefficients).
+:func:`numbers` walks that tree and names each number by its path (``gains.k``, ``_d[1].value``,
+``design.M[2][0]``); with ``replace=True`` it swaps every number for the tracer leaf ``L:<path>``
+(numpy arrays become object arrays), so that one run of the law's own ``step`` traces its arithmetic.
 """
 from __future__ import annotations
 

@@ -93,7 +93,14 @@ def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, floa
     step = float(values.get("integrator_step", float(info["integrator_step"])))
     out: dict[str, float] = {k: v for k, v in values.items()}
     plant = Plant(make(kind, **phys))
-    out.update(stage_coefficients(etdrk4_f_form(plant._L, step), len(plant.state_names)))
+    present = set(info["stage_coefficients"])
+    for name, value in stage_coefficients(etdrk4_f_form(plant._L, step), len(plant.state_names)).items():
+        if name in present:
+            out[name] = value
+        elif value != 0.0:
+            raise NativeParameterError(f"the native flavour of {info['model']} has no integrator coefficient {name} "
+                                       f"(0 in its generated code), but these parameters make it {value!r}: "
+                                       "run with --fmus python")
     out["integrator_step"] = step
     return out
 
