@@ -120,9 +120,11 @@ def native_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return out / "fmus", out / "fmus-native"
 
 
-def _law_names() -> list[str]:
+def _laws() -> dict[str, tuple[str, str]]:
+    """{controller FMU name: (law, plant kind)}: every law on both plants, and the swing-up."""
     from ipcosim.controllers.catalog import KINDS, LAWS, model_name
-    return [model_name(law, kind) for law in LAWS for kind in KINDS]
+    return {**{model_name(law, kind): (law, kind) for law in LAWS for kind in KINDS},
+            "SwingUpSingleMass": ("SwingUp", "single-mass")}
 
 
 def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int = 200) -> float:
@@ -134,13 +136,14 @@ def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int
     """
     from fmi_helpers import instantiate
 
-    from ipcosim.controllers.catalog import KINDS, LAWS, build_law, defaults, lqr_from_gains, lqr_gains, model_name
+    from ipcosim.controllers.catalog import build_law, defaults, lqr_from_gains, lqr_gains, swing_up_around
     from ipcosim.fmus.physics import MEASURED
 
-    law, kind = next((la, k) for la in LAWS for k in KINDS if model_name(la, k) == law_name)
+    law, kind = _laws()[law_name]
     py = build_law(law, kind, defaults(law, kind), backend="scipy")
-    if law == "LQR":  # what the Python FMU runs on its shipped gains (controller_fmu): ZOH model in plain Python
-        py = lqr_from_gains(kind, defaults(law, kind), lqr_gains(py))
+    if law in ("LQR", "SwingUp"):  # what the Python FMU runs on its shipped gains (controller_fmu)
+        lqr = lqr_from_gains(kind, defaults(law, kind), lqr_gains(getattr(py, "balance", py)))
+        py = swing_up_around(kind, defaults(law, kind), lqr) if law == "SwingUp" else lqr
     inst = instantiate(fmu, unzip)
     s = inst.slave
     rng = random.Random(zlib.crc32(law_name.encode()))
@@ -177,16 +180,15 @@ def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int
 @pytest.mark.integration
 def test_generated_laws_agree_with_python(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
     _, native = native_fmus
-    for name in _law_names():
+    for name in _laws():
         worst = _drive_law(native / f"{name}.fmu", name, tmp_path / name)
         print(f"{name}: worst relative difference (1 V floor) {worst:.2e} over 10 x 200 samples")
 
 
 #: Scenarios the native flavour refuses, with what the refusal must name: the lab plant's encoders and
-#: the tap are instrument options the native plant lacks; the swing-up law has no native flavour.
+#: the tap are instrument options the native plant lacks.
 NATIVE_UNSUPPORTED = {"double-mass-hsmc-lab": "parameter cart_resolution = 2.275e-05 must be 0",
-                      "single-mass-lqr-tap": "parameter tap_torque_impulse = 0.005 must be 0",
-                      "single-mass-swing-up": "SwingUpSingleMass"}
+                      "single-mass-lqr-tap": "parameter tap_torque_impulse = 0.005 must be 0"}
 
 
 @needs_cc
@@ -254,7 +256,7 @@ def test_native_fmus_validate(native_fmus: tuple[Path, Path]) -> None:
 
     _, native = native_fmus
     fmus = sorted(native.glob("*.fmu"))
-    assert len(fmus) == 13
+    assert len(fmus) == 14
     for fmu in fmus:
         assert validate_fmu(str(fmu)) == [], fmu.name
         md = read_model_description(str(fmu))
@@ -442,9 +444,7 @@ def test_crosscheck_layout_validates_and_flavours_agree(native_fmus: tuple[Path,
 
     python, native = native_fmus
     count, problems = write_tree(tmp_path, {"ipcosim-python": python, "ipcosim-native": native}, "test")
-    # every Python FMU but the HIL adapter (the swing-up controller has no native flavour), every native one
-    expected = len([f for f in python.glob("*.fmu") if "HIL" not in f.stem]) + len(list(native.glob("*.fmu")))
-    assert problems == [] and count == expected == 27
+    assert problems == [] and count == 28  # 14 models (not the HIL adapter) in each flavour
     base = tmp_path / "fmus" / "2.0" / "cs" / "linux64"
     for folder in sorted((base / "ipcosim-native" / "test").iterdir()):
         a = np.genfromtxt(base / "ipcosim-python" / "test" / folder.name / f"{folder.name}_ref.csv", delimiter=",",

@@ -16,7 +16,9 @@ import numpy as np
 from ipcosim.fmus.native.tracer import Node, leaf
 
 #: Integer attributes that are state (counted by the law), not structure.
-COUNTERS = ("ticks",)
+COUNTERS = ("ticks", "catches")
+#: Boolean attributes that are state (a law's mode, switched by its step), carried as 0.0 / 1.0.
+FLAGS = ("balancing",)
 
 
 def numbers(obj: Any, replace: bool = False) -> dict[str, Any]:
@@ -31,6 +33,9 @@ def _join(path: str, name: str) -> str:
 
 
 def _walk(obj: Any, path: str, out: dict[str, Any], replace: bool, memo: set[int]) -> Any:
+    if isinstance(obj, bool) and path.rsplit(".", 1)[-1] in FLAGS:
+        out[path] = float(obj)
+        return leaf("L:" + path) if replace else obj
     if obj is None or isinstance(obj, (bool, str, np.bool_)):
         return obj
     is_counter = isinstance(obj, int) and path.rsplit(".", 1)[-1] in COUNTERS

@@ -304,6 +304,10 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
     defaults = catalog.defaults(law, kind)
     build = lambda values: native_law(law, kind, values)  # noqa: E731
     law0 = build(defaults)
+    if hasattr(law0, "balance"):
+        # a swing-up sets its balancing law's predicted state on every catch, before that law uses it: start
+        # it at zeros instead of None, so that every path of the first sample has the same state layout
+        law0.balance.x_pred = [0.0] * len(law0.balance.coefficients.states)
     measured = MEASURED[kind]
     law1 = copy.deepcopy(law0)
     law1.step([0.0] * len(measured), 0.0)
@@ -367,9 +371,10 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
     renamed: dict[str, str] = {}
     extra: list[Variable] = []
     taken = {v.name for v in python_vars}
-    coef = getattr(law, "coefficients", None)
+    lqr, where = (law.balance, "balance.") if hasattr(law, "balance") else (law, "")  # a swing-up's LQR
+    coef = getattr(lqr, "coefficients", None)
     gains: dict[str, str] = {}
-    for at in ("coefficients", "design") if coef is not None else ():  # one object under both names
+    for at in (f"{where}coefficients", f"{where}design") if coef is not None else ():  # one object, two names
         gains.update({f"{at}.K[{i}]": f"K_{s}" for i, s in enumerate(coef.states)})
         gains[f"{at}.N"] = "N"
         gains.update({f"{at}.M[{i}][{j}]": f"M_{s}_{o}" for i, s in enumerate(coef.states)
@@ -389,17 +394,19 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
 def native_law(law: str, kind: str, values: Mapping[str, Any]) -> Any:
     """The law the Python controller FMU runs for flat parameter ``values`` (``controller_fmu``).
 
-    The LQR's ``values`` may hold its gains ``K_*``, ``N``, ``M_*``: they replace the designed ones, and
-    the zero-order-hold model comes from the plain-Python ``lqr_from_gains`` as in the Python FMU with
-    its shipped gains. Gains together with a changed weight or observer pole are refused, as there.
+    The LQR's (and the swing-up's balancing LQR's) ``values`` may hold its gains ``K_*``, ``N``, ``M_*``:
+    they replace the designed ones, and the zero-order-hold model comes from the plain-Python
+    ``lqr_from_gains`` as in the Python FMU with its shipped gains. Gains together with a changed weight
+    or observer pole are refused, as there.
     """
     from ipcosim.controllers import catalog
 
-    gain_names = {s.name for s in catalog.lqr_gain_specs(kind)} if law == "LQR" else set()
+    lqr_laws = ("LQR", "SwingUp")
+    gain_names = {s.name for s in catalog.lqr_gain_specs(kind)} if law in lqr_laws else set()
     gains = {k: float(v) for k, v in values.items() if k in gain_names}
     design = {k: v for k, v in values.items() if k not in gain_names}
     built = catalog.build_law(law, kind, design, backend="scipy")
-    if law != "LQR":
+    if law not in lqr_laws:
         return built
     full = {**catalog.defaults(law, kind), **design}
     if gains:
@@ -409,7 +416,8 @@ def native_law(law: str, kind: str, values: Mapping[str, Any]) -> Any:
             raise NativeModelError(f"{catalog.model_name(law, kind)}: parameters {weights[0]} and "
                                    f"{sorted(gains)[0]} were both set: give either the design (weights, observer "
                                    "poles) or the gains K_*, N, M_*, not both")
-    return catalog.lqr_from_gains(kind, full, {**catalog.lqr_gains(built), **gains})
+    lqr = catalog.lqr_from_gains(kind, full, {**catalog.lqr_gains(getattr(built, "balance", built)), **gains})
+    return catalog.swing_up_around(kind, full, lqr) if law == "SwingUp" else lqr
 
 
 def _leaves(roots: list[Node]) -> set[str]:
