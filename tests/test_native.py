@@ -49,6 +49,26 @@ def test_tracer_refuses_float_of_a_symbol() -> None:
         float(tracer.leaf("x") + 1.0)
 
 
+@needs_cc
+def test_traced_modulo_is_pythons(tmp_path: Path) -> None:
+    """``a % b`` on nodes is Python's float modulo (the sign of ``b``; ``laws.wrap_angle``), bit for bit."""
+    (out,) = tracer.trace(lambda: [tracer.leaf("a") % tracer.leaf("b")])
+    body = "\n".join(tracer.emit([("*y", out)]))
+    (tmp_path / "m.c").write_text(f"#include <math.h>\nvoid m(double a, double b, double *y);\n"
+                                  f"void m(double a, double b, double *y) {{\n{body}\n}}\n")
+    subprocess.run([CC, "-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-O2", "-fPIC", "-shared",
+                    str(tmp_path / "m.c"), "-o", str(tmp_path / "m.so"), "-lm"], check=True)
+    fn = ctypes.CDLL(str(tmp_path / "m.so")).m
+    fn.argtypes = [ctypes.c_double, ctypes.c_double, ctypes.POINTER(ctypes.c_double)]
+    y = ctypes.c_double()
+    two_pi = 2 * math.pi
+    for a in (3.5, -3.5, 0.0, -0.0, two_pi, -two_pi, 7 * math.pi, -1e-17, 1e300):
+        for b in (two_pi, -two_pi, 1.0, 0.3):
+            fn(a, b, ctypes.byref(y))
+            want = a % b
+            assert y.value == want and math.copysign(1, y.value) == math.copysign(1, want), (a, b, y.value, want)
+
+
 def test_c_literals_round_trip() -> None:
     for v in (0.1, -1e-300, 1.0 / 3.0, 5e-324, 12345678.9):
         assert float(tracer.c_double(v)) == v
