@@ -287,6 +287,7 @@ def test_native_fmus_validate(native_fmus: tuple[Path, Path]) -> None:
     assert_vdmcheck_clean(native / "LQRDoubleMass.fmu")
     assert_vdmcheck_clean(native / "IP02SingleMass.fmu")
     assert_vdmcheck_clean(native / "Setpoint.fmu")
+    assert_vdmcheck_clean(native / "SwingUpSingleMass.fmu")
 
 
 @needs_cc

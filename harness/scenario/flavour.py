@@ -55,7 +55,7 @@ def to_native(scenario: Scenario) -> tuple[Scenario, dict[str, dict[str, Any]]]:
             from ipcosim.fmus.native.build import model_names
 
             model = Path(str(comp.source)).stem
-            hint = (f"{model} has no native flavour (docs/native.md says why)" if model not in model_names()
+            hint = (f"{model} has no native flavour (docs/native.md lists the models)" if model not in model_names()
                     else "run `ipcosim build --native`")
             raise FlavourError(f"{scenario.origin}: component {comp.name!r}: no native flavour of {comp.source} "
                                f"(found {comp.fmu}); {hint}")
