@@ -49,6 +49,26 @@ def test_tracer_refuses_float_of_a_symbol() -> None:
         float(tracer.leaf("x") + 1.0)
 
 
+@needs_cc
+def test_traced_modulo_is_pythons(tmp_path: Path) -> None:
+    """``a % b`` on nodes is Python's float modulo (the sign of ``b``; ``laws.wrap_angle``), bit for bit."""
+    (out,) = tracer.trace(lambda: [tracer.leaf("a") % tracer.leaf("b")])
+    body = "\n".join(tracer.emit([("*y", out)]))
+    (tmp_path / "m.c").write_text(f"#include <math.h>\nvoid m(double a, double b, double *y);\n"
+                                  f"void m(double a, double b, double *y) {{\n{body}\n}}\n")
+    subprocess.run([CC, "-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-O2", "-fPIC", "-shared",
+                    str(tmp_path / "m.c"), "-o", str(tmp_path / "m.so"), "-lm"], check=True)
+    fn = ctypes.CDLL(str(tmp_path / "m.so")).m
+    fn.argtypes = [ctypes.c_double, ctypes.c_double, ctypes.POINTER(ctypes.c_double)]
+    y = ctypes.c_double()
+    two_pi = 2 * math.pi
+    for a in (3.5, -3.5, 0.0, -0.0, two_pi, -two_pi, 7 * math.pi, -1e-17, 1e300):
+        for b in (two_pi, -two_pi, 1.0, 0.3):
+            fn(a, b, ctypes.byref(y))
+            want = a % b
+            assert y.value == want and math.copysign(1, y.value) == math.copysign(1, want), (a, b, y.value, want)
+
+
 def test_c_literals_round_trip() -> None:
     for v in (0.1, -1e-300, 1.0 / 3.0, 5e-324, 12345678.9):
         assert float(tracer.c_double(v)) == v
@@ -120,9 +140,11 @@ def native_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return out / "fmus", out / "fmus-native"
 
 
-def _law_names() -> list[str]:
+def _laws() -> dict[str, tuple[str, str]]:
+    """{controller FMU name: (law, plant kind)}: every law on both plants, and the swing-up."""
     from ipcosim.controllers.catalog import KINDS, LAWS, model_name
-    return [model_name(law, kind) for law in LAWS for kind in KINDS]
+    return {**{model_name(law, kind): (law, kind) for law in LAWS for kind in KINDS},
+            "SwingUpSingleMass": ("SwingUp", "single-mass")}
 
 
 def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int = 200) -> float:
@@ -134,11 +156,14 @@ def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int
     """
     from fmi_helpers import instantiate
 
-    from ipcosim.controllers.catalog import KINDS, LAWS, build_law, defaults, model_name
+    from ipcosim.controllers.catalog import build_law, defaults, lqr_from_gains, lqr_gains, swing_up_around
     from ipcosim.fmus.physics import MEASURED
 
-    law, kind = next((la, k) for la in LAWS for k in KINDS if model_name(la, k) == law_name)
+    law, kind = _laws()[law_name]
     py = build_law(law, kind, defaults(law, kind), backend="scipy")
+    if law in ("LQR", "SwingUp"):  # what the Python FMU runs on its shipped gains (controller_fmu)
+        lqr = lqr_from_gains(kind, defaults(law, kind), lqr_gains(getattr(py, "balance", py)))
+        py = swing_up_around(kind, defaults(law, kind), lqr) if law == "SwingUp" else lqr
     inst = instantiate(fmu, unzip)
     s = inst.slave
     rng = random.Random(zlib.crc32(law_name.encode()))
@@ -175,19 +200,30 @@ def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int
 @pytest.mark.integration
 def test_generated_laws_agree_with_python(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
     _, native = native_fmus
-    for name in _law_names():
+    for name in _laws():
         worst = _drive_law(native / f"{name}.fmu", name, tmp_path / name)
         print(f"{name}: worst relative difference (1 V floor) {worst:.2e} over 10 x 200 samples")
+
+
+#: Scenarios the native flavour refuses, with what the refusal must name: the lab plant's encoders and
+#: the tap are instrument options the native plant lacks.
+NATIVE_UNSUPPORTED = {"double-mass-hsmc-lab": "parameter cart_resolution = 2.275e-05 must be 0",
+                      "single-mass-lqr-tap": "parameter tap_torque_impulse = 0.005 must be 0"}
 
 
 @needs_cc
 @pytest.mark.integration
 def test_every_scenario_trajectory_agrees_between_flavours(native_fmus: tuple[Path, Path]) -> None:
     from ipcosim.harness.api import run
+    from ipcosim.harness.scenario.flavour import FlavourError
     from ipcosim.harness.scenario.ssp import scenario_names
 
     python, native = native_fmus
     names = [n for n in scenario_names() if n.startswith(("single-mass-", "double-mass-"))]
+    for name, named in NATIVE_UNSUPPORTED.items():
+        with pytest.raises(FlavourError, match=named):
+            run(name, fmu_dirs=[native], fmus="native", stop_time=0.01)
+    names = [n for n in names if n not in NATIVE_UNSUPPORTED]
     assert len(names) >= 10
     for name in names:
         a = run(name, fmu_dirs=[python]).data
@@ -240,7 +276,7 @@ def test_native_fmus_validate(native_fmus: tuple[Path, Path]) -> None:
 
     _, native = native_fmus
     fmus = sorted(native.glob("*.fmu"))
-    assert len(fmus) == 13
+    assert len(fmus) == 14
     for fmu in fmus:
         assert validate_fmu(str(fmu)) == [], fmu.name
         md = read_model_description(str(fmu))
@@ -251,6 +287,7 @@ def test_native_fmus_validate(native_fmus: tuple[Path, Path]) -> None:
     assert_vdmcheck_clean(native / "LQRDoubleMass.fmu")
     assert_vdmcheck_clean(native / "IP02SingleMass.fmu")
     assert_vdmcheck_clean(native / "Setpoint.fmu")
+    assert_vdmcheck_clean(native / "SwingUpSingleMass.fmu")
 
 
 @needs_cc
@@ -267,8 +304,10 @@ def test_same_connectors_as_the_python_flavour(native_fmus: tuple[Path, Path]) -
                 w = b[name]
                 assert (w.valueReference, w.unit, w.type) == (v.valueReference, v.unit, v.type), (fmu.name, name)
                 if v.causality != "calculatedParameter":
+                    # pythonfmu writes Real start values with 16 significant digits, the native flavour the
+                    # exact double (the value both FMUs start from): equal when rounded alike
                     as_num = (lambda x: None if x is None else  # noqa: E731
-                              float({"true": 1, "false": 0}.get(str(x), x)))
+                              float(f"{float({'true': 1, 'false': 0}.get(str(x), x)):.16g}"))
                     assert as_num(w.start) == as_num(v.start), (fmu.name, name)
 
 
@@ -375,6 +414,50 @@ def test_native_fmu_rejects_a_bad_parameter_by_name(native_fmus: tuple[Path, Pat
 
 @needs_cc
 @pytest.mark.integration
+def test_native_plant_refuses_instrument_options_by_name(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
+    """The native plant has ideal instruments: the Python plant's options are there (same value references)
+    but must stay 0, in the FMU itself and through ``--set``; 0 is accepted."""
+    from fmi_helpers import instantiate
+    from fmpy.fmi1 import FMICallException
+
+    from ipcosim.harness.api import run
+    from ipcosim.harness.scenario.flavour import FlavourError
+
+    _, native = native_fmus
+    inst = instantiate(native / "IP02DoubleMass.fmu", tmp_path / "p")
+    inst.slave.setupExperiment(startTime=0.0)
+    inst.slave.enterInitializationMode()
+    inst.set(end_stop=0.407)
+    with pytest.raises(FMICallException):
+        inst.slave.exitInitializationMode()
+    assert "IP02DoubleMass: parameter end_stop = 0.407 must be 0 in the native flavour" in inst.text()
+    inst.slave.freeInstance()
+    with pytest.raises(FlavourError, match="native flavour of IP02SingleMass has no instruments: parameter "
+                                           "input_delay = 0.002 must be 0"):
+        run("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides={"plant.input_delay": 0.002},
+            stop_time=0.01)
+    run("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides={"plant.end_stop": 0.0}, stop_time=0.01)
+
+
+@needs_cc
+@pytest.mark.integration
+def test_set_lqr_gains_acts_alike_on_both_flavours(native_fmus: tuple[Path, Path]) -> None:
+    """``K_*``, ``N``, ``M_*`` are parameters of both flavours under the same names."""
+    from ipcosim.harness.api import run
+
+    python, native = native_fmus
+    over = {"controller.K_cart_position": -35.0, "controller.M_cart_velocity_pendulum_angle": 10.0}
+    a = run("single-mass-lqr", fmu_dirs=[python], overrides=over, stop_time=2.0).data
+    b = run("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides=over, stop_time=2.0).data
+    c = run("single-mass-lqr", fmu_dirs=[native], fmus="native", stop_time=2.0).data
+    col = "plant.cart_position"
+    scale = float(np.max(np.abs(a[col])))
+    assert float(np.max(np.abs(a[col] - b[col]))) <= 1e-9 * scale
+    assert float(np.max(np.abs(b[col] - c[col]))) > 1e-3 * scale  # the gains took effect
+
+
+@needs_cc
+@pytest.mark.integration
 def test_crosscheck_layout_validates_and_flavours_agree(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
     """``make crosscheck``'s tree passes fmpy.cross_check, and each model's reference result is the same
     in both flavours (each FMU alone on the same input signal)."""
@@ -382,7 +465,7 @@ def test_crosscheck_layout_validates_and_flavours_agree(native_fmus: tuple[Path,
 
     python, native = native_fmus
     count, problems = write_tree(tmp_path, {"ipcosim-python": python, "ipcosim-native": native}, "test")
-    assert problems == [] and count == 26
+    assert problems == [] and count == 28  # 14 models (not the HIL adapter) in each flavour
     base = tmp_path / "fmus" / "2.0" / "cs" / "linux64"
     for folder in sorted((base / "ipcosim-native" / "test").iterdir()):
         a = np.genfromtxt(base / "ipcosim-python" / "test" / folder.name / f"{folder.name}_ref.csv", delimiter=",",

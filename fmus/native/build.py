@@ -41,13 +41,20 @@ class NativeResult:
 
 def model_names() -> list[str]:
     """Every model with a native flavour."""
-    from ipcosim.controllers.catalog import KINDS, LAWS, model_name
-    return [*PLANTS, *(model_name(law, kind) for law in LAWS for kind in KINDS), "Setpoint"]
+    from ipcosim.controllers.catalog import model_name
+    return [*PLANTS, *(model_name(law, kind) for law, kind in _laws()), "Setpoint"]
+
+
+def _laws() -> list[tuple[str, str]]:
+    """(law, plant kind) of every controller FMU: ``catalog.LAWS`` on both plants, and the swing-up."""
+    from ipcosim.controllers.catalog import KINDS, LAWS, PARAMETER_SETS
+    return [(law, kind) for law in (*LAWS, *(la for la in PARAMETER_SETS if la not in LAWS)) for kind in KINDS
+            if kind in PARAMETER_SETS[law]]
 
 
 def native_model(name: str, python_dir: Path) -> models.NativeModel:
     """Trace the model ``name`` from its Python definition (its Python FMU must be in ``python_dir``)."""
-    from ipcosim.controllers.catalog import KINDS, LAWS, model_name
+    from ipcosim.controllers.catalog import model_name
 
     fmu = Path(python_dir) / f"{name}.fmu"
     if not fmu.is_file():
@@ -56,10 +63,9 @@ def native_model(name: str, python_dir: Path) -> models.NativeModel:
         return models.plant_model(name, PLANTS[name], fmu)
     if name == "Setpoint":
         return models.setpoint_model(fmu)
-    for law in LAWS:
-        for kind in KINDS:
-            if model_name(law, kind) == name:
-                return models.law_model(law, kind, fmu)
+    for law, kind in _laws():
+        if model_name(law, kind) == name:
+            return models.law_model(law, kind, fmu)
     raise NativeBuildError(f"no native model named {name!r}")
 
 

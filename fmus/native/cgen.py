@@ -63,7 +63,8 @@ def model_c(model: NativeModel) -> tuple[str, str]:
     var_rows = [f'    {{{v.vr}u, {v.index}, {_TYPE[v.type]}, {settable.get(v.causality, 0)}, "{v.name}"}},'
                 for v in model.variables]
     checked = [slots[k] for k in model.checked]
-    kinds = {"finite": "CHECK_FINITE", "positive": "CHECK_POSITIVE", "nonnegative": "CHECK_NONNEGATIVE"}
+    kinds = {"finite": "CHECK_FINITE", "positive": "CHECK_POSITIVE", "nonnegative": "CHECK_NONNEGATIVE",
+             "zero": "CHECK_ZERO"}
     check_rows = [f'    {{{slots["V:" + name]}, {kinds[kind]}, "{name}"}},' for name, kind in model.checks.items()]
     period = ("V:integrator_step" if model.kind == "plant" else "V:sample_period" if model.kind == "sampled" else "")
     by_vr = [-1] * (max(v.vr for v in model.variables) + 1)

@@ -1,11 +1,11 @@
 """The numbers inside a Python model object, by path: read them, or replace them by symbolic leaves.
 
 A law object (``ipcosim.controllers.laws``) holds its gains, its design matrices and its state as
-plain floats, tuples and numpy arrays, in attributes of itself and of the small project objects it
-owns (gain dataclasses, derivative filters, the LQR design). :func:`numbers` walks that tree and
-names each number by its path (``gains.k``, ``_d[1].value``, ``design.M[2,0]``); with
-``replace=True`` it swaps every number for the tracer leaf ``L:<path>`` (numpy arrays become object
-arrays), so that one run of the law's own ``step`` traces its arithmetic.
+plain floats, tuples and lists (a design object also numpy arrays), in attributes of itself and of
+the small project objects it owns (gain dataclasses, derivative filters, the LQR coefficients).
+:func:`numbers` walks that tree and names each number by its path (``gains.k``, ``_d[1].value``,
+``design.M[2][0]``); with ``replace=True`` it swaps every number for the tracer leaf ``L:<path>``
+(numpy arrays become object arrays), so that one run of the law's own ``step`` traces its arithmetic.
 """
 from __future__ import annotations
 
@@ -16,7 +16,9 @@ import numpy as np
 from ipcosim.fmus.native.tracer import Node, leaf
 
 #: Integer attributes that are state (counted by the law), not structure.
-COUNTERS = ("ticks",)
+COUNTERS = ("ticks", "catches")
+#: Boolean attributes that are state (a law's mode, switched by its step), carried as 0.0 / 1.0.
+FLAGS = ("balancing",)
 
 
 def numbers(obj: Any, replace: bool = False) -> dict[str, Any]:
@@ -31,6 +33,9 @@ def _join(path: str, name: str) -> str:
 
 
 def _walk(obj: Any, path: str, out: dict[str, Any], replace: bool, memo: set[int]) -> Any:
+    if isinstance(obj, bool) and path.rsplit(".", 1)[-1] in FLAGS:
+        out[path] = float(obj)
+        return leaf("L:" + path) if replace else obj
     if obj is None or isinstance(obj, (bool, str, np.bool_)):
         return obj
     is_counter = isinstance(obj, int) and path.rsplit(".", 1)[-1] in COUNTERS

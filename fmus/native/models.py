@@ -24,10 +24,8 @@ import copy
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 from xml.etree import ElementTree
-
-import numpy as np
 
 from ipcosim.fmus.native import tracer
 from ipcosim.fmus.native.leaves import c_name, numbers
@@ -70,8 +68,8 @@ class NativeModel:
     checked: list[str]                          # slot keys that must stay finite
     python_only: list[str] = field(default_factory=list)   # Python parameters this flavour lacks
     paths: dict[str, str] = field(default_factory=dict)    # law number path -> native parameter (laws)
-    meta: dict[str, str] = field(default_factory=dict)     # {"role": plant|law|source, "law", "plant"}
-    checks: dict[str, str] = field(default_factory=dict)   # parameter -> finite | positive | nonnegative
+    meta: dict[str, Any] = field(default_factory=dict)     # {"role": plant|law|source, "law", "plant"}
+    checks: dict[str, str] = field(default_factory=dict)   # parameter -> finite | positive | nonnegative | zero
     unit_definitions: list[ElementTree.Element] = field(default_factory=list)
 
     def variable(self, name: str) -> Variable:
@@ -117,6 +115,43 @@ def python_variables(fmu: Path) -> tuple[list[Variable], list[ElementTree.Elemen
 # ============================================================================ plants
 
 
+#: Instrument options of the Python plant (``ipcosim.fmus.instruments``) that the native plant does not
+#: model: each must stay 0 (off) in the native flavour. ``noise_seed`` and ``tap_time`` act only through
+#: them and may take any value.
+NATIVE_INSTRUMENTS_OFF = ("cart_resolution", "pendulum_resolution", "noise_counts", "end_stop", "input_delay",
+                          "tap_force_impulse", "tap_torque_impulse")
+
+
+def stage_coefficients(stages: list[list[list[float]]], n: int) -> dict[str, float]:
+    """``{etdrk4_S<k>_<i>_<j>: value}``: the right-hand-side columns (``j >= n``) of the stage matrices of
+    ``ipcosim.fmus.integrator.etdrk4_f_form`` (the start-value block is the identity, applied as ``x + ...``)."""
+    return {f"etdrk4_S{k}_{i}_{j}": float(row[j]) for k, m in enumerate(stages) for i, row in enumerate(m)
+            for j in range(n, len(row))}
+
+
+def sym_stages(x: list[Any], f: Callable[..., Any], args: tuple[Any, ...], shapes: list[tuple[int, int]],
+               present: set[str]) -> list[Any]:
+    """``FastETDRK4``'s compiled stages (``ipcosim.fmus.integrator._compile_stages``) with each coefficient in
+    ``present`` a parameter leaf: ``y_i = x_i + sum_j S_k[i, j] f_j`` in the same order, the others (the exact
+    zeros the Python code leaves out too) left out, then ``f`` at the new stage."""
+    n = len(x)
+    fs = [list(f(*x, *args))]
+    out: list[Any] = []
+    for k, (rows, cols) in enumerate(shapes):
+        flat = [v for fk in fs for v in fk]
+        out = []
+        for i in range(rows):
+            acc = x[i]
+            for j in range(n, cols):
+                name = f"etdrk4_S{k}_{i}_{j}"
+                if name in present:
+                    acc = acc + leaf("V:" + name) * flat[j - n]
+            out.append(acc)
+        if k < len(shapes) - 1:
+            fs.append(list(f(*out, *args)))
+    return out
+
+
 def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> NativeModel:
     """The native plant ``name`` (``IP02SingleMass`` / ``IP02DoubleMass``) traced from the Python plant."""
     from ipcosim.fmus import physics
@@ -128,8 +163,11 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
     cls = PLANT_KINDS[kind]
     pnames = [f.name for f in cls.__dataclass_fields__.values()]
     p0 = make(kind, **dict(PRESETS[DEFAULT_PRESET[kind]][1]))
-    concrete = plant_mod.Plant(p0)
-    stepper = FastETDRK4(concrete._L, step)
+    stepper = FastETDRK4(plant_mod.Plant(p0)._L, step)
+    stages = [stepper.S0, stepper.S1, stepper.S2, stepper.S3]
+    shapes = [(len(m), len(m[0])) for m in stages]
+    # the zeros are structural (L is the current's row and column): a redesign checks they stay zero
+    coefficients = {k: v for k, v in stage_coefficients(stages, len(stages[0])).items() if v != 0.0}
     states = physics.state_names(kind)
     n = len(states)
     single = kind == "single-mass"
@@ -141,23 +179,12 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
             object.__setattr__(p, pn, leaf("V:" + pn))
         return p
 
-    def sym_stepper() -> FastETDRK4:
-        s = object.__new__(FastETDRK4)
-        s.h, s.n = step, n
-        for k, m in enumerate((stepper.S0, stepper.S1, stepper.S2, stepper.S3)):
-            sym = np.empty(m.shape, dtype=object)
-            for i, j in np.ndindex(m.shape):
-                sym[i, j] = leaf(f"V:etdrk4_S{k}_{i}_{j}")
-            setattr(s, f"S{k}", sym)
-        s._buf = np.zeros(5 * n, dtype=object)
-        return s
-
     def step_fn() -> list[Any]:
         p = sym_params()
         f = tracer.local(rhs_factory(p))
         vA = tracer.local(physics.clip_voltage)(leaf("V:voltage"), p.voltage_limit)
-        z = sym_stepper().step([leaf(f"S:z{i}") for i in range(n)], f, vA)
-        x = physics.single_mass_from_momentum(z, p) if single else z
+        z = sym_stages([leaf(f"S:z{i}") for i in range(n)], f, (vA,), shapes, set(coefficients))
+        x = plant_mod.single_mass_output_map(p)(z) if single else z
         return list(z) + list(x)
 
     def init_fn() -> list[Any]:
@@ -171,23 +198,26 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
     extra = [Variable("integrator_step", 0, "parameter", "fixed", start=step, initial="exact", unit="s",
                       description="communication step the integrator's coefficients are computed for [s]; every "
                                   "fmi2DoStep must use it")]
-    for k, m in enumerate((stepper.S0, stepper.S1, stepper.S2, stepper.S3)):
-        for i, j in np.ndindex(m.shape):
-            extra.append(Variable(f"etdrk4_S{k}_{i}_{j}", 0, "parameter", "fixed", start=float(m[i, j]),
-                                  initial="exact", unit="1",
-                                  description=f"ETDRK4 stage matrix S{k}[{i},{j}] (ipcosim.fmus.integrator."
-                                              "etdrk4_f_form), computed for integrator_step"))
+    for pname, value in coefficients.items():
+        k, i, j = pname.split("_")[1:]
+        extra.append(Variable(pname, 0, "parameter", "fixed", start=value, initial="exact", unit="1",
+                              description=f"ETDRK4 stage matrix {k}[{i},{j}] (ipcosim.fmus.integrator."
+                                          "etdrk4_f_form), computed for integrator_step"))
     _append(variables, extra)
+    present = {v.name for v in variables}
+    off = [name for name in NATIVE_INSTRUMENTS_OFF if name in present]
     return NativeModel(
         name=name, kind="plant", description=description, variables=variables, unit_definitions=units,
         states={k: 0.0 for k in zkeys},
         initialize=list(zip(zkeys, started)) + [(f"V:{s}", leaf(f"V:initial_{s}")) for s in states],
         step=list(zip(zkeys, stepped[:n])) + [(f"V:{s}", v) for s, v in zip(states, stepped[n:])],
-        checked=zkeys, meta={"role": "plant", "plant": kind, "integrator_step": repr(step)},
+        checked=zkeys, meta={"role": "plant", "plant": kind, "integrator_step": repr(step), "instruments_off": off,
+                             "stage_coefficients": sorted(coefficients)},
         checks={**{f.name: ("positive" if f.metadata.get("positive") else
                             "nonnegative" if f.metadata.get("nonnegative") else "finite")
                    for f in cls.__dataclass_fields__.values()},
-                **{f"initial_{s}": "finite" for s in states}, "integrator_step": "positive"})
+                **{f"initial_{s}": "finite" for s in states}, "integrator_step": "positive",
+                **{name: "zero" for name in off}})
 
 
 def _append(variables: list[Variable], extra: list[Variable]) -> None:
@@ -212,7 +242,7 @@ def _trace_step(base: Any, measured: tuple[str, ...]) -> tuple[Any, dict[str, An
     def fn() -> list[Any]:
         law = copy.deepcopy(base)
         numbers(law, replace=True)
-        law._inputs = lambda m, r: (np.array(list(m), dtype=object), r)
+        law._inputs = lambda m, r: (tuple(m), r)
         u = law.step([leaf(f"V:{m}") for m in measured], leaf("V:reference"))
         after = numbers(law)
         if not keys:
@@ -272,8 +302,12 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
     name = catalog.model_name(law, kind)
     variables, units, description = python_variables(python_fmu)
     defaults = catalog.defaults(law, kind)
-    build = lambda values: catalog.build_law(law, kind, values, backend="scipy")  # noqa: E731
+    build = lambda values: native_law(law, kind, values)  # noqa: E731
     law0 = build(defaults)
+    if hasattr(law0, "balance"):
+        # a swing-up sets its balancing law's predicted state on every catch, before that law uses it: start
+        # it at zeros instead of None, so that every path of the first sample has the same state layout
+        law0.balance.x_pred = [0.0] * len(law0.balance.coefficients.states)
     measured = MEASURED[kind]
     law1 = copy.deepcopy(law0)
     law1.step([0.0] * len(measured), 0.0)
@@ -290,11 +324,12 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
     param_paths = sorted(k[2:] for k in used if k.startswith("L:") and k[2:] not in state_paths)
     alias, design_only = gain_aliases(law, kind, defaults, build)
     alias = {p: a for p, a in alias.items() if a not in design_only}
-    keep = {alias[p] for p in param_paths if p in alias} | {"sample_period", "voltage_limit"}
+    extra, renamed = _derived_parameters(law0, [p for p in param_paths if p not in alias], before2, variables)
+    python_params = {v.name for v in variables if v.causality == "parameter"}
+    keep = ({alias[p] for p in param_paths if p in alias} | {"sample_period", "voltage_limit"}
+            | (set(renamed.values()) & python_params))
     python_only = sorted(v.name for v in variables if v.causality == "parameter" and v.name not in keep)
     native_vars = [v for v in variables if v.causality != "parameter" or v.name in keep]
-    extra, renamed = _derived_parameters(law, kind, [p for p in param_paths if p not in alias], before2,
-                                         variables)
     for v in native_vars:
         if v.causality == "calculatedParameter" and v.name in renamed.values():
             v.causality, v.variability, v.initial = "parameter", "fixed", "exact"
@@ -303,9 +338,13 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
     for p in param_paths:
         target = alias.get(p) or renamed[p]
         var = next(v for v in native_vars if v.name == target)
-        if var.start is None or var.causality == "parameter" and p not in alias:
+        if target in python_params and var.start is not None and f"{float(var.start):.16g}" == f"{before2[p]:.16g}":
+            # a Python FMU's model description holds 16 significant digits (pythonfmu), the FMU itself the
+            # exact value (a default, or a gain it ships: K_*, N, M_*), which is the start value here
             var.start = before2[p]
-        if p in alias and abs(float(var.start) - before2[p]) > 1e-15 * max(1.0, abs(before2[p])):
+        if var.start is None or var.causality == "parameter" and p not in alias and target not in python_params:
+            var.start = before2[p]
+        if float(var.start) != before2[p]:
             raise NativeModelError(f"{name}: {p} = {before2[p]} but parameter {target} starts at {var.start}")
     aliases = {f"L:{p}": f"V:{alias.get(p) or renamed[p]}" for p in param_paths}
     step = [(k, _rename(n, aliases)) for k, n in step]
@@ -321,28 +360,64 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
                                   if s.constraint != "bool" and s.name in {v.name for v in native_vars}}})
 
 
-def _derived_parameters(law: str, kind: str, paths: list[str], values: dict[str, float],
+def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
                         python_vars: list[Variable]) -> tuple[list[Variable], dict[str, str]]:
-    """Native-only parameters for law numbers that equal no Python parameter (LQR gains keep their names)."""
-    from ipcosim.controllers.catalog import design_states
+    """Native-only parameters for law numbers that equal no Python parameter.
 
+    The LQR's feedback and estimator gains (``K[i]``, ``N``, ``M[i][j]`` of its ``coefficients``, also
+    reachable as its ``design``: ``ipcosim.controllers.laws.LQRCoefficients``) keep the Python FMU's
+    names ``K_<state>``, ``N``, ``M_<state>_<output>`` (``ipcosim.controllers.catalog.lqr_gain_specs``).
+    """
     renamed: dict[str, str] = {}
     extra: list[Variable] = []
-    calculated = {v.name for v in python_vars if v.causality == "calculatedParameter"}
-    states = design_states(kind)
+    taken = {v.name for v in python_vars}
+    lqr, where = (law.balance, "balance.") if hasattr(law, "balance") else (law, "")  # a swing-up's LQR
+    coef = getattr(lqr, "coefficients", None)
+    gains: dict[str, str] = {}
+    for at in (f"{where}coefficients", f"{where}design") if coef is not None else ():  # one object, two names
+        gains.update({f"{at}.K[{i}]": f"K_{s}" for i, s in enumerate(coef.states)})
+        gains[f"{at}.N"] = "N"
+        gains.update({f"{at}.M[{i}][{j}]": f"M_{s}_{o}" for i, s in enumerate(coef.states)
+                      for j, o in enumerate(coef.outputs)})
     for p in paths:
-        if law == "LQR" and p.startswith("design.K[0,"):
-            renamed[p] = "K_" + states[int(p[len("design.K[0,"):-1])]
-        elif law == "LQR" and p == "design.N":
-            renamed[p] = "N"
-        else:
-            renamed[p] = c_name(p)
-        if renamed[p] in calculated:
+        renamed[p] = gains.get(p) or c_name(p)
+        if renamed[p] in taken:
+            if p not in gains:
+                raise NativeModelError(f"law constant {p}: its native name {renamed[p]} is a Python variable")
             continue
         extra.append(Variable(renamed[p], 0, "parameter", "fixed", start=values[p], initial="exact",
                               description=f"law constant {p} (ipcosim.controllers.laws), computed at build time by "
                                           "the Python design; see docs/native.md to redesign"))
     return extra, renamed
+
+
+def native_law(law: str, kind: str, values: Mapping[str, Any]) -> Any:
+    """The law the Python controller FMU runs for flat parameter ``values`` (``controller_fmu``).
+
+    The LQR's (and the swing-up's balancing LQR's) ``values`` may hold its gains ``K_*``, ``N``, ``M_*``:
+    they replace the designed ones, and the zero-order-hold model comes from the plain-Python
+    ``lqr_from_gains`` as in the Python FMU with its shipped gains. Gains together with a changed weight
+    or observer pole are refused, as there.
+    """
+    from ipcosim.controllers import catalog
+
+    lqr_laws = ("LQR", "SwingUp")
+    gain_names = {s.name for s in catalog.lqr_gain_specs(kind)} if law in lqr_laws else set()
+    gains = {k: float(v) for k, v in values.items() if k in gain_names}
+    design = {k: v for k, v in values.items() if k not in gain_names}
+    built = catalog.build_law(law, kind, design, backend="scipy")
+    if law not in lqr_laws:
+        return built
+    full = {**catalog.defaults(law, kind), **design}
+    if gains:
+        base = catalog.defaults(law, kind)
+        weights = [n for n in catalog.lqr_weight_parameters(kind) if float(full[n]) != float(base[n])]
+        if weights:
+            raise NativeModelError(f"{catalog.model_name(law, kind)}: parameters {weights[0]} and "
+                                   f"{sorted(gains)[0]} were both set: give either the design (weights, observer "
+                                   "poles) or the gains K_*, N, M_*, not both")
+    lqr = catalog.lqr_from_gains(kind, full, {**catalog.lqr_gains(getattr(built, "balance", built)), **gains})
+    return catalog.swing_up_around(kind, full, lqr) if law == "SwingUp" else lqr
 
 
 def _leaves(roots: list[Node]) -> set[str]:

@@ -17,8 +17,6 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
-
 
 class NativeParameterError(KeyError):
     """A parameter the native flavour does not have (names the model and the flavour)."""
@@ -64,12 +62,13 @@ def redesign(fmu: Path | str | Mapping[str, Any], python_values: Mapping[str, An
 
 
 def _law(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]:
-    from ipcosim.controllers.catalog import build_law, defaults
+    from ipcosim.controllers.catalog import defaults
     from ipcosim.fmus.native.leaves import numbers
+    from ipcosim.fmus.native.models import native_law
 
     full = dict(defaults(info["law"], info["plant"]))
     full.update(values)
-    law = build_law(info["law"], info["plant"], full, backend="scipy")
+    law = native_law(info["law"], info["plant"], full)
     nums = numbers(law)
     out = {name: nums[path] for path, name in info["paths"].items()}
     for name in ("sample_period", "voltage_limit"):
@@ -82,20 +81,39 @@ def _law(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]
 
 def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]:
     from ipcosim.fmus.integrator import etdrk4_f_form
+    from ipcosim.fmus.native.models import stage_coefficients
     from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, make
     from ipcosim.fmus.plant import Plant
 
+    check_instruments(info, values)
     kind = info["plant"]
     fields = set(PLANT_KINDS[kind].__dataclass_fields__)
     phys = dict(PRESETS[DEFAULT_PRESET[kind]][1])
     phys.update({k: float(v) for k, v in values.items() if k in fields})
     step = float(values.get("integrator_step", float(info["integrator_step"])))
     out: dict[str, float] = {k: v for k, v in values.items()}
-    for k, m in enumerate(etdrk4_f_form(Plant(make(kind, **phys))._L, step)):
-        for i, j in np.ndindex(m.shape):
-            out[f"etdrk4_S{k}_{i}_{j}"] = float(m[i, j])
+    plant = Plant(make(kind, **phys))
+    present = set(info["stage_coefficients"])
+    for name, value in stage_coefficients(etdrk4_f_form(plant._L, step), len(plant.state_names)).items():
+        if name in present:
+            out[name] = value
+        elif value != 0.0:
+            raise NativeParameterError(f"the native flavour of {info['model']} has no integrator coefficient {name} "
+                                       f"(0 in its generated code), but these parameters make it {value!r}: "
+                                       "run with --fmus python")
     out["integrator_step"] = step
     return out
+
+
+def check_instruments(info: Mapping[str, Any], values: Mapping[str, Any]) -> None:
+    """Raise NativeParameterError for an instrument option of the Python plant set to a value other than 0
+    (off): the native plant has ideal instruments (``ipcosim.fmus.native.models.NATIVE_INSTRUMENTS_OFF``)."""
+    for name in info.get("instruments_off", ()):
+        if name in values and float(values[name]) != 0.0:
+            raise NativeParameterError(
+                f"the native flavour of {info['model']} has no instruments: parameter {name} = {values[name]} must "
+                "be 0 there (quantization, noise, end stops, delay and taps are in the python flavour only: run "
+                "with --fmus python)")
 
 
 def check_settable(info: Mapping[str, Any], fmu_name: str, names: list[str], known: set[str]) -> None:

@@ -8,8 +8,7 @@ conditional expressions), ``Node.__bool__`` asks the active :class:`Tracer`, whi
 outcomes path by path (depth first) and merges the paths' results into C conditional
 expressions ``c ? a : b``. The emitted code is straight-line: every node once, in topological
 order, then the assignments. Floating-point operations map one to one onto C doubles in the
-same order, so the C reproduces the Python results to rounding (exactly, in practice, except
-where numpy sums in another order).
+same order, so the C reproduces the Python results to rounding (exactly, in practice).
 """
 from __future__ import annotations
 
@@ -50,6 +49,8 @@ class Node:
     def __rmul__(self, o: Any) -> Node: return _bin("*", o, self)
     def __truediv__(self, o: Any) -> Node: return _bin("/", self, o)
     def __rtruediv__(self, o: Any) -> Node: return _bin("/", o, self)
+    def __mod__(self, o: Any) -> Node: return py_mod(self, o)
+    def __rmod__(self, o: Any) -> Node: return py_mod(o, self)
     def __pow__(self, o: Any) -> Node: return call("pow", self, o)
     def __rpow__(self, o: Any) -> Node: return call("pow", o, self)
     def __neg__(self) -> Node: return _intern("neg", (self,))
@@ -133,6 +134,14 @@ def _bin(op: str, a: Any, b: Any) -> Node:
 def call(fn: str, *args: Any) -> Node:
     """A call of the C math function ``fn`` (``MATH_FUNCTIONS``)."""
     return _intern("call:" + fn, tuple(wrap(a) for a in args))
+
+
+def py_mod(a: Any, b: Any) -> Node:
+    """Python's float ``a % b`` (the sign of ``b``) from C's ``fmod``, as CPython computes it."""
+    r = call("fmod", a, b)
+    b = wrap(b)
+    fixed = select(_bin("!=", _bin("<", r, 0.0), _bin("<", b, 0.0)), _bin("+", r, b), r)
+    return select(_bin("!=", r, 0.0), fixed, call("copysign", 0.0, b))
 
 
 def select(cond: Node, a: Any, b: Any) -> Any:

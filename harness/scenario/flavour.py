@@ -52,8 +52,13 @@ def to_native(scenario: Scenario) -> tuple[Scenario, dict[str, dict[str, Any]]]:
     for comp in scenario.components:
         info = native_info(comp.fmu) if comp.fmu is not None else None
         if info is None:
+            from ipcosim.fmus.native.build import model_names
+
+            model = Path(str(comp.source)).stem
+            hint = (f"{model} has no native flavour (docs/native.md lists the models)" if model not in model_names()
+                    else "run `ipcosim build --native`")
             raise FlavourError(f"{scenario.origin}: component {comp.name!r}: no native flavour of {comp.source} "
-                               f"(found {comp.fmu}); run `ipcosim build --native`")
+                               f"(found {comp.fmu}); {hint}")
         values = {p.name: p.value for pset in comp.bindings for p in pset.parameters}
         python_values[comp.name] = values
         try:
@@ -107,7 +112,11 @@ def native_overrides(system: Any, overrides: Mapping[str, Any], python_values: M
         if info["role"] in ("law", "plant") and any(v.causality == "parameter"
                                                     for n, v in inst.model.variables.items() if n in values):
             merged = {**python_values.get(comp, {}), **{k: float(v) for k, v in values.items()}}
-            for name, value in redesign(info, merged).items():
+            try:
+                native = redesign(info, merged)
+            except Exception as exc:  # noqa: BLE001 -- the design's own error, named for the component
+                raise FlavourError(f"--set on component {comp!r} (native {info['model']}): {exc}") from None
+            for name, value in native.items():
                 if name in known and inst.model.variables[name].causality == "parameter":
                     out[f"{comp}.{name}"] = value
     return out

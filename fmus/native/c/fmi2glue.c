@@ -128,11 +128,13 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
 
 static int parameters_valid(Instance *c) {
     int i;
-    static const char *const need[] = {"be a finite number", "be > 0", "be >= 0"};
+    static const char *const need[] = {"be a finite number", "be > 0", "be >= 0",
+                                       "be 0 in the native flavour (it has no instruments: use the python flavour)"};
     for (i = 0; i < c->m->nchecks; i++) {
         const ParameterCheck *k = &c->m->checks[i];
         double x = c->v[k->index];
-        int ok = isfinite(x) && (k->kind != CHECK_POSITIVE || x > 0.0) && (k->kind != CHECK_NONNEGATIVE || x >= 0.0);
+        int ok = isfinite(x) && (k->kind != CHECK_POSITIVE || x > 0.0) && (k->kind != CHECK_NONNEGATIVE || x >= 0.0) &&
+                 (k->kind != CHECK_ZERO || x == 0.0);
         if (!ok) {
             report(c, fmi2Error, "logStatusError", "%s: parameter %s = %g must %s", c->m->identifier, k->name, x,
                    need[k->kind]);

@@ -31,10 +31,11 @@ typedef struct {
 #define CHECK_FINITE 0
 #define CHECK_POSITIVE 1
 #define CHECK_NONNEGATIVE 2
+#define CHECK_ZERO 3        /* an option of the Python flavour the native one lacks: must stay 0 */
 
 typedef struct {
     int index;         /* slot in v */
-    int kind;          /* CHECK_FINITE, CHECK_POSITIVE, CHECK_NONNEGATIVE */
+    int kind;          /* CHECK_FINITE, CHECK_POSITIVE, CHECK_NONNEGATIVE, CHECK_ZERO */
     const char *name;
 } ParameterCheck;
 
