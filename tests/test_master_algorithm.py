@@ -388,3 +388,34 @@ def test_units_convert_through_their_definitions_and_mismatches_are_refused():
     bad = model("Dst", inputs=["u"], outputs=["v"], units={"u": "rad"})
     with pytest.raises(BindingError, match="unit 'm' does not match 'rad'"):
         system([("a", src), ("b", bad)], [("a.y", "b.u")], units={"m": m, "rad": rad})
+
+
+def test_a_traceback_through_the_generated_loop_shows_its_source() -> None:
+    """The generated stepping loop is registered with linecache: a traceback through it shows
+    the line that failed, not just a file name."""
+    import linecache
+    import traceback
+
+    from ipcosim.harness.master.algorithm import compile_loop
+
+    import ctypes
+
+    from ipcosim.harness.master.algorithm import GAUSS_SEIDEL, Block, TimeBase
+
+    def failing_step(*args):
+        return 1 / 0
+
+    none = (ctypes.c_uint * 0)()
+    block = Block(index=0, name="broken", handle=None, do_step=failing_step, get_real=lambda *a: 0,
+                  set_real=lambda *a: 0, out_vrs=none, in_vrs=none, out_values=(ctypes.c_double * 0)(),
+                  in_values=(ctypes.c_double * 0)(), n_out=0, n_in=0, multiple=1)
+    run, source = compile_loop([block], [0], GAUSS_SEIDEL, TimeBase.make(0.0, 1.0, 0.1))
+    frames = []
+    try:
+        run(0, 1, 0, 0, 8)
+    except ZeroDivisionError as exc:
+        frames = traceback.extract_tb(exc.__traceback__)
+    loop = [f for f in frames if f.filename.startswith("<ipcosim stepping loop")]
+    assert loop and loop[-1].line, frames
+    assert loop[-1].line.strip() in source
+    assert linecache.getline(loop[-1].filename, loop[-1].lineno).strip() == loop[-1].line.strip()

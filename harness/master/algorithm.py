@@ -534,8 +534,17 @@ def _record(L: list[str], ns: dict[str, Any], ind: str, record_every: int, typed
 
 def compile_loop(blocks: Sequence[Block], order: Sequence[int], algorithm: str, time: TimeBase,
                  record_every: int = 1, typed: TypedRecord | None = None) -> tuple[Callable[..., Any], str]:
-    """The stepping loop as a function (see :func:`generate_loop`) and its source."""
+    """The stepping loop as a function (see :func:`generate_loop`) and its source.
+
+    The source is registered with :mod:`linecache` under a name unique to it, so a traceback
+    through the loop shows the generated lines like those of any module.
+    """
+    import hashlib
+    import linecache
+
     source, ns = generate_loop(blocks, order, algorithm, time, record_every, typed)
-    code = compile(source, "<ipcosim stepping loop>", "exec")
+    filename = f"<ipcosim stepping loop {hashlib.sha1(source.encode()).hexdigest()[:12]}>"
+    linecache.cache[filename] = (len(source), None, source.splitlines(True), filename)
+    code = compile(source, filename, "exec")
     exec(code, ns)  # noqa: S102 -- source generated above from the system's structure only
     return ns["run"], source
