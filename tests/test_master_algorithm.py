@@ -393,14 +393,11 @@ def test_units_convert_through_their_definitions_and_mismatches_are_refused():
 def test_a_traceback_through_the_generated_loop_shows_its_source() -> None:
     """The generated stepping loop is registered with linecache: a traceback through it shows
     the line that failed, not just a file name."""
+    import ctypes
     import linecache
     import traceback
 
-    from ipcosim.harness.master.algorithm import compile_loop
-
-    import ctypes
-
-    from ipcosim.harness.master.algorithm import GAUSS_SEIDEL, Block, TimeBase
+    from ipcosim.harness.master.algorithm import GAUSS_SEIDEL, Block, TimeBase, compile_loop
 
     def failing_step(*args):
         return 1 / 0
