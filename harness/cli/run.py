@@ -31,10 +31,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fmu-dir", action="append", default=[], metavar="DIR",
                    help="extra folder to look for FMUs in (also IPCOSIM_FMU_PATH; default build/fmus)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.add_argument("--timeout", metavar="S",
+                   help="wall-clock limit [s]: stop the run there with its results so far (exit status 124)")
     p.set_defaults(func=main)
 
 
-def _number(option: str, text: str | None) -> float | None:
+def seconds_option(option: str, text: str | None) -> float | None:
+    """The value of a command-line option in seconds (None if not given), positive and finite."""
     from ipcosim.harness.errors import UsageError
 
     if text is None:
@@ -62,8 +65,8 @@ def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.master.results import json_safe
     from ipcosim.harness.scenario.system import parse_set_options, parse_swap_options
 
-    stop = _number("--stop-time", args.stop_time)
-    step = _number("--step", args.step)
+    stop = seconds_option("--stop-time", args.stop_time)
+    step = seconds_option("--step", args.step)
     overrides = parse_set_options(args.set)
     swaps = parse_swap_options(args.swap)
     variables = [v.strip() for item in args.record for v in item.split(",") if v.strip()] or None

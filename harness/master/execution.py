@@ -38,15 +38,63 @@ from ipcosim.harness.master.algorithm import (
     step_multiples,
 )
 from ipcosim.harness.master.manipulators import Manipulator, Overrides
+from ipcosim.harness.master import signals
 from ipcosim.harness.master.observers import Observer
-from ipcosim.harness.master.results import Result, SimulationError, task_metrics
+from ipcosim.harness.master.results import Result, RowWriter, SimulationError, task_metrics
 from ipcosim.harness.master.slave import FMUSlave, Slave
 from ipcosim.harness.scenario.system import Instance, System, Variable
 
 SlaveFactory = Callable[[Instance], Slave]
 
-#: Ticks run between two looks at the record for non-finite values (and at KeyboardInterrupt).
+#: At most this many ticks run between two looks at the record for non-finite values, at
+#: pending signals, and two writes of the results.
 CHUNK = 512
+#: Wall-clock seconds a chunk of ticks aims at (fewer ticks per chunk for slow FMUs), so rows
+#: reach the disk several times a second.
+CHUNK_SECONDS = 0.2
+#: Most communication steps of one run (a year at 1 kHz is 3e10).
+MAX_TICKS = 10 ** 12
+
+
+def check_times(start: float, stop: Any, step: Any, record_every: Any = 1,
+                sources: Mapping[str, str] | None = None) -> TimeBase:
+    """Check the run's times before anything is allocated; the integer time base.
+
+    Parameters
+    ----------
+    start, stop, step : float
+        [s]; ``stop`` and ``step`` as given (any type: checked here).
+    record_every : int
+        Record every n-th communication point.
+    sources : mapping, optional
+        Where ``start``, ``stop`` and ``step`` came from, for the messages, e.g.
+        ``{"stop": "--stop-time", "step": "ssp/x/SystemStructure.ssd: baseStepSize"}``.
+
+    Raises
+    ------
+    StepSizeError
+        One line naming the value and where it came from.
+    """
+    src = {"start": "startTime", "stop": "--stop-time", "step": "--step", **(sources or {})}
+    for key, value in (("step", step), ("stop", stop), ("start", start)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise StepSizeError(f"{src[key]} {value!r}: not a finite number of seconds")
+    if not step > 0:
+        raise StepSizeError(f"{src['step']} {step:g}: the step size must be a positive number of seconds")
+    if not stop > start:
+        raise StepSizeError(f"{src['stop']} {stop:g}: the stop time must be after the start time {start:g} s "
+                            f"({src['start']})")
+    if isinstance(record_every, bool) or not isinstance(record_every, int) or record_every < 1:
+        raise StepSizeError(f"record_every = {record_every!r} must be a positive integer")
+    ticks = (stop - start) / step
+    if ticks > MAX_TICKS:
+        raise StepSizeError(f"{src['stop']} {stop:g} s at {src['step']} {step:g} s: {ticks:.3g} steps, more than "
+                            f"the limit {MAX_TICKS:.0e} (check the units: seconds)")
+    try:
+        return TimeBase.make(start, stop, step)
+    except StepSizeError:
+        raise StepSizeError(f"{src['stop']} {stop:g} s: the run of {stop - start:g} s is not a whole number of "
+                            f"steps of {step:g} s ({src['step']})") from None
 
 
 class NonFiniteError(SimulationError, FloatingPointError):
@@ -80,13 +128,16 @@ class Execution:
         Record every n-th communication point.
     max_init_iterations : int
         Bound on the initialization fixed-point iterations.
+    writer : RowWriter, optional
+        Where the rows go while the run proceeds (default: a spool file only); see
+        :meth:`row_names` for its field names.
     """
 
     def __init__(self, system: System, step: float, stop_time: float, start_time: float | None = None,
                  algorithm: str = GAUSS_SEIDEL, overrides: Mapping[tuple[str, str], Any] | None = None,
                  observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
                  slave_factory: SlaveFactory | None = None, unzip_dirs: Mapping[str, Path] | None = None,
-                 record_every: int = 1, max_init_iterations: int = 20) -> None:
+                 record_every: int = 1, max_init_iterations: int = 20, writer: RowWriter | None = None) -> None:
         if algorithm not in ALGORITHMS:
             raise StepSizeError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
         self.system = system
@@ -112,6 +163,7 @@ class Execution:
         self.init_order = self.order
         self._layout()
         self.slaves: list[Slave] = []
+        self.writer = writer
         self.tick = 0
         self.init_iterations = 0
         self._loop_source = ""
@@ -243,37 +295,41 @@ class Execution:
         return float(self.values[self._slot[(component, variable)]])
 
     # ------------------------------------------------------------------ run
+    def row_names(self) -> list[str]:
+        """Field names of the recorded rows: ``time``, then ``component.variable``."""
+        return ["time"] + [n for n, _, _ in self.columns]
+
     def run(self) -> Result:
         """Run the lifecycle; always returns a Result (``result.error`` set on failure).
 
-        Every instance is terminated (when FMI allows it) and freed, also after a failure or
-        a KeyboardInterrupt (which is re-raised after cleanup).
+        Rows go to the writer chunk by chunk as the run proceeds (memory stays bounded).
+        Every instance is terminated (when FMI allows it) and freed, also after a failure, a
+        KeyboardInterrupt or a signal deferred by :mod:`ipcosim.harness.master.signals`
+        (re-raised after cleanup with ``.result`` set).
         """
-        n_rows = self.n_ticks // self.record_every + 1
-        self.record = np.zeros((n_rows, max(self.n_values, 1)))
-        rows = 0
+        self.writer = self.writer or RowWriter(self.row_names())
+        self.record = np.zeros((CHUNK // self.record_every + 2, max(self.n_values, 1)))
+        self._base_row = 0
         error: BaseException | None = None
         interrupted: BaseException | None = None
         wall0 = _time.perf_counter()
         wall_loop = 0.0
         try:
+            signals.check()
             self._instantiate()
             self._initialize()
             self.record[0, :self.n_values] = self.values
-            rows = 1
             self._check_finite(0, 1)
+            self._emit(1)
             for obs in self.observers:
                 obs.start(self)
             loop_t0 = _time.perf_counter()
-            rows = self._step_all()
+            self._step_all()
             wall_loop = _time.perf_counter() - loop_t0
         except KeyboardInterrupt as exc:
             interrupted = error = exc
-            rows = min(self.tick // self.record_every + 1, n_rows) if rows else 0
         except Exception as exc:  # noqa: BLE001 -- reported in the Result, cleanup below
-            error = exc
-            if isinstance(exc, _TickFailure):
-                rows = exc.rows
+            error = exc.cause if isinstance(exc, _TickFailure) and exc.cause is not None else exc
         finally:
             cleanup_error = self._cleanup()
             if error is None and cleanup_error is not None:
@@ -284,10 +340,12 @@ class Execution:
                 except Exception as exc:  # noqa: BLE001
                     error = error or exc
         wall = _time.perf_counter() - wall0
-        result = self._result(rows, error, wall, wall_loop)
+        result = self._result(self.writer.finish(), error, wall, wall_loop)
         if interrupted is not None:
-            result.error = f"interrupted at t = {self.time_of(self.tick):.6g} s"
+            what = getattr(interrupted, "message", "interrupted")
+            result.error = f"{what} at t = {self.time_of(self.tick):.6g} s"
             result.metadata["error"] = result.error
+            result.metadata["status"] = "interrupted"
             interrupted.result = result  # type: ignore[attr-defined]  -- for callers that save it
             raise interrupted
         return result
@@ -374,46 +432,61 @@ class Execution:
             if status > 1:
                 raise self.slaves[b.index].fail("fmi2GetReal", status, t if t is not None else self.start_time)
 
-    def _step_all(self) -> int:
-        """Run every tick in chunks between observer/manipulator events; returns rows recorded."""
+    def _emit(self, rows: int) -> None:
+        """Hand the record rows ``_base_row .. rows-1`` (absolute numbers) to the writer."""
+        k = rows - self._base_row
+        if k > 0:
+            self.writer.append(self._rows(self.record[:k], self._base_row))
+            self._base_row = rows
+
+    def _step_all(self) -> None:
+        """Run every tick in chunks between observer/manipulator events, writing the rows of
+        each chunk and looking at pending signals in between."""
         N = self.n_ticks
-        rec_addr = self.record.ctypes.data
         row_bytes = self.record.shape[1] * 8
         va = ctypes.addressof(self.values_c)
         run = self._run_loop
         every = self.record_every
         due_man = {id(m): m.next_tick(-1) for m in self.manipulators}
         due_obs = {id(o): o.next_tick(0) for o in self.observers}
-        n = 0
+        n, chunk = 0, min(CHUNK, 16)
         while n < N:
+            signals.check()
             for man in self.manipulators:
                 if due_man[id(man)] == n:
                     man.step(self, n)
                     due_man[id(man)] = man.next_tick(n)
-            target = min(N, n + CHUNK)
+            target = min(N, n + chunk)
             for k in (*due_man.values(), *due_obs.values()):
                 if k is not None and n < k < target:
                     target = k
-            failure = run(n, target, rec_addr, va, row_bytes)
+            # the loop writes row r at rb + r * row_bytes: map this chunk's first row to record[0]
+            rb = self.record.ctypes.data - self._base_row * row_bytes
+            t0 = _time.perf_counter()
+            failure = run(n, target, rb, va, row_bytes)
             if failure is not None:
                 fn, idx, function, status = failure
-                rows = fn // every + 1
                 self.tick = fn
-                self._check_finite(n // every + 1, rows)
+                self._check_finite(self._base_row, fn // every + 1)
+                self._emit(fn // every + 1)
                 err = self.slaves[idx].fail(function, status, self.time_of(fn))
-                raise _TickFailure(str(err), rows, err)
-            self._check_finite(n // every + 1, target // every + 1)
+                raise _TickFailure(str(err), fn // every + 1, err)
+            self._check_finite(self._base_row, target // every + 1)
+            self._emit(target // every + 1)
+            chunk = _next_chunk(chunk, target - n, _time.perf_counter() - t0)
             n = self.tick = target
             for obs in self.observers:
                 if due_obs[id(obs)] == n:
                     obs.step(self, n)
                     due_obs[id(obs)] = obs.next_tick(n)
-        return N // every + 1
 
-    def _check_finite(self, row0: int, row1: int, failing: bool = False) -> None:
+    def _check_finite(self, row0: int, row1: int) -> None:
+        """Raise for the first non-finite output in record rows ``row0 .. row1-1`` (absolute
+        numbers, ``row0`` being the first row held in the record buffer); the rows before it
+        are handed to the writer first."""
         if row1 <= row0 or not len(self.output_slots):
             return
-        block = self.record[row0:row1][:, self.output_slots]
+        block = self.record[row0 - self._base_row:row1 - self._base_row][:, self.output_slots]
         if np.isfinite(block).all():
             return
         bad = ~np.isfinite(block)
@@ -429,7 +502,8 @@ class Execution:
         var = self._real_outputs[k][slot - self._out_offset[k]].name
         t = self.time_of(row * self.record_every)
         msg = (f"component {inst.name} ({inst.model.name}): output {inst.name}.{var} = "
-               f"{float(self.record[row, slot])} at t = {t:.6g} s (non-finite value)")
+               f"{float(self.record[row - self._base_row, slot])} at t = {t:.6g} s (non-finite value)")
+        self._emit(row + 1)  # the bad row too: it shows what went wrong
         raise _TickFailure(msg, row + 1, NonFiniteError(msg))
 
     def _slot_owner(self, slot: int) -> int:
@@ -456,11 +530,11 @@ class Execution:
         return first
 
     # ------------------------------------------------------------------ result
-    def _result(self, rows: int, error: BaseException | None, wall: float, wall_loop: float) -> Result:
-        rec = self.record[:rows]
-        names = ["time"] + [n for n, _, _ in self.columns]
-        data = np.zeros(rows, dtype=[(n, "f8") for n in names])
-        ticks = np.arange(rows) * self.record_every
+    def _rows(self, rec: np.ndarray, first_row: int) -> np.ndarray:
+        """Record rows (value vectors) as a structured array of the row fields."""
+        rows = len(rec)
+        data = np.zeros(rows, dtype=[(n, "f8") for n in self.row_names()])
+        ticks = (first_row + np.arange(rows)) * self.record_every
         if self.timebase.step_ns is not None:
             data["time"] = (self.timebase.start_ns + ticks * self.timebase.step_ns) / 1e9
         else:
@@ -471,6 +545,10 @@ class Execution:
             else:
                 src, factor, offset = link
                 data[name] = factor * rec[:, src] + offset
+        return data
+
+    def _result(self, data: np.ndarray, error: BaseException | None, wall: float, wall_loop: float) -> Result:
+        rows = len(data)
         simulated = float(data["time"][-1] - data["time"][0]) if rows else 0.0
         metrics: dict[str, Any] = {}
         if rows >= 2:
@@ -504,6 +582,13 @@ class Execution:
             "fmu_messages": {s.name: s.messages()[-5:] for s in self.slaves if s.messages()},
         }
         return Result(data=data, metrics=metrics, metadata=metadata, error=message)
+
+
+def _next_chunk(chunk: int, ticks: int, seconds: float) -> int:
+    """Ticks for the next chunk so that it lasts about CHUNK_SECONDS (between 1 and CHUNK)."""
+    if ticks < chunk or seconds <= 0:
+        return chunk
+    return int(max(1, min(CHUNK, ticks * CHUNK_SECONDS / seconds)))
 
 
 class _TickFailure(SimulationError):

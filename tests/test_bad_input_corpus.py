@@ -1,0 +1,222 @@
+"""The bad-input corpus of ``ipcosim run``: archives, SSD/SSV files, command-line values,
+parameter values, FMU faults, signals and output folders.
+
+Every case asserts one clear error line naming the file, component or value, the exit
+status, what is on disk afterwards (partial results where a run had started), every FMU
+instance freed, and an empty temporary folder. Cases are tables run in-process; the signal
+cases run as subprocesses, started together.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from ssd_helpers import component, connection, connector, ssd, ssv, write_scenario
+
+from ipcosim.harness import cli
+from ipcosim.harness.master.slave import FMUSlave
+
+pytestmark = pytest.mark.integration
+DATA = Path(__file__).resolve().parent / "data"
+
+
+# ------------------------------------------------------------------ fixtures
+@pytest.fixture(scope="session")
+def corpus_fmus(tmp_path_factory) -> dict[str, Path]:
+    from ipcosim.fmus.build import build_all
+
+    out = tmp_path_factory.mktemp("corpus-fmus")
+    scripts = [DATA / "fmu_master_source.py", DATA / "fmu_master_gain.py", DATA / "fmu_corpus_fault.py"]
+    return {r.fmu.stem: r.fmu for r in build_all(out, scripts=scripts)}
+
+
+@pytest.fixture
+def tmpdir_watch(tmp_path, monkeypatch) -> Path:
+    """A private temporary folder for the run (checked empty by :func:`check_clean`)."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    return tmp
+
+
+@pytest.fixture
+def tracked(monkeypatch):
+    """Every FMUSlave instantiated and freed during the test."""
+    made, freed = [], []
+    real_inst, real_free = FMUSlave.instantiate, FMUSlave.free
+
+    def inst(self):
+        made.append(self)
+        real_inst(self)
+
+    def free(self):
+        was = self.state
+        real_free(self)
+        if was not in ("freed", "created"):
+            freed.append(self)
+
+    monkeypatch.setattr(FMUSlave, "instantiate", inst)
+    monkeypatch.setattr(FMUSlave, "free", free)
+    return made, freed
+
+
+SRC = lambda **inline: component("src", "MasterSource", [connector("y", "output")], inline=inline or None)  # noqa: E731
+GAIN = component("g", "MasterGain", [connector("u", "input"), connector("aux", "input", "rad"),
+                                     connector("y", "output"), connector("z", "output", "rad")])
+FAULT = lambda **inline: component("f", "CorpusFault", [connector("u", "input"), connector("y", "output")],  # noqa: E731
+                                   inline=inline or None)
+CONNS = [connection("src.y", "g.u")]
+
+
+def scenario(tmp_path: Path, fmus, comps=None, conns=None, name="s", **kw) -> Path:
+    text = ssd(name, comps if comps is not None else [SRC(), GAIN], CONNS if conns is None else conns, **kw)
+    return write_scenario(tmp_path / name, text, fmus)
+
+
+def run_cli(capsys, *argv: object) -> tuple[int, list[str]]:
+    rc = cli.main(["run", *map(str, argv), "--quiet"])
+    err = capsys.readouterr().err
+    return rc, [line for line in err.splitlines() if line.strip()]
+
+
+def error_line(err: list[str]) -> str:
+    """The one error line (warnings aside)."""
+    errors = [line for line in err if "warning:" not in line]
+    assert len(errors) == 1, err
+    assert errors[0].startswith("ipcosim run: error: "), errors
+    return errors[0]
+
+
+def check_clean(tmp: Path, tracked=None) -> None:
+    """Nothing left in the temporary folder; every instantiated FMU freed."""
+    assert list(tmp.iterdir()) == []
+    if tracked is not None:
+        made, freed = tracked
+        assert set(map(id, freed)) == set(map(id, made))
+
+
+def read_csv(path: Path) -> np.ndarray:
+    return np.genfromtxt(path, delimiter=",", names=True, deletechars="")
+
+
+# ------------------------------------------------------------------ archives
+def _pack(folder: Path, archive: Path, extra: dict[str, bytes] | None = None, source: str | None = None,
+          infos: list[tuple[zipfile.ZipInfo, bytes]] = ()) -> Path:
+    """Zip a scenario folder into ``archive``; ``source`` replaces the FMU source of component g."""
+    with zipfile.ZipFile(archive, "w") as zf:
+        for p in sorted(folder.rglob("*")):
+            if p.is_file():
+                data = p.read_bytes()
+                if p.name == "SystemStructure.ssd" and source is not None:
+                    data = data.replace(b'source="resources/MasterGain.fmu"', f'source="{source}"'.encode())
+                zf.writestr(p.relative_to(folder).as_posix(), data)
+        for name, data in (extra or {}).items():
+            zf.writestr(name, data)
+        for info, data in infos:
+            zf.writestr(info, data)
+    return archive
+
+
+def _fmu_with(fmu: Path, out: Path, name: str, data: bytes, mode: int | None = None) -> Path:
+    """A copy of ``fmu`` with one extra member (``mode``: Unix file type and permissions)."""
+    shutil.copyfile(fmu, out)
+    info = zipfile.ZipInfo(name)
+    if mode is not None:
+        info.create_system = 3
+        info.external_attr = mode << 16
+    with zipfile.ZipFile(out, "a") as zf:
+        zf.writestr(info, data)
+    return out
+
+
+ESCAPES = {
+    "dotdot-source": ("../../escaped.fmu", "'..' in the name"),
+    "dotdot-inside-source": ("resources/../../../escaped.fmu", "'..' in the name"),
+    "absolute-source": ("/tmp/ipcosim-escaped.fmu", "absolute name"),
+    "backslash-source": ("..\\..\\escaped.fmu", "absolute name or drive letter"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(ESCAPES))
+def test_archive_component_source_escaping_the_folder(case, tmp_path, capsys, corpus_fmus, tmpdir_watch, tracked):
+    source, reason = ESCAPES[case]
+    folder = scenario(tmp_path, corpus_fmus)
+    member = source.replace("\\", "/").lstrip("/")
+    arch = _pack(folder, tmp_path / "evil.ssp", extra={member: corpus_fmus["MasterGain"].read_bytes()}, source=source)
+    rc, err = run_cli(capsys, arch, "--out", tmp_path / "out")
+    line = error_line(err)
+    assert rc == 1 and "evil.ssp: member" in line and repr(source) in line and reason in line
+    assert not (tmp_path / "escaped.fmu").exists() and not Path("/tmp/ipcosim-escaped.fmu").exists()
+    assert tracked[0] == [] and not (tmp_path / "out").exists()
+    check_clean(tmpdir_watch, tracked)
+
+
+FMU_MEMBERS = {
+    "fmu-dotdot-member": ("../../outside.txt", None, "'..' in the name"),
+    "fmu-absolute-member": ("/tmp/ipcosim-outside.txt", None, "absolute name"),
+    "fmu-symlink-member": ("resources/link", stat.S_IFLNK | 0o777, "symbolic link"),
+    "fmu-device-member": ("resources/dev", stat.S_IFCHR | 0o666, "device or special file"),
+    "fmu-fifo-member": ("resources/fifo", stat.S_IFIFO | 0o666, "device or special file"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(FMU_MEMBERS))
+def test_fmu_member_refused(case, tmp_path, capsys, corpus_fmus, tmpdir_watch, tracked):
+    name, mode, reason = FMU_MEMBERS[case]
+    bad = _fmu_with(corpus_fmus["MasterGain"], tmp_path / "MasterGain.fmu", name, b"/etc/passwd", mode)
+    folder = scenario(tmp_path, {"MasterSource": corpus_fmus["MasterSource"], "MasterGain": bad})
+    rc, err = run_cli(capsys, folder, "--out", tmp_path / "out")
+    line = error_line(err)
+    assert rc == 1 and "MasterGain.fmu: member" in line and repr(name) in line and reason in line
+    assert not (tmp_path / "outside.txt").exists() and not Path("/tmp/ipcosim-outside.txt").exists()
+    assert tracked[0] == []
+    check_clean(tmpdir_watch, tracked)
+
+
+def test_fmu_in_an_archive_with_a_symlink_member(tmp_path, capsys, corpus_fmus, tmpdir_watch, tracked):
+    bad = _fmu_with(corpus_fmus["MasterGain"], tmp_path / "bad.fmu", "binaries/x", b"/", stat.S_IFLNK | 0o777)
+    folder = scenario(tmp_path, {"MasterSource": corpus_fmus["MasterSource"], "MasterGain": bad})
+    arch = _pack(folder, tmp_path / "linked.ssp")
+    rc, err = run_cli(capsys, arch)
+    line = error_line(err)
+    assert rc == 1 and "MasterGain.fmu: member 'binaries/x': symbolic link" in line
+    check_clean(tmpdir_watch, tracked)
+
+
+def test_archive_with_too_many_members(tmp_path, capsys, corpus_fmus, tmpdir_watch, monkeypatch):
+    from ipcosim.harness.scenario import archive
+
+    monkeypatch.setattr(archive, "MAX_MEMBERS", 5)
+    folder = scenario(tmp_path, corpus_fmus)
+    rc, err = run_cli(capsys, folder)
+    line = error_line(err)
+    assert rc == 1 and "MasterSource.fmu: " in line and "more than the limit 5" in line
+    check_clean(tmpdir_watch)
+
+
+def test_archive_member_larger_than_declared_is_stopped(tmp_path, capsys, corpus_fmus, tmpdir_watch, monkeypatch):
+    from ipcosim.harness.scenario import archive
+
+    monkeypatch.setattr(archive, "MAX_TOTAL_BYTES", 4096)
+    folder = scenario(tmp_path, corpus_fmus)
+    rc, err = run_cli(capsys, folder)
+    line = error_line(err)
+    assert rc == 1 and "MasterSource.fmu: " in line and "more than the limit 4096" in line
+    check_clean(tmpdir_watch)
+
+
+def test_good_archive_still_runs(tmp_path, capsys, corpus_fmus, tmpdir_watch, tracked):
+    folder = scenario(tmp_path, corpus_fmus, comps=[SRC(value=3.0), GAIN])
+    arch = _pack(folder, tmp_path / "good.ssp")
+    rc, err = run_cli(capsys, arch, "--out", tmp_path / "out")
+    assert rc == 0, err
+    assert np.all(read_csv(tmp_path / "out" / "results.csv")["g.y"] == 6.0)
+    assert len(tracked[0]) == 2
+    check_clean(tmpdir_watch, tracked)
