@@ -220,3 +220,118 @@ def test_good_archive_still_runs(tmp_path, capsys, corpus_fmus, tmpdir_watch, tr
     assert np.all(read_csv(tmp_path / "out" / "results.csv")["g.y"] == 6.0)
     assert len(tracked[0]) == 2
     check_clean(tmpdir_watch, tracked)
+
+
+# ------------------------------------------------------------------ SSD and SSV files
+def _edit(folder: Path, old: str, new: str, name: str = "SystemStructure.ssd") -> None:
+    path = folder / name
+    text = path.read_text()
+    assert old in text, old
+    path.write_text(text.replace(old, new, 1))
+
+
+SSD_CASES = {
+    # case: (edit of the SSD: old, new), expected text in the error line
+    "infinite-stop-time": (('stopTime="1.0"', 'stopTime="INF"'),
+                           "SystemStructure.ssd: DefaultExperiment stopTime inf: not a finite number"),
+    "absurd-stop-time": (('stopTime="1.0"', 'stopTime="1e300"'),
+                         "SystemStructure.ssd: DefaultExperiment stopTime 1e+300 s at"),
+    "stop-before-start": (('startTime="0.0"', 'startTime="5.0"'), "stopTime 1 s must be after startTime 5 s"),
+    "zero-base-step": (('baseStepSize="0.01"', 'baseStepSize="0"'), "baseStepSize 0 must be positive"),
+    "nan-base-step": (('baseStepSize="0.01"', 'baseStepSize="NaN"'), "baseStepSize nan must be positive"),
+    "stop-not-a-multiple": (('stopTime="1.0"', 'stopTime="1.005"'),
+                            "DefaultExperiment stopTime 1.005 s: the run of 1.005 s is not a whole number of steps"),
+    "tiny-base-step": (('baseStepSize="0.01"', 'baseStepSize="1e-300"'), "more than the limit"),
+    "duplicate-component": (('<ssd:Component name="g"', '<ssd:Component name="src"'),
+                            "duplicate component name 'src'"),
+    "unknown-connection-end": (('endElement="g"', 'endElement="nobody"'),
+                               "connection names component 'nobody'"),
+    "missing-binding-file": (('<ssd:Connectors>', '<ssd:Connectors>', ), None),
+    "not-well-formed": (("</ssd:System>", "</ssd:Sys>"), "SystemStructure.ssd"),
+    "bad-linear-transformation": (('<ssd:Connection startElement="src" startConnector="y" endElement="g" '
+                                   'endConnector="u"/>',
+                                   '<ssd:Connection startElement="src" startConnector="y" endElement="g" '
+                                   'endConnector="u"><ssc:LinearTransformation factor="INF"/></ssd:Connection>'),
+                                  "linear transformation factor/offset must be finite"),
+}
+SSD_CASES.pop("missing-binding-file")
+
+
+@pytest.mark.parametrize("case", sorted(SSD_CASES))
+def test_bad_ssd(case, tmp_path, capsys, corpus_fmus, tmpdir_watch, tracked):
+    (old, new), expected = SSD_CASES[case]
+    folder = scenario(tmp_path, corpus_fmus)
+    _edit(folder, old, new)
+    rc, err = run_cli(capsys, folder, "--out", tmp_path / "out")
+    line = error_line(err)
+    assert rc == 1 and expected in line, line
+    assert tracked[0] == [] and not (tmp_path / "out" / "results.csv").exists()
+    check_clean(tmpdir_watch, tracked)
+
+
+SSV_CASES = {
+    # case: (.ssv text, expected text in the error line)
+    "nan-parameter": (ssv("bad", {"gain": 1.0}).replace('value="1.0"', 'value="NaN"'), "gain"),
+    "unknown-parameter": (ssv("bad", {"nothing": 1.0}), "nothing"),
+    "not-well-formed": ("<ssv:ParameterSet", "bad.ssv"),
+    "string-for-real": (ssv("bad", {"gain": 1.0}).replace('value="1.0"', 'value="fast"'), "bad.ssv"),
+    "fails-schema": (ssv("bad", {"gain": 1.0}).replace("<ssv:Parameters>", "<ssv:Bogus/><ssv:Parameters>"),
+                     "bad.ssv"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SSV_CASES))
+def test_bad_ssv(case, tmp_path, capsys, corpus_fmus, tmpdir_watch, tracked):
+    text, expected = SSV_CASES[case]
+    gain = component("g", "MasterGain", [connector("u", "input"), connector("aux", "input", "rad"),
+                                         connector("y", "output"), connector("z", "output", "rad")],
+                     bindings=["bad.ssv"])
+    folder = write_scenario(tmp_path / "s", ssd("s", [SRC(), gain], CONNS), corpus_fmus, {"bad.ssv": text})
+    rc, err = run_cli(capsys, folder, "--out", tmp_path / "out")
+    line = error_line(err)
+    assert rc == 1 and expected in line, line
+    check_clean(tmpdir_watch, tracked)
+
+
+# ------------------------------------------------------------------ command-line values
+CLI_CASES = {
+    "negative-step-exponent": (("--step", "-1e-3"), "--step -1e-3: must be a positive number of seconds"),
+    "negative-stop-exponent": (("--stop-time", "-1e-3"), "--stop-time -1e-3: must be a positive number"),
+    "infinite-stop": (("--stop-time", "inf"), "--stop-time inf: must be a positive number"),
+    "nan-step": (("--step", "nan"), "--step nan: must be a positive number"),
+    "absurd-stop": (("--stop-time", "1e300"), "baseStepSize 0.01 s: 1e+302 steps, more than the limit"),
+    "absurd-small-step": (("--step", "1e-300"), "steps, more than the limit"),
+    "stop-not-a-multiple": (("--stop-time", "0.005"), "--stop-time 0.005 s: the run of 0.005 s is not a whole"),
+    "unknown-record": (("--record", "g.nothing"), "--record g.nothing: no such variable"),
+    "unknown-parameter-set": (("--parameter-set", "nothing"), "nothing"),
+    "zero-timeout": (("--timeout", "0"), "--timeout 0: must be a positive number"),
+    "negative-timeout": (("--timeout", "-5e0"), "--timeout -5e0: must be a positive number"),
+    "set-empty-value": (("--set", "g.gain="), "--set 'g.gain=': expected COMPONENT.VARIABLE=VALUE"),
+    "set-without-variable": (("--set", "g=1"), "expected COMPONENT.VARIABLE=VALUE"),
+    "swap-missing-file": (("--swap", "g=missing.fmu"), "--swap g=missing.fmu"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CLI_CASES))
+def test_bad_command_line_value(case, tmp_path, capsys, corpus_fmus, tmpdir_watch, tracked):
+    args, expected = CLI_CASES[case]
+    folder = scenario(tmp_path, corpus_fmus)
+    rc, err = run_cli(capsys, folder, *args, "--out", tmp_path / "out")
+    line = error_line(err)
+    assert rc == 1 and expected in line, line
+    assert tracked[0] == [] and not (tmp_path / "out").exists()
+    check_clean(tmpdir_watch, tracked)
+
+
+def test_ssd_external_entity_is_not_read(tmp_path, capsys, corpus_fmus, tmpdir_watch, tracked):
+    folder = scenario(tmp_path, corpus_fmus)
+    secret = tmp_path / "secret.txt"
+    secret.write_text("top-secret-text")
+    _edit(folder, '<?xml version="1.0" encoding="UTF-8"?>\n<ssd:SystemStructureDescription',
+          f'<?xml version="1.0" encoding="UTF-8"?>\n<!DOCTYPE x [<!ENTITY e SYSTEM "file://{secret}">]>\n'
+          f'<ssd:SystemStructureDescription')
+    _edit(folder, '<ssd:System name="s">', '<ssd:System name="s" description="&e;">')
+    rc, err = run_cli(capsys, folder, "--out", tmp_path / "out")
+    line = error_line(err)
+    assert rc == 1 and "SystemStructure.ssd" in line and "top-secret-text" not in line
+    check_clean(tmpdir_watch, tracked)

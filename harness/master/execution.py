@@ -352,6 +352,7 @@ class Execution:
 
     def _instantiate(self) -> None:
         for inst in self.instances:
+            signals.check()
             slave = self.slave_factory(inst)
             self.slaves.append(slave)
             slave.instantiate()
@@ -365,6 +366,7 @@ class Execution:
 
     def _initialize(self) -> None:
         """Enter initialization mode, propagate to a fixed point, exit initialization mode."""
+        signals.check()
         for slave in self.slaves:
             slave.enter_initialization_mode()
         self.blocks = self._blocks()
@@ -372,6 +374,7 @@ class Execution:
             self._get_outputs(b, None)
         changed: list[str] = []
         for it in range(1, self.max_init_iterations + 1):
+            signals.check()
             changed = self._sweep()
             self.init_iterations = it
             if not changed:
