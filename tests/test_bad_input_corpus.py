@@ -335,3 +335,172 @@ def test_ssd_external_entity_is_not_read(tmp_path, capsys, corpus_fmus, tmpdir_w
     line = error_line(err)
     assert rc == 1 and "SystemStructure.ssd" in line and "top-secret-text" not in line
     check_clean(tmpdir_watch, tracked)
+
+
+# ------------------------------------------------------------------ subprocess cases: FMU faults, parameter
+# values, signals. pythonfmu 0.7.0 releases objects twice after a Python exception in an FMU (see
+# ipcosim.fmus.fmi), so fatal FMU errors run in their own processes; signals need their own process
+# anyway. All start together and run in parallel (a few at a time).
+import json  # noqa: E402
+import signal  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from dataclasses import dataclass, field  # noqa: E402
+
+RUNNER = DATA / "corpus_runner.py"
+PARALLEL = 4
+
+
+@dataclass
+class Case:
+    comps: dict = field(default_factory=dict)   # inline parameters of f (CorpusFault)
+    args: tuple = ()
+    status: int = 1
+    line: str = ""                              # expected in the one error line ("" : no error line)
+    last_time: float | None = None              # time of the last results row
+    min_rows: int = 1                           # at least this many rows in results.csv
+    signal_at: str = ""                         # CORPUS_SIGNAL_AT
+    send: tuple = ()                            # (signal, rows in results.csv before it is sent)
+    freed: bool = True                          # every instance freed (counted by the runner)
+    clean: bool = True                          # nothing left in the temporary folder
+    stop: float = 1.0
+
+
+SLOW = {"fault": 5, "delay": 0.01}
+SUBPROCESS_CASES = {
+    # FMU faults
+    "fault-exception": Case({"fault": 1, "fail_time": 0.5}, line="component f (CorpusFault): fmi2DoStep returned "
+                            "fmi2Fatal at t = 0.5 s: RuntimeError: corpus fault: exploded at t = 0.5 s", last_time=0.5),
+    "fault-nan-output": Case({"fault": 2, "fail_time": 0.5},
+                             line="component f (CorpusFault): output f.y = nan at t = 0.51 s", last_time=0.51),
+    "fault-discard": Case({"fault": 3, "fail_time": 0.5}, line="fmi2DoStep returned fmi2Discard at t = 0.5 s: "
+                          "corpus fault: cannot step from t = 0.5 s", last_time=0.5),
+    "fault-exception-in-initialization": Case({"fault": 6}, line="component f (CorpusFault): "
+                                              "fmi2ExitInitializationMode returned fmi2Fatal", min_rows=0),
+    # the rows of the chunk that hangs (at most CHUNK_SECONDS of wall time) are not written
+    "fault-hang-past-timeout": Case({"fault": 4, "fail_time": 0.3}, args=("--timeout", "3"), status=124,
+                                    line="wall-clock limit of 3 s reached", min_rows=1, freed=False),
+    "fault-slow-past-timeout": Case(dict(SLOW), args=("--timeout", "2"), status=124, stop=1000.0,
+                                    line="stopped: wall-clock limit (--timeout) reached at t =", min_rows=20),
+    # parameter values
+    "parameter-nan": Case(args=("--set", "g.gain=nan"), line="gain", min_rows=0),
+    "parameter-infinite": Case(args=("--set", "g.gain=1e400"), line="gain", min_rows=0),
+    "parameter-negative-delay": Case(args=("--set", "f.fail_time=-inf"), line="fail_time", min_rows=0),
+    "parameter-bad-period": Case(args=("--set", "g.sample_period=-0.01"), line="g.sample_period", min_rows=-1),
+    "parameter-not-an-integer": Case(args=("--set", "f.fault=1.5"), line="f.fault", min_rows=-1),
+    # signals at every phase
+    "sigterm-load": Case(signal_at="load:SIGTERM", status=143, line="interrupted by SIGTERM", min_rows=0),
+    "sigint-load": Case(signal_at="load:SIGINT", status=130, line="interrupted by SIGINT", min_rows=0),
+    "sigterm-instantiate": Case(signal_at="instantiate:SIGTERM", status=143, line="interrupted by SIGTERM at t = 0 s",
+                                min_rows=0),
+    "sigint-initialize": Case(signal_at="initialize:SIGINT", status=130, line="interrupted by SIGINT at t = 0 s",
+                              min_rows=0),
+    "sigint-inside-initialization": Case({"init_delay": 3.0}, send=(signal.SIGINT, 0), status=130,
+                                         line="interrupted by SIGINT at t = 0 s", min_rows=0),
+    "sigterm-write": Case(signal_at="write:SIGTERM", status=143, line="interrupted by SIGTERM", last_time=1.0),
+    "sigterm-step": Case(dict(SLOW), send=(signal.SIGTERM, 30), status=143, line="interrupted by SIGTERM at t =",
+                         min_rows=30, stop=1000.0),
+    "sigterm-inside-fmu-call": Case({"fault": 5, "delay": 0.5}, send=(signal.SIGTERM, 2), status=143,
+                                    line="interrupted by SIGTERM at t =", min_rows=2, stop=1000.0),
+    **{f"sigint-step-{k}": Case(send=(signal.SIGINT, 200 * (k + 1)), status=130, line="interrupted by SIGINT at t =",
+                                min_rows=200 * (k + 1), stop=100000.0) for k in range(5)},
+    "second-signal-during-cleanup": Case(dict(SLOW), send=(signal.SIGTERM, 30), signal_at="cleanup:SIGTERM",
+                                         status=143, line="", min_rows=30, freed=False, stop=1000.0),
+    "sigkill-step": Case(dict(SLOW), send=(signal.SIGKILL, 200), status=-9, line="", min_rows=200, freed=False,
+                         clean=False, stop=1000.0),
+}
+
+
+@dataclass
+class Outcome:
+    status: int
+    stderr: str
+    out: Path
+    tmp: Path
+    counts: dict | None
+    wall_at_kill: float | None = None
+    rows_1s_before_kill: int = 0
+
+
+def _csv_rows(path: Path) -> int:
+    try:
+        return max(0, path.read_bytes().count(b"\n") - 1)
+    except FileNotFoundError:
+        return -1
+
+
+@pytest.fixture(scope="module")
+def subprocess_outcomes(tmp_path_factory, corpus_fmus) -> dict[str, Outcome]:
+    root = tmp_path_factory.mktemp("corpus-subprocess")
+    comps_src = component("src", "MasterSource", [connector("y", "output")])
+    pending = sorted(SUBPROCESS_CASES)
+    running: dict[str, tuple] = {}
+    outcomes: dict[str, Outcome] = {}
+    deadline = time.monotonic() + 300
+    while (pending or running) and time.monotonic() < deadline:
+        while pending and len(running) < PARALLEL:
+            name = pending.pop(0)
+            case = SUBPROCESS_CASES[name]
+            d = root / name
+            (d / "tmp").mkdir(parents=True)
+            folder = write_scenario(d / "s", ssd("s", [comps_src, GAIN, FAULT(**case.comps)],
+                                                 [connection("src.y", "g.u"), connection("g.y", "f.u")],
+                                                 stop=case.stop), corpus_fmus)
+            env = dict(os.environ, TMPDIR=str(d / "tmp"), CORPUS_COUNTS=str(d / "counts.json"),
+                       CORPUS_SIGNAL_AT=case.signal_at)
+            proc = subprocess.Popen([sys.executable, str(RUNNER), "run", str(folder), "--out", str(d / "out"),
+                                     "--quiet", *case.args], env=env, stderr=subprocess.PIPE, text=True)
+            running[name] = (proc, d, case, [], None)
+        for name in list(running):
+            proc, d, case, history, killed = running[name]
+            csv = d / "out" / "results.csv"
+            if case.send and killed is None and proc.poll() is None:
+                rows = _csv_rows(csv)
+                history.append((time.monotonic(), rows))
+                if rows >= case.send[1] and (case.send[1] > 0 or rows >= 0 or (d / "tmp").exists()):
+                    if case.send[1] == 0:
+                        time.sleep(1.0)  # inside the FMU's initialization (init_delay)
+                    proc.send_signal(case.send[0])
+                    killed = time.monotonic()
+                    running[name] = (proc, d, case, history, killed)
+            if proc.poll() is not None:
+                err = proc.stderr.read()
+                counts = json.loads((d / "counts.json").read_text()) if (d / "counts.json").exists() else None
+                before = [r for t, r in history if killed is not None and t <= killed - 1.0]
+                outcomes[name] = Outcome(proc.returncode, err, d / "out", d / "tmp", counts, killed,
+                                         before[-1] if before else 0)
+                del running[name]
+        time.sleep(0.05)
+    for proc, *_ in running.values():
+        proc.kill()
+    return outcomes
+
+
+@pytest.mark.parametrize("name", sorted(SUBPROCESS_CASES))
+def test_subprocess_case(name, subprocess_outcomes):
+    case, got = SUBPROCESS_CASES[name], subprocess_outcomes.get(name)
+    assert got is not None, f"{name} did not finish in time"
+    assert got.status == case.status, got.stderr
+    lines = [line for line in got.stderr.splitlines() if line.strip() and "warning:" not in line]
+    if case.line:
+        assert len(lines) == 1 and case.line in lines[0], got.stderr
+    rows = _csv_rows(got.out / "results.csv")
+    if case.min_rows >= 0:
+        assert rows >= case.min_rows, (rows, got.stderr)
+        data = np.genfromtxt(got.out / "results.csv", delimiter=",", names=True, deletechars="") if rows else None
+        if data is not None:
+            assert data.size == rows and np.all(np.isfinite(data["time"]))   # every line complete
+        if case.last_time is not None:
+            assert float(np.atleast_1d(data["time"])[-1]) == pytest.approx(case.last_time, abs=1e-9)
+        if case.status != -9 and case.freed:
+            assert (got.out / "metrics.json").exists()
+    else:
+        assert rows == -1  # refused before the run: nothing written
+    if case.freed:
+        assert got.counts is not None and got.counts["freed"] == got.counts["instantiated"], got.counts
+    if case.clean:
+        assert list(got.tmp.iterdir()) == []
+    if case.send and case.send[0] == signal.SIGKILL:
+        # rows reach the disk while the run goes on: at most about a second is lost
+        assert rows >= got.rows_1s_before_kill > 0

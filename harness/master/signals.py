@@ -92,11 +92,11 @@ def critical() -> Iterator[None]:
             _force_exit(_State.exit_after_critical)
 
 
-def _force_exit(status: int) -> None:
+def _force_exit(status: int, message: str = "second signal: exiting without finishing the clean-up") -> None:
     for path in list(_State.temp_dirs):
         shutil.rmtree(path, ignore_errors=True)
     try:
-        sys.stderr.write("ipcosim: second signal: exiting without finishing the clean-up\n")
+        sys.stderr.write(f"ipcosim: {message}\n")
         sys.stderr.flush()
     finally:
         os._exit(status)
@@ -122,9 +122,8 @@ def _watchdog(timeout: float, grace: float, done: threading.Event) -> None:
     if done.wait(grace):
         return
     # the master did not get back from an FMU call: leave now
-    sys.stderr.write(f"ipcosim: error: wall-clock limit of {timeout:g} s reached and an FMU call did not return "
-                     f"within {grace:g} s; results up to the last written chunk are on disk\n")
-    _force_exit(TIMEOUT_STATUS)
+    _force_exit(TIMEOUT_STATUS, f"error: wall-clock limit of {timeout:g} s reached and an FMU call did not return "
+                                f"within {grace:g} s; results up to the last written chunk are on disk")
 
 
 @contextlib.contextmanager

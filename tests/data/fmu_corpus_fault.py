@@ -16,8 +16,10 @@ class CorpusFault(FmuBase):
         self.add_parameter("fault", start=0, type_=int, description="fault kind (see the class docstring)")
         self.add_parameter("fail_time", start=0.0, unit="s", description="time from which to fail")
         self.add_parameter("delay", start=0.0, unit="s", description="wall-clock seconds per step (fault 5)")
+        self.add_parameter("init_delay", start=0.0, unit="s", description="wall-clock seconds in initialization")
 
     def setup(self):
+        time.sleep(self.init_delay)
         if self.fault == 6:
             raise RuntimeError("corpus fault: initialization exploded")
         self.y = self.u
