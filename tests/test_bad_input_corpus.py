@@ -504,3 +504,59 @@ def test_subprocess_case(name, subprocess_outcomes):
     if case.send and case.send[0] == signal.SIGKILL:
         # rows reach the disk while the run goes on: at most about a second is lost
         assert rows >= got.rows_1s_before_kill > 0
+
+
+# ------------------------------------------------------------------ output folders
+def _out_under_file(tmp_path: Path) -> Path:
+    (tmp_path / "plain-file").write_text("x")
+    return tmp_path / "plain-file" / "out"
+
+
+def _out_is_file(tmp_path: Path) -> Path:
+    (tmp_path / "out-file").write_text("x")
+    return tmp_path / "out-file"
+
+
+OUT_CASES = {
+    "under-a-file": (_out_under_file, "output folder is not writable (Not a directory)"),
+    "is-a-file": (_out_is_file, "output folder is not writable (File exists)"),
+    "read-only-filesystem": (lambda tmp_path: Path("/proc/ipcosim-out"), "output folder is not writable"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(OUT_CASES))
+def test_unwritable_output_folder_is_refused_before_the_run(case, tmp_path, capsys, corpus_fmus, tmpdir_watch,
+                                                             tracked):
+    make, expected = OUT_CASES[case]
+    out = make(tmp_path)
+    rc, err = run_cli(capsys, scenario(tmp_path, corpus_fmus), "--out", out)
+    line = error_line(err)
+    assert rc == 1 and f"--out {out}: {expected}" in line, line
+    assert tracked[0] == []  # refused before any FMU was instantiated
+    check_clean(tmpdir_watch, tracked)
+
+
+def test_disk_full_while_running_keeps_the_rows_written(tmp_path, capsys, corpus_fmus, tmpdir_watch, tracked,
+                                                        monkeypatch):
+    import errno
+
+    from ipcosim.harness.master import results
+
+    real_write, calls = os.write, []
+
+    def full_after_three(fd, data):
+        calls.append(len(data))
+        if len(calls) > 3:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real_write(fd, data)
+
+    monkeypatch.setattr(results.os, "write", full_after_three)
+    rc, err = run_cli(capsys, scenario(tmp_path, corpus_fmus, stop=50.0), "--out", tmp_path / "out")
+    monkeypatch.setattr(results.os, "write", real_write)
+    line = error_line(err)
+    assert rc == 1 and "results.csv: cannot write results (No space left on device)" in line, line
+    data = read_csv(tmp_path / "out" / "results.csv")
+    assert 1 < data.size < 5001 and f"{data.size} rows written" in line
+    assert np.all(np.diff(data["time"]) > 0)
+    assert len(tracked[0]) == 2
+    check_clean(tmpdir_watch, tracked)
