@@ -40,7 +40,7 @@ from ipcosim.harness.master.algorithm import (
 from ipcosim.harness.master.manipulators import Manipulator, Overrides
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.observers import Observer
-from ipcosim.harness.master.results import Result, RowWriter, SimulationError, task_metrics
+from ipcosim.harness.master.results import Result, RowWriter, SimulationError, streamed_task_metrics
 from ipcosim.harness.master.slave import FMUSlave, Slave
 from ipcosim.harness.scenario.system import Instance, System, Variable
 
@@ -340,7 +340,8 @@ class Execution:
                 except Exception as exc:  # noqa: BLE001
                     error = error or exc
         wall = _time.perf_counter() - wall0
-        result = self._result(self.writer.finish(), error, wall, wall_loop)
+        task = self._task_metrics()
+        result = self._result(self.writer.finish(), error, wall, wall_loop, task)
         if interrupted is not None:
             what = getattr(interrupted, "message", "interrupted")
             result.error = f"{what} at t = {self.time_of(self.tick):.6g} s"
@@ -550,15 +551,19 @@ class Execution:
                 data[name] = factor * rec[:, src] + offset
         return data
 
-    def _result(self, data: np.ndarray, error: BaseException | None, wall: float, wall_loop: float) -> Result:
+    def _task_metrics(self) -> dict[str, Any]:
+        """The task metrics from the rows written (a chunk at a time: bounded memory)."""
+        try:
+            return streamed_task_metrics(self.writer.chunks, self.row_names())
+        except Exception as exc:  # noqa: BLE001 -- metrics must not hide the run's result
+            return {"metrics_error": str(exc)}
+
+    def _result(self, data: np.ndarray, error: BaseException | None, wall: float, wall_loop: float,
+                task: dict[str, Any]) -> Result:
         rows = len(data)
         simulated = float(data["time"][-1] - data["time"][0]) if rows else 0.0
         metrics: dict[str, Any] = {}
-        if rows >= 2:
-            try:
-                metrics.update(task_metrics(data))
-            except Exception as exc:  # noqa: BLE001 -- metrics must not hide the run's result
-                metrics["metrics_error"] = str(exc)
+        metrics.update(task)
         metrics["wall_time_s"] = wall
         metrics["real_time_factor"] = simulated / wall if wall > 0 else None
         for obs in self.observers:

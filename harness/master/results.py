@@ -12,7 +12,7 @@ import tempfile
 import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -173,7 +173,7 @@ class RowWriter:
     """
 
     def __init__(self, names: Sequence[str], csv_path: str | Path | None = None,
-                 csv_columns: Sequence[str] | None = None, in_memory_limit: int = 64 * 1024 ** 2) -> None:
+                 csv_columns: Sequence[str] | None = None, in_memory_limit: int = 16 * 1024 ** 2) -> None:
         self.dtype = np.dtype([(n, "f8") for n in names])
         self.rows = 0
         self.in_memory_limit = in_memory_limit
@@ -214,6 +214,16 @@ class RowWriter:
             self._write_csv(lines.encode())
         self.rows += len(block)
         self.last_write = _time.monotonic()
+
+    def chunks(self, rows: int = 1 << 16) -> Iterator[np.ndarray]:
+        """The rows written so far, ``rows`` at a time, read from the spool file (so that a pass
+        over a long run does not map it into memory). Valid until :meth:`finish`."""
+        self._spool.flush()
+        fd = self._spool.fileno()
+        size = self.dtype.itemsize
+        for first in range(0, self.rows, rows):
+            n = min(rows, self.rows - first)
+            yield np.frombuffer(os.pread(fd, n * size, first * size), dtype=self.dtype)
 
     def finish(self) -> np.ndarray:
         """Stop writing; the rows as a structured array (in memory, or memory-mapped if large)."""
@@ -297,3 +307,127 @@ def task_metrics(data: np.ndarray) -> dict[str, Any]:
     return dict(compute_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
                                 np.asarray(data[ref], float), np.asarray(data[ang], float),
                                 np.asarray(data[volt], float)))
+
+
+def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: Sequence[str]) -> dict[str, Any]:
+    """:func:`task_metrics` computed in two passes over the rows, a chunk at a time, so that
+    the metrics of a run of any length need no more memory than one chunk.
+
+    Parameters
+    ----------
+    chunks : callable
+        ``chunks()`` -> iterable of structured arrays (consecutive rows; called twice).
+    columns : sequence of str
+        The field names.
+
+    Returns
+    -------
+    dict
+        The same keys and values as ``ipcosim.harness.metrics.compute_metrics`` on the
+        whole arrays (an empty dict when the columns are missing or there are < 2 rows).
+    """
+    from ipcosim.harness import metrics as m
+
+    pos, ang = first_column(columns, POSITION_COLUMNS), first_column(columns, ANGLE_COLUMNS)
+    ref, volt = first_column(columns, REFERENCE_COLUMNS), first_column(columns, VOLTAGE_COLUMNS)
+    if None in (pos, ang, ref, volt):
+        return {}
+    a = _first_pass(chunks, pos, ang, ref, volt)
+    if a["n"] < 2:
+        return {}
+    if not a["t_ok"]:
+        raise m.MetricsError("metrics: time must be finite and strictly increasing")
+    result: dict[str, Any] = {
+        "settling_time_s": None, "overshoot_m": None, "steady_state_error_m": None,
+        "max_abs_angle_rad": a["max_angle"] if a["th_finite"] else None,
+        "peak_voltage_V": a["peak_v"] if a["v_finite"] else None,
+        "rms_voltage_V": math.sqrt(a["sum_v2"] / a["n"]) if a["v_finite"] else None,
+        "upright": bool(a["finite"] and a["max_angle"] < m.UPRIGHT_LIMIT_RAD)}
+    if not a["finite"]:
+        return result
+    result.update(_second_pass(chunks, a, pos, ref, m.SETTLING_BAND, m.STEADY_STATE_FRACTION))
+    return result
+
+
+def _first_pass(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, ref: str, volt: str) -> dict[str, Any]:
+    """Counts, finiteness, extremes, the first and last samples."""
+    a: dict[str, Any] = {"n": 0, "t_ok": True, "th_finite": True, "v_finite": True, "finite": True,
+                         "max_angle": 0.0, "peak_v": 0.0, "sum_v2": 0.0, "t_prev": None}
+    for c in chunks():
+        if not len(c):
+            continue
+        t, x, r, th, v = (np.asarray(c[k], float) for k in ("time", pos, ref, ang, volt))
+        if a["n"] == 0:
+            a["t0"], a["x0"] = float(t[0]), float(x[0])
+        prev = a["t_prev"]
+        a["t_ok"] &= bool(np.all(np.isfinite(t)) and np.all(np.diff(t) > 0) and (prev is None or t[0] > prev))
+        a["t_prev"], a["t_end"], a["r_final"] = float(t[-1]), float(t[-1]), float(r[-1])
+        a["th_finite"] &= bool(np.all(np.isfinite(th)))
+        a["v_finite"] &= bool(np.all(np.isfinite(v)))
+        a["finite"] &= bool(np.all(np.isfinite(x)) and np.all(np.isfinite(r)))
+        if a["th_finite"]:
+            a["max_angle"] = max(a["max_angle"], float(np.max(np.abs(th))))
+        if a["v_finite"]:
+            a["peak_v"] = max(a["peak_v"], float(np.max(np.abs(v))))
+            a["sum_v2"] += float(np.sum(v * v))
+        a["n"] += len(c)
+    a["finite"] = a["finite"] and a["th_finite"] and a["v_finite"]
+    if not a["th_finite"]:
+        a["max_angle"] = math.inf
+    return a
+
+
+def _second_pass(chunks: Callable[[], Iterable[np.ndarray]], a: dict[str, Any], pos: str, ref: str,
+                 band_fraction: float, tail_fraction: float) -> dict[str, Any]:
+    """Overshoot, steady-state error and settling time, once the final reference is known."""
+    r_final, step = a["r_final"], a["r_final"] - a["x0"]
+    direction = 1.0 if step >= 0 else -1.0
+    band = band_fraction * abs(step)
+    t_start = a["t_end"] - tail_fraction * (a["t_end"] - a["t0"])
+    over, tail_sum, tail_n = -math.inf, 0.0, 0
+    last_out, last_outside = -1, False      # index of the last sample outside the band
+    last_change_t = a["t0"]                 # time of the last reference change seen so far
+    t_ref_at_entry = a["t0"]                # time of the last change at or before the entry
+    first, r_prev = 0, None
+    for c in chunks():
+        if not len(c):
+            continue
+        t, x, r = (np.asarray(c[k], float) for k in ("time", pos, ref))
+        over = max(over, float(np.max(direction * (x - r_final))))
+        tail = t >= t_start
+        tail_sum += float(np.sum(x[tail] - r[tail]))
+        tail_n += int(tail.sum())
+        prev = np.concatenate(([r[0] if r_prev is None else r_prev], r[:-1]))
+        changes = np.flatnonzero(r != prev)
+        outside = np.abs(x - r_final) > band
+        out_idx = np.flatnonzero(outside)
+        if out_idx.size:  # entry candidate: the sample after the last outside one
+            last_out = first + int(out_idx[-1])
+            entry_local = int(out_idx[-1]) + 1
+            before = changes[changes <= entry_local]
+            t_ref_at_entry = float(t[before[-1]]) if before.size else last_change_t
+            if entry_local == len(c):  # the entry sample is in the next chunk: its change counts too
+                t_ref_at_entry = None
+        elif t_ref_at_entry is None:  # entry was the first sample of this chunk
+            t_ref_at_entry = float(t[0]) if changes.size and changes[0] == 0 else last_change_t
+        if changes.size:
+            last_change_t = float(t[changes[-1]])
+        last_outside = bool(outside[-1])
+        r_prev = float(r[-1])
+        first += len(c)
+    out: dict[str, Any] = {"overshoot_m": max(0.0, over), "steady_state_error_m": abs(tail_sum / tail_n)}
+    if step != 0.0 and not last_outside:
+        entry_t = _time_of_row(chunks, last_out + 1)
+        out["settling_time_s"] = float(entry_t - (t_ref_at_entry if t_ref_at_entry is not None else last_change_t))
+    else:
+        out["settling_time_s"] = None
+    return out
+
+
+def _time_of_row(chunks: Callable[[], Iterable[np.ndarray]], row: int) -> float:
+    first = 0
+    for c in chunks():
+        if row < first + len(c):
+            return float(c["time"][row - first])
+        first += len(c)
+    raise IndexError(row)
