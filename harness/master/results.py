@@ -215,7 +215,7 @@ class RowWriter:
         self.rows += len(block)
         self.last_write = _time.monotonic()
 
-    def chunks(self, rows: int = 1 << 16) -> Iterator[np.ndarray]:
+    def chunks(self, rows: int = 8192) -> Iterator[np.ndarray]:
         """The rows written so far, ``rows`` at a time, read from the spool file (so that a pass
         over a long run does not map it into memory). Valid until :meth:`finish`."""
         self._spool.flush()
