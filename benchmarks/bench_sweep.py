@@ -100,7 +100,8 @@ def run() -> list[str]:
         f"  serial (the run itself)  {m['serial_s_per_run'] * 1e3:8.1f} ms/run  {60 / m['serial_s_per_run']:7.1f} runs/min",
         f"  sweep, 1 worker          {m['w1_s_per_run'] * 1e3:8.1f} ms/run  {m['w1_runs_per_min']:7.1f} runs/min",
         f"  sweep, 2 workers         {m['w2_s_per_run'] * 1e3:8.1f} ms/run  {m['w2_runs_per_min']:7.1f} runs/min",
-        f"  scaling 2 vs 1 worker    {m['scaling']:.2f}x  ({target('sweep scaling 2 vs 1 worker', m['scaling'], 1.7, 'x', at_most=False)})",
+        f"  scaling 2 vs 1 worker    {m['scaling']:.2f}x  "
+        f"({target('sweep scaling 2 vs 1 worker', m['scaling'], 1.7, 'x', at_most=False)})",
         f"  per-run overhead         {100 * m['overhead']:+.1f} % of the run in the worker "
         f"({(m['w1_s_per_run'] - m['w1_run_s']) * 1e3:+.2f} ms; "
         f"{target('sweep per-run overhead', 100 * m['overhead'], 5.0, ' %')}); "

@@ -424,8 +424,8 @@ class FmuBase(Fmi2Slave):
                 for vr, value in zip(vrs, values):
                     setters[vr](value)
             except Exception as exc:  # noqa: BLE001
-                error = (f"fmi2Set{_TYPES[type_].__name__} in state {self.fmi_state}: {exc}" if isinstance(exc, FmuError)
-                         else self._access_message("set", type_, vrs, exc))
+                error = (f"fmi2Set{_TYPES[type_].__name__} in state {self.fmi_state}: {exc}"
+                         if isinstance(exc, FmuError) else self._access_message("set", type_, vrs, exc))
         if error is not None:
             self._fail(error)
 

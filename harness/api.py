@@ -23,9 +23,9 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.harness.errors import UsageError
+from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, check_times
-from ipcosim.harness.master import signals
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns

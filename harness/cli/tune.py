@@ -130,8 +130,8 @@ def main(args: argparse.Namespace) -> int:
         usage = (f"It is the complete `{component}` parameter set ({pset or 'default'} with the tuned values)"
                  + (f", installed as `{install}`: `ipcosim run {args.scenario} --parameter-set autotuned` runs it."
                     if install is not None else
-                    f"; copy it beside the scenario (or tune with --install) to run it with "
-                    f"`--parameter-set autotuned`."))
+                    "; copy it beside the scenario (or tune with --install) to run it with "
+                    "`--parameter-set autotuned`."))
     else:
         usage = "It holds the tuned values as component.variable (apply them with --set)."
     table = tunemod.before_after_markdown(res, f"{pset} gains" if pset else "scenario gains")

@@ -26,6 +26,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import (
     ALGORITHMS,
     GAUSS_SEIDEL,
@@ -38,7 +39,6 @@ from ipcosim.harness.master.algorithm import (
     step_multiples,
 )
 from ipcosim.harness.master.manipulators import Manipulator, Overrides
-from ipcosim.harness.master import signals
 from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError, streamed_task_metrics
 from ipcosim.harness.master.slave import FMUSlave, Slave
