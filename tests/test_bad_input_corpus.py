@@ -379,8 +379,9 @@ SUBPROCESS_CASES = {
     "fault-exception-in-initialization": Case({"fault": 6}, line="component f (CorpusFault): "
                                               "fmi2ExitInitializationMode returned fmi2Fatal", min_rows=0),
     # the rows of the chunk that hangs (at most CHUNK_SECONDS of wall time) are not written
-    "fault-hang-past-timeout": Case({"fault": 4, "fail_time": 0.3}, args=("--timeout", "3"), status=124,
-                                    line="wall-clock limit of 3 s reached", min_rows=1, freed=False),
+    "fault-hang-past-timeout": Case({"fault": 4, "fail_time": 0.3}, args=("--timeout", "5"), status=124,
+                                    line="wall-clock limit of 5 s reached and an FMU call did not return",
+                                    min_rows=1, freed=False),
     "fault-slow-past-timeout": Case(dict(SLOW), args=("--timeout", "2"), status=124, stop=1000.0,
                                     line="stopped: wall-clock limit (--timeout) reached at t =", min_rows=20),
     # parameter values

@@ -310,6 +310,7 @@ class Execution:
         self.writer = self.writer or RowWriter(self.row_names())
         self.record = np.zeros((CHUNK // self.record_every + 2, max(self.n_values, 1)))
         self._base_row = 0
+        self._last_emit = _time.monotonic()
         error: BaseException | None = None
         interrupted: BaseException | None = None
         wall0 = _time.perf_counter()
@@ -328,8 +329,10 @@ class Execution:
             wall_loop = _time.perf_counter() - loop_t0
         except KeyboardInterrupt as exc:
             interrupted = error = exc
+            self._flush_pending()
         except Exception as exc:  # noqa: BLE001 -- reported in the Result, cleanup below
             error = exc.cause if isinstance(exc, _TickFailure) and exc.cause is not None else exc
+            self._flush_pending()
         finally:
             cleanup_error = self._cleanup()
             if error is None and cleanup_error is not None:
@@ -442,6 +445,15 @@ class Execution:
         if k > 0:
             self.writer.append(self._rows(self.record[:k], self._base_row))
             self._base_row = rows
+        self._last_emit = _time.monotonic()
+
+    def _flush_pending(self) -> None:
+        """After an interruption: write the rows of the completed chunks still in the buffer."""
+        if self._base_row > 0:  # stepping had started (row 0 written)
+            try:
+                self._emit(self.tick // self.record_every + 1)
+            except Exception:  # noqa: BLE001 -- the first error is the one reported
+                pass
 
     def _step_all(self) -> None:
         """Run every tick in chunks between observer/manipulator events, writing the rows of
@@ -475,14 +487,20 @@ class Execution:
                 self._emit(fn // every + 1)
                 err = self.slaves[idx].fail(function, status, self.time_of(fn))
                 raise _TickFailure(str(err), fn // every + 1, err)
-            self._check_finite(self._base_row, target // every + 1)
-            self._emit(target // every + 1)
+            rows = target // every + 1
+            self._check_finite(n // every + 1, rows)
             chunk = _next_chunk(chunk, target - n, _time.perf_counter() - t0)
+            # write when the next chunk might not fit in the record buffer, and at least every
+            # CHUNK_SECONDS (observers that need every tick make chunks of one tick)
+            if (rows - self._base_row + chunk // every + 1 > len(self.record)
+                    or _time.monotonic() - self._last_emit >= CHUNK_SECONDS):
+                self._emit(rows)
             n = self.tick = target
             for obs in self.observers:
                 if due_obs[id(obs)] == n:
                     obs.step(self, n)
                     due_obs[id(obs)] = obs.next_tick(n)
+        self._emit(N // every + 1)
 
     def _check_finite(self, row0: int, row1: int) -> None:
         """Raise for the first non-finite output in record rows ``row0 .. row1-1`` (absolute
