@@ -20,17 +20,19 @@ import tempfile
 import time
 import weakref
 import zipfile
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.harness.errors import UsageError
+from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
-from ipcosim.harness.master.execution import Execution, SlaveFactory, timing_metrics
+from ipcosim.harness.master.execution import Execution, SlaveFactory, check_times, timing_metrics
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
-from ipcosim.harness.master.results import Result, SimulationError
+from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
 from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.options import RunOptions
+from ipcosim.harness.scenario.archive import member_path, safe_extract
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
 from ipcosim.harness.scenario.system import (
     SwapTarget,
@@ -41,6 +43,11 @@ from ipcosim.harness.scenario.system import (
     warn_all,
     with_overrides,
 )
+
+
+def _remove_temp(path: str) -> None:
+    shutil.rmtree(path, ignore_errors=True)
+    signals.unregister_temp(path)
 
 
 class Prepared:
@@ -112,40 +119,44 @@ class Prepared:
         self.scenario = scenario
         if workdir is None:
             self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
-            self._finalizer = weakref.finalize(self, shutil.rmtree, str(self._tmp), True)
+            self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
+            signals.register_temp(self._tmp)  # removed also on a forced exit
             work = self._tmp
         else:
             work = Path(workdir)
             work.mkdir(parents=True, exist_ok=True)
-        fmu_files = self._archive_members(scenario, work) if scenario.location.is_file() else {}
-        self.system = bind(scenario, swaps=swaps, fmu_files=fmu_files)
-        if warn:
-            warn_all(self.system)
-        if slave_factory is None:
-            self._extract(work)
+        try:
+            fmu_files = self._archive_members(scenario, work) if scenario.location.is_file() else {}
+            self.system = bind(scenario, swaps=swaps, fmu_files=fmu_files)
+            if warn:
+                warn_all(self.system)
+            if slave_factory is None:
+                self._extract(work)
+        except BaseException:
+            self.close()  # nothing left in the temporary folder
+            raise
         self.load_seconds = time.perf_counter() - t0
 
     @staticmethod
     def _archive_members(scenario: Scenario, work: Path) -> dict[str, Path]:
-        """Extract the FMUs an ``.ssp`` archive carries; components whose FMU is missing are left out."""
+        """Extract the FMUs an ``.ssp`` archive carries (safely, see
+        :mod:`ipcosim.harness.scenario.archive`); components whose FMU is missing are left out."""
         out: dict[str, Path] = {}
         with zipfile.ZipFile(scenario.location) as zf:
             names = set(zf.namelist())
-            for comp in scenario.components:
-                member = str(PurePosixPath(comp.source))
-                if comp.source.startswith("file:") or member not in names:
-                    continue
-                target = work / "ssp" / member
-                target.parent.mkdir(parents=True, exist_ok=True)
-                if not target.exists():
-                    with zf.open(member) as src, open(target, "wb") as dst:
-                        shutil.copyfileobj(src, dst)
-                out[comp.name] = target
+        wanted = {}
+        for comp in scenario.components:
+            if comp.source.startswith("file:"):
+                continue
+            member_path(scenario.location, comp.source, work / "ssp")  # refuses '..', absolute names
+            if comp.source in names:
+                wanted[comp.name] = comp.source
+        safe_extract(scenario.location, work / "ssp", sorted(set(wanted.values())))
+        for comp_name, member in wanted.items():
+            out[comp_name] = member_path(scenario.location, member, work / "ssp")
         return out
 
     def _extract(self, work: Path) -> None:
-        from fmpy import extract
-
         by_file: dict[Path, Path] = {}
         for inst in self.system.instances:
             path = inst.model.path
@@ -153,7 +164,7 @@ class Prepared:
             if path not in by_file:
                 target = work / f"{len(by_file)}-{path.stem}"
                 if not (target / "modelDescription.xml").exists():
-                    extract(str(path), unzipdir=str(target))
+                    safe_extract(path, target)
                 by_file[path] = target
             self.unzip_dirs[inst.name] = by_file[path]
 
@@ -170,6 +181,14 @@ class Prepared:
             raise StepSizeError(f"{why_stop}; give --stop-time")
         if h is None:
             raise StepSizeError(f"{why_step}; give --step")
+        origin = self.scenario.origin
+        start = self.scenario.experiment.start_time if start_time is None else start_time
+        check_times(start, stop, h, record_every, {
+            "start": "start_time" if start_time is not None else f"{origin}: DefaultExperiment startTime",
+            "stop": "--stop-time" if stop_time is not None else why_stop,
+            "step": "--step" if step is not None else (f"{origin}: osp:FixedStepAlgorithm baseStepSize"
+                                                        if self.scenario.experiment.step_size is not None
+                                                        else why_step)})
         if self.fmus == "native" and overrides:
             from ipcosim.harness.scenario.flavour import native_overrides
             overrides = native_overrides(self.system, overrides, self._python_values)
@@ -203,20 +222,22 @@ class Prepared:
         t0 = time.perf_counter()
         load, self.load_seconds = self.load_seconds, 0.0  # the loading belongs to the first run
         execution = self.execution(stop_time, step, overrides, **kwargs)
+        columns = select_columns(execution.row_names(), variables)  # unknown names fail before the run
+        if out_dir is not None:  # results.csv streamed while the run proceeds
+            out = open_output(out_dir)
+            execution.writer = RowWriter(execution.row_fields(), out / "results.csv", columns)
         try:
             result = execution.run()
         except KeyboardInterrupt as exc:  # save what was computed, then stop
             partial = getattr(exc, "result", None)
             if out_dir is not None and partial is not None:
-                partial.write(out_dir, variables=variables, plot=plot)
+                partial.write(out_dir, variables=variables, plot=plot, csv=False)
             raise
         result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
         result.metadata["swaps"] = dict(self.swaps)
         if out_dir is not None:
             result.metadata["files"] = {k: str(v) for k, v in
-                                        result.write(out_dir, variables=variables, plot=plot).items()}
-        elif variables:
-            result.select(variables)  # reject unknown names even when nothing is written
+                                        result.write(out_dir, variables=variables, plot=plot, csv=False).items()}
         self._whole_run_timing(result, load + time.perf_counter() - t0, out_dir)
         if result.error is not None and raise_on_error:
             raise SimulationError(result.error, result)
@@ -330,7 +351,10 @@ def run_with(options: RunOptions, prepared: Prepared | None = None) -> Result:
     """Run once as ``options`` say: the one path behind ``ipcosim run`` and :func:`ipcosim.run`.
 
     Writes ``options.out`` and ``options.save_baseline`` when given; relative ``set`` values
-    (``"1.1*nominal"``) are resolved against the values the scenario binds.
+    (``"1.1*nominal"``) are resolved against the values the scenario binds. SIGINT and SIGTERM
+    (in the main thread) and ``options.timeout`` stop the run between FMU calls
+    (:mod:`ipcosim.harness.master.signals`): :class:`~ipcosim.harness.master.signals.Interrupted`
+    is raised after every FMU is freed, with the results so far in ``options.out``.
 
     Raises
     ------
@@ -342,9 +366,10 @@ def run_with(options: RunOptions, prepared: Prepared | None = None) -> Result:
         with prepare_with(options) as own:
             return run_with(options, own)
     overrides = resolve_relative(prepared.system, options.set)
-    result = prepared.run(options.stop_time, options.step, overrides, out_dir=options.out,
-                          variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
-                          progress=options.progress)
+    with signals.deferred(timeout=options.timeout):  # a no-op inside the command line's own
+        result = prepared.run(options.stop_time, options.step, overrides, out_dir=options.out,
+                              variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
+                              progress=options.progress)
     if options.save_baseline is not None:
         from ipcosim.harness.baseline import save_baseline
 
