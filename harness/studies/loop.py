@@ -164,7 +164,8 @@ def _lqr(law: LQR, b: Builder) -> tuple[Lin, list[str]]:
     ys = [b.input(j) for j in range(p)]
     notes = []
     if law.filter is not None:
-        Af, Bf, Cf = law.filter
+        Ad, Bd, Cd = law.filter  # lists (the controllers' stdlib runtime): as matrices here
+        Af, Bf, Cf = np.asarray(Ad, float), np.asarray(Bd, float).reshape(2, 1), np.asarray(Cd, float).reshape(1, 2)
         filtered = []
         for y in ys:
             xf = [b.state(), b.state()]
