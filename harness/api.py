@@ -23,10 +23,11 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from ipcosim.fmus.task import streamed_task_metrics
 from ipcosim.harness.errors import UsageError
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
-from ipcosim.harness.master.execution import Execution, SlaveFactory, check_times, timing_metrics
+from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
@@ -43,6 +44,14 @@ from ipcosim.harness.scenario.system import (
     warn_all,
     with_overrides,
 )
+
+
+def plot_run(result: Result, path: Path | None = None) -> Any:
+    """The figure of a pendulum run (:attr:`Result.plotter` of the results made here): the
+    matplotlib Figure, or with ``path`` the PNG written there (see :mod:`ipcosim.harness.plot`)."""
+    from ipcosim.harness.plot import figure, plot_result
+
+    return figure(result) if path is None else plot_result(result, path)
 
 
 def _remove_temp(path: str) -> None:
@@ -73,6 +82,10 @@ class Prepared:
         An already bound system (tests); skips loading and binding.
     warn : bool
         Issue the binding's notes (unconnected inputs...) as Python warnings.
+    task_metrics : callable, optional
+        The task's metrics of a run's rows (``ipcosim.harness.master.execution.TaskMetrics``);
+        default the IP02 task's, :func:`ipcosim.fmus.task.streamed_task_metrics` (a scenario
+        without the pendulum's columns gets none).
     """
 
     def __init__(self, scenario_or_path: str | os.PathLike[str] | Scenario | None = None, *,
@@ -80,7 +93,8 @@ class Prepared:
                  swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
                  fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, algorithm: str = GAUSS_SEIDEL,
                  workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
-                 system: System | None = None, warn: bool = True, fmus: str = "python") -> None:
+                 system: System | None = None, warn: bool = True, fmus: str = "python",
+                 task_metrics: TaskMetrics | None = streamed_task_metrics) -> None:
         from ipcosim.harness.scenario.flavour import check_flavour, native_fmu_dir, to_native
 
         t0 = time.perf_counter()
@@ -92,6 +106,7 @@ class Prepared:
             raise UsageError(f"--algorithm {algorithm}: expected one of {', '.join(ALGORITHMS)}")
         self.algorithm = algorithm
         self.slave_factory = slave_factory
+        self.task_metrics = task_metrics
         self.parameter_set = parameter_set
         self.swaps = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
                       for k, v in (swaps or {}).items()}
@@ -205,7 +220,8 @@ class Prepared:
                          algorithm=algorithm or self.algorithm, overrides=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
                          unzip_dirs=self.unzip_dirs,
-                         record_every=record_every, max_init_iterations=max_init_iterations)
+                         record_every=record_every, max_init_iterations=max_init_iterations,
+                         task_metrics=self.task_metrics)
 
     def run(self, stop_time: float | None = None, step: float | None = None,
             overrides: Mapping[str, Any] | None = None, *, out_dir: str | os.PathLike[str] | None = None,
@@ -230,9 +246,12 @@ class Prepared:
             result = execution.run()
         except KeyboardInterrupt as exc:  # save what was computed, then stop
             partial = getattr(exc, "result", None)
-            if out_dir is not None and partial is not None:
-                partial.write(out_dir, variables=variables, plot=plot, csv=False)
+            if partial is not None:
+                partial.plotter = plot_run
+                if out_dir is not None:
+                    partial.write(out_dir, variables=variables, plot=plot, csv=False)
             raise
+        result.plotter = plot_run
         result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
         result.metadata["swaps"] = dict(self.swaps)
         if out_dir is not None:

@@ -1,12 +1,12 @@
-"""Streamed results (``ipcosim.harness.master.results.RowWriter``) and the metrics computed from
-them a chunk at a time, which must equal ``compute_metrics`` on the whole arrays."""
+"""Streamed results (``ipcosim.harness.master.results.RowWriter``) and the task metrics computed
+from them a chunk at a time (``ipcosim.fmus.task``), which must equal those of the whole arrays."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from ipcosim.harness.master.results import RowWriter, streamed_task_metrics, task_metrics
-from ipcosim.harness.metrics import compute_metrics
+from ipcosim.fmus.task import compute_metrics, streamed_task_metrics, task_metrics
+from ipcosim.harness.master.results import RowWriter
 
 NAMES = ["time", "setpoint.reference", "plant.cart_position", "plant.pendulum_angle", "controller.voltage"]
 

@@ -22,7 +22,7 @@ import ctypes
 import math
 import time as _time
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -43,11 +43,16 @@ from ipcosim.harness.master.algorithm import (
 )
 from ipcosim.harness.master.manipulators import Manipulator, Overrides
 from ipcosim.harness.master.observers import Observer
-from ipcosim.harness.master.results import Result, RowWriter, SimulationError, streamed_task_metrics
+from ipcosim.harness.master.results import Result, RowWriter, SimulationError
 from ipcosim.harness.master.slave import DISCARD, TERMINATE, FMUSlave, Slave
 from ipcosim.harness.master.system import Instance, System, Variable, kind_of
 
 SlaveFactory = Callable[[Instance], Slave]
+#: The task's metrics of a run: ``task_metrics(chunks, names) -> dict``, where ``chunks()``
+#: iterates over the recorded rows (structured arrays, a chunk at a time; it may be called more
+#: than once) and ``names`` are the fields. Given by whoever knows the scenario (the master
+#: knows no task): ``ipcosim.harness.api`` gives ``ipcosim.fmus.task.streamed_task_metrics``.
+TaskMetrics = Callable[[Callable[[], Iterable[np.ndarray]], Sequence[str]], Mapping[str, Any]]
 
 #: At most this many ticks run between two looks at the record for non-finite values, at
 #: pending signals, and two writes of the results.
@@ -130,13 +135,17 @@ class Execution:
     writer : RowWriter, optional
         Where the rows go while the run proceeds (default: a spool file only); see
         :meth:`row_fields` for its fields.
+    task_metrics : callable, optional
+        The task's metrics of the recorded rows (see :data:`TaskMetrics`), added to the
+        result's metrics; None: only the run's own (timing, observers).
     """
 
     def __init__(self, system: System, step: float, stop_time: float, start_time: float | None = None,
                  algorithm: str = GAUSS_SEIDEL, overrides: Mapping[tuple[str, str], Any] | None = None,
                  observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
                  slave_factory: SlaveFactory | None = None, unzip_dirs: Mapping[str, Path] | None = None,
-                 record_every: int = 1, max_init_iterations: int = 20, writer: RowWriter | None = None) -> None:
+                 record_every: int = 1, max_init_iterations: int = 20, writer: RowWriter | None = None,
+                 task_metrics: TaskMetrics | None = None) -> None:
         if algorithm not in ALGORITHMS:
             raise StepSizeError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
         self.system = system
@@ -164,6 +173,7 @@ class Execution:
         self._layout()
         self.slaves: list[Slave] = []
         self.writer = writer
+        self.task_metrics = task_metrics
         self.tick = 0
         self.init_iterations = 0
         self._loop_source = ""
@@ -746,8 +756,10 @@ class Execution:
 
     def _task_metrics(self) -> dict[str, Any]:
         """The task metrics from the rows written (a chunk at a time: bounded memory)."""
+        if self.task_metrics is None:
+            return {}
         try:
-            return streamed_task_metrics(self.writer.chunks, self.row_names())
+            return dict(self.task_metrics(self.writer.chunks, self.row_names()))
         except Exception as exc:  # noqa: BLE001 -- metrics must not hide the run's result
             return {"metrics_error": str(exc)}
 

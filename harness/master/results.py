@@ -12,17 +12,14 @@ import tempfile
 import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
 from ipcosim.harness.errors import IpcosimError, UsageError
 
-#: Plant outputs that the metrics read, by preference: the motor-driven cart's position.
-POSITION_COLUMNS = ("plant.cart_position", "plant.active_cart_position")
-ANGLE_COLUMNS = ("plant.pendulum_angle",)
-REFERENCE_COLUMNS = ("setpoint.reference", "controller.reference")
-VOLTAGE_COLUMNS = ("controller.voltage", "plant.voltage")
+#: Draws a result's figure: ``plotter(result, path or None)`` (see :attr:`Result.plotter`).
+Plotter = Callable[["Result", "Path | None"], Any]
 
 
 class SimulationError(IpcosimError, RuntimeError):
@@ -51,12 +48,17 @@ class Result:
         status and error.
     error : str or None
         One-line description of the failure, None for a complete run.
+    plotter : callable, optional
+        ``plotter(result, path)`` draws the run's figure (``path`` None: return it; else write
+        a PNG there and return the path); set by whoever knows what the run is
+        (``ipcosim.harness.api``: :func:`ipcosim.harness.plot.plot`).
     """
 
     data: np.ndarray
     metrics: dict[str, Any] = field(default_factory=dict)
     metadata: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
+    plotter: Plotter | None = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
@@ -81,17 +83,22 @@ class Result:
         return select_columns(self.columns, patterns)
 
     def plot(self, path: str | Path | None = None) -> Any:
-        """The run's figure: reference and cart position(s), pendulum angle, voltage.
+        """The run's figure, drawn by :attr:`plotter`.
 
         Parameters
         ----------
         path : path, optional
             Write the figure there as PNG and return the path; without it, return the
             matplotlib Figure (to show or save).
-        """
-        from ipcosim.harness.plot import figure, plot_result
 
-        return figure(self) if path is None else plot_result(self, path)
+        Raises
+        ------
+        UsageError
+            If the result has no plotter.
+        """
+        if self.plotter is None:
+            raise UsageError("this result has no plotter (results of ipcosim.run and ipcosim.harness.run have one)")
+        return self.plotter(self, Path(path) if path is not None else None)
 
     def write(self, out_dir: str | Path, variables: Sequence[str] | None = None, plot: bool = False,
               csv: bool = True) -> dict[str, Path]:
@@ -110,9 +117,7 @@ class Result:
             write_csv(self.data, files["results"], self.select(variables))
         self.write_metrics(files["metrics"])  # before the plot, which may fail (a missing extra)
         if plot:
-            from ipcosim.harness.plot import plot_result
-
-            files["plot"] = plot_result(self, out / "plot.png")
+            files["plot"] = self.plot(out / "plot.png")
         return files
 
     def write_metrics(self, path: Path) -> None:
@@ -372,215 +377,3 @@ def json_safe(value: Any) -> Any:
     if isinstance(value, Path):
         return str(value)
     return value
-
-
-def first_column(columns: Sequence[str], candidates: Sequence[str]) -> str | None:
-    for c in candidates:
-        if c in columns:
-            return c
-    return None
-
-
-def task_metrics(data: np.ndarray) -> dict[str, Any]:
-    """The DESIGN.md metrics of a pendulum run (``ipcosim.harness.metrics.compute_metrics``), from the
-    plant's motor-cart position and angle, the reference and the controller's voltage; an
-    empty dict when the result lacks those columns or has fewer than two rows."""
-    cols = list(data.dtype.names or ())
-    pos, ang = first_column(cols, POSITION_COLUMNS), first_column(cols, ANGLE_COLUMNS)
-    ref, volt = first_column(cols, REFERENCE_COLUMNS), first_column(cols, VOLTAGE_COLUMNS)
-    if None in (pos, ang, ref, volt) or len(data) < 2:
-        return {}
-    try:
-        from ipcosim.harness.metrics import compute_metrics
-    except ImportError:
-        return {}
-    out = dict(compute_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
-                               np.asarray(data[ref], float), np.asarray(data[ang], float),
-                               np.asarray(data[volt], float)))
-    from ipcosim.harness.metrics import upright_metrics
-    out.update(upright_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
-                               np.asarray(data[ang], float)))
-    return out
-
-
-def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: Sequence[str]) -> dict[str, Any]:
-    """:func:`task_metrics` computed in two passes over the rows, a chunk at a time, so that
-    the metrics of a run of any length need no more memory than one chunk.
-
-    Parameters
-    ----------
-    chunks : callable
-        ``chunks()`` -> iterable of structured arrays (consecutive rows; called twice).
-    columns : sequence of str
-        The field names.
-
-    Returns
-    -------
-    dict
-        The same keys and values as :func:`task_metrics` on the whole arrays
-        (``compute_metrics`` and ``upright_metrics``; an empty dict when the columns are
-        missing or there are < 2 rows).
-    """
-    from ipcosim.harness import metrics as m
-
-    pos, ang = first_column(columns, POSITION_COLUMNS), first_column(columns, ANGLE_COLUMNS)
-    ref, volt = first_column(columns, REFERENCE_COLUMNS), first_column(columns, VOLTAGE_COLUMNS)
-    if None in (pos, ang, ref, volt):
-        return {}
-    a = _first_pass(chunks, pos, ang, ref, volt)
-    if a["n"] < 2:
-        return {}
-    if not a["t_ok"]:
-        raise m.MetricsError("metrics: time must be finite and strictly increasing")
-    result: dict[str, Any] = {
-        "settling_time_s": None, "overshoot_m": None, "steady_state_error_m": None,
-        "max_abs_angle_rad": a["max_angle"] if a["th_finite"] else None,
-        "peak_voltage_V": a["peak_v"] if a["v_finite"] else None,
-        "rms_voltage_V": math.sqrt(a["sum_v2"] / a["n"]) if a["v_finite"] else None,
-        "upright": bool(a["finite"] and a["max_angle"] < m.UPRIGHT_LIMIT_RAD)}
-    if a["finite"]:
-        result.update(_second_pass(chunks, a, pos, ref, m.SETTLING_BAND, m.STEADY_STATE_FRACTION))
-    result.update(_upright_pass(chunks, pos, ang))
-    return result
-
-
-def _first_pass(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, ref: str, volt: str) -> dict[str, Any]:
-    """Counts, finiteness, extremes, the first and last samples."""
-    a: dict[str, Any] = {"n": 0, "t_ok": True, "th_finite": True, "v_finite": True, "finite": True,
-                         "max_angle": 0.0, "peak_v": 0.0, "sum_v2": 0.0, "t_prev": None}
-    for c in chunks():
-        if not len(c):
-            continue
-        t, x, r, th, v = (np.asarray(c[k], float) for k in ("time", pos, ref, ang, volt))
-        if a["n"] == 0:
-            a["t0"], a["x0"] = float(t[0]), float(x[0])
-        prev = a["t_prev"]
-        a["t_ok"] &= bool(np.all(np.isfinite(t)) and np.all(np.diff(t) > 0) and (prev is None or t[0] > prev))
-        a["t_prev"], a["t_end"], a["r_final"] = float(t[-1]), float(t[-1]), float(r[-1])
-        a["th_finite"] &= bool(np.all(np.isfinite(th)))
-        a["v_finite"] &= bool(np.all(np.isfinite(v)))
-        a["finite"] &= bool(np.all(np.isfinite(x)) and np.all(np.isfinite(r)))
-        if a["th_finite"]:
-            a["max_angle"] = max(a["max_angle"], float(np.max(np.abs(th))))
-        if a["v_finite"]:
-            a["peak_v"] = max(a["peak_v"], float(np.max(np.abs(v))))
-            a["sum_v2"] += float(np.sum(v * v))
-        a["n"] += len(c)
-    a["finite"] = a["finite"] and a["th_finite"] and a["v_finite"]
-    if not a["th_finite"]:
-        a["max_angle"] = math.inf
-    return a
-
-
-def _second_pass(chunks: Callable[[], Iterable[np.ndarray]], a: dict[str, Any], pos: str, ref: str,
-                 band_fraction: float, tail_fraction: float) -> dict[str, Any]:
-    """Overshoot, steady-state error and settling time, once the final reference is known."""
-    r_final, step = a["r_final"], a["r_final"] - a["x0"]
-    direction = 1.0 if step >= 0 else -1.0
-    band = band_fraction * abs(step)
-    t_start = a["t_end"] - tail_fraction * (a["t_end"] - a["t0"])
-    over, tail_sum, tail_n = -math.inf, 0.0, 0
-    last_out, last_outside = -1, False      # index of the last sample outside the band
-    last_change_t = a["t0"]                 # time of the last reference change seen so far
-    t_ref_at_entry = a["t0"]                # time of the last change at or before the entry
-    first, r_prev = 0, None
-    for c in chunks():
-        if not len(c):
-            continue
-        t, x, r = (np.asarray(c[k], float) for k in ("time", pos, ref))
-        over = max(over, float(np.max(direction * (x - r_final))))
-        tail = t >= t_start
-        tail_sum += float(np.sum(x[tail] - r[tail]))
-        tail_n += int(tail.sum())
-        prev = np.concatenate(([r[0] if r_prev is None else r_prev], r[:-1]))
-        changes = np.flatnonzero(r != prev)
-        outside = np.abs(x - r_final) > band
-        out_idx = np.flatnonzero(outside)
-        if out_idx.size:  # entry candidate: the sample after the last outside one
-            last_out = first + int(out_idx[-1])
-            entry_local = int(out_idx[-1]) + 1
-            before = changes[changes <= entry_local]
-            t_ref_at_entry = float(t[before[-1]]) if before.size else last_change_t
-            if entry_local == len(c):  # the entry sample is in the next chunk: its change counts too
-                t_ref_at_entry = None
-        elif t_ref_at_entry is None:  # entry was the first sample of this chunk
-            t_ref_at_entry = float(t[0]) if changes.size and changes[0] == 0 else last_change_t
-        if changes.size:
-            last_change_t = float(t[changes[-1]])
-        last_outside = bool(outside[-1])
-        r_prev = float(r[-1])
-        first += len(c)
-    out: dict[str, Any] = {"overshoot_m": max(0.0, over), "steady_state_error_m": abs(tail_sum / tail_n)}
-    if step != 0.0 and not last_outside:
-        entry_t = _time_of_row(chunks, last_out + 1)
-        out["settling_time_s"] = float(entry_t - (t_ref_at_entry if t_ref_at_entry is not None else last_change_t))
-    else:
-        out["settling_time_s"] = None
-    return out
-
-
-class _LastRow:
-    """The last row (absolute number) where a condition held, and the time of the row after it."""
-
-    def __init__(self) -> None:
-        self.row, self.t_after, self.pending = -1, None, False
-
-    def see(self, first: int, t: np.ndarray, mask: np.ndarray) -> None:
-        if self.pending and len(t):
-            self.t_after, self.pending = float(t[0]), False
-        hits = np.flatnonzero(mask)
-        if hits.size:
-            k = int(hits[-1])
-            self.row = first + k
-            self.pending = k + 1 == len(t)
-            self.t_after = None if self.pending else float(t[k + 1])
-
-
-def _upright_pass(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str) -> dict[str, Any]:
-    """``ipcosim.harness.metrics.upright_metrics`` (time to upright, track used, the tap
-    metrics) in one pass over the rows."""
-    from ipcosim.harness import metrics as m
-
-    down, outside = _LastRow(), _LastRow()   # |angle| not below the limit; outside the recovery band
-    n, t0, th0, k0, t_k0 = 0, None, None, None, None
-    x_finite, th_finite, track, peak = True, True, 0.0, 0.0
-    for c in chunks():
-        if not len(c):
-            continue
-        t, x = np.asarray(c["time"], float), np.asarray(c[pos], float)
-        th = m.wrapped(np.asarray(c[ang], float))
-        if t0 is None:
-            t0, th0 = float(t[0]), float(th[0])
-        x_finite &= bool(np.all(np.isfinite(x)))
-        th_finite &= bool(np.all(np.isfinite(th)))
-        if x_finite:
-            track = max(track, float(np.max(np.abs(x))))
-        down.see(n, t, ~(np.abs(th) < m.UPRIGHT_LIMIT_RAD))
-        start = 0
-        if k0 is None:
-            moved = np.flatnonzero(np.abs(th - th0) > 1e-6)
-            if moved.size:
-                start = int(moved[0])
-                k0, t_k0 = n + start, float(t[start])
-        if k0 is not None and th_finite:
-            rest = np.abs(th[start:])
-            peak = max(peak, float(np.max(rest)))
-            outside.see(n + start, t[start:], rest >= m.RECOVERY_BAND_RAD)
-        n += len(c)
-    t_up = t0 if down.row < 0 else (None if down.row == n - 1 else down.t_after)
-    out: dict[str, Any] = {"time_to_upright_s": t_up, "track_used_m": track if x_finite else None}
-    if k0 is None or not th_finite:
-        out.update(peak_angle_after_tap_rad=None, recovery_time_s=None)
-        return out
-    rec = 0.0 if outside.row < 0 else (None if outside.row == n - 1 else outside.t_after - t_k0)
-    out.update(peak_angle_after_tap_rad=peak, recovery_time_s=rec)
-    return out
-
-
-def _time_of_row(chunks: Callable[[], Iterable[np.ndarray]], row: int) -> float:
-    first = 0
-    for c in chunks():
-        if row < first + len(c):
-            return float(c["time"][row - first])
-        first += len(c)
-    raise IndexError(row)
