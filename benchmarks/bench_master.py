@@ -19,6 +19,7 @@ import time
 import warnings
 from typing import Any
 
+from benchmarks.bench import target
 from ipcosim.harness.scenario.ssp import BUILD_SSP_DIR
 
 SCENARIOS = ("single-mass-lqr", "double-mass-hsmc")
@@ -111,9 +112,12 @@ def bench_scenario(name: str, repeats: int = REPEATS) -> list[str]:
     o, f, lc = _median(ours), _median(floor), _median(lib)
     lines = [
         f"{name}: {STOP:g} s at {STEP * 1e3:g} ms, medians of {repeats}",
-        f"  ours (ipcosim.harness.run)        {o:7.3f} s   real-time factor {STOP / o:6.1f}x (goal >= 20x)",
-        f"  hand-written fmpy loop    {f:7.3f} s   ours/floor    = {o / f:5.2f}x (target <= 1.15x)",
-        f"  libcosim (libcosimpy)     {lc:7.3f} s   ours/libcosim = {o / lc:5.2f}x (target <= 0.5x)",
+        f"  ours (ipcosim.harness.run)        {o:7.3f} s   real-time factor {STOP / o:6.1f}x "
+        f"({target(f'{name} real-time factor', STOP / o, 20.0, 'x', at_most=False)})",
+        f"  hand-written fmpy loop    {f:7.3f} s   ours/floor    = {o / f:5.2f}x "
+        f"({target(f'{name} ours/floor', o / f, 1.15, 'x')})",
+        f"  libcosim (libcosimpy)     {lc:7.3f} s   ours/libcosim = {o / lc:5.2f}x "
+        f"({target(f'{name} ours/libcosim', o / lc, 0.5, 'x')})",
         (f"  fmpy simulate_ssp         {fmpy_wall:7.3f} s   ours/fmpy     = {o / fmpy_wall:5.2f}x (one run)"
          if note == "ok" else f"  fmpy simulate_ssp         does not run it: {note}"),
     ]

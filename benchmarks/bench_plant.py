@@ -21,6 +21,8 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from benchmarks.bench import target
+
 ROUNDS = int(os.environ.get("IPCOSIM_BENCH_ROUNDS", "40"))
 CYCLES = int(os.environ.get("IPCOSIM_BENCH_CYCLES", "250"))
 H = 1e-3
@@ -168,7 +170,7 @@ def run() -> list[str]:
              f"{m['fmubase'] - floor:.1f} us)"]
     for kind in ("single-mass", "double-mass"):
         added = m[kind] - floor
-        verdict = "ok" if added <= TARGET_US else "OVER TARGET"
+        verdict = target(f"{kind} plant FMU over the floor", added, TARGET_US, " us")
         lines.append(f"{kind:<12} plant FMU:                 {m[kind]:7.1f} us  -> adds {added:5.1f} us over the floor "
-                     f"(target <= {TARGET_US:g} us: {verdict}); pure Plant.do_step {m[kind + '-pure']:5.1f} us")
+                     f"({verdict}); pure Plant.do_step {m[kind + '-pure']:5.1f} us")
     return lines

@@ -257,6 +257,8 @@ class FmuBase(Fmi2Slave):
         self.info: dict[str, VariableInfo] = {}
         self.start_time = 0.0
         self.initialized = False
+        self.fmi_state = "instantiated"   # FMI 2.0 call order: see "FMI 2.0 call order" below
+        self._next_time = 0.0
         self._parameters_dirty = False
         self._getters: dict[type, dict[int, Callable[[], Any]]] = {t: {} for t in _TYPES}
         self._setters: dict[type, dict[int, Callable[[Any], None]]] = {t: {} for t in _TYPES}
@@ -423,13 +425,15 @@ class FmuBase(Fmi2Slave):
         self._fail(error)
 
     def _set(self, type_: type, vrs: Sequence[int], values: Sequence[Any]) -> None:
-        error = None
-        try:
-            setters = self._setters[type_]
-            for vr, value in zip(vrs, values):
-                setters[vr](value)
-        except Exception as exc:  # noqa: BLE001
-            error = str(exc) if isinstance(exc, FmuError) else self._access_message("set", type_, vrs, exc)
+        error = self._set_order_error(type_)
+        if error is None:
+            try:
+                setters = self._setters[type_]
+                for vr, value in zip(vrs, values):
+                    setters[vr](value)
+            except Exception as exc:  # noqa: BLE001
+                error = (f"fmi2Set{_TYPES[type_].__name__} in state {self.fmi_state}: {exc}"
+                         if isinstance(exc, FmuError) else self._access_message("set", type_, vrs, exc))
         if error is not None:
             self._fail(error)
 
@@ -480,6 +484,7 @@ class FmuBase(Fmi2Slave):
         if error is not None:
             self._fail(error)
         self.initialized = True
+        self._order_initialized()
 
     def _own_resources_first(self) -> None:
         """Make this instance's ``resources/`` the first place its private package imports from.
@@ -502,12 +507,17 @@ class FmuBase(Fmi2Slave):
                 path.insert(0, folder)
 
     def do_step(self, current_time: float, step_size: float) -> bool:
+        refused = self._step_order_error(current_time, step_size)
+        if refused is not None:
+            self.log(refused, Fmi2Status.error)
+            return False  # fmi2Discard: see "FMI 2.0 call order"
         try:
             if self._parameters_dirty:
                 self.check_parameters()
                 self.parameters_changed()
                 self._parameters_dirty = False
             self.step(current_time, step_size)
+            self._next_time = current_time + step_size
             return True
         except StepFailure as exc:
             self.log(str(exc), Fmi2Status.error)
@@ -517,6 +527,7 @@ class FmuBase(Fmi2Slave):
         self._fail(error)
 
     def terminate(self) -> None:
+        self.fmi_state = "terminated"
         error = None
         try:
             self.teardown()
@@ -544,6 +555,56 @@ class FmuBase(Fmi2Slave):
                 reason = info.check(value)
                 if reason:
                     raise FmuError(f"parameter {info.name} = {value}{unit}: {reason}")
+
+    # --- FMI 2.0 call order -------------------------------------------------------------------
+    # States of FMI 2.0 co-simulation (standard, section 4.2.4): instantiated ->
+    # (fmi2EnterInitializationMode) initialization -> (fmi2ExitInitializationMode) stepping ->
+    # (fmi2Terminate) terminated. fmi2Reset returns to instantiated (pythonfmu creates a new
+    # instance). The FMUs declare canGetAndSetFMUstate="false", so every fmi2DoStep must start
+    # where the last completed one ended (the start time for the first; a discarded step may be
+    # retried from the same point).
+    #
+    # What pythonfmu 0.7.0's wrapper lets a Python FMU return decides how a refused call is
+    # reported: fmi2DoStep returns fmi2Discard when ``do_step`` returns False, and every Python
+    # exception becomes fmi2Fatal; no entry point can return fmi2Error. So an out-of-order
+    # fmi2DoStep is logged with status fmi2Error (naming the call, its arguments and the state),
+    # returns fmi2Discard and changes nothing (the instance stays usable); a set call in a state
+    # that forbids it (a fixed parameter after initialization, anything after terminate) is
+    # fmi2Fatal with the same kind of message, because its only other outcome would be fmi2OK.
+
+    #: Relative tolerance on a communication point continuing the last step.
+    TIME_TOLERANCE = 1e-9
+
+    def enter_initialization_mode(self) -> None:
+        if self.fmi_state != "instantiated":
+            self._fail(f"fmi2EnterInitializationMode in state {self.fmi_state}: allowed only once, after "
+                       f"fmi2Instantiate (or fmi2Reset)")
+        self.fmi_state = "initialization"
+
+    def _order_initialized(self) -> None:
+        """fmi2ExitInitializationMode succeeded: stepping starts at the experiment's start time."""
+        self.fmi_state = "stepping"
+        self._next_time = self.start_time
+
+    def _step_order_error(self, t: float, h: float) -> str | None:
+        """Why ``fmi2DoStep(t, h)`` is refused in the current state, or None."""
+        call = f"fmi2DoStep(currentCommunicationPoint = {t!r}, communicationStepSize = {h!r})"
+        if self.fmi_state != "stepping":
+            return (f"{call} in state {self.fmi_state}: allowed only after fmi2ExitInitializationMode and "
+                    f"before fmi2Terminate")
+        if not (math.isfinite(h) and h > 0):
+            return f"{call} in state stepping: the step size must be a positive finite number"
+        expected = self._next_time
+        if not (math.isfinite(t) and abs(t - expected) <= self.TIME_TOLERANCE * max(1.0, abs(expected), h)):
+            return (f"{call} in state stepping: the communication point does not continue the last step, "
+                    f"which ended at t = {expected!r} (this FMU cannot go back or skip time)")
+        return None
+
+    def _set_order_error(self, type_: type) -> str | None:
+        """Why a set call is refused in the current state, or None."""
+        if self.fmi_state == "terminated":
+            return f"fmi2Set{_TYPES[type_].__name__} in state terminated: no value can be set after fmi2Terminate"
+        return None
 
     # --- error reporting ---------------------------------------------------------------------
 

@@ -20,17 +20,20 @@ import tempfile
 import time
 import weakref
 import zipfile
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from ipcosim.fmus.task import streamed_task_metrics
 from ipcosim.harness.errors import UsageError
+from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
-from ipcosim.harness.master.execution import Execution, SlaveFactory, timing_metrics
+from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
-from ipcosim.harness.master.results import Result, SimulationError
+from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
 from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.options import RunOptions
+from ipcosim.harness.scenario.archive import member_path, safe_extract
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
 from ipcosim.harness.scenario.system import (
     SwapTarget,
@@ -41,6 +44,19 @@ from ipcosim.harness.scenario.system import (
     warn_all,
     with_overrides,
 )
+
+
+def plot_run(result: Result, path: Path | None = None) -> Any:
+    """The figure of a pendulum run (:attr:`Result.plotter` of the results made here): the
+    matplotlib Figure, or with ``path`` the PNG written there (see :mod:`ipcosim.harness.plot`)."""
+    from ipcosim.harness.plot import figure, plot_result
+
+    return figure(result) if path is None else plot_result(result, path)
+
+
+def _remove_temp(path: str) -> None:
+    shutil.rmtree(path, ignore_errors=True)
+    signals.unregister_temp(path)
 
 
 class Prepared:
@@ -66,6 +82,10 @@ class Prepared:
         An already bound system (tests); skips loading and binding.
     warn : bool
         Issue the binding's notes (unconnected inputs...) as Python warnings.
+    task_metrics : callable, optional
+        The task's metrics of a run's rows (``ipcosim.harness.master.execution.TaskMetrics``);
+        default the IP02 task's, :func:`ipcosim.fmus.task.streamed_task_metrics` (a scenario
+        without the pendulum's columns gets none).
     """
 
     def __init__(self, scenario_or_path: str | os.PathLike[str] | Scenario | None = None, *,
@@ -73,7 +93,8 @@ class Prepared:
                  swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
                  fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, algorithm: str = GAUSS_SEIDEL,
                  workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
-                 system: System | None = None, warn: bool = True, fmus: str = "python") -> None:
+                 system: System | None = None, warn: bool = True, fmus: str = "python",
+                 task_metrics: TaskMetrics | None = streamed_task_metrics) -> None:
         from ipcosim.harness.scenario.flavour import check_flavour, native_fmu_dir, to_native
 
         t0 = time.perf_counter()
@@ -85,6 +106,7 @@ class Prepared:
             raise UsageError(f"--algorithm {algorithm}: expected one of {', '.join(ALGORITHMS)}")
         self.algorithm = algorithm
         self.slave_factory = slave_factory
+        self.task_metrics = task_metrics
         self.parameter_set = parameter_set
         self.swaps = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
                       for k, v in (swaps or {}).items()}
@@ -112,40 +134,44 @@ class Prepared:
         self.scenario = scenario
         if workdir is None:
             self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
-            self._finalizer = weakref.finalize(self, shutil.rmtree, str(self._tmp), True)
+            self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
+            signals.register_temp(self._tmp)  # removed also on a forced exit
             work = self._tmp
         else:
             work = Path(workdir)
             work.mkdir(parents=True, exist_ok=True)
-        fmu_files = self._archive_members(scenario, work) if scenario.location.is_file() else {}
-        self.system = bind(scenario, swaps=swaps, fmu_files=fmu_files)
-        if warn:
-            warn_all(self.system)
-        if slave_factory is None:
-            self._extract(work)
+        try:
+            fmu_files = self._archive_members(scenario, work) if scenario.location.is_file() else {}
+            self.system = bind(scenario, swaps=swaps, fmu_files=fmu_files)
+            if warn:
+                warn_all(self.system)
+            if slave_factory is None:
+                self._extract(work)
+        except BaseException:
+            self.close()  # nothing left in the temporary folder
+            raise
         self.load_seconds = time.perf_counter() - t0
 
     @staticmethod
     def _archive_members(scenario: Scenario, work: Path) -> dict[str, Path]:
-        """Extract the FMUs an ``.ssp`` archive carries; components whose FMU is missing are left out."""
+        """Extract the FMUs an ``.ssp`` archive carries (safely, see
+        :mod:`ipcosim.harness.scenario.archive`); components whose FMU is missing are left out."""
         out: dict[str, Path] = {}
         with zipfile.ZipFile(scenario.location) as zf:
             names = set(zf.namelist())
-            for comp in scenario.components:
-                member = str(PurePosixPath(comp.source))
-                if comp.source.startswith("file:") or member not in names:
-                    continue
-                target = work / "ssp" / member
-                target.parent.mkdir(parents=True, exist_ok=True)
-                if not target.exists():
-                    with zf.open(member) as src, open(target, "wb") as dst:
-                        shutil.copyfileobj(src, dst)
-                out[comp.name] = target
+        wanted = {}
+        for comp in scenario.components:
+            if comp.source.startswith("file:"):
+                continue
+            member_path(scenario.location, comp.source, work / "ssp")  # refuses '..', absolute names
+            if comp.source in names:
+                wanted[comp.name] = comp.source
+        safe_extract(scenario.location, work / "ssp", sorted(set(wanted.values())))
+        for comp_name, member in wanted.items():
+            out[comp_name] = member_path(scenario.location, member, work / "ssp")
         return out
 
     def _extract(self, work: Path) -> None:
-        from fmpy import extract
-
         by_file: dict[Path, Path] = {}
         for inst in self.system.instances:
             path = inst.model.path
@@ -153,7 +179,7 @@ class Prepared:
             if path not in by_file:
                 target = work / f"{len(by_file)}-{path.stem}"
                 if not (target / "modelDescription.xml").exists():
-                    extract(str(path), unzipdir=str(target))
+                    safe_extract(path, target)
                 by_file[path] = target
             self.unzip_dirs[inst.name] = by_file[path]
 
@@ -170,6 +196,14 @@ class Prepared:
             raise StepSizeError(f"{why_stop}; give --stop-time")
         if h is None:
             raise StepSizeError(f"{why_step}; give --step")
+        origin = self.scenario.origin
+        start = self.scenario.experiment.start_time if start_time is None else start_time
+        check_times(start, stop, h, record_every, {
+            "start": "start_time" if start_time is not None else f"{origin}: DefaultExperiment startTime",
+            "stop": "--stop-time" if stop_time is not None else why_stop,
+            "step": "--step" if step is not None else (f"{origin}: osp:FixedStepAlgorithm baseStepSize"
+                                                        if self.scenario.experiment.step_size is not None
+                                                        else why_step)})
         if self.fmus == "native" and overrides:
             from ipcosim.harness.scenario.flavour import native_overrides
             overrides = native_overrides(self.system, overrides, self._python_values)
@@ -186,7 +220,8 @@ class Prepared:
                          algorithm=algorithm or self.algorithm, overrides=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
                          unzip_dirs=self.unzip_dirs,
-                         record_every=record_every, max_init_iterations=max_init_iterations)
+                         record_every=record_every, max_init_iterations=max_init_iterations,
+                         task_metrics=self.task_metrics)
 
     def run(self, stop_time: float | None = None, step: float | None = None,
             overrides: Mapping[str, Any] | None = None, *, out_dir: str | os.PathLike[str] | None = None,
@@ -203,20 +238,25 @@ class Prepared:
         t0 = time.perf_counter()
         load, self.load_seconds = self.load_seconds, 0.0  # the loading belongs to the first run
         execution = self.execution(stop_time, step, overrides, **kwargs)
+        columns = select_columns(execution.row_names(), variables)  # unknown names fail before the run
+        if out_dir is not None:  # results.csv streamed while the run proceeds
+            out = open_output(out_dir)
+            execution.writer = RowWriter(execution.row_fields(), out / "results.csv", columns)
         try:
             result = execution.run()
         except KeyboardInterrupt as exc:  # save what was computed, then stop
             partial = getattr(exc, "result", None)
-            if out_dir is not None and partial is not None:
-                partial.write(out_dir, variables=variables, plot=plot)
+            if partial is not None:
+                partial.plotter = plot_run
+                if out_dir is not None:
+                    partial.write(out_dir, variables=variables, plot=plot, csv=False)
             raise
+        result.plotter = plot_run
         result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
         result.metadata["swaps"] = dict(self.swaps)
         if out_dir is not None:
             result.metadata["files"] = {k: str(v) for k, v in
-                                        result.write(out_dir, variables=variables, plot=plot).items()}
-        elif variables:
-            result.select(variables)  # reject unknown names even when nothing is written
+                                        result.write(out_dir, variables=variables, plot=plot, csv=False).items()}
         self._whole_run_timing(result, load + time.perf_counter() - t0, out_dir)
         if result.error is not None and raise_on_error:
             raise SimulationError(result.error, result)
@@ -330,7 +370,10 @@ def run_with(options: RunOptions, prepared: Prepared | None = None) -> Result:
     """Run once as ``options`` say: the one path behind ``ipcosim run`` and :func:`ipcosim.run`.
 
     Writes ``options.out`` and ``options.save_baseline`` when given; relative ``set`` values
-    (``"1.1*nominal"``) are resolved against the values the scenario binds.
+    (``"1.1*nominal"``) are resolved against the values the scenario binds. SIGINT and SIGTERM
+    (in the main thread) and ``options.timeout`` stop the run between FMU calls
+    (:mod:`ipcosim.harness.master.signals`): :class:`~ipcosim.harness.master.signals.Interrupted`
+    is raised after every FMU is freed, with the results so far in ``options.out``.
 
     Raises
     ------
@@ -342,9 +385,10 @@ def run_with(options: RunOptions, prepared: Prepared | None = None) -> Result:
         with prepare_with(options) as own:
             return run_with(options, own)
     overrides = resolve_relative(prepared.system, options.set)
-    result = prepared.run(options.stop_time, options.step, overrides, out_dir=options.out,
-                          variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
-                          progress=options.progress)
+    with signals.deferred(timeout=options.timeout):  # a no-op inside the command line's own
+        result = prepared.run(options.stop_time, options.step, overrides, out_dir=options.out,
+                              variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
+                              progress=options.progress)
     if options.save_baseline is not None:
         from ipcosim.harness.baseline import save_baseline
 

@@ -20,8 +20,14 @@ from ipcosim.harness.errors import UsageError
 ALGORITHM_CHOICES = ("gauss-seidel", "jacobi")
 
 
-def _seconds(option: str, value: Any) -> float | None:
-    """A positive, finite number of seconds (text or number), or None."""
+def seconds_option(option: str, value: Any) -> float | None:
+    """A positive, finite number of seconds (text or number), or None.
+
+    Raises
+    ------
+    UsageError
+        Naming the option and the value.
+    """
     if value is None:
         return None
     try:
@@ -87,6 +93,9 @@ class RunOptions:
     fmus : str
         FMU flavour: ``python`` (pythonfmu FMUs, default) or ``native`` (C FMUs from
         ``ipcosim build --native``).
+    timeout : float or None
+        Wall-clock limit [s]: the run stops there with its results so far
+        (:class:`ipcosim.harness.master.signals.Interrupted`; the command line exits 124).
     """
 
     scenario: str | os.PathLike[str]
@@ -104,6 +113,7 @@ class RunOptions:
     save_baseline: Path | None = None
     progress: bool = False
     fmus: str = "python"
+    timeout: float | None = None
 
     def __post_init__(self) -> None:
         if self.fmus not in ("python", "native"):
@@ -121,7 +131,7 @@ class RunOptions:
                record: Sequence[str] | str | None = None, algorithm: str = "gauss-seidel",
                fmu_dirs: Sequence[str | os.PathLike[str]] | None = None,
                save_baseline: str | os.PathLike[str] | None = None, progress: bool = False,
-               fmus: str = "python") -> "RunOptions":
+               fmus: str = "python", timeout: Any = None) -> "RunOptions":
         """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
 
         Raises
@@ -132,12 +142,13 @@ class RunOptions:
         if isinstance(record, str):
             record = [record]
         columns = tuple(v.strip() for item in (record or ()) for v in str(item).split(",") if v.strip())
-        return cls(scenario=scenario, stop_time=_seconds("--stop-time", stop_time), step=_seconds("--step", step),
+        return cls(scenario=scenario, stop_time=seconds_option("--stop-time", stop_time),
+                   step=seconds_option("--step", step),
                    set=_pairs("--set", set), swap=_pairs("--swap", swap), parameter_set=parameter_set,
                    realtime=realtime, out=Path(out) if out is not None else None, plot=plot, record=columns,
                    algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
                    save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,
-                   fmus=fmus)
+                   fmus=fmus, timeout=seconds_option("--timeout", timeout))
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "RunOptions":
@@ -147,7 +158,7 @@ class RunOptions:
                           parameter_set=args.parameter_set, realtime=True if args.realtime else None, out=out,
                           plot=args.plot, record=args.record, algorithm=args.algorithm, fmu_dirs=args.fmu_dir,
                           save_baseline=args.save_baseline, progress=not args.quiet,
-                          fmus=getattr(args, "fmus", "python"))
+                          fmus=getattr(args, "fmus", "python"), timeout=getattr(args, "timeout", None))
 
 
 def scenario_label(text: str | os.PathLike[str]) -> str:

@@ -14,6 +14,47 @@ if TYPE_CHECKING:  # pragma: no cover
 
 POSITIONS = (("plant.cart_position", "cart"), ("plant.active_cart_position", "active cart"),
              ("plant.passive_cart_position", "passive cart"))
+#: Percentiles that bound a panel's axis when a few samples lie far outside the rest.
+ROBUST_PERCENTILES = (0.5, 99.5)
+#: The axis is cut to the robust range only when the full range is this much wider.
+SPIKE_RATIO = 2.0
+
+
+def axis_limits(signals: list[np.ndarray], margin: float = 0.08) -> tuple[float, float] | None:
+    """Y-axis limits of a panel that a few spikes cannot squash.
+
+    The limits span the finite samples' range, unless that range is more than
+    :data:`SPIKE_RATIO` times the range between the :data:`ROBUST_PERCENTILES`: then they span
+    the percentile range (samples beyond it are drawn as markers on the axis edge by
+    :func:`plot_result`). ``margin`` widens either range by that fraction on each side.
+
+    Returns
+    -------
+    (low, high) or None
+        None when there is no finite sample.
+    """
+    finite = [np.asarray(y, float)[np.isfinite(y)] for y in signals]
+    data = np.concatenate(finite) if finite else np.zeros(0)
+    if data.size == 0:
+        return None
+    lo, hi = float(data.min()), float(data.max())
+    r_lo, r_hi = (float(v) for v in np.percentile(data, ROBUST_PERCENTILES))
+    if hi - lo > SPIKE_RATIO * (r_hi - r_lo) and r_hi > r_lo:
+        lo, hi = r_lo, r_hi
+    pad = margin * (hi - lo) if hi > lo else max(abs(hi), 1.0) * margin
+    return lo - pad, hi + pad
+
+
+def _mark_spikes(ax, t: np.ndarray, y: np.ndarray, limits: tuple[float, float]) -> int:  # noqa: ANN001
+    """Draw the samples beyond ``limits`` as triangles on the axis edge; returns their count."""
+    lo, hi = limits
+    y = np.asarray(y, float)
+    above, below = y > hi, y < lo
+    if above.any():
+        ax.plot(t[above], np.full(int(above.sum()), hi), "^", color="tab:red", markersize=5, clip_on=False)
+    if below.any():
+        ax.plot(t[below], np.full(int(below.sum()), lo), "v", color="tab:red", markersize=5, clip_on=False)
+    return int(above.sum() + below.sum())
 
 
 def plot_result(result: "Result", path: str | Path, title: str | None = None) -> Path:
@@ -32,7 +73,9 @@ def figure(result: "Result", title: str | None = None, backend: str | None = Non
 
     Panels: (1) reference and cart position(s) [m], (2) pendulum angle [deg], (3) controller
     voltage [V]. Panels whose signals the result lacks are left out; with none of them, every
-    recorded column is drawn in one panel.
+    recorded column is drawn in one panel. Each panel's axis comes from :func:`axis_limits`:
+    isolated spikes do not squash it; they are marked with red triangles on its edge and
+    their count and range are written in the panel.
     """
     from ipcosim.harness.errors import require
 
@@ -63,6 +106,15 @@ def figure(result: "Result", title: str | None = None, backend: str | None = Non
     for ax, (ylabel, lines) in zip(axes[:, 0], panels):
         for label, y, style in lines:
             ax.plot(t, y, label=label, **style)
+        limits = axis_limits([y for _, y, _ in lines])
+        if limits is not None:
+            ax.set_ylim(*limits)
+            spikes = sum(_mark_spikes(ax, np.asarray(t), y, limits) for _, y, _ in lines)
+            if spikes:
+                extremes = np.concatenate([np.asarray(y, float)[np.isfinite(y)] for _, y, _ in lines])
+                ax.annotate(f"{spikes} sample(s) beyond the axis (range {extremes.min():.3g} .. {extremes.max():.3g})",
+                            xy=(0.99, 0.02), xycoords="axes fraction", ha="right", va="bottom",
+                            fontsize="x-small", color="tab:red")
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
         if len(lines) > 1:

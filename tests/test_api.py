@@ -83,6 +83,30 @@ def test_result_data_plot_and_files(short_run):
 
 
 @pytest.mark.integration
+def test_task_metrics_and_the_plotter_come_from_the_api_not_the_master():
+    """The master computes whatever task metrics it is given (the IP02 task's by default), and a
+    result draws its figure only through the plotter the API set on it."""
+    from ipcosim.fmus.task import METRIC_KEYS
+    from ipcosim.harness.api import Prepared
+    from ipcosim.harness.errors import UsageError
+
+    def count_rows(chunks, names):
+        return {"rows_seen": sum(len(c) for c in chunks()), "fields": len(names)}
+
+    with Prepared("single-mass-lqr", warn=False, task_metrics=count_rows) as prepared:
+        r = prepared.run(stop_time=0.05)
+        assert r.metrics["rows_seen"] == len(r.data) == 51 and r.metrics["fields"] == len(r.columns)
+        assert not set(METRIC_KEYS) & set(r.metrics)
+        prepared.task_metrics = None
+        r = prepared.run(stop_time=0.05)
+        assert "wall_time_s" in r.metrics and not set(METRIC_KEYS) & set(r.metrics) and "rows_seen" not in r.metrics
+    assert r.plotter is not None
+    r.plotter = None
+    with pytest.raises(UsageError, match="no plotter"):
+        r.plot()
+
+
+@pytest.mark.integration
 def test_baseline_is_thinned_samples_of_the_run(short_run):
     base = load_baseline(short_run.metadata["files"]["baseline"])
     assert base.dtype.names == ("time", "plant.cart_position", "plant.pendulum_angle")

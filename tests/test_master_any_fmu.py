@@ -133,6 +133,28 @@ def test_every_type_through_fmi3_and_fmi2_with_set_and_typed_csv(tmp_path, fmus,
         assert col["pt3.string_out"][n] == "x-" + label
 
 
+def test_typed_columns_stream_over_many_chunks(tmp_path, fmus):
+    """3000 ticks recorded every third one: the rows reach results.csv and the spool in many
+    chunks; every typed column keeps its values and type across the chunk boundaries."""
+    folder = scenario(tmp_path, fmus, [comp("src", "Source3"), comp("pt", "PassThrough"), comp("pt3", "PassThrough3")],
+                      CHAIN, stop=3.0, step=0.001)
+    r = run(folder, out_dir=tmp_path / "out", overrides={"pt.offset": 5, "pt.prefix": "x-", "pt.invert": True,
+                                                        "src.step_time": 1.2},
+            record_every=3)
+    assert len(r.data) == 1001 and r.data.dtype["src.count"] == np.int32 and r.data.dtype["src.on"] == np.bool_
+    ticks = np.arange(1001) * 3
+    on = r["time"] >= 1.2 - 1e-12
+    assert list(r["src.count"]) == list(ticks) and list(r["pt.int_out"]) == list(ticks + 5)
+    assert list(r["src.on"]) == list(on) and list(r["pt3.bool_out"]) == list(~on)
+    assert list(r["pt3.string_out"]) == ["x-on" if o else "x-off" for o in on]
+    header, rows = read_csv(tmp_path / "out" / "results.csv")
+    assert header == list(r.data.dtype.names) and len(rows) == 1001
+    col = {name: [row[k] for row in rows] for k, name in enumerate(header)}
+    assert col["src.count"] == [str(n) for n in ticks] and col["src.on"] == ["true" if o else "false" for o in on]
+    assert col["pt3.string_out"] == list(r["pt3.string_out"])
+    assert [float(x) for x in col["pt.real_out"]] == list(r["pt.real_out"])
+
+
 def test_jacobi_delays_every_type_by_one_step(tmp_path, fmus):
     folder = scenario(tmp_path, fmus, [comp("src", "Source3"), comp("pt", "PassThrough"), comp("pt3", "PassThrough3")],
                       CHAIN)

@@ -74,9 +74,10 @@ def test_compare_report_on_two_scenarios(fmu_env, tmp_path, capsys):
     assert "not measured" in md and ("| confirmed |" in md or "| not confirmed |" in md)
 
 
-def test_tune_writes_autotuned_set_beside_the_scenario(fmu_env, tmp_path, capsys):
+def test_tune_writes_into_out_and_installs_beside_the_scenario_on_request(fmu_env, tmp_path, capsys):
     scenario = tmp_path / "single-mass-lqr"
     shutil.copytree(ROOT / "ssp" / "single-mass-lqr", scenario)
+    before = sorted(p.name for p in scenario.iterdir())
     from ipcosim.harness.scenario.ssp import load_scenario
 
     sc = load_scenario(scenario)
@@ -84,8 +85,15 @@ def test_tune_writes_autotuned_set_beside_the_scenario(fmu_env, tmp_path, capsys
     bound = {p.name: p.value for b in controller.bindings for p in b.parameters}
     name = next(n for n, v in bound.items() if isinstance(v, float) and v > 0 and n != "sample_period"
                 and n != "voltage_limit")
-    code = cli_main(["tune", str(scenario), "--params", f"controller.{name}", "--budget", "11",
-                     "--stop-time", "2", "--workers", "2", "--out", str(tmp_path / "t"), "--quiet"])
+    args = ["tune", str(scenario), "--params", f"controller.{name}", "--budget", "11",
+            "--stop-time", "2", "--workers", "2", "--out", str(tmp_path / "t"), "--quiet"]
+    code = cli_main(args)
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert sorted(p.name for p in scenario.iterdir()) == before  # nothing written beside the scenario
+    assert (tmp_path / "t" / "autotuned.ssv").exists()
+    assert (tmp_path / "t" / "evaluations.csv").read_text().count("\n") == 12  # header + exactly 11 runs
+    code = cli_main(args + ["--install"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     tuned = scenario / "autotuned.ssv"

@@ -13,7 +13,7 @@ from ipcosim.controllers.laws import LawParameterError, wrap_angle
 from ipcosim.fmus.instruments import realism
 from ipcosim.fmus.params import preset
 from ipcosim.fmus.plant import InstrumentedPlant
-from ipcosim.harness.metrics import upright_metrics
+from ipcosim.fmus.task import upright_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 H = 1e-3

@@ -47,12 +47,14 @@ def test_cost_is_infinite_when_the_pendulum_falls_and_surrogate_ranks_falls():
     assert good < late < early < math.inf
 
 
-def test_population_plan_respects_budget():
-    for budget, dims in [(10, 1), (40, 2), (200, 3), (1000, 6), (25, 5)]:
+def test_population_plan_covers_the_budget():
+    for budget, dims in [(6, 1), (10, 1), (40, 2), (200, 3), (1000, 6), (25, 5)]:
         popsize, maxiter = plan_population(budget, dims)
-        assert popsize * dims >= 5 and maxiter >= 1
-        assert popsize * dims * (1 + maxiter) <= budget
-    with pytest.raises(TuneError, match="--budget 6"):
+        pop = max(5, popsize * dims)
+        assert maxiter >= 1 and 1 + pop <= budget <= 1 + pop * (1 + maxiter)  # cut short at the budget
+    with pytest.raises(TuneError, match=r"--budget 1: need at least 6 runs for 1 parameter\(s\)"):
+        plan_population(1, 1)
+    with pytest.raises(TuneError, match=r"--budget 6: need at least 7 runs for 3 parameter\(s\)"):
         plan_population(6, 3)
 
 
@@ -88,7 +90,7 @@ def test_tune_improves_on_the_nominal_gains_within_budget():
         res = tune(spec, names, bounds, budget=25, executor=executor, seed=3)
     finally:
         executor.close()
-    assert len(res.evaluations) <= 25
+    assert len(res.evaluations) == 25  # the budget, exactly
     assert res.best_cost < res.nominal_cost < math.inf
     assert all(lo <= res.best[n] <= hi for n, (lo, hi) in zip(names, bounds))
     # the reported best is a run that was actually made, with the cost recomputed from its metrics
@@ -106,10 +108,26 @@ def test_cli_tune_writes_ssv_and_table(tmp_path, capsys):
     assert list(values) == ["controller.q_position"] and 1000.0 <= values["controller.q_position"] <= 4000.0
     report = (out / "tune.md").read_text()
     assert "| controller.q_position | 2000 |" in report and "| cost |" in report
-    assert (out / "evaluations.csv").read_text().count("\n") <= 13
+    assert (out / "evaluations.csv").read_text().count("\n") == 13  # header + exactly --budget runs
+    assert sorted(p.name for p in out.iterdir()) == ["autotuned.ssv", "evaluations.csv", "tune.md"]
 
 
 def test_cli_tune_unknown_parameter_is_one_line(capsys):
     code = cli_main(["tune", "pure:single-mass-lqr", "--params", "controller.nope"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 1 and len(err) == 1 and "unknown parameter 'controller.nope'" in err[0]
+
+
+def test_cli_tune_budget_below_the_minimum_is_one_line(capsys):
+    code = cli_main(["tune", "pure:single-mass-lqr", "--params", "controller.q_position", "--budget", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and err == ["ipcosim tune: error: --budget 1: need at least 6 runs for 1 parameter(s) (the "
+                                 "scenario's own values, then a first population of 5)"]
+
+
+def test_cli_tune_install_needs_a_scenario_folder(tmp_path, capsys):
+    code = cli_main(["tune", "pure:single-mass-lqr", "--params", "controller.q_position", "--budget", "6",
+                     "--install", "--out", str(tmp_path / "t")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and "--install: scenario 'pure:single-mass-lqr' has no folder" in err[-1]
+    assert not (tmp_path / "t").exists() or not any((tmp_path / "t").iterdir())

@@ -35,12 +35,67 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the process exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def _negative_values(parser: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
+    """``--step -1e-3`` as ``--step=-1e-3``: argparse takes a token that starts with ``-`` and is
+    not a plain decimal for an option, so a negative value in exponent form would print a
+    usage block instead of reaching the value check that names it."""
+    takes_value = set()
+    parsers = [parser]
+    while parsers:
+        p = parsers.pop()
+        for action in p._actions:  # noqa: SLF001 -- argparse offers no public walk
+            if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+                parsers.extend(action.choices.values())
+            elif action.option_strings and action.nargs is None:
+                takes_value.update(action.option_strings)
+    out: list[str] = []
+    args = list(argv)
+    i = 0
+    while i < len(args):
+        token = args[i]
+        if token in takes_value and i + 1 < len(args) and args[i + 1].startswith("-") and _is_number(args[i + 1]):
+            out.append(f"{token}={args[i + 1]}")
+            i += 2
+            continue
+        out.append(token)
+        i += 1
+    return out
+
+
+def _is_number(text: str) -> bool:
     try:
-        return int(args.func(args) or 0)
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the process exit status.
+
+    SIGINT and SIGTERM are deferred to the master's checks between FMU calls
+    (:mod:`ipcosim.harness.master.signals`): the run ends with its results so far on disk and
+    the status is ``128 + signal number``.
+    """
+    from ipcosim.harness.master import signals
+
+    parser = build_parser()
+    args = parser.parse_args(_negative_values(parser, sys.argv[1:] if argv is None else argv))
+    try:
+        limit = getattr(args, "timeout", None)
+        if limit is not None:
+            from ipcosim.harness.options import seconds_option
+
+            limit = seconds_option("--timeout", limit)
+        with signals.deferred(timeout=limit):
+            status = int(args.func(args) or 0)
+            signals.check()  # a signal during the last writes: report it after them
+            return status
+    except signals.Interrupted as exc:
+        partial = getattr(exc, "result", None)
+        text = partial.error if partial is not None and partial.error else exc.message
+        print(f"ipcosim {args.command}: error: {text}", file=sys.stderr)
+        return exc.exit_status
     except KeyboardInterrupt:
         print("ipcosim: interrupted", file=sys.stderr)
         return 130

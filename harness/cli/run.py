@@ -34,6 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="FMU flavour: python (build/fmus, default) or native (build/fmus-native: C, from "
                         "`ipcosim build --native`)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.add_argument("--timeout", metavar="S",
+                   help="wall-clock limit [s]: stop the run there with its results so far (exit status 124)")
     p.set_defaults(func=main)
 
 

@@ -4,11 +4,11 @@
                  [--bounds controller.c1=1:10 ...] [--workers W] [--scheduler ADDR] [--seed S]
 
 Starts from the scenario's ``thesis`` parameter set when it has one (the thesis's gains; else
-its default binding, or ``--parameter-set``). Writes the tuned parameter set as
-``autotuned.ssv`` beside the scenario (``ssp/<scenario>/autotuned.ssv``: the complete controller
-set with the tuned values, so ``ipcosim run SCENARIO --parameter-set autotuned`` runs it; for a
-scenario without a folder, into ``--out``), and into ``--out`` (default ``out/tune/<scenario>``)
-``tune.md`` (before/after table) and ``evaluations.csv`` (every run).
+its default binding, or ``--parameter-set``). ``--budget N`` makes exactly N runs. Everything
+goes into ``--out`` (default ``out/tune/<scenario>``): ``autotuned.ssv`` (the complete controller
+set with the tuned values), ``tune.md`` (before/after table) and ``evaluations.csv`` (every run).
+``--install`` also copies the set beside the scenario (``ssp/<scenario>/autotuned.ssv``), so that
+``ipcosim run SCENARIO --parameter-set autotuned`` runs it.
 """
 from __future__ import annotations
 
@@ -27,7 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--params", required=True, metavar="COMP.VAR,...", help="parameters to tune, comma-separated")
     p.add_argument("--bounds", action="append", default=[], metavar="COMP.VAR=LOW:HIGH",
                    help="search range (default: nominal/2 .. nominal*2)")
-    p.add_argument("--budget", type=int, default=200, help="maximum number of runs (default 200)")
+    p.add_argument("--budget", type=int, default=200,
+                   help="number of runs, exactly, the scenario's own values included (default 200)")
     p.add_argument("--seed", type=int, default=0, help="optimiser seed (default 0)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU cores)")
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler address tcp://HOST:PORT")
@@ -42,8 +43,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "`ipcosim build --native`)")
     p.add_argument("--parameter-set", metavar="NAME",
                    help="start from this parameter set of the scenario (default: thesis when it exists)")
-    p.add_argument("--ssv", help="where to write the tuned parameter set (default: autotuned.ssv beside the scenario)")
-    p.add_argument("--out", help="report folder (default out/tune/<scenario>)")
+    p.add_argument("--ssv", help="where to write the tuned parameter set (default: OUT/autotuned.ssv)")
+    p.add_argument("--install", action="store_true",
+                   help="also copy the tuned parameter set beside the scenario (autotuned.ssv in its folder), "
+                        "so that `ipcosim run SCENARIO --parameter-set autotuned` runs it")
+    p.add_argument("--out", help="output folder: everything tuning writes goes there (default out/tune/<scenario>)")
     p.add_argument("--quiet", action="store_true", help="no per-generation progress")
     p.set_defaults(func=main)
 
@@ -61,6 +65,16 @@ def _scenario_dir(scenario: str) -> Path | None:
         return None
     candidate = SCENARIO_DIR / scenario
     return candidate if candidate.is_dir() else None
+
+
+def _install_path(args: argparse.Namespace) -> Path:
+    """Where ``--install`` puts the tuned set: ``autotuned.ssv`` in the scenario's folder."""
+    from ipcosim.harness.errors import UsageError
+
+    folder = _scenario_dir(args.scenario)
+    if folder is None or Path(args.scenario).suffix == ".ssp":
+        raise UsageError(f"--install: scenario {args.scenario!r} has no folder to install a parameter set into")
+    return folder / "autotuned.ssv"
 
 
 def main(args: argparse.Namespace) -> int:
@@ -83,16 +97,11 @@ def main(args: argparse.Namespace) -> int:
     bounds = tunemod.parse_bounds(args.bounds, names, spec.parameters)
     w_angle = costmod.W_ANGLE if args.w_angle is None else args.w_angle
     w_voltage = costmod.W_VOLTAGE if args.w_voltage is None else args.w_voltage
-    tunemod.plan_population(args.budget - 1, len(names))  # checks the budget before starting workers
+    tunemod.plan_population(args.budget, len(names))  # checks the budget before starting workers
     out = Path(args.out) if args.out else default_out(args.scenario, "tune")
     out.mkdir(parents=True, exist_ok=True)
-    scenario_dir = _scenario_dir(args.scenario)
-    if args.ssv:
-        ssv_path = Path(args.ssv)
-    elif scenario_dir is not None and Path(args.scenario).suffix == ".ssp":
-        ssv_path = scenario_dir / f"{Path(args.scenario).stem}.autotuned.ssv"
-    else:
-        ssv_path = (scenario_dir or out) / "autotuned.ssv"
+    ssv_path = Path(args.ssv) if args.ssv else out / "autotuned.ssv"
+    install = _install_path(args) if args.install else None
 
     executor = open_executor(args.workers, args.scheduler)
     print(f"tune {spec.name}: {', '.join(names)} within "
@@ -116,10 +125,16 @@ def main(args: argparse.Namespace) -> int:
                    f"w_angle {w_angle:g}, w_voltage {w_voltage:g}")
     values, component = tunemod.tuned_parameter_set(args.scenario, res.best, pset)
     ssv_path.parent.mkdir(parents=True, exist_ok=True)
-    ssv_path.write_text(tunemod.ssv_text(values, name="autotuned", description=description))
+    text = tunemod.ssv_text(values, name="autotuned", description=description)
+    ssv_path.write_text(text)
+    if install is not None:
+        install.write_text(text)
     if component is not None:
-        usage = (f"It is the complete `{component}` parameter set ({pset or 'default'} with the tuned values): "
-                 f"`ipcosim run {args.scenario} --parameter-set autotuned` runs it.")
+        usage = (f"It is the complete `{component}` parameter set ({pset or 'default'} with the tuned values)"
+                 + (f", installed as `{install}`: `ipcosim run {args.scenario} --parameter-set autotuned` runs it."
+                    if install is not None else
+                    "; copy it beside the scenario (or tune with --install) to run it with "
+                    "`--parameter-set autotuned`."))
     else:
         usage = "It holds the tuned values as component.variable (apply them with --set)."
     table = tunemod.before_after_markdown(res, f"{pset} gains" if pset else "scenario gains")
@@ -132,5 +147,6 @@ def main(args: argparse.Namespace) -> int:
               + f"\nTuned parameter set: `{ssv_path}`. {usage}\n")
     (out / "tune.md").write_text(report)
     print(table, end="")
-    print(f"tuned parameter set: {ssv_path}\nreport: {out / 'tune.md'}, runs: {out / 'evaluations.csv'}")
+    print(f"tuned parameter set: {ssv_path}" + (f" (installed: {install})" if install is not None else "")
+          + f"\nreport: {out / 'tune.md'}, runs: {out / 'evaluations.csv'}")
     return 0

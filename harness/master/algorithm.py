@@ -358,13 +358,13 @@ class Block:
 
 @dataclass
 class TypedRecord:
-    """Where the loop records the non-Real values: the ``c_int`` vector's rows (address, row
-    bytes, vector address) and a list of String rows filled by ``snapshot()``."""
+    """Where the loop records the non-Real values: the ``c_int`` vector's rows (row bytes, vector
+    address; the rows' address is the loop's ``rbi`` argument) and String rows filled by
+    ``snapshot()`` into ``strings[row]`` (a mapping by row number)."""
 
-    int_address: int = 0
     int_row_bytes: int = 0
     int_vector: int = 0
-    strings: list | None = None
+    strings: dict | None = None
     snapshot: Callable[[], tuple] | None = None
 
 
@@ -372,9 +372,12 @@ def generate_loop(blocks: Sequence[Block], order: Sequence[int], algorithm: str,
                   record_every: int = 1, typed: TypedRecord | None = None) -> tuple[str, dict[str, Any]]:
     """Python source of the stepping loop and its namespace.
 
-    The generated ``run(n0, n1, rec_address, value_address, row_bytes)`` steps ticks
-    ``n0 .. n1-1``; after tick ``n`` it copies the value vector into record row
-    ``(n + 1) // record_every`` when ``(n + 1) % record_every == 0``. It returns None, or
+    The generated ``run(n0, n1, rec_address, value_address, row_bytes, int_rec_address=0)`` steps
+    ticks ``n0 .. n1-1``; after tick ``n`` it copies the value vector into record row
+    ``r = (n + 1) // record_every`` (at ``rec_address + r * row_bytes``; the ``c_int`` vector at
+    ``int_rec_address + r * typed.int_row_bytes``) when ``(n + 1) % record_every == 0``. The
+    addresses are those of a row 0, which need not exist: a caller that keeps only a window of
+    rows passes its first row's address minus the rows before it. It returns None, or
     ``(n, block index, function name, status)`` for the first call that returned more than
     fmi2Warning (or a ``do_step`` that returned :data:`~ipcosim.harness.master.slave.TERMINATE`).
     Every component's last step ends at the stop time: a component whose last period is partial
@@ -383,7 +386,7 @@ def generate_loop(blocks: Sequence[Block], order: Sequence[int], algorithm: str,
     if algorithm not in ALGORITHMS:
         raise ValueError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
     em = _Emitter(blocks, time)
-    em.lines += ["def run(n0, n1, rb, va, rs):", "    for n in range(n0, n1):", f"{IND}t = {time.expr('n')}"]
+    em.lines += ["def run(n0, n1, rb, va, rs, rbi=0):", "    for n in range(n0, n1):", f"{IND}t = {time.expr('n')}"]
     if algorithm == GAUSS_SEIDEL:
         _gauss_seidel(em, order)
     else:
@@ -520,7 +523,7 @@ def _record(L: list[str], ns: dict[str, Any], ind: str, record_every: int, typed
     """The lines that copy the values into the record after a tick."""
     rows: list[str] = ["memmove(rb + ROW * rs, va, rs)"]
     if typed is not None and typed.int_row_bytes:
-        ns.update({"rbi": typed.int_address, "rsi": typed.int_row_bytes, "vai": typed.int_vector})
+        ns.update({"rsi": typed.int_row_bytes, "vai": typed.int_vector})
         rows.append("memmove(rbi + ROW * rsi, vai, rsi)")
     if typed is not None and typed.strings is not None:
         ns.update({"SREC": typed.strings, "snap": typed.snapshot})

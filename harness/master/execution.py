@@ -22,10 +22,11 @@ import ctypes
 import math
 import time as _time
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import (
     ALGORITHMS,
     GAUSS_SEIDEL,
@@ -42,14 +43,62 @@ from ipcosim.harness.master.algorithm import (
 )
 from ipcosim.harness.master.manipulators import Manipulator, Overrides
 from ipcosim.harness.master.observers import Observer
-from ipcosim.harness.master.results import Result, SimulationError, task_metrics
+from ipcosim.harness.master.results import Result, RowWriter, SimulationError
 from ipcosim.harness.master.slave import DISCARD, TERMINATE, FMUSlave, Slave
 from ipcosim.harness.master.system import Instance, System, Variable, kind_of
 
 SlaveFactory = Callable[[Instance], Slave]
+#: The task's metrics of a run: ``task_metrics(chunks, names) -> dict``, where ``chunks()``
+#: iterates over the recorded rows (structured arrays, a chunk at a time; it may be called more
+#: than once) and ``names`` are the fields. Given by whoever knows the scenario (the master
+#: knows no task): ``ipcosim.harness.api`` gives ``ipcosim.fmus.task.streamed_task_metrics``.
+TaskMetrics = Callable[[Callable[[], Iterable[np.ndarray]], Sequence[str]], Mapping[str, Any]]
 
-#: Ticks run between two looks at the record for non-finite values (and at KeyboardInterrupt).
+#: At most this many ticks run between two looks at the record for non-finite values, at
+#: pending signals, and two writes of the results.
 CHUNK = 512
+#: Wall-clock seconds a chunk of ticks aims at (fewer ticks per chunk for slow FMUs), so rows
+#: reach the disk several times a second.
+CHUNK_SECONDS = 0.2
+#: Most communication steps of one run (a year at 1 kHz is 3e10).
+MAX_TICKS = 10 ** 12
+
+
+def check_times(start: float, stop: Any, step: Any, record_every: Any = 1,
+                sources: Mapping[str, str] | None = None) -> TimeBase:
+    """Check the run's times before anything is allocated; the integer time base.
+
+    Parameters
+    ----------
+    start, stop, step : float
+        [s]; ``stop`` and ``step`` as given (any type: checked here).
+    record_every : int
+        Record every n-th communication point.
+    sources : mapping, optional
+        Where ``start``, ``stop`` and ``step`` came from, for the messages, e.g.
+        ``{"stop": "--stop-time", "step": "ssp/x/SystemStructure.ssd: baseStepSize"}``.
+
+    Raises
+    ------
+    StepSizeError
+        One line naming the value and where it came from.
+    """
+    src = {"start": "startTime", "stop": "--stop-time", "step": "--step", **(sources or {})}
+    for key, value in (("step", step), ("stop", stop), ("start", start)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise StepSizeError(f"{src[key]} {value!r}: not a finite number of seconds")
+    if not step > 0:
+        raise StepSizeError(f"{src['step']} {step:g}: the step size must be a positive number of seconds")
+    if not stop > start:
+        raise StepSizeError(f"{src['stop']} {stop:g}: the stop time must be after the start time {start:g} s "
+                            f"({src['start']})")
+    if isinstance(record_every, bool) or not isinstance(record_every, int) or record_every < 1:
+        raise StepSizeError(f"record_every = {record_every!r} must be a positive integer")
+    ticks = (stop - start) / step
+    if ticks > MAX_TICKS:
+        raise StepSizeError(f"{src['stop']} {stop:g} s at {src['step']} {step:g} s: {ticks:.3g} steps, more than "
+                            f"the limit {MAX_TICKS:.0e} (check the units: seconds)")
+    return TimeBase.make(start, stop, step)  # a run that is not a whole number of steps ends with a short step
 
 
 class NonFiniteError(SimulationError, FloatingPointError):
@@ -83,13 +132,20 @@ class Execution:
         Record every n-th communication point.
     max_init_iterations : int
         Bound on the initialization fixed-point iterations.
+    writer : RowWriter, optional
+        Where the rows go while the run proceeds (default: a spool file only); see
+        :meth:`row_fields` for its fields.
+    task_metrics : callable, optional
+        The task's metrics of the recorded rows (see :data:`TaskMetrics`), added to the
+        result's metrics; None: only the run's own (timing, observers).
     """
 
     def __init__(self, system: System, step: float, stop_time: float, start_time: float | None = None,
                  algorithm: str = GAUSS_SEIDEL, overrides: Mapping[tuple[str, str], Any] | None = None,
                  observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
                  slave_factory: SlaveFactory | None = None, unzip_dirs: Mapping[str, Path] | None = None,
-                 record_every: int = 1, max_init_iterations: int = 20) -> None:
+                 record_every: int = 1, max_init_iterations: int = 20, writer: RowWriter | None = None,
+                 task_metrics: TaskMetrics | None = None) -> None:
         if algorithm not in ALGORITHMS:
             raise StepSizeError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
         self.system = system
@@ -116,6 +172,8 @@ class Execution:
         self.init_order = self.order
         self._layout()
         self.slaves: list[Slave] = []
+        self.writer = writer
+        self.task_metrics = task_metrics
         self.tick = 0
         self.init_iterations = 0
         self._loop_source = ""
@@ -289,7 +347,7 @@ class Execution:
         if not self.n_ints and not self._string_slots:
             return None
         slots = self._string_slots
-        return TypedRecord(int_address=self.record_i.ctypes.data, int_row_bytes=4 * self.n_ints if self.n_ints else 0,
+        return TypedRecord(int_row_bytes=4 * self.n_ints if self.n_ints else 0,
                            int_vector=ctypes.addressof(self.ints_c),
                            strings=self.record_s if slots else None,
                            snapshot=(lambda: tuple(lst[j] for lst, j in slots)) if slots else None)
@@ -354,42 +412,51 @@ class Execution:
         return bool(self.ints[slot]) if kind == "boolean" else int(self.ints[slot])
 
     # ------------------------------------------------------------------ run
+    def row_names(self) -> list[str]:
+        """Field names of the recorded rows: ``time``, then ``component.variable`` (every
+        connector of every type, in SSD order)."""
+        return list(self.column_kinds)
+
     def run(self) -> Result:
         """Run the lifecycle; always returns a Result (``result.error`` set on failure).
 
-        Every instance is terminated (when FMI allows it) and freed, also after a failure or
-        a KeyboardInterrupt (which is re-raised after cleanup).
+        Rows go to the writer chunk by chunk as the run proceeds (memory stays bounded).
+        Every instance is terminated (when FMI allows it) and freed, also after a failure, a
+        KeyboardInterrupt or a signal deferred by :mod:`ipcosim.harness.master.signals`
+        (re-raised after cleanup with ``.result`` set).
         """
-        n_rows = self.n_ticks // self.record_every + 1
-        self.record = np.zeros((n_rows, max(self.n_values, 1)))
-        self.record_i = np.zeros((n_rows, max(self.n_ints, 1)), dtype=np.int32)
-        self.record_s: list[tuple | None] = [None] * n_rows if self._string_slots else []
-        rows = 0
+        self.writer = self.writer or RowWriter(self.row_fields())
+        rows = CHUNK // self.record_every + 2  # the record holds at most a chunk of rows
+        self.record = np.zeros((rows, max(self.n_values, 1)))
+        self.record_i = np.zeros((rows, max(self.n_ints, 1)), dtype=np.int32)
+        self.record_s: dict[int, tuple] = {}  # String rows by (absolute) row number
+        self._base_row = 0
+        self._last_emit = _time.monotonic()
         error: BaseException | None = None
         interrupted: BaseException | None = None
         wall0 = _time.perf_counter()
         wall_loop = 0.0
         try:
+            signals.check()
             self._instantiate()
             self._initialize()
             self.record[0, :self.n_values] = self.values
             self.record_i[0, :self.n_ints] = self.ints
             if self._string_slots:
                 self.record_s[0] = tuple(lst[j] for lst, j in self._string_slots)
-            rows = 1
             self._check_finite(0, 1)
+            self._emit(1)
             for obs in self.observers:
                 obs.start(self)
             loop_t0 = _time.perf_counter()
-            rows = self._step_all()
+            self._step_all()
             wall_loop = _time.perf_counter() - loop_t0
         except KeyboardInterrupt as exc:
             interrupted = error = exc
-            rows = min(self.tick // self.record_every + 1, n_rows) if rows else 0
+            self._flush_pending()
         except Exception as exc:  # noqa: BLE001 -- reported in the Result, cleanup below
-            error = exc
-            if isinstance(exc, _TickFailure):
-                rows = exc.rows
+            error = exc.cause if isinstance(exc, _TickFailure) and exc.cause is not None else exc
+            self._flush_pending()
         finally:
             cleanup_error = self._cleanup()
             if error is None and cleanup_error is not None:
@@ -400,16 +467,20 @@ class Execution:
                 except Exception as exc:  # noqa: BLE001
                     error = error or exc
         wall = _time.perf_counter() - wall0
-        result = self._result(rows, error, wall, wall_loop)
+        task = self._task_metrics()
+        result = self._result(self.writer.finish(), error, wall, wall_loop, task)
         if interrupted is not None:
-            result.error = f"interrupted at t = {self.time_of(self.tick):.6g} s"
+            what = getattr(interrupted, "message", "interrupted")
+            result.error = f"{what} at t = {self.time_of(self.tick):.6g} s"
             result.metadata["error"] = result.error
+            result.metadata["status"] = "interrupted"
             interrupted.result = result  # type: ignore[attr-defined]  -- for callers that save it
             raise interrupted
         return result
 
     def _instantiate(self) -> None:
         for inst in self.instances:
+            signals.check()
             slave = self.slave_factory(inst)
             self.slaves.append(slave)
             slave.instantiate()
@@ -423,6 +494,7 @@ class Execution:
 
     def _initialize(self) -> None:
         """Enter initialization mode, propagate to a fixed point, exit initialization mode."""
+        signals.check()
         for slave in self.slaves:
             slave.enter_initialization_mode()
         self.blocks = self._blocks()
@@ -430,6 +502,7 @@ class Execution:
             self._get_outputs(b, None)
         changed: list[str] = []
         for it in range(1, self.max_init_iterations + 1):
+            signals.check()
             changed = self._sweep()
             self.init_iterations = it
             if not changed:
@@ -511,37 +584,62 @@ class Execution:
                     raise self.slaves[b.index].fail(f"fmi2Get{ch.kind.capitalize()}", status,
                                                     t if t is not None else self.start_time)
 
-    def _step_all(self) -> int:
-        """Run every tick in chunks between observer/manipulator events; returns rows recorded."""
+    def _emit(self, rows: int) -> None:
+        """Hand the record rows ``_base_row .. rows-1`` (absolute numbers) to the writer."""
+        k = rows - self._base_row
+        if k > 0:
+            self.writer.append(self._rows(self._base_row, k))
+            for row in range(self._base_row, rows):
+                self.record_s.pop(row, None)
+            self._base_row = rows
+        self._last_emit = _time.monotonic()
+
+    def _flush_pending(self) -> None:
+        """After an interruption: write the rows of the completed chunks still in the buffer."""
+        if self._base_row > 0:  # stepping had started (row 0 written)
+            try:
+                self._emit(self.tick // self.record_every + 1)
+            except Exception:  # noqa: BLE001 -- the first error is the one reported
+                pass
+
+    def _step_all(self) -> None:
+        """Run every tick in chunks between observer/manipulator events, writing the rows of
+        each chunk and looking at pending signals in between."""
         N = self.n_ticks
-        rec_addr = self.record.ctypes.data
         row_bytes = self.record.shape[1] * 8
+        int_row_bytes = self.record_i.shape[1] * 4
         va = ctypes.addressof(self.values_c)
         run = self._run_loop
         every = self.record_every
         due_man = {id(m): m.next_tick(-1) for m in self.manipulators}
         due_obs = {id(o): o.next_tick(0) for o in self.observers}
-        n = 0
+        n, chunk = 0, min(CHUNK, 16)
         while n < N:
+            signals.check()
             for man in self.manipulators:
                 if due_man[id(man)] == n:
                     man.step(self, n)
                     due_man[id(man)] = man.next_tick(n)
-            target = min(N, n + CHUNK)
+            target = min(N, n + chunk)
             for k in (*due_man.values(), *due_obs.values()):
                 if k is not None and n < k < target:
                     target = k
+            # the loop writes row r at rb + r * row_bytes: map this chunk's first row to record[0]
+            rb = self.record.ctypes.data - self._base_row * row_bytes
+            rbi = self.record_i.ctypes.data - self._base_row * int_row_bytes
             marks = [s.errors_logged for s in self.slaves]
-            failure = run(n, target, rec_addr, va, row_bytes)
+            t0 = _time.perf_counter()
+            failure = run(n, target, rb, va, row_bytes, rbi)
             if failure is not None:
                 fn, idx, function, status = failure
-                rows = fn // every + 1
                 self.tick = fn
-                self._check_finite(n // every + 1, rows)
+                rows = fn // every + 1
+                self._check_finite(self._base_row, rows)
+                self._emit(rows)
                 slave = self.slaves[idx]
                 logged_error = slave.errors_logged > marks[idx]
                 if not logged_error and self._ended_by_fmu(idx, function, status):
-                    return rows
+                    return
                 err = slave.fail(function, status, self.time_of(fn))
                 if status == DISCARD and function == "fmi2DoStep":
                     ended, query = slave.terminated()
@@ -549,13 +647,20 @@ class Execution:
                            else "the FMU did not end the simulation")
                     err = type(err)(f"{err} ({query}, {why})", err.component, err.function, err.status, err.time)
                 raise _TickFailure(str(err), rows, err)
-            self._check_finite(n // every + 1, target // every + 1)
+            rows = target // every + 1
+            self._check_finite(n // every + 1, rows)
+            chunk = _next_chunk(chunk, target - n, _time.perf_counter() - t0)
+            # write when the next chunk might not fit in the record buffer, and at least every
+            # CHUNK_SECONDS (observers that need every tick make chunks of one tick)
+            if (rows - self._base_row + chunk // every + 1 > len(self.record)
+                    or _time.monotonic() - self._last_emit >= CHUNK_SECONDS):
+                self._emit(rows)
             n = self.tick = target
             for obs in self.observers:
                 if due_obs[id(obs)] == n:
                     obs.step(self, n)
                     due_obs[id(obs)] = obs.next_tick(n)
-        return N // every + 1
+        self._emit(N // every + 1)
 
     def _ended_by_fmu(self, idx: int, function: str, status: int) -> bool:
         """Whether a failed ``do_step`` is a component ending the simulation itself (FMI 2.0:
@@ -574,10 +679,13 @@ class Execution:
                                       f"t = {t:.6g} s to {t_next:.6g} s ({query}); the run ends at t = {t:.6g} s"}
         return True
 
-    def _check_finite(self, row0: int, row1: int, failing: bool = False) -> None:
+    def _check_finite(self, row0: int, row1: int) -> None:
+        """Raise for the first non-finite output in record rows ``row0 .. row1-1`` (absolute
+        numbers, ``row0`` being the first row held in the record buffer); the rows before it
+        are handed to the writer first."""
         if row1 <= row0 or not len(self.output_slots):
             return
-        block = self.record[row0:row1][:, self.output_slots]
+        block = self.record[row0 - self._base_row:row1 - self._base_row][:, self.output_slots]
         if np.isfinite(block).all():
             return
         bad = ~np.isfinite(block)
@@ -593,7 +701,8 @@ class Execution:
         var = self._real_outputs[k][slot - self._out_offset[k]].name
         t = self.time_of(row * self.record_every)
         msg = (f"component {inst.name} ({inst.model.name}): output {inst.name}.{var} = "
-               f"{float(self.record[row, slot])} at t = {t:.6g} s (non-finite value)")
+               f"{float(self.record[row - self._base_row, slot])} at t = {t:.6g} s (non-finite value)")
+        self._emit(row + 1)  # the bad row too: it shows what went wrong
         raise _TickFailure(msg, row + 1, NonFiniteError(msg))
 
     def _slot_owner(self, slot: int) -> int:
@@ -620,10 +729,17 @@ class Execution:
         return first
 
     # ------------------------------------------------------------------ result
-    def _result(self, rows: int, error: BaseException | None, wall: float, wall_loop: float) -> Result:
+    def row_fields(self) -> list[tuple[str, str]]:
+        """Name and numpy type of every recorded field: ``time``, then ``component.variable``
+        (see :data:`COLUMN_DTYPE`)."""
+        return [(n, COLUMN_DTYPE[k]) for n, k in self.column_kinds.items()]
+
+    def _rows(self, first_row: int, rows: int) -> np.ndarray:
+        """Record buffer rows ``0 .. rows-1`` (absolute ``first_row ..``) as a structured array
+        of the row fields."""
         rec = self.record[:rows]
-        data = np.zeros(rows, dtype=[(n, COLUMN_DTYPE[k]) for n, k in self.column_kinds.items()])
-        ticks = np.arange(rows) * self.record_every
+        data = np.zeros(rows, dtype=self.row_fields())
+        ticks = (first_row + np.arange(rows)) * self.record_every
         if self.timebase.step_ns is not None:
             data["time"] = (self.timebase.start_ns + ticks * self.timebase.step_ns) / 1e9
         else:
@@ -635,14 +751,23 @@ class Execution:
             else:
                 src, factor, offset = link
                 data[name] = factor * rec[:, src] + offset
-        self._typed_result(data, rows)
+        self._typed_rows(data, first_row)
+        return data
+
+    def _task_metrics(self) -> dict[str, Any]:
+        """The task metrics from the rows written (a chunk at a time: bounded memory)."""
+        if self.task_metrics is None:
+            return {}
+        try:
+            return dict(self.task_metrics(self.writer.chunks, self.row_names()))
+        except Exception as exc:  # noqa: BLE001 -- metrics must not hide the run's result
+            return {"metrics_error": str(exc)}
+
+    def _result(self, data: np.ndarray, error: BaseException | None, wall: float, wall_loop: float,
+                task: dict[str, Any]) -> Result:
+        rows = len(data)
         simulated = float(data["time"][-1] - data["time"][0]) if rows else 0.0
-        metrics: dict[str, Any] = {}
-        if rows >= 2:
-            try:
-                metrics.update(task_metrics(data))
-            except Exception as exc:  # noqa: BLE001 -- metrics must not hide the run's result
-                metrics["metrics_error"] = str(exc)
+        metrics: dict[str, Any] = dict(task)
         metrics.update(timing_metrics(simulated, wall, wall_loop))
         for obs in self.observers:
             try:
@@ -674,15 +799,18 @@ class Execution:
             metadata["notes"].append(self.terminated_by["note"])
         return Result(data=data, metrics=metrics, metadata=metadata, error=message)
 
-    def _typed_result(self, data: np.ndarray, rows: int) -> None:
-        """Fill the Integer, Boolean and String columns (a connected input: what its
-        connection delivers, i.e. the source's value through the mapping)."""
+    def _typed_rows(self, data: np.ndarray, first_row: int) -> None:
+        """Fill the Integer, Boolean and String columns of record buffer rows ``0 .. len(data)-1``
+        (absolute ``first_row ..``); a connected input: what its connection delivers, i.e. the
+        source's value through the mapping."""
+        rows = len(data)
         ints = self.record_i[:rows]
+        strings = [self.record_s.get(first_row + r) for r in range(rows)] if self._string_slots else []
         for name, kind, slot, link in self.typed_columns:
             src, mapping = link if link is not None else (slot, {})
             if kind == "string":
                 values = [row[src].decode("utf-8", "replace") if row is not None else ""
-                          for row in self.record_s[:rows]]
+                          for row in strings]
                 data[name] = np.array(values, dtype=object) if rows else values
                 continue
             col = ints[:, src]
@@ -700,6 +828,13 @@ def timing_metrics(simulated: float, wall: float, loop: float) -> dict[str, floa
     (simulated / stepping-loop seconds) of a run that simulated ``simulated`` seconds."""
     return {"wall_time_s": wall, "real_time_factor": simulated / wall if wall > 0 else None,
             "loop_real_time_factor": simulated / loop if loop > 0 else None}
+
+
+def _next_chunk(chunk: int, ticks: int, seconds: float) -> int:
+    """Ticks for the next chunk so that it lasts about CHUNK_SECONDS (between 1 and CHUNK)."""
+    if ticks < chunk or seconds <= 0:
+        return chunk
+    return int(max(1, min(CHUNK, ticks * CHUNK_SECONDS / seconds)))
 
 
 class _TickFailure(SimulationError):

@@ -7,19 +7,19 @@ from __future__ import annotations
 import fnmatch
 import json
 import math
+import os
+import tempfile
+import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
 from ipcosim.harness.errors import IpcosimError, UsageError
 
-#: Plant outputs that the metrics read, by preference: the motor-driven cart's position.
-POSITION_COLUMNS = ("plant.cart_position", "plant.active_cart_position")
-ANGLE_COLUMNS = ("plant.pendulum_angle",)
-REFERENCE_COLUMNS = ("setpoint.reference", "controller.reference")
-VOLTAGE_COLUMNS = ("controller.voltage", "plant.voltage")
+#: Draws a result's figure: ``plotter(result, path or None)`` (see :attr:`Result.plotter`).
+Plotter = Callable[["Result", "Path | None"], Any]
 
 
 class SimulationError(IpcosimError, RuntimeError):
@@ -48,12 +48,17 @@ class Result:
         status and error.
     error : str or None
         One-line description of the failure, None for a complete run.
+    plotter : callable, optional
+        ``plotter(result, path)`` draws the run's figure (``path`` None: return it; else write
+        a PNG there and return the path); set by whoever knows what the run is
+        (``ipcosim.harness.api``: :func:`ipcosim.harness.plot.plot`).
     """
 
     data: np.ndarray
     metrics: dict[str, Any] = field(default_factory=dict)
     metadata: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
+    plotter: Plotter | None = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
@@ -75,32 +80,30 @@ class Result:
         UsageError
             If a pattern matches no column.
         """
-        cols = self.columns
-        if not patterns:
-            return cols
-        chosen = {"time"}
-        for p in patterns:
-            hits = [c for c in cols if fnmatch.fnmatchcase(c, p)]
-            if not hits:
-                raise UsageError(f"--record {p}: no such variable (recorded: {', '.join(cols[1:])})")
-            chosen.update(hits)
-        return [c for c in cols if c in chosen]
+        return select_columns(self.columns, patterns)
 
     def plot(self, path: str | Path | None = None) -> Any:
-        """The run's figure: reference and cart position(s), pendulum angle, voltage.
+        """The run's figure, drawn by :attr:`plotter`.
 
         Parameters
         ----------
         path : path, optional
             Write the figure there as PNG and return the path; without it, return the
             matplotlib Figure (to show or save).
+
+        Raises
+        ------
+        UsageError
+            If the result has no plotter.
         """
-        from ipcosim.harness.plot import figure, plot_result
+        if self.plotter is None:
+            raise UsageError("this result has no plotter (results of ipcosim.run and ipcosim.harness.run have one)")
+        return self.plotter(self, Path(path) if path is not None else None)
 
-        return figure(self) if path is None else plot_result(self, path)
-
-    def write(self, out_dir: str | Path, variables: Sequence[str] | None = None, plot: bool = False) -> dict[str, Path]:
-        """Write ``results.csv``, ``metrics.json`` (and ``plot.png``) into ``out_dir``.
+    def write(self, out_dir: str | Path, variables: Sequence[str] | None = None, plot: bool = False,
+              csv: bool = True) -> dict[str, Path]:
+        """Write ``results.csv`` (unless ``csv`` is false: already streamed there),
+        ``metrics.json`` (and ``plot.png``) into ``out_dir``.
 
         Returns
         -------
@@ -110,17 +113,222 @@ class Result:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         files = {"results": out / "results.csv", "metrics": out / "metrics.json"}
-        write_csv(self.data, files["results"], self.select(variables))
+        if csv:
+            write_csv(self.data, files["results"], self.select(variables))
         self.write_metrics(files["metrics"])  # before the plot, which may fail (a missing extra)
         if plot:
-            from ipcosim.harness.plot import plot_result
-
-            files["plot"] = plot_result(self, out / "plot.png")
+            files["plot"] = self.plot(out / "plot.png")
         return files
 
     def write_metrics(self, path: Path) -> None:
         """Write ``metrics.json``."""
         path.write_text(json.dumps(json_safe(self.metrics), indent=2) + "\n")
+
+
+def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> list[str]:
+    """Names of ``columns`` matching ``patterns`` (see :meth:`Result.select`)."""
+    cols = list(columns)
+    if not patterns:
+        return cols
+    chosen = {"time"}
+    for p in patterns:
+        hits = [c for c in cols if fnmatch.fnmatchcase(c, p)]
+        if not hits:
+            raise UsageError(f"--record {p}: no such variable (recorded: {', '.join(cols[1:])})")
+        chosen.update(hits)
+    return [c for c in cols if c in chosen]
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename, so
+    that an interrupted write never leaves a truncated file."""
+    tmp = path.with_name(f".{path.name}.partial")
+    try:
+        with open(tmp, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+class OutputFolderError(IpcosimError, OSError):
+    """The output folder cannot be created or written."""
+
+
+def open_output(out_dir: str | Path, what: str = "--out") -> Path:
+    """Create ``out_dir`` and check that files can be written there (before a run starts).
+
+    Raises
+    ------
+    OutputFolderError
+        Naming the folder and the reason.
+    """
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = tempfile.NamedTemporaryFile(dir=out, prefix=".ipcosim-write-check-", delete=True)
+        probe.write(b"x")
+        probe.flush()
+        probe.close()
+    except OSError as exc:
+        raise OutputFolderError(f"{what} {out}: output folder is not writable ({exc.strerror or exc})") from None
+    return out
+
+
+class RowWriter:
+    """Where the rows of a run go while it runs: an anonymous spool file that backs
+    :attr:`Result.data` (memory stays bounded whatever the run's length) and, when given,
+    ``results.csv``, appended chunk by chunk with unbuffered writes (a killed process loses
+    only the chunk being computed; the execution keeps chunks under a fraction of a second).
+
+    Fields keep their types (Real ``f8``, Integer ``i4``, Boolean ``?``, String ``O``). A String
+    field is spooled as the number of its value in a table of the distinct values seen, so the
+    memory a run holds grows with the distinct strings, not with its length.
+
+    Parameters
+    ----------
+    fields : sequence of str or of (name, numpy type)
+        ``time`` then ``component.variable``; a bare name is a Real (``f8``) field.
+    csv_path : path, optional
+        ``results.csv`` to stream to (created now, header written: an unwritable folder fails
+        before the run).
+    csv_columns : sequence of str, optional
+        The columns of ``results.csv`` (default: all).
+    in_memory_limit : int
+        Results up to this many bytes are read back into memory at the end; larger ones (without
+        String fields) stay a read-only memory map of the spool file.
+    """
+
+    def __init__(self, fields: Sequence[str] | Sequence[tuple[str, str]], csv_path: str | Path | None = None,
+                 csv_columns: Sequence[str] | None = None, in_memory_limit: int = 16 * 1024 ** 2) -> None:
+        pairs = [(f, "f8") if isinstance(f, str) else (str(f[0]), str(f[1])) for f in fields]
+        self.dtype = np.dtype(pairs)
+        self._strings = [n for n, t in pairs if np.dtype(t).kind == "O"]
+        self._spool_dtype = np.dtype([(n, "i4" if n in self._strings else t) for n, t in pairs])
+        self._table: list[str] = []
+        self._number: dict[str, int] = {}
+        self.rows = 0
+        self.in_memory_limit = in_memory_limit
+        self.csv_path = Path(csv_path) if csv_path is not None else None
+        names = [n for n, _ in pairs]
+        self.csv_columns = list(csv_columns) if csv_columns else names
+        self._csv_fd: int | None = None
+        self._spool = tempfile.TemporaryFile(prefix="ipcosim-rows-")  # unlinked at once: nothing left behind
+        if self.csv_path is not None:
+            try:
+                self._csv_fd = os.open(self.csv_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+            except OSError as exc:
+                self._spool.close()
+                raise OutputFolderError(f"{self.csv_path}: cannot write results ({exc.strerror})") from None
+            self._write_csv((",".join(self.csv_columns) + "\n").encode())
+        self.last_write = _time.monotonic()
+
+    def _write_csv(self, data: bytes) -> None:
+        from ipcosim.harness.master import signals
+
+        view = memoryview(data)
+        with signals.critical():  # a forced exit waits for the chunk: no half-written line
+            while view:
+                try:
+                    n = os.write(self._csv_fd, view)  # type: ignore[arg-type]
+                except OSError as exc:
+                    raise OutputFolderError(f"{self.csv_path}: cannot write results ({exc.strerror}); "
+                                            f"{self.rows} rows written") from None
+                view = view[n:]
+
+    def append(self, block: np.ndarray) -> None:
+        """Append rows (a structured array of :attr:`dtype`)."""
+        if not len(block):
+            return
+        self._spool.write(self._to_spool(block).tobytes())
+        if self._csv_fd is not None:
+            self._write_csv(csv_text(block, self.csv_columns).encode())
+        self.rows += len(block)
+        self.last_write = _time.monotonic()
+
+    def _to_spool(self, block: np.ndarray) -> np.ndarray:
+        if not self._strings:
+            return np.ascontiguousarray(block, dtype=self.dtype)
+        out = np.zeros(len(block), dtype=self._spool_dtype)
+        for name in self.dtype.names or ():
+            if name not in self._strings:
+                out[name] = block[name]
+                continue
+            numbers = out[name]
+            for i, value in enumerate(block[name]):
+                k = self._number.get(value)
+                if k is None:
+                    k = self._number[value] = len(self._table)
+                    self._table.append(value)
+                numbers[i] = k
+        return out
+
+    def _from_spool(self, raw: np.ndarray) -> np.ndarray:
+        if not self._strings:
+            return raw
+        out = np.zeros(len(raw), dtype=self.dtype)
+        table = np.array(self._table + [""], dtype=object)
+        for name in self.dtype.names or ():
+            out[name] = table[raw[name]] if name in self._strings else raw[name]
+        return out
+
+    def chunks(self, rows: int = 8192) -> Iterator[np.ndarray]:
+        """The rows written so far, ``rows`` at a time, read from the spool file (so that a pass
+        over a long run does not map it into memory). Valid until :meth:`finish`."""
+        self._spool.flush()
+        fd = self._spool.fileno()
+        size = self._spool_dtype.itemsize
+        for first in range(0, self.rows, rows):
+            n = min(rows, self.rows - first)
+            raw = np.frombuffer(os.pread(fd, n * size, first * size), dtype=self._spool_dtype)
+            yield self._from_spool(raw)
+
+    def finish(self) -> np.ndarray:
+        """Stop writing; the rows as a structured array (in memory, or memory-mapped if large)."""
+        self.close_csv()
+        self._spool.flush()
+        nbytes = self.rows * self._spool_dtype.itemsize
+        if nbytes == 0:
+            self._spool.close()
+            return np.zeros(0, dtype=self.dtype)
+        if nbytes <= self.in_memory_limit or self._strings:
+            self._spool.seek(0)
+            raw = np.frombuffer(bytearray(self._spool.read(nbytes)), dtype=self._spool_dtype)
+            self._spool.close()
+            return self._from_spool(raw)
+        return np.memmap(self._spool, dtype=self.dtype, mode="r", shape=(self.rows,))
+
+    def close_csv(self) -> None:
+        if self._csv_fd is not None:
+            os.close(self._csv_fd)
+            self._csv_fd = None
+
+    def close(self) -> None:
+        """Release the files (after :meth:`finish`, the memory map keeps the spool alive)."""
+        self.close_csv()
+
+
+def csv_text(data: np.ndarray, columns: Sequence[str]) -> str:
+    """CSV lines (no header) of selected fields of a structured array, each column in its type:
+    Real with full double precision (``%.17g``), Integer as integers, Boolean as
+    ``true``/``false``, String quoted where CSV needs it."""
+    if not len(data):
+        return ""
+    if all(data.dtype[c].kind == "f" for c in columns):
+        matrix = np.column_stack([np.asarray(data[c], dtype=float) for c in columns])
+        return "\n".join(",".join(map(_fmt, row)) for row in matrix.tolist()) + "\n"
+    import csv
+    import io
+
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(zip(*(_csv_column(data[c]) for c in columns)))
+    return buf.getvalue()
+
+
+def _fmt(x: float) -> str:
+    """A float as CSV text with full precision (``%.17g``, as ``write_csv``)."""
+    return "%.17g" % x
 
 
 def write_csv(data: np.ndarray, path: Path, columns: Sequence[str]) -> None:
@@ -169,32 +377,3 @@ def json_safe(value: Any) -> Any:
     if isinstance(value, Path):
         return str(value)
     return value
-
-
-def first_column(columns: Sequence[str], candidates: Sequence[str]) -> str | None:
-    for c in candidates:
-        if c in columns:
-            return c
-    return None
-
-
-def task_metrics(data: np.ndarray) -> dict[str, Any]:
-    """The DESIGN.md metrics of a pendulum run (``ipcosim.harness.metrics.compute_metrics``), from the
-    plant's motor-cart position and angle, the reference and the controller's voltage; an
-    empty dict when the result lacks those columns or has fewer than two rows."""
-    cols = list(data.dtype.names or ())
-    pos, ang = first_column(cols, POSITION_COLUMNS), first_column(cols, ANGLE_COLUMNS)
-    ref, volt = first_column(cols, REFERENCE_COLUMNS), first_column(cols, VOLTAGE_COLUMNS)
-    if None in (pos, ang, ref, volt) or len(data) < 2:
-        return {}
-    try:
-        from ipcosim.harness.metrics import compute_metrics
-    except ImportError:
-        return {}
-    out = dict(compute_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
-                               np.asarray(data[ref], float), np.asarray(data[ang], float),
-                               np.asarray(data[volt], float)))
-    from ipcosim.harness.metrics import upright_metrics
-    out.update(upright_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
-                               np.asarray(data[ang], float)))
-    return out

@@ -28,7 +28,7 @@ from ipcosim.fmus.instruments import Instruments, realism
 from ipcosim.fmus.params import preset
 from ipcosim.fmus.physics import MOTOR_CART
 from ipcosim.fmus.plant import InstrumentedPlant, PlantStepError
-from ipcosim.harness.metrics import UPRIGHT_LIMIT_RAD, compute_metrics
+from ipcosim.fmus.task import UPRIGHT_LIMIT_RAD, compute_metrics
 
 STOP_TIME = 20.0
 PLANT_STEP = 1e-3

@@ -82,8 +82,8 @@ class CosimSpec(RunSpec):
         IpcosimError
             Unknown scenario, unreadable SSD/FMU, unknown ``--set`` names (one line each).
         """
+        from ipcosim.fmus.task import METRIC_KEYS
         from ipcosim.harness.api import Prepared
-        from ipcosim.harness.metrics import METRIC_KEYS
         from ipcosim.harness.scenario.system import with_overrides
         from ipcosim.harness.studies.cost import COST_TERMS
 
@@ -146,14 +146,14 @@ class CosimSpec(RunSpec):
 
     def build(self) -> Runner:
         """Load the scenario and extract its FMUs (once per worker); return the run function."""
-        from ipcosim.harness.api import Prepared
-        from ipcosim.harness.master.results import (
+        from ipcosim.fmus.task import (
             ANGLE_COLUMNS,
             POSITION_COLUMNS,
             REFERENCE_COLUMNS,
             VOLTAGE_COLUMNS,
             first_column,
         )
+        from ipcosim.harness.api import Prepared
         from ipcosim.harness.studies.cost import cost_terms, series
 
         location = self.location

@@ -164,7 +164,7 @@ def _lqr(law: LQR, b: Builder) -> tuple[Lin, list[str]]:
     ys = [b.input(j) for j in range(p)]
     notes = []
     if law.filter is not None:
-        # the law's filter as plain lists: Ad (2 x 2), Bd (2), Cd (2)
+        # the law's filter as plain lists (the controllers' stdlib runtime): Ad (2 x 2), Bd (2), Cd (2)
         Af, Bf, Cf = (np.asarray(m, dtype=float) for m in law.filter)
         Bf, Cf = Bf.reshape(2), Cf.reshape(2)
         filtered = []

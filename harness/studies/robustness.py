@@ -2,7 +2,7 @@
 
 A run is a success when its status is ``ok``: the pendulum stayed upright (|angle| < 0.35 rad
 throughout) and the cart ended inside the +-2 % settling band of the step (the task's band,
-``ipcosim.harness.metrics``). The success rate is reported with its 95 % Wilson score interval.
+``ipcosim.fmus.task``). The success rate is reported with its 95 % Wilson score interval.
 """
 from __future__ import annotations
 

@@ -174,7 +174,7 @@ class PurePlantSpec(RunSpec):
 
     def __post_init__(self) -> None:
         from ipcosim.fmus.params import preset
-        from ipcosim.harness.metrics import METRIC_KEYS
+        from ipcosim.fmus.task import METRIC_KEYS
         from ipcosim.harness.studies.cost import COST_TERMS
 
         plant = preset(self.preset)

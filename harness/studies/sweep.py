@@ -179,6 +179,11 @@ def _quick_exit() -> None:
         os._exit(0)
 
 
+#: Runs per worker, on average, before the local pool is replaced (bounded memory; measured
+#: growth per run in ``tests/test_sweep_memory.py``).
+RECYCLE_RUNS = 50
+
+
 def _worker_init() -> None:
     # The parent handles Ctrl-C (it stops the pool); workers must not die half-way on it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -188,16 +193,25 @@ def _worker_init() -> None:
 class LocalExecutor:
     """A pool of worker processes on this machine.
 
+    Each instantiation of a pythonfmu FMU leaves memory behind in its process (pythonfmu
+    0.7.0 re-imports the FMU script and keeps the new class; see ``docs/studies.md``), so the
+    pool is replaced after ``workers * recycle_runs`` runs: no worker process runs more than
+    that many, and its resident memory stays bounded whatever the length of the sweep.
+
     Parameters
     ----------
     workers : int, optional
         Number of processes (default: the number of CPU cores).
+    recycle_runs : int
+        Runs per worker (on average) before the pool is replaced by fresh processes.
     """
 
-    def __init__(self, workers: int | None = None) -> None:
+    def __init__(self, workers: int | None = None, recycle_runs: int = RECYCLE_RUNS) -> None:
         if workers is not None and workers < 1:
             raise UsageError(f"--workers {workers}: need at least one worker")
         self.workers = int(workers or os.cpu_count() or 1)
+        self.recycle_runs = int(recycle_runs)
+        self._used = 0  # runs submitted to the current pool
         self._ctx = multiprocessing.get_context("spawn")
         # One BLAS/OpenMP thread per worker process, as Dask's nanny does: a run's small matrix
         # products gain nothing from threads, and W workers x C BLAS threads on C cores
@@ -236,8 +250,9 @@ class LocalExecutor:
                         continue
                     batch = [pending[index]]
                 else:
-                    batch = list(pending.values())
+                    batch = list(pending.values())[:max(1, self.workers * self.recycle_runs - self._used)]
                 pool = self._ensure_pool()
+                self._used += len(batch)
                 futures = {pool.submit(_tracked_execute, spec, c, str(track)): c for c in batch}
                 broken = False
                 try:
@@ -256,6 +271,8 @@ class LocalExecutor:
                     for fut in futures:
                         fut.cancel()
                     raise
+                if not broken and self._used >= self.workers * self.recycle_runs:
+                    self.close()  # fresh worker processes for the next runs
                 if broken:
                     self._kill_pool()
                     in_flight = _read_tracks(track)
@@ -271,6 +288,7 @@ class LocalExecutor:
 
     def _kill_pool(self) -> None:
         pool, self._pool = self._pool, None
+        self._used = 0
         if pool is None:
             return
         processes = list((getattr(pool, "_processes", None) or {}).values())
@@ -290,6 +308,7 @@ class LocalExecutor:
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
+        self._used = 0
 
 
 _ADDRESS = re.compile(r"^(tcp|tls|ws|wss|ucx|inproc)://\S+$")

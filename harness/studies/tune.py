@@ -131,9 +131,16 @@ class SweepMap:
         self.on_row = on_row
         self.generations = 0
 
+    @property
+    def remaining(self) -> int:
+        """Runs left in the budget."""
+        return max(0, self.budget - len(self.rows))
+
     def evaluate(self, vectors: Sequence[Sequence[float]]) -> list[dict[str, Any]]:
         """Run one case per parameter vector; return their rows (with ``cost``)."""
         start = len(self.rows)
+        if not vectors:
+            return []
         cases = [Case(index=start + i, params=dict(zip(self.names, map(float, v))), seed=case_seed(self.seed, start + i))
                  for i, v in enumerate(vectors)]
         result = self._run_sweep(self.spec, cases, executor=self.executor)
@@ -146,23 +153,38 @@ class SweepMap:
 
     def __call__(self, func: Callable, iterable: Iterable) -> list[float]:
         vectors = [np.asarray(x, dtype=float) for x in iterable]
-        rows = self.evaluate(vectors)
+        rows = self.evaluate(vectors[:self.remaining])  # the budget is a hard limit on runs
         self.generations += 1
         stop = self.spec.stop_time or 1.0
-        return [costmod.surrogate_cost(r, stop, self.w_angle, self.w_voltage) if r["status"] != "error"
-                else 2.0 * costmod.FALL_PENALTY for r in rows]
+        costs = [costmod.surrogate_cost(r, stop, self.w_angle, self.w_voltage) if r["status"] != "error"
+                 else 2.0 * costmod.FALL_PENALTY for r in rows]
+        return costs + [math.inf] * (len(vectors) - len(rows))  # members not run: never selected
+
+
+def population_size(popsize: int, dims: int) -> int:
+    """Members of scipy's differential-evolution population (``max(5, popsize * dims)``)."""
+    return max(5, popsize * dims)
 
 
 def plan_population(budget: int, dims: int) -> tuple[int, int]:
-    """(popsize multiplier, generations after the first) so that the total number of runs,
-    ``popsize * dims * (1 + maxiter)``, stays within ``budget`` (at least 5 members, 1 generation)."""
-    if budget < 2 * max(5, dims):
-        raise TuneError(f"--budget {budget}: need at least {2 * max(5, dims)} runs for {dims} parameter(s)")
+    """(popsize multiplier, generations after the first) for exactly ``budget`` runs, the run
+    of the scenario's own values included: that run, a whole first population, then as many
+    members of later generations as the budget leaves (the last generation may be cut short).
+
+    Raises
+    ------
+    TuneError
+        If ``budget`` does not cover the scenario's run and one population.
+    """
+    smallest = 1 + population_size(max(1, math.ceil(5 / dims)), dims)
+    if budget < smallest:
+        raise TuneError(f"--budget {budget}: need at least {smallest} runs for {dims} parameter(s) (the scenario's "
+                        f"own values, then a first population of {smallest - 1})")
     popsize = max(1, math.ceil(5 / dims))
     # grow the population while it leaves room for ~ 8 generations
-    while (popsize + 1) * dims * 9 <= budget and popsize < 15:
+    while population_size(popsize + 1, dims) * 9 <= budget - 1 and popsize < 15:
         popsize += 1
-    maxiter = max(1, budget // (popsize * dims) - 1)
+    maxiter = max(1, math.ceil((budget - 1) / population_size(popsize, dims)) - 1)
     return popsize, maxiter
 
 
@@ -181,7 +203,7 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
     bounds : sequence of (float, float)
         Search range of each.
     budget : int
-        Maximum number of runs (the nominal run included).
+        Number of runs, exactly (the run of the nominal values included).
     executor : LocalExecutor or DaskExecutor, optional
         Where runs go (default: a local pool, closed at the end).
     seed : int
@@ -196,7 +218,7 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
     from ipcosim.harness.studies.sweep import open_executor
 
     dims = len(names)
-    popsize, maxiter = plan_population(budget - 1, dims)
+    popsize, maxiter = plan_population(budget, dims)
     nominal = {n: float(spec.parameters[n]) for n in names}
     x0 = np.array([min(max(nominal[n], lo), hi) for n, (lo, hi) in zip(names, bounds)])
     own = executor is None
@@ -207,12 +229,13 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
         nominal_row = mapper.evaluate([np.array([nominal[n] for n in names])])[0]
         best_seen = [nominal_row["cost"]]
 
-        def callback(*_: Any, **__: Any) -> None:
+        def callback(*_: Any, **__: Any) -> bool:
             if progress:
                 gen_best = min(r["cost"] for r in mapper.rows)
                 best_seen.append(gen_best)
                 print(f"tune: generation {mapper.generations}, {len(mapper.rows)} runs, best cost "
                       f"{fmt(gen_best)} (nominal {fmt(nominal_row['cost'])})", file=sys.stderr, flush=True)
+            return mapper.remaining == 0  # True stops the optimiser
 
         result = differential_evolution(
             lambda x: math.inf, bounds=list(bounds), popsize=popsize, maxiter=maxiter, tol=0.0, atol=0.0,

@@ -1,0 +1,405 @@
+"""The IP02 task and its metrics: what a run of the pendulum is judged by.
+
+The master knows nothing of pendulums: ``ipcosim.harness.api`` gives the execution
+:func:`streamed_task_metrics` as its ``task_metrics`` plug-in, which it calls on the recorded
+rows a chunk at a time; :func:`task_metrics` computes the same on a whole result. Both read the
+plant's columns named by :data:`POSITION_COLUMNS`, :data:`ANGLE_COLUMNS`,
+:data:`REFERENCE_COLUMNS` and :data:`VOLTAGE_COLUMNS`; a run without them has no task metrics.
+
+The task (thesis ch. 3 and 4): move the motor-driven cart from its initial position to the
+reference (0.05 m) while the pendulum stays upright. Definitions (DESIGN.md, "Metrics"):
+
+``settling_time_s``
+    The step is ``r_f - x(t0)``, with ``r_f`` the final reference value and ``x(t0)`` the
+    initial cart position. The band is ``r_f +- 2 %`` of ``|step|``. The settling time is the
+    time of the *last entry* into the band (the first sample from which the position stays
+    inside until the end of the run), measured from the instant the reference last changed
+    before that entry (``t0`` for a reference that is already at ``r_f`` at ``t0``). ``None``
+    if the position is outside the band at the end of the run, if the step is zero, or if the
+    run holds a non-finite sample.
+``overshoot_m``
+    ``max(0, max over the run of sign(step) (x - r_f))``: how far the cart went past the final
+    reference, in metres.
+``steady_state_error_m``
+    ``|mean(x - r)|`` over the samples in the final 10 % of the run's duration.
+``max_abs_angle_rad``
+    ``max |angle|``.
+``peak_voltage_V``, ``rms_voltage_V``
+    ``max |v|`` and ``sqrt(mean(v^2))`` of the controller's voltage command (samples treated with
+    equal weight; the recorders sample on a uniform grid).
+``upright``
+    ``True`` if ``|angle| < 0.35 rad`` at every sample (and every sample is finite).
+
+A run that diverged (NaN/inf samples) gives ``upright = False`` and ``None`` for the metrics that
+lose their meaning, never an exception: failed runs must still produce their metrics file.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+from ipcosim.errors import IpcosimError
+
+#: Plant outputs that the metrics read, by preference: the motor-driven cart's position.
+POSITION_COLUMNS = ("plant.cart_position", "plant.active_cart_position")
+ANGLE_COLUMNS = ("plant.pendulum_angle",)
+REFERENCE_COLUMNS = ("setpoint.reference", "controller.reference")
+VOLTAGE_COLUMNS = ("controller.voltage", "plant.voltage")
+
+
+#: |angle| limit of the task [rad] (about 20 degrees, the lab software's pendulum limit).
+UPRIGHT_LIMIT_RAD = 0.35
+#: Half-width of the settling band as a fraction of the step.
+SETTLING_BAND = 0.02
+#: Fraction of the run (at its end) over which the steady-state error is averaged.
+STEADY_STATE_FRACTION = 0.10
+
+METRIC_KEYS = ("settling_time_s", "overshoot_m", "steady_state_error_m", "max_abs_angle_rad",
+               "peak_voltage_V", "rms_voltage_V", "upright")
+
+
+class MetricsError(IpcosimError, ValueError):
+    """The signals handed to ``compute_metrics`` do not describe one run (lengths, shape, time order)."""
+
+
+def _as_1d(name: str, values: Any, n: int | None) -> np.ndarray:
+    arr = np.asarray(values, dtype=float)
+    if arr.ndim != 1:
+        raise MetricsError(f"metrics: signal {name} must be 1-D, got shape {arr.shape}")
+    if n is not None and arr.size != n:
+        raise MetricsError(f"metrics: signal {name} has {arr.size} samples, time has {n}")
+    return arr
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def compute_metrics(time: Any, position: Any, reference: Any, angle: Any, voltage: Any) -> dict[str, Any]:
+    """Metrics of one run (see the module docstring for the definitions).
+
+    Parameters
+    ----------
+    time : array_like, shape (n,)
+        Sample times [s], strictly increasing, n >= 2.
+    position : array_like, shape (n,)
+        Position of the motor-driven cart [m] (the active cart for the double mass).
+    reference : array_like, shape (n,)
+        Reference position [m].
+    angle : array_like, shape (n,)
+        Pendulum angle from upright [rad].
+    voltage : array_like, shape (n,)
+        Controller voltage command [V].
+
+    Returns
+    -------
+    dict
+        Keys ``METRIC_KEYS``; values are float, ``None`` or (``upright``) bool.
+
+    Raises
+    ------
+    MetricsError
+        If the signals are not 1-D arrays of one length >= 2 or time is not strictly increasing.
+    """
+    t = _as_1d("time", time, None)
+    n = t.size
+    if n < 2:
+        raise MetricsError(f"metrics: need at least 2 samples, got {n}")
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise MetricsError("metrics: time must be finite and strictly increasing")
+    x = _as_1d("position", position, n)
+    r = _as_1d("reference", reference, n)
+    th = _as_1d("angle", angle, n)
+    v = _as_1d("voltage", voltage, n)
+
+    finite = bool(np.all(np.isfinite(x)) and np.all(np.isfinite(r)) and np.all(np.isfinite(th))
+                  and np.all(np.isfinite(v)))
+    abs_th = np.abs(th)
+    max_angle = float(np.max(abs_th)) if np.all(np.isfinite(th)) else math.inf
+    upright = bool(finite and max_angle < UPRIGHT_LIMIT_RAD)
+    abs_v = np.abs(v)
+    peak_v = float(np.max(abs_v)) if np.all(np.isfinite(v)) else math.inf
+    rms_v = float(np.sqrt(np.mean(v * v))) if np.all(np.isfinite(v)) else math.inf
+
+    result: dict[str, Any] = {"settling_time_s": None, "overshoot_m": None, "steady_state_error_m": None,
+                              "max_abs_angle_rad": _finite_or_none(max_angle),
+                              "peak_voltage_V": _finite_or_none(peak_v),
+                              "rms_voltage_V": _finite_or_none(rms_v), "upright": upright}
+    if not finite:
+        return result
+
+    r_final = float(r[-1])
+    step = r_final - float(x[0])
+    direction = 1.0 if step >= 0 else -1.0
+    result["overshoot_m"] = max(0.0, float(np.max(direction * (x - r_final))))
+
+    t_start = t[-1] - STEADY_STATE_FRACTION * (t[-1] - t[0])
+    tail = t >= t_start
+    result["steady_state_error_m"] = float(abs(np.mean(x[tail] - r[tail])))
+
+    if step != 0.0:
+        band = SETTLING_BAND * abs(step)
+        outside = np.abs(x - r_final) > band
+        if not outside[-1]:
+            idx_out = np.flatnonzero(outside)
+            entry = int(idx_out[-1]) + 1 if idx_out.size else 0
+            # instant the reference last changed at or before the entry (t0 if never)
+            changed = np.flatnonzero(r[1:entry + 1] != r[:entry])
+            t_ref = t[int(changed[-1]) + 1] if changed.size else t[0]
+            result["settling_time_s"] = float(t[entry] - t_ref)
+    return result
+
+
+def wrapped(angle: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi) (upright = 0; a swing-up's angle starts at pi)."""
+    return (np.asarray(angle, dtype=float) + math.pi) % (2 * math.pi) - math.pi
+
+
+def upright_metrics(time: Any, position: Any, angle: Any) -> dict[str, Any]:
+    """Metrics of a run that need not start upright (a swing-up): ``time_to_upright_s`` (from which
+    on ``|wrapped angle| < UPRIGHT_LIMIT_RAD`` to the end of the run; None if it does not end
+    upright) and ``track_used_m`` (largest ``|position|`` of the motor-driven cart)."""
+    t = _as_1d("time", time, None)
+    th = np.abs(wrapped(_as_1d("angle", angle, t.size)))
+    x = _as_1d("position", position, t.size)
+    down = np.nonzero(~(th < UPRIGHT_LIMIT_RAD))[0]
+    if down.size == 0:
+        t_up: float | None = float(t[0])
+    elif down[-1] == t.size - 1:
+        t_up = None
+    else:
+        t_up = float(t[down[-1] + 1])
+    out = {"time_to_upright_s": t_up, "track_used_m": _finite_or_none(float(np.max(np.abs(x))))}
+    out.update(tap_metrics(t, angle))
+    return out
+
+
+#: Band the pendulum must re-enter (and stay in) after a tap to count as recovered [rad].
+RECOVERY_BAND_RAD = 0.01
+
+
+def tap_metrics(time: Any, angle: Any) -> dict[str, Any]:
+    """``peak_angle_after_tap_rad`` (largest ``|angle|`` from the instant the angle first leaves its
+    initial value by more than 1e-6 rad: the tap, for a pendulum at rest upright) and
+    ``recovery_time_s`` (from that instant until ``|angle|`` is inside +-RECOVERY_BAND_RAD for
+    good; None if it ends outside). Both None when the angle never moves. On a step-task run they
+    describe the step's angle excursion instead."""
+    t = _as_1d("time", time, None)
+    th = wrapped(_as_1d("angle", angle, t.size))
+    moved = np.nonzero(np.abs(th - th[0]) > 1e-6)[0]
+    if moved.size == 0 or not np.all(np.isfinite(th)):
+        return {"peak_angle_after_tap_rad": None, "recovery_time_s": None}
+    k0 = int(moved[0])
+    outside = np.nonzero(np.abs(th[k0:]) >= RECOVERY_BAND_RAD)[0]
+    if outside.size == 0:
+        rec: float | None = 0.0
+    elif k0 + outside[-1] == t.size - 1:
+        rec = None
+    else:
+        rec = float(t[k0 + outside[-1] + 1] - t[k0])
+    return {"peak_angle_after_tap_rad": float(np.max(np.abs(th[k0:]))), "recovery_time_s": rec}
+
+
+def first_column(columns: Sequence[str], candidates: Sequence[str]) -> str | None:
+    for c in candidates:
+        if c in columns:
+            return c
+    return None
+
+
+def task_metrics(data: np.ndarray) -> dict[str, Any]:
+    """The DESIGN.md metrics of a pendulum run (:func:`compute_metrics`), from the
+    plant's motor-cart position and angle, the reference and the controller's voltage; an
+    empty dict when the result lacks those columns or has fewer than two rows."""
+    cols = list(data.dtype.names or ())
+    pos, ang = first_column(cols, POSITION_COLUMNS), first_column(cols, ANGLE_COLUMNS)
+    ref, volt = first_column(cols, REFERENCE_COLUMNS), first_column(cols, VOLTAGE_COLUMNS)
+    if None in (pos, ang, ref, volt) or len(data) < 2:
+        return {}
+    out = dict(compute_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
+                               np.asarray(data[ref], float), np.asarray(data[ang], float),
+                               np.asarray(data[volt], float)))
+    out.update(upright_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
+                               np.asarray(data[ang], float)))
+    return out
+
+
+def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: Sequence[str]) -> dict[str, Any]:
+    """:func:`task_metrics` computed in two passes over the rows, a chunk at a time, so that
+    the metrics of a run of any length need no more memory than one chunk.
+
+    Parameters
+    ----------
+    chunks : callable
+        ``chunks()`` -> iterable of structured arrays (consecutive rows; called twice).
+    columns : sequence of str
+        The field names.
+
+    Returns
+    -------
+    dict
+        The same keys and values as :func:`task_metrics` on the whole arrays
+        (``compute_metrics`` and ``upright_metrics``; an empty dict when the columns are
+        missing or there are < 2 rows).
+    """
+    pos, ang = first_column(columns, POSITION_COLUMNS), first_column(columns, ANGLE_COLUMNS)
+    ref, volt = first_column(columns, REFERENCE_COLUMNS), first_column(columns, VOLTAGE_COLUMNS)
+    if None in (pos, ang, ref, volt):
+        return {}
+    a = _first_pass(chunks, pos, ang, ref, volt)
+    if a["n"] < 2:
+        return {}
+    if not a["t_ok"]:
+        raise MetricsError("metrics: time must be finite and strictly increasing")
+    result: dict[str, Any] = {
+        "settling_time_s": None, "overshoot_m": None, "steady_state_error_m": None,
+        "max_abs_angle_rad": a["max_angle"] if a["th_finite"] else None,
+        "peak_voltage_V": a["peak_v"] if a["v_finite"] else None,
+        "rms_voltage_V": math.sqrt(a["sum_v2"] / a["n"]) if a["v_finite"] else None,
+        "upright": bool(a["finite"] and a["max_angle"] < UPRIGHT_LIMIT_RAD)}
+    if a["finite"]:
+        result.update(_second_pass(chunks, a, pos, ref, SETTLING_BAND, STEADY_STATE_FRACTION))
+    result.update(_upright_pass(chunks, pos, ang))
+    return result
+
+
+def _first_pass(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, ref: str, volt: str) -> dict[str, Any]:
+    """Counts, finiteness, extremes, the first and last samples."""
+    a: dict[str, Any] = {"n": 0, "t_ok": True, "th_finite": True, "v_finite": True, "finite": True,
+                         "max_angle": 0.0, "peak_v": 0.0, "sum_v2": 0.0, "t_prev": None}
+    for c in chunks():
+        if not len(c):
+            continue
+        t, x, r, th, v = (np.asarray(c[k], float) for k in ("time", pos, ref, ang, volt))
+        if a["n"] == 0:
+            a["t0"], a["x0"] = float(t[0]), float(x[0])
+        prev = a["t_prev"]
+        a["t_ok"] &= bool(np.all(np.isfinite(t)) and np.all(np.diff(t) > 0) and (prev is None or t[0] > prev))
+        a["t_prev"], a["t_end"], a["r_final"] = float(t[-1]), float(t[-1]), float(r[-1])
+        a["th_finite"] &= bool(np.all(np.isfinite(th)))
+        a["v_finite"] &= bool(np.all(np.isfinite(v)))
+        a["finite"] &= bool(np.all(np.isfinite(x)) and np.all(np.isfinite(r)))
+        if a["th_finite"]:
+            a["max_angle"] = max(a["max_angle"], float(np.max(np.abs(th))))
+        if a["v_finite"]:
+            a["peak_v"] = max(a["peak_v"], float(np.max(np.abs(v))))
+            a["sum_v2"] += float(np.sum(v * v))
+        a["n"] += len(c)
+    a["finite"] = a["finite"] and a["th_finite"] and a["v_finite"]
+    if not a["th_finite"]:
+        a["max_angle"] = math.inf
+    return a
+
+
+def _second_pass(chunks: Callable[[], Iterable[np.ndarray]], a: dict[str, Any], pos: str, ref: str,
+                 band_fraction: float, tail_fraction: float) -> dict[str, Any]:
+    """Overshoot, steady-state error and settling time, once the final reference is known."""
+    r_final, step = a["r_final"], a["r_final"] - a["x0"]
+    direction = 1.0 if step >= 0 else -1.0
+    band = band_fraction * abs(step)
+    t_start = a["t_end"] - tail_fraction * (a["t_end"] - a["t0"])
+    over, tail_sum, tail_n = -math.inf, 0.0, 0
+    last_out, last_outside = -1, False      # index of the last sample outside the band
+    last_change_t = a["t0"]                 # time of the last reference change seen so far
+    t_ref_at_entry = a["t0"]                # time of the last change at or before the entry
+    first, r_prev = 0, None
+    for c in chunks():
+        if not len(c):
+            continue
+        t, x, r = (np.asarray(c[k], float) for k in ("time", pos, ref))
+        over = max(over, float(np.max(direction * (x - r_final))))
+        tail = t >= t_start
+        tail_sum += float(np.sum(x[tail] - r[tail]))
+        tail_n += int(tail.sum())
+        prev = np.concatenate(([r[0] if r_prev is None else r_prev], r[:-1]))
+        changes = np.flatnonzero(r != prev)
+        outside = np.abs(x - r_final) > band
+        out_idx = np.flatnonzero(outside)
+        if out_idx.size:  # entry candidate: the sample after the last outside one
+            last_out = first + int(out_idx[-1])
+            entry_local = int(out_idx[-1]) + 1
+            before = changes[changes <= entry_local]
+            t_ref_at_entry = float(t[before[-1]]) if before.size else last_change_t
+            if entry_local == len(c):  # the entry sample is in the next chunk: its change counts too
+                t_ref_at_entry = None
+        elif t_ref_at_entry is None:  # entry was the first sample of this chunk
+            t_ref_at_entry = float(t[0]) if changes.size and changes[0] == 0 else last_change_t
+        if changes.size:
+            last_change_t = float(t[changes[-1]])
+        last_outside = bool(outside[-1])
+        r_prev = float(r[-1])
+        first += len(c)
+    out: dict[str, Any] = {"overshoot_m": max(0.0, over), "steady_state_error_m": abs(tail_sum / tail_n)}
+    if step != 0.0 and not last_outside:
+        entry_t = _time_of_row(chunks, last_out + 1)
+        out["settling_time_s"] = float(entry_t - (t_ref_at_entry if t_ref_at_entry is not None else last_change_t))
+    else:
+        out["settling_time_s"] = None
+    return out
+
+
+class _LastRow:
+    """The last row (absolute number) where a condition held, and the time of the row after it."""
+
+    def __init__(self) -> None:
+        self.row, self.t_after, self.pending = -1, None, False
+
+    def see(self, first: int, t: np.ndarray, mask: np.ndarray) -> None:
+        if self.pending and len(t):
+            self.t_after, self.pending = float(t[0]), False
+        hits = np.flatnonzero(mask)
+        if hits.size:
+            k = int(hits[-1])
+            self.row = first + k
+            self.pending = k + 1 == len(t)
+            self.t_after = None if self.pending else float(t[k + 1])
+
+
+def _upright_pass(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str) -> dict[str, Any]:
+    """:func:`upright_metrics` (time to upright, track used, the tap
+    metrics) in one pass over the rows."""
+    down, outside = _LastRow(), _LastRow()   # |angle| not below the limit; outside the recovery band
+    n, t0, th0, k0, t_k0 = 0, None, None, None, None
+    x_finite, th_finite, track, peak = True, True, 0.0, 0.0
+    for c in chunks():
+        if not len(c):
+            continue
+        t, x = np.asarray(c["time"], float), np.asarray(c[pos], float)
+        th = wrapped(np.asarray(c[ang], float))
+        if t0 is None:
+            t0, th0 = float(t[0]), float(th[0])
+        x_finite &= bool(np.all(np.isfinite(x)))
+        th_finite &= bool(np.all(np.isfinite(th)))
+        if x_finite:
+            track = max(track, float(np.max(np.abs(x))))
+        down.see(n, t, ~(np.abs(th) < UPRIGHT_LIMIT_RAD))
+        start = 0
+        if k0 is None:
+            moved = np.flatnonzero(np.abs(th - th0) > 1e-6)
+            if moved.size:
+                start = int(moved[0])
+                k0, t_k0 = n + start, float(t[start])
+        if k0 is not None and th_finite:
+            rest = np.abs(th[start:])
+            peak = max(peak, float(np.max(rest)))
+            outside.see(n + start, t[start:], rest >= RECOVERY_BAND_RAD)
+        n += len(c)
+    t_up = t0 if down.row < 0 else (None if down.row == n - 1 else down.t_after)
+    out: dict[str, Any] = {"time_to_upright_s": t_up, "track_used_m": track if x_finite else None}
+    if k0 is None or not th_finite:
+        out.update(peak_angle_after_tap_rad=None, recovery_time_s=None)
+        return out
+    rec = 0.0 if outside.row < 0 else (None if outside.row == n - 1 else outside.t_after - t_k0)
+    out.update(peak_angle_after_tap_rad=peak, recovery_time_s=rec)
+    return out
+
+
+def _time_of_row(chunks: Callable[[], Iterable[np.ndarray]], row: int) -> float:
+    first = 0
+    for c in chunks():
+        if row < first + len(c):
+            return float(c["time"][row - first])
+        first += len(c)
+    raise IndexError(row)
