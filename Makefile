@@ -39,7 +39,7 @@ demo: fmus
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
-test: fmus vdmcheck
+test: fmus vdmcheck lint
 	$(BIN)/python -m pytest
 
 bench: fmus

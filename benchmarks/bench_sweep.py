@@ -97,7 +97,8 @@ def run() -> list[str]:
     return [
         f"sweep engine on {label}, {STOP_TIME:g} s per run, {RUNS} runs (2 workers: {2 * RUNS}), best of "
         f"{REPEATS}, {os.cpu_count()} cores:",
-        f"  serial (the run itself)  {m['serial_s_per_run'] * 1e3:8.1f} ms/run  {60 / m['serial_s_per_run']:7.1f} runs/min",
+        f"  serial (the run itself)  {m['serial_s_per_run'] * 1e3:8.1f} ms/run  "
+        f"{60 / m['serial_s_per_run']:7.1f} runs/min",
         f"  sweep, 1 worker          {m['w1_s_per_run'] * 1e3:8.1f} ms/run  {m['w1_runs_per_min']:7.1f} runs/min",
         f"  sweep, 2 workers         {m['w2_s_per_run'] * 1e3:8.1f} ms/run  {m['w2_runs_per_min']:7.1f} runs/min",
         f"  scaling 2 vs 1 worker    {m['scaling']:.2f}x  "

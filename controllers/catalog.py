@@ -507,7 +507,10 @@ def set_values(law: str, kind: str, parameter_set: str) -> dict[str, Any]:
 
 
 def parameter_sets(kind: str, law: str) -> dict[str, dict[str, Any]]:
-    """``{set name: {FMU parameter: value}}`` of ``law`` on plant ``kind`` (used by ``ipcosim.harness.scenario.ssp_gen``)."""
+    """``{set name: {FMU parameter: value}}`` of ``law`` on plant ``kind``.
+
+    Used by ``ipcosim.harness.scenario.ssp_gen``.
+    """
     return {name: set_values(law, kind, name) for name in PARAMETER_SETS[law][kind]}
 
 

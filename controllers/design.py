@@ -375,7 +375,7 @@ def sampled_closed_loop_poles(design: LQRDesign) -> np.ndarray:
 
     Augmented state ``[x, e]`` with e the prediction error; returns the 2n poles.
     """
-    A, B, C = design.model.A, design.model.B, design.model.C
+    A, C = design.model.A, design.model.C
     Ad, Bd, M, K, T = design.Ad, design.Bd, design.M, design.K, design.sample_period
     n = A.shape[0]
     # x^ = x- + M C (x - x-) = x - (I - M C) e ;  u = -K x^ ; e = x - x-

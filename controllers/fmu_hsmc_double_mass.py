@@ -3,7 +3,7 @@ from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class HSMCDoubleMass(ControllerFmu):
-    """Hierarchical sliding-mode control (IP02 double-mass carts); output the motor voltage, sampled at sample_period."""
+    """Hierarchical sliding-mode control (IP02 double-mass carts); output the motor voltage, sampled at sample_period."""  # noqa: E501 -- this one line is the FMU's modelDescription description
 
     law = "HSMC"
     kind = "double-mass"

@@ -1,19 +1,20 @@
 """How the ``tuned`` parameter sets were found (reproducible: ``python -m ipcosim.controllers.tuning``).
 
 CascadePID and HSMC are, on the linearized plant with ideal derivatives, linear state
-feedbacks with a particular parameterization (plus an integrator; the HSMC's tanh is linearized). Their ``tuned`` sets minimize
-one quadratic step cost over that parameterization, on the design model (no inductance) of the
-plant's default preset:
+feedbacks with a particular parameterization (plus an integrator; the HSMC's tanh is linearized).
+Their ``tuned`` sets minimize one quadratic step cost over that parameterization, on the design
+model (no inductance) of the plant's default preset:
 
     J = int_0^inf ( (e_motor / 1 cm)^2 + (theta / 0.05 rad)^2 + (u / 10 V)^2 ) dt
 
 for the closed loop released from the 0.05 m step error at rest (J = x0' P x0 with P from the
 closed loop's Lyapunov equation), subject to: every closed-loop pole with real part <= -1 rad/s,
 damping ratio >= 0.3 and magnitude <= 40 rad/s (a bandwidth limit: encoder quantization noise
-through the derivative filters, and a 1 ms sample period far above the loop's dynamics). Search: Nelder-Mead, first on a feasibility measure (largest real part
-minus damping margin) from the thesis's values and perturbations of them, then on J from the
-feasible points. The result is then checked on the nonlinear plant with the sampled law, its
-derivative filters and the voltage limit (``tests/test_controllers.py``, ``ipcosim.controllers.evidence``).
+through the derivative filters, and a 1 ms sample period far above the loop's dynamics).
+Search: Nelder-Mead, first on a feasibility measure (largest real part minus damping margin)
+from the thesis's values and perturbations of them, then on J from the feasible points. The result
+is then checked on the nonlinear plant with the sampled law, its derivative filters and the voltage
+limit (``tests/test_controllers.py``, ``ipcosim.controllers.evidence``).
 The search uses constraints tightened by ``TUNING_MARGIN`` (2 %) so that the optimum -- which lies
 on a constraint boundary, often as a double pole -- still meets the nominal constraints after
 rounding; the numbers in ``ipcosim.controllers.catalog`` are rounded to the fewest significant digits

@@ -3,6 +3,6 @@ from ipcosim.fmus.hil_fmu import HilFmu
 
 
 class IP02HILSingleMass(HilFmu):
-    """Hardware-in-the-loop adapter for the IP02 single mass: voltage to a Q4 analog output, encoder counts to positions."""
+    """Hardware-in-the-loop adapter for the IP02 single mass: voltage to a Q4 analog output, encoder counts to positions."""  # noqa: E501 -- this one line is the FMU's modelDescription description
 
     kind = "single-mass"

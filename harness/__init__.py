@@ -15,7 +15,8 @@ from typing import Any
 _EXPORTS = {
     "run": "ipcosim.harness.api", "prepare": "ipcosim.harness.api", "Prepared": "ipcosim.harness.api",
     "Result": "ipcosim.harness.master.results", "SimulationError": "ipcosim.harness.master.results",
-    "swap_aliases": "ipcosim.harness.scenario.system", "register_swap_alias": "ipcosim.harness.scenario.system", "SwapTarget": "ipcosim.harness.scenario.system",
+    "swap_aliases": "ipcosim.harness.scenario.system", "register_swap_alias": "ipcosim.harness.scenario.system",
+    "SwapTarget": "ipcosim.harness.scenario.system",
     "SwapRequest": "ipcosim.harness.scenario.system",
     "Observer": "ipcosim.harness.master.observers", "Manipulator": "ipcosim.harness.master.manipulators",
     "load_scenario": "ipcosim.harness.scenario.ssp",

@@ -339,7 +339,8 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
     progress : bool
         Show a progress bar on stderr (a terminal) for runs longer than a second.
     observers, manipulators : sequences
-        Extra observers and manipulators (see :mod:`ipcosim.harness.master.observers`, :mod:`ipcosim.harness.master.manipulators`).
+        Extra observers and manipulators (see :mod:`ipcosim.harness.master.observers`,
+        :mod:`ipcosim.harness.master.manipulators`).
     record_every : int
         Record every n-th communication point.
     raise_on_error : bool

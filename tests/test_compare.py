@@ -92,11 +92,11 @@ def test_render_markdown_html_and_figures(tmp_path):
                           meta={"stop time": "5 s", "packages": {"numpy": "2"}})
     md = files["markdown"].read_text()
     # the table: one line per scenario, in plant x controller order, with the robustness column
-    lines = [l for l in md.splitlines() if l.startswith("| single mass") or l.startswith("| double mass")]
+    lines = [line for line in md.splitlines() if line.startswith("| single mass") or line.startswith("| double mass")]
     assert len(lines) == 9
     assert lines[0].startswith("| single mass | PID | - | fell |")
     assert lines[1].startswith("| single mass | cascade PID | - | error |")
-    lqr = next(l for l in lines if "| LQR + observer |" in l and l.startswith("| single"))
+    lqr = next(line for line in lines if "| LQR + observer |" in line and line.startswith("| single"))
     assert "| 75 % (4 runs, CI" in lqr and "| 12 |" in lqr
     assert "10 confirmed, 0 not confirmed, 0 not measured" in md
     assert "could not load Setpoint.fmu" in md

@@ -18,7 +18,8 @@ def test_missing_module_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None
 
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "matplotlib" else real(name, *a))
-    with pytest.raises(MissingExtraError, match=r"matplotlib is not installed \(plots need it\): pip install 'ipcosim\[plot\]'"):
+    with pytest.raises(MissingExtraError,
+                       match=r"matplotlib is not installed \(plots need it\): pip install 'ipcosim\[plot\]'"):
         require("matplotlib")
 
 

@@ -245,11 +245,11 @@ def test_transport_latency_delays_commands_and_readings():
     assert delayed.true_state()["cart_position"] == 0.0          # the command has not arrived yet
     direct_counts = []
     delayed_counts = []
-    for k in range(100):
+    for _ in range(100):
         direct.advance(1e-3)
         direct_counts.append(int(direct.read_encoder([0])[0]))
     # the delayed rig: command arrives 5 ms late, readings show the encoders 5 ms ago
-    for k in range(100):
+    for _ in range(100):
         delayed.advance(1e-3)
         delayed_counts.append(int(delayed.read_encoder([0])[0]))
     # delayed reading at (lat + (k+1) ms) shows the encoders at (k+1) ms after the command's arrival

@@ -33,7 +33,8 @@ RES = {"cart_position": CART_RES, "active_cart_position": CART_RES, "passive_car
 
 # The open-loop scenarios leave plant.voltage unconnected on purpose (manipulators drive it).
 pytestmark = [pytest.mark.integration,
-              pytest.mark.filterwarnings("ignore:.*plant.voltage is not connected:ipcosim.harness.scenario.system.UnconnectedInputWarning")]
+              pytest.mark.filterwarnings("ignore:.*plant.voltage is not connected:"
+                                         "ipcosim.harness.scenario.system.UnconnectedInputWarning")]
 
 
 @pytest.fixture(scope="session")

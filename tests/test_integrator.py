@@ -35,7 +35,7 @@ def radau_reference(params, x0: np.ndarray) -> np.ndarray:
         n = int(round((b - a) / H))
         t_eval = a + H * np.arange(1, n + 1)
         t_eval[-1] = b
-        sol = solve_ivp(lambda t, y: rhs(y, v, params), (a, b), x, method="Radau", rtol=1e-10, atol=1e-13,
+        sol = solve_ivp(lambda t, y, v=v: rhs(y, v, params), (a, b), x, method="Radau", rtol=1e-10, atol=1e-13,
                         t_eval=t_eval)
         assert sol.success, sol.message
         rows.extend(sol.y.T)

@@ -36,7 +36,8 @@ def run(sysm, factory, **kw):
     return Prepared(system=sysm, slave_factory=factory, algorithm=kw.pop("algorithm", "gauss-seidel")).run(**kw)
 
 
-def expected_gauss_seidel(n: int, k: float = K, h: float = H, r: float = 1.0, m: int = 1) -> tuple[np.ndarray, np.ndarray]:
+def expected_gauss_seidel(n: int, k: float = K, h: float = H, r: float = 1.0,
+                          m: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """x' = u with u held over each step (ZOH), u sampled every m steps without delay: u_j = k (r - x_j)."""
     x = np.zeros(n + 1)
     u = np.zeros(n + 1)
@@ -141,7 +142,8 @@ def test_jacobi_multirate_publishes_at_the_end_of_the_period():
 
 
 def test_sample_period_that_the_step_does_not_divide_is_rejected():
-    with pytest.raises(StepSizeError, match=r"controller.sample_period = 0.015 s is not a whole multiple of the step 0.01 s"):
+    with pytest.raises(StepSizeError,
+                       match=r"controller.sample_period = 0.015 s is not a whole multiple of the step 0.01 s"):
         run(loop_system(), loop_factory(), stop_time=1.0, step=H, overrides={"controller.sample_period": 0.015})
     with pytest.raises(StepSizeError, match="sample_period"):
         run(loop_system(), loop_factory(), stop_time=1.0, step=0.02)  # period 0.01 < step
@@ -325,7 +327,8 @@ def test_progress_bar_draws_only_after_its_delay():
     run(loop_system(), loop_factory(), stop_time=1.0, step=H, observers=[bar])
     assert "100.0%" in stream.getvalue() and stream.getvalue().endswith("\n")
     quiet = io.StringIO()
-    run(loop_system(), loop_factory(), stop_time=1.0, step=H, observers=[Progress(stream=quiet, delay=60.0, force=True)])
+    run(loop_system(), loop_factory(), stop_time=1.0, step=H,
+        observers=[Progress(stream=quiet, delay=60.0, force=True)])
     assert quiet.getvalue() == ""
 
 

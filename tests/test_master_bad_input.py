@@ -76,7 +76,7 @@ def test_good_run_writes_results_and_metrics(tmp_path, capsys, test_fmus, tracke
                       conns=[connection("src.y", "g.u", factor=2.0, offset=1.0)])
     rc, err = run_cli(capsys, folder, "--out", tmp_path / "out")
     assert rc == 0
-    assert err == ["ipcosim run: warning: " + next(l for l in err if "g.aux" in l).split("warning: ", 1)[1]]
+    assert err == ["ipcosim run: warning: " + next(line for line in err if "g.aux" in line).split("warning: ", 1)[1]]
     assert "input g.aux is not connected" in err[0]
     data = read_csv(tmp_path / "out" / "results.csv")
     assert data.dtype.names == ("time", "src.y", "g.u", "g.aux", "g.y", "g.z")
@@ -102,7 +102,7 @@ def test_record_flag_selects_columns(tmp_path, capsys, test_fmus):
 
 # ------------------------------------------------------------------ bad input before anything runs
 def _one_error_line(err):
-    errors = [l for l in err if not l.startswith("ipcosim run: warning:")]
+    errors = [line for line in err if not line.startswith("ipcosim run: warning:")]
     assert len(errors) == 1, err
     assert errors[0].startswith("ipcosim run: error: ")
     return errors[0]
@@ -177,7 +177,7 @@ def test_ssd_connector_unit_contradicting_the_fmu(tmp_path, capsys, test_fmus):
 def test_unconnected_input_is_a_warning_and_the_run_goes_on(tmp_path, capsys, test_fmus):
     folder = scenario(tmp_path, test_fmus)
     rc, err = run_cli(capsys, folder, "--out", tmp_path / "out")
-    assert rc == 0 and err == [l for l in err if l.startswith("ipcosim run: warning:")]
+    assert rc == 0 and err == [line for line in err if line.startswith("ipcosim run: warning:")]
     assert len(err) == 1 and "input g.aux is not connected; it keeps its start value 0.0" in err[0]
 
 
@@ -263,9 +263,9 @@ def test_fmu_raising_an_exception_is_fatal_and_reported_with_its_message(tmp_pat
     import sys
 
     folder = scenario(tmp_path, test_fmus, comps=[SRC(fail_time=0.5, fail_mode=2.0), GAIN])
-    proc = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "run", str(folder), "--out", str(tmp_path / "out"),
-                           "--quiet"], capture_output=True, text=True, timeout=120)
-    errors = [l for l in proc.stderr.splitlines() if l.strip() and "warning:" not in l]
+    proc = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "run", str(folder),
+                           "--out", str(tmp_path / "out"), "--quiet"], capture_output=True, text=True, timeout=120)
+    errors = [line for line in proc.stderr.splitlines() if line.strip() and "warning:" not in line]
     assert proc.returncode == 1 and len(errors) == 1, proc.stderr
     assert errors[0].startswith("ipcosim run: error: component src (MasterSource): fmi2DoStep returned fmi2Fatal "
                                 "at t = 0.5 s: ")

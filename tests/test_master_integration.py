@@ -124,7 +124,8 @@ def test_cosimulation_equals_a_monolithic_loop_of_the_pure_models(built, name, l
 def test_demo_run_writes_results_metrics_and_plot(built, tmp_path):
     out = tmp_path / "demo"
     env = {**os.environ, "IPCOSIM_FMU_PATH": str(built / "fmus")}
-    proc = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "run", "single-mass-lqr", "--plot", "--out", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "run", "single-mass-lqr", "--plot",
+                           "--out", str(out)],
                           capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert {p.name for p in out.iterdir()} >= {"results.csv", "metrics.json", "plot.png"}

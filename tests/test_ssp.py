@@ -2,6 +2,7 @@
 schema validation, parameter sets, and every malformed-file case with its one-line message."""
 from __future__ import annotations
 
+import dataclasses
 import zipfile
 from pathlib import Path
 
@@ -179,7 +180,8 @@ def test_invalid_parameter_file_names_it(tmp_path):
 def test_parameter_sets_bindings_transformations_and_units(tmp_path):
     comps = [component("a", "A", [connector("y", "output")], inline={"value": 3.0}),
              component("b", "B", [connector("u", "input", "mm")], bindings=["tuned.ssv"])]
-    units = '<ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit><ssc:Unit name="mm"><ssc:BaseUnit m="1" factor="0.001"/></ssc:Unit>'
+    units = ('<ssc:Unit name="m"><ssc:BaseUnit m="1"/></ssc:Unit>'
+             '<ssc:Unit name="mm"><ssc:BaseUnit m="1" factor="0.001"/></ssc:Unit>')
     folder = write_scenario(tmp_path / "s", ssd("s", comps, [connection("a.y", "b.u", factor=2.0, offset=0.5)],
                                                 units=units),
                             ssvs={"tuned.ssv": ssv("tuned", {"k": 1.5}), "thesis.ssv": ssv("thesis", {"k": 7.0})})
@@ -200,7 +202,7 @@ def test_parameter_sets_bindings_transformations_and_units(tmp_path):
 
 def test_loaded_scenario_is_immutable():
     sc = load_scenario("single-mass-lqr")
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         sc.components[0].name = "x"  # type: ignore[misc]
 
 
@@ -222,9 +224,9 @@ def test_list_prints_one_line_per_scenario(capsys):
     from ipcosim.harness.scenario.ssp_gen import VARIANTS
 
     lines = capsys.readouterr().out.splitlines()
-    assert [l.split()[0] for l in lines] == sorted(EXPECTED + list(VARIANTS))
-    assert all("at 0.001 s" in l and "sets:" in l for l in lines)
-    assert all("10 s at 0.001 s" in l for l in lines if l.split()[0] in EXPECTED)
+    assert [line.split()[0] for line in lines] == sorted(EXPECTED + list(VARIANTS))
+    assert all("at 0.001 s" in line and "sets:" in line for line in lines)
+    assert all("10 s at 0.001 s" in line for line in lines if line.split()[0] in EXPECTED)
 
 
 def test_variant_scenarios_are_what_the_generator_writes():

@@ -170,7 +170,7 @@ def main(args: argparse.Namespace) -> int:
                 row["gains"] = getattr(specs[row["index"]], "gains", "") or ""
                 results[name] = row
         if args.robustness:
-            for name, spec in zip(spec_names, specs):
+            for name, _spec in zip(spec_names, specs):
                 plain = spec_for(name, stop_time=args.stop_time, parameter_set=_pset(name, args.parameter_set),
                                  fmus=args.fmus)
                 varies = parse_all(rob.default_vary(plant_kind(name, plain), plain.parameters), plain.parameters)

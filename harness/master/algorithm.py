@@ -124,7 +124,7 @@ def _acyclic(nodes: Sequence[str], edges: set[tuple[str, str]]) -> bool:
 def _topological(nodes: Sequence[str], edges: set[tuple[str, str]]) -> list[str] | None:
     """Kahn's algorithm; ties broken by position in ``nodes`` (the SSD order). None on a cycle."""
     indeg = {n: 0 for n in nodes}
-    for a, b in edges:
+    for _a, b in edges:
         indeg[b] += 1
     order: list[str] = []
     ready = [n for n in nodes if indeg[n] == 0]
@@ -166,8 +166,8 @@ def gauss_seidel_order(system: System) -> list[str]:
         else:
             soft.append((link.dst, link.src))
     if not _acyclic(nodes, hard):
-        pairs = ", ".join(f"{l.src_name} -> {l.dst_name}" for l in system.links
-                          if (l.src, l.dst) in hard)
+        pairs = ", ".join(f"{link.src_name} -> {link.dst_name}" for link in system.links
+                          if (link.src, link.dst) in hard)
         raise AlgebraicLoopError(f"components feed each other through direct feedthrough ({pairs}); "
                                  f"no Gauss-Seidel order exists: use the Jacobi algorithm")
     edges = set(hard)

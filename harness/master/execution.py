@@ -244,7 +244,7 @@ class Execution:
         # record columns: every Real connector in SSD order; connected inputs are the
         # transformed source values (what the connection delivers at that time)
         self.columns: list[tuple[str, int, tuple[int, float, float] | None]] = []
-        for k, inst in enumerate(self.instances):
+        for inst in self.instances:
             for v in inst.connectors:
                 if kind_of(v.type) != "real":
                     continue

@@ -471,7 +471,8 @@ def load_scenario(scenario_or_path: str | os.PathLike[str],
 def _load(src: _Source, fmu_dirs: Sequence[Path]) -> Scenario:
     if not src.exists(SSD_NAME):
         where = _display(src.location)
-        raise ScenarioError(f"{where}: no {SSD_NAME} at the top level of the {'archive' if src.is_archive else 'folder'}")
+        container = "archive" if src.is_archive else "folder"
+        raise ScenarioError(f"{where}: no {SSD_NAME} at the top level of the {container}")
     ssd_display = src.display(SSD_NAME)
     root = parse_xml(src.read(SSD_NAME), ssd_display, "SystemStructureDescription.xsd")
 

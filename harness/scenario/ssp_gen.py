@@ -22,7 +22,8 @@ from ipcosim.harness.scenario.ssp import NS, SCENARIO_DIR
 
 PLANTS = {
     "single-mass": {"model": "IP02SingleMass", "suffix": "SingleMass", "description": "single-mass cart"},
-    "double-mass": {"model": "IP02DoubleMass", "suffix": "DoubleMass", "description": "double-mass (spring-coupled) carts"},
+    "double-mass": {"model": "IP02DoubleMass", "suffix": "DoubleMass",
+                    "description": "double-mass (spring-coupled) carts"},
 }
 CONTROLLERS = {
     "pid": ("PID", "the thesis's single-loop PID on the cart position"),
@@ -134,15 +135,18 @@ def ssd_text(plant: str, controller: str, default_set: str | None, sample_period
          "            <ssd:ParameterValues>",
          '              <ssv:ParameterSet version="1.0" name="experiment">',
          "                <ssv:Parameters>",
-         f'                  <ssv:Parameter name="amplitude"><ssv:Real value="{amplitude!r}" unit="m"/></ssv:Parameter>',
-         f'                  <ssv:Parameter name="step_time"><ssv:Real value="{STEP_TIME!r}" unit="s"/></ssv:Parameter>',
+         f'                  <ssv:Parameter name="amplitude">'
+         f'<ssv:Real value="{amplitude!r}" unit="m"/></ssv:Parameter>',
+         f'                  <ssv:Parameter name="step_time">'
+         f'<ssv:Real value="{STEP_TIME!r}" unit="s"/></ssv:Parameter>',
          "                </ssv:Parameters>",
          "              </ssv:ParameterSet>",
          "            </ssd:ParameterValues>",
          "          </ssd:ParameterBinding>",
          "        </ssd:ParameterBindings>",
          "      </ssd:Component>",
-         f'      <ssd:Component name="controller" type="application/x-fmu-sharedlibrary" source="resources/{ctrl_model}.fmu">',
+         f'      <ssd:Component name="controller" type="application/x-fmu-sharedlibrary" '
+         f'source="resources/{ctrl_model}.fmu">',
          "        <ssd:Connectors>",
          _connector("reference", "input", "m")]
     L += [_connector(m, "input", STATE_UNITS[m]) for m in measured]
@@ -153,26 +157,33 @@ def ssd_text(plant: str, controller: str, default_set: str | None, sample_period
               "        </ssd:ParameterBindings>"]
     if sample_period:
         L += ["        <ssd:Annotations>",
-              f'          <ssc:Annotation type="com.opensimulationplatform"><osp:StepSizeHint value="{sample_period!r}"/></ssc:Annotation>',
+              '          <ssc:Annotation type="com.opensimulationplatform">'
+              f'<osp:StepSizeHint value="{sample_period!r}"/></ssc:Annotation>',
               "        </ssd:Annotations>"]
     L += ["      </ssd:Component>",
-          f'      <ssd:Component name="plant" type="application/x-fmu-sharedlibrary" source="resources/{p["model"]}.fmu">',
+          f'      <ssd:Component name="plant" type="application/x-fmu-sharedlibrary" '
+          f'source="resources/{p["model"]}.fmu">',
           "        <ssd:Connectors>",
           _connector("voltage", "input", "V")]
     L += [_connector(o, "output", STATE_UNITS[o]) for o in outputs]
     L += ["        </ssd:Connectors>"]
     if plant_values:
-        L += ["        <ssd:ParameterBindings>", "          <ssd:ParameterBinding>", "            <ssd:ParameterValues>",
+        L += ["        <ssd:ParameterBindings>", "          <ssd:ParameterBinding>",
+              "            <ssd:ParameterValues>",
               '              <ssv:ParameterSet version="1.0" name="plant">', "                <ssv:Parameters>"]
         L += [f'                  <ssv:Parameter name="{k}"><ssv:Real value="{float(v)!r}"/></ssv:Parameter>'
               for k, v in plant_values.items()]
-        L += ["                </ssv:Parameters>", "              </ssv:ParameterSet>", "            </ssd:ParameterValues>",
+        L += ["                </ssv:Parameters>", "              </ssv:ParameterSet>",
+              "            </ssd:ParameterValues>",
               "          </ssd:ParameterBinding>", "        </ssd:ParameterBindings>"]
     L += ["      </ssd:Component>", "    </ssd:Elements>", "    <ssd:Connections>",
-          '      <ssd:Connection startElement="setpoint" startConnector="reference" endElement="controller" endConnector="reference"/>']
-    L += [f'      <ssd:Connection startElement="plant" startConnector="{m}" endElement="controller" endConnector="{m}"/>'
+          '      <ssd:Connection startElement="setpoint" startConnector="reference" '
+          'endElement="controller" endConnector="reference"/>']
+    L += [f'      <ssd:Connection startElement="plant" startConnector="{m}" '
+          f'endElement="controller" endConnector="{m}"/>'
           for m in measured]
-    L += ['      <ssd:Connection startElement="controller" startConnector="voltage" endElement="plant" endConnector="voltage"/>',
+    L += ['      <ssd:Connection startElement="controller" startConnector="voltage" '
+          'endElement="plant" endConnector="voltage"/>',
           "    </ssd:Connections>", "  </ssd:System>", "  <ssd:Units>"]
     for unit, exps in UNITS.items():
         attrs = " ".join(f'{k}="{v}"' for k, v in exps.items())
@@ -209,7 +220,7 @@ def write_scenarios(root: Path = SCENARIO_DIR, names: list[str] | None = None) -
             path = folder / "SystemStructure.ssd"
             path.write_text(ssd_text(plant, controller, default, float(period)))
             written.append(path)
-    for name, (plant, law, *_rest) in VARIANTS.items():
+    for name, (_plant, _law, *_rest) in VARIANTS.items():
         if names and name not in names:
             continue
         folder = root / name

@@ -68,7 +68,8 @@ def read_model(path: Path, display: str | None = None) -> Model:
     try:
         md = read_model_description(str(path), validate=False)
     except Exception as exc:  # noqa: BLE001 -- fmpy raises assorted exceptions
-        raise BindingError(f"{display}: not a readable FMU ({str(exc).splitlines()[0] if str(exc) else exc!r})") from None
+        reason = str(exc).splitlines()[0] if str(exc) else exc
+        raise BindingError(f"{display}: not a readable FMU ({reason!r})") from None
     if md.fmiVersion not in ("2.0", "3.0"):
         raise BindingError(f"{display}: FMI {md.fmiVersion} FMU; FMI 2.0 and 3.0 are supported")
     if md.coSimulation is None:
@@ -281,7 +282,8 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
                     model = None
                 else:
                     raise FMUNotFoundError(f"{origin}: component {comp.name!r}: FMU {comp.source} not found "
-                                           f"(run `ipcosim build`, or give its folder with --fmu-dir / IPCOSIM_FMU_PATH)")
+                                           "(run `ipcosim build`, or give its folder with "
+                                           "--fmu-dir / IPCOSIM_FMU_PATH)")
             else:
                 model = read_model(Path(fmu), f"{origin}: component {comp.name!r} ({comp.source})")
         swapped_from, realtime, extra = None, False, {}
@@ -291,15 +293,16 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
             realtime = target.realtime
             extra = dict(target.parameters)
             model = read_model(target.fmu, f"--swap {comp.name}={target.fmu}")
-            infos.append(f"component {comp.name!r}: {swapped_from} swapped for {target.description or target.fmu.name}")
+            infos.append(f"component {comp.name!r}: {swapped_from} swapped for "
+                         f"{target.description or target.fmu.name}")
         where = f"{origin}: component {comp.name!r} ({model.path.name if model.path else comp.source})"
         connectors = []
         for c in comp.connectors:
             var = model.variables.get(c.name)
             if var is None:
                 if swapped_from is not None and not _is_connected(scenario, comp.name, c.name):
-                    infos.append(f"component {comp.name!r}: unconnected connector {c.name!r} is not in the swapped-in FMU "
-                                 f"and is left out")
+                    infos.append(f"component {comp.name!r}: unconnected connector {c.name!r} "
+                                 "is not in the swapped-in FMU and is left out")
                     continue
                 raise BindingError(f"{where}: connector {c.name!r} is not a variable of the FMU"
                                    + (" (swapped-in FMU lacks a connected connector)" if swapped_from else ""))
@@ -413,7 +416,8 @@ def _check_connector(c: Connector, var: Variable, where: str, units: Mapping[str
     kind_ok = {"input": ("input",), "output": ("output",), "parameter": ("parameter",),
                "calculatedParameter": ("calculatedParameter",), "inout": ("input", "output")}
     if var.causality not in kind_ok.get(c.kind, ()):
-        raise BindingError(f"{where}: connector {c.name!r} is declared {c.kind} but the FMU variable is {var.causality}")
+        raise BindingError(f"{where}: connector {c.name!r} is declared {c.kind} "
+                           f"but the FMU variable is {var.causality}")
     if c.type is not None and c.type != SSP_TYPE.get(var.type, var.type):
         raise BindingError(f"{where}: connector {c.name!r} is declared {c.type} but the FMU variable is {var.type}")
     if c.unit and var.unit and unit_conversion(c.unit, var.unit, units) != (1.0, 0.0):
@@ -480,7 +484,8 @@ def with_overrides(system: System, overrides: Mapping[str, Any]) -> tuple[System
             raise BindingError(f"--set {key}={value}: no component {comp!r} (components: "
                                f"{', '.join(i.name for i in system.instances)})") from None
         v = inst.model.variables.get(var)
-        where = f"--set {key}={value}: component {comp!r} ({inst.model.path.name if inst.model.path else inst.model.name})"
+        model_name = inst.model.path.name if inst.model.path else inst.model.name
+        where = f"--set {key}={value}: component {comp!r} ({model_name})"
         if v is None:
             raise BindingError(f"{where} has no variable {var!r}")
         if not v.settable:

@@ -107,7 +107,8 @@ class CosimSpec(RunSpec):
                    stop_time=stop_time if stop_time is not None else exp.stop_time,
                    step=step if step is not None else exp.step_size, overrides=overrides, with_series=series,
                    parameter_set=parameter_set,
-                   gains=parameter_set or ",".join(prepared.scenario.bound_sets) or "FMU defaults", name=prepared.scenario.name or Path(scenario).name,
+                   gains=parameter_set or ",".join(prepared.scenario.bound_sets) or "FMU defaults",
+                   name=prepared.scenario.name or Path(scenario).name,
                    scenario_hash=_hash_files(files), parameters=params,
                    metric_names=tuple(METRIC_KEYS) + COST_TERMS + TIMING_METRICS, fmu_files=fmu_files, fmus=fmus)
         return spec

@@ -51,7 +51,8 @@ def parse_params(text: str, parameters: Mapping[str, Any]) -> list[str]:
     return names
 
 
-def parse_bounds(items: Iterable[str], names: Sequence[str], parameters: Mapping[str, Any]) -> list[tuple[float, float]]:
+def parse_bounds(items: Iterable[str], names: Sequence[str],
+                 parameters: Mapping[str, Any]) -> list[tuple[float, float]]:
     """Search bounds per parameter: ``--bounds NAME=LO:HI`` or the default factor-2 range
     around the nominal value (a zero nominal needs explicit bounds)."""
     given: dict[str, tuple[float, float]] = {}
@@ -141,7 +142,8 @@ class SweepMap:
         start = len(self.rows)
         if not vectors:
             return []
-        cases = [Case(index=start + i, params=dict(zip(self.names, map(float, v))), seed=case_seed(self.seed, start + i))
+        cases = [Case(index=start + i, params=dict(zip(self.names, map(float, v))),
+                      seed=case_seed(self.seed, start + i))
                  for i, v in enumerate(vectors)]
         result = self._run_sweep(self.spec, cases, executor=self.executor)
         for row in result.rows:
