@@ -3,8 +3,11 @@ from ipcosim.controllers.controller_fmu import ControllerFmu
 
 
 class SwingUpSingleMass(ControllerFmu):
-    """Energy swing-up from hanging, balanced by an LQR near upright (IP02 single-mass cart); output the motor
-    voltage, sampled at sample_period."""
+    """Energy swing-up from hanging, balanced by an LQR near upright (IP02 single-mass cart).
+
+    The first line is the FMU's modelDescription description. Output: the motor voltage,
+    sampled at sample_period.
+    """
 
     law = "SwingUp"
     kind = "single-mass"
