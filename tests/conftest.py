@@ -18,3 +18,26 @@ def plant_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     results = build_all(out, scripts=scripts)
     fmus = {r.fmu.stem: r.fmu for r in results}
     return {"single-mass": fmus["IP02SingleMass"], "double-mass": fmus["IP02DoubleMass"]}
+
+
+@pytest.fixture
+def tracked(monkeypatch: pytest.MonkeyPatch) -> tuple[list, list]:
+    """Every FMUSlave instantiated and freed during the test: ``(made, freed)``."""
+    from ipcosim.harness.master.slave import FMUSlave
+
+    made, freed = [], []
+    real_inst, real_free = FMUSlave.instantiate, FMUSlave.free
+
+    def inst(self):
+        made.append(self)
+        real_inst(self)
+
+    def free(self):
+        was = self.state
+        real_free(self)
+        if was not in ("freed", "created"):
+            freed.append(self)
+
+    monkeypatch.setattr(FMUSlave, "instantiate", inst)
+    monkeypatch.setattr(FMUSlave, "free", free)
+    return made, freed

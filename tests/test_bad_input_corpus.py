@@ -20,7 +20,6 @@ import pytest
 from ssd_helpers import component, connection, connector, ssd, ssv, write_scenario
 
 from ipcosim.harness import cli
-from ipcosim.harness.master.slave import FMUSlave
 
 pytestmark = pytest.mark.integration
 DATA = Path(__file__).resolve().parent / "data"
@@ -44,27 +43,6 @@ def tmpdir_watch(tmp_path, monkeypatch) -> Path:
     monkeypatch.setattr(tempfile, "tempdir", str(tmp))
     monkeypatch.setenv("TMPDIR", str(tmp))
     return tmp
-
-
-@pytest.fixture
-def tracked(monkeypatch):
-    """Every FMUSlave instantiated and freed during the test."""
-    made, freed = [], []
-    real_inst, real_free = FMUSlave.instantiate, FMUSlave.free
-
-    def inst(self):
-        made.append(self)
-        real_inst(self)
-
-    def free(self):
-        was = self.state
-        real_free(self)
-        if was not in ("freed", "created"):
-            freed.append(self)
-
-    monkeypatch.setattr(FMUSlave, "instantiate", inst)
-    monkeypatch.setattr(FMUSlave, "free", free)
-    return made, freed
 
 
 SRC = lambda **inline: component("src", "MasterSource", [connector("y", "output")], inline=inline or None)  # noqa: E731

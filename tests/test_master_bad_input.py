@@ -12,7 +12,6 @@ import pytest
 from ssd_helpers import component, connection, connector, ssd, write_scenario
 
 from ipcosim.harness import cli
-from ipcosim.harness.master.slave import FMUSlave
 
 pytestmark = pytest.mark.integration
 DATA = Path(__file__).resolve().parent / "data"
@@ -25,27 +24,6 @@ def test_fmus(tmp_path_factory) -> dict[str, Path]:
     out = tmp_path_factory.mktemp("master-test-fmus")
     results = build_all(out, scripts=[DATA / "fmu_master_source.py", DATA / "fmu_master_gain.py"])
     return {r.fmu.stem: r.fmu for r in results}
-
-
-@pytest.fixture
-def tracked(monkeypatch):
-    """Every FMUSlave instantiated and freed during the test."""
-    made, freed = [], []
-    real_inst, real_free = FMUSlave.instantiate, FMUSlave.free
-
-    def inst(self):
-        made.append(self)
-        real_inst(self)
-
-    def free(self):
-        was = self.state
-        real_free(self)
-        if was not in ("freed", "created"):
-            freed.append(self)
-
-    monkeypatch.setattr(FMUSlave, "instantiate", inst)
-    monkeypatch.setattr(FMUSlave, "free", free)
-    return made, freed
 
 
 SRC = lambda **inline: component("src", "MasterSource", [connector("y", "output")], inline=inline or None)  # noqa: E731
