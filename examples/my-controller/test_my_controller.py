@@ -25,7 +25,7 @@ def my_fmus() -> dict[str, Path]:
     from design import write_gains
 
     gains = write_gains()
-    return {plant: ipcosim.build_fmu(HERE / script, files=[gains[plant]])
+    return {plant: ipcosim.build_fmu(HERE / script, files=[gains[plant], HERE / "my_law.py"])
             for plant, script in SCRIPTS.items()}
 
 
