@@ -157,6 +157,9 @@ class FMUSlave(Slave):
 
     MAX_MESSAGES = 50
 
+    #: Prefix of the FMI functions this class calls (FMU3Slave: fmi3).
+    FMI = "fmi2"
+
     def __new__(cls, instance: Instance, *args: Any, **kwargs: Any) -> "FMUSlave":
         # one entry point for FMUs of either version: an FMI 3.0 FMU gets the FMI 3.0 slave
         if cls is FMUSlave and instance.model.fmi_version.startswith("3"):
@@ -246,13 +249,13 @@ class FMUSlave(Slave):
         self.state = "initialization"
 
     def exit_initialization_mode(self) -> None:
-        self._call("fmi2ExitInitializationMode")
+        self._call(f"{self.FMI}ExitInitializationMode")
         self.state = "stepping"
 
     def terminate(self) -> None:
         if self.state in ("initialization", "stepping", "step-failed"):
             self.state = "terminating"
-            self._call("fmi2Terminate")
+            self._call(f"{self.FMI}Terminate")
             self.state = "terminated"
 
     def free(self) -> None:
@@ -261,7 +264,7 @@ class FMUSlave(Slave):
         _SINKS.pop(getattr(self, "_sink", None), None)
         try:
             if self._fmu.component is not None:
-                self._fmu.fmi2FreeInstance(self._fmu.component)
+                getattr(self._fmu, f"{self.FMI}FreeInstance")(self._fmu.component)
         finally:
             self.state = "freed"
             self._fmu.component = None
@@ -365,6 +368,8 @@ class FMU3Slave(FMUSlave):
     this class for an FMI 3.0 model.
     """
 
+    FMI = "fmi3"
+
     def instantiate(self) -> None:
         if self._fmu is None:
             self._fmu = load_library(self.instance, self.unzip_dir)
@@ -389,31 +394,6 @@ class FMU3Slave(FMUSlave):
         start, stop = getattr(self, "_experiment", (0.0, None))
         self._call("fmi3EnterInitializationMode", False, 0.0, start, stop is not None, float(stop or 0.0))
         self.state = "initialization"
-
-    def exit_initialization_mode(self) -> None:
-        self._call("fmi3ExitInitializationMode")
-        self.state = "stepping"
-
-    def terminate(self) -> None:
-        if self.state in ("initialization", "stepping", "step-failed"):
-            self.state = "terminating"
-            self._call("fmi3Terminate")
-            self.state = "terminated"
-
-    def free(self) -> None:
-        if self._fmu is None or self.state in ("freed", "created"):
-            return
-        try:
-            if self._fmu.component is not None:
-                self._fmu.fmi3FreeInstance(self._fmu.component)
-        finally:
-            self.state = "freed"
-            self._fmu.component = None
-            if self._owns_library:
-                try:
-                    self._fmu.freeLibrary()
-                except Exception:  # noqa: BLE001 -- unloading is best effort
-                    pass
 
     def _typed(self, direction: str, type_: str) -> Callable[..., int]:
         name = "Int64" if type_ == "Enumeration" else type_
