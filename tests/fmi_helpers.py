@@ -116,3 +116,16 @@ def private_resource(names: list[str], path: str) -> bool:
 
     pattern = re.compile(r"resources/_ipcosim_[a-z0-9_]+_[0-9a-f]{10}/" + re.escape(path) + "$")
     return any(pattern.match(n) for n in names)
+
+
+def wait_for(predicate, limit: float = 20.0, poll: float = 0.005) -> bool:
+    """Poll ``predicate`` until it holds (True) or ``limit`` seconds of wall time pass (its last
+    value): for outcomes another process or thread brings about, generous on a busy machine."""
+    import time
+
+    end = time.monotonic() + limit
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(poll)
+    return predicate()

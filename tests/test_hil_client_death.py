@@ -7,10 +7,10 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
+from fmi_helpers import wait_for
 
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 from ipcosim.harness.hil.server import RigServer
@@ -42,14 +42,6 @@ def start_client(uri: str) -> subprocess.Popen:
     assert line.strip() == "running", proc.stderr.read()
     return proc
 
-
-def wait_for(predicate, limit: float = 20.0) -> bool:
-    end = time.monotonic() + limit
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 @pytest.fixture

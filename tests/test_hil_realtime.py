@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 import pytest
+from fmi_helpers import wait_for
 
 from ipcosim.fmus.hil.tcpip import TcpipCard
 
@@ -126,14 +127,6 @@ def test_docs_walkthrough_is_the_tested_commands():
     for rig_cmd, run_cmd in WALKTHROUGH.values():
         assert rig_cmd in text and run_cmd in text
 
-
-def wait_for(predicate, limit: float) -> bool:
-    end = time.monotonic() + limit
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.005)
-    return predicate()
 
 
 def test_master_killed_mid_run_the_rig_puts_the_motor_at_zero(env, realtime_fmus, tmp_path):

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
+from fmi_helpers import wait_for
 
 from ipcosim.fmus.hil import ErrorCode, HILError
 from ipcosim.fmus.hil.protocol import HEADER, MAGIC, MAX_PAYLOAD, Msg, encode_frame, pack_channels, pack_text
@@ -25,14 +26,6 @@ from ipcosim.harness.hil.server import RigAccessError, RigServer, escape
 
 ROOT = Path(__file__).resolve().parents[1]
 
-
-def wait_for(predicate, limit: float = 10.0) -> bool:
-    end = time.monotonic() + limit
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 @pytest.fixture
