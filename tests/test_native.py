@@ -474,3 +474,68 @@ def test_crosscheck_layout_validates_and_flavours_agree(native_fmus: tuple[Path,
         for col in a.dtype.names:
             scale = max(float(np.max(np.abs(a[col]))), 1e-12)
             assert float(np.max(np.abs(a[col] - b[col]))) <= 1e-9 * scale, (folder.name, col)
+
+
+# ============================================================================ studies on the fast flavour
+
+
+@pytest.fixture()
+def built_here(native_fmus: tuple[Path, Path], monkeypatch: pytest.MonkeyPatch) -> tuple[Path, Path]:
+    """Both flavours where ``ipcosim build`` / ``build --native`` put them (the session's build)."""
+    import ipcosim.harness.scenario.flavour as flavour
+
+    python, native = native_fmus
+    monkeypatch.setenv("IPCOSIM_FMU_PATH", str(python))
+    monkeypatch.setattr(flavour, "native_fmu_dir", lambda: native)
+    return python, native
+
+
+@needs_cc
+@pytest.mark.integration
+def test_studies_take_the_native_flavour_when_it_can_run_them(built_here: tuple[Path, Path],
+                                                               tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+                                                               ) -> None:
+    """``--fmus auto`` (the studies' default): native when built and able to run the study; else python, saying why."""
+    import ipcosim.harness.scenario.flavour as flavour
+    from ipcosim.harness.studies.specs import study_spec
+
+    spec, why = study_spec("single-mass-lqr", "auto", names=["plant.Mp"], stop_time=1.0)
+    assert spec.fmus == "native" and why.startswith("native")
+    refusals = {("single-mass-lqr", "controller.Q_cart_position"): "not a parameter of the native FMUs",
+                ("single-mass-lqr", "plant.end_stop"): "instrument option",
+                ("double-mass-hsmc-lab", "plant.Mp"): "must be 0"}
+    for (scenario, name), said in refusals.items():
+        spec, why = study_spec(scenario, "auto", names=[name], stop_time=1.0)
+        assert spec.fmus == "python" and said in why, (scenario, name, why)
+    spec, why = study_spec("single-mass-lqr", "python", names=["plant.Mp"], stop_time=1.0)
+    assert spec.fmus == "python"
+    monkeypatch.setattr(flavour, "native_fmu_dir", lambda: tmp_path)  # nothing built there
+    spec, why = study_spec("single-mass-lqr", "auto", stop_time=1.0)
+    assert spec.fmus == "python" and "ipcosim build --native" in why
+
+
+@needs_cc
+@pytest.mark.integration
+def test_a_sweep_gives_the_same_metrics_on_both_flavours(built_here: tuple[Path, Path]) -> None:
+    """The same robustness cases (masses and friction drawn +-20 %) on both flavours: every metric equal to
+    within the trajectories' 1e-9 agreement (threshold times to one step)."""
+    from ipcosim.harness.studies.specs import study_spec
+
+    rng = random.Random(7)
+    cases = [{"plant.Mp": 0.230 * rng.uniform(0.8, 1.2), "plant.Beq": 4.3 * rng.uniform(0.8, 1.2)} for _ in range(3)]
+    rows = {}
+    for fmus in ("python", "native"):
+        spec, _ = study_spec("single-mass-lqr", fmus, names=list(cases[0]), stop_time=5.0)
+        runner = spec.build()
+        rows[fmus] = [runner(case, i) for i, case in enumerate(cases)]
+    compared = 0
+    for a, b in zip(rows["python"], rows["native"]):
+        assert a["upright"] and b["upright"]
+        for key, va in a.items():
+            vb = b[key]
+            if key.endswith(("wall_time_s", "real_time_factor")) or not isinstance(va, float):
+                continue
+            tol = 1e-3 if key.endswith("_time") or "settling" in key or "rise" in key else 1e-9
+            assert close(va, vb, tol, 1e-9), (key, va, vb)
+            compared += 1
+    assert compared >= 15

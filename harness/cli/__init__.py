@@ -16,6 +16,14 @@ from typing import Sequence
 COMMAND_MODULES = ("build", "list_", "run", "linearize", "analyze", "rig", "compare", "sweep", "tune")
 
 
+def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
+    """``--fmus`` of the studies (sweep, tune, compare): ``auto`` by default
+    (``ipcosim.harness.studies.specs.study_spec``)."""
+    p.add_argument("--fmus", choices=["auto", "python", "native"], default="auto",
+                   help="FMU flavour: auto (default: the native C FMUs when `ipcosim build --native` has built "
+                        "them and they can run this study, else python), python, or native")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The top-level parser with every available sub-command registered."""
     parser = argparse.ArgumentParser(

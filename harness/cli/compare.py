@@ -18,6 +18,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ipcosim.harness.cli import add_study_fmus_option
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -32,9 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "friction (viscous damping) and spring stiffness")
     p.add_argument("--samples", type=int, default=20, help="robustness runs per scenario (default 20)")
     p.add_argument("--seed", type=int, default=0, help="robustness seed (default 0)")
-    p.add_argument("--fmus", choices=["python", "native"], default="python",
-                   help="FMU flavour of the co-simulated scenarios: python (default) or native (C, from "
-                        "`ipcosim build --native`)")
+    add_study_fmus_option(p)
     p.add_argument("--parameter-set", metavar="NAME",
                    help="bind this parameter set in every scenario that has it, e.g. thesis (default: each "
                         "scenario's own binding)")
@@ -108,7 +108,7 @@ def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.studies.cost import cost
     from ipcosim.harness.studies.report import render
     from ipcosim.harness.studies.runners import SCENARIO_PARAM, MultiSpec
-    from ipcosim.harness.studies.specs import for_executor, spec_for
+    from ipcosim.harness.studies.specs import for_executor, spec_for, study_spec
     from ipcosim.harness.studies.sweep import (
         make_cases,
         one_line,
@@ -134,8 +134,8 @@ def main(args: argparse.Namespace) -> int:
     for name in names:
         try:
             try:
-                spec = spec_for(name, stop_time=args.stop_time, series=True,
-                                parameter_set=_pset(name, args.parameter_set), fmus=args.fmus)
+                spec, flavour = study_spec(name, args.fmus, stop_time=args.stop_time, series=True,
+                                           parameter_set=_pset(name, args.parameter_set))
             except FileNotFoundError as exc:
                 if built or "ipcosim build" not in str(exc):
                     raise
@@ -146,8 +146,10 @@ def main(args: argparse.Namespace) -> int:
                 print(f"compare: FMUs missing; building them into {BUILD_FMU_DIR}", file=sys.stderr)
                 build_all(BUILD_FMU_DIR)
                 built = True
-                spec = spec_for(name, stop_time=args.stop_time, series=True,
-                                parameter_set=_pset(name, args.parameter_set), fmus=args.fmus)
+                spec, flavour = study_spec(name, args.fmus, stop_time=args.stop_time, series=True,
+                                           parameter_set=_pset(name, args.parameter_set))
+            if not args.quiet:
+                print(f"compare: {name}: {flavour}", file=sys.stderr)
             specs.append(spec)
             spec_names.append(name)
         except (IpcosimError, OSError, ValueError) as exc:
@@ -172,7 +174,7 @@ def main(args: argparse.Namespace) -> int:
         if args.robustness:
             for name, _spec in zip(spec_names, specs):
                 plain = spec_for(name, stop_time=args.stop_time, parameter_set=_pset(name, args.parameter_set),
-                                 fmus=args.fmus)
+                                 fmus=getattr(_spec, "fmus", "python"))
                 varies = parse_all(rob.default_vary(plant_kind(name, plain), plain.parameters), plain.parameters)
                 cases = make_cases(varies, plain.parameters, samples=args.samples, seed=args.seed)
                 if not args.quiet:

@@ -15,6 +15,8 @@ import shutil
 import sys
 from pathlib import Path
 
+from ipcosim.harness.cli import add_study_fmus_option
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -35,9 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler address tcp://HOST:PORT")
     p.add_argument("--set", action="append", default=[], metavar="COMP.VAR=VALUE",
                    help="fixed parameter value in every run")
-    p.add_argument("--fmus", choices=["python", "native"], default="python",
-                   help="FMU flavour of the co-simulated scenarios: python (default) or native (C, from "
-                        "`ipcosim build --native`)")
+    add_study_fmus_option(p)
     p.add_argument("--parameter-set", metavar="NAME", help="bind this parameter set of the scenario (thesis, tuned...)")
     p.add_argument("--stop-time", type=float, help="simulated seconds per run (default: the scenario's)")
     p.add_argument("--step", type=float, help="communication step [s] (default: the scenario's)")
@@ -57,12 +57,15 @@ def default_out(scenario: str, kind: str = "sweep") -> Path:
 def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.errors import IpcosimError
     from ipcosim.harness.studies import robustness
-    from ipcosim.harness.studies.specs import for_executor, parse_set, spec_for
+    from ipcosim.harness.studies.specs import for_executor, parse_set, study_spec
     from ipcosim.harness.studies.sweep import make_cases, open_executor, parse_all, run_sweep
 
     overrides = parse_set(args.set)
-    spec = spec_for(args.scenario, stop_time=args.stop_time, step=args.step, overrides=overrides,
-                    parameter_set=args.parameter_set, fmus=args.fmus)
+    spec, flavour = study_spec(args.scenario, args.fmus, names=[*overrides, *(v.partition("=")[0].strip()
+                                                                              for v in args.vary)],
+                               check=lambda s: parse_all(args.vary, s.parameters), stop_time=args.stop_time,
+                               step=args.step, overrides=overrides, parameter_set=args.parameter_set)
+    print(f"sweep {spec.name}: {flavour}", file=sys.stderr)
     varies = parse_all(args.vary, spec.parameters)
     cases = make_cases(varies, spec.parameters, samples=args.samples, seed=args.seed)
     out = Path(args.out) if args.out else default_out(args.scenario)

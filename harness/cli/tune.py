@@ -16,6 +16,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from ipcosim.harness.cli import add_study_fmus_option
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -38,9 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--step", type=float, help="communication step [s] (default: the scenario's)")
     p.add_argument("--w-angle", type=float, default=None, help="weight of ITAE(angle) [m/rad] (default 0.1)")
     p.add_argument("--w-voltage", type=float, default=None, help="weight of ISE(voltage) [m s/V^2] (default 1e-4)")
-    p.add_argument("--fmus", choices=["python", "native"], default="python",
-                   help="FMU flavour of the co-simulated scenarios: python (default) or native (C, from "
-                        "`ipcosim build --native`)")
+    add_study_fmus_option(p)
     p.add_argument("--parameter-set", metavar="NAME",
                    help="start from this parameter set of the scenario (default: thesis when it exists)")
     p.add_argument("--ssv", help="where to write the tuned parameter set (default: OUT/autotuned.ssv)")
@@ -81,7 +81,7 @@ def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.cli.sweep import default_out
     from ipcosim.harness.studies import cost as costmod
     from ipcosim.harness.studies import tune as tunemod
-    from ipcosim.harness.studies.specs import PURE_SCENARIOS, for_executor, parse_set, spec_for
+    from ipcosim.harness.studies.specs import PURE_SCENARIOS, for_executor, parse_set, study_spec
     from ipcosim.harness.studies.sweep import open_executor
 
     overrides = parse_set(args.set)
@@ -91,8 +91,11 @@ def main(args: argparse.Namespace) -> int:
 
         if "thesis" in load_scenario(args.scenario).parameter_sets:
             pset = "thesis"
-    spec = spec_for(args.scenario, stop_time=args.stop_time, step=args.step, overrides=overrides,
-                    parameter_set=pset, fmus=args.fmus)
+    spec, flavour = study_spec(args.scenario, args.fmus, names=list(overrides),
+                               check=lambda s: tunemod.parse_bounds(
+                                   args.bounds, tunemod.parse_params(args.params, s.parameters), s.parameters),
+                               stop_time=args.stop_time, step=args.step, overrides=overrides, parameter_set=pset)
+    print(f"tune {spec.name}: {flavour}", file=sys.stderr)
     names = tunemod.parse_params(args.params, spec.parameters)
     bounds = tunemod.parse_bounds(args.bounds, names, spec.parameters)
     w_angle = costmod.W_ANGLE if args.w_angle is None else args.w_angle

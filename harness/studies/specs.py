@@ -1,7 +1,7 @@
 """Turn a scenario name or path (plus run settings) into a run specification."""
 from __future__ import annotations
 
-from typing import Mapping
+from typing import Any, Callable, Iterable, Mapping
 
 from ipcosim.harness.errors import UsageError
 from ipcosim.harness.studies.runners import PurePlantSpec, RunSpec
@@ -85,3 +85,65 @@ def for_executor(spec: RunSpec, executor: object) -> RunSpec:
         return MultiSpec(specs=[for_executor(s, executor) for s in spec.specs], name=spec.name)
     portable = getattr(spec, "portable", None)
     return portable() if callable(portable) else spec
+
+
+#: ``--fmus`` of the studies: ``auto`` (the default) takes the native FMUs when they are built and
+#: can run the study, else the Python ones.
+STUDY_FLAVOURS = ("auto", "python", "native")
+
+
+def study_spec(scenario: str, fmus: str = "auto", names: Iterable[str] = (),
+               check: Callable[[RunSpec], object] | None = None, **kwargs: Any) -> tuple[RunSpec, str]:
+    """The run specification of a study (sweep, robustness, tune, compare) on an FMU flavour.
+
+    ``fmus="auto"`` chooses the native flavour (C FMUs, ``ipcosim build --native``; several times
+    faster, equal results to 1e-9, docs/native.md) when all of these hold, else the Python one:
+    the native FMUs are built; the scenario runs on them (no plant instruments, a native model for
+    every component); every parameter the study sets or varies (``names``, ``component.variable``)
+    is a parameter of the native FMUs and not an instrument option the native plant lacks; and
+    ``check(spec)`` (the study's own parsing of its options against ``spec.parameters``) passes.
+    ``python`` and ``native`` are taken as given (a study the flavour cannot run fails as with
+    ``ipcosim run --fmus``).
+
+    Returns the spec and one line saying which flavour runs and, for ``auto``, why.
+    """
+    if fmus not in STUDY_FLAVOURS:
+        raise UsageError(f"--fmus {fmus}: expected one of {', '.join(STUDY_FLAVOURS)}")
+    if fmus != "auto" or scenario in PURE_SCENARIOS:
+        spec = spec_for(scenario, fmus="python" if fmus == "auto" else fmus, **kwargs)
+        if check is not None:
+            check(spec)
+        return spec, f"{fmus if fmus != 'auto' else 'python'} FMUs"
+    reason = _native_refusal(scenario, list(names), check, kwargs)
+    if isinstance(reason, str):
+        spec = spec_for(scenario, fmus="python", **kwargs)
+        if check is not None:
+            check(spec)
+        return spec, f"python FMUs (native flavour not used: {reason})"
+    return reason, "native FMUs (auto: built, and they run this study; --fmus python to compare)"
+
+
+def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], object] | None,
+                    kwargs: Mapping[str, Any]) -> RunSpec | str:
+    """The native spec of a study, or why the native flavour cannot run it (one line)."""
+    from ipcosim.fmus.native.models import NATIVE_INSTRUMENTS_OFF
+    from ipcosim.harness.errors import IpcosimError
+    from ipcosim.harness.scenario.flavour import native_fmu_dir
+
+    if not any(native_fmu_dir().glob("*.fmu")):
+        return f"not built in {native_fmu_dir()} (ipcosim build --native)"
+    try:
+        spec = spec_for(scenario, fmus="native", **kwargs)
+    except (IpcosimError, OSError, ValueError) as exc:
+        return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    for name in names:
+        if name not in spec.parameters:
+            return f"{name} is not a parameter of the native FMUs (a Python-flavour design parameter)"
+        if name.partition(".")[2] in NATIVE_INSTRUMENTS_OFF:
+            return f"{name} is an instrument option the native plant lacks"
+    if check is not None:
+        try:
+            check(spec)
+        except (IpcosimError, ValueError) as exc:
+            return str(exc).splitlines()[0]
+    return spec
