@@ -126,23 +126,13 @@ class Prepared:
             scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
         if parameter_set:
             scenario = select_parameter_set(scenario, parameter_set)
-        if fmus == "native":
-            if scenario.location.is_file():
-                raise UsageError(f"--fmus native: {scenario.origin} is an archive carrying its own FMUs; give the "
-                                 "scenario's name or folder")
-            scenario, self._python_values = to_native(scenario)
-        self.scenario = scenario
-        if workdir is None:
-            self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
-            self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
-            signals.register_temp(self._tmp)  # removed also on a forced exit
-            work = self._tmp
-        else:
-            work = Path(workdir)
-            work.mkdir(parents=True, exist_ok=True)
+        work = self._workdir(workdir)
         try:
-            fmu_files = self._archive_members(scenario, work) if scenario.location.is_file() else {}
-            self.system = bind(scenario, swaps=swaps, fmu_files=fmu_files)
+            archived = self._archive_members(scenario, work) if scenario.location.is_file() else {}
+            if fmus == "native":
+                scenario, self._python_values = to_native(_with_fmus(scenario, archived))
+            self.scenario = scenario
+            self.system = bind(scenario, swaps=swaps, fmu_files=archived)
             if warn:
                 warn_all(self.system)
             if slave_factory is None:
@@ -151,6 +141,17 @@ class Prepared:
             self.close()  # nothing left in the temporary folder
             raise
         self.load_seconds = time.perf_counter() - t0
+
+    def _workdir(self, workdir: str | Path | None) -> Path:
+        """``workdir``, or a temporary folder removed with this object (and on a forced exit)."""
+        if workdir is None:
+            self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
+            self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
+            signals.register_temp(self._tmp)  # removed also on a forced exit
+            return self._tmp
+        work = Path(workdir)
+        work.mkdir(parents=True, exist_ok=True)
+        return work
 
     @staticmethod
     def _archive_members(scenario: Scenario, work: Path) -> dict[str, Path]:
@@ -422,3 +423,13 @@ def resolve_relative(system: System, overrides: Mapping[str, Any]) -> dict[str, 
             raise UsageError(f"--set {key}={value}: expected NUMBER*nominal on a numeric variable of the "
                              f"scenario") from None
     return out
+
+
+def _with_fmus(scenario: Scenario, fmus: Mapping[str, Path]) -> Scenario:
+    """The scenario with the FMU of each component in ``fmus`` (an archive's extracted members)."""
+    import dataclasses
+
+    if not fmus:
+        return scenario
+    return dataclasses.replace(scenario, components=tuple(
+        dataclasses.replace(c, fmu=fmus.get(c.name, c.fmu)) for c in scenario.components))

@@ -140,7 +140,7 @@ def test_compare_builds_missing_fmus_once_then_runs(tmp_path, monkeypatch, capsy
 
     monkeypatch.setattr(specs, "spec_for", fake_spec_for)
     monkeypatch.setattr(ipcosim.fmus.build, "build_all", lambda out, **kw: builds.append(out) or [])
-    code = cli_main(["compare", "--scenarios", "a,b", "--stop-time", "0.5", "--workers", "1",
+    code = cli_main(["compare", "--scenarios", "a,b", "--stop-time", "0.5", "--workers", "1", "--fmus", "python",
                      "--out", str(tmp_path), "--quiet"])
     err = capsys.readouterr().err
     assert code == 0, err

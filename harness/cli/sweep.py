@@ -65,7 +65,6 @@ def main(args: argparse.Namespace) -> int:
                                                                               for v in args.vary)],
                                check=lambda s: parse_all(args.vary, s.parameters), stop_time=args.stop_time,
                                step=args.step, overrides=overrides, parameter_set=args.parameter_set)
-    print(f"sweep {spec.name}: {flavour}", file=sys.stderr)
     varies = parse_all(args.vary, spec.parameters)
     cases = make_cases(varies, spec.parameters, samples=args.samples, seed=args.seed)
     out = Path(args.out) if args.out else default_out(args.scenario)
@@ -74,7 +73,7 @@ def main(args: argparse.Namespace) -> int:
             (out / name).unlink(missing_ok=True)
         shutil.rmtree(out / "figures", ignore_errors=True)
     executor = open_executor(args.workers, args.scheduler)
-    print(f"sweep {spec.name}: {len(cases)} runs on {executor.description} -> {out}", file=sys.stderr)
+    print(f"sweep {spec.name}: {len(cases)} runs on {executor.description}, {flavour} -> {out}", file=sys.stderr)
     try:
         result = run_sweep(for_executor(spec, executor), cases, out_dir=out, executor=executor,
                            progress=not args.quiet,

@@ -95,7 +95,6 @@ def main(args: argparse.Namespace) -> int:
                                check=lambda s: tunemod.parse_bounds(
                                    args.bounds, tunemod.parse_params(args.params, s.parameters), s.parameters),
                                stop_time=args.stop_time, step=args.step, overrides=overrides, parameter_set=pset)
-    print(f"tune {spec.name}: {flavour}", file=sys.stderr)
     names = tunemod.parse_params(args.params, spec.parameters)
     bounds = tunemod.parse_bounds(args.bounds, names, spec.parameters)
     w_angle = costmod.W_ANGLE if args.w_angle is None else args.w_angle
@@ -109,7 +108,7 @@ def main(args: argparse.Namespace) -> int:
     executor = open_executor(args.workers, args.scheduler)
     print(f"tune {spec.name}: {', '.join(names)} within "
           f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in bounds)}, budget {args.budget} runs on "
-          f"{executor.description}", file=sys.stderr)
+          f"{executor.description}, {flavour}", file=sys.stderr)
     try:
         res = tunemod.tune(for_executor(spec, executor), names, bounds, budget=args.budget, executor=executor,
                            seed=args.seed,

@@ -113,7 +113,9 @@ def study_spec(scenario: str, fmus: str = "auto", names: Iterable[str] = (),
         spec = spec_for(scenario, fmus="python" if fmus == "auto" else fmus, **kwargs)
         if check is not None:
             check(spec)
-        return spec, f"{fmus if fmus != 'auto' else 'python'} FMUs"
+        if scenario in PURE_SCENARIOS:
+            return spec, "no FMUs (a pure-Python stand-in)"
+        return spec, f"{fmus} FMUs"
     reason = _native_refusal(scenario, list(names), check, kwargs)
     if isinstance(reason, str):
         spec = spec_for(scenario, fmus="python", **kwargs)
