@@ -257,9 +257,9 @@ def _compile(source: str, so: Path, cc: str) -> None:
         with os.fdopen(fd, "w") as fh:
             fh.write(source)
         proc = subprocess.run([cc, *CFLAGS, "-o", tmp_so, tmp_c], capture_output=True, text=True)
-        if proc.returncode != 0 or proc.stderr.strip():
-            lines = [x for x in proc.stderr.splitlines() if "error" in x or "warning" in x] or proc.stderr.splitlines()
-            raise LoopUnavailable(f"C compile failed: {(lines or ['exit status %d' % proc.returncode])[0].strip()}")
+        if proc.returncode != 0:
+            lines = [x for x in proc.stderr.splitlines() if "error" in x] or proc.stderr.splitlines()
+            raise LoopUnavailable(f"C compile failed: {(lines or [f'exit status {proc.returncode}'])[0].strip()}")
         os.replace(tmp_so, so)
     except OSError as exc:
         raise LoopUnavailable(f"C compile failed: {exc}") from None
