@@ -149,6 +149,18 @@ def test_without_a_compiler_the_run_completes_on_the_python_loop_and_says_so(tmp
     assert r.ok and r.metadata["loop"] == "python (no C compiler)" and len(r.data) == 11
 
 
+def test_a_failed_compile_runs_the_python_loop_and_says_why(tmp_path, monkeypatch):
+    cc = tmp_path / "broken-cc"
+    cc.write_text("#!/bin/sh\necho 'broken-cc: error: out of licences' >&2\nexit 1\n")
+    cc.chmod(0o755)
+    monkeypatch.setenv("CC", str(cc))
+    monkeypatch.setattr("ipcosim.harness.paths.LOOP_DIR", tmp_path / "loops")
+    monkeypatch.setattr("ipcosim.harness.master.execution.python_functions", lambda blocks: [])
+    r = run(loop_system(), loop_factory, "auto", stop_time=0.1, step=H)
+    assert r.ok and r.metadata["loop"] == "python (C compile failed: broken-cc: error: out of licences)"
+    assert not list((tmp_path / "loops").iterdir())  # nothing left behind
+
+
 def test_the_library_is_keyed_by_the_structure_alone(tmp_path, monkeypatch):
     monkeypatch.setattr("ipcosim.harness.paths.LOOP_DIR", tmp_path)
     runs = [({"stop_time": 1.0, "step": H}, "a"),

@@ -26,6 +26,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import platform
 import shutil
 import subprocess
 import tempfile
@@ -227,14 +228,18 @@ def library(source: str, cache: Path | None = None) -> Any:
     cc = find_compiler()
     if cc is None:
         raise LoopUnavailable("no C compiler")
-    key = hashlib.sha256("\0".join([source, os.path.realpath(cc), *CFLAGS]).encode()).hexdigest()[:20]
+    parts = [source, os.path.realpath(cc), platform.machine(), *CFLAGS]
+    key = hashlib.sha256("\0".join(parts).encode()).hexdigest()[:20]
     folder = Path(cache or LOOP_DIR)
     so = folder / f"{key}.so"
     if so in _LOADED:
         return _LOADED[so]
     if not so.is_file():
         _compile(source, so, cc)
-    lib = ctypes.CDLL(str(so))
+    try:
+        lib = ctypes.CDLL(str(so))
+    except OSError as exc:
+        raise LoopUnavailable(f"cannot load the compiled loop {so}: {exc}") from None
     fn = lib.ipcosim_loop
     vp = ctypes.POINTER(ctypes.c_void_p)
     fn.argtypes = [vp, vp, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_longlong), ctypes.c_longlong,
