@@ -18,10 +18,12 @@ at the end of its period (``(n + 1) % m == 0``, from ``t_{n+1-m}``), with its in
 just before the step; in Jacobi it reads its inputs at the start of its period and its
 outputs are published at the end (as libcosim's decimation does).
 
-The loop for a given system is generated as Python source once per execution (all value
-references, arrays and functions bound as locals; one batched set and one batched get per
-component and step; conversions folded into constants), so each step does nothing but the
-FMI calls, the transfers and one ``memmove`` of the value vector into the record.
+The loop for a given system is planned once per execution (:func:`loop_plan`: the operations
+of a tick, one batched set and one batched get per component and step) and the plan rendered
+as Python source (:func:`generate_loop`: all value references, arrays and functions bound as
+locals, conversions folded into constants) or as C (:mod:`ipcosim.harness.master.cloop`), so
+each step does nothing but the FMI calls, the transfers and one copy of the value vector into
+the record.
 """
 from __future__ import annotations
 
