@@ -213,3 +213,12 @@ def test_the_generated_c_compiles_warning_free_as_c99(tmp_path):
         proc = subprocess.run([path or cc, *cloop.CFLAGS, "-Werror", "-o", str(tmp_path / "loop.so"), str(src)],
                               capture_output=True, text=True)
         assert proc.returncode == 0 and not proc.stderr, proc.stderr
+
+
+def test_the_loop_option_is_checked_where_the_command_line_checks_it():
+    from ipcosim.errors import UsageError
+    from ipcosim.harness.options import RunOptions
+
+    assert RunOptions.create("single-mass-lqr", loop="c").loop == "c"
+    with pytest.raises(UsageError, match=r"^--loop fast: expected one of auto, c, python$"):
+        RunOptions.create("single-mass-lqr", loop="fast")
