@@ -189,8 +189,9 @@ class Prepared:
                   overrides: Mapping[str, Any] | None = None, *, start_time: float | None = None,
                   algorithm: str | None = None, observers: Sequence[Observer] = (),
                   manipulators: Sequence[Manipulator] = (), realtime: bool | None = None, progress: bool = False,
-                  record_every: int = 1, max_init_iterations: int = 20) -> Execution:
-        """A ready :class:`Execution` (checked: step, stop time, overrides, step multiples)."""
+                  record_every: int = 1, max_init_iterations: int = 20, loop: str = "auto") -> Execution:
+        """A ready :class:`Execution` (checked: step, stop time, overrides, step multiples);
+        ``loop``: the stepping loop, ``auto``, ``c`` or ``python`` (see :class:`Execution`)."""
         stop, why_stop = (stop_time, "") if stop_time is not None else default_stop_time(self.system)
         h, why_step = (step, "") if step is not None else default_step(self.system)
         if stop is None:
@@ -222,7 +223,7 @@ class Prepared:
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
                          unzip_dirs=self.unzip_dirs,
                          record_every=record_every, max_init_iterations=max_init_iterations,
-                         task_metrics=self.task_metrics)
+                         task_metrics=self.task_metrics, loop=loop)
 
     def run(self, stop_time: float | None = None, step: float | None = None,
             overrides: Mapping[str, Any] | None = None, *, out_dir: str | os.PathLike[str] | None = None,
@@ -312,7 +313,7 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
         variables: Sequence[str] | None = None, plot: bool = False, realtime: bool | None = None,
         progress: bool = False, observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
         start_time: float | None = None, record_every: int = 1, raise_on_error: bool = True,
-        fmus: str = "python") -> Result:
+        fmus: str = "python", loop: str = "auto") -> Result:
     """Co-simulate a scenario once.
 
     Parameters
@@ -349,6 +350,8 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
         Result with ``error`` set.
     fmus : {'python', 'native'}
         FMU flavour: ``build/fmus`` or ``build/fmus-native`` (``ipcosim build --native``).
+    loop : {'auto', 'c', 'python'}
+        The master's stepping loop (see :class:`~ipcosim.harness.master.execution.Execution`).
 
     Returns
     -------
@@ -359,7 +362,8 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
                   algorithm=algorithm, fmus=fmus) as prepared:
         return prepared.run(stop_time, step, overrides, out_dir=out_dir, variables=variables, plot=plot,
                             raise_on_error=raise_on_error, realtime=realtime, progress=progress, observers=observers,
-                            manipulators=manipulators, start_time=start_time, record_every=record_every)
+                            manipulators=manipulators, start_time=start_time, record_every=record_every,
+                            loop=loop)
 
 
 def prepare_with(options: RunOptions, *, warn: bool = True) -> Prepared:
@@ -390,7 +394,7 @@ def run_with(options: RunOptions, prepared: Prepared | None = None) -> Result:
     with signals.deferred(timeout=options.timeout):  # a no-op inside the command line's own
         result = prepared.run(options.stop_time, options.step, overrides, out_dir=options.out,
                               variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
-                              progress=options.progress)
+                              progress=options.progress, loop=options.loop)
     if options.save_baseline is not None:
         from ipcosim.harness.baseline import save_baseline
 

@@ -18,6 +18,7 @@ from typing import Any, Mapping, Sequence
 from ipcosim.harness.errors import UsageError
 
 ALGORITHM_CHOICES = ("gauss-seidel", "jacobi")
+LOOP_CHOICES = ("auto", "c", "python")
 
 
 def seconds_option(option: str, value: Any) -> float | None:
@@ -96,6 +97,9 @@ class RunOptions:
     timeout : float or None
         Wall-clock limit [s]: the run stops there with its results so far
         (:class:`ipcosim.harness.master.signals.Interrupted`; the command line exits 124).
+    loop : str
+        The master's stepping loop: ``auto`` (the C loop where it can run, else the Python
+        loop), ``c`` (an error where it cannot run) or ``python`` (see docs/master.md).
     """
 
     scenario: str | os.PathLike[str]
@@ -114,8 +118,11 @@ class RunOptions:
     progress: bool = False
     fmus: str = "python"
     timeout: float | None = None
+    loop: str = "auto"
 
     def __post_init__(self) -> None:
+        if self.loop not in LOOP_CHOICES:
+            raise UsageError(f"--loop {self.loop}: expected one of {', '.join(LOOP_CHOICES)}")
         if self.fmus not in ("python", "native"):
             raise UsageError(f"--fmus {self.fmus}: expected python or native")
         if self.algorithm not in ALGORITHM_CHOICES:
@@ -131,7 +138,7 @@ class RunOptions:
                record: Sequence[str] | str | None = None, algorithm: str = "gauss-seidel",
                fmu_dirs: Sequence[str | os.PathLike[str]] | None = None,
                save_baseline: str | os.PathLike[str] | None = None, progress: bool = False,
-               fmus: str = "python", timeout: Any = None) -> "RunOptions":
+               fmus: str = "python", timeout: Any = None, loop: str = "auto") -> "RunOptions":
         """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
 
         Raises
@@ -148,7 +155,7 @@ class RunOptions:
                    realtime=realtime, out=Path(out) if out is not None else None, plot=plot, record=columns,
                    algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
                    save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,
-                   fmus=fmus, timeout=seconds_option("--timeout", timeout))
+                   fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "RunOptions":
@@ -158,7 +165,8 @@ class RunOptions:
                           parameter_set=args.parameter_set, realtime=True if args.realtime else None, out=out,
                           plot=args.plot, record=args.record, algorithm=args.algorithm, fmu_dirs=args.fmu_dir,
                           save_baseline=args.save_baseline, progress=not args.quiet,
-                          fmus=getattr(args, "fmus", "python"), timeout=getattr(args, "timeout", None))
+                          fmus=getattr(args, "fmus", "python"), timeout=getattr(args, "timeout", None),
+                          loop=getattr(args, "loop", "auto"))
 
 
 def scenario_label(text: str | os.PathLike[str]) -> str:

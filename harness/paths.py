@@ -41,3 +41,5 @@ def default_build_dir() -> Path:
 BUILD_DIR = default_build_dir()
 BUILD_FMU_DIR = BUILD_DIR / "fmus"
 BUILD_SSP_DIR = BUILD_DIR / "ssp"
+#: Compiled stepping loops (``loops/<hash>.so``; see :mod:`ipcosim.harness.master.cloop`).
+LOOP_DIR = BUILD_DIR / "loops"

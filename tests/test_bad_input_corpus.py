@@ -321,7 +321,7 @@ import signal  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from dataclasses import dataclass, field  # noqa: E402
+from dataclasses import dataclass, field, replace  # noqa: E402
 
 RUNNER = DATA / "corpus_runner.py"
 PARALLEL = 4
@@ -386,6 +386,11 @@ SUBPROCESS_CASES = {
     "sigkill-step": Case(dict(SLOW), send=(signal.SIGKILL, 200), status=-9, line="", min_rows=200, freed=False,
                          clean=False, stop=1000.0),
 }
+# signals while stepping: on the compiled C loop (forced: an error if it could not run), and once on the Python loop
+for _name, _case in list(SUBPROCESS_CASES.items()):
+    if _case.send or _name.startswith(("sigterm-step", "fault-slow", "fault-hang", "fault-exception")):
+        SUBPROCESS_CASES[_name] = replace(_case, args=(*_case.args, "--loop", "c"))
+SUBPROCESS_CASES["sigint-step-python-loop"] = replace(SUBPROCESS_CASES["sigint-step-0"], args=("--loop", "python"))
 
 
 @dataclass

@@ -313,3 +313,49 @@ def test_an_integer_only_fmu_writes_its_integer_column_and_record_selects_it(tmp
     assert rc == 0, capsys.readouterr().err
     header, rows = read_csv(tmp_path / "out" / "results.csv")
     assert header == ["time", "stair.counter"] and [r[1] for r in rows] == [str(k) for k in range(1, 7)]
+
+
+# ------------------------------------------------------------------ the C stepping loop on these FMUs
+def _loops(folder: Path, **kw) -> dict[str, object]:
+    """The run on each loop (auto, c, python); the C and the Python loop's records are the same bit for bit."""
+    out = {loop: run(folder, loop=loop, raise_on_error=False, **kw) for loop in ("auto", "c", "python")}
+    c, py = out["c"], out["python"]
+    assert c.metadata["loop"] == "c" and py.metadata["loop"] == "python (forced)"
+    assert c.data.dtype == py.data.dtype and c.data.tobytes() == py.data.tobytes()
+    for key in ("status", "error", "terminated_by", "end_time"):
+        assert c.metadata[key] == py.metadata[key], key
+    return out
+
+
+@pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
+def test_c_loop_on_c_fmus_and_fmi3_adapters_equals_the_python_loop(tmp_path, fmus, algorithm):
+    # a C FMU stepping every 0.3 s with a partial last period, fed by an FMI 3.0 FMU (its adapter is Python:
+    # called back from C when forced, else the Python loop runs)
+    reals = ("u", "reached", "integral")
+    folder = scenario(tmp_path, fmus, [comp("src", "Source3", only=("y",)), comp("c", "Counter", hint=0.3, only=reals)],
+                      [link("src.y", "c.u")], stop=1.0, step=0.1)
+    runs = _loops(folder, overrides={"src.step_time": 0.5}, algorithm=algorithm)
+    assert runs["auto"].metadata["loop"] == "python (components stepped by Python functions: src)"
+    assert runs["c"]["c.integral"][-1] > 0 and runs["c"]["time"][-1] == 1.0
+    alone = scenario(tmp_path, fmus, [comp("c", "Counter", hint=0.3, only=reals)], stop=0.95, step=0.1, name="alone")
+    assert _loops(alone, algorithm=algorithm)["auto"].metadata["loop"] == "c"
+
+
+@pytest.mark.parametrize("model", ["Stair", "Stair3"])
+def test_c_loop_ends_where_the_fmu_ends_the_simulation_or_fails_as_the_python_loop(tmp_path, fmus, model):
+    folder = scenario(tmp_path, fmus, [comp("stair", model, only=("height",))], stop=2.0)
+    runs = _loops(folder)
+    assert runs["c"].ok and runs["c"].metadata["terminated_by"]["component"] == "stair"
+    assert runs["c"]["time"][-1] == pytest.approx(0.9)
+    if model == "Stair":  # an FMI 2.0 Discard without termination: the same error
+        failed = _loops(folder, overrides={"stair.end_simulation": "false", "stair.limit": 3})
+        assert failed["c"].error.startswith("component stair (Stair): fmi2DoStep returned fmi2Discard at t = 0.2 s")
+
+
+def test_integer_boolean_and_string_connectors_run_on_the_python_loop(tmp_path, fmus):
+    folder = scenario(tmp_path, fmus, [comp("pt", "PassThrough")], stop=0.5)
+    r = run(folder, loop="auto")
+    assert r.ok and r.metadata["loop"] == "python (Integer/Boolean/String connectors (pt))"
+    with pytest.raises(SimulationError, match=r"^--loop c: the C stepping loop cannot run: Integer/Boolean/String "
+                                              r"connectors \(pt\)$"):
+        run(folder, loop="c")

@@ -245,6 +245,24 @@ def test_every_scenario_trajectory_agrees_between_flavours(native_fmus: tuple[Pa
 
 @needs_cc
 @pytest.mark.integration
+@pytest.mark.parametrize("name", ["single-mass-lqr", "double-mass-lqr"])
+def test_c_loop_records_equal_the_python_loops_on_both_flavours(native_fmus: tuple[Path, Path], name: str) -> None:
+    from ipcosim.harness.api import run
+
+    python, native = native_fmus
+    for flavour, folder, stop in (("native", native, 10.0), ("python", python, 1.0)):
+        kw = {"fmu_dirs": [folder], "fmus": flavour, "stop_time": stop}
+        c, py = run(name, **kw), run(name, loop="python", **kw)
+        assert c.metadata["loop"] == "c" and py.metadata["loop"] == "python (forced)"  # C by default
+        assert len(c.data) == round(stop * 1000) + 1
+        assert c.data.dtype == py.data.dtype and c.data.tobytes() == py.data.tobytes(), (name, flavour)
+        timing = ("wall_time_s", "real_time_factor", "loop_real_time_factor")
+        task = [{k: repr(v) for k, v in r.metrics.items() if k not in timing} for r in (c, py)]
+        assert c.metrics["upright"] and task[0] == task[1]
+
+
+@needs_cc
+@pytest.mark.integration
 def test_set_on_a_design_parameter_names_the_native_flavour(native_fmus: tuple[Path, Path]) -> None:
     from ipcosim.harness.api import run
     from ipcosim.harness.scenario.flavour import FlavourError

@@ -33,6 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fmus", choices=["python", "native"], default="python",
                    help="FMU flavour: python (build/fmus, default) or native (build/fmus-native: C, from "
                         "`ipcosim build --native`)")
+    p.add_argument("--loop", choices=["auto", "c", "python"], default="auto",
+                   help="the master's stepping loop: auto (default: compiled C where it can run, else Python), "
+                        "c (an error where it cannot run) or python")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.add_argument("--timeout", metavar="S",
                    help="wall-clock limit [s]: stop the run there with its results so far (exit status 124)")
@@ -63,7 +66,7 @@ def main(args: argparse.Namespace) -> int:
         meta = result.metadata
         print(f"{meta['scenario']}: {meta['stop_time'] - meta['start_time']:g} s simulated in "
               f"{m['wall_time_s']:.3f} s ({m['real_time_factor']:.1f}x real time; stepping loop "
-              f"{m['loop_real_time_factor'] or 0:.1f}x), "
+              f"{m['loop_real_time_factor'] or 0:.1f}x, {meta['loop']} loop), "
               f"{meta['algorithm']}, step {meta['step']:g} s, order {' -> '.join(meta['order'])}")
         for key, value in m.items():
             if key in ("wall_time_s", "real_time_factor", "loop_real_time_factor"):

@@ -18,10 +18,12 @@ at the end of its period (``(n + 1) % m == 0``, from ``t_{n+1-m}``), with its in
 just before the step; in Jacobi it reads its inputs at the start of its period and its
 outputs are published at the end (as libcosim's decimation does).
 
-The loop for a given system is generated as Python source once per execution (all value
-references, arrays and functions bound as locals; one batched set and one batched get per
-component and step; conversions folded into constants), so each step does nothing but the
-FMI calls, the transfers and one ``memmove`` of the value vector into the record.
+The loop for a given system is planned once per execution (:func:`loop_plan`: the operations
+of a tick, one batched set and one batched get per component and step) and the plan rendered
+as Python source (:func:`generate_loop`: all value references, arrays and functions bound as
+locals, conversions folded into constants) or as C (:mod:`ipcosim.harness.master.cloop`), so
+each step does nothing but the FMI calls, the transfers and one copy of the value vector into
+the record.
 """
 from __future__ import annotations
 
@@ -382,15 +384,14 @@ def generate_loop(blocks: Sequence[Block], order: Sequence[int], algorithm: str,
     fmi2Warning (or a ``do_step`` that returned :data:`~ipcosim.harness.master.slave.TERMINATE`).
     Every component's last step ends at the stop time: a component whose last period is partial
     (or a run whose last tick is short) takes a shorter last step there.
+
+    The order of the calls comes from :func:`loop_plan` (shared with the C loop of
+    :mod:`ipcosim.harness.master.cloop`).
     """
-    if algorithm not in ALGORITHMS:
-        raise ValueError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
+    plan = loop_plan(blocks, order, algorithm, time)
     em = _Emitter(blocks, time)
     em.lines += ["def run(n0, n1, rb, va, rs, rbi=0):", "    for n in range(n0, n1):", f"{IND}t = {time.expr('n')}"]
-    if algorithm == GAUSS_SEIDEL:
-        _gauss_seidel(em, order)
-    else:
-        _jacobi(em, order)
+    em.render(plan, IND)
     _record(em.lines, em.ns, IND, record_every, typed)
     em.lines.append("    return None")
     return "\n".join(em.lines) + "\n", em.ns
@@ -398,9 +399,92 @@ def generate_loop(blocks: Sequence[Block], order: Sequence[int], algorithm: str,
 
 IND = "        "
 
+#: A tick of the loop as a tree of operations, shared by the Python and the C back ends
+#: (:func:`loop_plan`). Each is a tuple whose first item names it:
+#:
+#: - ``("transfer", b, k, src, j, factor, offset)``: Real input ``k`` of block ``b`` from output
+#:   ``j`` of block ``src``: ``factor * x + offset``, the product only when ``factor != 1``, the
+#:   sum only when ``offset != 0`` (``x + 0.0`` would turn -0.0 into 0.0);
+#: - ``("ctransfer", b, c, k, src, j, mapping)``: the same for channel ``c`` (through ``mapping``);
+#: - ``("set", b)``, ``("cset", b, c)``: the batched set of the Real inputs / of channel ``c``;
+#: - ``("step", b, multiple, last, partial)``: ``do_step`` from ``t`` (``multiple`` None) or from
+#:   the start of the period ``(n // m) * m``, with step ``h_b``, or ``hl_b`` on the tick ``last``
+#:   (``"end"``: ``N - 1``; ``"period"``: the first tick of the last period) when ``partial``;
+#: - ``("get", b, private)``, ``("cget", b, c, private)``: the batched get into the value vector
+#:   (or the private outputs of a multi-rate Jacobi component);
+#: - ``("publish", b)``, ``("cpublish", b, c)``: the private outputs into the value vector;
+#: - ``("if", cond, body)``: ``cond`` ``("end", m, partial)``: ``(n + 1) % m == 0`` (or the last
+#:   tick, when ``partial``); ``("start", m)``: ``n % m == 0``.
+Op = tuple
+
+
+def loop_plan(blocks: Sequence[Block], order: Sequence[int], algorithm: str, time: TimeBase) -> list[Op]:
+    """The operations of one tick of the stepping loop (see :data:`Op`)."""
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
+    if algorithm == GAUSS_SEIDEL:
+        return _gauss_seidel(blocks, order, time)
+    return _jacobi(blocks, order, time)
+
+
+def _partial(b: Block, time: TimeBase) -> bool:
+    """Whether the component's last step differs from its regular one."""
+    return time.ticks % b.multiple != 0 or time.short_last
+
+
+def _inputs(b: Block) -> list[Op]:
+    """Transfers into the component's inputs, then its batched sets."""
+    ops: list[Op] = [("transfer", b.index, k, src, j, factor, offset) for k, src, j, factor, offset in b.transfers]
+    for c, ch in enumerate(b.channels):
+        ops += [("ctransfer", b.index, c, k, src, j, mapping) for k, src, j, mapping in ch.transfers]
+    if b.n_in:
+        ops.append(("set", b.index))
+    return ops + [("cset", b.index, c) for c, ch in enumerate(b.channels) if ch.n_in]
+
+
+def _outputs(b: Block, private: bool) -> list[Op]:
+    ops: list[Op] = [("get", b.index, private)] if b.n_out else []
+    return ops + [("cget", b.index, c, private) for c, ch in enumerate(b.channels) if ch.n_out]
+
+
+def _gauss_seidel(blocks: Sequence[Block], order: Sequence[int], time: TimeBase) -> list[Op]:
+    """Each component in order: transfers, set, step (multi-rate: at the end of its period)."""
+    plan: list[Op] = []
+    for idx in order:
+        b = blocks[idx]
+        m, partial = b.multiple, _partial(b, time)
+        ops = _inputs(b) + [("step", b.index, None if m == 1 else m, "end", partial)] + _outputs(b, False)
+        plan += ops if m == 1 else [("if", ("end", m, partial), ops)]
+    return plan
+
+
+def _jacobi(blocks: Sequence[Block], order: Sequence[int], time: TimeBase) -> list[Op]:
+    """Every component reads the values of ``t_n``, then all step; multi-rate outputs are
+    published at the end of their period (a partial last period starts with the shorter step)."""
+    plan: list[Op] = []
+    for idx in order:
+        b = blocks[idx]
+        plan += _inputs(b) if b.multiple == 1 else [("if", ("start", b.multiple), _inputs(b))]
+    for idx in order:
+        b = blocks[idx]
+        m, partial = b.multiple, _partial(b, time)
+        ops = [("step", b.index, None, "period", partial)] + _outputs(b, m > 1)
+        plan += ops if m == 1 else [("if", ("start", m), ops)]
+    for idx in order:
+        b = blocks[idx]
+        if b.multiple > 1:
+            ops = ([("publish", b.index)] if b.n_out else []) + [
+                ("cpublish", b.index, c) for c, ch in enumerate(b.channels) if ch.n_out]
+            plan += [("if", ("end", b.multiple, _partial(b, time)), ops)]
+    return plan
+
+
+#: The FMI function each failure check names (the C loop reports its position in this tuple).
+FUNCTIONS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")
+
 
 class _Emitter:
-    """Source lines of the loop for each block: transfers, batched sets, the step, batched gets."""
+    """Python source lines of a loop plan (:func:`loop_plan`) and the namespace they run in."""
 
     def __init__(self, blocks: Sequence[Block], time: TimeBase) -> None:
         self.blocks, self.time, self.lines = blocks, time, []
@@ -416,103 +500,64 @@ class _Emitter:
                                 f"I{i}_{k}": ch.in_values, f"P{i}_{k}": ch.private_out})
                 self.ns.update({f"M{i}_{k}_{t[0]}": t[3] for t in ch.transfers if t[3]})
 
-    def partial(self, b: Block) -> bool:
-        """Whether the component's last step differs from its regular one."""
-        return self.time.ticks % b.multiple != 0 or self.time.short_last
+    def render(self, plan: Sequence[Op], indent: str) -> None:
+        for op in plan:
+            getattr(self, "op_" + op[0])(indent, *op[1:])
 
-    def transfers(self, b: Block, indent: str) -> None:
-        L = self.lines
-        for k, src, j, factor, offset in b.transfers:
-            expr = f"O{src}[{j}]"
-            if factor != 1.0:
-                expr = f"{factor!r} * {expr}"
-            if offset != 0.0:
-                expr = f"{expr} + {offset!r}"
-            L.append(f"{indent}I{b.index}[{k}] = {expr}")
-        for c, ch in enumerate(b.channels):
-            for k, src, j, mapping in ch.transfers:
-                sc = _channel_index(self.blocks[src], ch.kind)
-                if mapping:
-                    L.append(f"{indent}x = O{src}_{sc}[{j}]")
-                    L.append(f"{indent}I{b.index}_{c}[{k}] = M{b.index}_{c}_{k}.get(x, x)")
-                else:
-                    L.append(f"{indent}I{b.index}_{c}[{k}] = O{src}_{sc}[{j}]")
+    def check(self, indent: str, i: int, call: str, function: str) -> None:
+        self.lines += [f"{indent}s = {call}", f"{indent}if s > 1: return (n, {i}, '{function}', s)"]
 
-    def set_inputs(self, b: Block, indent: str) -> None:
-        i, L = b.index, self.lines
-        if b.n_in:
-            L.append(f"{indent}s = sr{i}(c{i}, vi{i}, {b.n_in}, I{i})")
-            L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2SetReal', s)")
-        for c, ch in enumerate(b.channels):
-            if ch.n_in:
-                L.append(f"{indent}s = S{i}_{c}(I{i}_{c})")
-                L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2Set{FMI_NAME[ch.kind]}', s)")
+    def op_if(self, indent: str, cond: tuple, body: Sequence[Op]) -> None:
+        if not body:
+            return
+        if cond[0] == "start":
+            self.lines.append(f"{indent}if n % {cond[1]} == 0:")
+        else:
+            last = f" or n == {self.time.ticks - 1}" if cond[2] else ""
+            self.lines.append(f"{indent}if (n + 1) % {cond[1]} == 0{last}:")
+        self.render(body, indent + "    ")
 
-    def step(self, b: Block, indent: str, start: str, private: bool, h: str) -> None:
-        i, L = b.index, self.lines
+    def op_transfer(self, indent: str, i: int, k: int, src: int, j: int, factor: float, offset: float) -> None:
+        expr = f"O{src}[{j}]"
+        if factor != 1.0:
+            expr = f"{factor!r} * {expr}"
+        if offset != 0.0:
+            expr = f"{expr} + {offset!r}"
+        self.lines.append(f"{indent}I{i}[{k}] = {expr}")
+
+    def op_ctransfer(self, indent: str, i: int, c: int, k: int, src: int, j: int, mapping: Any) -> None:
+        sc = _channel_index(self.blocks[src], self.blocks[i].channels[c].kind)
+        if mapping:
+            self.lines += [f"{indent}x = O{src}_{sc}[{j}]", f"{indent}I{i}_{c}[{k}] = M{i}_{c}_{k}.get(x, x)"]
+        else:
+            self.lines.append(f"{indent}I{i}_{c}[{k}] = O{src}_{sc}[{j}]")
+
+    def op_set(self, indent: str, i: int) -> None:
+        self.check(indent, i, f"sr{i}(c{i}, vi{i}, {self.blocks[i].n_in}, I{i})", "fmi2SetReal")
+
+    def op_cset(self, indent: str, i: int, c: int) -> None:
+        self.check(indent, i, f"S{i}_{c}(I{i}_{c})", f"fmi2Set{FMI_NAME[self.blocks[i].channels[c].kind]}")
+
+    def op_step(self, indent: str, i: int, multiple: int | None, last: str, partial: bool) -> None:
+        start = "t" if multiple is None else self.time.expr(f"(n // {multiple}) * {multiple}")
+        N, m = self.time.ticks, self.blocks[i].multiple
+        tick = N - 1 if last == "end" else ((N - 1) // m) * m
+        h = f"(h{i} if n != {tick} else hl{i})" if partial else f"h{i}"
+        self.check(indent, i, f"ds{i}(c{i}, {start}, {h}, 1)", "fmi2DoStep")
+
+    def op_get(self, indent: str, i: int, private: bool) -> None:
         target = "P" if private else "O"
-        L.append(f"{indent}s = ds{i}(c{i}, {start}, {h}, 1)")
-        L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2DoStep', s)")
-        if b.n_out:
-            L.append(f"{indent}s = gr{i}(c{i}, vo{i}, {b.n_out}, {target}{i})")
-            L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2GetReal', s)")
-        for c, ch in enumerate(b.channels):
-            if ch.n_out:
-                L.append(f"{indent}s = G{i}_{c}({target}{i}_{c})")
-                L.append(f"{indent}if s > 1: return (n, {i}, 'fmi2Get{FMI_NAME[ch.kind]}', s)")
+        self.check(indent, i, f"gr{i}(c{i}, vo{i}, {self.blocks[i].n_out}, {target}{i})", "fmi2GetReal")
 
+    def op_cget(self, indent: str, i: int, c: int, private: bool) -> None:
+        target = "P" if private else "O"
+        self.check(indent, i, f"G{i}_{c}({target}{i}_{c})", f"fmi2Get{FMI_NAME[self.blocks[i].channels[c].kind]}")
 
-def _gauss_seidel(em: _Emitter, order: Sequence[int]) -> None:
-    """Each component in order: transfers, set, step (multi-rate: at the end of its period)."""
-    N = em.time.ticks
-    for idx in order:
-        b = em.blocks[idx]
-        i, m = b.index, b.multiple
-        h = f"h{i}" if not em.partial(b) else f"(h{i} if n != {N - 1} else hl{i})"
-        if m == 1:
-            em.transfers(b, IND)
-            em.set_inputs(b, IND)
-            em.step(b, IND, "t", False, h)
-        else:
-            last = f" or n == {N - 1}" if em.partial(b) else ""
-            em.lines.append(f"{IND}if (n + 1) % {m} == 0{last}:")
-            em.transfers(b, IND + "    ")
-            em.set_inputs(b, IND + "    ")
-            em.step(b, IND + "    ", em.time.expr(f"(n // {m}) * {m}"), False, h)
+    def op_publish(self, indent: str, i: int) -> None:
+        self.lines.append(f"{indent}O{i}[:] = P{i}")
 
-
-def _jacobi(em: _Emitter, order: Sequence[int]) -> None:
-    """Every component reads the values of ``t_n``, then all step; multi-rate outputs are
-    published at the end of their period (a partial last period starts with the shorter step)."""
-    N, L = em.time.ticks, em.lines
-    for idx in order:
-        b = em.blocks[idx]
-        cond = "" if b.multiple == 1 else f"if n % {b.multiple} == 0:"
-        inner = IND if not cond else IND + "    "
-        if cond and (b.transfers or b.n_in or any(ch.transfers or ch.n_in for ch in b.channels)):
-            L.append(f"{IND}{cond}")
-        em.transfers(b, inner)
-        em.set_inputs(b, inner)
-    for idx in order:
-        b = em.blocks[idx]
-        i, m = b.index, b.multiple
-        p0 = ((N - 1) // m) * m
-        h = f"h{i}" if not em.partial(b) else f"(h{i} if n != {p0} else hl{i})"
-        if m == 1:
-            em.step(b, IND, "t", False, h)
-        else:
-            L.append(f"{IND}if n % {m} == 0:")
-            em.step(b, IND + "    ", "t", True, h)
-    for idx in order:
-        b = em.blocks[idx]
-        if b.multiple > 1 and (b.n_out or any(ch.n_out for ch in b.channels)):
-            last = f" or n == {N - 1}" if em.partial(b) else ""
-            L.append(f"{IND}if (n + 1) % {b.multiple} == 0{last}:")
-            if b.n_out:
-                L.append(f"{IND}    O{b.index}[:] = P{b.index}")
-            for c, ch in enumerate(b.channels):
-                if ch.n_out:
-                    L.append(f"{IND}    O{b.index}_{c}[:] = P{b.index}_{c}[:{ch.n_out}]")
+    def op_cpublish(self, indent: str, i: int, c: int) -> None:
+        self.lines.append(f"{indent}O{i}_{c}[:] = P{i}_{c}[:{self.blocks[i].channels[c].n_out}]")
 
 
 def _channel_index(block: Block, kind: str) -> int:

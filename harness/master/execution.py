@@ -41,6 +41,7 @@ from ipcosim.harness.master.algorithm import (
     gauss_seidel_order,
     step_multiples,
 )
+from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
 from ipcosim.harness.master.manipulators import Manipulator, Overrides
 from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError
@@ -138,6 +139,12 @@ class Execution:
     task_metrics : callable, optional
         The task's metrics of the recorded rows (see :data:`TaskMetrics`), added to the
         result's metrics; None: only the run's own (timing, observers).
+    loop : str
+        The stepping loop: ``auto`` (default: the C loop of :mod:`ipcosim.harness.master.cloop`
+        when every component's stepping functions are C functions, the system has Real
+        connectors only and a C compiler is found; else the Python loop), ``c`` (the C loop, or
+        :class:`~ipcosim.harness.master.cloop.LoopUnavailable` saying why not) or ``python``.
+        The metadata's ``loop`` says which ran and why.
     """
 
     def __init__(self, system: System, step: float, stop_time: float, start_time: float | None = None,
@@ -145,9 +152,14 @@ class Execution:
                  observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
                  slave_factory: SlaveFactory | None = None, unzip_dirs: Mapping[str, Path] | None = None,
                  record_every: int = 1, max_init_iterations: int = 20, writer: RowWriter | None = None,
-                 task_metrics: TaskMetrics | None = None) -> None:
+                 task_metrics: TaskMetrics | None = None, loop: str = "auto") -> None:
         if algorithm not in ALGORITHMS:
             raise StepSizeError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
+        if loop not in LOOPS:
+            raise ValueError(f"loop {loop!r}: expected one of {', '.join(LOOPS)}")
+        self.loop = loop
+        #: Which loop ran: ``c``, or ``python`` with the reason in parentheses when C was not used.
+        self.loop_used = ""
         self.system = system
         self.algorithm = algorithm
         start = system.scenario.experiment.start_time if start_time is None else float(start_time)
@@ -528,8 +540,31 @@ class Execution:
                 self.slaves[idx].exit_initialization_mode()
             for b in self.blocks:
                 self._get_outputs(b, self.start_time)
-        self._run_loop, self._loop_source = compile_loop(self.blocks, self.order, self.algorithm, self.timebase,
-                                                         self.record_every, self._typed_record())
+        self._run_loop, self._loop_source = self._compile_loop()
+
+    def _compile_loop(self) -> tuple[Callable[..., Any], str]:
+        """The stepping loop this run uses (see the ``loop`` parameter) and its source;
+        ``loop_used`` says which."""
+        if self.loop != "python":
+            why = ""
+            slow = python_functions(self.blocks)
+            if slow and self.loop == "auto":
+                why = "components stepped by Python functions: " + ", ".join(slow)
+            else:
+                try:
+                    cloop = CLoop(self.blocks, self.order, self.algorithm, self.timebase, self.record_every,
+                                  self.record.shape[1] * 8, ctypes.addressof(self.values_c))
+                    self.loop_used = "c"
+                    return cloop.run, cloop.source
+                except LoopUnavailable as exc:
+                    if self.loop == "c":
+                        raise LoopUnavailable(f"--loop c: the C stepping loop cannot run: {exc}") from None
+                    why = str(exc)
+            self.loop_used = f"python ({why})"
+        else:
+            self.loop_used = "python (forced)"
+        return compile_loop(self.blocks, self.order, self.algorithm, self.timebase, self.record_every,
+                            self._typed_record())
 
     def _sweep(self) -> list[str]:
         """One pass in step order: transfer, set inputs, read outputs; returns changed inputs."""
@@ -783,7 +818,8 @@ class Execution:
             "start_time": self.start_time, "stop_time": self.stop_time, "step": self.step_size,
             "ticks": self.n_ticks,
             "ticks_done": self.tick if error is not None or self.terminated_by else self.n_ticks,
-            "record_every": self.record_every, "order": self.component_order, "step_multiples": dict(self.multiples),
+            "record_every": self.record_every, "loop": self.loop_used or None, "order": self.component_order,
+            "step_multiples": dict(self.multiples),
             "initialization_iterations": self.init_iterations,
             "components": {i.name: {"model": i.model.name, "guid": i.model.guid,
                                     "fmu": str(i.model.path) if i.model.path else None,
