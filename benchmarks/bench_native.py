@@ -14,6 +14,7 @@ FMUs are built into a temporary folder. A missed target ends the module with an 
 from __future__ import annotations
 
 import os
+import shutil
 import statistics
 import tempfile
 import time
@@ -94,14 +95,12 @@ def _master_rtf(native: Path) -> dict[str, float]:
     return best
 
 
-def _libcosim_rtf(tmp: Path) -> float:
+def _libcosim_rtf(folder: Path) -> float:
+    """Best of three real-time factors of libcosim's ``simulate_until`` over 10 s, 1 ms steps."""
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
 
-    from ipcosim.harness.scenario.flavour import write_native_folder
-
     log_output_level(CosimLogLevel.ERROR)
-    folder = write_native_folder(SCENARIO, tmp / "ssp")
     best = 0.0
     for _ in range(3):
         execution = CosimExecution.from_ssp_file(str(folder), 1_000_000)
@@ -111,6 +110,21 @@ def _libcosim_rtf(tmp: Path) -> float:
         best = max(best, 10.0 / (time.perf_counter() - t0))
         execution.stop()
     return best
+
+
+def _trivial_folder(native: Path, dest: Path) -> Path:
+    """An SSP folder holding one native ``Setpoint`` and nothing else: libcosim's own cost per step."""
+    (dest / "resources").mkdir(parents=True)
+    shutil.copy(native / "Setpoint.fmu", dest / "resources" / "Setpoint.fmu")
+    (dest / "SystemStructure.ssd").write_text(
+        '<?xml version="1.0" encoding="UTF-8"?>\n'
+        '<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
+        'version="1.0" name="floor">\n  <ssd:System name="floor">\n    <ssd:Elements>\n'
+        '      <ssd:Component name="setpoint" type="application/x-fmu-sharedlibrary"'
+        ' source="resources/Setpoint.fmu"/>\n'
+        '    </ssd:Elements>\n  </ssd:System>\n  <ssd:DefaultExperiment startTime="0.0" stopTime="10.0"/>\n'
+        '</ssd:SystemStructureDescription>\n')
+    return dest
 
 
 def _sweep_ratio(python: Path, native: Path) -> tuple[float, float]:
@@ -158,7 +172,7 @@ def run() -> list[str]:
         c = _cycles(tmp / "fmus", tmp / "fmus-native", tmp)
         master = _master_rtf(tmp / "fmus-native")
         try:
-            libcosim: float | None = _libcosim_rtf_native(tmp)
+            libcosim: tuple[float, float] | None = _libcosim_rtf_native(tmp)
         except ImportError:
             libcosim = None
         sweep_py, sweep_native = _sweep_ratio(tmp / "fmus", tmp / "fmus-native")
@@ -172,8 +186,10 @@ def run() -> list[str]:
     if libcosim is None:
         lines.append("libcosim: libcosimpy not installed")
     else:
-        lines.append(f"{SCENARIO} on native FMUs, libcosim: real-time factor {libcosim:.0f}x (target >= "
-                     f"{LIBCOSIM_TARGET:g}x: {'ok' if libcosim >= LIBCOSIM_TARGET else 'MISSED'})")
+        rtf, floor = libcosim
+        lines.append(f"{SCENARIO} on native FMUs, libcosim: real-time factor {rtf:.0f}x (target >= "
+                     f"{LIBCOSIM_TARGET:g}x: {'ok' if rtf >= LIBCOSIM_TARGET else 'MISSED'}); libcosim alone with one "
+                     f"trivial native FMU: {floor:.0f}x ({1e3 / floor:.1f} us per 1 ms step of its own)")
     lines.append(f"robustness sweep of {SCENARIO} ({SWEEP_RUNS} runs of 10 s each, one worker): python "
                  f"{sweep_py:.2f} s/run, native {sweep_native:.3f} s/run, ratio {sweep_py / sweep_native:.1f}x "
                  f"(a 1000-run sweep: {1000 * sweep_py / 60:.0f} min vs {1000 * sweep_native / 60:.1f} min)")
@@ -187,13 +203,15 @@ def run() -> list[str]:
     return lines
 
 
-def _libcosim_rtf_native(tmp: Path) -> float:
-    """libcosim on the scenario folder written for the native FMUs in ``tmp/fmus-native``."""
+def _libcosim_rtf_native(tmp: Path) -> tuple[float, float]:
+    """libcosim on the scenario folder written for the native FMUs in ``tmp/fmus-native``, and on one
+    trivial native FMU alone (the floor of libcosim's own per-step cost)."""
     import ipcosim.harness.scenario.flavour as flavour
 
     saved = flavour.native_fmu_dir
     flavour.native_fmu_dir = lambda: tmp / "fmus-native"  # type: ignore[assignment]
     try:
-        return _libcosim_rtf(tmp)
+        scenario = _libcosim_rtf(flavour.write_native_folder(SCENARIO, tmp / "ssp"))
     finally:
         flavour.native_fmu_dir = saved  # type: ignore[assignment]
+    return scenario, _libcosim_rtf(_trivial_folder(tmp / "fmus-native", tmp / "floor"))
