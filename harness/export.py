@@ -39,10 +39,15 @@ class ExportOptions:
     out: Path
     parameter_set: str | None = None
     model_identifier: str | None = None
+    fmu_dirs: tuple[Path, ...] = ()
 
 
 class ExportError(IpcosimError, ValueError):
     """The scenario cannot be exported as one FMU (names the scenario, component or file)."""
+
+
+#: Said before a flavour error: the export has no Python flavour to fall back to.
+NATIVE_ONLY = "only the native flavour can be exported"
 
 
 def identifier(scenario_name: str) -> str:
@@ -62,12 +67,17 @@ def export(options: ExportOptions) -> Path:
         and parameter), no C compiler, an unwritable ``out`` (one line each).
     """
     from ipcosim.harness.api import Prepared
+    from ipcosim.harness.scenario.flavour import FlavourError
 
     out = Path(options.out)
     _check_out(out)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        prepared = Prepared(options.scenario, parameter_set=options.parameter_set, fmus="native", warn=False)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            prepared = Prepared(options.scenario, parameter_set=options.parameter_set, fmus="native", warn=False,
+                                fmu_dirs=list(options.fmu_dirs))
+    except FlavourError as exc:
+        raise ExportError(f"{NATIVE_ONLY}: {exc}") from None
     with prepared:
         execution = prepared.execution()
         spec = container_spec(prepared.system, [execution.instances[i].name for i in execution.order],
@@ -77,11 +87,11 @@ def export(options: ExportOptions) -> Path:
 
 
 def _check_out(out: Path) -> None:
+    if out.is_dir():
+        raise ExportError(f"--out {out}: is a folder, not a file")
     if out.suffix != ".fmu":
         raise UsageError(f"--out {out}: the file name must end in .fmu")
     parent = out.parent if str(out.parent) else Path(".")
-    if out.is_dir():
-        raise ExportError(f"--out {out}: is a folder, not a file")
     if not parent.is_dir() or not os.access(parent, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
         raise ExportError(f"--out {out}: cannot write there ({parent} is not a writable folder)"
                           if not parent.is_dir() or not os.access(parent, os.W_OK)

@@ -120,9 +120,10 @@ class _Component:
         self.vars: dict[str, _Var] = {}
         for sv in root.iter("ScalarVariable"):
             typed = next(iter(sv))
-            self.vars[sv.get("name")] = _Var(sv.get("name"), int(sv.get("valueReference")), sv.get("causality", "local"),
-                                             sv.get("variability", "continuous"), typed.tag, typed.get("start"),
-                                             typed.get("unit"), sv.get("description", ""), sv.get("initial"))
+            self.vars[sv.get("name")] = _Var(
+                sv.get("name"), int(sv.get("valueReference")), sv.get("causality", "local"),
+                sv.get("variability", "continuous"), typed.tag, typed.get("start"), typed.get("unit"),
+                sv.get("description", ""), sv.get("initial"))
 
     def var(self, name: str, causality: str) -> _Var:
         v = self.vars.get(name)
@@ -206,32 +207,9 @@ def table_c(spec: ContainerSpec, comps: dict[str, _Component], lay: _Layout, gid
              '#include "container.h"', ""]
     rows = []
     for k, c in enumerate(spec.components):
-        comp = comps[c.name]
-        p = f"ipcosim_{comp.symbol}_fmi2"
-        lines += [f"/* {c.name}: {comp.model} */"]
-        lines += [f"fmi2{f}TYPE {p}{f};" for f in _FUNCTIONS]
-        lines += [f"static const ComponentFunctions fmi_{k} = {{", *(f"    {p}{f}," for f in _FUNCTIONS), "};"]
-        outs = [comp.var(o, "output").vr for o in c.outputs]
-        ins = [comp.var(i.name, "input").vr for i in c.inputs]
-        lines.append(f"static const fmi2ValueReference out_{k}[{max(len(outs), 1)}] = {{{_join(outs)}}};")
-        lines.append(f"static const fmi2ValueReference in_{k}[{max(len(ins), 1)}] = {{{_join(ins)}}};")
-        src = []
-        for i in c.inputs:
-            add = lay.slot[REFERENCE] if i.add_reference else -1
-            if i.source is None:
-                src.append(f"    {{SOURCE_INPUT, -1, {lay.slot[f'{c.name}.{i.name}']}, 1.0, 0.0, {add}}},")
-            else:
-                sc, so = i.source
-                src_spec = spec.components[pos[sc]]
-                if so not in src_spec.outputs:
-                    raise ContainerError(f"component {c.name}: input {i.name} reads {sc}.{so}, which is not among "
-                                         f"{sc}'s outputs read by the loop")
-                src.append(f"    {{SOURCE_OUTPUT, {pos[sc]}, {src_spec.outputs.index(so)}, "
-                           f"{tracer.c_double(float(i.factor))}, {tracer.c_double(float(i.offset))}, {add}}},")
-        lines += [f"static const InputSource src_{k}[{max(len(src), 1)}] = {{",
-                  *(src or ["    {SOURCE_INPUT, -1, 0, 1.0, 0.0, -1},"]), "};", ""]
-        rows.append(f'    {{"{c.name}", "{comp.guid}", &fmi_{k}, {c.multiple}, {len(outs)}, out_{k}, {len(ins)}, '
-                    f"in_{k}, src_{k}}},")
+        lines += _component_c(spec, k, comps[c.name], lay, pos)
+        rows.append(f'    {{"{c.name}", "{comps[c.name].guid}", &fmi_{k}, {c.multiple}, {len(c.outputs)}, out_{k}, '
+                    f"{len(c.inputs)}, in_{k}, src_{k}}},")
     vars_rows = [f'    {{{v.vr}u, {v.vr}, {_TYPE[v.type]}, {dict(parameter=1, input=2).get(v.causality, 0)}, '
                  f'"{v.name}"}},' for v in lay.vars]
     params = [f"    {{{lay.slot[f'{c.name}.{v.name}']}, {k}, {v.vr}u, {_TYPE[v.type]}}},"
@@ -255,6 +233,34 @@ def table_c(spec: ContainerSpec, comps: dict[str, _Component], lay: _Layout, gid
         f"    components, {len(rows)}, order, parameters, {len(params)}, outputs, {len(outputs)},",
         f"    {step_ns}LL, {tracer.c_double(float(spec.step))}, {spec.max_init_iterations}}};", ""]
     return "\n".join(lines)
+
+
+def _component_c(spec: ContainerSpec, k: int, comp: _Component, lay: _Layout, pos: dict[str, int]) -> list[str]:
+    """Component ``k``'s part of the table: its prefixed FMI functions, value references, input sources."""
+    c = spec.components[k]
+    p = f"ipcosim_{comp.symbol}_fmi2"
+    lines = [f"/* {c.name}: {comp.model} */"]
+    lines += [f"fmi2{f}TYPE {p}{f};" for f in _FUNCTIONS]
+    lines += [f"static const ComponentFunctions fmi_{k} = {{", *(f"    {p}{f}," for f in _FUNCTIONS), "};"]
+    outs = [comp.var(o, "output").vr for o in c.outputs]
+    ins = [comp.var(i.name, "input").vr for i in c.inputs]
+    lines.append(f"static const fmi2ValueReference out_{k}[{max(len(outs), 1)}] = {{{_join(outs)}}};")
+    lines.append(f"static const fmi2ValueReference in_{k}[{max(len(ins), 1)}] = {{{_join(ins)}}};")
+    src = []
+    for i in c.inputs:
+        add = lay.slot[REFERENCE] if i.add_reference else -1
+        if i.source is None:
+            src.append(f"    {{SOURCE_INPUT, -1, {lay.slot[f'{c.name}.{i.name}']}, 1.0, 0.0, {add}}},")
+            continue
+        sc, so = i.source
+        src_spec = spec.components[pos[sc]]
+        if so not in src_spec.outputs:
+            raise ContainerError(f"component {c.name}: input {i.name} reads {sc}.{so}, which is not among "
+                                 f"{sc}'s outputs read by the loop")
+        src.append(f"    {{SOURCE_OUTPUT, {pos[sc]}, {src_spec.outputs.index(so)}, "
+                   f"{tracer.c_double(float(i.factor))}, {tracer.c_double(float(i.offset))}, {add}}},")
+    return lines + [f"static const InputSource src_{k}[{max(len(src), 1)}] = {{",
+                    *(src or ["    {SOURCE_INPUT, -1, 0, 1.0, 0.0, -1},"]), "};", ""]
 
 
 def _join(items: Any) -> str:
