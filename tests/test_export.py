@@ -245,3 +245,36 @@ def test_bad_input_ends_in_one_line(native_fmus: tuple[Path, Path], tmp_path: Pa
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no C compiler found" in err, err
     assert not (tmp_path / "a.fmu").exists()
+
+
+def test_unconnected_inputs_become_container_inputs(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
+    """A loop left open (setpoint and LQR without the plant): the controller's measurement inputs are
+    the container's inputs ``controller.<input>`` and act as on the controller FMU alone."""
+    import fmpy
+
+    from ipcosim.fmus.native.container import ComponentSpec, ContainerSpec, InputSpec, build_container
+
+    native = native_fmus[1]
+    spec = ContainerSpec(
+        name="OpenLoop", description="setpoint and controller", step=0.001, order=("setpoint", "controller"),
+        outputs=(("controller", "voltage"),),
+        components=(
+            ComponentSpec("setpoint", native / "Setpoint.fmu", 1, (), ("reference",)),
+            ComponentSpec("controller", native / "LQRSingleMass.fmu", 1,
+                          (InputSpec("reference", ("setpoint", "reference"), add_reference=True),
+                           InputSpec("cart_position"), InputSpec("pendulum_angle")), ("voltage",))))
+    fmu = build_container(spec, tmp_path / "open.fmu")
+    inputs = {v.name: v for v in fmpy.read_model_description(str(fmu)).modelVariables if v.causality == "input"}
+    assert sorted(inputs) == ["controller.cart_position", "controller.pendulum_angle", "reference"]
+    assert inputs["controller.cart_position"].unit == "m"
+    signal = np.array([(0.0, 0.01, 0.002), (0.05, 0.01, 0.002), (0.05, -0.02, 0.0), (0.2, -0.02, 0.0)],
+                      dtype=[("time", float), ("controller.cart_position", float),
+                             ("controller.pendulum_angle", float)])
+    ours = fmpy.simulate_fmu(str(fmu), stop_time=0.2, step_size=0.001, output_interval=0.001, input=signal)
+    alone_signal = signal.copy()
+    alone_signal.dtype.names = ("time", "cart_position", "pendulum_angle")
+    alone = fmpy.simulate_fmu(str(native / "LQRSingleMass.fmu"), stop_time=0.2, step_size=0.001,
+                              output_interval=0.001, input=alone_signal, start_values={"reference": 0.05})
+    assert np.array_equal(ours["controller.voltage"], alone["voltage"])
+    u = ours["controller.voltage"]
+    assert len(set(u[:50])) > 1 and u[60] != u[40]  # the inputs act, and the change at 0.05 s too
