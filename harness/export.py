@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Mapping
 
 from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.native.container import ComponentSpec, ContainerSpec, InputSpec, build_container, c_name
@@ -32,14 +33,17 @@ SETPOINT_MODEL = "Setpoint"
 @dataclass(frozen=True)
 class ExportOptions:
     """What ``ipcosim export`` does: the scenario (name or folder), the FMU file to write, and
-    optionally a parameter set of the scenario and the model identifier (default from the
-    scenario's name)."""
+    optionally a parameter set of the scenario, the model identifier (default from the
+    scenario's name), extra FMU folders and parameter values (``{"controller.sample_period":
+    0.002}``, the grammar and the native redesign of ``ipcosim run --set``) that become the
+    FMU's parameter start values."""
 
     scenario: str
     out: Path
     parameter_set: str | None = None
     model_identifier: str | None = None
     fmu_dirs: tuple[Path, ...] = ()
+    set: Mapping[str, Any] = field(default_factory=dict)  # noqa: A003 -- the option's name (as RunOptions.set)
 
 
 class ExportError(IpcosimError, ValueError):
@@ -66,7 +70,7 @@ def export(options: ExportOptions) -> Path:
         An unknown scenario, a scenario the native flavour cannot run (it names the component
         and parameter), no C compiler, an unwritable ``out`` (one line each).
     """
-    from ipcosim.harness.api import Prepared
+    from ipcosim.harness.api import Prepared, resolve_relative
     from ipcosim.harness.scenario.flavour import FlavourError
 
     out = Path(options.out)
@@ -79,10 +83,10 @@ def export(options: ExportOptions) -> Path:
     except FlavourError as exc:
         raise ExportError(f"{NATIVE_ONLY}: {exc}") from None
     with prepared:
-        execution = prepared.execution()
+        execution = prepared.execution(overrides=resolve_relative(prepared.system, options.set))
         spec = container_spec(prepared.system, [execution.instances[i].name for i in execution.order],
                               execution.multiples, execution.step_size,
-                              options.model_identifier or identifier(prepared.scenario.name))
+                              options.model_identifier or identifier(prepared.scenario.name), execution.overrides)
     return build_container(spec, out)
 
 
@@ -98,11 +102,19 @@ def _check_out(out: Path) -> None:
                           else f"--out {out}: the file is not writable")
 
 
-def container_spec(system: System, order: list[str], multiples: dict[str, int], step: float,
-                   name: str) -> ContainerSpec:
-    """The :class:`ContainerSpec` of a bound native system, stepped as the master would."""
+def container_spec(system: System, order: list[str], multiples: dict[str, int], step: float, name: str,
+                   overrides: Mapping[tuple[str, str], Any] | None = None) -> ContainerSpec:
+    """The :class:`ContainerSpec` of a bound native system, stepped as the master would
+    (``overrides``: parameter values by (component, parameter), as the execution holds them)."""
+    overrides = dict(overrides or {})
+    for (comp, var), value in overrides.items():
+        if system.instance(comp).model.variables[var].causality != "parameter":
+            raise ExportError(f"--set {comp}.{var}={value}: only parameters can be set for the export "
+                              "(the FMU's inputs are set by its host)")
     setpoints = {i.name for i in system.instances if i.model.name == SETPOINT_MODEL}
-    components = tuple(_component(inst, system, multiples[inst.name], setpoints) for inst in system.instances)
+    components = tuple(_component(inst, system, multiples[inst.name], setpoints,
+                                  {var: value for (comp, var), value in overrides.items() if comp == inst.name})
+                       for inst in system.instances)
     outputs = tuple((inst.name, v.name) for inst in system.instances if inst.name not in setpoints
                     for v in inst.outputs if v.type == "Real")
     description = (f"{system.scenario.name}: {system.scenario.description} The whole closed loop "
@@ -113,7 +125,8 @@ def container_spec(system: System, order: list[str], multiples: dict[str, int], 
                                                "(set the setpoint's amplitude to 0 to follow this input alone)")
 
 
-def _component(inst: Instance, system: System, multiple: int, setpoints: set[str]) -> ComponentSpec:
+def _component(inst: Instance, system: System, multiple: int, setpoints: set[str],
+               overrides: dict[str, Any]) -> ComponentSpec:
     if inst.model.path is None:
         raise ExportError(f"component {inst.name}: no FMU file")
     for v in inst.connectors:
@@ -130,4 +143,4 @@ def _component(inst: Instance, system: System, multiple: int, setpoints: set[str
                                     add_reference=link.src in setpoints))
     return ComponentSpec(name=inst.name, fmu=Path(inst.model.path), multiple=multiple, inputs=tuple(inputs),
                          outputs=tuple(v.name for v in inst.outputs),
-                         parameters={var.name: value for var, value in inst.parameters})
+                         parameters={**{var.name: value for var, value in inst.parameters}, **overrides})

@@ -232,6 +232,10 @@ def test_bad_input_ends_in_one_line(native_fmus: tuple[Path, Path], tmp_path: Pa
         (["single-mass-lqr", "--out", str(tmp_path / "missing" / "a.fmu")], "missing is not a writable folder"),
         (["single-mass-lqr", "--out", str(tmp_path)], "is a folder"),
         (["single-mass-lqr", "--out", str(tmp_path / "a.zip")], "must end in .fmu"),
+        (["single-mass-lqr", "--out", str(tmp_path / "a.fmu"), "--set", "controller.R=1"],
+         "the native flavour of LQRSingleMass has no parameter 'R'"),
+        (["single-mass-lqr", "--out", str(tmp_path / "a.fmu"), "--set", "controller.K_cart_position"],
+         "expected COMPONENT.VARIABLE=VALUE"),
     ]
     for argv, words in cases:
         assert main(["export", *argv, *fmu_dir]) == 1, argv
@@ -278,3 +282,25 @@ def test_unconnected_inputs_become_container_inputs(native_fmus: tuple[Path, Pat
     assert np.array_equal(ours["controller.voltage"], alone["voltage"])
     u = ours["controller.voltage"]
     assert len(set(u[:50])) > 1 and u[60] != u[40]  # the inputs act, and the change at 0.05 s too
+
+
+def test_multi_rate_loop_equals_the_scenario_run(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
+    """``--set controller.sample_period=0.002`` (redesigned as in ``ipcosim run``): the controller
+    steps every second tick, by the master's multi-rate rule, in the exported FMU too."""
+    from fmpy import read_model_description
+
+    from ipcosim.harness.api import run
+    from ipcosim.harness.export import ExportOptions, export
+
+    values = {"controller.sample_period": 0.002}
+    fmu = export(ExportOptions("single-mass-lqr", tmp_path / "mr.fmu", fmu_dirs=(native_fmus[1],), set=values))
+    start = {v.name: v.start for v in read_model_description(str(fmu)).modelVariables}
+    assert float(start["controller.sample_period"]) == 0.002
+    ref = run("single-mass-lqr", fmu_dirs=[native_fmus[1]], fmus="native", overrides=values).data
+    names = ["controller.voltage", "plant.cart_position", "plant.pendulum_angle", "plant.motor_current"]
+    for step in (0.001, 0.01):
+        worst = _worst(_simulate(fmu, step), ref, names, round(step / 1e-3))
+        print(f"multi-rate at {step:g} s: largest relative difference {max(worst.values()):.3g}")
+        assert max(worst.values()) <= 1e-9, worst
+    u = ref["controller.voltage"]
+    assert np.all(u[1::2] == u[0:-1:2]) and not np.all(u[2::2] == u[1:-1:2])  # held over two ticks

@@ -18,6 +18,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="bind this parameter set of the scenario (thesis, tuned...) instead of the default")
     p.add_argument("--model-identifier", metavar="NAME",
                    help="the FMU's model identifier (default: from the scenario's name, e.g. SingleMassLqrLoop)")
+    p.add_argument("--set", action="append", default=[], metavar="COMP.VAR=VALUE",
+                   help="a parameter's value in the FMU (its start value), as `ipcosim run --set`, e.g. "
+                        "--set controller.sample_period=0.002 (repeatable)")
     p.add_argument("--fmu-dir", action="append", default=[], type=Path, metavar="DIR",
                    help="extra folder to look for the native FMUs in (default build/fmus-native)")
     p.set_defaults(func=main)
@@ -25,8 +28,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.options import RunOptions
 
+    values = RunOptions.create(args.scenario, set=args.set).set  # the --set grammar of `ipcosim run`
     out = export(ExportOptions(args.scenario, args.out, args.parameter_set, args.model_identifier,
-                               tuple(args.fmu_dir)))
+                               tuple(args.fmu_dir), values))
     print(f"exported: {out}")
     return 0
