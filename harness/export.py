@@ -16,6 +16,7 @@ ordered exactly as ``ipcosim run SCENARIO --fmus native`` runs it (the same
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -87,6 +88,7 @@ def export(options: ExportOptions) -> Path:
         spec = container_spec(prepared.system, [execution.instances[i].name for i in execution.order],
                               execution.multiples, execution.step_size,
                               options.model_identifier or identifier(prepared.scenario.name), execution.overrides)
+        spec = dataclasses.replace(spec, start_time=execution.start_time, stop_time=execution.stop_time)
     return build_container(spec, out)
 
 

@@ -84,6 +84,8 @@ class ContainerSpec:
     outputs: tuple[tuple[str, str], ...]
     reference_description: str = ""
     max_init_iterations: int = 20
+    start_time: float = 0.0
+    stop_time: float | None = None  # the DefaultExperiment's, if given
 
 
 @dataclass
@@ -337,7 +339,10 @@ def model_description(spec: ContainerSpec, gid: str, files: list[str], lay: _Lay
     logs = ElementTree.SubElement(root, "LogCategories")
     for cat in ("logStatusDiscard", "logStatusError"):
         ElementTree.SubElement(logs, "Category", {"name": cat})
-    ElementTree.SubElement(root, "DefaultExperiment", {"stepSize": repr(float(spec.step))})
+    experiment = {"startTime": repr(float(spec.start_time)), "stepSize": repr(float(spec.step))}
+    if spec.stop_time is not None:
+        experiment["stopTime"] = repr(float(spec.stop_time))
+    ElementTree.SubElement(root, "DefaultExperiment", experiment)
     mv = ElementTree.SubElement(root, "ModelVariables")
     for v in lay.vars:
         attrs = {"name": v.name, "valueReference": str(v.vr), "causality": v.causality,
