@@ -20,6 +20,18 @@ def plant_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return {"single-mass": fmus["IP02SingleMass"], "double-mass": fmus["IP02DoubleMass"]}
 
 
+@pytest.fixture(scope="session")
+def native_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """(Python FMU folder, native FMU folder), built for this session (tests/test_native.py, test_export.py)."""
+    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.native.build import build_native
+
+    out = tmp_path_factory.mktemp("native")
+    build_all(out / "fmus")
+    build_native(out / "fmus", out / "fmus-native")
+    return out / "fmus", out / "fmus-native"
+
+
 @pytest.fixture
 def tracked(monkeypatch: pytest.MonkeyPatch) -> tuple[list, list]:
     """Every FMUSlave instantiated and freed during the test: ``(made, freed)``."""

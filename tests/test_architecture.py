@@ -5,7 +5,7 @@ Rooms (docs/architecture.md), lowest first; a room may import only rooms to its 
     errors  <-  fmus (physics, plant FMU glue, HIL card API)  <-  controllers (laws, controller
             FMU glue)  <-  fmus.native (the C generator: a build tool over both)
             <-  harness.master  <-  harness.scenario  <-  harness.hil (rig server, swap alias)
-            <-  harness.api  <-  harness.studies  <-  harness.cli
+            <-  harness.api, harness.export  <-  harness.studies  <-  harness.cli
 
 Every import counts, at module level or inside a function (a lazy import is still a
 dependency), except those under ``if TYPE_CHECKING:``, which only name types for readers and
@@ -29,6 +29,7 @@ FORBIDDEN = {
     "harness.scenario": ("harness.studies", "harness.cli", "harness.api"),
     "harness.hil": ("harness.studies", "harness.cli", "harness.api"),
     "harness.api": ("harness.studies", "harness.cli"),
+    "harness.export": ("harness.studies", "harness.cli"),
     "harness.studies": ("harness.cli",),
 }
 

@@ -128,18 +128,6 @@ def test_generated_rhs_agrees_with_python(kernels: ctypes.CDLL, name: str) -> No
 # ============================================================================ built FMUs
 
 
-@pytest.fixture(scope="session")
-def native_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """(Python FMU folder, native FMU folder), built for this session."""
-    from ipcosim.fmus.build import build_all
-    from ipcosim.fmus.native.build import build_native
-
-    out = tmp_path_factory.mktemp("native")
-    build_all(out / "fmus")
-    build_native(out / "fmus", out / "fmus-native")
-    return out / "fmus", out / "fmus-native"
-
-
 def _laws() -> dict[str, tuple[str, str]]:
     """{controller FMU name: (law, plant kind)}: every law on both plants, and the swing-up."""
     from ipcosim.controllers.catalog import KINDS, LAWS, model_name
