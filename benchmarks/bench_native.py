@@ -95,15 +95,15 @@ def _master_rtf(native: Path) -> dict[str, float]:
     return best
 
 
-def _libcosim_rtf(folder: Path) -> float:
-    """Best of three real-time factors of libcosim's ``simulate_until`` over 10 s, 1 ms steps."""
+def _libcosim_rtf(folder: Path, step_ns: int = 1_000_000) -> float:
+    """Best of three real-time factors of libcosim's ``simulate_until`` over 10 s (1 ms steps by default)."""
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
 
     log_output_level(CosimLogLevel.ERROR)
     best = 0.0
     for _ in range(3):
-        execution = CosimExecution.from_ssp_file(str(folder), 1_000_000)
+        execution = CosimExecution.from_ssp_file(str(folder), step_ns)
         t0 = time.perf_counter()
         if not execution.simulate_until(10_000_000_000):
             raise RuntimeError("libcosim: simulation failed")
@@ -112,16 +112,16 @@ def _libcosim_rtf(folder: Path) -> float:
     return best
 
 
-def _trivial_folder(native: Path, dest: Path) -> Path:
-    """An SSP folder holding one native ``Setpoint`` and nothing else: libcosim's own cost per step."""
+def _one_fmu_folder(fmu: Path, dest: Path) -> Path:
+    """An SSP folder holding one FMU and nothing else."""
     (dest / "resources").mkdir(parents=True)
-    shutil.copy(native / "Setpoint.fmu", dest / "resources" / "Setpoint.fmu")
+    shutil.copy(fmu, dest / "resources" / fmu.name)
     (dest / "SystemStructure.ssd").write_text(
         '<?xml version="1.0" encoding="UTF-8"?>\n'
         '<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
-        'version="1.0" name="floor">\n  <ssd:System name="floor">\n    <ssd:Elements>\n'
-        '      <ssd:Component name="setpoint" type="application/x-fmu-sharedlibrary"'
-        ' source="resources/Setpoint.fmu"/>\n'
+        'version="1.0" name="one">\n  <ssd:System name="one">\n    <ssd:Elements>\n'
+        f'      <ssd:Component name="{fmu.stem}" type="application/x-fmu-sharedlibrary"'
+        f' source="resources/{fmu.name}"/>\n'
         '    </ssd:Elements>\n  </ssd:System>\n  <ssd:DefaultExperiment startTime="0.0" stopTime="10.0"/>\n'
         '</ssd:SystemStructureDescription>\n')
     return dest
@@ -172,7 +172,7 @@ def run() -> list[str]:
         c = _cycles(tmp / "fmus", tmp / "fmus-native", tmp)
         master = _master_rtf(tmp / "fmus-native")
         try:
-            libcosim: tuple[float, float] | None = _libcosim_rtf_native(tmp)
+            libcosim: dict[str, float] | None = _libcosim_rtf_native(tmp)
         except ImportError:
             libcosim = None
         sweep_py, sweep_native = _sweep_ratio(tmp / "fmus", tmp / "fmus-native")
@@ -186,10 +186,13 @@ def run() -> list[str]:
     if libcosim is None:
         lines.append("libcosim: libcosimpy not installed")
     else:
-        rtf, floor = libcosim
+        rtf, floor = libcosim["scenario"], libcosim["floor"]
         lines.append(f"{SCENARIO} on native FMUs, libcosim: real-time factor {rtf:.0f}x (target >= "
                      f"{LIBCOSIM_TARGET:g}x: {'ok' if rtf >= LIBCOSIM_TARGET else 'MISSED'}); libcosim alone with one "
                      f"trivial native FMU: {floor:.0f}x ({1e3 / floor:.1f} us per 1 ms step of its own)")
+        lines.append(f"{SCENARIO} exported as one FMU (ipcosim export), libcosim: {libcosim['export 1 ms']:.0f}x at "
+                     f"1 ms communication steps, {libcosim['export 10 ms']:.0f}x at 10 ms (ten 1 ms ticks inside "
+                     f"each step; the same results)")
     lines.append(f"robustness sweep of {SCENARIO} ({SWEEP_RUNS} runs of 10 s each, one worker): python "
                  f"{sweep_py:.2f} s/run, native {sweep_native:.3f} s/run, ratio {sweep_py / sweep_native:.1f}x "
                  f"(a 1000-run sweep: {1000 * sweep_py / 60:.0f} min vs {1000 * sweep_native / 60:.1f} min)")
@@ -203,15 +206,22 @@ def run() -> list[str]:
     return lines
 
 
-def _libcosim_rtf_native(tmp: Path) -> tuple[float, float]:
-    """libcosim on the scenario folder written for the native FMUs in ``tmp/fmus-native``, and on one
-    trivial native FMU alone (the floor of libcosim's own per-step cost)."""
+def _libcosim_rtf_native(tmp: Path) -> dict[str, float]:
+    """libcosim's real-time factors: the scenario folder written for the native FMUs in ``tmp/fmus-native``
+    (1 ms steps); one trivial native FMU alone (the floor of libcosim's own per-step cost); the scenario
+    exported as one FMU (``ipcosim export``) at 1 ms and at 10 ms communication steps."""
     import ipcosim.harness.scenario.flavour as flavour
+    from ipcosim.harness.export import ExportOptions, export
 
     saved = flavour.native_fmu_dir
     flavour.native_fmu_dir = lambda: tmp / "fmus-native"  # type: ignore[assignment]
     try:
-        scenario = _libcosim_rtf(flavour.write_native_folder(SCENARIO, tmp / "ssp"))
+        out = {"scenario": _libcosim_rtf(flavour.write_native_folder(SCENARIO, tmp / "ssp"))}
+        loop = export(ExportOptions(SCENARIO, tmp / "SingleMassLqrLoop.fmu"))
     finally:
         flavour.native_fmu_dir = saved  # type: ignore[assignment]
-    return scenario, _libcosim_rtf(_trivial_folder(tmp / "fmus-native", tmp / "floor"))
+    out["floor"] = _libcosim_rtf(_one_fmu_folder(tmp / "fmus-native" / "Setpoint.fmu", tmp / "floor"))
+    folder = _one_fmu_folder(loop, tmp / "one")
+    out["export 1 ms"] = _libcosim_rtf(folder)
+    out["export 10 ms"] = _libcosim_rtf(folder, 10_000_000)
+    return out
