@@ -1,14 +1,20 @@
-"""The Python API of the master: :func:`run` for one run, :func:`prepare` for many runs of one
-scenario (parameter sweeps) that share the loaded, checked and extracted FMUs.
+"""The Python API of the master: :func:`run_master` for one run, :func:`prepare` for many runs of one
+scenario (parameter sweeps) that share the loaded, checked and extracted FMUs, and :func:`run_with`,
+the one path behind ``ipcosim run`` and :func:`ipcosim.run` (a :class:`RunOptions`).
+
+``run_master`` differs from the public :func:`ipcosim.run` in what it takes: the master's own
+keywords (plain ``overrides``, ``swaps`` with :class:`SwapTarget`, a loaded :class:`Scenario`)
+and its extension points (``observers``, ``manipulators``, ``record_every``), with no
+:class:`RunOptions` checks and no relative ``"1.1*nominal"`` values.
 
 Example::
 
     import ipcosim.harness
 
-    result = ipcosim.harness.run("single-mass-lqr", stop_time=5.0, overrides={"plant.Mp": 0.2})
+    result = ipcosim.harness.run_master("single-mass-lqr", stop_time=5.0, overrides={"plant.Mp": 0.2})
     result.metrics["settling_time_s"], result["plant.cart_position"]
 
-    with ipcosim.harness.prepare("double-mass-hsmc") as prepared:      # load and extract once
+    with ipcosim.prepare("double-mass-hsmc") as prepared:      # load and extract once
         for mp in (0.10, 0.12, 0.14):
             r = prepared.run(overrides={"plant.Mp": mp}, raise_on_error=False)
 """
@@ -227,7 +233,7 @@ class Prepared:
             overrides: Mapping[str, Any] | None = None, *, out_dir: str | os.PathLike[str] | None = None,
             variables: Sequence[str] | None = None, plot: bool = False, raise_on_error: bool = True,
             **kwargs: Any) -> Result:
-        """Run once; see :func:`ipcosim.harness.run` for the parameters.
+        """Run once; see :func:`ipcosim.harness.run_master` for the parameters.
 
         Raises
         ------
@@ -303,7 +309,7 @@ def prepare(scenario_or_path: str | os.PathLike[str] | Scenario, **kwargs: Any) 
     return Prepared(scenario_or_path, **kwargs)
 
 
-def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | None = None,
+def run_master(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | None = None,
         step: float | None = None, overrides: Mapping[str, Any] | None = None,
         swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None, *,
         parameter_set: str | None = None, algorithm: str = GAUSS_SEIDEL,
@@ -312,7 +318,10 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
         progress: bool = False, observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
         start_time: float | None = None, record_every: int = 1, raise_on_error: bool = True,
         fmus: str = "python") -> Result:
-    """Co-simulate a scenario once.
+    """Co-simulate a scenario once on the master, with its extension points (observers, manipulators).
+
+    The public, option-checked call is :func:`ipcosim.run`; this one is for code that plugs
+    into the master.
 
     Parameters
     ----------

@@ -362,7 +362,7 @@ def _resolve_fmu(source: str, src: _Source, fmu_dirs: Sequence[Path]) -> Path | 
         return p if p.is_file() else None
     rel = PurePosixPath(source)
     if src.is_archive:
-        return None  # archive members are extracted on preparation (see ipcosim.harness.prepare)
+        return None  # archive members are extracted on preparation (see ipcosim.prepare)
     direct = src.location / Path(*rel.parts)
     if direct.is_file():
         return direct.resolve()

@@ -1,4 +1,4 @@
-"""The co-simulation run spec: one scenario, run through the master (``ipcosim.harness.prepare``).
+"""The co-simulation run spec: one scenario, run through the master (``ipcosim.prepare``).
 
 Made in the parent from the scenario (parsed and bound, nothing extracted) so that
 ``--vary`` and ``--params`` are checked against the scenario's real parameters; each worker
