@@ -101,7 +101,7 @@ class Prepared:
                  workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
                  system: System | None = None, warn: bool = True, fmus: str = "python",
                  task_metrics: TaskMetrics | None = streamed_task_metrics) -> None:
-        from ipcosim.harness.scenario.flavour import check_flavour, native_fmu_dir, to_native
+        from ipcosim.harness.scenario.flavour import check_flavour
 
         t0 = time.perf_counter()
         #: Seconds spent loading, binding and extracting, charged to the first run's ``wall_time_s``.
@@ -124,28 +124,8 @@ class Prepared:
             self.system = system
             self.scenario = system.scenario
             return
-        if isinstance(scenario_or_path, Scenario):
-            scenario = scenario_or_path
-        else:
-            if fmus == "native":
-                fmu_dirs = [*(fmu_dirs or []), native_fmu_dir()]
-            scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
-        if parameter_set:
-            scenario = select_parameter_set(scenario, parameter_set)
-        if fmus == "native":
-            if scenario.location.is_file():
-                raise UsageError(f"--fmus native: {scenario.origin} is an archive carrying its own FMUs; give the "
-                                 "scenario's name or folder")
-            scenario, self._python_values = to_native(scenario)
-        self.scenario = scenario
-        if workdir is None:
-            self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
-            self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
-            signals.register_temp(self._tmp)  # removed also on a forced exit
-            work = self._tmp
-        else:
-            work = Path(workdir)
-            work.mkdir(parents=True, exist_ok=True)
+        self.scenario = scenario = self._load(scenario_or_path, parameter_set, fmu_dirs)
+        work = self._workdir(workdir)
         try:
             fmu_files = self._archive_members(scenario, work) if scenario.location.is_file() else {}
             self.system = bind(scenario, swaps=swaps, fmu_files=fmu_files)
@@ -157,6 +137,39 @@ class Prepared:
             self.close()  # nothing left in the temporary folder
             raise
         self.load_seconds = time.perf_counter() - t0
+
+    def _load(self, scenario_or_path: str | os.PathLike[str] | Scenario | None, parameter_set: str | None,
+              fmu_dirs: Sequence[str | os.PathLike[str]] | None) -> Scenario:
+        """The scenario parsed (unless given parsed), with ``parameter_set`` selected and, for
+        native FMUs, turned to their flavour (the Python flavour's values kept for overrides)."""
+        from ipcosim.harness.scenario.flavour import native_fmu_dir, to_native
+
+        if isinstance(scenario_or_path, Scenario):
+            scenario = scenario_or_path
+        else:
+            if self.fmus == "native":
+                fmu_dirs = [*(fmu_dirs or []), native_fmu_dir()]
+            scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
+        if parameter_set:
+            scenario = select_parameter_set(scenario, parameter_set)
+        if self.fmus == "native":
+            if scenario.location.is_file():
+                raise UsageError(f"--fmus native: {scenario.origin} is an archive carrying its own FMUs; give the "
+                                 "scenario's name or folder")
+            scenario, self._python_values = to_native(scenario)
+        return scenario
+
+    def _workdir(self, workdir: str | os.PathLike[str] | None) -> Path:
+        """The folder FMUs are extracted to: ``workdir``, or a temporary one removed by :meth:`close`
+        (and on a forced exit)."""
+        if workdir is not None:
+            work = Path(workdir)
+            work.mkdir(parents=True, exist_ok=True)
+            return work
+        self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
+        self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
+        signals.register_temp(self._tmp)
+        return self._tmp
 
     @staticmethod
     def _archive_members(scenario: Scenario, work: Path) -> dict[str, Path]:
