@@ -113,10 +113,10 @@ def _init_ms(fmu: Path, unzip: Path) -> tuple[float, float]:
 def loop_rtfs(ssp: Path) -> tuple[list[float], float]:
     """``loop_real_time_factor`` of ``LOOP_RUNS`` runs of one prepared scenario, and the best
     simulated seconds per CPU second of a whole run (reference: less disturbed by other load)."""
-    import ipcosim.harness as harness
+    import ipcosim
 
     rtfs, cpu = [], []
-    with harness.prepare(ssp) as prepared:
+    with ipcosim.prepare(ssp) as prepared:
         prepared.run()  # warm-up: libraries loaded, modules imported
         for _ in range(LOOP_RUNS):
             c0 = time.process_time()

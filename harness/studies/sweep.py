@@ -684,13 +684,11 @@ def run_sweep(spec: RunSpec, cases: Sequence[Case], *, out_dir: str | os.PathLik
     if len(set(indices)) != len(indices):
         raise ValueError("sweep cases must have unique indices")
     columns = columns_for(spec, cases)
-    plan = plan_hash(spec, cases)
     meta: dict[str, Any] = {
-        "scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan, "spec": spec.describe(),
-        "runs": len(cases), "seeds": {"cases": [c.seed for c in cases][:10000]},
+        "scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan_hash(spec, cases),
+        "spec": spec.describe(), "runs": len(cases), "seeds": {"cases": [c.seed for c in cases][:10000]},
         "packages": package_versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         **dict(extra_metadata or {})}
-
     done: dict[int, dict[str, Any]] = {}
     writer: ResultsWriter | None = None
     path: Path | None = None
@@ -702,17 +700,24 @@ def run_sweep(spec: RunSpec, cases: Sequence[Case], *, out_dir: str | os.PathLik
                  scheduler=scheduler, progress=progress)
 
     rows = sorted(done.values(), key=lambda r: r["index"])
+    counts = _close_results(rows, meta, time.monotonic() - t_start, writer, path)
+    return SweepResult(rows=rows, columns=columns, metadata=meta, path=path, resumed=resumed,
+                       elapsed_s=meta["elapsed_s"], counts=counts)
+
+
+def _close_results(rows: list[dict[str, Any]], meta: dict[str, Any], elapsed: float,
+                   writer: ResultsWriter | None, path: Path | None) -> dict[str, int]:
+    """Count the rows by status into ``meta`` (with the end time and ``elapsed`` [s]); with a
+    results file, rewrite it sorted by case and write the final ``metadata.json``. Returns the counts."""
     counts = {s: 0 for s in STATUSES}
     for r in rows:
         counts[r["status"]] = counts.get(r["status"], 0) + 1
-    elapsed = time.monotonic() - t_start
     meta.update({"finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "elapsed_s": elapsed, "counts": counts,
                  "success_rate": counts.get("ok", 0) / len(rows) if rows else None})
     if writer is not None and path is not None:
         writer.rewrite_sorted(rows)
         (path.parent / METADATA_FILE).write_text(json.dumps(meta, indent=2, default=repr) + "\n")
-    return SweepResult(rows=rows, columns=columns, metadata=meta, path=path, resumed=resumed,
-                       elapsed_s=elapsed, counts=counts)
+    return counts
 
 
 def _open_results(path: Path, meta: dict[str, Any], columns: list[str],
