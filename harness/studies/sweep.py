@@ -684,17 +684,10 @@ def run_sweep(spec: RunSpec, cases: Sequence[Case], *, out_dir: str | os.PathLik
     if len(set(indices)) != len(indices):
         raise ValueError("sweep cases must have unique indices")
     columns = columns_for(spec, cases)
-    meta: dict[str, Any] = {
-        "scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan_hash(spec, cases),
-        "spec": spec.describe(), "runs": len(cases), "seeds": {"cases": [c.seed for c in cases][:10000]},
-        "packages": package_versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        **dict(extra_metadata or {})}
-    done: dict[int, dict[str, Any]] = {}
-    writer: ResultsWriter | None = None
-    path: Path | None = None
-    if out_dir is not None:
-        path = Path(out_dir) / RESULTS_FILE
-        done, writer = _open_results(path, meta, columns, set(indices) if resume else None)
+    meta = _start_metadata(spec, cases, extra_metadata)
+    path = Path(out_dir) / RESULTS_FILE if out_dir is not None else None
+    done, writer = (_open_results(path, meta, columns, set(indices) if resume else None) if path is not None
+                    else ({}, None))
     resumed = len(done)
     _run_missing(spec, cases, done, columns, meta, writer, executor=executor, workers=workers,
                  scheduler=scheduler, progress=progress)
@@ -718,6 +711,14 @@ def _close_results(rows: list[dict[str, Any]], meta: dict[str, Any], elapsed: fl
         writer.rewrite_sorted(rows)
         (path.parent / METADATA_FILE).write_text(json.dumps(meta, indent=2, default=repr) + "\n")
     return counts
+
+
+def _start_metadata(spec: RunSpec, cases: Sequence[Case], extra: Mapping[str, Any] | None) -> dict[str, Any]:
+    """What ``metadata.json`` records at the start: the scenario, the plan's identity, the seeds
+    (the first 10 000), package versions, the start time and ``extra``."""
+    return {"scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan_hash(spec, cases),
+            "spec": spec.describe(), "runs": len(cases), "seeds": {"cases": [c.seed for c in cases][:10000]},
+            "packages": package_versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **dict(extra or {})}
 
 
 def _open_results(path: Path, meta: dict[str, Any], columns: list[str],
