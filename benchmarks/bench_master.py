@@ -20,7 +20,7 @@ import warnings
 from typing import Any
 
 from benchmarks.bench import target
-from ipcosim.harness.scenario.ssp import BUILD_SSP_DIR
+from ipcosim.harness.paths import BUILD_SSP_DIR
 
 SCENARIOS = ("single-mass-lqr", "double-mass-hsmc")
 REPEATS = 5

@@ -139,7 +139,7 @@ def run() -> list[str]:
     """Lines for ``make bench``; raises TargetMissed (after the figures) when a target is missed."""
     from benchmarks import bench_plant
     from ipcosim.fmus.build import ROOT
-    from ipcosim.harness.scenario.ssp import BUILD_SSP_DIR
+    from ipcosim.harness.paths import BUILD_SSP_DIR
 
     fmu_dir = ROOT / "build" / "fmus"
     with tempfile.TemporaryDirectory(prefix="ipcosim-bench-") as tmp:

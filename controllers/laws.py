@@ -27,7 +27,8 @@ from dataclasses import dataclass, fields
 from operator import mul
 from typing import Any, Sequence
 
-from ipcosim.controllers.errors import ControllerParameterError, DesignError, IpcosimError
+from ipcosim.controllers.errors import ControllerParameterError, DesignError
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.expm import Matrix, as_matrix, expm
 from ipcosim.fmus.physics import MEASURED
 

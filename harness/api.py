@@ -29,8 +29,8 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from ipcosim.errors import UsageError
 from ipcosim.fmus.task import streamed_task_metrics
-from ipcosim.harness.errors import UsageError
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
@@ -38,18 +38,11 @@ from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
 from ipcosim.harness.master.slave import FMUSlave, load_library
+from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
-from ipcosim.harness.scenario.system import (
-    SwapTarget,
-    System,
-    bind,
-    default_step,
-    default_stop_time,
-    warn_all,
-    with_overrides,
-)
+from ipcosim.harness.scenario.system import SwapTarget, bind, default_step, default_stop_time, warn_all, with_overrides
 
 
 def plot_run(result: Result, path: Path | None = None) -> Any:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.results import Result
 from ipcosim.harness.options import RunOptions
 

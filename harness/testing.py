@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
+from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.task import ANGLE_COLUMNS, POSITION_COLUMNS, REFERENCE_COLUMNS, first_column
-from ipcosim.harness.errors import IpcosimError, UsageError
 
 if TYPE_CHECKING:  # pragma: no cover
     from ipcosim.harness.master.results import Result

@@ -72,7 +72,7 @@ def available_scenarios() -> list[str]:
     from ipcosim.harness.studies.report import SCENARIOS
 
     try:
-        from ipcosim.harness.scenario.ssp import SCENARIO_DIR
+        from ipcosim.harness.paths import SCENARIO_DIR
     except ImportError:
         return []
     found = sorted(p.name for p in SCENARIO_DIR.iterdir() if (p / "SystemStructure.ssd").exists()) \
@@ -105,7 +105,7 @@ def main(args: argparse.Namespace) -> int:
     sweep of each, then write the report, ``metrics.csv`` and ``metrics.json``."""
     if args.thesis_claims:
         return thesis_claims(Path(args.out))
-    from ipcosim.harness.errors import IpcosimError, UsageError
+    from ipcosim.errors import IpcosimError, UsageError
     from ipcosim.harness.studies.report import render
     from ipcosim.harness.studies.sweep import open_executor, package_versions
 
@@ -157,7 +157,7 @@ def main(args: argparse.Namespace) -> int:
 def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """The run spec of each scenario, by name; a scenario that cannot be loaded gets an error row
     in ``results`` instead. Missing FMUs (a fresh checkout) are built once, as ``ipcosim build`` does."""
-    from ipcosim.harness.errors import IpcosimError
+    from ipcosim.errors import IpcosimError
     from ipcosim.harness.studies.specs import spec_for
     from ipcosim.harness.studies.sweep import one_line
 
@@ -172,7 +172,7 @@ def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[s
                 if built or "ipcosim build" not in str(exc):
                     raise
                 from ipcosim.fmus.build import build_all
-                from ipcosim.harness.scenario.ssp import BUILD_FMU_DIR
+                from ipcosim.harness.paths import BUILD_FMU_DIR
 
                 print(f"compare: FMUs missing; building them into {BUILD_FMU_DIR}", file=sys.stderr)
                 build_all(BUILD_FMU_DIR)
@@ -217,7 +217,8 @@ def _robustness(names: list[str], executor: Any, args: argparse.Namespace, out: 
     under ``out/robustness/<scenario>/``, summarized by scenario."""
     from ipcosim.harness.studies import robustness as rob
     from ipcosim.harness.studies.specs import for_executor, spec_for
-    from ipcosim.harness.studies.sweep import make_cases, parse_all, run_sweep
+    from ipcosim.harness.studies.sweep import run_sweep
+    from ipcosim.harness.studies.vary import make_cases, parse_all
 
     summaries: dict[str, dict[str, Any]] = {}
     for name in names:

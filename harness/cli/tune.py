@@ -61,7 +61,7 @@ def _scenario_dir(scenario: str) -> Path | None:
     if path.suffix == ".ssp" and path.exists():
         return path.parent
     try:
-        from ipcosim.harness.scenario.ssp import SCENARIO_DIR
+        from ipcosim.harness.paths import SCENARIO_DIR
     except ImportError:
         return None
     candidate = SCENARIO_DIR / scenario
@@ -70,7 +70,7 @@ def _scenario_dir(scenario: str) -> Path | None:
 
 def _install_path(args: argparse.Namespace) -> Path:
     """Where ``--install`` puts the tuned set: ``autotuned.ssv`` in the scenario's folder."""
-    from ipcosim.harness.errors import UsageError
+    from ipcosim.errors import UsageError
 
     folder = _scenario_dir(args.scenario)
     if folder is None or Path(args.scenario).suffix == ".ssp":

@@ -16,7 +16,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from ipcosim.harness.errors import IpcosimError, UsageError
+from ipcosim.errors import IpcosimError, UsageError
 
 #: Draws a result's figure: ``plotter(result, path or None)`` (see :attr:`Result.plotter`).
 Plotter = Callable[["Result", "Path | None"], Any]

@@ -25,8 +25,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from lxml import etree
 
-from ipcosim.harness.errors import IpcosimError
-from ipcosim.harness.paths import BUILD_FMU_DIR, BUILD_SSP_DIR, SCENARIO_DIR  # noqa: F401 -- re-exported
+from ipcosim.errors import IpcosimError
+from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
 
 #: XML namespaces of SSP 1.0 (as in fmpy.ssp.ssd) plus the OSP annotations libcosim reads.
 NS = {

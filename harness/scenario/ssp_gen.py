@@ -18,7 +18,8 @@ from pathlib import Path
 from typing import Any, Mapping
 from xml.sax.saxutils import quoteattr
 
-from ipcosim.harness.scenario.ssp import NS, SCENARIO_DIR
+from ipcosim.harness.paths import SCENARIO_DIR
+from ipcosim.harness.scenario.ssp import NS
 
 PLANTS = {
     "single-mass": {"model": "IP02SingleMass", "suffix": "SingleMass", "description": "single-mass cart"},

@@ -16,12 +16,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from ipcosim.harness.errors import IpcosimError
-from ipcosim.harness.master.system import (  # noqa: F401 -- the bound system's types, re-exported
-    _KIND,
-    KINDS,
+from ipcosim.errors import IpcosimError
+from ipcosim.harness.master.system import (
     SSP_TYPE,
-    SUPPORTED_CONNECTION_TYPES,
     TRANSFORMATION_TYPES,
     Instance,
     Link,

@@ -13,7 +13,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 
 
 class CrossCheckError(IpcosimError, RuntimeError):

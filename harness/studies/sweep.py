@@ -48,7 +48,7 @@ from importlib import metadata as importlib_metadata
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping, Sequence, TextIO
 
-from ipcosim.harness.errors import IpcosimError, UsageError
+from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.harness.studies.runners import STATUSES, Runner, RunSpec, stable_hash
 from ipcosim.harness.studies.vary import Case, Vary, VaryError, case_seed, make_cases, parse_all, parse_vary
 

@@ -21,7 +21,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ipcosim.harness.errors import UsageError
+from ipcosim.errors import UsageError
 from ipcosim.harness.studies import cost as costmod
 from ipcosim.harness.studies.robustness import fmt
 from ipcosim.harness.studies.runners import RunSpec

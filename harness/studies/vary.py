@@ -26,7 +26,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from ipcosim.harness.errors import UsageError
+from ipcosim.errors import UsageError
 
 FORMS_HELP = ("uniform(a,b), normal(mean,std), grid(start,stop,n), [v1,v2,...] or a number, "
               "each optionally '*nominal'")
