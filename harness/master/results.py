@@ -9,7 +9,6 @@ import json
 import math
 import os
 import tempfile
-import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
@@ -140,19 +139,6 @@ def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> li
     return [c for c in cols if c in chosen]
 
 
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename, so
-    that an interrupted write never leaves a truncated file."""
-    tmp = path.with_name(f".{path.name}.partial")
-    try:
-        with open(tmp, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
 class OutputFolderError(IpcosimError, OSError):
     """The output folder cannot be created or written."""
 
@@ -223,7 +209,6 @@ class RowWriter:
                 self._spool.close()
                 raise OutputFolderError(f"{self.csv_path}: cannot write results ({exc.strerror})") from None
             self._write_csv((",".join(self.csv_columns) + "\n").encode())
-        self.last_write = _time.monotonic()
 
     def _write_csv(self, data: bytes) -> None:
         from ipcosim.harness.master import signals
@@ -246,7 +231,6 @@ class RowWriter:
         if self._csv_fd is not None:
             self._write_csv(csv_text(block, self.csv_columns).encode())
         self.rows += len(block)
-        self.last_write = _time.monotonic()
 
     def _to_spool(self, block: np.ndarray) -> np.ndarray:
         if not self._strings:

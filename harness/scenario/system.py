@@ -14,7 +14,7 @@ import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping
 
 from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.system import (
@@ -561,28 +561,6 @@ def default_stop_time(system: System) -> tuple[float | None, str]:
         return None, f"{sc.origin}: no DefaultExperiment stopTime in the SSD or the FMUs"
     return None, (f"{sc.origin}: no stopTime in the SSD and the FMUs' differ ("
                   + ", ".join(f"{k} {v:g} s" for k, v in stops.items()) + ")")
-
-
-def parse_set_options(items: Sequence[str]) -> dict[str, str]:
-    """``["plant.Mp=0.2", ...]`` as ``{"plant.Mp": "0.2"}``; values stay strings until checked."""
-    out: dict[str, str] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            raise BindingError(f"--set {item!r}: expected COMPONENT.VARIABLE=VALUE")
-        out[key.strip()] = value.strip()
-    return out
-
-
-def parse_swap_options(items: Sequence[str]) -> dict[str, str]:
-    """``["plant=hil"]`` as ``{"plant": "hil"}``."""
-    out: dict[str, str] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            raise BindingError(f"--swap {item!r}: expected COMPONENT=FMU_OR_ALIAS")
-        out[key.strip()] = value.strip()
-    return out
 
 
 def warn_all(system: System) -> None:

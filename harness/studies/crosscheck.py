@@ -6,7 +6,6 @@ so that tests can compare them with :func:`ipcosim.harness.run_master` (``algori
 """
 from __future__ import annotations
 
-import math
 import os
 import time
 from typing import Any, Sequence
@@ -118,5 +117,3 @@ def run_fmpy_ssp(ssp: str | os.PathLike[str], stop_time: float, step: float) -> 
     return result, time.perf_counter() - t0, "ok"
 
 
-def max_abs_difference(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.max(np.abs(np.asarray(a, float) - np.asarray(b, float)))) if len(a) else math.nan
