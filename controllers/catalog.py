@@ -58,11 +58,19 @@ from ipcosim.controllers.thesis import (
     THESIS_SINGLE_MASS_R,
 )
 from ipcosim.fmus.linearize import LinearModel, linear_matrices
-from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, ParameterError, PlantParams, make, parameter_info
+from ipcosim.fmus.params import (
+    DEFAULT_PRESET,
+    KINDS,
+    PLANT_KINDS,
+    PRESETS,
+    ParameterError,
+    PlantParams,
+    make,
+    parameter_info,
+)
 from ipcosim.fmus.physics import MEASURED
 
 LAWS = ("PID", "CascadePID", "LQR", "HSMC", "AdaptiveHSMC")
-KINDS = ("single-mass", "double-mass")
 PLANT_SUFFIX = {"single-mass": "SingleMass", "double-mass": "DoubleMass"}
 
 #: Parameter sets per law and plant kind; the first is the default (the one that does the task).

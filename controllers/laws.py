@@ -30,9 +30,9 @@ from typing import Any, Sequence
 from ipcosim.controllers.errors import ControllerParameterError, DesignError
 from ipcosim.errors import IpcosimError
 from ipcosim.fmus.expm import Matrix, as_matrix, expm
+from ipcosim.fmus.params import KINDS
 from ipcosim.fmus.physics import MEASURED
 
-KINDS = ("single-mass", "double-mass")
 G = 9.81
 
 

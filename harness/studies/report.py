@@ -16,16 +16,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
+from ipcosim.fmus.params import KINDS
 from ipcosim.harness.studies.robustness import fmt
 
-PLANTS = ("single-mass", "double-mass")
 CONTROLLERS = ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")
 CONTROLLER_LABELS = {"pid": "PID", "cascade-pid": "cascade PID", "lqr": "LQR + observer", "hsmc": "HSMC",
                      "adaptive-hsmc": "adaptive HSMC"}
 PLANT_LABELS = {"single-mass": "single mass", "double-mass": "double mass"}
 CONTROLLER_COLORS = {"pid": "tab:gray", "cascade-pid": "tab:purple", "lqr": "tab:orange", "hsmc": "tab:blue",
                      "adaptive-hsmc": "tab:green"}
-SCENARIOS = tuple(f"{p}-{c}" for p in PLANTS for c in CONTROLLERS)
+SCENARIOS = tuple(f"{p}-{c}" for p in KINDS for c in CONTROLLERS)
 
 #: The task's step [m] and the +-2 % band half-width [m].
 STEP = 0.05
@@ -42,7 +42,7 @@ TABLE_COLUMNS = (("status", "status", None), ("settling_time_s", "settling time 
 
 def split(scenario: str) -> tuple[str, str]:
     """``single-mass-adaptive-hsmc`` -> (``single-mass``, ``adaptive-hsmc``)."""
-    for plant in PLANTS:
+    for plant in KINDS:
         if scenario.startswith(plant + "-"):
             return plant, scenario[len(plant) + 1:]
     return "", scenario
@@ -147,7 +147,7 @@ def _fewer_oscillations(r: Results) -> Verdict:
 
 def _hsmc_better(r: Results) -> Verdict:
     parts, ok, measured = [], True, False
-    for plant in PLANTS:
+    for plant in KINDS:
         h = f"{plant}-hsmc"
         if _row(r, h) is None:
             continue
@@ -367,7 +367,7 @@ def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     figures: dict[str, Path] = {}
-    for plant in PLANTS:
+    for plant in KINDS:
         path = plot_plant(plant, results, out_dir / "figures" / f"{plant}.png")
         if path:
             figures[plant] = path
