@@ -32,7 +32,7 @@ _EXPORTS = {
     "prepare": "ipcosim.harness.api", "Prepared": "ipcosim.harness.api",
     "Result": "ipcosim.harness.master.results", "SimulationError": "ipcosim.harness.master.results",
     "load_scenario": "ipcosim.harness.scenario.ssp", "scenario_names": "ipcosim.harness.scenario.ssp",
-    "IpcosimError": "ipcosim.harness.errors", "UsageError": "ipcosim.harness.errors",
+    "IpcosimError": "ipcosim.errors", "UsageError": "ipcosim.errors",
     "assert_upright": "ipcosim.harness.testing", "assert_settles": "ipcosim.harness.testing",
     "assert_steady_state": "ipcosim.harness.testing", "assert_close_to": "ipcosim.harness.testing",
     "settling_time": "ipcosim.harness.testing", "cases": "ipcosim.harness.testing", "Case": "ipcosim.harness.testing",

@@ -1,7 +1,7 @@
 """Master speed, measured side by side in one process on the same ``build/ssp/*.ssp`` archives
 (10 s at 1 ms), medians of several interleaved runs:
 
-* ours: ``ipcosim.harness.prepare(ssp).run()`` -- instantiate, initialize, 10 000 steps with
+* ours: ``ipcosim.prepare(ssp).run()`` -- instantiate, initialize, 10 000 steps with
   recording, terminate, free (FMUs extracted once beforehand, as for a sweep);
 * floor: a minimal hand-written FMPy loop over the same extracted FMUs with the same
   parameters: ``FMU2Slave`` set/doStep/get per component and step, value references
@@ -20,7 +20,7 @@ import warnings
 from typing import Any
 
 from benchmarks.bench import target
-from ipcosim.harness.scenario.ssp import BUILD_SSP_DIR
+from ipcosim.harness.paths import BUILD_SSP_DIR
 
 SCENARIOS = ("single-mass-lqr", "double-mass-hsmc")
 REPEATS = 5
@@ -97,7 +97,7 @@ def bench_scenario(name: str, repeats: int = REPEATS) -> list[str]:
     ours, floor, lib = [], [], []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        prepared = ipcosim.harness.prepare(ssp)
+        prepared = ipcosim.prepare(ssp)
     with prepared:
         prepared.run(STOP, STEP)  # warm-up: imports, first instantiation of each FMU module
         floor_loop(prepared)
@@ -112,7 +112,7 @@ def bench_scenario(name: str, repeats: int = REPEATS) -> list[str]:
     o, f, lc = _median(ours), _median(floor), _median(lib)
     lines = [
         f"{name}: {STOP:g} s at {STEP * 1e3:g} ms, medians of {repeats}",
-        f"  ours (ipcosim.harness.run)        {o:7.3f} s   real-time factor {STOP / o:6.1f}x "
+        f"  ours (ipcosim.harness.run_master)        {o:7.3f} s   real-time factor {STOP / o:6.1f}x "
         f"({target(f'{name} real-time factor', STOP / o, 20.0, 'x', at_most=False)})",
         f"  hand-written fmpy loop    {f:7.3f} s   ours/floor    = {o / f:5.2f}x "
         f"({target(f'{name} ours/floor', o / f, 1.15, 'x')})",

@@ -115,11 +115,11 @@ def loop_rtfs(ssp: Path) -> tuple[dict[str, list[float]], float]:
     """``loop_real_time_factor`` of ``LOOP_RUNS`` runs of one prepared scenario on each stepping
     loop (``c``, the default, and ``python``; alternating), and the best simulated seconds per CPU
     second of a whole run on the default loop (reference: less disturbed by other load)."""
-    import ipcosim.harness as harness
+    import ipcosim
 
     rtfs: dict[str, list[float]] = {"c": [], "python": []}
     cpu = []
-    with harness.prepare(ssp) as prepared:
+    with ipcosim.prepare(ssp) as prepared:
         prepared.run()  # warm-up: libraries loaded, modules imported, the C loop compiled
         for _ in range(LOOP_RUNS):
             for loop in rtfs:
@@ -146,7 +146,7 @@ def run() -> list[str]:
     """Lines for ``make bench``; raises TargetMissed (after the figures) when a target is missed."""
     from benchmarks import bench_plant
     from ipcosim.fmus.build import ROOT
-    from ipcosim.harness.scenario.ssp import BUILD_SSP_DIR
+    from ipcosim.harness.paths import BUILD_SSP_DIR
 
     fmu_dir = ROOT / "build" / "fmus"
     with tempfile.TemporaryDirectory(prefix="ipcosim-bench-") as tmp:

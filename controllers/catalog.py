@@ -58,11 +58,19 @@ from ipcosim.controllers.thesis import (
     THESIS_SINGLE_MASS_R,
 )
 from ipcosim.fmus.linearize import LinearModel, linear_matrices
-from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, ParameterError, PlantParams, make, parameter_info
+from ipcosim.fmus.params import (
+    DEFAULT_PRESET,
+    KINDS,
+    PLANT_KINDS,
+    PRESETS,
+    ParameterError,
+    PlantParams,
+    make,
+    parameter_info,
+)
 from ipcosim.fmus.physics import MEASURED
 
 LAWS = ("PID", "CascadePID", "LQR", "HSMC", "AdaptiveHSMC")
-KINDS = ("single-mass", "double-mass")
 PLANT_SUFFIX = {"single-mass": "SingleMass", "double-mass": "DoubleMass"}
 
 #: Parameter sets per law and plant kind; the first is the default (the one that does the task).
@@ -652,17 +660,7 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
     ControllerParameterError
         Naming the parameter (``parameter`` attribute and the message).
     """
-    spec = {s.name: s for s in schema(law, kind)}
-    v = {name: s.default for name, s in spec.items()}
-    for name, value in (values or {}).items():
-        if name not in spec:
-            raise CatalogError(name, f"{model_name(law, kind)} has no parameter {name!r}")
-        v[name] = value
-    for name, s in spec.items():
-        reason = s.check(v[name])
-        if reason:
-            unit = f" {s.unit}" if s.unit and s.unit != "1" else ""
-            raise ControllerParameterError(name, f"parameter {name} = {v[name]}{unit}: {reason}")
+    v = _checked_values(law, kind, values)
     T, vlim = float(v["sample_period"]), float(v["voltage_limit"])
     if law == "PID":
         g = PIDGains(**{f: float(v[f]) for f in ("Kp", "Ki", "Kd", "derivative_time_constant")})
@@ -676,6 +674,28 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
         balance = LQR(kind, lqr_design_from(kind, v, backend), vlim,
                       output_filter_time_constant=float(v["output_filter_time_constant"]))
         return swing_up_around(kind, v, balance)
+    return _sliding_mode(law, kind, v, T, vlim)
+
+
+def _checked_values(law: str, kind: str, values: Mapping[str, Any] | None) -> dict[str, Any]:
+    """Every parameter of the law: the given values over the defaults, each checked against its schema."""
+    spec = {s.name: s for s in schema(law, kind)}
+    v = {name: s.default for name, s in spec.items()}
+    for name, value in (values or {}).items():
+        if name not in spec:
+            raise CatalogError(name, f"{model_name(law, kind)} has no parameter {name!r}")
+        v[name] = value
+    for name, s in spec.items():
+        reason = s.check(v[name])
+        if reason:
+            unit = f" {s.unit}" if s.unit and s.unit != "1" else ""
+            raise ControllerParameterError(name, f"parameter {name} = {v[name]}{unit}: {reason}")
+    return v
+
+
+def _sliding_mode(law: str, kind: str, v: Mapping[str, Any], T: float, vlim: float) -> DiscreteLaw:
+    """The HSMC or adaptive HSMC law of the checked values ``v``: gains, subsystem models (the
+    thesis's coefficients or designed), and for the adaptive law its gain schedules."""
     n = 2 if kind == "single-mass" else 3
     c = tuple(float(v[f"c{i + 1}"]) for i in range(n))
     if kind == "single-mass":

@@ -49,17 +49,12 @@ import numpy as np
 import scipy.linalg
 
 # DesignError, check_sample_period and the thesis's numbers live in numpy-free modules (the FMU runtime
-# reads them); they are re-exported here.
-from ipcosim.controllers.errors import DesignError  # noqa: F401
+# reads them).
+from ipcosim.controllers.errors import DesignError
 from ipcosim.controllers.laws import check_sample_period
-from ipcosim.controllers.thesis import (  # noqa: F401
-    THESIS_DOUBLE_MASS_K,
-    THESIS_DOUBLE_MASS_OBSERVER_FACTOR,
+from ipcosim.controllers.thesis import (
     THESIS_DOUBLE_MASS_Q_DIAGONAL,
-    THESIS_DOUBLE_MASS_R,
-    THESIS_SINGLE_MASS_OBSERVER_POLES,
     THESIS_SINGLE_MASS_Q_DIAGONAL,
-    THESIS_SINGLE_MASS_R,
 )
 from ipcosim.fmus.linearize import LinearModel, linearize
 from ipcosim.fmus.params import PlantParams

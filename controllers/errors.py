@@ -22,4 +22,4 @@ class DesignError(ControllerParameterError):
     """
 
 
-__all__ = ["IpcosimError", "ControllerParameterError", "DesignError"]
+__all__ = ["ControllerParameterError", "DesignError"]

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from ipcosim.controllers.catalog import KINDS, LAWS, PARAMETER_SETS, default_preset, make_law
+from ipcosim.controllers.catalog import LAWS, PARAMETER_SETS, default_preset, make_law
 from ipcosim.controllers.simulate import run_loop
-from ipcosim.fmus.params import preset
+from ipcosim.fmus.params import KINDS, preset
 
 #: The thesis's qualitative result per law and plant (reference/thesis-data.md section 2).
 THESIS_CLAIMS = {

@@ -27,11 +27,12 @@ from dataclasses import dataclass, fields
 from operator import mul
 from typing import Any, Sequence
 
-from ipcosim.controllers.errors import ControllerParameterError, DesignError, IpcosimError
+from ipcosim.controllers.errors import ControllerParameterError, DesignError
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.expm import Matrix, as_matrix, expm
+from ipcosim.fmus.params import KINDS
 from ipcosim.fmus.physics import MEASURED
 
-KINDS = ("single-mass", "double-mass")
 G = 9.81
 
 

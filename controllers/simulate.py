@@ -95,11 +95,24 @@ def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, pla
     ref = reference if callable(reference) else (lambda t, c=float(reference): c)
     plant = Plant(params, x0=x0)
     law.reset()
+    states, refs, volts, failure = _step_loop(plant, law, ref, n_steps, n_sub, plant_step, quantize)
+    time = np.arange(n_steps + 1) * plant_step
     names = plant.state_names
-    states = np.full((n_steps + 1, len(names)), np.nan)
+    motor = states[:, MOTOR_CART[plant.kind]]
+    angle = states[:, names.index("pendulum_angle")]
+    metrics = compute_metrics(time, motor, refs, angle, volts)
+    return LoopResult(time=time, states=states, state_names=tuple(names), reference=refs, voltage=volts,
+                      metrics=metrics, failure=failure)
+
+
+def _step_loop(plant: Plant, law: DiscreteLaw, ref: Callable[[float], float], n_steps: int, n_sub: int,
+               plant_step: float, quantize: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, str | None]:
+    """Step the plant ``n_steps`` times, the law every ``n_sub``-th step (its voltage held in
+    between); returns the states, references and voltages at every step (NaN after a plant
+    failure) and the failure's message (None)."""
+    states = np.full((n_steps + 1, len(plant.state_names)), np.nan)
     refs = np.empty(n_steps + 1)
     volts = np.full(n_steps + 1, np.nan)
-    failure = None
     u = 0.0
     res = np.array([ENCODER_RESOLUTION[n] for n in MEASURED[plant.kind]])
     for i in range(n_steps + 1):
@@ -115,16 +128,9 @@ def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, pla
         try:
             plant.do_step(t, plant_step, u)
         except PlantStepError as exc:
-            failure = str(exc)
             refs[i + 1:] = [ref((j) * plant_step) for j in range(i + 1, n_steps + 1)]
-            break
-    time = np.arange(n_steps + 1) * plant_step
-    kind = plant.kind
-    motor = states[:, MOTOR_CART[kind]]
-    angle = states[:, names.index("pendulum_angle")]
-    metrics = compute_metrics(time, motor, refs, angle, volts)
-    return LoopResult(time=time, states=states, state_names=tuple(names), reference=refs, voltage=volts,
-                      metrics=metrics, failure=failure)
+            return states, refs, volts, str(exc)
+    return states, refs, volts, None
 
 
 def measured_names(kind: str) -> tuple[str, ...]:

@@ -243,24 +243,7 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
     saved_path = list(sys.path)
     try:
         with tempfile.TemporaryDirectory(prefix="ipcosim-build-") as tmp:
-            stage = Path(tmp) / "stage"
-            package = _stage_runtime(files, root, stage, private)
-            staged_script = stage / script.name
-            staged_script.write_text(_privatize(script.read_text(), private))
-            _write_build_files(staged_script, package)
-            out = Path(tmp) / "out"
-            try:
-                built = Path(pythonfmu.FmuBuilder.build_FMU(staged_script, dest=out,
-                                                            project_files=[package, *project_files]))
-            except Exception as exc:  # noqa: BLE001 -- one line naming the script
-                raise BuildError(f"{script}: pythonfmu build failed: {type(exc).__name__}: {exc}") from exc
-            _ensure_binaries(built)
-            _add_bytecode(built, Path(tmp) / "pyc")
-            check_fmu(built)
-            try:
-                wrapper.patch_fmu(built)  # pythonfmu 0.7.0's exit-time double free (ipcosim.fmus.wrapper)
-            except wrapper.WrapperError as exc:
-                raise BuildError(f"{script}: {exc}") from exc
+            built = _build_staged(script, files, root, private, project_files, Path(tmp))
             target = fmu_dir / built.name
             tmp_target = fmu_dir / f".{built.name}.{os.getpid()}.tmp"
             shutil.copyfile(built, tmp_target)
@@ -271,6 +254,31 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
         # ... and its import of the script leaves the staged (now deleted) private package in
         # sys.modules, where an FMU of the same build loaded later in this process would find it.
         _forget_modules(private, script.stem)
+
+
+def _build_staged(script: Path, files: Iterable[Path], root: Path, private: str, project_files: Iterable[Path],
+                  tmp: Path) -> Path:
+    """Stage the script and its modules under the private package in ``tmp``, build the FMU
+    with pythonfmu, complete it (binaries, bytecode), check it and patch its wrapper; returns
+    the FMU in ``tmp``."""
+    stage = tmp / "stage"
+    package = _stage_runtime(files, root, stage, private)
+    staged_script = stage / script.name
+    staged_script.write_text(_privatize(script.read_text(), private))
+    _write_build_files(staged_script, package)
+    try:
+        built = Path(pythonfmu.FmuBuilder.build_FMU(staged_script, dest=tmp / "out",
+                                                    project_files=[package, *project_files]))
+    except Exception as exc:  # noqa: BLE001 -- one line naming the script
+        raise BuildError(f"{script}: pythonfmu build failed: {type(exc).__name__}: {exc}") from exc
+    _ensure_binaries(built)
+    _add_bytecode(built, tmp / "pyc")
+    check_fmu(built)
+    try:
+        wrapper.patch_fmu(built)  # pythonfmu 0.7.0's exit-time double free (ipcosim.fmus.wrapper)
+    except wrapper.WrapperError as exc:
+        raise BuildError(f"{script}: {exc}") from exc
+    return built
 
 
 def _forget_modules(private: str, script_module: str) -> None:

@@ -311,6 +311,31 @@ class FmuBase(Fmi2Slave):
         -------
         VariableInfo
         """
+        self._check_declaration(name, causality, type_, unit)
+        variability, initial = _attributes(causality, type_, variability, initial, initial_depends_on)
+        if causality == "output":
+            depends_on = depends_on or ()   # an output depends on no input unless told
+        getter, setter = self._accessors(name, causality, variability, type_, start, getter, setter)
+        vr = self._register(_TYPES[type_](name, causality=_CAUSALITY[causality],
+                                          variability=_VARIABILITY[variability],
+                                          initial=_INITIAL[initial] if initial else None, description=description,
+                                          getter=getter, setter=setter), type_)
+        self.info[name] = VariableInfo(
+            name=name, causality=causality, variability=variability, type_=type_, unit=unit, initial=initial,
+            depends_on=_tuple_or_none(depends_on), depends_kind=depends_kind,
+            initial_depends_on=_tuple_or_none(initial_depends_on), check=check, value_reference=vr)
+        return self.info[name]
+
+    def _register(self, var: Any, type_: type) -> int:
+        """Register a pythonfmu variable and index its getter and setter by value reference; returns the reference."""
+        self.register_variable(var, nested=False)
+        self._getters[type_][var.value_reference] = var.getter
+        if var.setter is not None:
+            self._setters[type_][var.value_reference] = var.setter
+        return var.value_reference
+
+    def _check_declaration(self, name: str, causality: str, type_: type, unit: str | None) -> None:
+        """A new name, a known causality and type, and a unit only on a Real (one that parses)."""
         if name in self.info:
             raise FmuError(f"{type(self).__name__}: variable {name!r} declared twice")
         if causality not in _CAUSALITY:
@@ -321,19 +346,13 @@ class FmuBase(Fmi2Slave):
             if type_ is not float:
                 raise FmuError(f"{type(self).__name__}.{name}: only Real variables carry a unit")
             parse_unit(unit)
-        if variability is None:
-            if causality in ("parameter", "calculatedParameter"):
-                variability = "fixed"
-            else:
-                variability = "continuous" if type_ is float else "discrete"
-        if variability == "continuous" and type_ is not float:
-            variability = "discrete"
-        if causality == "output":
-            if initial is None:
-                initial = "calculated" if initial_depends_on is None or len(initial_depends_on) else "exact"
-            depends_on = tuple(depends_on or ())
-        elif causality == "parameter" and initial is None:
-            initial = "exact"
+
+    def _accessors(self, name: str, causality: str, variability: str, type_: type, start: Any,
+                   getter: Callable[[], Any] | None,
+                   setter: Callable[[Any], None] | None) -> tuple[Callable[[], Any], Callable[[Any], None] | None]:
+        """The value's getter and setter: the given ones, else the instance attribute ``name``
+        (set to ``start``); none for a calculated parameter or a constant; a parameter's setter
+        marks the parameters changed (:meth:`_parameter_setter`)."""
         if getter is None and setter is None and name in _RESERVED:
             raise FmuError(f"{type(self).__name__}: variable name {name!r} clashes with an FmuBase attribute; "
                            "pass getter/setter or rename it")
@@ -345,22 +364,7 @@ class FmuBase(Fmi2Slave):
             setter = (lambda v, n=name: setattr(self, n, v))
         if causality == "parameter" and setter is not None:
             setter = self._parameter_setter(name, variability, setter)
-        cls = _TYPES[type_]
-        var = cls(name, causality=_CAUSALITY[causality], variability=_VARIABILITY[variability],
-                  initial=_INITIAL[initial] if initial else None, description=description,
-                  getter=getter, setter=setter)
-        self.register_variable(var, nested=False)
-        self._getters[type_][var.value_reference] = getter
-        if setter is not None:
-            self._setters[type_][var.value_reference] = setter
-        info = VariableInfo(name=name, causality=causality, variability=variability, type_=type_, unit=unit,
-                            initial=initial, depends_on=tuple(depends_on) if depends_on is not None else None,
-                            depends_kind=depends_kind,
-                            initial_depends_on=(tuple(initial_depends_on) if initial_depends_on is not None
-                                                else None),
-                            check=check, value_reference=var.value_reference)
-        self.info[name] = info
-        return info
+        return getter, setter
 
     def add_input(self, name: str, *, start: Any = 0.0, **kwargs: Any) -> VariableInfo:
         """Declare an input (``start`` required by FMI; default 0)."""
@@ -703,3 +707,27 @@ _RESERVED = frozenset(dir(FmuBase)) | {
 
 def _indices(names: Iterable[str], index: dict[str, int]) -> str:
     return " ".join(str(i) for i in sorted(index[n] for n in names))
+
+
+def _attributes(causality: str, type_: type, variability: str | None, initial: str | None,
+                initial_depends_on: Sequence[str] | None) -> tuple[str, str | None]:
+    """A variable's FMI ``variability`` and ``initial`` where not given: parameters ``fixed`` and
+    ``exact``, other Reals ``continuous``, other types ``discrete`` (never continuous); outputs
+    ``calculated``, or ``exact`` when they depend on nothing at initialization."""
+    if variability is None:
+        if causality in ("parameter", "calculatedParameter"):
+            variability = "fixed"
+        else:
+            variability = "continuous" if type_ is float else "discrete"
+    if variability == "continuous" and type_ is not float:
+        variability = "discrete"
+    if causality == "output":
+        if initial is None:
+            initial = "calculated" if initial_depends_on is None or len(initial_depends_on) else "exact"
+    elif causality == "parameter" and initial is None:
+        initial = "exact"
+    return variability, initial
+
+
+def _tuple_or_none(names: Sequence[str] | None) -> tuple[str, ...] | None:
+    return tuple(names) if names is not None else None

@@ -117,6 +117,8 @@ class DoubleMassParams(MotorParams):
 PlantParams = SingleMassParams | DoubleMassParams
 
 PLANT_KINDS: dict[str, type] = {"single-mass": SingleMassParams, "double-mass": DoubleMassParams}
+#: The plant kinds by name (the one list every room uses).
+KINDS: tuple[str, ...] = tuple(PLANT_KINDS)
 
 #: Named presets: (plant kind, overrides of the class defaults, one-line description).
 PRESETS: dict[str, tuple[str, dict[str, float], str]] = {

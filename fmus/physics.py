@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from typing import Callable, Sequence
 
-from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, kind_of
+from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams
 
 SINGLE_STATES = ("cart_position", "cart_velocity", "pendulum_angle", "pendulum_velocity", "motor_current")
 DOUBLE_STATES = ("active_cart_position", "active_cart_velocity", "passive_cart_position",
@@ -112,13 +112,6 @@ def rhs_no_inductance(x_mech: Sequence[float], v: float, params: PlantParams) ->
     """Mechanical right-hand side with the current eliminated (thesis App. A.2/B.3 models)."""
     i = quasi_static_current(x_mech, v, params)
     return rhs_for(params)((*x_mech, i), v, params)[:-1]
-
-
-def measured_outputs(x: Sequence[float], params: PlantParams) -> tuple[float, ...]:
-    """The encoder-measured positions (see ``MEASURED``) from a full state."""
-    if kind_of(params) == "single-mass":
-        return (x[0], x[2])
-    return (x[0], x[2], x[4])
 
 
 # --- Momentum form of the single-mass plant (used by the integrator) -----------------------

@@ -9,9 +9,7 @@ from ipcosim.fmus.integrator import FastETDRK4
 from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, kind_of, validate
 from ipcosim.fmus.physics import (
     MEASURED,
-    clip_voltage,
     rhs_for,
-    single_mass_from_momentum,
     single_mass_momentum_rhs,
     single_mass_to_momentum,
     state_names,
@@ -118,13 +116,12 @@ class Plant:
         if self.kind == "single-mass":
             self._irhs = single_mass_momentum_rhs
             self._to_int = single_mass_to_momentum
-            self._from_int = single_mass_from_momentum
             self._f = single_mass_internal_rhs(params)
             self._out: Callable[[Sequence[float]], Sequence[float]] | None = single_mass_output_map(params)
         else:
             self._out = None
             self._irhs = self._rhs
-            self._to_int = self._from_int = lambda x, p: tuple(x)
+            self._to_int = lambda x, p: tuple(x)
             self._f = double_mass_internal_rhs(params)
         self._L = self._circuit_part(self._internal_jacobian())
         self._steppers: dict[float, FastETDRK4] = {}
@@ -158,10 +155,6 @@ class Plant:
         import numpy as np  # noqa: PLC0415 -- off the FMU runtime's path
 
         return np.array(self._xl)
-
-    def derivatives(self, voltage: float | None = None) -> tuple[float, ...]:
-        """Right-hand side at the current state (for the voltage held now, or ``voltage``)."""
-        return self._rhs(self._xl, self.voltage if voltage is None else voltage, self.params)
 
     def do_step(self, t: float, h: float, voltage: float) -> None:
         """Advance from time ``t`` to ``t + h`` with ``voltage`` [V] held constant.
@@ -227,10 +220,6 @@ class Plant:
         """
         last = len(J) - 1
         return [[v if j == last or i == last else 0.0 for j, v in enumerate(row)] for i, row in enumerate(J)]
-
-    def applied_voltage(self) -> float:
-        """Voltage after the amplifier's limit [V]."""
-        return clip_voltage(self.voltage, self.params.voltage_limit)
 
     def values(self) -> dict[str, float]:
         """Every state by name (SI units)."""

@@ -116,29 +116,30 @@ def compute_metrics(time: Any, position: Any, reference: Any, angle: Any, voltag
 
     finite = bool(np.all(np.isfinite(x)) and np.all(np.isfinite(r)) and np.all(np.isfinite(th))
                   and np.all(np.isfinite(v)))
-    abs_th = np.abs(th)
-    max_angle = float(np.max(abs_th)) if np.all(np.isfinite(th)) else math.inf
-    upright = bool(finite and max_angle < UPRIGHT_LIMIT_RAD)
-    abs_v = np.abs(v)
-    peak_v = float(np.max(abs_v)) if np.all(np.isfinite(v)) else math.inf
+    max_angle = float(np.max(np.abs(th))) if np.all(np.isfinite(th)) else math.inf
+    peak_v = float(np.max(np.abs(v))) if np.all(np.isfinite(v)) else math.inf
     rms_v = float(np.sqrt(np.mean(v * v))) if np.all(np.isfinite(v)) else math.inf
-
     result: dict[str, Any] = {"settling_time_s": None, "overshoot_m": None, "steady_state_error_m": None,
                               "max_abs_angle_rad": _finite_or_none(max_angle),
                               "peak_voltage_V": _finite_or_none(peak_v),
-                              "rms_voltage_V": _finite_or_none(rms_v), "upright": upright}
-    if not finite:
-        return result
+                              "rms_voltage_V": _finite_or_none(rms_v),
+                              "upright": bool(finite and max_angle < UPRIGHT_LIMIT_RAD)}
+    if finite:
+        result.update(_step_response(t, x, r))
+    return result
 
+
+def _step_response(t: np.ndarray, x: np.ndarray, r: np.ndarray) -> dict[str, float | None]:
+    """Overshoot, steady-state error and settling time of position ``x`` after reference ``r``
+    (finite signals): settling counts from the last change of the reference before the final
+    entry into the +-``SETTLING_BAND`` band of the step (None if the run ends outside it)."""
     r_final = float(r[-1])
     step = r_final - float(x[0])
     direction = 1.0 if step >= 0 else -1.0
-    result["overshoot_m"] = max(0.0, float(np.max(direction * (x - r_final))))
-
+    out: dict[str, float | None] = {"overshoot_m": max(0.0, float(np.max(direction * (x - r_final))))}
     t_start = t[-1] - STEADY_STATE_FRACTION * (t[-1] - t[0])
     tail = t >= t_start
-    result["steady_state_error_m"] = float(abs(np.mean(x[tail] - r[tail])))
-
+    out["steady_state_error_m"] = float(abs(np.mean(x[tail] - r[tail])))
     if step != 0.0:
         band = SETTLING_BAND * abs(step)
         outside = np.abs(x - r_final) > band
@@ -148,8 +149,8 @@ def compute_metrics(time: Any, position: Any, reference: Any, angle: Any, voltag
             # instant the reference last changed at or before the entry (t0 if never)
             changed = np.flatnonzero(r[1:entry + 1] != r[:entry])
             t_ref = t[int(changed[-1]) + 1] if changed.size else t[0]
-            result["settling_time_s"] = float(t[entry] - t_ref)
-    return result
+            out["settling_time_s"] = float(t[entry] - t_ref)
+    return out
 
 
 def wrapped(angle: np.ndarray) -> np.ndarray:

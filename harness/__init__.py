@@ -1,25 +1,24 @@
 """ipcosim's co-simulation master, command line, results and studies.
 
-Public API (imported lazily, so that ``import harness`` stays cheap)::
+The public API (``ipcosim.run``, ``ipcosim.prepare``, ``ipcosim.Result``, ``ipcosim.load_scenario``...)
+is exported once, at the top of the package (``ipcosim/__init__.py``). This package adds, lazily
+(so that ``import ipcosim.harness`` stays cheap), what only code plugging into the master needs::
 
-    ipcosim.harness.run(scenario_or_path, stop_time=None, step=None, overrides=None, swaps=None, ...) -> Result
-    ipcosim.harness.prepare(scenario_or_path, ...) -> Prepared      # .run(overrides=...) many times
-    harness.Result, harness.SimulationError
-    ipcosim.harness.swap_aliases                                     # --swap alias registry
-    harness.Observer, harness.Manipulator                    # extension points
+    ipcosim.harness.run_master(scenario_or_path, stop_time=None, step=None, overrides=None, swaps=None,
+                               observers=(), manipulators=(), ...) -> Result
+    ipcosim.harness.swap_aliases, register_swap_alias, SwapTarget, SwapRequest   # --swap alias registry
+    ipcosim.harness.Observer, ipcosim.harness.Manipulator                         # extension points
 """
 from __future__ import annotations
 
 from typing import Any
 
 _EXPORTS = {
-    "run": "ipcosim.harness.api", "prepare": "ipcosim.harness.api", "Prepared": "ipcosim.harness.api",
-    "Result": "ipcosim.harness.master.results", "SimulationError": "ipcosim.harness.master.results",
+    "run_master": "ipcosim.harness.api",
     "swap_aliases": "ipcosim.harness.scenario.system", "register_swap_alias": "ipcosim.harness.scenario.system",
     "SwapTarget": "ipcosim.harness.scenario.system",
     "SwapRequest": "ipcosim.harness.scenario.system",
     "Observer": "ipcosim.harness.master.observers", "Manipulator": "ipcosim.harness.master.manipulators",
-    "load_scenario": "ipcosim.harness.scenario.ssp",
 }
 
 __all__ = sorted(_EXPORTS)
@@ -30,4 +29,4 @@ def __getattr__(name: str) -> Any:
         import importlib
 
         return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module 'harness' has no attribute {name!r}")
+    raise AttributeError(f"module 'ipcosim.harness' has no attribute {name!r}")

@@ -1,14 +1,20 @@
-"""The Python API of the master: :func:`run` for one run, :func:`prepare` for many runs of one
-scenario (parameter sweeps) that share the loaded, checked and extracted FMUs.
+"""The Python API of the master: :func:`run_master` for one run, :func:`prepare` for many runs of one
+scenario (parameter sweeps) that share the loaded, checked and extracted FMUs, and :func:`run_with`,
+the one path behind ``ipcosim run`` and :func:`ipcosim.run` (a :class:`RunOptions`).
+
+``run_master`` differs from the public :func:`ipcosim.run` in what it takes: the master's own
+keywords (plain ``overrides``, ``swaps`` with :class:`SwapTarget`, a loaded :class:`Scenario`)
+and its extension points (``observers``, ``manipulators``, ``record_every``), with no
+:class:`RunOptions` checks and no relative ``"1.1*nominal"`` values.
 
 Example::
 
     import ipcosim.harness
 
-    result = ipcosim.harness.run("single-mass-lqr", stop_time=5.0, overrides={"plant.Mp": 0.2})
+    result = ipcosim.harness.run_master("single-mass-lqr", stop_time=5.0, overrides={"plant.Mp": 0.2})
     result.metrics["settling_time_s"], result["plant.cart_position"]
 
-    with ipcosim.harness.prepare("double-mass-hsmc") as prepared:      # load and extract once
+    with ipcosim.prepare("double-mass-hsmc") as prepared:      # load and extract once
         for mp in (0.10, 0.12, 0.14):
             r = prepared.run(overrides={"plant.Mp": mp}, raise_on_error=False)
 """
@@ -23,8 +29,8 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from ipcosim.errors import UsageError
 from ipcosim.fmus.task import streamed_task_metrics
-from ipcosim.harness.errors import UsageError
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
@@ -32,18 +38,11 @@ from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
 from ipcosim.harness.master.slave import FMUSlave, load_library
+from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
-from ipcosim.harness.scenario.system import (
-    SwapTarget,
-    System,
-    bind,
-    default_step,
-    default_stop_time,
-    warn_all,
-    with_overrides,
-)
+from ipcosim.harness.scenario.system import SwapTarget, bind, default_step, default_stop_time, warn_all, with_overrides
 
 
 def plot_run(result: Result, path: Path | None = None) -> Any:
@@ -95,7 +94,7 @@ class Prepared:
                  workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
                  system: System | None = None, warn: bool = True, fmus: str = "python",
                  task_metrics: TaskMetrics | None = streamed_task_metrics) -> None:
-        from ipcosim.harness.scenario.flavour import check_flavour, native_fmu_dir, to_native
+        from ipcosim.harness.scenario.flavour import check_flavour, to_native
 
         t0 = time.perf_counter()
         #: Seconds spent loading, binding and extracting, charged to the first run's ``wall_time_s``.
@@ -118,14 +117,7 @@ class Prepared:
             self.system = system
             self.scenario = system.scenario
             return
-        if isinstance(scenario_or_path, Scenario):
-            scenario = scenario_or_path
-        else:
-            if fmus == "native":
-                fmu_dirs = [*(fmu_dirs or []), native_fmu_dir()]
-            scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
-        if parameter_set:
-            scenario = select_parameter_set(scenario, parameter_set)
+        scenario = self._load(scenario_or_path, parameter_set, fmu_dirs)
         work = self._workdir(workdir)
         try:
             archived = self._archive_members(scenario, work) if scenario.location.is_file() else {}
@@ -142,16 +134,33 @@ class Prepared:
             raise
         self.load_seconds = time.perf_counter() - t0
 
-    def _workdir(self, workdir: str | Path | None) -> Path:
-        """``workdir``, or a temporary folder removed with this object (and on a forced exit)."""
-        if workdir is None:
-            self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
-            self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
-            signals.register_temp(self._tmp)  # removed also on a forced exit
-            return self._tmp
-        work = Path(workdir)
-        work.mkdir(parents=True, exist_ok=True)
-        return work
+    def _load(self, scenario_or_path: str | os.PathLike[str] | Scenario | None, parameter_set: str | None,
+              fmu_dirs: Sequence[str | os.PathLike[str]] | None) -> Scenario:
+        """The scenario parsed (unless given parsed), with ``parameter_set`` selected (native FMUs:
+        looked for in ``build/fmus-native`` too; turned to their flavour once an archive's FMUs are out)."""
+        from ipcosim.harness.scenario.flavour import native_fmu_dir
+
+        if isinstance(scenario_or_path, Scenario):
+            scenario = scenario_or_path
+        else:
+            if self.fmus == "native":
+                fmu_dirs = [*(fmu_dirs or []), native_fmu_dir()]
+            scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
+        if parameter_set:
+            scenario = select_parameter_set(scenario, parameter_set)
+        return scenario
+
+    def _workdir(self, workdir: str | os.PathLike[str] | None) -> Path:
+        """The folder FMUs are extracted to: ``workdir``, or a temporary one removed by :meth:`close`
+        (and on a forced exit)."""
+        if workdir is not None:
+            work = Path(workdir)
+            work.mkdir(parents=True, exist_ok=True)
+            return work
+        self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
+        self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
+        signals.register_temp(self._tmp)
+        return self._tmp
 
     @staticmethod
     def _archive_members(scenario: Scenario, work: Path) -> dict[str, Path]:
@@ -229,7 +238,7 @@ class Prepared:
             overrides: Mapping[str, Any] | None = None, *, out_dir: str | os.PathLike[str] | None = None,
             variables: Sequence[str] | None = None, plot: bool = False, raise_on_error: bool = True,
             **kwargs: Any) -> Result:
-        """Run once; see :func:`ipcosim.harness.run` for the parameters.
+        """Run once; see :func:`ipcosim.harness.run_master` for the parameters.
 
         Raises
         ------
@@ -305,7 +314,7 @@ def prepare(scenario_or_path: str | os.PathLike[str] | Scenario, **kwargs: Any) 
     return Prepared(scenario_or_path, **kwargs)
 
 
-def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | None = None,
+def run_master(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | None = None,
         step: float | None = None, overrides: Mapping[str, Any] | None = None,
         swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None, *,
         parameter_set: str | None = None, algorithm: str = GAUSS_SEIDEL,
@@ -314,7 +323,10 @@ def run(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | 
         progress: bool = False, observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
         start_time: float | None = None, record_every: int = 1, raise_on_error: bool = True,
         fmus: str = "python", loop: str = "auto") -> Result:
-    """Co-simulate a scenario once.
+    """Co-simulate a scenario once on the master, with its extension points (observers, manipulators).
+
+    The public, option-checked call is :func:`ipcosim.run`; this one is for code that plugs
+    into the master.
 
     Parameters
     ----------

@@ -1,10 +1,10 @@
-"""Errors of the master's side: the base classes (from :mod:`ipcosim.errors`) and the
-missing-extra check for optional dependencies."""
+"""The missing-extra check for optional dependencies (the base error classes are
+:mod:`ipcosim.errors`)."""
 from __future__ import annotations
 
-from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.errors import IpcosimError, UsageError  # noqa: F401 -- UsageError re-exported for harness/options.py
 
-__all__ = ["IpcosimError", "UsageError", "MissingExtraError", "EXTRAS", "require"]
+__all__ = ["MissingExtraError", "EXTRAS", "require"]
 
 
 class MissingExtraError(IpcosimError, ImportError):

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.results import Result
 from ipcosim.harness.options import RunOptions
 
@@ -217,39 +217,74 @@ def build_fmu(script: str | os.PathLike[str], *, files: Sequence[str | os.PathLi
     >>> ipcosim.build_fmu(folder / "gain.py").name
     'Gain.fmu'
     """
-    from ipcosim.fmus.build import BuildError, build_one, runtime_modules
+    script, extra, digest = _sources(script, files)
+    target = Path(out) if out is not None else script.parent / "build"
+    target.mkdir(parents=True, exist_ok=True)
+    stamps = _read_stamps(target)
+    entry = stamps.get(str(script))
+    if entry and entry.get("sha256") == digest and (target / entry["fmu"]).is_file():
+        return target / entry["fmu"]
+    fmu = _build_isolated(script, target, digest, extra)
+    stamps[str(script)] = {"sha256": digest, "fmu": fmu.name}
+    _write_stamps(target, stamps)
+    return fmu
+
+
+def _sources(script: str | os.PathLike[str],
+             files: Sequence[str | os.PathLike[str]]) -> tuple[Path, list[Path], str]:
+    """The script and further files as absolute paths, and the digest of everything the FMU is
+    built from: the script, the ipcosim modules it imports, the files (``.py`` of a folder).
+
+    Raises
+    ------
+    FMUBuildError
+        A file that does not exist.
+    """
+    from ipcosim.fmus.build import runtime_modules
 
     script = Path(script).resolve()
     extra = [Path(f).resolve() for f in files]
     for f in [script, *extra]:
         if not f.exists():
             raise FMUBuildError(f"build_fmu: {f} does not exist")
-    target = Path(out) if out is not None else script.parent / "build"
-    target.mkdir(parents=True, exist_ok=True)
-    stamps_file = target / ".build-stamps.json"
-    try:
-        stamps = json.loads(stamps_file.read_text())
-    except (OSError, ValueError):
-        stamps = {}
     contents = [p for f in extra for p in ([f] if f.is_file() else sorted(f.rglob("*.py")))]
-    digest = _digest([script, *runtime_modules(script), *contents])
-    entry = stamps.get(str(script))
-    if entry and entry.get("sha256") == digest and (target / entry["fmu"]).is_file():
-        return target / entry["fmu"]
+    return script, extra, _digest([script, *runtime_modules(script), *contents])
+
+
+def _read_stamps(target: Path) -> dict[str, Any]:
+    """The build cache of a folder: script path -> {"sha256": digest, "fmu": file name} (empty if unreadable)."""
+    try:
+        return json.loads((target / ".build-stamps.json").read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _write_stamps(target: Path, stamps: Mapping[str, Any]) -> None:
+    """Replace the folder's build cache at once (a concurrent build sees the old or the new one)."""
+    tmp = target / f".build-stamps.{os.getpid()}.tmp"
+    tmp.write_text(json.dumps(stamps, indent=1, sort_keys=True))
+    os.replace(tmp, target / ".build-stamps.json")
+
+
+def _build_isolated(script: Path, target: Path, digest: str, extra: Sequence[Path]) -> Path:
+    """Build the script's FMU, leaving behind no module the builder imported from the script's folder.
+
+    Raises
+    ------
+    FMUBuildError
+        The first line of the builder's error.
+    """
+    from ipcosim.fmus.build import BuildError, build_one
+
     saved = set(sys.modules)
     try:
-        fmu = build_one(script, target, digest=digest, project_files=extra)
+        return build_one(script, target, digest=digest, project_files=extra)
     except BuildError as exc:
         raise FMUBuildError(str(exc).strip().splitlines()[0]) from exc
     finally:  # the builder imports the script and its own modules: do not leave them behind
         for name in set(sys.modules) - saved:
             if str(getattr(sys.modules.get(name), "__file__", "") or "").startswith(str(script.parent)):
                 del sys.modules[name]
-    stamps[str(script)] = {"sha256": digest, "fmu": fmu.name}
-    tmp = target / f".build-stamps.{os.getpid()}.tmp"
-    tmp.write_text(json.dumps(stamps, indent=1, sort_keys=True))
-    os.replace(tmp, stamps_file)
-    return fmu
 
 
 def _digest(files: Sequence[Path]) -> str:

@@ -129,7 +129,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) ->
 
 def _is_setup_error(exc: BaseException) -> bool:
     """An ipcosim error about the inputs (option, scenario, FMU): not a failed check or run."""
-    errors = sys.modules.get("ipcosim.harness.errors")
+    errors = sys.modules.get("ipcosim.errors")
     testing = sys.modules.get("ipcosim.harness.testing")
     results = sys.modules.get("ipcosim.harness.master.results")
     if errors is None or not isinstance(exc, errors.IpcosimError):

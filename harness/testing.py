@@ -20,8 +20,9 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
+from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.fmus.params import KINDS
 from ipcosim.fmus.task import ANGLE_COLUMNS, POSITION_COLUMNS, REFERENCE_COLUMNS, first_column
-from ipcosim.harness.errors import IpcosimError, UsageError
 
 if TYPE_CHECKING:  # pragma: no cover
     from ipcosim.harness.master.results import Result
@@ -197,7 +198,6 @@ def assert_close_to(result: "Result", reference_csv: str | os.PathLike[str], col
 
 
 # --------------------------------------------------------------------------- cases
-PLANTS = ("single-mass", "double-mass")
 
 
 @dataclass(frozen=True)
@@ -219,7 +219,7 @@ class Case:
         return f"{self.plant}-{controller}"
 
 
-def cases(plants: Sequence[str] = PLANTS, vary: Mapping[str, str | Sequence[float]] | None = None) -> list[Any]:
+def cases(plants: Sequence[str] = KINDS, vary: Mapping[str, str | Sequence[float]] | None = None) -> list[Any]:
     """Parametrization over plants and parameter values, for ``pytest.mark.parametrize``.
 
     Parameters
@@ -247,8 +247,8 @@ def cases(plants: Sequence[str] = PLANTS, vary: Mapping[str, str | Sequence[floa
     from ipcosim.harness.studies.vary import parse_vary
 
     for p in plants:
-        if p not in PLANTS:
-            raise UsageError(f"cases: unknown plant {p!r} (expected {', '.join(PLANTS)})")
+        if p not in KINDS:
+            raise UsageError(f"cases: unknown plant {p!r} (expected {', '.join(KINDS)})")
     axes: list[list[tuple[str, Any]]] = []
     for name, form in (vary or {}).items():
         text = form if isinstance(form, str) else "[" + ",".join(repr(float(v)) for v in form) + "]"

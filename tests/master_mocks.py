@@ -6,8 +6,9 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from ipcosim.harness.master.slave import DISCARD, ERROR, OK, PySlave
+from ipcosim.harness.master.system import Instance, Model, System, Variable
 from ipcosim.harness.scenario.ssp import Component, Connection, Connector, Experiment, Scenario
-from ipcosim.harness.scenario.system import Instance, Model, System, Variable, bind
+from ipcosim.harness.scenario.system import bind
 
 
 def model(name: str, inputs: Sequence[str] = (), outputs: Sequence[str] = (),

@@ -99,14 +99,15 @@ def test_imports_go_one_way() -> None:
     assert not bad, "imports against the layout's direction:\n" + "\n".join(sorted(bad))
 
 
-def test_no_import_cycles() -> None:
-    graph = _graph()
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The import cycles of a module graph: its strongly connected components of more than one
+    module (Tarjan's algorithm), each sorted."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
     cycles: list[list[str]] = []
 
-    def visit(v: str) -> None:  # Tarjan's strongly connected components
+    def visit(v: str) -> None:
         index[v] = low[v] = len(index)
         stack.append(v)
         for w in graph.get(v, ()):
@@ -128,6 +129,11 @@ def test_no_import_cycles() -> None:
     for v in list(graph):
         if v not in index:
             visit(v)
+    return cycles
+
+
+def test_no_import_cycles() -> None:
+    cycles = import_cycles(_graph())
     assert not cycles, f"import cycles: {cycles}"
 
 
@@ -135,7 +141,14 @@ def test_the_checks_see_a_forbidden_edge(tmp_path) -> None:
     """The direction check itself: a physics module importing the master is caught, lazily too,
     and a type-only import is not."""
     path = tmp_path / "physics.py"
-    path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from ipcosim.harness.api import run\n"
+    path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                    "    from ipcosim.harness.api import run_master\n"
                     "def f():\n    from ipcosim.harness.master.results import Result\n")
     mods = {"fmus.physics": path, "harness.master.results": path, "harness.api": path}
     assert _imports("fmus.physics", path, mods) == {"harness.master.results"}
+
+
+def test_the_cycle_check_sees_a_cycle() -> None:
+    """The cycle finder itself: a two-module and a three-module cycle are found, a chain is not."""
+    graph = {"a": {"b"}, "b": {"a"}, "c": {"d"}, "d": {"e"}, "e": {"c", "f"}, "f": set()}
+    assert sorted(import_cycles(graph)) == [["a", "b"], ["c", "d", "e"]]

@@ -12,7 +12,7 @@ import pytest
 
 from ipcosim.harness.studies import report
 from ipcosim.harness.studies.robustness import DEFAULT_UNCERTAINTY, default_vary, summarize
-from ipcosim.harness.studies.sweep import parse_all
+from ipcosim.harness.studies.vary import parse_all
 
 
 def row(status="ok", **metrics):

@@ -9,12 +9,7 @@ import pytest
 
 from ipcosim.controllers.catalog import build_law, lqr_design_for, make_law, schema
 from ipcosim.controllers.design import (
-    THESIS_DOUBLE_MASS_K,
     THESIS_DOUBLE_MASS_Q,
-    THESIS_DOUBLE_MASS_R,
-    THESIS_SINGLE_MASS_OBSERVER_POLES,
-    THESIS_SINGLE_MASS_R,
-    DesignError,
     check_weights,
     design_lqr,
     design_model,
@@ -25,7 +20,13 @@ from ipcosim.controllers.design import (
     thesis_single_mass_Q,
     zoh,
 )
-from ipcosim.controllers.errors import ControllerParameterError
+from ipcosim.controllers.errors import ControllerParameterError, DesignError
+from ipcosim.controllers.thesis import (
+    THESIS_DOUBLE_MASS_K,
+    THESIS_DOUBLE_MASS_R,
+    THESIS_SINGLE_MASS_OBSERVER_POLES,
+    THESIS_SINGLE_MASS_R,
+)
 from ipcosim.fmus.linearize import LinearModel
 from ipcosim.fmus.params import preset
 

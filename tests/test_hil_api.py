@@ -7,10 +7,10 @@ import types
 import numpy as np
 import pytest
 
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.hil import ErrorCode, HILError, open_card, open_uri, parse_card_uri
 from ipcosim.fmus.hil.inproc import VirtualCard, get_rig, register_rig, unregister_rig
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.harness.errors import IpcosimError
 
 
 @pytest.mark.parametrize("uri, expected", [

@@ -257,8 +257,8 @@ def test_fmu_failure_through_the_api_keeps_the_partial_result(tmp_path, test_fmu
     import ipcosim.harness
 
     folder = scenario(tmp_path, test_fmus, comps=[SRC(fail_time=0.2, fail_mode=1.0), GAIN])
-    with pytest.raises(ipcosim.harness.SimulationError) as info:
-        ipcosim.harness.run(folder)
+    with pytest.raises(ipcosim.SimulationError) as info:
+        ipcosim.harness.run_master(folder)
     assert len(info.value.result.data) == 21 and "fmi2Discard" in str(info.value)
-    result = ipcosim.harness.run(folder, raise_on_error=False)
+    result = ipcosim.harness.run_master(folder, raise_on_error=False)
     assert result.error.startswith("component src (MasterSource): fmi2DoStep returned fmi2Discard")

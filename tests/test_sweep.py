@@ -19,19 +19,8 @@ import pytest
 from ipcosim.harness.cli import main as cli_main
 from ipcosim.harness.studies.robustness import summarize, wilson_interval
 from ipcosim.harness.studies.runners import PurePlantSpec, SyntheticSpec, classify_task
-from ipcosim.harness.studies.sweep import (
-    Case,
-    DaskExecutor,
-    SchedulerError,
-    SweepMismatchError,
-    VaryError,
-    case_seed,
-    make_cases,
-    parse_all,
-    parse_vary,
-    read_results,
-    run_sweep,
-)
+from ipcosim.harness.studies.sweep import DaskExecutor, SchedulerError, SweepMismatchError, read_results, run_sweep
+from ipcosim.harness.studies.vary import Case, VaryError, case_seed, make_cases, parse_all, parse_vary
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMS = {"plant.Mp": 0.2, "plant.K": 140.0, "controller.c1": 4.7}

@@ -49,7 +49,7 @@ def test_worker_memory_growth_over_its_runs(tmp_path):
     code = textwrap.dedent(f"""
         import gc, os, warnings
         warnings.simplefilter("ignore")
-        import ipcosim.harness as h
+        import ipcosim as h
         def rss():
             with open("/proc/self/statm") as f:
                 return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")

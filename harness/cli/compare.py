@@ -72,7 +72,7 @@ def available_scenarios() -> list[str]:
     from ipcosim.harness.studies.report import SCENARIOS
 
     try:
-        from ipcosim.harness.scenario.ssp import SCENARIO_DIR
+        from ipcosim.harness.paths import SCENARIO_DIR
     except ImportError:
         return []
     found = sorted(p.name for p in SCENARIO_DIR.iterdir() if (p / "SystemStructure.ssd").exists()) \
@@ -101,23 +101,13 @@ def _pset(scenario: str, wanted: str | None) -> str | None:
 
 
 def main(args: argparse.Namespace) -> int:
+    """Co-simulate every scenario once (one sweep over the scenarios), optionally a robustness
+    sweep of each, then write the report, ``metrics.csv`` and ``metrics.json``."""
     if args.thesis_claims:
         return thesis_claims(Path(args.out))
-    from ipcosim.harness.errors import IpcosimError, UsageError
-    from ipcosim.harness.studies import robustness as rob
-    from ipcosim.harness.studies.cost import cost
+    from ipcosim.errors import IpcosimError, UsageError
     from ipcosim.harness.studies.report import render
-    from ipcosim.harness.studies.runners import SCENARIO_PARAM, MultiSpec
-    from ipcosim.harness.studies.specs import for_executor, spec_for, study_spec
-    from ipcosim.harness.studies.sweep import (
-        make_cases,
-        one_line,
-        open_executor,
-        package_versions,
-        parse_all,
-        run_sweep,
-    )
-    from ipcosim.harness.studies.vary import Case, case_seed
+    from ipcosim.harness.studies.sweep import open_executor, package_versions
 
     names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else available_scenarios()
     if not names:
@@ -129,61 +119,14 @@ def main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
 
     results: dict[str, dict[str, Any]] = {}
-    specs, spec_names = [], []
-    built = False
-    for name in names:
-        try:
-            try:
-                spec, flavour = study_spec(name, args.fmus, stop_time=args.stop_time, series=True,
-                                           parameter_set=_pset(name, args.parameter_set))
-            except FileNotFoundError as exc:
-                if built or "ipcosim build" not in str(exc):
-                    raise
-                # a fresh checkout: build the FMUs once (as 'ipcosim build' does), then go on
-                from ipcosim.fmus.build import build_all
-                from ipcosim.harness.scenario.ssp import BUILD_FMU_DIR
-
-                print(f"compare: FMUs missing; building them into {BUILD_FMU_DIR}", file=sys.stderr)
-                build_all(BUILD_FMU_DIR)
-                built = True
-                spec, flavour = study_spec(name, args.fmus, stop_time=args.stop_time, series=True,
-                                           parameter_set=_pset(name, args.parameter_set))
-            if not args.quiet:
-                print(f"compare: {name}: {flavour}", file=sys.stderr)
-            specs.append(spec)
-            spec_names.append(name)
-        except (IpcosimError, OSError, ValueError) as exc:
-            results[name] = {"status": "error", "error": one_line(exc).split(": ", 1)[-1]}
-            print(f"compare: {name}: {results[name]['error']}", file=sys.stderr)
-
+    specs = _specs(names, args, results)
     executor = open_executor(args.workers, args.scheduler)
-    print(f"compare: {len(spec_names)} scenarios on {executor.description}", file=sys.stderr)
+    print(f"compare: {len(specs)} scenarios on {executor.description}", file=sys.stderr)
     summaries: dict[str, dict[str, Any]] = {}
     try:
-        if specs:
-            multi = for_executor(MultiSpec(specs=specs), executor)
-            cases = [Case(index=i, params={SCENARIO_PARAM: float(i)}, seed=case_seed(args.seed, i))
-                     for i in range(len(specs))]
-            sweep = run_sweep(multi, cases, executor=executor, progress=not args.quiet)
-            for row in sweep.rows:
-                name = spec_names[row["index"]]
-                row = {k: v for k, v in row.items() if k != SCENARIO_PARAM}
-                row["cost"] = cost(row) if row["status"] != "error" else math.inf
-                row["gains"] = getattr(specs[row["index"]], "gains", "") or ""
-                results[name] = row
+        results.update(_run_all(specs, executor, args))
         if args.robustness:
-            for name, _spec in zip(spec_names, specs):
-                plain = spec_for(name, stop_time=args.stop_time, parameter_set=_pset(name, args.parameter_set),
-                                 fmus=getattr(_spec, "fmus", "python"))
-                varies = parse_all(rob.default_vary(plant_kind(name, plain), plain.parameters), plain.parameters)
-                cases = make_cases(varies, plain.parameters, samples=args.samples, seed=args.seed)
-                if not args.quiet:
-                    print(f"compare: robustness of {name}, {len(cases)} runs", file=sys.stderr)
-                res = run_sweep(for_executor(plain, executor), cases, executor=executor,
-                                out_dir=out / "robustness" / name,
-                                progress=not args.quiet,
-                                extra_metadata={"vary": [v.text for v in varies], "seed": args.seed})
-                summaries[name] = rob.summarize(res.rows, plain.metric_names)
+            summaries = _robustness(specs, executor, args, out)
     except KeyboardInterrupt:
         executor.abort()
         print(f"ipcosim compare: interrupted; robustness runs finished so far are kept under "
@@ -200,7 +143,105 @@ def main(args: argparse.Namespace) -> int:
     meta = {"scenarios": len(names), "stop time": f"{args.stop_time:g} s" if args.stop_time else "scenario default",
             "executor": executor.description, "packages": package_versions()}
     files = render(results, out, robustness=summaries or None, robustness_note=note, meta=meta)
+    _write_metrics(out, results, summaries)
+    print(f"report: {files['markdown']}, {files['html']}")
+    ok = sum(1 for r in results.values() if r.get("status") == "ok")
+    print(f"{len(results)} scenarios: {ok} succeed, "
+          f"{sum(1 for r in results.values() if r.get('status') == 'error')} failed to run")
+    if results and all(r.get("status") == "error" for r in results.values()):
+        first = next(iter(results.items()))
+        raise IpcosimError(f"every scenario failed to run; {first[0]}: {first[1].get('error')}")
+    return 0
 
+
+def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The run spec of each scenario, by name; a scenario that cannot be loaded gets an error row
+    in ``results`` instead. Missing FMUs (a fresh checkout) are built once, as ``ipcosim build`` does."""
+    from ipcosim.errors import IpcosimError
+    from ipcosim.harness.studies.specs import study_spec
+    from ipcosim.harness.studies.sweep import one_line
+
+    specs: dict[str, Any] = {}
+    built = False
+    for name in names:
+        try:
+            try:
+                spec, flavour = study_spec(name, args.fmus, stop_time=args.stop_time, series=True,
+                                           parameter_set=_pset(name, args.parameter_set))
+            except FileNotFoundError as exc:
+                if built or "ipcosim build" not in str(exc):
+                    raise
+                from ipcosim.fmus.build import build_all
+                from ipcosim.harness.paths import BUILD_FMU_DIR
+
+                print(f"compare: FMUs missing; building them into {BUILD_FMU_DIR}", file=sys.stderr)
+                build_all(BUILD_FMU_DIR)
+                built = True
+                spec, flavour = study_spec(name, args.fmus, stop_time=args.stop_time, series=True,
+                                           parameter_set=_pset(name, args.parameter_set))
+            if not args.quiet:
+                print(f"compare: {name}: {flavour}", file=sys.stderr)
+            specs[name] = spec
+        except (IpcosimError, OSError, ValueError) as exc:
+            results[name] = {"status": "error", "error": one_line(exc).split(": ", 1)[-1]}
+            print(f"compare: {name}: {results[name]['error']}", file=sys.stderr)
+    return specs
+
+
+def _run_all(specs: dict[str, Any], executor: Any, args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+    """One run of every scenario, as one sweep whose case parameter picks the scenario; each row
+    with its ``cost`` (inf for a run that failed) and the controller's ``gains``, by scenario."""
+    from ipcosim.harness.studies.cost import cost
+    from ipcosim.harness.studies.runners import SCENARIO_PARAM, MultiSpec
+    from ipcosim.harness.studies.specs import for_executor
+    from ipcosim.harness.studies.sweep import run_sweep
+    from ipcosim.harness.studies.vary import Case, case_seed
+
+    if not specs:
+        return {}
+    names, spec_list = list(specs), list(specs.values())
+    multi = for_executor(MultiSpec(specs=spec_list), executor)
+    cases = [Case(index=i, params={SCENARIO_PARAM: float(i)}, seed=case_seed(args.seed, i))
+             for i in range(len(spec_list))]
+    sweep = run_sweep(multi, cases, executor=executor, progress=not args.quiet)
+    results: dict[str, dict[str, Any]] = {}
+    for row in sweep.rows:
+        name = names[row["index"]]
+        row = {k: v for k, v in row.items() if k != SCENARIO_PARAM}
+        row["cost"] = cost(row) if row["status"] != "error" else math.inf
+        row["gains"] = getattr(spec_list[row["index"]], "gains", "") or ""
+        results[name] = row
+    return results
+
+
+def _robustness(specs: dict[str, Any], executor: Any, args: argparse.Namespace, out: Path
+                ) -> dict[str, dict[str, Any]]:
+    """A resumable robustness sweep of each scenario (masses, friction, stiffness within +-20 %) on the
+    flavour its comparison run took, under ``out/robustness/<scenario>/``, summarized by scenario."""
+    from ipcosim.harness.studies import robustness as rob
+    from ipcosim.harness.studies.specs import for_executor, spec_for
+    from ipcosim.harness.studies.sweep import run_sweep
+    from ipcosim.harness.studies.vary import make_cases, parse_all
+
+    summaries: dict[str, dict[str, Any]] = {}
+    for name, spec in specs.items():
+        plain = spec_for(name, stop_time=args.stop_time, parameter_set=_pset(name, args.parameter_set),
+                         fmus=getattr(spec, "fmus", "python"))
+        varies = parse_all(rob.default_vary(plant_kind(name, plain), plain.parameters), plain.parameters)
+        cases = make_cases(varies, plain.parameters, samples=args.samples, seed=args.seed)
+        if not args.quiet:
+            print(f"compare: robustness of {name}, {len(cases)} runs", file=sys.stderr)
+        res = run_sweep(for_executor(plain, executor), cases, executor=executor,
+                        out_dir=out / "robustness" / name,
+                        progress=not args.quiet,
+                        extra_metadata={"vary": [v.text for v in varies], "seed": args.seed})
+        summaries[name] = rob.summarize(res.rows, plain.metric_names)
+    return summaries
+
+
+def _write_metrics(out: Path, results: dict[str, dict[str, Any]], summaries: dict[str, dict[str, Any]]) -> None:
+    """``metrics.csv`` (one row per scenario, every key any row has) and ``metrics.json`` (non-finite
+    numbers as null, without the time series)."""
     keys: dict[str, None] = {"scenario": None}
     for row in results.values():
         for k in row:
@@ -214,11 +255,3 @@ def main(args: argparse.Namespace) -> int:
     clean = {n: {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
                  for k, v in r.items() if k != "series"} for n, r in results.items()}
     (out / "metrics.json").write_text(json.dumps({"results": clean, "robustness": summaries}, indent=2) + "\n")
-    print(f"report: {files['markdown']}, {files['html']}")
-    ok = sum(1 for r in results.values() if r.get("status") == "ok")
-    print(f"{len(results)} scenarios: {ok} succeed, "
-          f"{sum(1 for r in results.values() if r.get('status') == 'error')} failed to run")
-    if results and all(r.get("status") == "error" for r in results.values()):
-        first = next(iter(results.items()))
-        raise IpcosimError(f"every scenario failed to run; {first[0]}: {first[1].get('error')}")
-    return 0

@@ -10,7 +10,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ipcosim.harness.scenario.ssp import SCENARIO_DIR, ScenarioError, load_scenario, scenario_names
+    from ipcosim.harness.paths import SCENARIO_DIR
+    from ipcosim.harness.scenario.ssp import ScenarioError, load_scenario, scenario_names
 
     names = scenario_names()
     if not names:

@@ -70,8 +70,8 @@ def _token(args: argparse.Namespace) -> str | None:
     """The access token from --token-file, --token or IPCOSIM_RIG_TOKEN (in that order), or None."""
     import os
 
+    from ipcosim.errors import UsageError
     from ipcosim.fmus.hil.protocol import MAX_TOKEN, TOKEN_ENV
-    from ipcosim.harness.errors import UsageError
 
     if args.token_file:
         try:
@@ -89,7 +89,7 @@ def _token(args: argparse.Namespace) -> str | None:
 
 
 def _pairs(items: list[str], what: str) -> dict[str, float]:
-    from ipcosim.harness.errors import UsageError
+    from ipcosim.errors import UsageError
 
     out = {}
     for item in items:
@@ -131,7 +131,7 @@ def main(args: argparse.Namespace) -> int:
 
 def _limit(text: str, option: str, hi: float) -> float | None:
     """A software limit: a finite number in (0, hi], or None for the explicit word 'off'."""
-    from ipcosim.harness.errors import UsageError
+    from ipcosim.errors import UsageError
 
     if text.strip().lower() == "off":
         return None
@@ -145,7 +145,7 @@ def _limit(text: str, option: str, hi: float) -> float | None:
 
 
 def _check_numbers(args: argparse.Namespace) -> None:
-    from ipcosim.harness.errors import UsageError
+    from ipcosim.errors import UsageError
 
     if not 0 <= args.port <= 65535:
         raise UsageError(f"--port {args.port}: expected 0..65535")
@@ -165,8 +165,8 @@ def _check_numbers(args: argparse.Namespace) -> None:
 
 
 def serve(args: argparse.Namespace) -> int:
+    from ipcosim.errors import UsageError
     from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig
-    from ipcosim.harness.errors import UsageError
     from ipcosim.harness.hil.server import RigServer, escape
 
     _check_numbers(args)

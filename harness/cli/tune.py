@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from ipcosim.harness.cli import add_study_fmus_option
 
@@ -60,7 +61,7 @@ def _scenario_dir(scenario: str) -> Path | None:
     if path.suffix == ".ssp" and path.exists():
         return path.parent
     try:
-        from ipcosim.harness.scenario.ssp import SCENARIO_DIR
+        from ipcosim.harness.paths import SCENARIO_DIR
     except ImportError:
         return None
     candidate = SCENARIO_DIR / scenario
@@ -69,7 +70,7 @@ def _scenario_dir(scenario: str) -> Path | None:
 
 def _install_path(args: argparse.Namespace) -> Path:
     """Where ``--install`` puts the tuned set: ``autotuned.ssv`` in the scenario's folder."""
-    from ipcosim.harness.errors import UsageError
+    from ipcosim.errors import UsageError
 
     folder = _scenario_dir(args.scenario)
     if folder is None or Path(args.scenario).suffix == ".ssp":
@@ -77,20 +78,29 @@ def _install_path(args: argparse.Namespace) -> Path:
     return folder / "autotuned.ssv"
 
 
-def main(args: argparse.Namespace) -> int:
-    from ipcosim.harness.cli.sweep import default_out
-    from ipcosim.harness.studies import cost as costmod
-    from ipcosim.harness.studies import tune as tunemod
-    from ipcosim.harness.studies.specs import PURE_SCENARIOS, for_executor, parse_set, study_spec
-    from ipcosim.harness.studies.sweep import open_executor
+def _parameter_set(args: argparse.Namespace) -> str | None:
+    """The parameter set to start from: ``--parameter-set``, else ``thesis`` where the scenario has it."""
+    from ipcosim.harness.studies.specs import PURE_SCENARIOS
 
-    overrides = parse_set(args.set)
-    pset = args.parameter_set
-    if pset is None and args.scenario not in PURE_SCENARIOS:
+    if args.parameter_set is None and args.scenario not in PURE_SCENARIOS:
         from ipcosim.harness.scenario.ssp import load_scenario
 
         if "thesis" in load_scenario(args.scenario).parameter_sets:
-            pset = "thesis"
+            return "thesis"
+    return args.parameter_set
+
+
+def main(args: argparse.Namespace) -> int:
+    """Tune the named parameters of a scenario (differential evolution on the cost J over a run
+    budget), then write the evaluations, the tuned parameter set and the report."""
+    from ipcosim.harness.cli.sweep import default_out
+    from ipcosim.harness.studies import cost as costmod
+    from ipcosim.harness.studies import tune as tunemod
+    from ipcosim.harness.studies.specs import for_executor, parse_set, study_spec
+    from ipcosim.harness.studies.sweep import open_executor
+
+    overrides = parse_set(args.set)
+    pset = _parameter_set(args)
     spec, flavour = study_spec(args.scenario, args.fmus, names=list(overrides),
                                check=lambda s: tunemod.parse_bounds(
                                    args.bounds, tunemod.parse_params(args.params, s.parameters), s.parameters),
@@ -121,6 +131,19 @@ def main(args: argparse.Namespace) -> int:
         executor.close()
 
     tunemod.write_evaluations(out / "evaluations.csv", res.evaluations, names)
+    table = _write_tuned(args, spec, res, pset, out, ssv_path, install, w_angle, w_voltage)
+    print(table, end="")
+    print(f"tuned parameter set: {ssv_path}" + (f" (installed: {install})" if install is not None else "")
+          + f"\nreport: {out / 'tune.md'}, runs: {out / 'evaluations.csv'}")
+    return 0
+
+
+def _write_tuned(args: argparse.Namespace, spec: Any, res: Any, pset: str | None, out: Path, ssv_path: Path,
+                 install: Path | None, w_angle: float, w_voltage: float) -> str:
+    """Write the tuned parameter set (``ssv_path``, and ``install`` when given) and ``out/tune.md``;
+    returns the report's before/after table."""
+    from ipcosim.harness.studies import tune as tunemod
+
     scenario_hash = getattr(spec, "scenario_hash", "") or spec.key
     description = (f"ipcosim tune {spec.name} (scenario hash {scenario_hash}): J = {res.best_cost:.6g} "
                    f"(scenario gains: {res.nominal_cost:.6g}), {len(res.evaluations)} runs, seed {args.seed}, "
@@ -148,7 +171,4 @@ def main(args: argparse.Namespace) -> int:
                                      "the written set repeats them.\n")
               + f"\nTuned parameter set: `{ssv_path}`. {usage}\n")
     (out / "tune.md").write_text(report)
-    print(table, end="")
-    print(f"tuned parameter set: {ssv_path}" + (f" (installed: {install})" if install is not None else "")
-          + f"\nreport: {out / 'tune.md'}, runs: {out / 'evaluations.csv'}")
-    return 0
+    return table

@@ -524,6 +524,12 @@ class RigServer:
         return _ANSWERED
 
     def _dispatch(self, msg: Msg, r: Reader, session: _Session, frame: Frame, conn: socket.socket) -> object:
+        """Decode one request's body, call the rig and encode the reply body (None: do not answer).
+
+        Long on purpose (about 80 lines): a flat table, one short branch per message of the
+        protocol (docs/hil.md), so that the protocol reads in one place; the longer answers
+        (STEP, STATUS) are their own methods.
+        """
         rig = self.rig
         if msg == Msg.WRITE_ANALOG:
             ch = r.channels()
@@ -574,16 +580,7 @@ class RigServer:
             volts = r.doubles(len(ao))
             enc = r.channels()
             r.end()
-            session.steps += 1
-            if self.stall_after_steps is not None and session.steps > self.stall_after_steps:
-                session.stalled = True
-                self.counters["stalled_requests"] += 1
-                self.log(f"rig: fault injection: no longer answering {session.peer} "
-                         f"(after {self.stall_after_steps} steps)")
-                return None
-            res = rig.step(ao, volts, enc, until, reload)
-            return (struct.pack("!BqH", 1 if res.reloaded else 0, int(round(res.late * NS)), len(res.counts))
-                    + pack_ints([int(c) for c in res.counts]))
+            return self._step(session, ao, volts, enc, until, reload)
         if msg == Msg.ADVANCE:
             dt = r.one("q")
             r.end()
@@ -593,17 +590,7 @@ class RigServer:
             return b""
         if msg == Msg.STATUS:
             r.end()
-            st = rig.status()
-            with rig.lock:
-                last = rig.wd_last_reload_ns if rig.wd_last_reload_ns is not None else -1
-                expired_at = rig.wd_expired_at_ns if rig.wd_expired_at_ns is not None else -1
-            counters = {**{f"rig.{k}": v for k, v in st.counters.items()},
-                        **{f"server.{k}": v for k, v in self.counters.items()}}
-            body = struct.pack("!dqq", st.motor_voltage, last, expired_at) + pack_text(st.limit_message)
-            body += struct.pack("!H", len(counters))
-            for k, v in sorted(counters.items()):
-                body += pack_text(k, 200) + struct.pack("!q", int(v))
-            return body
+            return self._status_body()
         if msg == Msg.RESET:
             r.end()
             with self._lock:
@@ -622,3 +609,35 @@ class RigServer:
                 self._release(session, f"{session.peer}: BYE")
             return b""
         raise DecodeError(f"unhandled message {msg.name}")
+
+    def _step(self, session: _Session, ao: list[int], volts: list[float], enc: list[int], until: int,
+              reload: bool) -> bytes | None:
+        """STEP: write the voltages, advance the rig to ``until`` [ns] and read the encoders; the
+        reply is (reloaded, lateness [ns], counts). With ``stall_after_steps`` (fault injection),
+        None once the session has had that many steps: the request is left unanswered."""
+        session.steps += 1
+        if self.stall_after_steps is not None and session.steps > self.stall_after_steps:
+            session.stalled = True
+            self.counters["stalled_requests"] += 1
+            self.log(f"rig: fault injection: no longer answering {session.peer} "
+                     f"(after {self.stall_after_steps} steps)")
+            return None
+        res = self.rig.step(ao, volts, enc, until, reload)
+        return (struct.pack("!BqH", 1 if res.reloaded else 0, int(round(res.late * NS)), len(res.counts))
+                + pack_ints([int(c) for c in res.counts]))
+
+    def _status_body(self) -> bytes:
+        """STATUS: motor voltage, watchdog times [ns] (-1: none), the limit message and the rig's
+        and server's counters by name."""
+        rig = self.rig
+        st = rig.status()
+        with rig.lock:
+            last = rig.wd_last_reload_ns if rig.wd_last_reload_ns is not None else -1
+            expired_at = rig.wd_expired_at_ns if rig.wd_expired_at_ns is not None else -1
+        counters = {**{f"rig.{k}": v for k, v in st.counters.items()},
+                    **{f"server.{k}": v for k, v in self.counters.items()}}
+        body = struct.pack("!dqq", st.motor_voltage, last, expired_at) + pack_text(st.limit_message)
+        body += struct.pack("!H", len(counters))
+        for k, v in sorted(counters.items()):
+            body += pack_text(k, 200) + struct.pack("!q", int(v))
+        return body

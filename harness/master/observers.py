@@ -25,7 +25,7 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any, TextIO
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 
 if TYPE_CHECKING:  # pragma: no cover
     from ipcosim.harness.master.execution import Execution

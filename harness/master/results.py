@@ -9,14 +9,13 @@ import json
 import math
 import os
 import tempfile
-import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from ipcosim.harness.errors import IpcosimError, UsageError
+from ipcosim.errors import IpcosimError, UsageError
 
 #: Draws a result's figure: ``plotter(result, path or None)`` (see :attr:`Result.plotter`).
 Plotter = Callable[["Result", "Path | None"], Any]
@@ -97,7 +96,8 @@ class Result:
             If the result has no plotter.
         """
         if self.plotter is None:
-            raise UsageError("this result has no plotter (results of ipcosim.run and ipcosim.harness.run have one)")
+            raise UsageError("this result has no plotter (results of ipcosim.run and ipcosim.harness.run_master "
+                             "have one)")
         return self.plotter(self, Path(path) if path is not None else None)
 
     def write(self, out_dir: str | Path, variables: Sequence[str] | None = None, plot: bool = False,
@@ -137,19 +137,6 @@ def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> li
             raise UsageError(f"--record {p}: no such variable (recorded: {', '.join(cols[1:])})")
         chosen.update(hits)
     return [c for c in cols if c in chosen]
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename, so
-    that an interrupted write never leaves a truncated file."""
-    tmp = path.with_name(f".{path.name}.partial")
-    try:
-        with open(tmp, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 class OutputFolderError(IpcosimError, OSError):
@@ -222,7 +209,6 @@ class RowWriter:
                 self._spool.close()
                 raise OutputFolderError(f"{self.csv_path}: cannot write results ({exc.strerror})") from None
             self._write_csv((",".join(self.csv_columns) + "\n").encode())
-        self.last_write = _time.monotonic()
 
     def _write_csv(self, data: bytes) -> None:
         from ipcosim.harness.master import signals
@@ -245,7 +231,6 @@ class RowWriter:
         if self._csv_fd is not None:
             self._write_csv(csv_text(block, self.csv_columns).encode())
         self.rows += len(block)
-        self.last_write = _time.monotonic()
 
     def _to_spool(self, block: np.ndarray) -> np.ndarray:
         if not self._strings:

@@ -49,7 +49,6 @@ class Interrupted(KeyboardInterrupt):
 class _State:
     active = False
     pending: int | None = None
-    timed_out = False
     critical = 0
     exit_after_critical: int | None = None
     temp_dirs: list[str] = []
@@ -118,7 +117,6 @@ def _watchdog(timeout: float, grace: float, done: threading.Event) -> None:
         return
     if _State.pending is None:
         _State.pending = signal.SIGALRM
-        _State.timed_out = True
     if done.wait(grace):
         return
     # the master did not get back from an FMU call: leave now
@@ -142,7 +140,7 @@ def deferred(timeout: float | None = None, grace: float = 2.0) -> Iterator[None]
         yield
         return
     previous = {s: signal.getsignal(s) for s in HANDLED}
-    _State.active, _State.pending, _State.timed_out, _State.exit_after_critical = True, None, False, None
+    _State.active, _State.pending, _State.exit_after_critical = True, None, None
     done = threading.Event()
     for s in HANDLED:
         signal.signal(s, _handler)

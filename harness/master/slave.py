@@ -23,8 +23,8 @@ import ctypes
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ipcosim.harness.errors import IpcosimError
-from ipcosim.harness.master.system import KINDS, Instance, Variable, kind_of  # noqa: F401 -- re-exported
+from ipcosim.errors import IpcosimError
+from ipcosim.harness.master.system import Instance, Variable
 
 STATUS = {0: "fmi2OK", 1: "fmi2Warning", 2: "fmi2Discard", 3: "fmi2Error", 4: "fmi2Fatal", 5: "fmi2Pending"}
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4

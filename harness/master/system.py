@@ -13,8 +13,6 @@ from typing import TYPE_CHECKING, Any, Mapping
 if TYPE_CHECKING:  # type-only: a System remembers the scenario it was bound from
     from ipcosim.harness.scenario.ssp import Scenario, Unit
 
-#: The master's value kinds: how values of each SSP connector type are carried at run time.
-KINDS = ("real", "integer", "boolean", "string")
 #: SSP 1.0 connector type of every FMI 2.0 / 3.0 variable type the master carries.
 SSP_TYPE = {"Real": "Real", "Float64": "Real", "Float32": "Real",
             "Integer": "Integer", "Int8": "Integer", "UInt8": "Integer", "Int16": "Integer", "UInt16": "Integer",

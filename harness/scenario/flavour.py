@@ -12,7 +12,7 @@ import shutil
 from pathlib import Path
 from typing import Any, Mapping
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.scenario.ssp import Parameter, ParameterSet, Scenario
 
 FLAVOURS = ("python", "native")

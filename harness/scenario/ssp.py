@@ -25,8 +25,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from lxml import etree
 
-from ipcosim.harness.errors import IpcosimError
-from ipcosim.harness.paths import BUILD_FMU_DIR, BUILD_SSP_DIR, SCENARIO_DIR  # noqa: F401 -- re-exported
+from ipcosim.errors import IpcosimError
+from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
 
 #: XML namespaces of SSP 1.0 (as in fmpy.ssp.ssd) plus the OSP annotations libcosim reads.
 NS = {
@@ -362,7 +362,7 @@ def _resolve_fmu(source: str, src: _Source, fmu_dirs: Sequence[Path]) -> Path | 
         return p if p.is_file() else None
     rel = PurePosixPath(source)
     if src.is_archive:
-        return None  # archive members are extracted on preparation (see ipcosim.harness.prepare)
+        return None  # archive members are extracted on preparation (see ipcosim.prepare)
     direct = src.location / Path(*rel.parts)
     if direct.is_file():
         return direct.resolve()
@@ -469,19 +469,50 @@ def load_scenario(scenario_or_path: str | os.PathLike[str],
 
 
 def _load(src: _Source, fmu_dirs: Sequence[Path]) -> Scenario:
+    """Parse a scenario: the SSD (schema-validated), its parameter files, FMPy's object model of
+    the system, then what FMPy leaves out (connectors, bindings, step hints, transformations,
+    units, the default experiment), each checked with file and line in the message."""
     if not src.exists(SSD_NAME):
         where = _display(src.location)
         container = "archive" if src.is_archive else "folder"
         raise ScenarioError(f"{where}: no {SSD_NAME} at the top level of the {container}")
     ssd_display = src.display(SSD_NAME)
     root = parse_xml(src.read(SSD_NAME), ssd_display, "SystemStructureDescription.xsd")
-
-    # every .ssv of the scenario: validated, by set name (the selectable parameter sets)
     ssv_files = src.top_level(".ssv")
+    set_elements = _parameter_files(src, root, ssv_files, ssd_display)
+    fssd, system_xml = _read_system(src, root, set_elements, ssd_display)
+    components = []
+    seen: set[str] = set()
+    for fcomp, xml in zip(fssd.system.elements, system_xml.findall("ssd:Elements/ssd:Component", NS)):
+        if fcomp.name in seen:
+            raise ScenarioError(f"{ssd_display}:{xml.sourceline}: duplicate component name {fcomp.name!r}")
+        seen.add(fcomp.name)
+        components.append(_component(fcomp, xml, src, set_elements, fmu_dirs, ssd_display))
+    by_name = {c.name: c for c in components}
+    connections = [_connection(cxml, f"{ssd_display}:{cxml.sourceline}", by_name)
+                   for cxml in system_xml.findall("ssd:Connections/ssd:Connection", NS)]
+    units = {u.get("name"): _unit(u) for u in root.findall("ssd:Units/ssc:Unit", NS)}
+    experiment = _experiment(root, ssd_display)
+    sets = {}
+    set_files = {}
+    for fname in ssv_files:
+        pset = _parameter_set(set_elements[fname], src.display(fname), fname)
+        key = pset.name or PurePosixPath(fname).stem
+        sets[key] = pset
+        set_files[key] = fname
+    return Scenario(name=fssd.name or system_xml.get("name"), origin=ssd_display, location=src.location,
+                    description=system_xml.get("description") or "", components=tuple(components),
+                    connections=tuple(connections), units=units, experiment=experiment,
+                    parameter_sets=sets, set_files=set_files)
+
+
+def _parameter_files(src: _Source, root: etree._Element, ssv_files: Sequence[str],
+                     ssd_display: str) -> dict[str, etree._Element]:
+    """Every parameter file of the scenario, validated, by its path: the top-level ``.ssv`` files
+    (the selectable parameter sets) and those parameter bindings name in sub-folders."""
     set_elements: dict[str, etree._Element] = {}
     for name in ssv_files:
         set_elements[name] = parse_xml(src.read(name), src.display(name), "SystemStructureParameterValues.xsd")
-    # parameter bindings may reference .ssv files in sub-folders too
     for b in root.iter(f"{{{NS['ssd']}}}ParameterBinding"):
         source = b.get("source")
         if source is not None and source not in set_elements:
@@ -491,8 +522,13 @@ def _load(src: _Source, fmu_dirs: Sequence[Path]) -> Scenario:
                                              "SystemStructureParameterValues.xsd")
     for b in root.iter(f"{{{NS['ssd']}}}ParameterMapping"):
         raise ScenarioError(f"{ssd_display}:{b.sourceline}: parameter mappings (.ssm) are not supported")
+    return set_elements
 
-    # FMPy's reader for the object model (components, bindings, connections)...
+
+def _read_system(src: _Source, root: etree._Element, set_elements: Mapping[str, etree._Element],
+                 ssd_display: str) -> tuple[Any, etree._Element]:
+    """FMPy's object model of the SSD (components, bindings, connections) and the SSD's
+    ``ssd:System`` element; a system of anything but components is refused."""
     from fmpy.ssp.ssd import Component as FComponent
     from fmpy.ssp.ssd import read_ssd
 
@@ -501,79 +537,74 @@ def _load(src: _Source, fmu_dirs: Sequence[Path]) -> Scenario:
         fssd = read_ssd(archive, validate=False)
     except Exception as exc:  # noqa: BLE001 -- fmpy raises bare exceptions
         raise ScenarioError(f"{ssd_display}: cannot be read: {exc}") from None
-    system_xml = root.find("ssd:System", NS)
     if any(not isinstance(e, FComponent) for e in fssd.system.elements):
         raise ScenarioError(f"{ssd_display}: nested systems and signal dictionaries are not supported; "
                             f"the system must contain components only")
+    return fssd, root.find("ssd:System", NS)
 
-    # ... extended with what it leaves out
-    components = []
-    seen: set[str] = set()
-    for fcomp, xml in zip(fssd.system.elements, system_xml.findall("ssd:Elements/ssd:Component", NS)):
-        if fcomp.name in seen:
-            raise ScenarioError(f"{ssd_display}:{xml.sourceline}: duplicate component name {fcomp.name!r}")
-        seen.add(fcomp.name)
-        connectors = tuple(_connector(c) for c in xml.findall("ssd:Connectors/ssd:Connector", NS))
-        names = [c.name for c in connectors]
-        dup = {n for n in names if names.count(n) > 1}
-        if dup:
-            raise ScenarioError(f"{ssd_display}:{xml.sourceline}: component {fcomp.name!r} declares connector "
-                                f"{sorted(dup)[0]!r} twice")
-        bindings = []
-        for bxml in xml.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS):
-            source = bxml.get("source")
-            if source is not None:
-                bindings.append(_parameter_set(set_elements[source], src.display(source), source))
-            for inline in bxml.findall("ssd:ParameterValues/ssv:ParameterSet", NS):
-                bindings.append(_parameter_set(inline, ssd_display, None))
-        hint = None
-        ann = _osp_annotation(xml)
-        if ann is not None:
-            h = ann.find("osp:StepSizeHint", NS)
-            if h is not None:
-                hint = _positive(h.get("value"), f"{ssd_display}:{h.sourceline}: osp:StepSizeHint value")
-        components.append(Component(name=fcomp.name, source=fcomp.source,
-                                    fmu=_resolve_fmu(fcomp.source, src, fmu_dirs), connectors=connectors,
-                                    bindings=tuple(bindings), step_size_hint=hint))
-    by_name = {c.name: c for c in components}
 
-    connections = []
-    targets: dict[str, int] = {}
-    for cxml in system_xml.findall("ssd:Connections/ssd:Connection", NS):
-        line = f"{ssd_display}:{cxml.sourceline}"
-        se, sc, ee, ec = (cxml.get(k) for k in ("startElement", "startConnector", "endElement", "endConnector"))
-        if se is None or ee is None:
-            raise ScenarioError(f"{line}: connection {sc!r} -> {ec!r} to the system boundary is not supported "
-                                f"(give startElement and endElement)")
-        for elem, conn in ((se, sc), (ee, ec)):
-            if elem not in by_name:
-                raise ScenarioError(f"{line}: connection names component {elem!r}, which the system does not have")
-            if by_name[elem].connector(conn) is None:
-                raise ScenarioError(f"{line}: connection names {elem}.{conn}, but component {elem!r} declares "
-                                    f"no connector {conn!r}")
-        factor, offset = 1.0, 0.0
-        kind, mapping = None, ()
-        lt = cxml.find("ssc:LinearTransformation", NS)
-        if lt is not None:
-            kind = "LinearTransformation"
-            factor, offset = float(lt.get("factor", 1.0)), float(lt.get("offset", 0.0))
-            if not (math.isfinite(factor) and math.isfinite(offset)):
-                raise ScenarioError(f"{line}: linear transformation factor/offset must be finite")
-        for other in ("IntegerMappingTransformation", "BooleanMappingTransformation"):
-            mt = cxml.find(f"ssc:{other}", NS)
-            if mt is not None:
-                kind, mapping = other, _map_entries(mt, other, line)
-        if cxml.find("ssc:EnumerationMappingTransformation", NS) is not None:
-            raise ScenarioError(f"{line}: ssc:EnumerationMappingTransformation is not supported (it maps "
-                                f"enumeration item names; map the values with ssc:IntegerMappingTransformation)")
-        suppress = cxml.get("suppressUnitConversion", "false") in ("true", "1")
-        conn = Connection(se, sc, ee, ec, factor, offset, suppress, kind, mapping)
-        connections.append(conn)
-        for endpoint in (conn.start, conn.end):
-            targets[endpoint] = targets.get(endpoint, 0) + 1
+def _component(fcomp: Any, xml: etree._Element, src: _Source, set_elements: Mapping[str, etree._Element],
+               fmu_dirs: Sequence[Path], ssd_display: str) -> Component:
+    """One component: FMPy's name and source, with the connectors, parameter bindings (files and
+    inline) and ``osp:StepSizeHint`` read from its XML, and its FMU file resolved."""
+    connectors = tuple(_connector(c) for c in xml.findall("ssd:Connectors/ssd:Connector", NS))
+    names = [c.name for c in connectors]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise ScenarioError(f"{ssd_display}:{xml.sourceline}: component {fcomp.name!r} declares connector "
+                            f"{sorted(dup)[0]!r} twice")
+    bindings = []
+    for bxml in xml.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS):
+        source = bxml.get("source")
+        if source is not None:
+            bindings.append(_parameter_set(set_elements[source], src.display(source), source))
+        for inline in bxml.findall("ssd:ParameterValues/ssv:ParameterSet", NS):
+            bindings.append(_parameter_set(inline, ssd_display, None))
+    hint = None
+    ann = _osp_annotation(xml)
+    if ann is not None:
+        h = ann.find("osp:StepSizeHint", NS)
+        if h is not None:
+            hint = _positive(h.get("value"), f"{ssd_display}:{h.sourceline}: osp:StepSizeHint value")
+    return Component(name=fcomp.name, source=fcomp.source, fmu=_resolve_fmu(fcomp.source, src, fmu_dirs),
+                     connectors=connectors, bindings=tuple(bindings), step_size_hint=hint)
 
-    units = {u.get("name"): _unit(u) for u in root.findall("ssd:Units/ssc:Unit", NS)}
 
+def _connection(cxml: etree._Element, line: str, by_name: Mapping[str, Component]) -> Connection:
+    """One connection between declared connectors of declared components, with its
+    transformation (linear, or an integer or boolean mapping) and ``suppressUnitConversion``."""
+    se, sc, ee, ec = (cxml.get(k) for k in ("startElement", "startConnector", "endElement", "endConnector"))
+    if se is None or ee is None:
+        raise ScenarioError(f"{line}: connection {sc!r} -> {ec!r} to the system boundary is not supported "
+                            f"(give startElement and endElement)")
+    for elem, conn in ((se, sc), (ee, ec)):
+        if elem not in by_name:
+            raise ScenarioError(f"{line}: connection names component {elem!r}, which the system does not have")
+        if by_name[elem].connector(conn) is None:
+            raise ScenarioError(f"{line}: connection names {elem}.{conn}, but component {elem!r} declares "
+                                f"no connector {conn!r}")
+    factor, offset = 1.0, 0.0
+    kind, mapping = None, ()
+    lt = cxml.find("ssc:LinearTransformation", NS)
+    if lt is not None:
+        kind = "LinearTransformation"
+        factor, offset = float(lt.get("factor", 1.0)), float(lt.get("offset", 0.0))
+        if not (math.isfinite(factor) and math.isfinite(offset)):
+            raise ScenarioError(f"{line}: linear transformation factor/offset must be finite")
+    for other in ("IntegerMappingTransformation", "BooleanMappingTransformation"):
+        mt = cxml.find(f"ssc:{other}", NS)
+        if mt is not None:
+            kind, mapping = other, _map_entries(mt, other, line)
+    if cxml.find("ssc:EnumerationMappingTransformation", NS) is not None:
+        raise ScenarioError(f"{line}: ssc:EnumerationMappingTransformation is not supported (it maps "
+                            f"enumeration item names; map the values with ssc:IntegerMappingTransformation)")
+    suppress = cxml.get("suppressUnitConversion", "false") in ("true", "1")
+    return Connection(se, sc, ee, ec, factor, offset, suppress, kind, mapping)
+
+
+def _experiment(root: etree._Element, ssd_display: str) -> Experiment:
+    """The SSD's ``DefaultExperiment``: start and stop time, and the step of an
+    ``osp:FixedStepAlgorithm`` annotation (None where not given)."""
     start, stop, step = 0.0, None, None
     exp = root.find("ssd:DefaultExperiment", NS)
     if exp is not None:
@@ -588,18 +619,7 @@ def _load(src: _Source, fmu_dirs: Sequence[Path]) -> Scenario:
         if stop is not None and not stop > start:
             raise ScenarioError(f"{ssd_display}:{exp.sourceline}: DefaultExperiment stopTime {stop:g} s must be "
                                 f"after startTime {start:g} s")
-
-    sets = {}
-    set_files = {}
-    for fname in ssv_files:
-        pset = _parameter_set(set_elements[fname], src.display(fname), fname)
-        key = pset.name or PurePosixPath(fname).stem
-        sets[key] = pset
-        set_files[key] = fname
-    return Scenario(name=fssd.name or system_xml.get("name"), origin=ssd_display, location=src.location,
-                    description=system_xml.get("description") or "", components=tuple(components),
-                    connections=tuple(connections), units=units, experiment=Experiment(start, stop, step),
-                    parameter_sets=sets, set_files=set_files)
+    return Experiment(start, stop, step)
 
 
 def _map_entries(xml: etree._Element, kind: str, line: str) -> tuple[tuple[Any, Any], ...]:

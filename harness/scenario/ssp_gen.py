@@ -18,7 +18,8 @@ from pathlib import Path
 from typing import Any, Mapping
 from xml.sax.saxutils import quoteattr
 
-from ipcosim.harness.scenario.ssp import NS, SCENARIO_DIR
+from ipcosim.harness.paths import SCENARIO_DIR
+from ipcosim.harness.scenario.ssp import NS
 
 PLANTS = {
     "single-mass": {"model": "IP02SingleMass", "suffix": "SingleMass", "description": "single-mass cart"},
@@ -108,7 +109,8 @@ def _connector(name: str, kind: str, unit: str) -> str:
 def ssd_text(plant: str, controller: str, default_set: str | None, sample_period: float | None,
              variant: str | None = None) -> str:
     """The SystemStructure.ssd of one scenario (``variant``: a name of ``VARIANTS``; then ``controller``
-    is ignored)."""
+    is ignored): the three components ``setpoint``, ``controller``, ``plant``, their connections,
+    the units and the default experiment."""
     p = PLANTS[plant]
     amplitude, stop_time, plant_values = AMPLITUDE, STOP_TIME, {}
     if variant is None:
@@ -119,34 +121,52 @@ def ssd_text(plant: str, controller: str, default_set: str | None, sample_period
         _, law, law_doc, amplitude, stop_time, plant_values = VARIANTS[variant]
         name, description = variant, f"IP02 {p['description']}: {law_doc}"
     measured, outputs = plant_signals(plant)
-    ctrl_model = f"{law}{p['suffix']}"
     L = ['<?xml version="1.0" encoding="UTF-8"?>',
          f'<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" xmlns:ssc="{NS["ssc"]}"',
          f'    xmlns:ssv="{NS["ssv"]}" xmlns:osp="{NS["osp"]}"',
          f'    version="1.0" name="{name}" generationTool="ipcosim (ipcosim.harness.scenario.ssp_gen)">',
          f'  <ssd:System name="{name}" description={quoteattr(description)}>',
-         "    <ssd:Elements>",
-         '      <ssd:Component name="setpoint" type="application/x-fmu-sharedlibrary" source="resources/Setpoint.fmu">',
-         "        <ssd:Connectors>",
-         _connector("reference", "output", "m"),
-         "        </ssd:Connectors>",
-         "        <ssd:ParameterBindings>",
-         "          <ssd:ParameterBinding>",
-         "            <ssd:ParameterValues>",
-         '              <ssv:ParameterSet version="1.0" name="experiment">',
-         "                <ssv:Parameters>",
-         f'                  <ssv:Parameter name="amplitude">'
-         f'<ssv:Real value="{amplitude!r}" unit="m"/></ssv:Parameter>',
-         f'                  <ssv:Parameter name="step_time">'
-         f'<ssv:Real value="{STEP_TIME!r}" unit="s"/></ssv:Parameter>',
-         "                </ssv:Parameters>",
-         "              </ssv:ParameterSet>",
-         "            </ssd:ParameterValues>",
-         "          </ssd:ParameterBinding>",
-         "        </ssd:ParameterBindings>",
-         "      </ssd:Component>",
-         f'      <ssd:Component name="controller" type="application/x-fmu-sharedlibrary" '
-         f'source="resources/{ctrl_model}.fmu">',
+         "    <ssd:Elements>"]
+    L += _setpoint_lines(amplitude)
+    L += _controller_lines(f"{law}{p['suffix']}", measured, default_set, sample_period)
+    L += _plant_lines(p["model"], outputs, plant_values)
+    L += ["    </ssd:Elements>"]
+    L += _connection_lines(measured)
+    L += ["  </ssd:System>"]
+    L += _units_and_experiment_lines(stop_time)
+    return "\n".join(L)
+
+
+def _setpoint_lines(amplitude: float) -> list[str]:
+    """The ``setpoint`` component: a step to ``amplitude`` [m] at ``STEP_TIME``."""
+    return ['      <ssd:Component name="setpoint" type="application/x-fmu-sharedlibrary" '
+            'source="resources/Setpoint.fmu">',
+            "        <ssd:Connectors>",
+            _connector("reference", "output", "m"),
+            "        </ssd:Connectors>",
+            "        <ssd:ParameterBindings>",
+            "          <ssd:ParameterBinding>",
+            "            <ssd:ParameterValues>",
+            '              <ssv:ParameterSet version="1.0" name="experiment">',
+            "                <ssv:Parameters>",
+            f'                  <ssv:Parameter name="amplitude">'
+            f'<ssv:Real value="{amplitude!r}" unit="m"/></ssv:Parameter>',
+            f'                  <ssv:Parameter name="step_time">'
+            f'<ssv:Real value="{STEP_TIME!r}" unit="s"/></ssv:Parameter>',
+            "                </ssv:Parameters>",
+            "              </ssv:ParameterSet>",
+            "            </ssd:ParameterValues>",
+            "          </ssd:ParameterBinding>",
+            "        </ssd:ParameterBindings>",
+            "      </ssd:Component>"]
+
+
+def _controller_lines(model: str, measured: list[str], default_set: str | None,
+                      sample_period: float | None) -> list[str]:
+    """The ``controller`` component: reference and measured outputs in, voltage out; bound to
+    ``<default_set>.ssv`` and with its sample period as ``osp:StepSizeHint`` when given."""
+    L = [f'      <ssd:Component name="controller" type="application/x-fmu-sharedlibrary" '
+         f'source="resources/{model}.fmu">',
          "        <ssd:Connectors>",
          _connector("reference", "input", "m")]
     L += [_connector(m, "input", STATE_UNITS[m]) for m in measured]
@@ -160,11 +180,15 @@ def ssd_text(plant: str, controller: str, default_set: str | None, sample_period
               '          <ssc:Annotation type="com.opensimulationplatform">'
               f'<osp:StepSizeHint value="{sample_period!r}"/></ssc:Annotation>',
               "        </ssd:Annotations>"]
-    L += ["      </ssd:Component>",
-          f'      <ssd:Component name="plant" type="application/x-fmu-sharedlibrary" '
-          f'source="resources/{p["model"]}.fmu">',
-          "        <ssd:Connectors>",
-          _connector("voltage", "input", "V")]
+    return L + ["      </ssd:Component>"]
+
+
+def _plant_lines(model: str, outputs: list[str], plant_values: Mapping[str, float]) -> list[str]:
+    """The ``plant`` component: voltage in, its outputs out, ``plant_values`` bound inline."""
+    L = [f'      <ssd:Component name="plant" type="application/x-fmu-sharedlibrary" '
+         f'source="resources/{model}.fmu">',
+         "        <ssd:Connectors>",
+         _connector("voltage", "input", "V")]
     L += [_connector(o, "output", STATE_UNITS[o]) for o in outputs]
     L += ["        </ssd:Connectors>"]
     if plant_values:
@@ -176,28 +200,38 @@ def ssd_text(plant: str, controller: str, default_set: str | None, sample_period
         L += ["                </ssv:Parameters>", "              </ssv:ParameterSet>",
               "            </ssd:ParameterValues>",
               "          </ssd:ParameterBinding>", "        </ssd:ParameterBindings>"]
-    L += ["      </ssd:Component>", "    </ssd:Elements>", "    <ssd:Connections>",
-          '      <ssd:Connection startElement="setpoint" startConnector="reference" '
-          'endElement="controller" endConnector="reference"/>']
+    return L + ["      </ssd:Component>"]
+
+
+def _connection_lines(measured: list[str]) -> list[str]:
+    """The loop: setpoint -> controller, the plant's measured outputs -> controller, controller -> plant."""
+    L = ["    <ssd:Connections>",
+         '      <ssd:Connection startElement="setpoint" startConnector="reference" '
+         'endElement="controller" endConnector="reference"/>']
     L += [f'      <ssd:Connection startElement="plant" startConnector="{m}" '
           f'endElement="controller" endConnector="{m}"/>'
           for m in measured]
-    L += ['      <ssd:Connection startElement="controller" startConnector="voltage" '
-          'endElement="plant" endConnector="voltage"/>',
-          "    </ssd:Connections>", "  </ssd:System>", "  <ssd:Units>"]
+    return L + ['      <ssd:Connection startElement="controller" startConnector="voltage" '
+                'endElement="plant" endConnector="voltage"/>',
+                "    </ssd:Connections>"]
+
+
+def _units_and_experiment_lines(stop_time: float) -> list[str]:
+    """The SSD's units (SI base-unit exponents) and its default experiment (``STEP`` as
+    ``osp:FixedStepAlgorithm``), and the closing tag."""
+    L = ["  <ssd:Units>"]
     for unit, exps in UNITS.items():
         attrs = " ".join(f'{k}="{v}"' for k, v in exps.items())
         L.append(f'    <ssc:Unit name="{unit}"><ssc:BaseUnit {attrs}/></ssc:Unit>')
-    L += ["  </ssd:Units>",
-          f'  <ssd:DefaultExperiment startTime="0.0" stopTime="{float(stop_time)!r}">',
-          "    <ssd:Annotations>",
-          '      <ssc:Annotation type="com.opensimulationplatform">',
-          f'        <osp:Algorithm><osp:FixedStepAlgorithm baseStepSize="{STEP!r}"/></osp:Algorithm>',
-          "      </ssc:Annotation>",
-          "    </ssd:Annotations>",
-          "  </ssd:DefaultExperiment>",
-          "</ssd:SystemStructureDescription>", ""]
-    return "\n".join(L)
+    return L + ["  </ssd:Units>",
+                f'  <ssd:DefaultExperiment startTime="0.0" stopTime="{float(stop_time)!r}">',
+                "    <ssd:Annotations>",
+                '      <ssc:Annotation type="com.opensimulationplatform">',
+                f'        <osp:Algorithm><osp:FixedStepAlgorithm baseStepSize="{STEP!r}"/></osp:Algorithm>',
+                "      </ssc:Annotation>",
+                "    </ssd:Annotations>",
+                "  </ssd:DefaultExperiment>",
+                "</ssd:SystemStructureDescription>", ""]
 
 
 def write_scenarios(root: Path = SCENARIO_DIR, names: list[str] | None = None) -> list[Path]:

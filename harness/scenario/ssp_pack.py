@@ -9,7 +9,8 @@ import sys
 import zipfile
 from pathlib import Path
 
-from ipcosim.harness.scenario.ssp import SCENARIO_DIR, SSD_NAME, load_scenario, scenario_names
+from ipcosim.harness.paths import SCENARIO_DIR
+from ipcosim.harness.scenario.ssp import SSD_NAME, load_scenario, scenario_names
 
 
 def pack(scenario_dir: Path, fmu_dir: Path, target: Path) -> Path:

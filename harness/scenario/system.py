@@ -14,14 +14,11 @@ import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping
 
-from ipcosim.harness.errors import IpcosimError
-from ipcosim.harness.master.system import (  # noqa: F401 -- the bound system's types, re-exported
-    _KIND,
-    KINDS,
+from ipcosim.errors import IpcosimError
+from ipcosim.harness.master.system import (
     SSP_TYPE,
-    SUPPORTED_CONNECTION_TYPES,
     TRANSFORMATION_TYPES,
     Instance,
     Link,
@@ -30,7 +27,7 @@ from ipcosim.harness.master.system import (  # noqa: F401 -- the bound system's 
     Variable,
     kind_of,
 )
-from ipcosim.harness.scenario.ssp import BASE_UNITS, Connector, Scenario, Unit
+from ipcosim.harness.scenario.ssp import BASE_UNITS, Component, Connection, Connector, Scenario, Unit
 
 
 class BindingError(IpcosimError, ValueError):
@@ -263,125 +260,153 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
         Naming the file, component and variable.
     """
     swaps = dict(swaps or {})
-    fmu_files = dict(fmu_files or {})
-    models = dict(models or {})
-    origin = scenario.origin
     for comp in swaps:
         if comp not in {c.name for c in scenario.components}:
             raise BindingError(f"--swap {comp}=...: scenario {scenario.name!r} has no component {comp!r} "
                                f"(components: {', '.join(c.name for c in scenario.components)})")
-    notes: list[str] = []
-    infos: list[str] = []
-    instances: list[Instance] = []
-    for comp in scenario.components:
-        model = models.get(comp.name)
-        if model is None:
-            fmu = fmu_files.get(comp.name, comp.fmu)
-            if fmu is None or not Path(fmu).is_file():
-                if comp.name in swaps:
-                    model = None
-                else:
-                    raise FMUNotFoundError(f"{origin}: component {comp.name!r}: FMU {comp.source} not found "
-                                           "(run `ipcosim build`, or give its folder with "
-                                           "--fmu-dir / IPCOSIM_FMU_PATH)")
-            else:
-                model = read_model(Path(fmu), f"{origin}: component {comp.name!r} ({comp.source})")
-        swapped_from, realtime, extra = None, False, {}
-        if comp.name in swaps:
-            target = resolve_swap(scenario, comp.name, swaps[comp.name], model)
-            swapped_from = model.path.name if model is not None and model.path else comp.source
-            realtime = target.realtime
-            extra = dict(target.parameters)
-            model = read_model(target.fmu, f"--swap {comp.name}={target.fmu}")
-            infos.append(f"component {comp.name!r}: {swapped_from} swapped for "
-                         f"{target.description or target.fmu.name}")
-        where = f"{origin}: component {comp.name!r} ({model.path.name if model.path else comp.source})"
-        connectors = []
-        for c in comp.connectors:
-            var = model.variables.get(c.name)
-            if var is None:
-                if swapped_from is not None and not _is_connected(scenario, comp.name, c.name):
-                    infos.append(f"component {comp.name!r}: unconnected connector {c.name!r} "
-                                 "is not in the swapped-in FMU and is left out")
-                    continue
-                raise BindingError(f"{where}: connector {c.name!r} is not a variable of the FMU"
-                                   + (" (swapped-in FMU lacks a connected connector)" if swapped_from else ""))
-            _check_connector(c, var, where, _unit_table(scenario, model))
-            connectors.append(var)
-        params: list[tuple[Variable, Any]] = []
-        for pset in comp.bindings:
-            for p in pset.parameters:
-                var = model.variables.get(p.name)
-                src = pset.source or "inline ParameterValues"
-                if var is None:
-                    msg = f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which the FMU does not have"
-                    if strict_parameters and swapped_from is None:
-                        raise BindingError(msg)
-                    notes.append(msg + "; ignored")
-                    continue
-                if not var.settable:
-                    raise BindingError(f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which is "
-                                       f"{var.causality}/{var.variability} and cannot be set")
-                params.append((var, convert_value(var, p.value, f"{where}: {src}: {p.name}")))
-        for name, value in extra.items():
-            var = model.variables.get(name)
-            if var is None or not var.settable:
-                raise BindingError(f"--swap {comp.name}: the swapped-in FMU has no settable variable {name!r}")
-            params.append((var, convert_value(var, value, f"--swap {comp.name}: {name}")))
-        instances.append(Instance(name=comp.name, model=model, connectors=tuple(connectors), parameters=tuple(params),
-                                  step_size_hint=comp.step_size_hint, swapped_from=swapped_from, realtime=realtime))
-
+    notes: list[str] = []   # warnings: what may be wrong (unconnected inputs, ignored parameters)
+    infos: list[str] = []   # notes: what was done (swaps, connectors left out)
+    instances = [_bind_component(scenario, comp, swaps, dict(fmu_files or {}), dict(models or {}),
+                                 strict_parameters, notes, infos) for comp in scenario.components]
     by_name = {i.name: i for i in instances}
-    links: list[Link] = []
-    fed: dict[str, str] = {}
-    for conn in scenario.connections:
-        a, b = by_name[conn.start_element], by_name[conn.end_element]
-        va, vb = a.model.variables.get(conn.start_connector), b.model.variables.get(conn.end_connector)
-        for inst, v, cname in ((a, va, conn.start_connector), (b, vb, conn.end_connector)):
-            if v is None:
-                raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: FMU of component "
-                                   f"{inst.name!r} ({inst.model.path.name if inst.model.path else inst.model.name}) "
-                                   f"has no variable {cname!r}")
-        kinds = (va.causality, vb.causality)
-        if kinds == ("input", "output"):
-            a, b, va, vb = b, a, vb, va  # SSP start/end do not imply direction
-            src_name, dst_name = conn.end, conn.start
-        elif kinds == ("output", "input"):
-            src_name, dst_name = conn.start, conn.end
-        elif kinds[0] == kinds[1] and kinds[0] in ("output", "input"):
-            raise BindingError(f"{origin}: connection {conn.start} -> {conn.end} connects two {kinds[0]}s; "
-                               f"a connection must join one output to one input")
-        else:
-            raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: {conn.start} is {kinds[0]}, "
-                               f"{conn.end} is {kinds[1]}; only output -> input connections are supported")
-        _check_types(conn, va, vb, f"{origin}: connection {src_name} -> {dst_name}")
-        if dst_name in fed:
-            raise BindingError(f"{origin}: input {dst_name} is connected twice (from {fed[dst_name]} and {src_name})")
-        fed[dst_name] = src_name
-        ua = _connector_unit(scenario, a.name, va)
-        ub = _connector_unit(scenario, b.name, vb)
-        factor, offset = conn.factor, conn.offset
-        if SSP_TYPE[va.type] != "Real":
-            links.append(Link(a.name, va, b.name, vb, mapping=tuple(conn.mapping)))
-            continue
-        if not conn.suppress_unit_conversion:
-            conv = unit_conversion(ua, ub, _unit_table(scenario, a.model, b.model))
-            if conv is None:
-                raise BindingError(f"{origin}: connection {src_name} -> {dst_name}: unit {ua!r} does not match "
-                                   f"{ub!r} (mismatched units; define both in <ssd:Units> to convert, or set "
-                                   f"suppressUnitConversion)")
-            # transformation first, then unit conversion
-            factor, offset = factor * conv[0], offset * conv[0] + conv[1]
-        links.append(Link(a.name, va, b.name, vb, factor, offset))
-
+    fed: dict[str, str] = {}  # which output feeds each input: {"comp.input": "comp.output"}
+    links = [_bind_connection(scenario, conn, by_name, fed) for conn in scenario.connections]
     for inst in instances:
         for v in inst.inputs:
             if f"{inst.name}.{v.name}" not in fed:
                 start = inst.start_value(v.name)
-                notes.append(f"{origin}: input {inst.name}.{v.name} is not connected; it keeps its start value "
-                             f"{start!r}")
+                notes.append(f"{scenario.origin}: input {inst.name}.{v.name} is not connected; it keeps its start "
+                             f"value {start!r}")
     return System(scenario=scenario, instances=tuple(instances), links=tuple(links), warnings=tuple(notes),
                   notes=tuple(infos))
+
+
+def _component_model(scenario: Scenario, comp: Component, swapped: bool, fmu_files: Mapping[str, Path],
+                     models: Mapping[str, Model]) -> Model | None:
+    """The model interface of a component's own FMU (None for a missing FMU that is swapped out anyway)."""
+    model = models.get(comp.name)
+    if model is not None:
+        return model
+    fmu = fmu_files.get(comp.name, comp.fmu)
+    if fmu is None or not Path(fmu).is_file():
+        if swapped:
+            return None
+        raise FMUNotFoundError(f"{scenario.origin}: component {comp.name!r}: FMU {comp.source} not found "
+                               "(run `ipcosim build`, or give its folder with --fmu-dir / IPCOSIM_FMU_PATH)")
+    return read_model(Path(fmu), f"{scenario.origin}: component {comp.name!r} ({comp.source})")
+
+
+def _bind_component(scenario: Scenario, comp: Component, swaps: Mapping[str, Any], fmu_files: Mapping[str, Path],
+                    models: Mapping[str, Model], strict_parameters: bool, notes: list[str],
+                    infos: list[str]) -> Instance:
+    """One component as an :class:`Instance`: its FMU (or the one swapped in), connectors checked
+    against the FMU's variables, and its parameter bindings converted; appends to ``notes``/``infos``."""
+    model = _component_model(scenario, comp, comp.name in swaps, fmu_files, models)
+    swapped_from, realtime, extra = None, False, {}
+    if comp.name in swaps:
+        target = resolve_swap(scenario, comp.name, swaps[comp.name], model)
+        swapped_from = model.path.name if model is not None and model.path else comp.source
+        realtime = target.realtime
+        extra = dict(target.parameters)
+        model = read_model(target.fmu, f"--swap {comp.name}={target.fmu}")
+        infos.append(f"component {comp.name!r}: {swapped_from} swapped for "
+                     f"{target.description or target.fmu.name}")
+    assert model is not None
+    where = f"{scenario.origin}: component {comp.name!r} ({model.path.name if model.path else comp.source})"
+    connectors = _bind_connectors(scenario, comp, model, where, swapped_from, infos)
+    params = _bind_parameters(comp, model, where, strict_parameters and swapped_from is None, notes)
+    for name, value in extra.items():
+        var = model.variables.get(name)
+        if var is None or not var.settable:
+            raise BindingError(f"--swap {comp.name}: the swapped-in FMU has no settable variable {name!r}")
+        params.append((var, convert_value(var, value, f"--swap {comp.name}: {name}")))
+    return Instance(name=comp.name, model=model, connectors=tuple(connectors), parameters=tuple(params),
+                    step_size_hint=comp.step_size_hint, swapped_from=swapped_from, realtime=realtime)
+
+
+def _bind_connectors(scenario: Scenario, comp: Component, model: Model, where: str, swapped_from: str | None,
+                     infos: list[str]) -> list[Variable]:
+    """The FMU variables of a component's connectors, each checked (type, causality, unit); an
+    unconnected connector a swapped-in FMU lacks is left out (noted in ``infos``)."""
+    connectors = []
+    for c in comp.connectors:
+        var = model.variables.get(c.name)
+        if var is None:
+            if swapped_from is not None and not _is_connected(scenario, comp.name, c.name):
+                infos.append(f"component {comp.name!r}: unconnected connector {c.name!r} "
+                             "is not in the swapped-in FMU and is left out")
+                continue
+            raise BindingError(f"{where}: connector {c.name!r} is not a variable of the FMU"
+                               + (" (swapped-in FMU lacks a connected connector)" if swapped_from else ""))
+        _check_connector(c, var, where, _unit_table(scenario, model))
+        connectors.append(var)
+    return connectors
+
+
+def _bind_parameters(comp: Component, model: Model, where: str, strict: bool,
+                     notes: list[str]) -> list[tuple[Variable, Any]]:
+    """A component's parameter bindings as (variable, converted value); an unknown name is an
+    error when ``strict``, else a note in ``notes``; a variable that cannot be set is always an error."""
+    params: list[tuple[Variable, Any]] = []
+    for pset in comp.bindings:
+        for p in pset.parameters:
+            var = model.variables.get(p.name)
+            src = pset.source or "inline ParameterValues"
+            if var is None:
+                msg = f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which the FMU does not have"
+                if strict:
+                    raise BindingError(msg)
+                notes.append(msg + "; ignored")
+                continue
+            if not var.settable:
+                raise BindingError(f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which is "
+                                   f"{var.causality}/{var.variability} and cannot be set")
+            params.append((var, convert_value(var, p.value, f"{where}: {src}: {p.name}")))
+    return params
+
+
+def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str, Instance],
+                     fed: dict[str, str]) -> Link:
+    """One connection as a :class:`Link` from the output to the input (SSP's start/end do not
+    imply direction), with its types checked, its input recorded in ``fed`` (an input fed twice
+    is an error) and the linear transformation and unit conversion folded into one factor and
+    offset (transformation first)."""
+    origin = scenario.origin
+    a, b = by_name[conn.start_element], by_name[conn.end_element]
+    va, vb = a.model.variables.get(conn.start_connector), b.model.variables.get(conn.end_connector)
+    for inst, v, cname in ((a, va, conn.start_connector), (b, vb, conn.end_connector)):
+        if v is None:
+            raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: FMU of component "
+                               f"{inst.name!r} ({inst.model.path.name if inst.model.path else inst.model.name}) "
+                               f"has no variable {cname!r}")
+    kinds = (va.causality, vb.causality)
+    if kinds == ("input", "output"):
+        a, b, va, vb = b, a, vb, va
+        src_name, dst_name = conn.end, conn.start
+    elif kinds == ("output", "input"):
+        src_name, dst_name = conn.start, conn.end
+    elif kinds[0] == kinds[1] and kinds[0] in ("output", "input"):
+        raise BindingError(f"{origin}: connection {conn.start} -> {conn.end} connects two {kinds[0]}s; "
+                           f"a connection must join one output to one input")
+    else:
+        raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: {conn.start} is {kinds[0]}, "
+                           f"{conn.end} is {kinds[1]}; only output -> input connections are supported")
+    _check_types(conn, va, vb, f"{origin}: connection {src_name} -> {dst_name}")
+    if dst_name in fed:
+        raise BindingError(f"{origin}: input {dst_name} is connected twice (from {fed[dst_name]} and {src_name})")
+    fed[dst_name] = src_name
+    if SSP_TYPE[va.type] != "Real":
+        return Link(a.name, va, b.name, vb, mapping=tuple(conn.mapping))
+    factor, offset = conn.factor, conn.offset
+    if not conn.suppress_unit_conversion:
+        ua, ub = _connector_unit(scenario, a.name, va), _connector_unit(scenario, b.name, vb)
+        conv = unit_conversion(ua, ub, _unit_table(scenario, a.model, b.model))
+        if conv is None:
+            raise BindingError(f"{origin}: connection {src_name} -> {dst_name}: unit {ua!r} does not match "
+                               f"{ub!r} (mismatched units; define both in <ssd:Units> to convert, or set "
+                               f"suppressUnitConversion)")
+        factor, offset = factor * conv[0], offset * conv[0] + conv[1]
+    return Link(a.name, va, b.name, vb, factor, offset)
 
 
 def _check_types(conn: Any, va: Variable, vb: Variable, where: str) -> None:
@@ -536,28 +561,6 @@ def default_stop_time(system: System) -> tuple[float | None, str]:
         return None, f"{sc.origin}: no DefaultExperiment stopTime in the SSD or the FMUs"
     return None, (f"{sc.origin}: no stopTime in the SSD and the FMUs' differ ("
                   + ", ".join(f"{k} {v:g} s" for k, v in stops.items()) + ")")
-
-
-def parse_set_options(items: Sequence[str]) -> dict[str, str]:
-    """``["plant.Mp=0.2", ...]`` as ``{"plant.Mp": "0.2"}``; values stay strings until checked."""
-    out: dict[str, str] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            raise BindingError(f"--set {item!r}: expected COMPONENT.VARIABLE=VALUE")
-        out[key.strip()] = value.strip()
-    return out
-
-
-def parse_swap_options(items: Sequence[str]) -> dict[str, str]:
-    """``["plant=hil"]`` as ``{"plant": "hil"}``."""
-    out: dict[str, str] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            raise BindingError(f"--swap {item!r}: expected COMPONENT=FMU_OR_ALIAS")
-        out[key.strip()] = value.strip()
-    return out
 
 
 def warn_all(system: System) -> None:

@@ -33,10 +33,10 @@ from typing import Any, Mapping
 import control
 import numpy as np
 
-from ipcosim.controllers.catalog import KINDS, LAWS, build_law, model_name
+from ipcosim.controllers.catalog import LAWS, build_law, model_name
+from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.linearize import linearize
-from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, ParameterError, preset
-from ipcosim.harness.errors import IpcosimError, UsageError
+from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, ParameterError, preset
 from ipcosim.harness.studies.loop import LinearLaw, linear_law
 
 PLANT_MODELS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}

@@ -96,12 +96,6 @@ def run(law, kind: str, params, instruments: Instruments | None = None, stop_tim
     return Run(m, oscillation(t[ok], th[ok]), itae, fell)
 
 
-def plant_for(kind: str, realism_name: str, **overrides: float):
-    """(params, instruments) of the thesis's plant on the ``ideal`` or ``lab`` option set."""
-    inst, phys = realism(realism_name, kind)
-    return preset(PRESET[kind], **{**phys, **overrides}), inst
-
-
 #: The model each thesis design was made on, where it is not the kind's default preset: the thesis
 #: designed its single-mass LQR on the long pendulum (App. A.2).
 OWN_MODEL = {("LQR", "single-mass"): "thesis-appendix-a"}

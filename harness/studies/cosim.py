@@ -1,4 +1,4 @@
-"""The co-simulation run spec: one scenario, run through the master (``ipcosim.harness.prepare``).
+"""The co-simulation run spec: one scenario, run through the master (``ipcosim.prepare``).
 
 Made in the parent from the scenario (parsed and bound, nothing extracted) so that
 ``--vary`` and ``--params`` are checked against the scenario's real parameters; each worker
@@ -147,18 +147,10 @@ class CosimSpec(RunSpec):
 
     def build(self) -> Runner:
         """Load the scenario and extract its FMUs (once per worker); return the run function."""
-        from ipcosim.fmus.task import (
-            ANGLE_COLUMNS,
-            POSITION_COLUMNS,
-            REFERENCE_COLUMNS,
-            VOLTAGE_COLUMNS,
-            first_column,
-        )
         from ipcosim.harness.api import Prepared
-        from ipcosim.harness.studies.cost import cost_terms, series
 
         location = self.location
-        if self.archive is not None:
+        if self.archive is not None:  # the archive's bytes travelled with the spec: a local copy
             import atexit
             import shutil
             import tempfile
@@ -187,26 +179,45 @@ class CosimSpec(RunSpec):
             if not holder:
                 raise RunFailure(f"{spec.name}: the runner was released")
             values = {**spec.overrides, **params}
-            result = holder[0].run(spec.stop_time, spec.step, values, raise_on_error=False)
-            data = result.data
-            cols = result.columns
-            names = [first_column(cols, c) for c in (POSITION_COLUMNS, REFERENCE_COLUMNS, ANGLE_COLUMNS,
-                                                     VOLTAGE_COLUMNS)]
-            metrics = {k: v for k, v in result.metrics.items() if k in spec.metric_names}
-            if None in names or len(data) < 2:
-                raise RunFailure(result.error or f"{spec.name}: the result lacks the position, reference, angle "
-                                                 f"or voltage column")
-            signals = [np.asarray(data[n], dtype=float) for n in names]
-            t = np.asarray(data["time"], dtype=float)
-            metrics.update(cost_terms(t, *signals))
-            if result.error is not None:
-                # a run cut short: a result if the pendulum had fallen by then, else a failure
-                if metrics.get("fall_time_s") is None:
-                    raise RunFailure(result.error)
-                metrics["upright"] = False
-                metrics["error"] = result.error
-            if spec.with_series:
-                metrics["series"] = series(t, *signals)
-            return metrics
+            return spec.row_of(holder[0].run(spec.stop_time, spec.step, values, raise_on_error=False))
 
         return run
+
+    def row_of(self, result: Any) -> dict[str, Any]:
+        """A run's row: its task metrics, the cost terms of its position, reference, angle and
+        voltage, and (``with_series``) the series for the report.
+
+        Raises
+        ------
+        RunFailure
+            A result without those columns, or a run cut short before the pendulum fell.
+        """
+        from ipcosim.fmus.task import (
+            ANGLE_COLUMNS,
+            POSITION_COLUMNS,
+            REFERENCE_COLUMNS,
+            VOLTAGE_COLUMNS,
+            first_column,
+        )
+        from ipcosim.harness.studies.cost import cost_terms, series
+
+        data = result.data
+        cols = result.columns
+        names = [first_column(cols, c) for c in (POSITION_COLUMNS, REFERENCE_COLUMNS, ANGLE_COLUMNS,
+                                                 VOLTAGE_COLUMNS)]
+        metrics = {k: v for k, v in result.metrics.items() if k in self.metric_names}
+        if None in names or len(data) < 2:
+            raise RunFailure(result.error or f"{self.name}: the result lacks the position, reference, angle "
+                                             f"or voltage column")
+        signals = [np.asarray(data[n], dtype=float) for n in names]
+        t = np.asarray(data["time"], dtype=float)
+        metrics.update(cost_terms(t, *signals))
+        if result.error is not None:
+            # a run cut short: a result if the pendulum had fallen by then, else a failure
+            if metrics.get("fall_time_s") is None:
+                raise RunFailure(result.error)
+            metrics["upright"] = False
+            metrics["error"] = result.error
+        if self.with_series:
+            metrics["series"] = series(t, *signals)
+        return metrics

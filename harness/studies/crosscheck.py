@@ -2,18 +2,17 @@
 ``libcosimpy``, Jacobi fixed-step) and FMPy's ``simulate_ssp``.
 
 :func:`run_libcosim` returns the trajectories of chosen variables on libcosim's time grid,
-so that tests can compare them with :func:`ipcosim.harness.run` (``algorithm="jacobi"``, same step).
+so that tests can compare them with :func:`ipcosim.harness.run_master` (``algorithm="jacobi"``, same step).
 """
 from __future__ import annotations
 
-import math
 import os
 import time
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 
 
 class CrossCheckError(IpcosimError, RuntimeError):
@@ -56,6 +55,24 @@ def run_libcosim(ssp: str | os.PathLike[str], stop_time: float, step: float,
         execution = CosimExecution.from_ssp_file(str(ssp), step_ns)
     except AssertionError as exc:
         raise CrossCheckError(f"libcosim cannot load {ssp}: {exc}") from None
+    refs = _libcosim_refs(execution, ssp, variables)
+    observer = CosimObserver.create_time_series(buffer_size=n + 10)
+    execution.add_observer(observer)
+    for s, vr in refs:
+        observer.start_time_series(s, vr, CosimVariableType.REAL)
+    t0 = time.perf_counter()
+    ok = execution.simulate_until(round(stop_time * 1e9))
+    wall = time.perf_counter() - t0
+    if not ok:
+        raise CrossCheckError(f"libcosim: simulation of {ssp} failed")
+    data = _libcosim_table(observer, refs, variables, n)
+    execution.stop()
+    return data, wall
+
+
+def _libcosim_refs(execution: Any, ssp: str | os.PathLike[str],
+                   variables: Sequence[str]) -> list[tuple[int, int]]:
+    """(slave index, value reference) in libcosim of each ``component.variable``."""
     slaves = {info.name.decode(): info.index for info in execution.slave_infos()}
     refs = []
     for name in variables:
@@ -66,15 +83,13 @@ def run_libcosim(ssp: str | os.PathLike[str], stop_time: float, step: float,
         if vr is None:
             raise CrossCheckError(f"libcosim: slave {comp!r} has no variable {var!r}")
         refs.append((slaves[comp], vr))
-    observer = CosimObserver.create_time_series(buffer_size=n + 10)
-    execution.add_observer(observer)
-    for s, vr in refs:
-        observer.start_time_series(s, vr, CosimVariableType.REAL)
-    t0 = time.perf_counter()
-    ok = execution.simulate_until(round(stop_time * 1e9))
-    wall = time.perf_counter() - t0
-    if not ok:
-        raise CrossCheckError(f"libcosim: simulation of {ssp} failed")
+    return refs
+
+
+def _libcosim_table(observer: Any, refs: Sequence[tuple[int, int]], variables: Sequence[str],
+                    n: int) -> np.ndarray:
+    """The time series libcosim's observer recorded (from step 1), as one structured array:
+    ``time`` [s] (libcosim's own time points) and the variables."""
     columns: dict[str, np.ndarray] = {}
     times = None
     for name, (s, vr) in zip(variables, refs):
@@ -87,8 +102,7 @@ def run_libcosim(ssp: str | os.PathLike[str], stop_time: float, step: float,
     data["time"] = times / 1e9
     for name in variables:
         data[name] = columns[name][:len(times)]
-    execution.stop()
-    return data, wall
+    return data
 
 
 def run_fmpy_ssp(ssp: str | os.PathLike[str], stop_time: float, step: float) -> tuple[np.ndarray | None, float, str]:
@@ -103,5 +117,3 @@ def run_fmpy_ssp(ssp: str | os.PathLike[str], stop_time: float, step: float) -> 
     return result, time.perf_counter() - t0, "ok"
 
 
-def max_abs_difference(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.max(np.abs(np.asarray(a, float) - np.asarray(b, float)))) if len(a) else math.nan

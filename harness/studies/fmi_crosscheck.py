@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 
 STOP_TIME = 2.0
 STEP = 1e-3

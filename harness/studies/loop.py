@@ -21,7 +21,7 @@ from typing import Sequence
 import numpy as np
 
 from ipcosim.controllers.laws import HSMC, LQR, PID, AdaptiveHSMC, CascadePID, DiscreteLaw
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 
 
 class LinearizationError(IpcosimError, TypeError):

@@ -16,16 +16,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
+from ipcosim.fmus.params import KINDS
 from ipcosim.harness.studies.robustness import fmt
 
-PLANTS = ("single-mass", "double-mass")
 CONTROLLERS = ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")
 CONTROLLER_LABELS = {"pid": "PID", "cascade-pid": "cascade PID", "lqr": "LQR + observer", "hsmc": "HSMC",
                      "adaptive-hsmc": "adaptive HSMC"}
 PLANT_LABELS = {"single-mass": "single mass", "double-mass": "double mass"}
 CONTROLLER_COLORS = {"pid": "tab:gray", "cascade-pid": "tab:purple", "lqr": "tab:orange", "hsmc": "tab:blue",
                      "adaptive-hsmc": "tab:green"}
-SCENARIOS = tuple(f"{p}-{c}" for p in PLANTS for c in CONTROLLERS)
+SCENARIOS = tuple(f"{p}-{c}" for p in KINDS for c in CONTROLLERS)
 
 #: The task's step [m] and the +-2 % band half-width [m].
 STEP = 0.05
@@ -42,7 +42,7 @@ TABLE_COLUMNS = (("status", "status", None), ("settling_time_s", "settling time 
 
 def split(scenario: str) -> tuple[str, str]:
     """``single-mass-adaptive-hsmc`` -> (``single-mass``, ``adaptive-hsmc``)."""
-    for plant in PLANTS:
+    for plant in KINDS:
         if scenario.startswith(plant + "-"):
             return plant, scenario[len(plant) + 1:]
     return "", scenario
@@ -147,7 +147,7 @@ def _fewer_oscillations(r: Results) -> Verdict:
 
 def _hsmc_better(r: Results) -> Verdict:
     parts, ok, measured = [], True, False
-    for plant in PLANTS:
+    for plant in KINDS:
         h = f"{plant}-hsmc"
         if _row(r, h) is None:
             continue
@@ -367,69 +367,100 @@ def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     figures: dict[str, Path] = {}
-    for plant in PLANTS:
+    for plant in KINDS:
         path = plot_plant(plant, results, out_dir / "figures" / f"{plant}.png")
         if path:
             figures[plant] = path
     header, rows = _table(results, robustness)
     verdicts = check_claims(results)
-    claim_header = ["thesis claim", "source", "checked as", "measured", "verdict"]
-    claim_rows = [[c.quote, c.source, c.test, v.measured, v.verdict] for c, v in verdicts]
-    counts = {k: sum(1 for _, v in verdicts if v.verdict == k) for k in ("confirmed", "not confirmed", "not measured")}
-    errors = [(s, r.get("error")) for s, r in results.items() if r.get("status") == "error"]
     meta = dict(meta or {})
-
-    intro = ("Each scenario moves the motor-driven cart from 0 to 0.05 m with the pendulum upright (the thesis's "
-             "task). Success (status ok) = the pendulum stays within 0.35 rad and the cart ends inside the +-2 % "
-             "band; 'fell' = the pendulum left 0.35 rad; 'unsettled' = upright but not inside the band at the end. "
-             "Cost J = ITAE(x - r) + 0.1 ITAE(angle) + 1e-4 ISE(voltage), infinite when the pendulum falls. "
-             "Angle reversals count swings of the pendulum larger than 0.005 rad (an oscillation measure). "
-             "Gains: the controller parameter set each scenario ran with (thesis = the thesis's values, tuned = "
-             "the controller design's retuned values); the claims are judged on these runs.")
-    settings = ", ".join(f"{k} {v}" for k, v in meta.items() if k != "packages")
-
-    md = ["# IP02 controller comparison", "", intro, ""]
-    if settings:
-        md += [f"Settings: {settings}.", ""]
-    md += ["## Metrics (plant x controller)", "", _md_table(header, rows)]
-    if robustness_note:
-        md += [robustness_note, ""]
-    if errors:
-        md += ["Failed runs: " + "; ".join(f"{s}: {e}" for s, e in errors), ""]
-    md += ["## Time series", ""]
-    for plant, path in figures.items():
-        md += [f"![{plant}](figures/{path.name})", ""]
-    md += ["## The thesis's claims, measured",
-           "", f"{counts['confirmed']} confirmed, {counts['not confirmed']} not confirmed, "
-               f"{counts['not measured']} not measured.", "",
-           _md_table(claim_header, [[f"\"{c[0]}\"", *c[1:]] for c in claim_rows])]
-    if meta.get("packages"):
-        md += ["Package versions: " + ", ".join(f"{k} {v}" for k, v in meta["packages"].items()), ""]
+    parts = _Report(
+        settings=", ".join(f"{k} {v}" for k, v in meta.items() if k != "packages"),
+        header=header, rows=rows, robustness_note=robustness_note,
+        errors=[(s, r.get("error")) for s, r in results.items() if r.get("status") == "error"],
+        figures=figures,
+        counts={k: sum(1 for _, v in verdicts if v.verdict == k)
+                for k in ("confirmed", "not confirmed", "not measured")},
+        claim_rows=[[c.quote, c.source, c.test, v.measured, v.verdict] for c, v in verdicts],
+        claim_classes=[v.verdict.replace(" ", "-") for _, v in verdicts],
+        packages=dict(meta.get("packages") or {}))
     md_path = out_dir / "report.md"
-    md_path.write_text("\n".join(md))
+    md_path.write_text(_markdown(parts))
+    html_path = out_dir / "report.html"
+    html_path.write_text(_html_page(parts))
+    return {"markdown": md_path, "html": html_path, **{f"figure:{p}": f for p, f in figures.items()}}
 
-    body = ["<h1>IP02 controller comparison</h1>", f"<p>{html.escape(intro)}</p>"]
-    if settings:
-        body.append(f"<p>Settings: {html.escape(settings)}.</p>")
-    body += ["<h2>Metrics (plant x controller)</h2>", _html_table(header, rows)]
-    if robustness_note:
-        body.append(f"<p>{html.escape(robustness_note)}</p>")
-    if errors:
-        body.append("<p>Failed runs: " + html.escape("; ".join(f"{s}: {e}" for s, e in errors)) + "</p>")
+
+INTRO = ("Each scenario moves the motor-driven cart from 0 to 0.05 m with the pendulum upright (the thesis's "
+         "task). Success (status ok) = the pendulum stays within 0.35 rad and the cart ends inside the +-2 % "
+         "band; 'fell' = the pendulum left 0.35 rad; 'unsettled' = upright but not inside the band at the end. "
+         "Cost J = ITAE(x - r) + 0.1 ITAE(angle) + 1e-4 ISE(voltage), infinite when the pendulum falls. "
+         "Angle reversals count swings of the pendulum larger than 0.005 rad (an oscillation measure). "
+         "Gains: the controller parameter set each scenario ran with (thesis = the thesis's values, tuned = "
+         "the controller design's retuned values); the claims are judged on these runs.")
+CLAIM_HEADER = ["thesis claim", "source", "checked as", "measured", "verdict"]
+
+
+@dataclass
+class _Report:
+    """What both forms of the report show, in order."""
+
+    settings: str
+    header: list[str]
+    rows: list[list[Any]]
+    robustness_note: str
+    errors: list[tuple[str, Any]]
+    figures: dict[str, Path]
+    counts: dict[str, int]
+    claim_rows: list[list[Any]]
+    claim_classes: list[str]
+    packages: dict[str, Any]
+
+    @property
+    def tally(self) -> str:
+        c = self.counts
+        return f"{c['confirmed']} confirmed, {c['not confirmed']} not confirmed, {c['not measured']} not measured."
+
+
+def _markdown(r: _Report) -> str:
+    """``report.md``: intro, settings, metrics table, failed runs, figures, the claims, versions."""
+    md = ["# IP02 controller comparison", "", INTRO, ""]
+    if r.settings:
+        md += [f"Settings: {r.settings}.", ""]
+    md += ["## Metrics (plant x controller)", "", _md_table(r.header, r.rows)]
+    if r.robustness_note:
+        md += [r.robustness_note, ""]
+    if r.errors:
+        md += ["Failed runs: " + "; ".join(f"{s}: {e}" for s, e in r.errors), ""]
+    md += ["## Time series", ""]
+    for plant, path in r.figures.items():
+        md += [f"![{plant}](figures/{path.name})", ""]
+    md += ["## The thesis's claims, measured", "", r.tally, "",
+           _md_table(CLAIM_HEADER, [[f"\"{c[0]}\"", *c[1:]] for c in r.claim_rows])]
+    if r.packages:
+        md += ["Package versions: " + ", ".join(f"{k} {v}" for k, v in r.packages.items()), ""]
+    return "\n".join(md)
+
+
+def _html_page(r: _Report) -> str:
+    """``report.html``: the same as the Markdown, self-contained (figures inline as base64 PNG)."""
+    body = ["<h1>IP02 controller comparison</h1>", f"<p>{html.escape(INTRO)}</p>"]
+    if r.settings:
+        body.append(f"<p>Settings: {html.escape(r.settings)}.</p>")
+    body += ["<h2>Metrics (plant x controller)</h2>", _html_table(r.header, r.rows)]
+    if r.robustness_note:
+        body.append(f"<p>{html.escape(r.robustness_note)}</p>")
+    if r.errors:
+        body.append("<p>Failed runs: " + html.escape("; ".join(f"{s}: {e}" for s, e in r.errors)) + "</p>")
     body.append("<h2>Time series</h2>")
-    for plant, path in figures.items():
+    for plant, path in r.figures.items():
         data = base64.b64encode(path.read_bytes()).decode()
         body.append(f'<figure><img alt="{plant}" src="data:image/png;base64,{data}"/>'
                     f"<figcaption>{html.escape(PLANT_LABELS[plant])}</figcaption></figure>")
-    body += ["<h2>The thesis's claims, measured</h2>",
-             f"<p>{counts['confirmed']} confirmed, {counts['not confirmed']} not confirmed, "
-             f"{counts['not measured']} not measured.</p>",
-             _html_table(claim_header, claim_rows, [v.verdict.replace(" ", "-") for _, v in verdicts])]
-    if meta.get("packages"):
-        body.append("<p>Package versions: " + html.escape(", ".join(f"{k} {v}" for k, v in meta["packages"].items()))
+    body += ["<h2>The thesis's claims, measured</h2>", f"<p>{r.tally}</p>",
+             _html_table(CLAIM_HEADER, r.claim_rows, r.claim_classes)]
+    if r.packages:
+        body.append("<p>Package versions: " + html.escape(", ".join(f"{k} {v}" for k, v in r.packages.items()))
                     + "</p>")
-    page = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"/><title>IP02 controller comparison"
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"/><title>IP02 controller comparison"
             f"</title><style>{CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n")
-    html_path = out_dir / "report.html"
-    html_path.write_text(page)
-    return {"markdown": md_path, "html": html_path, **{f"figure:{p}": f for p, f in figures.items()}}

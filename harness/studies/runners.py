@@ -26,7 +26,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 
 #: A per-worker run function: (parameter values, seed) -> metrics.
 Runner = Callable[[Mapping[str, float], int], dict]

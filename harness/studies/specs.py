@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, Iterable, Mapping
 
-from ipcosim.harness.errors import UsageError
+from ipcosim.errors import UsageError
 from ipcosim.harness.studies.runners import PurePlantSpec, RunSpec
 
 #: Scenario names served without FMUs (pure-Python stand-ins, see ``ipcosim.harness.studies.runners``).

@@ -48,7 +48,7 @@ from importlib import metadata as importlib_metadata
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping, Sequence, TextIO
 
-from ipcosim.harness.errors import IpcosimError, UsageError
+from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.harness.studies.runners import STATUSES, Runner, RunSpec, stable_hash
 from ipcosim.harness.studies.vary import Case, Vary, VaryError, case_seed, make_cases, parse_all, parse_vary
 
@@ -684,43 +684,84 @@ def run_sweep(spec: RunSpec, cases: Sequence[Case], *, out_dir: str | os.PathLik
     if len(set(indices)) != len(indices):
         raise ValueError("sweep cases must have unique indices")
     columns = columns_for(spec, cases)
-    plan = plan_hash(spec, cases)
-    meta: dict[str, Any] = {
-        "scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan, "spec": spec.describe(),
-        "runs": len(cases), "seeds": {"cases": [c.seed for c in cases][:10000]},
-        "packages": package_versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        **dict(extra_metadata or {})}
+    meta = _start_metadata(spec, cases, extra_metadata)
+    path = Path(out_dir) / RESULTS_FILE if out_dir is not None else None
+    done, writer = (_open_results(path, meta, columns, set(indices) if resume else None) if path is not None
+                    else ({}, None))
+    resumed = len(done)
+    _run_missing(spec, cases, done, columns, meta, writer, executor=executor, workers=workers,
+                 scheduler=scheduler, progress=progress)
 
+    rows = sorted(done.values(), key=lambda r: r["index"])
+    counts = _close_results(rows, meta, time.monotonic() - t_start, writer, path)
+    return SweepResult(rows=rows, columns=columns, metadata=meta, path=path, resumed=resumed,
+                       elapsed_s=meta["elapsed_s"], counts=counts)
+
+
+def _close_results(rows: list[dict[str, Any]], meta: dict[str, Any], elapsed: float,
+                   writer: ResultsWriter | None, path: Path | None) -> dict[str, int]:
+    """Count the rows by status into ``meta`` (with the end time and ``elapsed`` [s]); with a
+    results file, rewrite it sorted by case and write the final ``metadata.json``. Returns the counts."""
+    counts = {s: 0 for s in STATUSES}
+    for r in rows:
+        counts[r["status"]] = counts.get(r["status"], 0) + 1
+    meta.update({"finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "elapsed_s": elapsed, "counts": counts,
+                 "success_rate": counts.get("ok", 0) / len(rows) if rows else None})
+    if writer is not None and path is not None:
+        writer.rewrite_sorted(rows)
+        (path.parent / METADATA_FILE).write_text(json.dumps(meta, indent=2, default=repr) + "\n")
+    return counts
+
+
+def _start_metadata(spec: RunSpec, cases: Sequence[Case], extra: Mapping[str, Any] | None) -> dict[str, Any]:
+    """What ``metadata.json`` records at the start: the scenario, the plan's identity, the seeds
+    (the first 10 000), package versions, the start time and ``extra``."""
+    return {"scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan_hash(spec, cases),
+            "spec": spec.describe(), "runs": len(cases), "seeds": {"cases": [c.seed for c in cases][:10000]},
+            "packages": package_versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **dict(extra or {})}
+
+
+def _open_results(path: Path, meta: dict[str, Any], columns: list[str],
+                  wanted: set[int] | None) -> tuple[dict[int, dict[str, Any]], ResultsWriter]:
+    """Open a sweep's ``results.csv`` for appending and write its ``metadata.json``; with
+    ``wanted`` (the case indices; None: start afresh), the rows of those cases an earlier,
+    interrupted run of the same sweep finished, by index (recorded as ``resumed_runs``).
+
+    Raises
+    ------
+    SweepMismatchError
+        The folder holds results of another sweep (other plan hash or columns).
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    meta_path = path.parent / METADATA_FILE
     done: dict[int, dict[str, Any]] = {}
-    writer: ResultsWriter | None = None
-    path: Path | None = None
-    resumed = 0
-    if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        path = out / RESULTS_FILE
-        meta_path = out / METADATA_FILE
-        existing = resume and path.exists() and path.stat().st_size > 0
-        if existing:
-            old_meta: dict[str, Any] = {}
-            if meta_path.exists():
-                try:
-                    old_meta = json.loads(meta_path.read_text())
-                except json.JSONDecodeError:
-                    old_meta = {}
-            old_columns, old_rows = read_results(path)
-            if old_meta.get("plan_hash") != plan or old_columns != columns:
-                raise SweepMismatchError(
-                    f"{path} holds results of a different sweep (scenario, settings, --vary, --samples or "
-                    f"--seed differ); choose another --out or start afresh with --fresh")
-            wanted = set(indices)
-            done = {r["index"]: r for r in old_rows if r["index"] in wanted}
-            resumed = len(done)
-            meta["resumed_runs"] = resumed
-        writer = ResultsWriter(path, columns)
-        writer.open(existing=existing)
-        meta_path.write_text(json.dumps(meta, indent=2, default=repr) + "\n")
+    existing = wanted is not None and path.exists() and path.stat().st_size > 0
+    if existing:
+        old_meta: dict[str, Any] = {}
+        if meta_path.exists():
+            try:
+                old_meta = json.loads(meta_path.read_text())
+            except json.JSONDecodeError:
+                old_meta = {}
+        old_columns, old_rows = read_results(path)
+        if old_meta.get("plan_hash") != meta["plan_hash"] or old_columns != columns:
+            raise SweepMismatchError(
+                f"{path} holds results of a different sweep (scenario, settings, --vary, --samples or "
+                f"--seed differ); choose another --out or start afresh with --fresh")
+        done = {r["index"]: r for r in old_rows if r["index"] in wanted}
+        meta["resumed_runs"] = len(done)
+    writer = ResultsWriter(path, columns)
+    writer.open(existing=existing)
+    meta_path.write_text(json.dumps(meta, indent=2, default=repr) + "\n")
+    return done, writer
 
+
+def _run_missing(spec: RunSpec, cases: Sequence[Case], done: dict[int, dict[str, Any]], columns: list[str],
+                 meta: dict[str, Any], writer: ResultsWriter | None, *, executor: Executor | None,
+                 workers: int | None, scheduler: Any, progress: bool | TextIO) -> None:
+    """Run the cases not in ``done`` on ``executor`` (or one opened from ``workers`` /
+    ``scheduler`` and closed here, aborted on an exception), adding each finished row to
+    ``done`` and appending it to ``writer``, with a progress bar over all ``cases``."""
     todo = [c for c in cases if c.index not in done]
     own_executor = executor is None
     bar = Progress(len(cases), done=len(done), enabled=bool(progress),
@@ -747,16 +788,3 @@ def run_sweep(spec: RunSpec, cases: Sequence[Case], *, out_dir: str | os.PathLik
             executor.close()
         if writer is not None:
             writer.close()
-
-    rows = sorted(done.values(), key=lambda r: r["index"])
-    counts = {s: 0 for s in STATUSES}
-    for r in rows:
-        counts[r["status"]] = counts.get(r["status"], 0) + 1
-    elapsed = time.monotonic() - t_start
-    meta.update({"finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "elapsed_s": elapsed, "counts": counts,
-                 "success_rate": counts.get("ok", 0) / len(rows) if rows else None})
-    if writer is not None and path is not None:
-        writer.rewrite_sorted(rows)
-        (path.parent / METADATA_FILE).write_text(json.dumps(meta, indent=2, default=repr) + "\n")
-    return SweepResult(rows=rows, columns=columns, metadata=meta, path=path, resumed=resumed,
-                       elapsed_s=elapsed, counts=counts)

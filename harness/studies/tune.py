@@ -21,7 +21,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ipcosim.harness.errors import UsageError
+from ipcosim.errors import UsageError
 from ipcosim.harness.studies import cost as costmod
 from ipcosim.harness.studies.robustness import fmt
 from ipcosim.harness.studies.runners import RunSpec
@@ -215,12 +215,9 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
     progress : bool
         Print one line per generation on stderr.
     """
-    from scipy.optimize import differential_evolution
-
     from ipcosim.harness.studies.sweep import open_executor
 
-    dims = len(names)
-    popsize, maxiter = plan_population(budget, dims)
+    population = plan_population(budget, len(names))  # checks the budget before any run
     nominal = {n: float(spec.parameters[n]) for n in names}
     x0 = np.array([min(max(nominal[n], lo), hi) for n, (lo, hi) in zip(names, bounds)])
     own = executor is None
@@ -229,24 +226,10 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
     try:
         mapper = SweepMap(spec, names, executor, seed, w_angle, w_voltage, budget, on_row)
         nominal_row = mapper.evaluate([np.array([nominal[n] for n in names])])[0]
-        best_seen = [nominal_row["cost"]]
-
-        def callback(*_: Any, **__: Any) -> bool:
-            if progress:
-                gen_best = min(r["cost"] for r in mapper.rows)
-                best_seen.append(gen_best)
-                print(f"tune: generation {mapper.generations}, {len(mapper.rows)} runs, best cost "
-                      f"{fmt(gen_best)} (nominal {fmt(nominal_row['cost'])})", file=sys.stderr, flush=True)
-            return mapper.remaining == 0  # True stops the optimiser
-
-        result = differential_evolution(
-            lambda x: math.inf, bounds=list(bounds), popsize=popsize, maxiter=maxiter, tol=0.0, atol=0.0,
-            polish=False, updating="deferred", workers=mapper, x0=x0, rng=np.random.default_rng(seed),
-            init="latinhypercube", callback=callback)
+        message = _evolve(mapper, bounds, x0, population, seed, progress, nominal_row["cost"])
     finally:
         if own:
             executor.close()
-
     candidates = [r for r in mapper.rows if r["status"] != "error"]
     best_row = min(candidates, key=lambda r: r["cost"]) if candidates else nominal_row
     if not (best_row["cost"] < nominal_row["cost"]):
@@ -254,7 +237,30 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
     best = {n: float(best_row[n]) for n in names}
     return TuneResult(names=list(names), nominal=nominal, best=best, nominal_cost=nominal_row["cost"],
                       best_cost=best_row["cost"], nominal_row=nominal_row, best_row=best_row,
-                      evaluations=mapper.rows, generations=mapper.generations, message=str(result.message))
+                      evaluations=mapper.rows, generations=mapper.generations, message=message)
+
+
+def _evolve(mapper: SweepMap, bounds: Sequence[tuple[float, float]], x0: np.ndarray, population: tuple[int, int],
+            seed: int, progress: bool, nominal_cost: float) -> str:
+    """Run scipy's differential evolution with ``mapper`` evaluating each generation as one sweep
+    (the objective itself is never called), stopping when the run budget is spent; returns the
+    optimiser's message. ``population`` is (popsize, maxiter) of :func:`plan_population`."""
+    from scipy.optimize import differential_evolution
+
+    popsize, maxiter = population
+
+    def callback(*_: Any, **__: Any) -> bool:
+        if progress:
+            gen_best = min(r["cost"] for r in mapper.rows)
+            print(f"tune: generation {mapper.generations}, {len(mapper.rows)} runs, best cost "
+                  f"{fmt(gen_best)} (nominal {fmt(nominal_cost)})", file=sys.stderr, flush=True)
+        return mapper.remaining == 0  # True stops the optimiser
+
+    result = differential_evolution(
+        lambda x: math.inf, bounds=list(bounds), popsize=popsize, maxiter=maxiter, tol=0.0, atol=0.0,
+        polish=False, updating="deferred", workers=mapper, x0=x0, rng=np.random.default_rng(seed),
+        init="latinhypercube", callback=callback)
+    return str(result.message)
 
 
 # --------------------------------------------------------------------------- outputs

@@ -26,7 +26,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from ipcosim.harness.errors import UsageError
+from ipcosim.errors import UsageError
 
 FORMS_HELP = ("uniform(a,b), normal(mean,std), grid(start,stop,n), [v1,v2,...] or a number, "
               "each optionally '*nominal'")
@@ -138,20 +138,11 @@ def parse_vary(expr: str, parameters: Mapping[str, float] | None = None) -> Vary
         hint = (f"{component} parameters: {', '.join(known)}" if known else
                 f"components: {', '.join(sorted({k.split('.', 1)[0] for k in parameters}))}")
         raise VaryError(f"--vary {expr!r}: unknown parameter {name!r} ({hint})")
-
-    relative = False
-    body = form.replace(" ", "")
-    if body.endswith("*nominal"):
-        relative, body = True, body[: -len("*nominal")]
-    elif body.startswith("nominal*"):
-        relative, body = True, body[len("nominal*"):]
-    if "nominal" in body:
-        raise VaryError(f"--vary {expr!r}: 'nominal' may only multiply the whole form, e.g. uniform(0.8,1.2)*nominal")
+    body, relative = _strip_nominal(form, expr)
     if relative and parameters is not None:
         nominal = parameters[name]
         if nominal is None or not isinstance(nominal, (int, float)) or not math.isfinite(nominal):
             raise VaryError(f"--vary {expr!r}: {name} has no numeric nominal value to scale")
-
     if body.startswith("[") and body.endswith("]"):
         values = _split_args(body[1:-1], expr)
         if not values:
@@ -159,25 +150,43 @@ def parse_vary(expr: str, parameters: Mapping[str, float] | None = None) -> Vary
         return Vary(name, "values", tuple(values), relative, expr)
     call = _CALL.match(body)
     if call:
-        dist, argtext = call.group(1), call.group(2)
-        if dist not in _DISTRIBUTIONS:
-            raise VaryError(f"--vary {expr!r}: unknown form {dist!r} (expected {FORMS_HELP})")
-        args = _split_args(argtext, expr)
-        if len(args) != _DISTRIBUTIONS[dist]:
-            raise VaryError(f"--vary {expr!r}: {dist} takes {_DISTRIBUTIONS[dist]} arguments, got {len(args)}")
-        if dist == "uniform" and not args[0] < args[1]:
-            raise VaryError(f"--vary {expr!r}: uniform(a,b) needs a < b")
-        if dist == "normal" and not args[1] > 0:
-            raise VaryError(f"--vary {expr!r}: normal(mean,std) needs std > 0")
-        if dist == "grid":
-            if args[2] != int(args[2]) or args[2] < 1:
-                raise VaryError(f"--vary {expr!r}: grid(start,stop,n) needs a whole n >= 1")
-            if args[2] > 1 and not args[0] != args[1]:
-                raise VaryError(f"--vary {expr!r}: grid(start,stop,n) needs start != stop")
-        return Vary(name, dist, tuple(args), relative, expr)
+        dist, args = _distribution(call.group(1), call.group(2), expr)
+        return Vary(name, dist, args, relative, expr)
     if "(" in body or ")" in body or "[" in body or "]" in body:
         raise VaryError(f"--vary {expr!r}: malformed form {form!r} (expected {FORMS_HELP})")
     return Vary(name, "values", (_number(body, expr),), relative, expr)
+
+
+def _strip_nominal(form: str, expr: str) -> tuple[str, bool]:
+    """The form without spaces and without a ``*nominal`` (or ``nominal*``) factor, and whether it had one."""
+    body = form.replace(" ", "")
+    relative = False
+    if body.endswith("*nominal"):
+        relative, body = True, body[: -len("*nominal")]
+    elif body.startswith("nominal*"):
+        relative, body = True, body[len("nominal*"):]
+    if "nominal" in body:
+        raise VaryError(f"--vary {expr!r}: 'nominal' may only multiply the whole form, e.g. uniform(0.8,1.2)*nominal")
+    return body, relative
+
+
+def _distribution(dist: str, argtext: str, expr: str) -> tuple[str, tuple[float, ...]]:
+    """A ``dist(args)`` form, checked: a known distribution, its number of arguments, and their ranges."""
+    if dist not in _DISTRIBUTIONS:
+        raise VaryError(f"--vary {expr!r}: unknown form {dist!r} (expected {FORMS_HELP})")
+    args = _split_args(argtext, expr)
+    if len(args) != _DISTRIBUTIONS[dist]:
+        raise VaryError(f"--vary {expr!r}: {dist} takes {_DISTRIBUTIONS[dist]} arguments, got {len(args)}")
+    if dist == "uniform" and not args[0] < args[1]:
+        raise VaryError(f"--vary {expr!r}: uniform(a,b) needs a < b")
+    if dist == "normal" and not args[1] > 0:
+        raise VaryError(f"--vary {expr!r}: normal(mean,std) needs std > 0")
+    if dist == "grid":
+        if args[2] != int(args[2]) or args[2] < 1:
+            raise VaryError(f"--vary {expr!r}: grid(start,stop,n) needs a whole n >= 1")
+        if args[2] > 1 and not args[0] != args[1]:
+            raise VaryError(f"--vary {expr!r}: grid(start,stop,n) needs start != stop")
+    return dist, tuple(args)
 
 
 def parse_all(exprs: Iterable[str], parameters: Mapping[str, float] | None = None) -> list[Vary]:

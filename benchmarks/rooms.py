@@ -1,0 +1,97 @@
+"""The rooms of the code base in figures: ``python -m benchmarks.rooms [--write]``.
+
+For each room (docs/architecture.md) the non-blank lines of its ``.py`` files and its longest
+function (``def`` to last line, docstring included), and the number of import cycles between
+the modules (the graph of ``tests/test_architecture.py``). Prints a Markdown table; with
+``--write`` it also replaces the table in docs/architecture.md (between the ``rooms`` markers).
+Not a benchmark of speed: it reads source files only and runs nothing of them.
+"""
+from __future__ import annotations
+
+import ast
+import importlib.util
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+#: room -> (folder, whether its sub-folders belong to it); sub-folders listed as rooms of their own are left out.
+ROOMS = {
+    "fmus": ("fmus", False),
+    "fmus/hil": ("fmus/hil", True),
+    "fmus/native": ("fmus/native", True),
+    "controllers": ("controllers", True),
+    "harness/master": ("harness/master", True),
+    "harness/scenario": ("harness/scenario", True),
+    "harness/hil": ("harness/hil", True),
+    "harness/studies": ("harness/studies", True),
+    "harness/cli": ("harness/cli", True),
+    "harness (top-level modules)": ("harness", False),
+    "benchmarks": ("benchmarks", True),
+}
+BEGIN, END = "<!-- rooms:begin -->", "<!-- rooms:end -->"
+
+
+def room_files(folder: str, deep: bool) -> list[Path]:
+    """The ``.py`` files of a room."""
+    base = ROOT / folder
+    return sorted(base.rglob("*.py") if deep else base.glob("*.py"))
+
+
+def nonblank_lines(files: list[Path]) -> int:
+    return sum(1 for f in files for line in f.read_text().splitlines() if line.strip())
+
+
+def longest_function(files: list[Path]) -> tuple[str, int, bool]:
+    """(``file:name``, lines, whether its docstring says why it is long) of the longest function
+    or method in ``files``."""
+    best = ("-", 0, False)
+    for f in files:
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = node.end_lineno - node.lineno + 1
+                if n > best[1]:
+                    why = "long on purpose" in (ast.get_docstring(node) or "").lower()
+                    best = (f"{f.relative_to(ROOT)}:{node.name}", n, why)
+    return best
+
+
+def import_cycle_count() -> int:
+    """Import cycles among the package's modules, by the machinery of tests/test_architecture.py."""
+    spec = importlib.util.spec_from_file_location("_architecture", ROOT / "tests" / "test_architecture.py")
+    assert spec is not None and spec.loader is not None
+    arch = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(arch)
+    return len(arch.import_cycles(arch._graph()))
+
+
+def table() -> str:
+    rows = ["| room | lines (non-blank, .py) | longest function | its lines |", "|---|---:|---|---:|"]
+    for room, (folder, deep) in ROOMS.items():
+        files = room_files(folder, deep)
+        name, n, why = longest_function(files)
+        note = " (its docstring says why)" if why else ""
+        rows.append(f"| {room} | {nonblank_lines(files)} | `{name}`{note} | {n} |")
+    rows += ["", f"Import cycles between modules: {import_cycle_count()}."]
+    return "\n".join(rows) + "\n"
+
+
+def write(doc: Path, text: str) -> None:
+    """Replace the text between the markers of ``doc`` with ``text``."""
+    page = doc.read_text()
+    if BEGIN not in page or END not in page:
+        raise SystemExit(f"{doc}: no {BEGIN} ... {END} markers to write the table between")
+    head, rest = page.split(BEGIN, 1)
+    _, tail = rest.split(END, 1)
+    doc.write_text(f"{head}{BEGIN}\n{text}{END}{tail}")
+
+
+def main(argv: list[str]) -> int:
+    text = table()
+    print(text, end="")
+    if "--write" in argv:
+        write(ROOT / "docs" / "architecture.md", text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
