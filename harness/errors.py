@@ -2,7 +2,7 @@
 :mod:`ipcosim.errors`)."""
 from __future__ import annotations
 
-from ipcosim.errors import IpcosimError, UsageError  # noqa: F401 -- UsageError re-exported for harness/options.py
+from ipcosim.errors import IpcosimError
 
 __all__ = ["MissingExtraError", "EXTRAS", "require"]
 

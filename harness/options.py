@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from ipcosim.harness.errors import UsageError
+from ipcosim.errors import UsageError
 
 ALGORITHM_CHOICES = ("gauss-seidel", "jacobi")
 LOOP_CHOICES = ("auto", "c", "python")

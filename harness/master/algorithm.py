@@ -32,7 +32,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.system import Instance, Link, System
 
 GAUSS_SEIDEL = "gauss-seidel"

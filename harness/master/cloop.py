@@ -33,7 +33,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ipcosim.harness.errors import IpcosimError
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.algorithm import FUNCTIONS, Block, Op, TimeBase, loop_plan
 
 #: Flags of the compile: C99, no fused multiply-add (the Python loop rounds every operation).
