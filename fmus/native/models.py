@@ -161,49 +161,16 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
 
     variables, units, description = python_variables(python_fmu)
     cls = PLANT_KINDS[kind]
-    pnames = [f.name for f in cls.__dataclass_fields__.values()]
     p0 = make(kind, **dict(PRESETS[DEFAULT_PRESET[kind]][1]))
     stepper = FastETDRK4(plant_mod.Plant(p0)._L, step)
     stages = [stepper.S0, stepper.S1, stepper.S2, stepper.S3]
-    shapes = [(len(m), len(m[0])) for m in stages]
     # the zeros are structural (L is the current's row and column): a redesign checks they stay zero
     coefficients = {k: v for k, v in stage_coefficients(stages, len(stages[0])).items() if v != 0.0}
     states = physics.state_names(kind)
     n = len(states)
-    single = kind == "single-mass"
-    rhs_factory = plant_mod.single_mass_internal_rhs if single else plant_mod.double_mass_internal_rhs
-
-    def sym_params() -> Any:
-        p = object.__new__(cls)
-        for pn in pnames:
-            object.__setattr__(p, pn, leaf("V:" + pn))
-        return p
-
-    def step_fn() -> list[Any]:
-        p = sym_params()
-        f = tracer.local(rhs_factory(p))
-        vA = tracer.local(physics.clip_voltage)(leaf("V:voltage"), p.voltage_limit)
-        z = sym_stages([leaf(f"S:z{i}") for i in range(n)], f, (vA,), shapes, set(coefficients))
-        x = plant_mod.single_mass_output_map(p)(z) if single else z
-        return list(z) + list(x)
-
-    def init_fn() -> list[Any]:
-        x0 = [leaf(f"V:initial_{s}") for s in states]
-        return list(physics.single_mass_to_momentum(x0, sym_params()) if single else x0)
-
-    with tracer.math_hooks():
-        stepped = tracer.trace(step_fn)
-        started = tracer.trace(init_fn)
+    stepped, started = _trace_plant(kind, cls, [(len(m), len(m[0])) for m in stages], set(coefficients))
     zkeys = [f"S:z{i}" for i in range(n)]
-    extra = [Variable("integrator_step", 0, "parameter", "fixed", start=step, initial="exact", unit="s",
-                      description="communication step the integrator's coefficients are computed for [s]; every "
-                                  "fmi2DoStep must use it")]
-    for pname, value in coefficients.items():
-        k, i, j = pname.split("_")[1:]
-        extra.append(Variable(pname, 0, "parameter", "fixed", start=value, initial="exact", unit="1",
-                              description=f"ETDRK4 stage matrix {k}[{i},{j}] (ipcosim.fmus.integrator."
-                                          "etdrk4_f_form), computed for integrator_step"))
-    _append(variables, extra)
+    _append(variables, _plant_parameters(step, coefficients))
     present = {v.name for v in variables}
     off = [name for name in NATIVE_INSTRUMENTS_OFF if name in present]
     return NativeModel(
@@ -218,6 +185,53 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
                    for f in cls.__dataclass_fields__.values()},
                 **{f"initial_{s}": "finite" for s in states}, "integrator_step": "positive",
                 **{name: "zero" for name in off}})
+
+
+def _trace_plant(kind: str, cls: type, shapes: list[tuple[int, int]], nonzero: set[str]
+                 ) -> tuple[list[Any], list[Any]]:
+    """One traced plant step (the integrator state ``z`` after the step, then the outputs) and the traced
+    start (``z`` from the initial values), every parameter symbolic."""
+    from ipcosim.fmus import physics
+    from ipcosim.fmus import plant as plant_mod
+
+    states = physics.state_names(kind)
+    single = kind == "single-mass"
+    rhs_factory = plant_mod.single_mass_internal_rhs if single else plant_mod.double_mass_internal_rhs
+    pnames = [f.name for f in cls.__dataclass_fields__.values()]
+
+    def sym_params() -> Any:
+        p = object.__new__(cls)
+        for pn in pnames:
+            object.__setattr__(p, pn, leaf("V:" + pn))
+        return p
+
+    def step_fn() -> list[Any]:
+        p = sym_params()
+        f = tracer.local(rhs_factory(p))
+        vA = tracer.local(physics.clip_voltage)(leaf("V:voltage"), p.voltage_limit)
+        z = sym_stages([leaf(f"S:z{i}") for i in range(len(states))], f, (vA,), shapes, nonzero)
+        x = plant_mod.single_mass_output_map(p)(z) if single else z
+        return list(z) + list(x)
+
+    def init_fn() -> list[Any]:
+        x0 = [leaf(f"V:initial_{s}") for s in states]
+        return list(physics.single_mass_to_momentum(x0, sym_params()) if single else x0)
+
+    with tracer.math_hooks():
+        return tracer.trace(step_fn), tracer.trace(init_fn)
+
+
+def _plant_parameters(step: float, coefficients: dict[str, float]) -> list[Variable]:
+    """The native plant's own parameters: its integrator step and the nonzero stage coefficients."""
+    extra = [Variable("integrator_step", 0, "parameter", "fixed", start=step, initial="exact", unit="s",
+                      description="communication step the integrator's coefficients are computed for [s]; every "
+                                  "fmi2DoStep must use it")]
+    for pname, value in coefficients.items():
+        k, i, j = pname.split("_")[1:]
+        extra.append(Variable(pname, 0, "parameter", "fixed", start=value, initial="exact", unit="1",
+                              description=f"ETDRK4 stage matrix {k}[{i},{j}] (ipcosim.fmus.integrator."
+                                          "etdrk4_f_form), computed for integrator_step"))
+    return extra
 
 
 def _append(variables: list[Variable], extra: list[Variable]) -> None:
@@ -297,7 +311,6 @@ def gain_aliases(law: str, kind: str, defaults: dict[str, Any],
 def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
     """The native controller ``<Law><Plant>`` traced from ``ipcosim.controllers.laws``."""
     from ipcosim.controllers import catalog
-    from ipcosim.fmus.physics import MEASURED
 
     name = catalog.model_name(law, kind)
     variables, units, description = python_variables(python_fmu)
@@ -308,6 +321,32 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
         # a swing-up sets its balancing law's predicted state on every catch, before that law uses it: start
         # it at zeros instead of None, so that every path of the first sample has the same state layout
         law0.balance.x_pred = [0.0] * len(law0.balance.coefficients.states)
+    step, state_paths, param_paths, before1, before2 = _trace_law(law0, kind)
+    alias, design_only = gain_aliases(law, kind, defaults, build)
+    alias = {p: a for p, a in alias.items() if a not in design_only}
+    extra, renamed = _derived_parameters(law0, [p for p in param_paths if p not in alias], before2, variables)
+    native_vars, python_only = _law_variables(name, variables, extra, param_paths, alias, renamed, before2)
+    aliases = {f"L:{p}": f"V:{alias.get(p) or renamed[p]}" for p in param_paths}
+    step = [(k, _rename(n, aliases)) for k, n in step]
+    states = {f"L:{p}": float(before1.get(p, 0.0)) for p in state_paths}
+    states.update({"S:first": 1.0, "S:tick": 0.0})
+    settable = sorted({v.name for v in native_vars if v.causality == "parameter"})
+    return NativeModel(name=name, kind="sampled", description=description, variables=native_vars,
+                       unit_definitions=units, states=states, initialize=step, step=step,
+                       checked=["V:voltage"] + [f"L:{p}" for p in state_paths], python_only=python_only,
+                       paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
+                       meta={"role": "law", "law": law, "plant": kind},
+                       checks={**{p: "finite" for p in settable},
+                               **{s.name: s.constraint for s in catalog.schema(law, kind)
+                                  if s.constraint != "bool" and s.name in {v.name for v in native_vars}}})
+
+
+def _trace_law(law0: Any, kind: str) -> tuple[list[tuple[str, Any]], list[str], list[str], dict[str, float],
+                                               dict[str, float]]:
+    """The law's step traced from the reset state and from the state after one sample, merged on the
+    ``first`` flag: (assignments, state paths, parameter paths, numbers at reset, numbers after a sample)."""
+    from ipcosim.fmus.physics import MEASURED
+
     measured = MEASURED[kind]
     law1 = copy.deepcopy(law0)
     law1.step([0.0] * len(measured), 0.0)
@@ -318,13 +357,17 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
                          if after2.get(p) is not leaf("L:" + p) or p not in before1)
     updates = [(f"L:{p}", select(first, after1.get(p, leaf("L:" + p)), after2.get(p, leaf("L:" + p))))
                for p in state_paths]
-    voltage = select(first, u1, u2)
-    step = [("V:voltage", voltage)] + updates + [("S:first", 0.0)]
+    step = [("V:voltage", select(first, u1, u2))] + updates + [("S:first", 0.0)]
     used = _leaves([n for _, n in step if isinstance(n, Node)])
     param_paths = sorted(k[2:] for k in used if k.startswith("L:") and k[2:] not in state_paths)
-    alias, design_only = gain_aliases(law, kind, defaults, build)
-    alias = {p: a for p, a in alias.items() if a not in design_only}
-    extra, renamed = _derived_parameters(law0, [p for p in param_paths if p not in alias], before2, variables)
+    return step, state_paths, param_paths, before1, before2
+
+
+def _law_variables(name: str, variables: list[Variable], extra: list[Variable], param_paths: list[str],
+                   alias: dict[str, str], renamed: dict[str, str], values: dict[str, float]
+                   ) -> tuple[list[Variable], list[str]]:
+    """The native law's variables (the Python FMU's, less its design-only parameters, plus ``extra``), each
+    parameter starting at the exact number the law holds; and the design-only (Python-only) names."""
     python_params = {v.name for v in variables if v.causality == "parameter"}
     keep = ({alias[p] for p in param_paths if p in alias} | {"sample_period", "voltage_limit"}
             | (set(renamed.values()) & python_params))
@@ -338,26 +381,15 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
     for p in param_paths:
         target = alias.get(p) or renamed[p]
         var = next(v for v in native_vars if v.name == target)
-        if target in python_params and var.start is not None and f"{float(var.start):.16g}" == f"{before2[p]:.16g}":
+        if target in python_params and var.start is not None and f"{float(var.start):.16g}" == f"{values[p]:.16g}":
             # a Python FMU's model description holds 16 significant digits (pythonfmu), the FMU itself the
             # exact value (a default, or a gain it ships: K_*, N, M_*), which is the start value here
-            var.start = before2[p]
+            var.start = values[p]
         if var.start is None or var.causality == "parameter" and p not in alias and target not in python_params:
-            var.start = before2[p]
-        if float(var.start) != before2[p]:
-            raise NativeModelError(f"{name}: {p} = {before2[p]} but parameter {target} starts at {var.start}")
-    aliases = {f"L:{p}": f"V:{alias.get(p) or renamed[p]}" for p in param_paths}
-    step = [(k, _rename(n, aliases)) for k, n in step]
-    states = {f"L:{p}": float(before1.get(p, 0.0)) for p in state_paths}
-    states.update({"S:first": 1.0, "S:tick": 0.0})
-    return NativeModel(name=name, kind="sampled", description=description, variables=native_vars,
-                       unit_definitions=units, states=states, initialize=step, step=step,
-                       checked=["V:voltage"] + [f"L:{p}" for p in state_paths], python_only=python_only,
-                       paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
-                       meta={"role": "law", "law": law, "plant": kind},
-                       checks={**{p: "finite" for p in {v.name for v in native_vars if v.causality == "parameter"}},
-                               **{s.name: s.constraint for s in catalog.schema(law, kind)
-                                  if s.constraint != "bool" and s.name in {v.name for v in native_vars}}})
+            var.start = values[p]
+        if float(var.start) != values[p]:
+            raise NativeModelError(f"{name}: {p} = {values[p]} but parameter {target} starts at {var.start}")
+    return native_vars, python_only
 
 
 def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
