@@ -326,7 +326,7 @@ def run_master(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: f
     """Co-simulate a scenario once on the master, with its extension points (observers, manipulators).
 
     The public, option-checked call is :func:`ipcosim.run`; this one is for code that plugs
-    into the master.
+    into the master. Long on purpose: one line of body under the documentation of each keyword.
 
     Parameters
     ----------
