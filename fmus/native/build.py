@@ -1,10 +1,10 @@
 """``ipcosim build --native``: every plant, controller and the setpoint as an FMI 2.0 source-code FMU.
 
-Each ``<Model>.fmu`` holds ``sources/`` (the generated ``model.c``, the shared ``fmi2glue.c`` and
-``model.h``, the FMI 2.0 headers) listed in the model description's ``<SourceFiles>``, and, where
-a C compiler is found (``$CC``, ``cc``, ``gcc``, ``clang``), ``binaries/linux64/<Model>.so``
-compiled with ``-std=c99 -Wall -Wextra -pedantic -Werror``. The variables are read from the
-Python flavour's FMU in ``python_dir`` (built first), so names, value references, units and
+Each ``<Model>.fmu`` holds ``sources/`` (the generated ``model.c``, the shared ``fmi2glue.c``,
+``fmi2unsupported.h`` and ``model.h``, the FMI 2.0 headers) listed in the model description's
+``<SourceFiles>``, and, where a C compiler is found (``$CC``, ``cc``, ``gcc``, ``clang``),
+``binaries/linux64/<Model>.so`` compiled with ``-std=c99 -Wall -Wextra -pedantic -Werror``. The
+variables are read from the Python flavour's FMU in ``python_dir`` (built first), so names, value references, units and
 start values are the same.
 """
 from __future__ import annotations
@@ -22,6 +22,8 @@ from pathlib import Path
 from ipcosim.fmus.native import cgen, models
 
 C_DIR = Path(__file__).resolve().parent / "c"
+#: The hand-written glue every native FMU carries (``fmi2unsupported.h``: the FMI functions it does not support).
+GLUE_FILES = ("fmi2glue.c", "model.h", "fmi2unsupported.h")
 FLAGS = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-O2", "-fPIC", "-shared")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 PLANTS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}
@@ -92,7 +94,7 @@ def write_sources(model: models.NativeModel, dest: Path) -> tuple[list[str], str
     dest.mkdir(parents=True, exist_ok=True)
     text, gid = cgen.model_c(model)
     (dest / "model.c").write_text(text)
-    for name in ("fmi2glue.c", "model.h"):
+    for name in GLUE_FILES:
         shutil.copy(C_DIR / name, dest / name)
     for name in FMI_HEADERS:
         shutil.copy(fmi_header_dir() / name, dest / name)

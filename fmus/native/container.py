@@ -33,7 +33,7 @@ from xml.etree import ElementTree
 from ipcosim.errors import IpcosimError
 from ipcosim.fmus.native import build, tracer
 
-CONTAINER_FILES = ("container.c", "container.h", "fmi2glue.c", "model.h")
+CONTAINER_FILES = ("container.c", "container.h", "fmi2glue.c", "model.h", "fmi2unsupported.h")
 _TYPE = {"Real": "VAR_REAL", "Integer": "VAR_INTEGER", "Boolean": "VAR_BOOLEAN"}
 _FUNCTIONS = ("Instantiate", "FreeInstance", "SetupExperiment", "EnterInitializationMode",
               "ExitInitializationMode", "Terminate", "Reset", "GetReal", "SetReal", "SetInteger", "SetBoolean",
