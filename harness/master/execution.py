@@ -444,6 +444,7 @@ class Execution:
         self.record_s: dict[int, tuple] = {}  # String rows by (absolute) row number
         self._base_row = 0
         self._last_emit = _time.monotonic()
+        self._write_seconds = 0.0  # spent handing rows to the writer (results.csv): not the loop's
         error: BaseException | None = None
         interrupted: BaseException | None = None
         wall0 = _time.perf_counter()
@@ -460,9 +461,9 @@ class Execution:
             self._emit(1)
             for obs in self.observers:
                 obs.start(self)
-            loop_t0 = _time.perf_counter()
+            loop_t0, written0 = _time.perf_counter(), self._write_seconds
             self._step_all()
-            wall_loop = _time.perf_counter() - loop_t0
+            wall_loop = _time.perf_counter() - loop_t0 - (self._write_seconds - written0)
         except KeyboardInterrupt as exc:
             interrupted = error = exc
             self._flush_pending()
@@ -621,13 +622,16 @@ class Execution:
 
     def _emit(self, rows: int) -> None:
         """Hand the record rows ``_base_row .. rows-1`` (absolute numbers) to the writer."""
+        t0 = _time.perf_counter()
         k = rows - self._base_row
         if k > 0:
             self.writer.append(self._rows(self._base_row, k))
-            for row in range(self._base_row, rows):
-                self.record_s.pop(row, None)
+            if self.record_s:
+                for row in range(self._base_row, rows):
+                    self.record_s.pop(row, None)
             self._base_row = rows
         self._last_emit = _time.monotonic()
+        self._write_seconds += _time.perf_counter() - t0
 
     def _flush_pending(self) -> None:
         """After an interruption: write the rows of the completed chunks still in the buffer."""
@@ -826,7 +830,8 @@ class Execution:
                                     "swapped_from": i.swapped_from} for i in self.instances},
             "overrides": {f"{c}.{v}": x for (c, v), x in self.overrides.items()},
             "warnings": list(self.system.warnings), "notes": list(self.system.notes),
-            "wall_time_s": wall, "loop_wall_time_s": wall_loop, "simulated_s": simulated,
+            "wall_time_s": wall, "loop_wall_time_s": wall_loop, "write_wall_time_s": self._write_seconds,
+            "simulated_s": simulated,
             "status": "ok" if error is None else "failed", "error": message,
             "end_time": float(data["time"][-1]) if rows else None, "terminated_by": self.terminated_by,
             "fmu_messages": {s.name: s.messages()[-5:] for s in self.slaves if s.messages()},
