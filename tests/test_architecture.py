@@ -2,7 +2,7 @@
 
 Rooms (docs/architecture.md), lowest first; a room may import only rooms to its left:
 
-    errors  <-  fmus (physics, plant FMU glue, HIL card API)  <-  controllers (laws, controller
+    errors, toolchain  <-  fmus (physics, plant FMU glue, HIL card API)  <-  controllers (laws, controller
             FMU glue)  <-  fmus.native (the C generator: a build tool over both)
             <-  harness.master  <-  harness.scenario  <-  harness.hil (rig server, swap alias)
             <-  harness.api, harness.export  <-  harness.studies  <-  harness.cli
@@ -19,8 +19,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("fmus", "controllers", "harness")
 
+#: Modules of the package's top folder: below every room.
+BOTTOM = ("errors", "toolchain")
 #: room -> rooms it must not import (prefix match on the dotted name below ``ipcosim``).
 FORBIDDEN = {
+    **{base: PACKAGES for base in BOTTOM},
     "fmus": ("controllers", "harness"),
     "fmus.native": ("harness",),
     "controllers": ("harness", "fmus.native"),
@@ -35,7 +38,7 @@ FORBIDDEN = {
 
 
 def _modules() -> dict[str, Path]:
-    mods = {"errors": ROOT / "errors.py"} if (ROOT / "errors.py").is_file() else {}
+    mods = {base: ROOT / f"{base}.py" for base in BOTTOM if (ROOT / f"{base}.py").is_file()}
     for pkg in PACKAGES:
         for f in (ROOT / pkg).rglob("*.py"):
             parts = f.relative_to(ROOT).with_suffix("").parts

@@ -20,8 +20,9 @@ from master_mocks import DISCARD, ERROR, OK, Factory, loop_factory, loop_system,
 from ipcosim.harness.api import Prepared
 from ipcosim.harness.master import cloop
 from ipcosim.harness.master.slave import TERMINATE
+from ipcosim.toolchain import find_compiler
 
-needs_cc = pytest.mark.skipif(cloop.find_compiler() is None, reason="no C compiler (set CC or install gcc/clang)")
+needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler (set CC or install gcc/clang)")
 pytestmark = needs_cc
 H = 0.01
 
@@ -140,7 +141,7 @@ def test_python_slaves_run_on_the_python_loop_unless_c_is_forced():
 def test_without_a_compiler_the_run_completes_on_the_python_loop_and_says_so(tmp_path, monkeypatch):
     monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
     monkeypatch.setenv("PATH", str(tmp_path))
-    assert cloop.find_compiler() is None
+    assert find_compiler() is None
     sysm, factory = loop_system(), loop_factory
     with pytest.raises(Exception, match=r"^--loop c: the C stepping loop cannot run: no C compiler$"):
         run(sysm, factory, "c", stop_time=0.1, step=H, raise_on_error=True)
@@ -203,7 +204,7 @@ def _source() -> str:
 
 
 def test_the_generated_c_compiles_warning_free_as_c99(tmp_path):
-    cc = cloop.find_compiler()
+    cc = find_compiler()
     for name in ("gcc", "clang"):
         path = shutil.which(name)
         if path is None and name != Path(cc).name:

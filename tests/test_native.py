@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from ipcosim.fmus.native import tracer
-from ipcosim.fmus.native.build import find_compiler
+from ipcosim.toolchain import find_compiler
 
 ROOT = Path(__file__).resolve().parents[1]
 CC = find_compiler()

@@ -10,7 +10,6 @@ start values are the same.
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -20,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ipcosim.fmus.native import cgen, models
+from ipcosim.toolchain import find_compiler
 
 C_DIR = Path(__file__).resolve().parent / "c"
 #: The hand-written glue every native FMU carries (``fmi2unsupported.h``: the FMI functions it does not support).
@@ -69,18 +69,6 @@ def native_model(name: str, python_dir: Path) -> models.NativeModel:
         if model_name(law, kind) == name:
             return models.law_model(law, kind, fmu)
     raise NativeBuildError(f"no native model named {name!r}")
-
-
-def find_compiler() -> str | None:
-    """The C compiler to use: ``$CC`` if set, else the first of cc, gcc, clang on PATH."""
-    env = os.environ.get("CC")
-    if env:
-        return shutil.which(env)
-    for cc in ("cc", "gcc", "clang"):
-        path = shutil.which(cc)
-        if path:
-            return path
-    return None
 
 
 def fmi_header_dir() -> Path:

@@ -32,6 +32,7 @@ from xml.etree import ElementTree
 
 from ipcosim.errors import IpcosimError
 from ipcosim.fmus.native import build, tracer
+from ipcosim.toolchain import find_compiler
 
 CONTAINER_FILES = ("container.c", "container.h", "fmi2glue.c", "model.h", "fmi2unsupported.h")
 _TYPE = {"Real": "VAR_REAL", "Integer": "VAR_INTEGER", "Boolean": "VAR_BOOLEAN"}
@@ -384,7 +385,7 @@ def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None)
     build.NativeBuildError
         The compiler failed on the sources.
     """
-    cc = cc or build.find_compiler()
+    cc = cc or find_compiler()
     if cc is None:
         raise ContainerError("no C compiler found (set CC, or install gcc or clang): the exported FMU needs one")
     out = Path(out)

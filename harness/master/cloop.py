@@ -27,7 +27,6 @@ import ctypes
 import hashlib
 import os
 import platform
-import shutil
 import subprocess
 import tempfile
 from pathlib import Path
@@ -35,6 +34,7 @@ from typing import Any, Callable, Sequence
 
 from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.algorithm import FUNCTIONS, Block, Op, TimeBase, loop_plan
+from ipcosim.toolchain import find_compiler
 
 #: Flags of the compile: C99, no fused multiply-add (the Python loop rounds every operation).
 CFLAGS = ("-std=c99", "-O2", "-shared", "-fPIC", "-ffp-contract=off", "-Wall", "-Wextra", "-pedantic")
@@ -199,19 +199,6 @@ def generate_c(blocks: Sequence[Block], order: Sequence[int], algorithm: str,
 
 
 # --------------------------------------------------------------------------- compile and cache
-def find_compiler() -> str | None:
-    """The C compiler: ``$CC`` if set, else the first of cc, gcc, clang on PATH (the rule of
-    ``ipcosim build --native``, whose module the master does not import)."""
-    env = os.environ.get("CC")
-    if env:
-        return shutil.which(env)
-    for cc in ("cc", "gcc", "clang"):
-        path = shutil.which(cc)
-        if path:
-            return path
-    return None
-
-
 _LOADED: dict[Path, Any] = {}
 
 
