@@ -1,7 +1,7 @@
 """``ipcosim build --native``: every plant, controller and the setpoint as an FMI 2.0 source-code FMU.
 
 Each ``<Model>.fmu`` holds ``sources/`` (the generated ``model.c``, the shared ``fmi2glue.c``,
-``fmi2unsupported.h`` and ``model.h``, the FMI 2.0 headers) listed in the model description's
+``fmi2shared.h`` and ``model.h``, the FMI 2.0 headers) listed in the model description's
 ``<SourceFiles>``, and, where a C compiler is found (``$CC``, ``cc``, ``gcc``, ``clang``),
 ``binaries/linux64/<Model>.so`` compiled with ``-std=c99 -Wall -Wextra -pedantic -Werror``. The
 variables are read from the Python flavour's FMU in ``python_dir`` (built first), so names, value references, units and
@@ -22,8 +22,8 @@ from ipcosim.fmus.native import cgen, models
 from ipcosim.toolchain import find_compiler
 
 C_DIR = Path(__file__).resolve().parent / "c"
-#: The hand-written glue every native FMU carries (``fmi2unsupported.h``: the FMI functions it does not support).
-GLUE_FILES = ("fmi2glue.c", "model.h", "fmi2unsupported.h")
+#: The hand-written glue every native FMU carries (``fmi2shared.h``: what it shares with the loop container).
+GLUE_FILES = ("fmi2glue.c", "model.h", "fmi2shared.h")
 FLAGS = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-O2", "-fPIC", "-shared")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 PLANTS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}

@@ -34,7 +34,7 @@ from ipcosim.errors import IpcosimError
 from ipcosim.fmus.native import build, tracer
 from ipcosim.toolchain import find_compiler
 
-CONTAINER_FILES = ("container.c", "container.h", "fmi2glue.c", "model.h", "fmi2unsupported.h")
+CONTAINER_FILES = ("container.c", "container.h", "fmi2glue.c", "model.h", "fmi2shared.h")
 _TYPE = {"Real": "VAR_REAL", "Integer": "VAR_INTEGER", "Boolean": "VAR_BOOLEAN"}
 _FUNCTIONS = ("Instantiate", "FreeInstance", "SetupExperiment", "EnterInitializationMode",
               "ExitInitializationMode", "Terminate", "Reset", "GetReal", "SetReal", "SetInteger", "SetBoolean",

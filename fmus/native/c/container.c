@@ -432,33 +432,5 @@ static fmi2Status set_values(Container *c, const fmi2ValueReference vr[], size_t
     return fmi2OK;
 }
 
-fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]) {
-    return get_values((Container *)c, vr, n, VAR_REAL, value);
-}
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer value[]) {
-    return get_values((Container *)c, vr, n, VAR_INTEGER, value);
-}
-fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean value[]) {
-    return get_values((Container *)c, vr, n, VAR_BOOLEAN, value);
-}
-fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String value[]) {
-    (void)vr;
-    (void)value;
-    return (c != NULL && n == 0) ? fmi2OK : fmi2Error;
-}
-fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[]) {
-    return set_values((Container *)c, vr, n, VAR_REAL, value);
-}
-fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer value[]) {
-    return set_values((Container *)c, vr, n, VAR_INTEGER, value);
-}
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean value[]) {
-    return set_values((Container *)c, vr, n, VAR_BOOLEAN, value);
-}
-fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String value[]) {
-    (void)vr;
-    (void)value;
-    return (c != NULL && n == 0) ? fmi2OK : fmi2Error;
-}
-
-#include "fmi2unsupported.h"
+#define FMI2_SHARED_INSTANCE Container
+#include "fmi2shared.h"

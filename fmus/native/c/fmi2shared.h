@@ -1,7 +1,38 @@
-/* The FMI 2.0 functions the native FMUs do not support or answer trivially, written once for the
- * single-model glue (fmi2glue.c) and the loop container (container.c): each includes this file
- * once, after the FMI headers, so the functions take that file's names (a component's prefix in a
- * container). Function definitions, not declarations: include it in exactly one place per file. */
+/* FMI 2.0 functions written once for the single-model glue (fmi2glue.c) and the loop container
+ * (container.c): the typed get/set entry points over the file's own get_values/set_values, and the
+ * functions the native FMUs do not support or answer trivially. Each of the two files defines
+ * FMI2_SHARED_INSTANCE (its instance type) and includes this file once, at its end, so the functions
+ * take that file's names (a component's prefix in a container). Function definitions, not
+ * declarations: include it in exactly one place per file. */
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]) {
+    return get_values((FMI2_SHARED_INSTANCE *)c, vr, n, VAR_REAL, value);
+}
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer value[]) {
+    return get_values((FMI2_SHARED_INSTANCE *)c, vr, n, VAR_INTEGER, value);
+}
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean value[]) {
+    return get_values((FMI2_SHARED_INSTANCE *)c, vr, n, VAR_BOOLEAN, value);
+}
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String value[]) {
+    (void)vr;
+    (void)value;
+    return (c != NULL && n == 0) ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[]) {
+    return set_values((FMI2_SHARED_INSTANCE *)c, vr, n, VAR_REAL, value);
+}
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer value[]) {
+    return set_values((FMI2_SHARED_INSTANCE *)c, vr, n, VAR_INTEGER, value);
+}
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean value[]) {
+    return set_values((FMI2_SHARED_INSTANCE *)c, vr, n, VAR_BOOLEAN, value);
+}
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String value[]) {
+    (void)vr;
+    (void)value;
+    return (c != NULL && n == 0) ? fmi2OK : fmi2Error;
+}
 
 fmi2Status fmi2CancelStep(fmi2Component c) {
     (void)c;
