@@ -179,49 +179,6 @@ fmi2Status fmi2Reset(fmi2Component comp) {
     return fmi2OK;
 }
 
-static fmi2Status get_values(Instance *c, const fmi2ValueReference vr[], size_t n, int type, void *out) {
-    size_t i;
-    if (c == NULL || (n > 0 && (vr == NULL || out == NULL))) return fmi2Error;
-    for (i = 0; i < n; i++) {
-        const ModelVariable *var = lookup(c, vr[i]);
-        double x;
-        if (var == NULL || var->type != type) {
-            report(c, fmi2Error, "logStatusError", "%s: no variable of this type has value reference %u",
-                   c->m->identifier, (unsigned)vr[i]);
-            return fmi2Error;
-        }
-        x = c->v[var->index];
-        if (type == VAR_REAL) ((fmi2Real *)out)[i] = x;
-        else if (type == VAR_INTEGER) ((fmi2Integer *)out)[i] = (fmi2Integer)x;
-        else ((fmi2Boolean *)out)[i] = x != 0.0 ? fmi2True : fmi2False;
-    }
-    return fmi2OK;
-}
-
-static fmi2Status set_values(Instance *c, const fmi2ValueReference vr[], size_t n, int type, const void *in) {
-    size_t i;
-    if (c == NULL || (n > 0 && (vr == NULL || in == NULL))) return fmi2Error;
-    for (i = 0; i < n; i++) {
-        const ModelVariable *var = lookup(c, vr[i]);
-        double x;
-        if (var == NULL || var->type != type || var->settable == 0) {
-            report(c, fmi2Error, "logStatusError", "%s: value reference %u is not a settable variable of this type",
-                   c->m->identifier, (unsigned)vr[i]);
-            return fmi2Error;
-        }
-        if (var->settable == 1 && c->phase != ST_INSTANTIATED && c->phase != ST_INIT) {
-            report(c, fmi2Error, "logStatusError", "%s: parameter %s is fixed after initialization",
-                   c->m->identifier, var->name);
-            return fmi2Error;
-        }
-        if (type == VAR_REAL) x = ((const fmi2Real *)in)[i];
-        else if (type == VAR_INTEGER) x = (double)((const fmi2Integer *)in)[i];
-        else x = ((const fmi2Boolean *)in)[i] ? 1.0 : 0.0;
-        c->v[var->index] = x;
-    }
-    return fmi2OK;
-}
-
 /* Run the model's step on a scratch copy; commit only if every checked slot is finite. */
 static fmi2Status guarded_step(Instance *c, double t, double h) {
     int i;

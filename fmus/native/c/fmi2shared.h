@@ -1,9 +1,55 @@
 /* FMI 2.0 functions written once for the single-model glue (fmi2glue.c) and the loop container
- * (container.c): the typed get/set entry points over the file's own get_values/set_values, and the
- * functions the native FMUs do not support or answer trivially. Each of the two files defines
- * FMI2_SHARED_INSTANCE (its instance type) and includes this file once, at its end, so the functions
- * take that file's names (a component's prefix in a container). Function definitions, not
- * declarations: include it in exactly one place per file. */
+ * (container.c): get and set by value reference, and the functions the native FMUs do not support
+ * or answer trivially. Each of the two files defines FMI2_SHARED_INSTANCE (its instance type, with
+ * the members m (const ModelInfo *), v (the values) and phase (ST_INSTANTIATED, ST_INIT, ...)), its
+ * lookup(c, vr) and report(c, ...), then includes this file once, at its end, so the functions take
+ * that file's names (a component's prefix in a container). Function definitions, not declarations:
+ * include it in exactly one place per file. */
+
+static fmi2Status get_values(FMI2_SHARED_INSTANCE *c, const fmi2ValueReference vr[], size_t n, int type,
+                             void *out) {
+    size_t i;
+    if (c == NULL || (n > 0 && (vr == NULL || out == NULL))) return fmi2Error;
+    for (i = 0; i < n; i++) {
+        const ModelVariable *var = lookup(c, vr[i]);
+        double x;
+        if (var == NULL || var->type != type) {
+            report(c, fmi2Error, "logStatusError", "%s: no variable of this type has value reference %u",
+                   c->m->identifier, (unsigned)vr[i]);
+            return fmi2Error;
+        }
+        x = c->v[var->index];
+        if (type == VAR_REAL) ((fmi2Real *)out)[i] = x;
+        else if (type == VAR_INTEGER) ((fmi2Integer *)out)[i] = (fmi2Integer)x;
+        else ((fmi2Boolean *)out)[i] = x != 0.0 ? fmi2True : fmi2False;
+    }
+    return fmi2OK;
+}
+
+static fmi2Status set_values(FMI2_SHARED_INSTANCE *c, const fmi2ValueReference vr[], size_t n, int type,
+                             const void *in) {
+    size_t i;
+    if (c == NULL || (n > 0 && (vr == NULL || in == NULL))) return fmi2Error;
+    for (i = 0; i < n; i++) {
+        const ModelVariable *var = lookup(c, vr[i]);
+        double x;
+        if (var == NULL || var->type != type || var->settable == 0) {
+            report(c, fmi2Error, "logStatusError", "%s: value reference %u is not a settable variable of this type",
+                   c->m->identifier, (unsigned)vr[i]);
+            return fmi2Error;
+        }
+        if (var->settable == 1 && c->phase != ST_INSTANTIATED && c->phase != ST_INIT) {
+            report(c, fmi2Error, "logStatusError", "%s: parameter %s is fixed after initialization",
+                   c->m->identifier, var->name);
+            return fmi2Error;
+        }
+        if (type == VAR_REAL) x = ((const fmi2Real *)in)[i];
+        else if (type == VAR_INTEGER) x = (double)((const fmi2Integer *)in)[i];
+        else x = ((const fmi2Boolean *)in)[i] ? 1.0 : 0.0;
+        c->v[var->index] = x;
+    }
+    return fmi2OK;
+}
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]) {
     return get_values((FMI2_SHARED_INSTANCE *)c, vr, n, VAR_REAL, value);
