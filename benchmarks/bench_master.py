@@ -112,7 +112,7 @@ def bench_scenario(name: str, repeats: int = REPEATS) -> list[str]:
     o, f, lc = _median(ours), _median(floor), _median(lib)
     lines = [
         f"{name}: {STOP:g} s at {STEP * 1e3:g} ms, medians of {repeats}",
-        f"  ours (ipcosim.harness.run_master)        {o:7.3f} s   real-time factor {STOP / o:6.1f}x "
+        f"  ours (ipcosim.prepare(...).run())        {o:7.3f} s   real-time factor {STOP / o:6.1f}x "
         f"({target(f'{name} real-time factor', STOP / o, 20.0, 'x', at_most=False)})",
         f"  hand-written fmpy loop    {f:7.3f} s   ours/floor    = {o / f:5.2f}x "
         f"({target(f'{name} ours/floor', o / f, 1.15, 'x')})",

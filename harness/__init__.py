@@ -4,8 +4,6 @@ The public API (``ipcosim.run``, ``ipcosim.prepare``, ``ipcosim.Result``, ``ipco
 is exported once, at the top of the package (``ipcosim/__init__.py``). This package adds, lazily
 (so that ``import ipcosim.harness`` stays cheap), what only code plugging into the master needs::
 
-    ipcosim.harness.run_master(scenario_or_path, stop_time=None, step=None, overrides=None, swaps=None,
-                               observers=(), manipulators=(), ...) -> Result
     ipcosim.harness.swap_aliases, register_swap_alias, SwapTarget, SwapRequest   # --swap alias registry
     ipcosim.harness.Observer, ipcosim.harness.Manipulator                         # extension points
 """
@@ -14,7 +12,6 @@ from __future__ import annotations
 from typing import Any
 
 _EXPORTS = {
-    "run_master": "ipcosim.harness.api",
     "swap_aliases": "ipcosim.harness.scenario.system", "register_swap_alias": "ipcosim.harness.scenario.system",
     "SwapTarget": "ipcosim.harness.scenario.system",
     "SwapRequest": "ipcosim.harness.scenario.system",

@@ -1,17 +1,13 @@
-"""The Python API of the master: :func:`run_master` for one run, :func:`prepare` for many runs of one
-scenario (parameter sweeps) that share the loaded, checked and extracted FMUs, and :func:`run_with`,
-the one path behind ``ipcosim run`` and :func:`ipcosim.run` (a :class:`RunOptions`).
-
-``run_master`` differs from the public :func:`ipcosim.run` in what it takes: the master's own
-keywords (plain ``overrides``, ``swaps`` with :class:`SwapTarget`, a loaded :class:`Scenario`)
-and its extension points (``observers``, ``manipulators``, ``record_every``), with no
-:class:`RunOptions` checks and no relative ``"1.1*nominal"`` values.
+"""The Python API of the master: :func:`prepare` for many runs of one scenario (parameter sweeps)
+that share the loaded, checked and extracted FMUs, and :func:`run_with`, the one path behind
+``ipcosim run`` and :func:`ipcosim.run` (a :class:`RunOptions`, plus the master's extension points
+``observers`` and ``manipulators``).
 
 Example::
 
-    import ipcosim.harness
+    import ipcosim
 
-    result = ipcosim.harness.run_master("single-mass-lqr", stop_time=5.0, overrides={"plant.Mp": 0.2})
+    result = ipcosim.run("single-mass-lqr", stop_time=5.0, set={"plant.Mp": 0.2})
     result.metrics["settling_time_s"], result["plant.cart_position"]
 
     with ipcosim.prepare("double-mass-hsmc") as prepared:      # load and extract once
@@ -238,7 +234,27 @@ class Prepared:
             overrides: Mapping[str, Any] | None = None, *, out_dir: str | os.PathLike[str] | None = None,
             variables: Sequence[str] | None = None, plot: bool = False, raise_on_error: bool = True,
             **kwargs: Any) -> Result:
-        """Run once; see :func:`ipcosim.harness.run_master` for the parameters.
+        """Run once.
+
+        Parameters
+        ----------
+        stop_time, step : float, optional
+            [s]; default the scenario's DefaultExperiment (10 s at 1 ms for the project's scenarios).
+        overrides : mapping of ``"component.variable"`` to value, optional
+            Start values (``{"plant.Mp": 0.2, "controller.sample_period": 0.002}``).
+        out_dir : path, optional
+            Write ``results.csv``, ``metrics.json`` (and ``plot.png`` with ``plot``) there.
+        variables : sequence of str, optional
+            Columns of results.csv (names or patterns like ``plant.*``); default all connectors.
+        raise_on_error : bool
+            Raise SimulationError on failure (after writing ``out_dir``); else return the partial
+            Result with ``error`` set.
+        **kwargs
+            ``realtime`` (None: only when a swapped-in component asks for it), ``progress``,
+            ``observers``, ``manipulators`` (:mod:`ipcosim.harness.master.observers`,
+            :mod:`ipcosim.harness.master.manipulators`), ``start_time``, ``record_every`` (record
+            every n-th communication point), ``loop`` (``auto``, ``c``, ``python``: the stepping
+            loop, :class:`~ipcosim.harness.master.execution.Execution`).
 
         Raises
         ------
@@ -314,78 +330,19 @@ def prepare(scenario_or_path: str | os.PathLike[str] | Scenario, **kwargs: Any) 
     return Prepared(scenario_or_path, **kwargs)
 
 
-def run_master(scenario_or_path: str | os.PathLike[str] | Scenario, stop_time: float | None = None,
-        step: float | None = None, overrides: Mapping[str, Any] | None = None,
-        swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None, *,
-        parameter_set: str | None = None, algorithm: str = GAUSS_SEIDEL,
-        fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, out_dir: str | os.PathLike[str] | None = None,
-        variables: Sequence[str] | None = None, plot: bool = False, realtime: bool | None = None,
-        progress: bool = False, observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
-        start_time: float | None = None, record_every: int = 1, raise_on_error: bool = True,
-        fmus: str = "python", loop: str = "auto") -> Result:
-    """Co-simulate a scenario once on the master, with its extension points (observers, manipulators).
-
-    The public, option-checked call is :func:`ipcosim.run`; this one is for code that plugs
-    into the master. Long on purpose: one line of body under the documentation of each keyword.
-
-    Parameters
-    ----------
-    scenario_or_path : str or path or Scenario
-        Scenario name (``single-mass-lqr``), folder, SSD file or ``.ssp`` archive.
-    stop_time, step : float, optional
-        [s]; default the scenario's DefaultExperiment (10 s at 1 ms for the project's scenarios).
-    overrides : mapping of ``"component.variable"`` to value, optional
-        Start values (``{"plant.Mp": 0.2, "controller.sample_period": 0.002}``).
-    swaps : mapping of component to FMU path or alias, optional
-        ``{"plant": "hil"}`` or ``{"plant": "other/IP02SingleMass.fmu"}``.
-    parameter_set : str, optional
-        ``thesis`` or ``tuned`` (the scenario's ``.ssv`` files), instead of the SSD's default.
-    algorithm : str
-        ``gauss-seidel`` (default) or ``jacobi``.
-    fmu_dirs : sequence of path, optional
-        Extra folders to look for FMUs in.
-    out_dir : path, optional
-        Write ``results.csv``, ``metrics.json`` (and ``plot.png`` with ``plot``) there.
-    variables : sequence of str, optional
-        Columns of results.csv (names or patterns like ``plant.*``); default all connectors.
-    realtime : bool, optional
-        Pace to wall-clock time; None: only when a swapped-in component asks for it.
-    progress : bool
-        Show a progress bar on stderr (a terminal) for runs longer than a second.
-    observers, manipulators : sequences
-        Extra observers and manipulators (see :mod:`ipcosim.harness.master.observers`,
-        :mod:`ipcosim.harness.master.manipulators`).
-    record_every : int
-        Record every n-th communication point.
-    raise_on_error : bool
-        Raise SimulationError on failure (after writing ``out_dir``); else return the partial
-        Result with ``error`` set.
-    fmus : {'python', 'native'}
-        FMU flavour: ``build/fmus`` or ``build/fmus-native`` (``ipcosim build --native``).
-    loop : {'auto', 'c', 'python'}
-        The master's stepping loop (see :class:`~ipcosim.harness.master.execution.Execution`).
-
-    Returns
-    -------
-    Result
-        ``data`` (structured array: ``time`` + ``component.variable``), ``metrics``, ``metadata``.
-    """
-    with Prepared(scenario_or_path, parameter_set=parameter_set, swaps=swaps, fmu_dirs=fmu_dirs,
-                  algorithm=algorithm, fmus=fmus) as prepared:
-        return prepared.run(stop_time, step, overrides, out_dir=out_dir, variables=variables, plot=plot,
-                            raise_on_error=raise_on_error, realtime=realtime, progress=progress, observers=observers,
-                            manipulators=manipulators, start_time=start_time, record_every=record_every,
-                            loop=loop)
-
-
 def prepare_with(options: RunOptions, *, warn: bool = True) -> Prepared:
     """A :class:`Prepared` scenario for ``options`` (scenario, parameter set, swaps, FMU folders, algorithm)."""
     return Prepared(options.scenario, parameter_set=options.parameter_set, swaps=options.swap,
                     fmu_dirs=options.fmu_dirs, algorithm=options.algorithm, warn=warn, fmus=options.fmus)
 
 
-def run_with(options: RunOptions, prepared: Prepared | None = None) -> Result:
+def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers: Sequence[Observer] = (),
+             manipulators: Sequence[Manipulator] = (), raise_on_error: bool = True) -> Result:
     """Run once as ``options`` say: the one path behind ``ipcosim run`` and :func:`ipcosim.run`.
+
+    ``observers`` and ``manipulators`` plug into the master (:mod:`ipcosim.harness.master.observers`,
+    :mod:`ipcosim.harness.master.manipulators`); with ``raise_on_error=False`` a failed run returns
+    its partial Result (``error`` set) instead of raising.
 
     Writes ``options.out`` and ``options.save_baseline`` when given; relative ``set`` values
     (``"1.1*nominal"``) are resolved against the values the scenario binds. SIGINT and SIGTERM
@@ -401,12 +358,14 @@ def run_with(options: RunOptions, prepared: Prepared | None = None) -> Result:
     """
     if prepared is None:
         with prepare_with(options) as own:
-            return run_with(options, own)
+            return run_with(options, own, observers=observers, manipulators=manipulators,
+                            raise_on_error=raise_on_error)
     overrides = resolve_relative(prepared.system, options.set)
     with signals.deferred(timeout=options.timeout):  # a no-op inside the command line's own
         result = prepared.run(options.stop_time, options.step, overrides, out_dir=options.out,
                               variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
-                              progress=options.progress, loop=options.loop)
+                              progress=options.progress, loop=options.loop, observers=observers,
+                              manipulators=manipulators, raise_on_error=raise_on_error)
     if options.save_baseline is not None:
         from ipcosim.harness.baseline import save_baseline
 

@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError
+from ipcosim.harness.master.manipulators import Manipulator
+from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.results import Result
 from ipcosim.harness.options import RunOptions
 
@@ -28,8 +30,10 @@ class FMUBuildError(IpcosimError, RuntimeError):
 def run(scenario: str | os.PathLike[str], *, swap: Mapping[str, Any] | None = None,
         set: Mapping[str, Any] | None = None,  # noqa: A002 -- the command line's --set
         stop_time: float | None = None, step: float | None = None, parameter_set: str | None = None,
-        realtime: bool = False, out: str | os.PathLike[str] | None = None, **more: Any) -> Result:
-    """Co-simulate a scenario once, as ``ipcosim run`` does.
+        realtime: bool = False, out: str | os.PathLike[str] | None = None, observers: Sequence[Observer] = (),
+        manipulators: Sequence[Manipulator] = (), **more: Any) -> Result:
+    """Co-simulate a scenario once, as ``ipcosim run`` does. (Long on purpose: the public reference of
+    its options, with examples that run as doctests, over a two-line body.)
 
     Parameters
     ----------
@@ -47,6 +51,9 @@ def run(scenario: str | os.PathLike[str], *, swap: Mapping[str, Any] | None = No
         Pace the run to wall-clock time (on by itself when a component needs it, e.g. a rig).
     out : path, optional
         Write ``results.csv`` and ``metrics.json`` there.
+    observers, manipulators : sequences, optional
+        Code that watches or changes the run between steps (:mod:`ipcosim.harness.master.observers`,
+        :mod:`ipcosim.harness.master.manipulators`, e.g. ``ScheduledValues``).
     **more
         The other options of ``ipcosim run``: ``plot``, ``record``, ``algorithm``,
         ``fmu_dirs``, ``save_baseline``, ``timeout``, ``loop`` (see :class:`~ipcosim.harness.options.RunOptions`).
@@ -84,7 +91,7 @@ def run(scenario: str | os.PathLike[str], *, swap: Mapping[str, Any] | None = No
 
     options = RunOptions.create(scenario, swap=swap, set=set, stop_time=stop_time, step=step,
                                 parameter_set=parameter_set, realtime=True if realtime else None, out=out, **more)
-    return run_with(options)
+    return run_with(options, observers=observers, manipulators=manipulators)
 
 
 @dataclass(frozen=True)

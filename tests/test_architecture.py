@@ -145,7 +145,7 @@ def test_the_checks_see_a_forbidden_edge(tmp_path) -> None:
     and a type-only import is not."""
     path = tmp_path / "physics.py"
     path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
-                    "    from ipcosim.harness.api import run_master\n"
+                    "    from ipcosim.harness.api import run_with\n"
                     "def f():\n    from ipcosim.harness.master.results import Result\n")
     mods = {"fmus.physics": path, "harness.master.results": path, "harness.api": path}
     assert _imports("fmus.physics", path, mods) == {"harness.master.results"}

@@ -38,9 +38,9 @@ def exported(native_fmus: tuple[Path, Path], tmp_path_factory: pytest.TempPathFa
 @pytest.fixture(scope="module")
 def runs(native_fmus: tuple[Path, Path]) -> dict[str, np.ndarray]:
     """Each scenario's 10 s run on the native FMUs in the ipcosim master."""
-    from ipcosim.harness.api import run_master
+    import ipcosim
 
-    return {sc: run_master(sc, fmu_dirs=[native_fmus[1]], fmus="native").data for sc in SCENARIOS}
+    return {sc: ipcosim.run(sc, fmu_dirs=[native_fmus[1]], fmus="native").data for sc in SCENARIOS}
 
 
 def _simulate(fmu: Path, step: float, **kwargs) -> np.ndarray:  # noqa: ANN003 -- fmpy.simulate_fmu's options
@@ -289,14 +289,14 @@ def test_multi_rate_loop_equals_the_scenario_run(native_fmus: tuple[Path, Path],
     steps every second tick, by the master's multi-rate rule, in the exported FMU too."""
     from fmpy import read_model_description
 
-    from ipcosim.harness.api import run_master
+    import ipcosim
     from ipcosim.harness.export import ExportOptions, export
 
     values = {"controller.sample_period": 0.002}
     fmu = export(ExportOptions("single-mass-lqr", tmp_path / "mr.fmu", fmu_dirs=(native_fmus[1],), set=values))
     start = {v.name: v.start for v in read_model_description(str(fmu)).modelVariables}
     assert float(start["controller.sample_period"]) == 0.002
-    ref = run_master("single-mass-lqr", fmu_dirs=[native_fmus[1]], fmus="native", overrides=values).data
+    ref = ipcosim.run("single-mass-lqr", fmu_dirs=[native_fmus[1]], fmus="native", set=values).data
     names = ["controller.voltage", "plant.cart_position", "plant.pendulum_angle", "plant.motor_current"]
     for step in (0.001, 0.01):
         worst = _worst(_simulate(fmu, step), ref, names, round(step / 1e-3))

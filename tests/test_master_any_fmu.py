@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from ssd_helpers import HEAD, write_scenario
 
+import ipcosim
 from ipcosim.harness import cli
-from ipcosim.harness.api import run_master
 from ipcosim.harness.master.algorithm import StepSizeError
 from ipcosim.harness.master.results import SimulationError
 from ipcosim.harness.scenario.system import BindingError
@@ -138,9 +138,9 @@ def test_typed_columns_stream_over_many_chunks(tmp_path, fmus):
     chunks; every typed column keeps its values and type across the chunk boundaries."""
     folder = scenario(tmp_path, fmus, [comp("src", "Source3"), comp("pt", "PassThrough"), comp("pt3", "PassThrough3")],
                       CHAIN, stop=3.0, step=0.001)
-    r = run_master(folder, out_dir=tmp_path / "out", overrides={"pt.offset": 5, "pt.prefix": "x-", "pt.invert": True,
-                                                        "src.step_time": 1.2},
-            record_every=3)
+    with ipcosim.prepare(folder) as prepared:
+        r = prepared.run(out_dir=tmp_path / "out", overrides={"pt.offset": 5, "pt.prefix": "x-", "pt.invert": True,
+                                                               "src.step_time": 1.2}, record_every=3)
     assert len(r.data) == 1001 and r.data.dtype["src.count"] == np.int32 and r.data.dtype["src.on"] == np.bool_
     ticks = np.arange(1001) * 3
     on = r["time"] >= 1.2 - 1e-12
@@ -158,7 +158,7 @@ def test_typed_columns_stream_over_many_chunks(tmp_path, fmus):
 def test_jacobi_delays_every_type_by_one_step(tmp_path, fmus):
     folder = scenario(tmp_path, fmus, [comp("src", "Source3"), comp("pt", "PassThrough"), comp("pt3", "PassThrough3")],
                       CHAIN)
-    r = run_master(folder, algorithm="jacobi", overrides={"pt.offset": 1})
+    r = ipcosim.run(folder, algorithm="jacobi", set={"pt.offset": 1})
     count = r["src.count"]
     assert r.data.dtype["src.count"] == np.int32 and r.data.dtype["pt.bool_out"] == np.bool_
     # libcosim's fixed-step Jacobi: an input at step n is the source's value at n - 1
@@ -177,7 +177,7 @@ def test_ssv_binds_every_type_and_mapping_transformations_apply(tmp_path, fmus):
     folder = scenario(tmp_path, fmus, [comp("src", "Source3"), comp("pt", "PassThrough", params=params)],
                       [link("src.count", "pt.int_in", imap), link("src.on", "pt.bool_in", bmap),
                        link("src.label", "pt.string_in"), link("src.y", "pt.real_in")])
-    r = run_master(folder)
+    r = ipcosim.run(folder)
     mapped = [{2: 20, 3: 30}.get(int(c), int(c)) for c in r["src.count"]]
     assert list(r["pt.int_in"]) == mapped  # the column of a connected input: what the connection delivers
     assert list(r["pt.int_out"]) == [m + 100 for m in mapped]
@@ -202,14 +202,14 @@ def test_type_mismatch_is_one_clear_line_citing_the_ssp_rule(tmp_path, fmus, cap
     err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]
     assert rc != 0 and len(err) == 1 and message in err[0] and "SystemStructure.ssd: connection" in err[0]
     with pytest.raises(BindingError, match="SSP 1.0"):
-        run_master(folder)
+        ipcosim.run(folder)
 
 
 # ------------------------------------------------------------------ 2: termination by an FMU
 @pytest.mark.parametrize("model", ["Stair", "Stair3"])
 def test_fmu_ending_the_simulation_ends_the_run_normally_and_matches_fmpy(tmp_path, fmus, model):
     folder = scenario(tmp_path, fmus, [comp("stair", model)], stop=2.0)
-    r = run_master(folder, out_dir=tmp_path / "out")
+    r = ipcosim.run(folder, out=tmp_path / "out")
     assert r.ok and r.metadata["status"] == "ok"
     by = r.metadata["terminated_by"]
     assert by["component"] == "stair" and by["time"] == pytest.approx(0.9)
@@ -228,7 +228,7 @@ def test_fmu_ending_the_simulation_ends_the_run_normally_and_matches_fmpy(tmp_pa
 def test_discard_without_termination_is_an_error_saying_what_the_status_query_returned(tmp_path, fmus):
     folder = scenario(tmp_path, fmus, [comp("stair", "Stair")], stop=2.0)
     with pytest.raises(SimulationError) as info:
-        run_master(folder, overrides={"stair.end_simulation": "false", "stair.limit": 3})
+        ipcosim.run(folder, set={"stair.end_simulation": "false", "stair.limit": 3})
     assert str(info.value) == ("component stair (Stair): fmi2DoStep returned fmi2Discard at t = 0.2 s "
                                "(fmi2GetBooleanStatus(fmi2Terminated) returned fmi2False, the FMU did not end "
                                "the simulation)")
@@ -238,7 +238,7 @@ def test_discard_without_termination_is_an_error_saying_what_the_status_query_re
 # ------------------------------------------------------------------ events: compared with FMPy
 def test_bouncing_ball_equals_fmpy(tmp_path, fmus):
     folder = scenario(tmp_path, fmus, [comp("ball", "BouncingBall")], stop=3.0, step=0.01)
-    r = run_master(folder, overrides={"ball.e": 0.8})
+    r = ipcosim.run(folder, set={"ball.e": 0.8})
     ref = fmpy_result(fmus["BouncingBall"], 3.0, 0.01, {"e": 0.8})
     assert np.allclose(r["time"], ref["time"], rtol=0, atol=1e-14)
     # FMPy passes h = t_{n+1} - t_n (which differs from 0.01 in the last bits), we pass 0.01: the
@@ -254,7 +254,7 @@ def test_bouncing_ball_equals_fmpy(tmp_path, fmus):
 def test_multi_rate_component_steps_exactly_to_the_stop_time(tmp_path, fmus):
     folder = scenario(tmp_path, fmus, [comp("src", "Source3", only=("y",)), comp("c", "Counter", hint=0.3)],
                       [link("src.y", "c.u")], stop=1.0, step=0.1)
-    r = run_master(folder, overrides={"src.step_time": 0.5})
+    r = ipcosim.run(folder, set={"src.step_time": 0.5})
     # hand-written: c steps at the end of each period with its input sampled there: 0-0.3, 0.3-0.6,
     # 0.6-0.9 and a last, shorter period 0.9-1.0
     periods = [(0.0, 0.3), (0.3, 0.6), (0.6, 0.9), (0.9, 1.0)]
@@ -263,13 +263,13 @@ def test_multi_rate_component_steps_exactly_to_the_stop_time(tmp_path, fmus):
     assert r["c.integral"][-1] == pytest.approx(integral, abs=1e-12)
     assert list(r["c.steps"]) == [0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 4]
     # Jacobi: inputs read at the start of each period (y at 0, 0.3, 0.6, 0.9), outputs published at its end
-    jac = run_master(folder, overrides={"src.step_time": 0.5}, algorithm="jacobi")
+    jac = ipcosim.run(folder, set={"src.step_time": 0.5}, algorithm="jacobi")
     assert list(jac["c.steps"]) == [0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 4]
     assert jac["c.integral"][-1] == pytest.approx(0.3 + 0.1, abs=1e-12)
     # the same component alone, against FMPy (which takes the shorter last step too)
     alone = scenario(tmp_path, fmus, [comp("c", "Counter", hint=0.3)], stop=1.0, step=0.1, name="alone")
     ref = fmpy_result(fmus["Counter"], 1.0, 0.3)
-    mine = run_master(alone)
+    mine = ipcosim.run(alone)
     assert ref["time"][-1] == 1.0 and mine["c.steps"][-1] == ref["steps"][-1] == 4
     assert mine["c.reached"][-1] == ref["reached"][-1]
 
@@ -278,32 +278,32 @@ def test_partial_last_period_of_a_fixed_step_fmu_is_a_load_time_error(tmp_path, 
     folder = scenario(tmp_path, fmus, [comp("c", "CounterFixed", hint=0.3)], stop=1.0, step=0.1)
     with pytest.raises(StepSizeError, match=r"c \(CounterFixed: step 0.3 s, last step 0.1 s\), which cannot take a "
                                             r"shorter last step"):
-        run_master(folder)
-    assert run_master(folder, stop_time=0.9).ok  # a whole number of its steps
+        ipcosim.run(folder)
+    assert ipcosim.run(folder, stop_time=0.9).ok  # a whole number of its steps
 
 
 def test_stop_time_not_a_multiple_of_the_step_gets_a_shorter_last_step(tmp_path, fmus):
     folder = scenario(tmp_path, fmus, [comp("c", "Counter"), comp("pt", "PassThrough")], stop=0.95, step=0.1)
-    r = run_master(folder)
+    r = ipcosim.run(folder)
     assert r["time"][-1] == 0.95 and len(r.data) == 11 and r["c.reached"][-1] == pytest.approx(0.95, abs=1e-12)
     assert r.metadata["stop_time"] == 0.95
     fixed = scenario(tmp_path, fmus, [comp("c", "CounterFixed"), comp("pt", "PassThrough")], stop=0.95, step=0.1,
                      name="fixed")
     with pytest.raises(StepSizeError, match=r"not a whole number of steps of c \(CounterFixed: step 0.1 s, last step "
                                             r"0.05 s\)"):
-        run_master(fixed)
+        ipcosim.run(fixed)
 
 
 def test_default_step_and_stop_time_come_from_the_fmus(tmp_path, fmus):
     # no step in the SSD: the largest step dividing every FMU's DefaultExperiment step (0.1, 0.25)
     folder = scenario(tmp_path, fmus, [comp("stair", "Stair"), comp("c", "Counter25")], stop=1.0, step=None)
-    r = run_master(folder)
+    r = ipcosim.run(folder)
     assert r.metadata["step"] == pytest.approx(0.05)
     assert r["time"][-1] == pytest.approx(0.45) and r["stair.counter"][-1] == 10  # 9 steps, then it ends
     # no stop time in the SSD either: the FMUs' DefaultExperiment stopTime (they agree: 1.0)
     folder = scenario(tmp_path, fmus, [comp("src", "Source3"), comp("pt3", "PassThrough3")], stop=None, step=None,
                       name="nostop")
-    r = run_master(folder)
+    r = ipcosim.run(folder)
     assert r.metadata["step"] == pytest.approx(0.1) and r["time"][-1] == pytest.approx(1.0)
 
 
@@ -316,9 +316,17 @@ def test_an_integer_only_fmu_writes_its_integer_column_and_record_selects_it(tmp
 
 
 # ------------------------------------------------------------------ the C stepping loop on these FMUs
+def _run_keeping_failure(folder: Path, **kw) -> object:
+    """The run's result, the partial one of a run that failed."""
+    try:
+        return ipcosim.run(folder, **kw)
+    except ipcosim.SimulationError as exc:
+        return exc.result
+
+
 def _loops(folder: Path, **kw) -> dict[str, object]:
     """The run on each loop (auto, c, python); the C and the Python loop's records are the same bit for bit."""
-    out = {loop: run_master(folder, loop=loop, raise_on_error=False, **kw) for loop in ("auto", "c", "python")}
+    out = {loop: _run_keeping_failure(folder, loop=loop, **kw) for loop in ("auto", "c", "python")}
     c, py = out["c"], out["python"]
     assert c.metadata["loop"] == "c" and py.metadata["loop"] == "python (forced)"
     assert c.data.dtype == py.data.dtype and c.data.tobytes() == py.data.tobytes()
@@ -334,7 +342,7 @@ def test_c_loop_on_c_fmus_and_fmi3_adapters_equals_the_python_loop(tmp_path, fmu
     reals = ("u", "reached", "integral")
     folder = scenario(tmp_path, fmus, [comp("src", "Source3", only=("y",)), comp("c", "Counter", hint=0.3, only=reals)],
                       [link("src.y", "c.u")], stop=1.0, step=0.1)
-    runs = _loops(folder, overrides={"src.step_time": 0.5}, algorithm=algorithm)
+    runs = _loops(folder, set={"src.step_time": 0.5}, algorithm=algorithm)
     assert runs["auto"].metadata["loop"] == "python (components stepped by Python functions: src)"
     assert runs["c"]["c.integral"][-1] > 0 and runs["c"]["time"][-1] == 1.0
     alone = scenario(tmp_path, fmus, [comp("c", "Counter", hint=0.3, only=reals)], stop=0.95, step=0.1, name="alone")
@@ -348,14 +356,14 @@ def test_c_loop_ends_where_the_fmu_ends_the_simulation_or_fails_as_the_python_lo
     assert runs["c"].ok and runs["c"].metadata["terminated_by"]["component"] == "stair"
     assert runs["c"]["time"][-1] == pytest.approx(0.9)
     if model == "Stair":  # an FMI 2.0 Discard without termination: the same error
-        failed = _loops(folder, overrides={"stair.end_simulation": "false", "stair.limit": 3})
+        failed = _loops(folder, set={"stair.end_simulation": "false", "stair.limit": 3})
         assert failed["c"].error.startswith("component stair (Stair): fmi2DoStep returned fmi2Discard at t = 0.2 s")
 
 
 def test_integer_boolean_and_string_connectors_run_on_the_python_loop(tmp_path, fmus):
     folder = scenario(tmp_path, fmus, [comp("pt", "PassThrough")], stop=0.5)
-    r = run_master(folder, loop="auto")
+    r = ipcosim.run(folder, loop="auto")
     assert r.ok and r.metadata["loop"] == "python (Integer/Boolean/String connectors (pt))"
     with pytest.raises(SimulationError, match=r"^--loop c: the C stepping loop cannot run: Integer/Boolean/String "
                                               r"connectors \(pt\)$"):
-        run_master(folder, loop="c")
+        ipcosim.run(folder, loop="c")

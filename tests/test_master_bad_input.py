@@ -258,7 +258,8 @@ def test_fmu_failure_through_the_api_keeps_the_partial_result(tmp_path, test_fmu
 
     folder = scenario(tmp_path, test_fmus, comps=[SRC(fail_time=0.2, fail_mode=1.0), GAIN])
     with pytest.raises(ipcosim.SimulationError) as info:
-        ipcosim.harness.run_master(folder)
+        ipcosim.run(folder)
     assert len(info.value.result.data) == 21 and "fmi2Discard" in str(info.value)
-    result = ipcosim.harness.run_master(folder, raise_on_error=False)
+    with ipcosim.prepare(folder) as prepared:
+        result = prepared.run(raise_on_error=False)
     assert result.error.startswith("component src (MasterSource): fmi2DoStep returned fmi2Discard")

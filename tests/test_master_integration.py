@@ -57,7 +57,7 @@ def test_every_scenario_is_packed_and_runs_in_libcosim_and_ours(built):
         assert len(lib) == 50 and all(np.isfinite(lib[c]).all() for c in cols), name
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # the project's scenarios leave no input unconnected
-            ours = ipcosim.harness.run_master(ssp, stop_time=0.05)
+            ours = ipcosim.run(ssp, stop_time=0.05)
         assert len(ours.data) == 51 and ours.metadata["order"] == ["setpoint", "plant", "controller"]
 
 
@@ -67,7 +67,7 @@ def test_libcosim_agrees_with_our_jacobi_to_1e_9(built, name):
     cols = ([f"plant.{m}" for m in measured(plant_kind(name))] + ["plant.motor_current", "controller.voltage",
                                                                    "setpoint.reference"])
     lib, _ = run_libcosim(ssp, 2.0, 1e-3, cols)
-    ours = ipcosim.harness.run_master(ssp, stop_time=2.0, step=1e-3, algorithm="jacobi")
+    ours = ipcosim.run(ssp, stop_time=2.0, step=1e-3, algorithm="jacobi")
     assert np.array_equal(ours["time"][1:], lib["time"])  # the same integer-nanosecond time grid
     for c in cols:
         assert np.max(np.abs(ours[c][1:] - lib[c])) <= 1e-9, c
@@ -94,7 +94,7 @@ def test_cosimulation_equals_a_monolithic_loop_of_the_pure_models(built, name, l
     scenario = load_scenario(built / "ssp" / f"{name}.ssp")
     bound = scenario.bound_sets[0] if scenario.bound_sets else None
     stop, h = 3.0, 1e-3
-    result = ipcosim.harness.run_master(built / "ssp" / f"{name}.ssp", stop_time=stop, step=h)
+    result = ipcosim.run(built / "ssp" / f"{name}.ssp", stop_time=stop, step=h)
     amplitude, step_time = _setpoint(scenario)
     ctrl = make_law(law, kind, bound)
     m = round(ctrl.sample_period / h)
@@ -149,24 +149,24 @@ def test_prepared_runs_many_times_with_different_overrides(built):
         assert not np.array_equal(a["plant.pendulum_angle"], b["plant.pendulum_angle"])
         assert b.metadata["overrides"] == {"plant.Mp": 0.30}
         assert len(prepared._libraries) == 3  # each FMU loaded once for all runs
-    default = ipcosim.harness.run_master(built / "ssp" / "single-mass-lqr.ssp", stop_time=0.5)
+    default = ipcosim.run(built / "ssp" / "single-mass-lqr.ssp", stop_time=0.5)
     assert np.array_equal(default.data, a.data)  # Mp = 0.2303 is the FMU's default
     assert isinstance(FMUSlave, type)
 
 
 def test_parameter_set_selection_changes_the_controller(built):
     ssp = built / "ssp" / "single-mass-hsmc.ssp"
-    tuned = ipcosim.harness.run_master(ssp, stop_time=1.0)
-    thesis = ipcosim.harness.run_master(ssp, stop_time=1.0, parameter_set="thesis")
+    tuned = ipcosim.run(ssp, stop_time=1.0)
+    thesis = ipcosim.run(ssp, stop_time=1.0, parameter_set="thesis")
     assert tuned.metadata["parameter_set"] == "tuned" and thesis.metadata["parameter_set"] == "thesis"
     assert not np.array_equal(tuned["controller.voltage"], thesis["controller.voltage"])
     with pytest.raises(Exception, match="has no parameter set 'best'"):
-        ipcosim.harness.run_master(ssp, stop_time=1.0, parameter_set="best")
+        ipcosim.run(ssp, stop_time=1.0, parameter_set="best")
 
 
 def test_controller_sample_period_sets_its_step_multiple(built):
-    r = ipcosim.harness.run_master(built / "ssp" / "single-mass-lqr.ssp", stop_time=1.0,
-                    overrides={"controller.sample_period": 0.002})
+    r = ipcosim.run(built / "ssp" / "single-mass-lqr.ssp", stop_time=1.0,
+                    set={"controller.sample_period": 0.002})
     assert r.metadata["step_multiples"]["controller"] == 2
     u = r["controller.voltage"]
     assert np.array_equal(u[1::2], u[0:-1:2])  # held over each 2 ms period

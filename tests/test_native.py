@@ -202,7 +202,7 @@ NATIVE_UNSUPPORTED = {"double-mass-hsmc-lab": "parameter cart_resolution = 2.275
 @needs_cc
 @pytest.mark.integration
 def test_every_scenario_trajectory_agrees_between_flavours(native_fmus: tuple[Path, Path]) -> None:
-    from ipcosim.harness.api import run_master
+    import ipcosim
     from ipcosim.harness.scenario.flavour import FlavourError
     from ipcosim.harness.scenario.ssp import scenario_names
 
@@ -210,12 +210,12 @@ def test_every_scenario_trajectory_agrees_between_flavours(native_fmus: tuple[Pa
     names = [n for n in scenario_names() if n.startswith(("single-mass-", "double-mass-"))]
     for name, named in NATIVE_UNSUPPORTED.items():
         with pytest.raises(FlavourError, match=named):
-            run_master(name, fmu_dirs=[native], fmus="native", stop_time=0.01)
+            ipcosim.run(name, fmu_dirs=[native], fmus="native", stop_time=0.01)
     names = [n for n in names if n not in NATIVE_UNSUPPORTED]
     assert len(names) >= 10
     for name in names:
-        a = run_master(name, fmu_dirs=[python]).data
-        b = run_master(name, fmu_dirs=[native], fmus="native").data
+        a = ipcosim.run(name, fmu_dirs=[python]).data
+        b = ipcosim.run(name, fmu_dirs=[native], fmus="native").data
         if name.endswith("-mass-pid"):
             # The thesis PID (2e6 V/m, bang-bang at +-10 V) lets the pendulum fall: that loop takes a 1e-15 rad
             # change of the initial angle to a 1e-9 difference by t = 0.36 s (single) / 0.49 s (double) in the
@@ -235,12 +235,12 @@ def test_every_scenario_trajectory_agrees_between_flavours(native_fmus: tuple[Pa
 @pytest.mark.integration
 @pytest.mark.parametrize("name", ["single-mass-lqr", "double-mass-lqr"])
 def test_c_loop_records_equal_the_python_loops_on_both_flavours(native_fmus: tuple[Path, Path], name: str) -> None:
-    from ipcosim.harness.api import run_master
+    import ipcosim
 
     python, native = native_fmus
     for flavour, folder, stop in (("native", native, 10.0), ("python", python, 1.0)):
         kw = {"fmu_dirs": [folder], "fmus": flavour, "stop_time": stop}
-        c, py = run_master(name, **kw), run_master(name, loop="python", **kw)
+        c, py = ipcosim.run(name, **kw), ipcosim.run(name, loop="python", **kw)
         assert c.metadata["loop"] == "c" and py.metadata["loop"] == "python (forced)"  # C by default
         assert len(c.data) == round(stop * 1000) + 1
         assert c.data.dtype == py.data.dtype and c.data.tobytes() == py.data.tobytes(), (name, flavour)
@@ -252,23 +252,23 @@ def test_c_loop_records_equal_the_python_loops_on_both_flavours(native_fmus: tup
 @needs_cc
 @pytest.mark.integration
 def test_set_on_a_design_parameter_names_the_native_flavour(native_fmus: tuple[Path, Path]) -> None:
-    from ipcosim.harness.api import run_master
+    import ipcosim
     from ipcosim.harness.scenario.flavour import FlavourError
 
     _, native = native_fmus
     with pytest.raises(FlavourError, match="native flavour of LQRSingleMass has no parameter 'R'"):
-        run_master("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides={"controller.R": 0.1}, stop_time=0.01)
+        ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"controller.R": 0.1}, stop_time=0.01)
 
 
 @needs_cc
 @pytest.mark.integration
 def test_set_on_a_plant_constant_redesigns_the_integrator(native_fmus: tuple[Path, Path]) -> None:
-    from ipcosim.harness.api import run_master
+    import ipcosim
 
     python, native = native_fmus
     over = {"plant.Mp": 0.16, "plant.La": 3e-4, "controller.voltage_limit": 8.0}
-    a = run_master("single-mass-lqr", fmu_dirs=[python], overrides=over, stop_time=2.0).data
-    b = run_master("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides=over, stop_time=2.0).data
+    a = ipcosim.run("single-mass-lqr", fmu_dirs=[python], set=over, stop_time=2.0).data
+    b = ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set=over, stop_time=2.0).data
     col = "plant.cart_position"
     assert np.max(np.abs(a[col] - b[col])) <= 1e-9 * np.max(np.abs(a[col]))
 
@@ -382,8 +382,8 @@ def test_native_scenario_runs_in_libcosim(native_fmus: tuple[Path, Path], tmp_pa
                                           monkeypatch: pytest.MonkeyPatch) -> None:
     """libcosim (Jacobi) on a folder with the native FMUs equals the ipcosim master's Jacobi run."""
     pytest.importorskip("libcosimpy")
+    import ipcosim
     import ipcosim.harness.scenario.flavour as flavour
-    from ipcosim.harness.api import run_master
     from ipcosim.harness.studies.crosscheck import run_libcosim
 
     _, native = native_fmus
@@ -391,7 +391,7 @@ def test_native_scenario_runs_in_libcosim(native_fmus: tuple[Path, Path], tmp_pa
     folder = flavour.write_native_folder("single-mass-lqr", tmp_path / "ssp")
     names = ["plant.cart_position", "plant.pendulum_angle", "controller.voltage"]
     data, _ = run_libcosim(folder, 2.0, 1e-3, names)
-    ours = run_master("single-mass-lqr", fmu_dirs=[native], fmus="native", algorithm="jacobi", stop_time=2.0).data
+    ours = ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", algorithm="jacobi", stop_time=2.0).data
     t = np.round(ours["time"] / 1e-3).astype(int)
     index = {k: i for i, k in enumerate(t)}
     rows = [index[k] for k in np.round(data["time"] / 1e-3).astype(int)]
@@ -426,7 +426,7 @@ def test_native_plant_refuses_instrument_options_by_name(native_fmus: tuple[Path
     from fmi_helpers import instantiate
     from fmpy.fmi1 import FMICallException
 
-    from ipcosim.harness.api import run_master
+    import ipcosim
     from ipcosim.harness.scenario.flavour import FlavourError
 
     _, native = native_fmus
@@ -440,22 +440,22 @@ def test_native_plant_refuses_instrument_options_by_name(native_fmus: tuple[Path
     inst.slave.freeInstance()
     with pytest.raises(FlavourError, match="native flavour of IP02SingleMass has no instruments: parameter "
                                            "input_delay = 0.002 must be 0"):
-        run_master("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides={"plant.input_delay": 0.002},
+        ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"plant.input_delay": 0.002},
             stop_time=0.01)
-    run_master("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides={"plant.end_stop": 0.0}, stop_time=0.01)
+    ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"plant.end_stop": 0.0}, stop_time=0.01)
 
 
 @needs_cc
 @pytest.mark.integration
 def test_set_lqr_gains_acts_alike_on_both_flavours(native_fmus: tuple[Path, Path]) -> None:
     """``K_*``, ``N``, ``M_*`` are parameters of both flavours under the same names."""
-    from ipcosim.harness.api import run_master
+    import ipcosim
 
     python, native = native_fmus
     over = {"controller.K_cart_position": -35.0, "controller.M_cart_velocity_pendulum_angle": 10.0}
-    a = run_master("single-mass-lqr", fmu_dirs=[python], overrides=over, stop_time=2.0).data
-    b = run_master("single-mass-lqr", fmu_dirs=[native], fmus="native", overrides=over, stop_time=2.0).data
-    c = run_master("single-mass-lqr", fmu_dirs=[native], fmus="native", stop_time=2.0).data
+    a = ipcosim.run("single-mass-lqr", fmu_dirs=[python], set=over, stop_time=2.0).data
+    b = ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set=over, stop_time=2.0).data
+    c = ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", stop_time=2.0).data
     col = "plant.cart_position"
     scale = float(np.max(np.abs(a[col])))
     assert float(np.max(np.abs(a[col] - b[col]))) <= 1e-9 * scale

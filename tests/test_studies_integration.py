@@ -106,7 +106,7 @@ def test_tune_writes_into_out_and_installs_beside_the_scenario_on_request(fmu_en
     assert f"| controller.{name} |" in report
     import ipcosim.harness
 
-    result = ipcosim.harness.run_master(scenario, stop_time=0.5, parameter_set="autotuned")
+    result = ipcosim.run(scenario, stop_time=0.5, parameter_set="autotuned")
     assert result.ok and math.isfinite(result.metrics["max_abs_angle_rad"])
 
 

@@ -96,8 +96,7 @@ class Result:
             If the result has no plotter.
         """
         if self.plotter is None:
-            raise UsageError("this result has no plotter (results of ipcosim.run and ipcosim.harness.run_master "
-                             "have one)")
+            raise UsageError("this result has no plotter (results of ipcosim.run and Prepared.run have one)")
         return self.plotter(self, Path(path) if path is not None else None)
 
     def write(self, out_dir: str | Path, variables: Sequence[str] | None = None, plot: bool = False,

@@ -2,7 +2,7 @@
 ``libcosimpy``, Jacobi fixed-step) and FMPy's ``simulate_ssp``.
 
 :func:`run_libcosim` returns the trajectories of chosen variables on libcosim's time grid,
-so that tests can compare them with :func:`ipcosim.harness.run_master` (``algorithm="jacobi"``, same step).
+so that tests can compare them with :func:`ipcosim.run` (``algorithm="jacobi"``, same step).
 """
 from __future__ import annotations
 
