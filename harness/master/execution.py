@@ -453,12 +453,7 @@ class Execution:
             signals.check()
             self._instantiate()
             self._initialize()
-            self.record[0, :self.n_values] = self.values
-            self.record_i[0, :self.n_ints] = self.ints
-            if self._string_slots:
-                self.record_s[0] = tuple(lst[j] for lst, j in self._string_slots)
-            self._check_finite(0, 1)
-            self._emit(1)
+            self._record_start()
             for obs in self.observers:
                 obs.start(self)
             loop_t0, written0 = _time.perf_counter(), self._write_seconds
@@ -490,6 +485,15 @@ class Execution:
             interrupted.result = result  # type: ignore[attr-defined]  -- for callers that save it
             raise interrupted
         return result
+
+    def _record_start(self) -> None:
+        """Row 0: the values at the start time, after initialization, checked and written."""
+        self.record[0, :self.n_values] = self.values
+        self.record_i[0, :self.n_ints] = self.ints
+        if self._string_slots:
+            self.record_s[0] = tuple(lst[j] for lst, j in self._string_slots)
+        self._check_finite(0, 1)
+        self._emit(1)
 
     def _instantiate(self) -> None:
         for inst in self.instances:
