@@ -115,19 +115,39 @@ def _fmt(x: float, typ: str) -> str:
     return repr(float(x))
 
 
-def model_description(model: NativeModel, gid: str, sources: list[str]) -> bytes:
-    """The FMI 2.0 model description: the Python flavour's variables plus the native parameters."""
+def description_root(name: str, gid: str, tool: str, description: str, sources: list[str]) -> ElementTree.Element:
+    """The root of a native FMU's model description (the single models' and the loop container's):
+    its attributes and ``<CoSimulation>`` with the C source files."""
     root = ElementTree.Element("fmiModelDescription", {
-        "fmiVersion": "2.0", "modelName": model.name, "guid": gid, "generationTool": "ipcosim.fmus.native",
-        "variableNamingConvention": "structured", "numberOfEventIndicators": "0",
-        "description": (model.description + " Native flavour (C, generated from the Python model).").strip()})
+        "fmiVersion": "2.0", "modelName": name, "guid": gid, "generationTool": tool,
+        "variableNamingConvention": "structured", "numberOfEventIndicators": "0", "description": description})
     cs = ElementTree.SubElement(root, "CoSimulation", {
-        "modelIdentifier": model.name, "canHandleVariableCommunicationStepSize": "true",
+        "modelIdentifier": name, "canHandleVariableCommunicationStepSize": "true",
         "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
         "canGetAndSetFMUstate": "false", "canSerializeFMUstate": "false"})
     files = ElementTree.SubElement(cs, "SourceFiles")
     for s in sources:
         ElementTree.SubElement(files, "File", {"name": s})
+    return root
+
+
+def log_categories(root: ElementTree.Element) -> None:
+    """The log categories the shared glue reports under."""
+    logs = ElementTree.SubElement(root, "LogCategories")
+    for cat in ("logStatusDiscard", "logStatusError"):
+        ElementTree.SubElement(logs, "Category", {"name": cat})
+
+
+def xml_bytes(root: ElementTree.Element) -> bytes:
+    """A model description as the FMU's ``modelDescription.xml``."""
+    ElementTree.indent(root)
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ElementTree.tostring(root, encoding="utf-8")
+
+
+def model_description(model: NativeModel, gid: str, sources: list[str]) -> bytes:
+    """The FMI 2.0 model description: the Python flavour's variables plus the native parameters."""
+    root = description_root(model.name, gid, "ipcosim.fmus.native", (
+        model.description + " Native flavour (C, generated from the Python model).").strip(), sources)
     units = {v.unit for v in model.variables if v.unit}
     if units:
         ud = ElementTree.SubElement(root, "UnitDefinitions")
@@ -141,9 +161,7 @@ def model_description(model: NativeModel, gid: str, sources: list[str]) -> bytes
                 raise ValueError(f"{model.name}: unit {name!r} has no definition")
             unit = ElementTree.SubElement(ud, "Unit", {"name": name})
             ElementTree.SubElement(unit, "BaseUnit", _BASE_UNITS[name])
-    logs = ElementTree.SubElement(root, "LogCategories")
-    for cat in ("logStatusDiscard", "logStatusError"):
-        ElementTree.SubElement(logs, "Category", {"name": cat})
+    log_categories(root)
     mv = ElementTree.SubElement(root, "ModelVariables")
     for v in model.variables:
         attrs = {"name": v.name, "valueReference": str(v.vr), "causality": v.causality, "variability": v.variability}
@@ -159,8 +177,7 @@ def model_description(model: NativeModel, gid: str, sources: list[str]) -> bytes
             tattrs["unit"] = v.unit
         ElementTree.SubElement(sv, v.type, tattrs)
     _structure(root, model)
-    ElementTree.indent(root)
-    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ElementTree.tostring(root, encoding="utf-8")
+    return xml_bytes(root)
 
 
 def _structure(root: ElementTree.Element, model: NativeModel) -> None:

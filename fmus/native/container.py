@@ -31,7 +31,7 @@ from typing import Any, Mapping
 from xml.etree import ElementTree
 
 from ipcosim.errors import IpcosimError
-from ipcosim.fmus.native import build, tracer
+from ipcosim.fmus.native import build, cgen, tracer
 from ipcosim.toolchain import find_compiler
 
 CONTAINER_FILES = ("container.c", "container.h", "fmi2glue.c", "model.h", "fmi2shared.h")
@@ -323,23 +323,12 @@ def write_sources(spec: ContainerSpec, dest: Path) -> tuple[list[str], str, _Lay
 
 def model_description(spec: ContainerSpec, gid: str, files: list[str], lay: _Layout) -> bytes:
     """The container's FMI 2.0 model description."""
-    root = ElementTree.Element("fmiModelDescription", {
-        "fmiVersion": "2.0", "modelName": spec.name, "guid": gid, "generationTool": "ipcosim.fmus.native.container",
-        "variableNamingConvention": "structured", "numberOfEventIndicators": "0", "description": spec.description})
-    cs = ElementTree.SubElement(root, "CoSimulation", {
-        "modelIdentifier": spec.name, "canHandleVariableCommunicationStepSize": "true",
-        "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
-        "canGetAndSetFMUstate": "false", "canSerializeFMUstate": "false"})
-    src = ElementTree.SubElement(cs, "SourceFiles")
-    for f in files:
-        ElementTree.SubElement(src, "File", {"name": f})
+    root = cgen.description_root(spec.name, gid, "ipcosim.fmus.native.container", spec.description, files)
     if lay.units:
         ud = ElementTree.SubElement(root, "UnitDefinitions")
         for name in sorted(lay.units):
             ud.append(lay.units[name])
-    logs = ElementTree.SubElement(root, "LogCategories")
-    for cat in ("logStatusDiscard", "logStatusError"):
-        ElementTree.SubElement(logs, "Category", {"name": cat})
+    cgen.log_categories(root)
     experiment = {"startTime": repr(float(spec.start_time)), "stepSize": repr(float(spec.step))}
     if spec.stop_time is not None:
         experiment["stopTime"] = repr(float(spec.stop_time))
@@ -370,8 +359,7 @@ def model_description(spec: ContainerSpec, gid: str, files: list[str], lay: _Lay
     for v in lay.vars:
         if v.causality == "output":
             ElementTree.SubElement(init, "Unknown", {"index": str(v.vr + 1)})
-    ElementTree.indent(root)
-    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ElementTree.tostring(root, encoding="utf-8")
+    return cgen.xml_bytes(root)
 
 
 def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None) -> Path:
