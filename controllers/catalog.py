@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Mapping
 
 from ipcosim.controllers.errors import ControllerParameterError, DesignError
+from ipcosim.controllers.excitation import Excitation, ExcitationGains
 from ipcosim.controllers.laws import (
     HSMC,
     LQR,
@@ -82,6 +83,8 @@ PARAMETER_SETS: dict[str, dict[str, tuple[str, ...]]] = {
     "AdaptiveHSMC": {"single-mass": ("tuned", "thesis"), "double-mass": ("thesis",)},
     # not in the thesis, single mass only: energy swing-up from hanging, balanced by the thesis's LQR
     "SwingUp": {"single-mass": ("tuned",)},
+    # not a control law: the identification experiments' multisine and weak hold (ipcosim.controllers.excitation)
+    "Excitation": {"single-mass": ("identify",), "double-mass": ("identify",)},
 }
 
 #: Physical constants that do not enter the design model (no inductance, no Coulomb friction, no limit).
@@ -414,6 +417,13 @@ def _swing_up_specs() -> list[ParamSpec]:
             for f in SwingUpGains.UNITS]
 
 
+def _excitation_specs() -> list[ParamSpec]:
+    g = ExcitationGains()
+    return [ParamSpec(f, getattr(g, f), ExcitationGains.UNITS[f], ExcitationGains.DOCS[f],
+                      "positive" if f in ("band_low", "band_high", "period") else "nonnegative")
+            for f in ExcitationGains.UNITS]
+
+
 def _cascade_specs() -> list[ParamSpec]:
     g = CascadeGains()
     pos = {"theta_ref_limit": "positive", "derivative_time_constant": "nonnegative"}
@@ -433,6 +443,8 @@ def schema(law: str, kind: str) -> list[ParamSpec]:
         specs += _lqr_specs(kind) + _model_specs(kind)
     elif law == "SwingUp":
         specs += _swing_up_specs() + _lqr_specs(kind) + _model_specs(kind)
+    elif law == "Excitation":
+        specs += _excitation_specs()
     else:
         specs += _hsmc_specs(kind, law) + _model_specs(kind)
     values = set_values(law, kind, default_set(law, kind))
@@ -488,6 +500,9 @@ def set_values(law: str, kind: str, parameter_set: str) -> dict[str, Any]:
     if law == "SwingUp":
         g = SwingUpGains()
         return {**{f: getattr(g, f) for f in SwingUpGains.UNITS}, **set_values("LQR", kind, "thesis")}
+    if law == "Excitation":
+        g = ExcitationGains()
+        return {f: getattr(g, f) for f in ExcitationGains.UNITS}
     if law == "LQR":
         states = design_states(kind)
         if kind == "single-mass":
@@ -670,6 +685,8 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
     if law == "LQR":
         design = lqr_design_from(kind, v, backend)
         return LQR(kind, design, vlim, output_filter_time_constant=float(v["output_filter_time_constant"]))
+    if law == "Excitation":
+        return Excitation(kind, ExcitationGains(**{f: float(v[f]) for f in ExcitationGains.UNITS}), T, vlim)
     if law == "SwingUp":
         balance = LQR(kind, lqr_design_from(kind, v, backend), vlim,
                       output_filter_time_constant=float(v["output_filter_time_constant"]))

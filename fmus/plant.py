@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any, Callable, Sequence
 
 from ipcosim.fmus.instruments import Instruments, Readout, end_stop_state, tap_velocity_change
@@ -290,3 +291,35 @@ class InstrumentedPlant(Plant):
             self.set_state(stopped)
             self.end_stop_hits += 1
         self.readings = self._readout.read(self.measured())
+
+
+def replay(params: PlantParams, voltages: Sequence[float], h: float, x0: Sequence[float] | None = None,
+           instruments: Instruments | None = None) -> list[tuple[float, ...]]:
+    """The measured positions (``MEASURED`` order, true values before the encoders) of the plant
+    driven by a logged voltage: the one simulation behind identification.
+
+    Parameters
+    ----------
+    params : SingleMassParams or DoubleMassParams
+    voltages : sequence of float
+        The voltage [V] held over each step: ``voltages[k]`` from ``k h`` to ``(k + 1) h``.
+    h : float
+        Step [s].
+    x0 : sequence of float, optional
+        Initial state (``state_names`` order).
+    instruments : Instruments, optional
+        The bench between the command and the motion (input delay, end stops...); its encoder
+        readout (resolutions, noise) is left out: the result is what the encoders look at.
+
+    Returns
+    -------
+    list of tuple
+        ``len(voltages) + 1`` rows: the start, then the positions after each step.
+    """
+    bench = replace(instruments or Instruments(), cart_resolution=0.0, pendulum_resolution=0.0, noise_counts=0.0)
+    plant = InstrumentedPlant(params, x0, instruments=bench)
+    rows = [plant.measured()]
+    for k, v in enumerate(voltages):
+        plant.do_step(k * h, h, v)
+        rows.append(plant.measured())
+    return rows

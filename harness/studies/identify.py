@@ -1,0 +1,310 @@
+"""Identification: the plant's physical parameters from a run's log, with 95 % intervals.
+
+The estimator is an output-error fit. It replays the logged voltage through the project's own plant
+model (:func:`ipcosim.fmus.plant.replay`: the same ``Plant`` the plant FMUs and the virtual rig
+step, on the lab bench's input path, ``ipcosim.fmus.instruments.REALISM["lab"]``), compares the
+simulated positions with the logged encoder readings, and minimizes the sum of squared
+differences (each output scaled by its spread in the log) with scipy's trust-region least squares.
+Only the parameters named in ``fit`` move; every other constant (motor, gearbox, pendulum mass
+and length) stays at the preset's value.
+
+Held-out check: the first ``1 - HELD_OUT`` of the log is fitted; the rest is simulated on from the
+start with the estimate and reported as NRMSE per output (``1 - ||y - y_sim|| / ||y - mean y||``).
+
+Intervals: the Gauss-Newton linearization ``theta - theta* ~ H^-1 J' r`` with ``H = J'J`` gives the
+covariance ``H^-1 S H^-1``; the residuals (encoder quantization, the input's D/A steps) are not
+white -- a cart that sticks holds the same count error for many samples -- so ``S`` is the
+Bartlett-weighted sum of the scores' autocovariances up to ``HAC_LAG`` samples (Newey-West), not
+``s^2 H``. The interval is the estimate +- 1.96 standard errors (clipped at 0 for a Coulomb force).
+It covers the estimator's scatter from the measurement's own errors; it says nothing of a model
+that is wrong (docs/identify.md).
+"""
+from __future__ import annotations
+
+import csv
+import difflib
+import math
+import time as _time
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ipcosim.errors import UsageError
+from ipcosim.fmus.instruments import realism
+from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, PRESETS, preset
+from ipcosim.fmus.physics import MEASURED, state_names
+from ipcosim.fmus.plant import replay
+
+#: What the excitation makes identifiable, per plant kind (the default of ``fit``).
+DEFAULT_FIT = {"single-mass": ("Mc", "Beq", "Bp", "b"),
+               "double-mass": ("Ma", "Mc", "K", "Ba", "Bf", "b1", "b2")}
+#: Parameters whose nominal may be 0: their fit scale [their unit] and start value.
+ZERO_NOMINAL = {"b": (0.1, 0.05), "b1": (0.1, 0.05), "b2": (0.1, 0.05), "Bc": (0.01, 0.005)}
+#: Parameters that can only be estimated >= 0 (the rest: > 0).
+NONNEGATIVE = ("b", "b1", "b2", "Bc", "Beq", "Ba", "Bf", "Bp", "K")
+HELD_OUT = 0.25
+HAC_LAG = 200
+#: Relative standard error (from the encoders' resolution alone) above which a parameter is refused.
+UNIDENTIFIABLE = 0.3
+VOLTAGE_COLUMNS = ("plant.voltage", "controller.voltage")
+
+
+class IdentifyError(UsageError):
+    """A log that cannot give what was asked (missing columns, a parameter the excitation did not move)."""
+
+
+@dataclass(frozen=True)
+class IdentifyOptions:
+    """What ``ipcosim identify`` does (the one options object behind the command line and Python).
+
+    Attributes
+    ----------
+    source : Path
+        A run folder (holding ``results.csv``) or a CSV file with ``time``, the plant's voltage and
+        its measured positions (``plant.<name>`` columns).
+    plant : str
+        ``single-mass`` or ``double-mass``.
+    fit : tuple of str
+        Parameters to estimate (``ipcosim.fmus.params`` names); empty: ``DEFAULT_FIT``.
+    preset : str or None
+        Preset of the parameters that are not fitted, and the start of the fit (default: the plant's).
+    out : Path or None
+        Folder for ``identified.ssv`` and ``identified.png``.
+    """
+
+    source: Path
+    plant: str
+    fit: tuple[str, ...] = ()
+    preset: str | None = None
+    out: Path | None = None
+
+    @classmethod
+    def create(cls, source: Any, *, plant: str, fit: Sequence[str] | str | None = None, preset: str | None = None,
+               out: Any = None) -> "IdentifyOptions":
+        """Checked options (``fit`` as names or one comma-separated string).
+
+        Raises
+        ------
+        UsageError
+            An unknown plant kind, preset or parameter name (with the closest known ones).
+        """
+        if plant not in KINDS:
+            raise UsageError(f"--plant {plant}: expected one of {', '.join(KINDS)}")
+        if preset is not None and (preset not in PRESETS or PRESETS[preset][0] != plant):
+            known = [p for p, (k, _, _) in PRESETS.items() if k == plant]
+            raise UsageError(f"--preset {preset}: not a {plant} preset{_closest(preset, known)}")
+        names = [n.strip() for item in ([fit] if isinstance(fit, str) else (fit or ()))
+                 for n in str(item).split(",") if n.strip()]
+        known = [f.name for f in fields(PLANT_KINDS[plant])]
+        for name in names:
+            if name not in known:
+                raise UsageError(f"--fit {name}: the {plant} plant has no parameter {name!r}{_closest(name, known)}")
+        return cls(source=Path(source), plant=plant, fit=tuple(dict.fromkeys(names)) or DEFAULT_FIT[plant],
+                   preset=preset, out=Path(out) if out is not None else None)
+
+
+def _closest(name: str, known: Sequence[str]) -> str:
+    near = difflib.get_close_matches(name, known, n=3, cutoff=0.4)
+    return f" (closest: {', '.join(near)})" if near else f" (known: {', '.join(known)})"
+
+
+@dataclass(frozen=True)
+class Log:
+    """The columns of a run's log that identification uses."""
+
+    display: str
+    time: np.ndarray
+    voltage: np.ndarray
+    y: np.ndarray                  # rows x measured outputs
+    outputs: tuple[str, ...]
+
+    @property
+    def step(self) -> float:
+        """The log's sample interval [s]."""
+        return float(self.time[1] - self.time[0])
+
+
+def read_log(source: Path, kind: str) -> Log:
+    """The voltage and measured positions of a run folder's ``results.csv`` or of a CSV file.
+
+    Raises
+    ------
+    IdentifyError
+        A missing file or column, too few rows, or a time column that is not evenly spaced.
+    """
+    path = source / "results.csv" if source.is_dir() else source
+    if not path.is_file():
+        raise IdentifyError(f"{path}: no such file (give a run folder holding results.csv, or a CSV file)")
+    with path.open(newline="") as fh:
+        header = next(csv.reader(fh), [])
+    wanted = [f"plant.{n}" for n in MEASURED[kind]]
+    voltage = next((c for c in VOLTAGE_COLUMNS if c in header), None)
+    missing = [c for c in ("time", *wanted) if c not in header] + ([] if voltage else ["plant.voltage"])
+    if missing:
+        raise IdentifyError(f"{path}: no column {missing[0]} (a {kind} log needs time, plant.voltage and "
+                            f"{', '.join(wanted)})")
+    data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=[header.index(c) for c in ("time", voltage, *wanted)],
+                      ndmin=2)
+    if len(data) < 1000:
+        raise IdentifyError(f"{path}: {len(data)} rows; identification needs at least 1000 samples")
+    dt = np.diff(data[:, 0])
+    if not np.all(np.isfinite(data)) or np.ptp(dt) > 1e-6 * dt[0] or dt[0] <= 0:
+        raise IdentifyError(f"{path}: the time column is not evenly spaced (or a value is not finite)")
+    return Log(str(path), data[:, 0], data[:, 1], data[:, 2:], tuple(MEASURED[kind]))
+
+
+@dataclass
+class Identification:
+    """Estimates, intervals and fit quality of one identification (``to_json``: the DESIGN.md shape)."""
+
+    plant: str
+    preset: str
+    parameters: dict[str, dict[str, Any]]
+    nrmse: dict[str, float]
+    held_out_from_s: float
+    fit_time_s: float
+    iterations: int
+    source: str
+    values: dict[str, float] = field(default_factory=dict)   # every plant parameter of the identified model
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"parameters": {NAME: {"value", "ci95", "unit"}}, "nrmse": {OUTPUT: fraction}, ...}``."""
+        return {"parameters": self.parameters, "nrmse": self.nrmse, "plant": self.plant, "preset": self.preset,
+                "held_out_from_s": self.held_out_from_s, "fit_time_s": self.fit_time_s,
+                "iterations": self.iterations, "source": self.source}
+
+
+class _Problem:
+    """The output-error problem of one log: parameters scaled to ~1, residuals scaled per output."""
+
+    def __init__(self, log: Log, kind: str, fit: Sequence[str], base: Any) -> None:
+        self.log, self.kind, self.fit, self.base = log, kind, tuple(fit), base
+        self.instruments = realism("lab", kind)[0]
+        self.scale = np.array([ZERO_NOMINAL.get(n, (getattr(base, n), 0))[0] or 1.0 for n in fit])
+        self.start = np.array([getattr(base, n) or ZERO_NOMINAL.get(n, (0, 1.0))[1] for n in fit]) / self.scale
+        x0 = [0.0] * len(state_names(kind))
+        for j, name in enumerate(MEASURED[kind]):
+            x0[state_names(kind).index(name)] = float(log.y[0, j])
+        self.x0 = x0
+        self.n_fit = int(round(len(log.time) * (1 - HELD_OUT)))
+        self.spread = np.maximum(log.y[: self.n_fit].std(axis=0), 1e-9)
+        self._last: tuple[np.ndarray, np.ndarray] | None = None
+
+    def params(self, theta: np.ndarray) -> Any:
+        from dataclasses import replace
+
+        return replace(self.base, **{n: float(t * s) for n, t, s in zip(self.fit, theta, self.scale)})
+
+    def simulate(self, theta: np.ndarray, rows: int) -> np.ndarray:
+        """Simulated positions for the first ``rows`` rows of the log."""
+        return np.array(replay(self.params(theta), self.log.voltage[: rows - 1], self.log.step, self.x0,
+                               self.instruments))
+
+    def residuals(self, theta: np.ndarray) -> np.ndarray:
+        """Scaled differences simulated - measured over the fitted part (cached for the last ``theta``)."""
+        if self._last is not None and np.array_equal(self._last[0], theta):
+            return self._last[1]
+        r = self._residuals(theta)
+        self._last = (theta.copy(), r)
+        return r
+
+    def _residuals(self, theta: np.ndarray) -> np.ndarray:
+        y = self.log.y[: self.n_fit]
+        try:
+            sim = self.simulate(theta, self.n_fit)
+        except (FloatingPointError, ValueError):
+            return np.full(y.size, 1e3)
+        return ((sim - y) / self.spread).ravel()
+
+    def jacobian(self, theta: np.ndarray, r0: np.ndarray | None = None) -> np.ndarray:
+        """Forward differences of the residuals, one simulation per parameter."""
+        r0 = self.residuals(theta) if r0 is None else r0
+        cols = []
+        for i in range(len(theta)):
+            d = 1e-3 * max(1.0, abs(theta[i]))
+            t = theta.copy()
+            t[i] += d
+            cols.append((self._residuals(t) - r0) / d)
+        return np.column_stack(cols)
+
+
+def _check_identifiable(problem: _Problem, J: np.ndarray) -> None:
+    """Refuse a parameter whose standard error from the encoders' resolution alone exceeds ``UNIDENTIFIABLE``."""
+    inst = problem.instruments
+    res = np.array([inst.pendulum_resolution if n == "pendulum_angle" else inst.cart_resolution
+                    for n in problem.log.outputs])
+    sigma = np.tile(np.maximum(res, 1e-9) / math.sqrt(12) / problem.spread, problem.n_fit)
+    Jw = J / sigma[:, None]
+    H = Jw.T @ Jw
+    for i, name in enumerate(problem.fit):
+        rest = [j for j in range(len(problem.fit)) if j != i]
+        # the information on parameter i left after the others explain what they can (Schur complement)
+        info = H[i, i] - (H[i, rest] @ np.linalg.pinv(H[np.ix_(rest, rest)]) @ H[rest, i] if rest else 0.0)
+        start = problem.start[i]
+        if not info > 0 or 1 / math.sqrt(info) > UNIDENTIFIABLE * max(start, 1.0):
+            raise IdentifyError(f"{problem.log.display}: cannot identify {name}: the excitation did not move it "
+                                f"(the outputs change by less than the encoders resolve when {name} changes)")
+
+
+def _covariance(J: np.ndarray, r: np.ndarray, m: int, lag: int = HAC_LAG) -> np.ndarray:
+    """Newey-West covariance of the least-squares estimate (``m`` residuals per sample)."""
+    p = J.shape[1]
+    scores = (J * r[:, None]).reshape(-1, m, p).sum(axis=1)     # one score per sample
+    n = len(scores)
+    nfft = 1 << (2 * n - 1).bit_length()
+    F = np.fft.rfft(scores, nfft, axis=0)
+    S = np.zeros((p, p))
+    for a in range(p):
+        for b in range(a, p):
+            c = np.fft.irfft(F[:, a] * np.conj(F[:, b]), nfft)   # c[l] = sum_t s_a[t+l] s_b[t]
+            w = 1 - np.arange(lag + 1) / (lag + 1)
+            v = w[0] * c[0] + np.sum(w[1:] * (c[1: lag + 1] + c[-lag:][::-1]))
+            S[a, b] = S[b, a] = v
+    Hinv = np.linalg.pinv(J.T @ J)
+    return Hinv @ S @ Hinv
+
+
+def nrmse(y: np.ndarray, y_sim: np.ndarray) -> float:
+    """``1 - ||y - y_sim|| / ||y - mean(y)||`` (1 = perfect fit, 0 = no better than the mean)."""
+    spread = np.linalg.norm(y - y.mean())
+    return float(1 - np.linalg.norm(y - y_sim) / spread) if spread > 0 else float("nan")
+
+
+def identify(options: IdentifyOptions) -> Identification:
+    """Estimate ``options.fit`` from the log ``options.source`` (see the module docstring).
+
+    Raises
+    ------
+    IdentifyError
+        A log without the needed columns, or one whose excitation did not move a requested parameter.
+    """
+    from scipy.optimize import least_squares
+
+    kind = options.plant
+    name = options.preset or DEFAULT_PRESET[kind]
+    log = read_log(options.source, kind)
+    problem = _Problem(log, kind, options.fit, preset(name))
+    t0 = _time.perf_counter()
+    r0 = problem.residuals(problem.start)
+    _check_identifiable(problem, problem.jacobian(problem.start, r0))
+    lower = [0.0 if n in NONNEGATIVE else 1e-3 for n in problem.fit]
+    sol = least_squares(problem.residuals, problem.start, jac=lambda t: problem.jacobian(t), method="trf",
+                        bounds=(lower, np.inf), x_scale=1.0, xtol=1e-8, ftol=1e-10, max_nfev=40)
+    cov = _covariance(sol.jac, sol.fun, len(log.outputs))
+    fit_time = _time.perf_counter() - t0
+    sim = problem.simulate(sol.x, len(log.time))
+    k = problem.n_fit
+    params = problem.params(sol.x)
+    units = {f.name: f.metadata["unit"] for f in fields(params)}
+    out: dict[str, dict[str, Any]] = {}
+    for i, n in enumerate(problem.fit):
+        se = math.sqrt(max(cov[i, i], 0.0)) * problem.scale[i]
+        value = float(getattr(params, n))
+        lo = value - 1.96 * se
+        out[n] = {"value": value, "ci95": [max(lo, 0.0) if n in NONNEGATIVE else lo, value + 1.96 * se],
+                  "unit": units[n]}
+    return Identification(kind, name, out, {o: nrmse(log.y[k:, j], sim[k:, j]) for j, o in enumerate(log.outputs)},
+                          float(log.time[k]), fit_time, int(sol.nfev), log.display,
+                          {f.name: float(getattr(params, f.name)) for f in fields(params)})
