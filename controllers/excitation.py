@@ -41,7 +41,7 @@ class ExcitationGains:
     seed: float = 1.0
     band_low: float = 0.2       # Hz
     band_high: float = 10.0     # Hz
-    period: float = 10.0        # s
+    period: float = 20.0        # s
     hold_gain: float = 20.0     # V/m
 
     UNITS = {"amplitude": "V", "seed": "1", "band_low": "Hz", "band_high": "Hz", "period": "s", "hold_gain": "V/m"}
@@ -69,7 +69,8 @@ def multisine(gains: ExcitationGains, sample_period: float) -> list[float]:
         raise LawParameterError("band_high", f"parameters band_low = {gains.band_low} Hz, band_high = "
                                              f"{gains.band_high} Hz: need 0 < band_low <= band_high < "
                                              f"{0.5 / sample_period:g} Hz (half the sample rate)")
-    lines = range(math.ceil(gains.band_low * gains.period - 1e-9), math.floor(gains.band_high * gains.period + 1e-9) + 1)
+    lines = range(math.ceil(gains.band_low * gains.period - 1e-9),
+                  math.floor(gains.band_high * gains.period + 1e-9) + 1)
     if not lines:
         raise LawParameterError("band_low", f"the band {gains.band_low} .. {gains.band_high} Hz holds no multiple "
                                             f"of 1/period = {1 / gains.period:g} Hz")

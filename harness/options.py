@@ -100,6 +100,9 @@ class RunOptions:
     loop : str
         The master's stepping loop: ``auto`` (the C loop where it can run, else the Python
         loop), ``c`` (an error where it cannot run) or ``python`` (see docs/master.md).
+    parameter_file : Path or None
+        An SSV file of ``component.variable`` values (``ipcosim identify --out``'s ``identified.ssv``),
+        applied after the scenario's own sets; ``set`` applies after it (:func:`with_parameter_file`).
     """
 
     scenario: str | os.PathLike[str]
@@ -119,6 +122,7 @@ class RunOptions:
     fmus: str = "python"
     timeout: float | None = None
     loop: str = "auto"
+    parameter_file: Path | None = None
 
     def __post_init__(self) -> None:
         if self.loop not in LOOP_CHOICES:
@@ -138,7 +142,8 @@ class RunOptions:
                record: Sequence[str] | str | None = None, algorithm: str = "gauss-seidel",
                fmu_dirs: Sequence[str | os.PathLike[str]] | None = None,
                save_baseline: str | os.PathLike[str] | None = None, progress: bool = False,
-               fmus: str = "python", timeout: Any = None, loop: str = "auto") -> "RunOptions":
+               fmus: str = "python", timeout: Any = None, loop: str = "auto",
+               parameter_file: str | os.PathLike[str] | None = None) -> "RunOptions":
         """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
 
         Raises
@@ -151,11 +156,13 @@ class RunOptions:
         columns = tuple(v.strip() for item in (record or ()) for v in str(item).split(",") if v.strip())
         return cls(scenario=scenario, stop_time=seconds_option("--stop-time", stop_time),
                    step=seconds_option("--step", step),
-                   set=_pairs("--set", set), swap=_pairs("--swap", swap), parameter_set=parameter_set,
+                   set=with_parameter_file(parameter_file, _pairs("--set", set)), swap=_pairs("--swap", swap),
+                   parameter_set=parameter_set,
                    realtime=realtime, out=Path(out) if out is not None else None, plot=plot, record=columns,
                    algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
                    save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,
-                   fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop)
+                   fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop,
+                   parameter_file=Path(parameter_file) if parameter_file is not None else None)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "RunOptions":
@@ -166,7 +173,17 @@ class RunOptions:
                           plot=args.plot, record=args.record, algorithm=args.algorithm, fmu_dirs=args.fmu_dir,
                           save_baseline=args.save_baseline, progress=not args.quiet,
                           fmus=getattr(args, "fmus", "python"), timeout=getattr(args, "timeout", None),
-                          loop=getattr(args, "loop", "auto"))
+                          loop=getattr(args, "loop", "auto"), parameter_file=getattr(args, "parameter_file", None))
+
+
+def with_parameter_file(path: str | os.PathLike[str] | None, values: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``component.variable`` values of the SSV file ``path`` (``--parameter-file``) under ``values``
+    (the ``--set`` values win), for ``run``, ``sweep`` and ``analyze`` alike."""
+    if path is None:
+        return dict(values)
+    from ipcosim.harness.scenario.ssp import read_parameter_file
+
+    return {**read_parameter_file(path), **values}
 
 
 def scenario_label(text: str | os.PathLike[str]) -> str:

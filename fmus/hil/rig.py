@@ -86,6 +86,15 @@ MAX_REQUEST_SPAN_NS = 10 * NS
 MAX_WATCHDOG_TIMEOUT = 10.0
 
 
+#: Experiments the rig can be set up for (``ipcosim rig serve --experiment NAME``): the pose it starts
+#: in and its software limits. ``identify``: the pendulum hanging (the excitation of
+#: ``{single-mass,double-mass}-identify`` swings it about its stable equilibrium), so the pendulum limit
+#: (an upright-balancing guard) is off; the cart limit stays (the excitation holds the cart within 0.25 m).
+EXPERIMENTS: dict[str, dict[str, object]] = {
+    "identify": {"initial_state": {"pendulum_angle": math.pi}, "pendulum_limit": None, "cart_limit": CART_LIMIT_M},
+}
+
+
 def to_ns(seconds: float) -> int:
     """Seconds -> integer nanoseconds (rounded)."""
     return int(round(float(seconds) * NS))

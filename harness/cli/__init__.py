@@ -13,7 +13,8 @@ import sys
 from typing import Sequence
 
 #: Sub-command modules, in the order ``ipcosim --help`` lists them.
-COMMAND_MODULES = ("build", "list_", "run", "export", "linearize", "analyze", "rig", "compare", "sweep", "tune")
+COMMAND_MODULES = ("build", "list_", "run", "export", "linearize", "analyze", "rig", "compare", "sweep", "tune",
+                   "identify")
 
 
 def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
@@ -22,6 +23,13 @@ def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fmus", choices=["auto", "python", "native"], default="auto",
                    help="FMU flavour: auto (default: the native C FMUs when `ipcosim build --native` has built "
                         "them and they can run this study, else python), python, or native")
+
+
+def add_parameter_file_option(p: argparse.ArgumentParser) -> None:
+    """``--parameter-file`` of run, sweep and analyze (``ipcosim.harness.options.with_parameter_file``)."""
+    p.add_argument("--parameter-file", metavar="FILE.ssv",
+                   help="SSV file of COMP.VAR values (e.g. `ipcosim identify --out DIR`'s DIR/identified.ssv), "
+                        "applied after the scenario's own sets; --set values apply after it")
 
 
 def build_parser() -> argparse.ArgumentParser:

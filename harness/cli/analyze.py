@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from ipcosim.harness.cli import add_parameter_file_option
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("analyze", help="linear analysis of a scenario's loop (margins, sensitivity, Bode/Nyquist)",
@@ -15,6 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--parameter-set", metavar="NAME", help="bind this parameter set (thesis, tuned...)")
     p.add_argument("--set", action="append", default=[], metavar="COMP.VAR=VALUE",
                    help="override a controller or plant parameter, e.g. --set plant.Mp=0.2 (repeatable)")
+    add_parameter_file_option(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--out", metavar="DIR", help="output folder (default: out/analyze/<scenario>)")
     p.set_defaults(func=main)
@@ -25,11 +28,13 @@ def _fmt(v: float | None, spec: str, unit: str = "") -> str:
 
 
 def main(args: argparse.Namespace) -> int:
+    from ipcosim.harness.options import with_parameter_file
     from ipcosim.harness.studies.analyze import analyze
     from ipcosim.harness.studies.specs import parse_set
 
     out = args.out or f"out/analyze/{args.scenario.rstrip('/').split('/')[-1]}"
-    r = analyze(args.scenario, parameter_set=args.parameter_set, overrides=parse_set(args.set), out_dir=out)
+    overrides = with_parameter_file(args.parameter_file, parse_set(args.set))
+    r = analyze(args.scenario, parameter_set=args.parameter_set, overrides=overrides, out_dir=out)
     if args.json:
         print(json.dumps(r))
         return 0

@@ -31,8 +31,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="initial state value, e.g. --initial pendulum_angle=0.01")
     s.add_argument("--cart-limit", default="0.30", metavar="M|off",
                    help="software cart limit [m], in (0, 0.407] (default 0.30; 'off' disables it)")
-    s.add_argument("--pendulum-limit-deg", default="20", metavar="D|off",
-                   help="software pendulum limit [deg], in (0, 180] (default 20; 'off' disables it)")
+    s.add_argument("--pendulum-limit-deg", default=None, metavar="D|off",
+                   help="software pendulum limit [deg], in (0, 180] (default 20, off with --experiment identify; "
+                        "'off' disables it)")
+    s.add_argument("--experiment", choices=["identify"],
+                   help="set the rig up for an experiment: identify = pendulum hanging, pendulum limit off, for "
+                        "`ipcosim run KIND-identify --swap plant=hil` (docs/identify.md)")
     s.add_argument("--noise-counts", type=float, default=0.0, help="encoder noise std. deviation [counts]")
     s.add_argument("--latency", type=float, default=0.0, help="one-way transport latency [s]")
     s.add_argument("--seed", type=int, default=0, help="noise seed")
@@ -166,15 +170,18 @@ def _check_numbers(args: argparse.Namespace) -> None:
 
 def serve(args: argparse.Namespace) -> int:
     from ipcosim.errors import UsageError
-    from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig
+    from ipcosim.fmus.hil.rig import END_STOP_M, EXPERIMENTS, RigConfig, VirtualRig
     from ipcosim.harness.hil.server import RigServer, escape
 
     _check_numbers(args)
+    experiment = EXPERIMENTS.get(args.experiment or "", {})
     cart_limit = _limit(args.cart_limit, "--cart-limit", END_STOP_M)
-    pend_limit = _limit(args.pendulum_limit_deg, "--pendulum-limit-deg", 180.0)
+    pend_default = "off" if args.experiment and experiment["pendulum_limit"] is None else "20"
+    pend_limit = _limit(args.pendulum_limit_deg or pend_default, "--pendulum-limit-deg", 180.0)
+    initial = {**experiment.get("initial_state", {}), **_pairs(args.initial, "--initial")}  # type: ignore[dict-item]
     try:
         config = RigConfig(plant=args.plant, preset=args.preset, params=_pairs(args.set, "--set"),
-                           initial_state=_pairs(args.initial, "--initial"), clock=args.clock, tick=args.tick,
+                           initial_state=initial, clock=args.clock, tick=args.tick,
                            cart_limit=cart_limit,
                            pendulum_limit=None if pend_limit is None else math.radians(pend_limit),
                            noise_counts=args.noise_counts, latency=args.latency, seed=args.seed).checked()

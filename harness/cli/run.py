@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ipcosim.harness.cli import add_parameter_file_option
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="co-simulate a scenario (SSP folder or archive)",
@@ -17,6 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="override a parameter or input start value, e.g. --set plant.Mp=0.2 (repeatable)")
     p.add_argument("--swap", action="append", default=[], metavar="COMPONENT=FMU_OR_ALIAS",
                    help="replace a component by another FMU with compatible connectors, e.g. --swap plant=hil")
+    add_parameter_file_option(p)
     p.add_argument("--realtime", action="store_true", help="pace the run to wall-clock time")
     p.add_argument("--out", metavar="DIR", help="output folder (default: out/<scenario>)")
     p.add_argument("--plot", action="store_true", help="also write DIR/plot.png")

@@ -15,7 +15,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from ipcosim.harness.cli import add_study_fmus_option
+from ipcosim.harness.cli import add_parameter_file_option, add_study_fmus_option
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler address tcp://HOST:PORT")
     p.add_argument("--set", action="append", default=[], metavar="COMP.VAR=VALUE",
                    help="fixed parameter value in every run")
+    add_parameter_file_option(p)
     add_study_fmus_option(p)
     p.add_argument("--parameter-set", metavar="NAME", help="bind this parameter set of the scenario (thesis, tuned...)")
     p.add_argument("--stop-time", type=float, help="simulated seconds per run (default: the scenario's)")
@@ -56,12 +57,13 @@ def default_out(scenario: str, kind: str = "sweep") -> Path:
 
 def main(args: argparse.Namespace) -> int:
     from ipcosim.errors import IpcosimError
+    from ipcosim.harness.options import with_parameter_file
     from ipcosim.harness.studies import robustness
     from ipcosim.harness.studies.specs import for_executor, parse_set, study_spec
     from ipcosim.harness.studies.sweep import open_executor, run_sweep
     from ipcosim.harness.studies.vary import make_cases, parse_all
 
-    overrides = parse_set(args.set)
+    overrides = with_parameter_file(args.parameter_file, parse_set(args.set))
     spec, flavour = study_spec(args.scenario, args.fmus, names=[*overrides, *(v.partition("=")[0].strip()
                                                                               for v in args.vary)],
                                check=lambda s: parse_all(args.vary, s.parameters), stop_time=args.stop_time,

@@ -680,3 +680,26 @@ def select_parameter_set(scenario: Scenario, name: str) -> Scenario:
         raise ScenarioError(f"{scenario.origin}: no component binds a parameter-set file, so set {name!r} "
                             f"has nothing to replace")
     return replace(scenario, components=tuple(components))
+
+
+def read_parameter_file(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """``{"component.variable": value}`` of an SSV file (``--parameter-file``): every parameter names
+    the component it applies to (``plant.Mc``), as a system-level SSP binding does.
+
+    Raises
+    ------
+    ScenarioError
+        A missing or invalid file, or a parameter name without a component.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ScenarioError(f"--parameter-file {p}: no such file")
+    element = parse_xml(p.read_bytes(), str(p), "SystemStructureParameterValues.xsd")
+    values = {}
+    for param in _parameter_set(element, str(p), str(p)).parameters:
+        component, dot, variable = param.name.partition(".")
+        if not (dot and component and variable):
+            raise ScenarioError(f"--parameter-file {p}: parameter {param.name!r} names no component "
+                                f"(write it COMPONENT.VARIABLE, e.g. plant.{param.name})")
+        values[param.name] = param.value
+    return values

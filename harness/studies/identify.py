@@ -49,6 +49,8 @@ HAC_LAG = 200
 #: Relative standard error (from the encoders' resolution alone) above which a parameter is refused.
 UNIDENTIFIABLE = 0.3
 VOLTAGE_COLUMNS = ("plant.voltage", "controller.voltage")
+#: How far from hanging (pi, or 0 on an encoder zeroed there) the log's first angle may be [rad].
+HANGING_TOLERANCE = 0.05
 
 
 class IdentifyError(UsageError):
@@ -152,7 +154,19 @@ def read_log(source: Path, kind: str) -> Log:
     dt = np.diff(data[:, 0])
     if not np.all(np.isfinite(data)) or np.ptp(dt) > 1e-6 * dt[0] or dt[0] <= 0:
         raise IdentifyError(f"{path}: the time column is not evenly spaced (or a value is not finite)")
-    return Log(str(path), data[:, 0], data[:, 1], data[:, 2:], tuple(MEASURED[kind]))
+    y = data[:, 2:].copy()
+    y[:, -1] += _hanging_offset(float(y[0, -1]), path)
+    return Log(str(path), data[:, 0], data[:, 1], y, tuple(MEASURED[kind]))
+
+
+def _hanging_offset(angle0: float, path: Path) -> float:
+    """What to add to the logged angle so that the experiment's start (at rest, hanging) reads pi: 0 for
+    a plant FMU's absolute angle, pi for a rig whose encoder was zeroed at the start (``IP02HIL*``)."""
+    for offset in (0.0, math.pi, -math.pi):
+        if abs(angle0 + offset - math.pi) < HANGING_TOLERANCE:
+            return offset
+    raise IdentifyError(f"{path}: the pendulum angle starts at {angle0:.4g} rad, neither hanging (pi) nor zeroed "
+                        "there (0): identification needs the identify experiment's start, at rest and hanging")
 
 
 @dataclass
@@ -168,6 +182,10 @@ class Identification:
     iterations: int
     source: str
     values: dict[str, float] = field(default_factory=dict)   # every plant parameter of the identified model
+    outputs: tuple[str, ...] = ()
+    time: np.ndarray | None = field(default=None, repr=False)
+    measured: np.ndarray | None = field(default=None, repr=False)
+    simulated: np.ndarray | None = field(default=None, repr=False)
 
     def to_json(self) -> dict[str, Any]:
         """``{"parameters": {NAME: {"value", "ci95", "unit"}}, "nrmse": {OUTPUT: fraction}, ...}``."""
@@ -307,4 +325,42 @@ def identify(options: IdentifyOptions) -> Identification:
                   "unit": units[n]}
     return Identification(kind, name, out, {o: nrmse(log.y[k:, j], sim[k:, j]) for j, o in enumerate(log.outputs)},
                           float(log.time[k]), fit_time, int(sol.nfev), log.display,
-                          {f.name: float(getattr(params, f.name)) for f in fields(params)})
+                          {f.name: float(getattr(params, f.name)) for f in fields(params)}, log.outputs,
+                          log.time, log.y, sim)
+
+
+def write_identified(result: Identification, out: Path) -> list[Path]:
+    """``out/identified.ssv`` (the identified constants as ``plant.<name>``, for ``--parameter-file``)
+    and ``out/identified.png`` (measured vs simulated outputs, the held-out part shaded).
+
+    Returns
+    -------
+    list of Path
+        The files written (the plot only where matplotlib is installed).
+    """
+    from ipcosim.harness.scenario.ssp_gen import ssv_text
+
+    out.mkdir(parents=True, exist_ok=True)
+    ssv = out / "identified.ssv"
+    values = {f"plant.{n}": v["value"] for n, v in result.parameters.items()}
+    ssv.write_text(ssv_text("identified", values, f"{result.plant} plant identified from {result.source}"))
+    written = [ssv]
+    try:
+        import matplotlib
+    except ImportError:
+        return written
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(result.outputs), 1, sharex=True, figsize=(9, 2.4 * len(result.outputs)))
+    for j, (ax, name) in enumerate(zip(np.atleast_1d(axes), result.outputs)):
+        ax.plot(result.time, result.measured[:, j], lw=0.8, label="measured")
+        ax.plot(result.time, result.simulated[:, j], lw=0.8, ls="--", label="simulated (identified)")
+        ax.axvspan(result.held_out_from_s, result.time[-1], color="0.9", zorder=-1)
+        ax.set_ylabel(f"{name}\nNRMSE {result.nrmse[name]:.1%}")
+    np.atleast_1d(axes)[0].legend(loc="upper right", fontsize=8)
+    np.atleast_1d(axes)[-1].set_xlabel("time [s] (shaded: held out of the fit)")
+    fig.tight_layout()
+    fig.savefig(out / "identified.png", dpi=110)
+    plt.close(fig)
+    return written + [out / "identified.png"]

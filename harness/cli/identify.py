@@ -1,0 +1,42 @@
+"""``ipcosim identify``: the plant's physical parameters from a run's log, with 95 % intervals."""
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("identify", help="estimate the plant's parameters from a run's log (with 95 % intervals)",
+                       description="Replay the logged voltage through the plant model, fit the named parameters to "
+                                   "the logged encoder readings (output error, scipy least squares) and report each "
+                                   "estimate with its 95 % interval and the NRMSE per output on the held-out last "
+                                   "quarter of the log. Run `ipcosim run KIND-identify` for a log (docs/identify.md).")
+    p.add_argument("source", metavar="RUN_DIR_OR_CSV", help="a run folder (holding results.csv) or a CSV file")
+    p.add_argument("--plant", required=True, choices=["single-mass", "double-mass"], help="plant kind of the log")
+    p.add_argument("--fit", metavar="NAME[,NAME...]",
+                   help="parameters to estimate (default: single mass Mc,Beq,Bp,b; double mass Ma,Mc,K,Ba,Bf,b1,b2)")
+    p.add_argument("--preset", metavar="NAME", help="preset of the parameters held fixed and of the fit's start")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--out", metavar="DIR",
+                   help="write DIR/identified.ssv (for --parameter-file) and DIR/identified.png")
+    p.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+    from ipcosim.harness.studies.identify import IdentifyOptions, identify, write_identified
+
+    options = IdentifyOptions.create(args.source, plant=args.plant, fit=args.fit, preset=args.preset, out=args.out)
+    result = identify(options)
+    written = write_identified(result, options.out) if options.out else []
+    if args.json:
+        print(json.dumps(result.to_json()))
+        return 0
+    print(f"{result.source}: {result.plant} plant, fitted to {result.held_out_from_s:g} s in {result.fit_time_s:.1f} s "
+          f"({result.iterations} iterations); others from preset {result.preset}")
+    for name, p in result.parameters.items():
+        lo, hi = p["ci95"]
+        print(f"  {name:4s} = {p['value']:.6g} {p['unit']}  (95 %: {lo:.6g} .. {hi:.6g})")
+    print("  held-out NRMSE: " + ", ".join(f"{k} {v:.1%}" for k, v in result.nrmse.items()))
+    for path in written:
+        print(f"wrote {path}")
+    return 0
