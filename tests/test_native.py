@@ -194,9 +194,11 @@ def test_generated_laws_agree_with_python(native_fmus: tuple[Path, Path], tmp_pa
 
 
 #: Scenarios the native flavour refuses, with what the refusal must name: the lab plant's encoders and
-#: the tap are instrument options the native plant lacks.
+#: the tap are instrument options the native plant lacks; the identification excitation is Python only.
 NATIVE_UNSUPPORTED = {"double-mass-hsmc-lab": "parameter cart_resolution = 2.275e-05 must be 0",
-                      "single-mass-lqr-tap": "parameter tap_torque_impulse = 0.005 must be 0"}
+                      "single-mass-lqr-tap": "parameter tap_torque_impulse = 0.005 must be 0",
+                      "single-mass-identify": "ExcitationSingleMass has no native flavour",
+                      "double-mass-identify": "ExcitationDoubleMass has no native flavour"}
 
 
 @needs_cc

@@ -47,11 +47,17 @@ def model_names() -> list[str]:
     return [*PLANTS, *(model_name(law, kind) for law, kind in _laws()), "Setpoint"]
 
 
+#: Controller FMUs without a native flavour: the identification excitation looks its multisine up in a
+#: table indexed by the sample count, which the tracer cannot follow (it runs on the Python flavour).
+PYTHON_ONLY_LAWS = ("Excitation",)
+
+
 def _laws() -> list[tuple[str, str]]:
-    """(law, plant kind) of every controller FMU: ``catalog.LAWS`` on both plants, and the swing-up."""
+    """(law, plant kind) of every controller FMU with a native flavour: ``catalog.LAWS`` on both plants, and
+    the swing-up (not ``PYTHON_ONLY_LAWS``)."""
     from ipcosim.controllers.catalog import KINDS, LAWS, PARAMETER_SETS
     return [(law, kind) for law in (*LAWS, *(la for la in PARAMETER_SETS if la not in LAWS)) for kind in KINDS
-            if kind in PARAMETER_SETS[law]]
+            if kind in PARAMETER_SETS[law] and law not in PYTHON_ONLY_LAWS]
 
 
 def native_model(name: str, python_dir: Path) -> models.NativeModel:

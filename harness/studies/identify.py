@@ -338,12 +338,13 @@ def write_identified(result: Identification, out: Path) -> list[Path]:
     list of Path
         The files written (the plot only where matplotlib is installed).
     """
-    from ipcosim.harness.scenario.ssp_gen import ssv_text
+    from ipcosim.harness.studies.tune import ssv_text
 
     out.mkdir(parents=True, exist_ok=True)
     ssv = out / "identified.ssv"
     values = {f"plant.{n}": v["value"] for n, v in result.parameters.items()}
-    ssv.write_text(ssv_text("identified", values, f"{result.plant} plant identified from {result.source}"))
+    ssv.write_text(ssv_text(values, name="identified", description=f"{result.plant} plant identified from "
+                                                                   f"{result.source}"))
     written = [ssv]
     try:
         import matplotlib

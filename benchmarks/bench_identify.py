@@ -1,0 +1,124 @@
+"""Identification (``make bench``): the fit time of a 20 s log at 1 kHz, and the targets of docs/identify.md.
+
+``run()``: one identify experiment per plant on the lab plant with parameters the estimator is not
+told (drawn by :func:`hidden_truth`), the fit timed (target <= 60 s), and the estimate's errors.
+``python -m benchmarks.bench_identify --coverage N``: N seeded repetitions per plant, each with its
+own hidden truth and excitation seed; prints per parameter how often the truth lies inside the
+reported 95 % interval and the largest relative error (the coverage figure of docs/identify.md).
+"""
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Relative spread of the hidden truth around the preset (masses and spring; dampings wider).
+SPREAD = {"Mc": 0.15, "Ma": 0.15, "K": 0.15, "Beq": 0.25, "Ba": 0.25, "Bf": 0.25, "Bp": 0.25}
+#: Coulomb forces are drawn in this range [N].
+COULOMB = (0.05, 0.15)
+#: Accuracy targets (relative), docs/identify.md; Coulomb: 15 % or 0.02 N below 0.13 N.
+TOLERANCE = {"Mc": 0.03, "Ma": 0.03, "K": 0.03, "Beq": 0.10, "Ba": 0.10, "Bf": 0.10, "Bp": 0.10}
+
+
+def hidden_truth(kind: str, seed: int) -> dict[str, float]:
+    """Plant parameters the estimator is not told: each fitted one moved from the preset at random."""
+    from ipcosim.fmus.params import DEFAULT_PRESET, preset
+    from ipcosim.harness.studies.identify import DEFAULT_FIT
+
+    rng = np.random.default_rng(1000 + seed)
+    base = preset(DEFAULT_PRESET[kind])
+    return {n: float(rng.uniform(*COULOMB)) if n.startswith("b") else
+            float(getattr(base, n) * (1 + rng.uniform(-SPREAD[n], SPREAD[n]))) for n in DEFAULT_FIT[kind]}
+
+
+def within_target(name: str, truth: float, value: float) -> bool:
+    """The accuracy target of docs/identify.md for one parameter."""
+    if name.startswith("b"):
+        return abs(value - truth) <= (0.02 if truth < 0.13 else 0.15 * truth)
+    return abs(value - truth) <= TOLERANCE[name] * truth
+
+
+def one_run(kind: str, seed: int, folder: Path) -> tuple[dict[str, float], Any]:
+    """Run ``KIND-identify`` on a hidden truth (excitation seed ``seed``) and identify it."""
+    import ipcosim
+    from ipcosim.harness.studies.identify import IdentifyOptions, identify
+
+    truth = hidden_truth(kind, seed)
+    out = folder / f"{kind}-{seed}"
+    result = ipcosim.run(f"{kind}-identify", set={**{f"plant.{k}": v for k, v in truth.items()},
+                                                  "controller.seed": seed}, out=out)
+    if result.error:
+        raise RuntimeError(f"{kind}-identify seed {seed}: {result.error}")
+    return truth, identify(IdentifyOptions.create(out, plant=kind))
+
+
+def run() -> list[str]:
+    from benchmarks.targets import figure, target
+
+    lines = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for kind in ("single-mass", "double-mass"):
+            truth, r = one_run(kind, 1, Path(tmp))
+            key = kind.replace("-", "_")
+            lines.append(f"{kind}: 20 s log at 1 kHz fitted in {r.fit_time_s:.1f} s -- "
+                         + target(f"identify.{key}_fit_s", r.fit_time_s, 60.0, "s",
+                                  what=f"identify a 20 s {kind} log at 1 kHz"))
+            for name, p in r.parameters.items():
+                err = (p["value"] - truth[name]) / truth[name]
+                lo, hi = p["ci95"]
+                lines.append(f"  {name:4s} truth {truth[name]:.6g}  estimate {p['value']:.6g}  ({err:+.2%})  "
+                             f"95 %: {lo:.6g} .. {hi:.6g}  {'inside' if lo <= truth[name] <= hi else 'OUTSIDE'}")
+            worst = min(r.nrmse.values())
+            lines.append("  held-out NRMSE: " + ", ".join(f"{k} {v:.1%}" for k, v in r.nrmse.items()) + "  "
+                         + figure(f"identify.{key}_worst_nrmse", worst, "1", what="lowest held-out NRMSE"))
+    return lines
+
+
+def lqr_margin_gap(kind: str, truth: dict[str, float], estimate: dict[str, float]) -> tuple[float, float]:
+    """(predicted, actual) phase margin [deg] of the thesis's LQR redesigned on the identified model:
+    ``ipcosim analyze KIND-lqr`` with the plant and the design model both the estimate (the prediction),
+    then with the design model the estimate and the plant the truth (what the law meets)."""
+    from ipcosim.harness.studies.analyze import analyze
+
+    design = {f"controller.model_{k}": v for k, v in estimate.items() if not k.startswith("b")}
+    predicted = analyze(f"{kind}-lqr", overrides={**design, **{f"plant.{k}": v for k, v in estimate.items()}})
+    actual = analyze(f"{kind}-lqr", overrides={**design, **{f"plant.{k}": v for k, v in truth.items()}})
+    return float(predicted["phase_margin_deg"]), float(actual["phase_margin_deg"])
+
+
+def coverage(kind: str, repetitions: int) -> list[str]:
+    """How often each truth lies inside its 95 % interval, and within its accuracy target."""
+    inside: dict[str, int] = {}
+    accurate: dict[str, int] = {}
+    worst: dict[str, float] = {}
+    nrmse, times, gaps = [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(1, repetitions + 1):
+            truth, r = one_run(kind, seed, Path(tmp))
+            times.append(r.fit_time_s)
+            pm = lqr_margin_gap(kind, truth, {n: p["value"] for n, p in r.parameters.items()})
+            gaps.append(abs(pm[0] - pm[1]))
+            nrmse.append(min(r.nrmse.values()))
+            for n, p in r.parameters.items():
+                lo, hi = p["ci95"]
+                inside[n] = inside.get(n, 0) + (lo <= truth[n] <= hi)
+                accurate[n] = accurate.get(n, 0) + within_target(n, truth[n], p["value"])
+                worst[n] = max(worst.get(n, 0.0), abs(p["value"] - truth[n]) / truth[n])
+    lines = [f"{kind}: {repetitions} repetitions, fit {min(times):.1f} .. {max(times):.1f} s, "
+             f"lowest held-out NRMSE {min(nrmse):.2%}, LQR redesigned on the estimate: phase margin predicted vs "
+             f"on the truth differs by at most {max(gaps):.3f} deg"]
+    lines += [f"  {n:4s} truth inside the 95 % interval {inside[n]}/{repetitions}, within target "
+              f"{accurate[n]}/{repetitions}, largest error {worst[n]:.2%}" for n in inside]
+    return lines
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--coverage", type=int, metavar="N", help="N seeded repetitions per plant")
+    parser.add_argument("--plant", choices=["single-mass", "double-mass"], action="append")
+    args = parser.parse_args()
+    for kind in args.plant or ["single-mass", "double-mass"]:
+        print("\n".join(coverage(kind, args.coverage or 10)), flush=True)
