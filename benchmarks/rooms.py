@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 ROOMS = {
     "fmus": ("fmus", False),
     "fmus/hil": ("fmus/hil", True),
-    "fmus/native": ("fmus/native", True),
+    "harness/native": ("harness/native", True),
     "controllers": ("controllers", True),
     "harness/master": ("harness/master", True),
     "harness/scenario": ("harness/scenario", True),

@@ -24,7 +24,7 @@ def plant_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def native_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """(Python FMU folder, native FMU folder), built for this session (tests/test_native.py, test_export.py)."""
     from ipcosim.fmus.build import build_all
-    from ipcosim.fmus.native.build import build_native
+    from ipcosim.harness.native.cbuild import build_native
 
     out = tmp_path_factory.mktemp("native")
     build_all(out / "fmus")

@@ -28,7 +28,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"{'built' if result.built else 'up to date'}: {result.fmu}")
     pack_ssp(out)
     if getattr(args, "native", False):
-        from ipcosim.fmus.native.build import build_native
+        from ipcosim.harness.native.cbuild import build_native
 
         for native in build_native(out / "fmus", out / "fmus-native"):
             print(f"built (native{'' if native.binary else ', sources only'}): {native.fmu}")

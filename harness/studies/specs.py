@@ -129,7 +129,7 @@ def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], 
                     kwargs: Mapping[str, Any]) -> RunSpec | str:
     """The native spec of a study, or why the native flavour cannot run it (one line)."""
     from ipcosim.errors import IpcosimError
-    from ipcosim.fmus.native.models import NATIVE_INSTRUMENTS_OFF
+    from ipcosim.harness.native.models import NATIVE_INSTRUMENTS_OFF
     from ipcosim.harness.scenario.flavour import native_fmu_dir
 
     if not any(native_fmu_dir().glob("*.fmu")):
