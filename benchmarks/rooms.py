@@ -22,7 +22,6 @@ ROOMS = {
     "controllers": ("controllers", True),
     "harness/master": ("harness/master", True),
     "harness/scenario": ("harness/scenario", True),
-    "harness/hil": ("harness/hil", True),
     "harness/studies": ("harness/studies", True),
     "harness/cli": ("harness/cli", True),
     "harness (top-level modules)": ("harness", False),

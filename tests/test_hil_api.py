@@ -166,7 +166,7 @@ def test_inproc_creates_a_rig_from_the_query():
 
 
 def test_swap_alias_picks_the_adapter_by_plant_kind(tmp_path, monkeypatch):
-    from ipcosim.harness.hil.swap import HilSwapError, card_clock, find_adapter, plant_kind
+    from ipcosim.fmus.hil.swap import HilSwapError, card_clock, find_adapter, plant_kind
 
     assert plant_kind("x", "IP02SingleMass", set()) == "single-mass"
     assert plant_kind("x", "IP02DoubleMass", set()) == "double-mass"

@@ -168,7 +168,7 @@ class SwapRequest:
 #: returns a SwapTarget. Modules listed in ``SWAP_ALIAS_PROVIDERS`` are imported on first use
 #: so that they can register their aliases (``ipcosim.harness.scenario.system.swap_aliases['hil'] = resolver``).
 swap_aliases: dict[str, Callable[[SwapRequest], SwapTarget]] = {}
-SWAP_ALIAS_PROVIDERS: tuple[str, ...] = ("ipcosim.harness.hil.swap",)
+SWAP_ALIAS_PROVIDERS: tuple[str, ...] = ("ipcosim.fmus.hil.swap",)
 _providers_loaded = False
 
 
