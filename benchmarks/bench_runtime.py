@@ -145,7 +145,7 @@ def module_counts(fmu_dir: Path) -> dict[str, tuple[int, int]]:
 def run() -> list[str]:
     """Lines for ``make bench``; raises TargetMissed (after the figures) when a target is missed."""
     from benchmarks import bench_plant
-    from ipcosim.fmus.build import ROOT
+    from ipcosim.fmus.pybuild import ROOT
     from ipcosim.harness.paths import BUILD_SSP_DIR
 
     fmu_dir = ROOT / "build" / "fmus"

@@ -8,7 +8,7 @@ holds what this module computes).
 Experiment (the thesis's task): plant at its default preset (``thesis-ch3`` single mass,
 ``thesis-ch4`` double mass; one extra row: the long-pendulum ``thesis-appendix-a`` plant with
 its own LQR design), upright at rest at 0, reference step 0 -> 0.05 m at t = 0, 10 s, plant
-step 1 ms, law sampled at 1 ms with zero-order hold, +-10 V. Metrics: ``ipcosim.fmus.task``.
+step 1 ms, law sampled at 1 ms with zero-order hold, +-10 V. Metrics: ``ipcosim.fmus.metrics``.
 """
 from __future__ import annotations
 

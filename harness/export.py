@@ -2,7 +2,7 @@
 
 The loop is built from the scenario's native components (``ipcosim build --native``), bound and
 ordered exactly as ``ipcosim run SCENARIO --fmus native`` runs it (the same
-:class:`~ipcosim.harness.api.Prepared` binding and redesign, the master's
+:class:`~ipcosim.harness.engine.Prepared` binding and redesign, the master's
 ``gauss_seidel_order`` and ``step_multiples``), and compiled into one FMU by
 :mod:`ipcosim.harness.native.container`. Its variables:
 
@@ -71,7 +71,7 @@ def export(options: ExportOptions) -> Path:
         An unknown scenario, a scenario the native flavour cannot run (it names the component
         and parameter), no C compiler, an unwritable ``out`` (one line each).
     """
-    from ipcosim.harness.api import Prepared, resolve_relative
+    from ipcosim.harness.engine import Prepared, resolve_relative
     from ipcosim.harness.scenario.flavour import FlavourError
 
     out = Path(options.out)

@@ -5,7 +5,7 @@ Rooms (docs/architecture.md), lowest first; a room may import only rooms to its 
     errors, toolchain  <-  fmus (physics, plant FMU glue, HIL)  <-  controllers (laws, controller
             FMU glue)  <-  harness.native (the C generator: a build tool over both)
             <-  harness.master  <-  harness.scenario
-            <-  harness.api, harness.export  <-  harness.studies  <-  harness.cli
+            <-  harness.engine, harness.export  <-  harness.studies  <-  harness.cli
 
 Every import counts, at module level or inside a function (a lazy import is still a
 dependency), except those under ``if TYPE_CHECKING:``, which only name types for readers and
@@ -26,15 +26,15 @@ FORBIDDEN = {
     **{base: PACKAGES for base in BOTTOM},
     "fmus": ("controllers", "harness"),
     "controllers": ("harness",),
-    "harness.native": ("harness.master", "harness.scenario", "harness.api", "harness.export",
+    "harness.native": ("harness.master", "harness.scenario", "harness.engine", "harness.export",
                        "harness.studies", "harness.cli"),
-    "harness.master": ("harness.scenario", "harness.studies", "harness.cli", "harness.api",
+    "harness.master": ("harness.scenario", "harness.studies", "harness.cli", "harness.engine",
                        "harness.plot", "harness.native", "controllers", "fmus"),
-    "harness.scenario": ("harness.studies", "harness.cli", "harness.api"),
+    "harness.scenario": ("harness.studies", "harness.cli", "harness.engine"),
     # The swap alias still reaches up to the scenario's swap registry (inverted next).
-    "fmus.hil.swap": ("controllers", "harness.master", "harness.native", "harness.api", "harness.studies",
+    "fmus.hil.swap": ("controllers", "harness.master", "harness.native", "harness.engine", "harness.studies",
                       "harness.cli"),
-    "harness.api": ("harness.studies", "harness.cli"),
+    "harness.engine": ("harness.studies", "harness.cli"),
     "harness.export": ("harness.studies", "harness.cli"),
     "harness.studies": ("harness.cli",),
 }
@@ -148,9 +148,9 @@ def test_the_checks_see_a_forbidden_edge(tmp_path) -> None:
     and a type-only import is not."""
     path = tmp_path / "physics.py"
     path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
-                    "    from ipcosim.harness.api import run_with\n"
+                    "    from ipcosim.harness.engine import run_with\n"
                     "def f():\n    from ipcosim.harness.master.results import Result\n")
-    mods = {"fmus.physics": path, "harness.master.results": path, "harness.api": path}
+    mods = {"fmus.physics": path, "harness.master.results": path, "harness.engine": path}
     assert _imports("fmus.physics", path, mods) == {"harness.master.results"}
 
 

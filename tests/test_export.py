@@ -100,7 +100,7 @@ def test_model_description_validates_and_carries_the_scenarios_values(exported: 
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
 
-    from ipcosim.harness.api import Prepared
+    from ipcosim.harness.engine import Prepared
     from ipcosim.harness.export import ExportOptions, export
 
     for sc, fmu in exported.items():

@@ -35,7 +35,7 @@ pytestmark = pytest.mark.integration
 
 @pytest.fixture(scope="session")
 def hil_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out = tmp_path_factory.mktemp("hil-fmus")
     scripts = [ROOT / "fmus" / "fmu_ip02_hil_single_mass.py", ROOT / "fmus" / "fmu_ip02_hil_double_mass.py"]

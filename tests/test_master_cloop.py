@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from master_mocks import DISCARD, ERROR, OK, Factory, loop_factory, loop_system, model, system
 
-from ipcosim.harness.api import Prepared
+from ipcosim.harness.engine import Prepared
 from ipcosim.harness.master import cloop
 from ipcosim.harness.master.slave import TERMINATE
 from ipcosim.toolchain import find_compiler

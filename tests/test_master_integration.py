@@ -29,7 +29,7 @@ def built(tmp_path_factory) -> Path:
     ready = os.environ.get("IPCOSIM_TEST_BUILD")
     if ready:
         return Path(ready)
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
     from ipcosim.harness.scenario.ssp_pack import pack_all
 
     out = tmp_path_factory.mktemp("master-build")

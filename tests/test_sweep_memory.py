@@ -35,7 +35,7 @@ def test_local_pool_is_replaced_after_its_share_of_runs(tmp_path):
 def test_worker_memory_growth_over_its_runs(tmp_path):
     """One process runs as many co-simulations (three pythonfmu FMUs each) as a worker of a
     2-worker pool can before it is replaced, and reports its resident memory growth."""
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     fmus = {r.fmu.stem: r.fmu for r in build_all(tmp_path / "fmus", scripts=[
         DATA / "fmu_master_source.py", DATA / "fmu_master_gain.py", DATA / "fmu_corpus_fault.py"])}

@@ -83,9 +83,9 @@ def card_clock(uri: str) -> str:
     return "wallclock"
 
 
-def resolve_hil(request):  # noqa: ANN001, ANN201 -- ipcosim.harness.scenario.system.SwapRequest -> SwapTarget
-    """Resolver of the ``hil`` alias (registered with :func:`ipcosim.harness.scenario.system.register_swap_alias`)."""
-    from ipcosim.harness.scenario.system import SwapTarget
+def resolve_hil(request):  # noqa: ANN001, ANN201 -- ipcosim.harness.scenario.binding.SwapRequest -> SwapTarget
+    """Resolver of the ``hil`` alias (registered with :func:`ipcosim.harness.scenario.binding.register_swap_alias`)."""
+    from ipcosim.harness.scenario.binding import SwapTarget
 
     model = request.model
     connectors = {c.name for c in request.scenario.component(request.component).connectors} \
@@ -101,7 +101,7 @@ def resolve_hil(request):  # noqa: ANN001, ANN201 -- ipcosim.harness.scenario.sy
 
 def register() -> None:
     """Register the ``hil`` alias with the master."""
-    from ipcosim.harness.scenario.system import register_swap_alias
+    from ipcosim.harness.scenario.binding import register_swap_alias
 
     register_swap_alias("hil", resolve_hil)
 

@@ -171,7 +171,7 @@ def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[s
             except FileNotFoundError as exc:
                 if built or "ipcosim build" not in str(exc):
                     raise
-                from ipcosim.fmus.build import build_all
+                from ipcosim.fmus.pybuild import build_all
                 from ipcosim.harness.paths import BUILD_FMU_DIR
 
                 print(f"compare: FMUs missing; building them into {BUILD_FMU_DIR}", file=sys.stderr)

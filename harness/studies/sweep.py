@@ -326,7 +326,7 @@ class DaskExecutor:
     """
 
     def __init__(self, scheduler: Any, timeout: float = 5.0) -> None:
-        from ipcosim.harness.errors import require
+        from ipcosim.harness.extras import require
 
         require("distributed")
         from distributed import Client

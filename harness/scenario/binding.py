@@ -166,7 +166,7 @@ class SwapRequest:
 
 #: Swap aliases: ``--swap plant=hil`` looks up ``hil`` here. A resolver takes a SwapRequest and
 #: returns a SwapTarget. Modules listed in ``SWAP_ALIAS_PROVIDERS`` are imported on first use
-#: so that they can register their aliases (``ipcosim.harness.scenario.system.swap_aliases['hil'] = resolver``).
+#: so that they can register their aliases (``ipcosim.harness.scenario.binding.swap_aliases['hil'] = resolver``).
 swap_aliases: dict[str, Callable[[SwapRequest], SwapTarget]] = {}
 SWAP_ALIAS_PROVIDERS: tuple[str, ...] = ("ipcosim.fmus.hil.swap",)
 _providers_loaded = False
