@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import ipcosim.harness
+from ipcosim.harness.evidence.crosscheck import run_libcosim
 from ipcosim.harness.scenario.ssp import load_scenario
-from ipcosim.harness.studies.crosscheck import run_libcosim
 
 pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[1]

@@ -50,9 +50,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def thesis_claims(out: Path) -> int:
-    """``--thesis-claims``: verdict, evidence and condition per claim (``ipcosim.harness.studies.claims``)."""
-    from ipcosim.harness.studies.claims import judge, search_lqr_fall
-    from ipcosim.harness.studies.results import claims_table, fall_table
+    """``--thesis-claims``: verdict, evidence and condition per claim (``ipcosim.harness.evidence.claims``)."""
+    from ipcosim.harness.evidence.claims import judge, search_lqr_fall
+    from ipcosim.harness.evidence.results_page import claims_table, fall_table
 
     out.mkdir(parents=True, exist_ok=True)
     rows, falls = judge(), search_lqr_fall()
