@@ -400,7 +400,9 @@ def test_a_traceback_through_the_generated_loop_shows_its_source() -> None:
     import linecache
     import traceback
 
-    from ipcosim.harness.master.algorithm import GAUSS_SEIDEL, Block, TimeBase, compile_loop
+    from ipcosim.harness.master.algorithm import GAUSS_SEIDEL, TimeBase
+    from ipcosim.harness.master.plan import Block
+    from ipcosim.harness.master.pyloop import compile_loop
 
     def failing_step(*args):
         return 1 / 0

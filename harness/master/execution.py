@@ -30,20 +30,18 @@ from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import (
     ALGORITHMS,
     GAUSS_SEIDEL,
-    Block,
-    Channel,
     InitializationError,
     StepSizeError,
     TimeBase,
-    TypedRecord,
     check_last_steps,
-    compile_loop,
     gauss_seidel_order,
     step_multiples,
 )
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
 from ipcosim.harness.master.manipulators import Manipulator, Overrides
 from ipcosim.harness.master.observers import Observer
+from ipcosim.harness.master.plan import Block, Channel, TypedRecord
+from ipcosim.harness.master.pyloop import compile_loop
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError
 from ipcosim.harness.master.slave import DISCARD, TERMINATE, FMUSlave, Slave
 from ipcosim.harness.master.system import Instance, System, Variable, kind_of
