@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from ipcosim.harness.cli import main as cli_main
-from ipcosim.harness.studies.sweep import read_results
+from ipcosim.harness.studies.store import read_results
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.integration

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 from ssd_helpers import component, connection, connector, ssd, write_scenario
 
+from ipcosim.harness.studies.executors import RECYCLE_RUNS, LocalExecutor
 from ipcosim.harness.studies.runners import SyntheticSpec
-from ipcosim.harness.studies.sweep import RECYCLE_RUNS, LocalExecutor
 from ipcosim.harness.studies.vary import Case
 
 DATA = Path(__file__).resolve().parent / "data"

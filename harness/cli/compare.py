@@ -106,8 +106,9 @@ def main(args: argparse.Namespace) -> int:
     if args.thesis_claims:
         return thesis_claims(Path(args.out))
     from ipcosim.errors import IpcosimError, UsageError
+    from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.report import render
-    from ipcosim.harness.studies.sweep import open_executor, package_versions
+    from ipcosim.harness.studies.store import package_versions
 
     names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else available_scenarios()
     if not names:
@@ -158,8 +159,8 @@ def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[s
     """The run spec of each scenario, by name; a scenario that cannot be loaded gets an error row
     in ``results`` instead. Missing FMUs (a fresh checkout) are built once, as ``ipcosim build`` does."""
     from ipcosim.errors import IpcosimError
+    from ipcosim.harness.studies.executors import one_line
     from ipcosim.harness.studies.specs import study_spec
-    from ipcosim.harness.studies.sweep import one_line
 
     specs: dict[str, Any] = {}
     built = False

@@ -57,8 +57,9 @@ def default_out(scenario: str, kind: str = "sweep") -> Path:
 def main(args: argparse.Namespace) -> int:
     from ipcosim.errors import IpcosimError
     from ipcosim.harness.studies import robustness
+    from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.specs import for_executor, parse_set, study_spec
-    from ipcosim.harness.studies.sweep import open_executor, run_sweep
+    from ipcosim.harness.studies.sweep import run_sweep
     from ipcosim.harness.studies.vary import make_cases, parse_all
 
     overrides = parse_set(args.set)

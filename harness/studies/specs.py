@@ -75,7 +75,7 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
 def for_executor(spec: RunSpec, executor: object) -> RunSpec:
     """The spec to send to ``executor``: on a Dask cluster, co-simulation specs carry their
     scenario and FMUs (workers may be other machines); locally, workers read the files."""
-    from ipcosim.harness.studies.sweep import DaskExecutor
+    from ipcosim.harness.studies.executors import DaskExecutor
 
     if not isinstance(executor, DaskExecutor):
         return spec

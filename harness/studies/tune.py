@@ -215,7 +215,7 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
     progress : bool
         Print one line per generation on stderr.
     """
-    from ipcosim.harness.studies.sweep import open_executor
+    from ipcosim.harness.studies.executors import open_executor
 
     population = plan_population(budget, len(names))  # checks the budget before any run
     nominal = {n: float(spec.parameters[n]) for n in names}
