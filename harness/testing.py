@@ -244,7 +244,7 @@ def cases(plants: Sequence[str] = KINDS, vary: Mapping[str, str | Sequence[float
     """
     import itertools
 
-    from ipcosim.harness.studies.vary import parse_vary
+    from ipcosim.harness.grammar import parse_vary
 
     for p in plants:
         if p not in KINDS:

@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 
 from ipcosim.harness.cli import main as cli_main
+from ipcosim.harness.grammar import Case, VaryError, case_seed, make_cases, parse_all, parse_vary
 from ipcosim.harness.studies.executors import DaskExecutor, SchedulerError
 from ipcosim.harness.studies.robustness import summarize, wilson_interval
 from ipcosim.harness.studies.runners import PurePlantSpec, SyntheticSpec, classify_task
 from ipcosim.harness.studies.store import read_results
 from ipcosim.harness.studies.sweep import SweepMismatchError, run_sweep
-from ipcosim.harness.studies.vary import Case, VaryError, case_seed, make_cases, parse_all, parse_vary
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMS = {"plant.Mp": 0.2, "plant.K": 140.0, "controller.c1": 4.7}
@@ -182,7 +182,7 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
     script = textwrap.dedent(f"""
         import sys
         from ipcosim.harness.studies.sweep import run_sweep
-        from ipcosim.harness.studies.vary import make_cases, parse_all
+        from ipcosim.harness.grammar import make_cases, parse_all
         from ipcosim.harness.studies.runners import SyntheticSpec
         if __name__ == "__main__":
             spec = SyntheticSpec(delay_s=0.3, calls_dir={str(calls1)!r})

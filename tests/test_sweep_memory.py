@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 from ssd_helpers import component, connection, connector, ssd, write_scenario
 
+from ipcosim.harness.grammar import Case
 from ipcosim.harness.studies.executors import RECYCLE_RUNS, LocalExecutor
 from ipcosim.harness.studies.runners import SyntheticSpec
-from ipcosim.harness.studies.vary import Case
 
 DATA = Path(__file__).resolve().parent / "data"
 

@@ -192,11 +192,11 @@ def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[s
 def _run_all(specs: dict[str, Any], executor: Any, args: argparse.Namespace) -> dict[str, dict[str, Any]]:
     """One run of every scenario, as one sweep whose case parameter picks the scenario; each row
     with its ``cost`` (inf for a run that failed) and the controller's ``gains``, by scenario."""
+    from ipcosim.harness.grammar import Case, case_seed
     from ipcosim.harness.studies.cost import cost
     from ipcosim.harness.studies.runners import SCENARIO_PARAM, MultiSpec
     from ipcosim.harness.studies.specs import for_executor
     from ipcosim.harness.studies.sweep import run_sweep
-    from ipcosim.harness.studies.vary import Case, case_seed
 
     if not specs:
         return {}
@@ -219,10 +219,10 @@ def _robustness(specs: dict[str, Any], executor: Any, args: argparse.Namespace, 
                 ) -> dict[str, dict[str, Any]]:
     """A resumable robustness sweep of each scenario (masses, friction, stiffness within +-20 %) on the
     flavour its comparison run took, under ``out/robustness/<scenario>/``, summarized by scenario."""
+    from ipcosim.harness.grammar import make_cases, parse_all
     from ipcosim.harness.studies import robustness as rob
     from ipcosim.harness.studies.specs import for_executor, spec_for
     from ipcosim.harness.studies.sweep import run_sweep
-    from ipcosim.harness.studies.vary import make_cases, parse_all
 
     summaries: dict[str, dict[str, Any]] = {}
     for name, spec in specs.items():

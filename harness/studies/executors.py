@@ -25,8 +25,8 @@ from pathlib import Path
 from typing import Any, Iterator, Sequence
 
 from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.harness.grammar import Case
 from ipcosim.harness.studies.runners import Runner, RunSpec
-from ipcosim.harness.studies.vary import Case
 
 #: Thread-count variables of the BLAS/OpenMP libraries, set to 1 for local worker processes.
 SINGLE_THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")

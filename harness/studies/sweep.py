@@ -2,7 +2,7 @@
 
 A sweep is a :class:`~ipcosim.harness.studies.runners.RunSpec` (what one run is; built once per
 worker, so a co-simulation's FMUs are extracted and loaded once per worker, not once per
-run) and a list of :class:`~ipcosim.harness.studies.vary.Case` (parameter values + seed).
+run) and a list of :class:`~ipcosim.harness.grammar.Case` (parameter values + seed).
 
 Executors (:mod:`ipcosim.harness.studies.executors`)
     :class:`LocalExecutor` -- a pool of worker processes on this machine (the default, one
@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence, TextIO
 
 from ipcosim.errors import IpcosimError
+from ipcosim.harness.grammar import Case
 from ipcosim.harness.studies.executors import Executor, open_executor
 from ipcosim.harness.studies.progress import SweepProgress
 from ipcosim.harness.studies.runners import STATUSES, RunSpec, stable_hash
@@ -48,7 +49,6 @@ from ipcosim.harness.studies.store import (
     package_versions,
     read_results,
 )
-from ipcosim.harness.studies.vary import Case
 
 __all__ = ["SweepResult", "SweepMismatchError", "run_sweep", "columns_for", "plan_hash"]
 

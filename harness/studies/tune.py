@@ -22,10 +22,10 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ipcosim.errors import UsageError
+from ipcosim.harness.grammar import Case, case_seed
 from ipcosim.harness.studies import cost as costmod
 from ipcosim.harness.studies.robustness import fmt
 from ipcosim.harness.studies.runners import RunSpec
-from ipcosim.harness.studies.vary import Case, case_seed
 
 #: Default search range around a nominal value g: [g / DEFAULT_FACTOR, g * DEFAULT_FACTOR].
 DEFAULT_FACTOR = 2.0
