@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from ssd_helpers import component, connection, connector, ssd, write_scenario
 
-from ipcosim.harness.grammar import Case
+from ipcosim.harness.studies.cases import SweepCase
 from ipcosim.harness.studies.executors import RECYCLE_RUNS, LocalExecutor
 from ipcosim.harness.studies.runners import SyntheticSpec
 
@@ -23,7 +23,7 @@ def test_local_pool_is_replaced_after_its_share_of_runs(tmp_path):
     spec = SyntheticSpec(calls_dir=str(tmp_path))
     executor = LocalExecutor(1, recycle_runs=5)
     try:
-        rows = list(executor.run(spec, [Case(index=i, params={"model.x": 1.0}, seed=i) for i in range(12)]))
+        rows = list(executor.run(spec, [SweepCase(index=i, params={"model.x": 1.0}, seed=i) for i in range(12)]))
     finally:
         executor.close()
     assert sorted(r["index"] for r in rows) == list(range(12)) and all(r["status"] == "ok" for r in rows)

@@ -192,7 +192,7 @@ def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[s
 def _run_all(specs: dict[str, Any], executor: Any, args: argparse.Namespace) -> dict[str, dict[str, Any]]:
     """One run of every scenario, as one sweep whose case parameter picks the scenario; each row
     with its ``cost`` (inf for a run that failed) and the controller's ``gains``, by scenario."""
-    from ipcosim.harness.grammar import Case, case_seed
+    from ipcosim.harness.studies.cases import SweepCase, case_seed
     from ipcosim.harness.studies.cost import cost
     from ipcosim.harness.studies.runners import SCENARIO_PARAM, MultiSpec
     from ipcosim.harness.studies.specs import for_executor
@@ -202,7 +202,7 @@ def _run_all(specs: dict[str, Any], executor: Any, args: argparse.Namespace) -> 
         return {}
     names, spec_list = list(specs), list(specs.values())
     multi = for_executor(MultiSpec(specs=spec_list), executor)
-    cases = [Case(index=i, params={SCENARIO_PARAM: float(i)}, seed=case_seed(args.seed, i))
+    cases = [SweepCase(index=i, params={SCENARIO_PARAM: float(i)}, seed=case_seed(args.seed, i))
              for i in range(len(spec_list))]
     sweep = run_sweep(multi, cases, executor=executor, progress=not args.quiet)
     results: dict[str, dict[str, Any]] = {}
@@ -219,8 +219,9 @@ def _robustness(specs: dict[str, Any], executor: Any, args: argparse.Namespace, 
                 ) -> dict[str, dict[str, Any]]:
     """A resumable robustness sweep of each scenario (masses, friction, stiffness within +-20 %) on the
     flavour its comparison run took, under ``out/robustness/<scenario>/``, summarized by scenario."""
-    from ipcosim.harness.grammar import make_cases, parse_all
+    from ipcosim.harness.grammar import parse_all
     from ipcosim.harness.studies import robustness as rob
+    from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.specs import for_executor, spec_for
     from ipcosim.harness.studies.sweep import run_sweep
 

@@ -56,8 +56,9 @@ def default_out(scenario: str, kind: str = "sweep") -> Path:
 
 def main(args: argparse.Namespace) -> int:
     from ipcosim.errors import IpcosimError
-    from ipcosim.harness.grammar import make_cases, parse_all
+    from ipcosim.harness.grammar import parse_all
     from ipcosim.harness.studies import robustness
+    from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.specs import for_executor, parse_set, study_spec
     from ipcosim.harness.studies.sweep import run_sweep

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, Iterator, Sequence
 
 from ipcosim.errors import IpcosimError, UsageError
-from ipcosim.harness.grammar import Case
+from ipcosim.harness.studies.cases import SweepCase
 from ipcosim.harness.studies.runners import Runner, RunSpec
 
 #: Thread-count variables of the BLAS/OpenMP libraries, set to 1 for local worker processes.
@@ -71,14 +71,14 @@ def one_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {first}" if first else type(exc).__name__
 
 
-def execute_case(spec: RunSpec, case: Case) -> dict[str, Any]:
+def execute_case(spec: RunSpec, case: SweepCase) -> dict[str, Any]:
     """Run one case and return its row (never raises for a failure of the run itself).
 
     Parameters
     ----------
     spec : RunSpec
         What a run is; its runner is built once per worker thread and cached.
-    case : Case
+    case : SweepCase
         Parameter values and seed.
 
     Returns
@@ -102,12 +102,12 @@ def execute_case(spec: RunSpec, case: Case) -> dict[str, Any]:
             "run_time_s": time.perf_counter() - t0}
 
 
-def _error_row(case: Case, message: str) -> dict[str, Any]:
+def _error_row(case: SweepCase, message: str) -> dict[str, Any]:
     return {"index": case.index, "seed": case.seed, "status": "error", "success": False, "error": message,
             "params": dict(case.params), "metrics": {}, "run_time_s": None}
 
 
-def _tracked_execute(spec: RunSpec, case: Case, track_dir: str) -> dict[str, Any]:
+def _tracked_execute(spec: RunSpec, case: SweepCase, track_dir: str) -> dict[str, Any]:
     """``execute_case`` leaving a note of the running case in ``track_dir`` while it runs, so
     that the parent can tell which runs were in flight when a worker process died."""
     note = os.path.join(track_dir, str(os.getpid()))
@@ -195,7 +195,7 @@ class LocalExecutor:
                                                 initializer=_worker_init)
         return self._pool
 
-    def run(self, spec: RunSpec, cases: Sequence[Case]) -> Iterator[dict[str, Any]]:
+    def run(self, spec: RunSpec, cases: Sequence[SweepCase]) -> Iterator[dict[str, Any]]:
         """Yield the row of every case, in completion order.
 
         When a worker process dies (an FMU that crashes the process), the pool is replaced and
@@ -325,7 +325,7 @@ class DaskExecutor:
         n = len(self.client.scheduler_info().get("workers", {}))
         return f"dask cluster at {self.address}, {n} worker{'s' if n != 1 else ''}"
 
-    def run(self, spec: RunSpec, cases: Sequence[Case]) -> Iterator[dict[str, Any]]:
+    def run(self, spec: RunSpec, cases: Sequence[SweepCase]) -> Iterator[dict[str, Any]]:
         """Yield the row of every case, in completion order."""
         from distributed import as_completed
 

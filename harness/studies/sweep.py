@@ -2,7 +2,7 @@
 
 A sweep is a :class:`~ipcosim.harness.studies.runners.RunSpec` (what one run is; built once per
 worker, so a co-simulation's FMUs are extracted and loaded once per worker, not once per
-run) and a list of :class:`~ipcosim.harness.grammar.Case` (parameter values + seed).
+run) and a list of :class:`~ipcosim.harness.studies.cases.SweepCase` (parameter values + seed).
 
 Executors (:mod:`ipcosim.harness.studies.executors`)
     :class:`LocalExecutor` -- a pool of worker processes on this machine (the default, one
@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence, TextIO
 
 from ipcosim.errors import IpcosimError
-from ipcosim.harness.grammar import Case
+from ipcosim.harness.studies.cases import SweepCase
 from ipcosim.harness.studies.executors import Executor, open_executor
 from ipcosim.harness.studies.progress import SweepProgress
 from ipcosim.harness.studies.runners import STATUSES, RunSpec, stable_hash
@@ -101,7 +101,7 @@ class SweepResult:
         return sum(1 for r in self.rows if r["status"] == "ok") / len(self.rows) if self.rows else math.nan
 
 
-def columns_for(spec: RunSpec, cases: Sequence[Case]) -> list[str]:
+def columns_for(spec: RunSpec, cases: Sequence[SweepCase]) -> list[str]:
     """Columns of a sweep's results: base, parameters (in first-seen order), metrics, run time."""
     params: dict[str, None] = {}
     for case in cases:
@@ -110,13 +110,13 @@ def columns_for(spec: RunSpec, cases: Sequence[Case]) -> list[str]:
     return [*BASE_COLUMNS, *params, *spec.metric_names, *TAIL_COLUMNS]
 
 
-def plan_hash(spec: RunSpec, cases: Sequence[Case]) -> str:
+def plan_hash(spec: RunSpec, cases: Sequence[SweepCase]) -> str:
     """Identity of a sweep: the spec and every case's parameters and seed."""
     return stable_hash({"spec": spec.key,
                         "cases": [[c.index, c.seed, sorted(c.params.items())] for c in cases]})
 
 
-def run_sweep(spec: RunSpec, cases: Sequence[Case], *, out_dir: str | os.PathLike | None = None,
+def run_sweep(spec: RunSpec, cases: Sequence[SweepCase], *, out_dir: str | os.PathLike | None = None,
               executor: Executor | None = None, workers: int | None = None, scheduler: Any = None,
               resume: bool = True, progress: bool | TextIO = False,
               extra_metadata: Mapping[str, Any] | None = None) -> SweepResult:
@@ -126,7 +126,7 @@ def run_sweep(spec: RunSpec, cases: Sequence[Case], *, out_dir: str | os.PathLik
     ----------
     spec : RunSpec
         What one run is.
-    cases : sequence of Case
+    cases : sequence of SweepCase
         The runs (unique indices).
     out_dir : path, optional
         Folder for ``results.csv`` and ``metadata.json``; rows are appended as runs finish.
@@ -193,7 +193,7 @@ def _close_results(rows: list[dict[str, Any]], meta: dict[str, Any], elapsed: fl
     return counts
 
 
-def _start_metadata(spec: RunSpec, cases: Sequence[Case], extra: Mapping[str, Any] | None) -> dict[str, Any]:
+def _start_metadata(spec: RunSpec, cases: Sequence[SweepCase], extra: Mapping[str, Any] | None) -> dict[str, Any]:
     """What ``metadata.json`` records at the start: the scenario, the plan's identity, the seeds
     (the first 10 000), package versions, the start time and ``extra``."""
     return {"scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan_hash(spec, cases),
@@ -236,7 +236,7 @@ def _open_results(path: Path, meta: dict[str, Any], columns: list[str],
     return done, writer
 
 
-def _run_missing(spec: RunSpec, cases: Sequence[Case], done: dict[int, dict[str, Any]], columns: list[str],
+def _run_missing(spec: RunSpec, cases: Sequence[SweepCase], done: dict[int, dict[str, Any]], columns: list[str],
                  meta: dict[str, Any], writer: ResultsWriter | None, *, executor: Executor | None,
                  workers: int | None, scheduler: Any, progress: bool | TextIO) -> None:
     """Run the cases not in ``done`` on ``executor`` (or one opened from ``workers`` /

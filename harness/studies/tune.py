@@ -22,8 +22,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ipcosim.errors import UsageError
-from ipcosim.harness.grammar import Case, case_seed
 from ipcosim.harness.studies import cost as costmod
+from ipcosim.harness.studies.cases import SweepCase, case_seed
 from ipcosim.harness.studies.robustness import fmt
 from ipcosim.harness.studies.runners import RunSpec
 
@@ -142,7 +142,7 @@ class SweepMap:
         start = len(self.rows)
         if not vectors:
             return []
-        cases = [Case(index=start + i, params=dict(zip(self.names, map(float, v))),
+        cases = [SweepCase(index=start + i, params=dict(zip(self.names, map(float, v))),
                       seed=case_seed(self.seed, start + i))
                  for i, v in enumerate(vectors)]
         result = self._run_sweep(self.spec, cases, executor=self.executor)
