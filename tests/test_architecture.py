@@ -31,9 +31,6 @@ FORBIDDEN = {
     "harness.master": ("harness.scenario", "harness.studies", "harness.cli", "harness.engine",
                        "harness.plot", "harness.native", "controllers", "fmus"),
     "harness.scenario": ("harness.studies", "harness.cli", "harness.engine"),
-    # The swap alias still reaches up to the scenario's swap registry (inverted next).
-    "fmus.hil.swap": ("controllers", "harness.master", "harness.native", "harness.engine", "harness.studies",
-                      "harness.cli"),
     "harness.engine": ("harness.studies", "harness.cli"),
     "harness.export": ("harness.studies", "harness.cli"),
     "harness.studies": ("harness.evidence", "harness.cli"),
