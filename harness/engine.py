@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import UsageError
+from ipcosim.fmus.hil.observer import CardObserver
 from ipcosim.fmus.metrics import streamed_task_metrics
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
@@ -219,10 +220,9 @@ class Prepared:
         if progress:
             observers.append(Progress())
         if realtime or (realtime is None and self.system.realtime):
-            observers.append(realtime_observer())
+            observers += [realtime_observer(), CardObserver(overruns=True)]
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
-            from ipcosim.harness.master.realtime import CardFaultRecorder
-            observers.append(CardFaultRecorder())
+            observers.append(CardObserver())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
                          algorithm=algorithm or self.algorithm, overrides=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
