@@ -158,10 +158,12 @@ def test_a_log_that_does_not_move_a_parameter_is_refused(tmp_path):
     ipcosim.run("single-mass-identify", stop_time=2.0, set={"controller.amplitude": 0.05}, out=tmp_path / "still")
     with pytest.raises(IdentifyError, match="cannot identify Bp: the excitation did not move it"):
         identify(IdentifyOptions.create(tmp_path / "still", plant="single-mass"))
-    # an upright experiment is not the identify experiment
-    ipcosim.run("single-mass-lqr", stop_time=1.5, out=tmp_path / "lqr")
-    with pytest.raises(IdentifyError, match="neither hanging"):
-        identify(IdentifyOptions.create(tmp_path / "lqr", plant="single-mass", fit="Mc"))
+    # a log that does not start hanging (pi on the plant FMU, 0 on an encoder zeroed there) is not the experiment's
+    t = np.arange(2000) * 1e-3
+    csv = _log(tmp_path / "tilted.csv", {"time": t, "plant.voltage": np.sin(t), "plant.cart_position": 0 * t,
+                                         "plant.pendulum_angle": 0 * t + 1.0})
+    with pytest.raises(IdentifyError, match="tilted.csv: the pendulum angle starts at 1 rad, neither hanging"):
+        identify(IdentifyOptions.create(csv, plant="single-mass", fit="Mc"))
 
 
 # ------------------------------------------------------------------------------------ the result feeds runs
