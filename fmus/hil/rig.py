@@ -95,6 +95,17 @@ EXPERIMENTS: dict[str, dict[str, object]] = {
 }
 
 
+def experiment_config(name: str | None, given: Mapping[str, object]) -> dict[str, object]:
+    """``RigConfig`` keywords for the experiment ``name`` (``EXPERIMENTS``; None: none) under the ones
+    ``given``: a given value wins, given initial-state values join the experiment's."""
+    if name is not None and name not in EXPERIMENTS:
+        raise ValueError(f"rig experiment {name!r}: expected one of {', '.join(EXPERIMENTS)}")
+    setup = EXPERIMENTS.get(name or "", {})
+    out = {**{k: v for k, v in setup.items() if k != "initial_state"}, **given}
+    out["initial_state"] = {**setup.get("initial_state", {}), **given.get("initial_state", {})}  # type: ignore[dict-item]
+    return out
+
+
 def to_ns(seconds: float) -> int:
     """Seconds -> integer nanoseconds (rounded)."""
     return int(round(float(seconds) * NS))

@@ -23,20 +23,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ipcosim.harness.studies.identify import IdentifyOptions, identify, write_identified
+    from ipcosim.harness.studies.identify import IdentifyOptions, identify
 
-    options = IdentifyOptions.create(args.source, plant=args.plant, fit=args.fit, preset=args.preset, out=args.out)
-    result = identify(options)
-    written = write_identified(result, options.out) if options.out else []
+    result = identify(IdentifyOptions.create(args.source, plant=args.plant, fit=args.fit, preset=args.preset,
+                                             out=args.out))
     if args.json:
         print(json.dumps(result.to_json()))
         return 0
     print(f"{result.source}: {result.plant} plant, fitted to {result.held_out_from_s:g} s in {result.fit_time_s:.1f} s "
-          f"({result.iterations} iterations); others from preset {result.preset}")
+          f"({result.iterations} iterations, computation delay {result.input_delay_s * 1e3:g} ms); others from "
+          f"preset {result.preset}")
     for name, p in result.parameters.items():
         lo, hi = p["ci95"]
         print(f"  {name:4s} = {p['value']:.6g} {p['unit']}  (95 %: {lo:.6g} .. {hi:.6g})")
     print("  held-out NRMSE: " + ", ".join(f"{k} {v:.1%}" for k, v in result.nrmse.items()))
-    for path in written:
+    for path in result.written:
         print(f"wrote {path}")
     return 0

@@ -29,12 +29,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="override a physical parameter, e.g. --set Mp=0.2")
     s.add_argument("--initial", action="append", default=[], metavar="STATE=VALUE",
                    help="initial state value, e.g. --initial pendulum_angle=0.01")
-    s.add_argument("--cart-limit", default="0.30", metavar="M|off",
+    s.add_argument("--cart-limit", default=None, metavar="M|off",
                    help="software cart limit [m], in (0, 0.407] (default 0.30; 'off' disables it)")
     s.add_argument("--pendulum-limit-deg", default=None, metavar="D|off",
                    help="software pendulum limit [deg], in (0, 180] (default 20, off with --experiment identify; "
                         "'off' disables it)")
-    s.add_argument("--experiment", choices=["identify"],
+    s.add_argument("--experiment", metavar="NAME",
                    help="set the rig up for an experiment: identify = pendulum hanging, pendulum limit off, for "
                         "`ipcosim run KIND-identify --swap plant=hil` (docs/identify.md)")
     s.add_argument("--noise-counts", type=float, default=0.0, help="encoder noise std. deviation [counts]")
@@ -170,21 +170,20 @@ def _check_numbers(args: argparse.Namespace) -> None:
 
 def serve(args: argparse.Namespace) -> int:
     from ipcosim.errors import UsageError
-    from ipcosim.fmus.hil.rig import END_STOP_M, EXPERIMENTS, RigConfig, VirtualRig
+    from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig, experiment_config
     from ipcosim.fmus.hil.server import RigServer, escape
 
     _check_numbers(args)
-    experiment = EXPERIMENTS.get(args.experiment or "", {})
-    cart_limit = _limit(args.cart_limit, "--cart-limit", END_STOP_M)
-    pend_default = "off" if args.experiment and experiment["pendulum_limit"] is None else "20"
-    pend_limit = _limit(args.pendulum_limit_deg or pend_default, "--pendulum-limit-deg", 180.0)
-    initial = {**experiment.get("initial_state", {}), **_pairs(args.initial, "--initial")}  # type: ignore[dict-item]
+    given: dict = {"initial_state": _pairs(args.initial, "--initial")}
+    if args.cart_limit is not None:
+        given["cart_limit"] = _limit(args.cart_limit, "--cart-limit", END_STOP_M)
+    if args.pendulum_limit_deg is not None:
+        limit = _limit(args.pendulum_limit_deg, "--pendulum-limit-deg", 180.0)
+        given["pendulum_limit"] = None if limit is None else math.radians(limit)
     try:
         config = RigConfig(plant=args.plant, preset=args.preset, params=_pairs(args.set, "--set"),
-                           initial_state=initial, clock=args.clock, tick=args.tick,
-                           cart_limit=cart_limit,
-                           pendulum_limit=None if pend_limit is None else math.radians(pend_limit),
-                           noise_counts=args.noise_counts, latency=args.latency, seed=args.seed).checked()
+                           clock=args.clock, tick=args.tick, noise_counts=args.noise_counts, latency=args.latency,
+                           seed=args.seed, **experiment_config(args.experiment, given)).checked()
         rig = VirtualRig(config)
     except (ValueError, KeyError) as exc:
         raise UsageError(str(exc).strip("'\"")) from None

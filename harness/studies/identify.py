@@ -6,7 +6,9 @@ step, on the lab bench's input path, ``ipcosim.fmus.instruments.REALISM["lab"]``
 simulated positions with the logged encoder readings, and minimizes the sum of squared
 differences (each output scaled by its spread in the log) with scipy's trust-region least squares.
 Only the parameters named in ``fit`` move; every other constant (motor, gearbox, pendulum mass
-and length) stays at the preset's value.
+and length) stays at the preset's value. The bench's computation delay is chosen too, as the whole
+number of samples (``DELAY_SAMPLES``) whose fit leaves the smaller cost: a plant FMU on the lab bench
+delays the logged voltage by one sample, the lockstep rig behind the HIL adapter by none.
 
 Held-out check: the first ``1 - HELD_OUT`` of the log is fitted; the rest is simulated on from the
 start with the estimate and reported as NRMSE per output (``1 - ||y - y_sim|| / ||y - mean y||``).
@@ -25,14 +27,14 @@ import csv
 import difflib
 import math
 import time as _time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
 from ipcosim.errors import UsageError
-from ipcosim.fmus.instruments import realism
+from ipcosim.fmus.instruments import Instruments, realism
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, PRESETS, preset
 from ipcosim.fmus.physics import MEASURED, state_names
 from ipcosim.fmus.plant import replay
@@ -45,6 +47,9 @@ ZERO_NOMINAL = {"b": (0.1, 0.05), "b1": (0.1, 0.05), "b2": (0.1, 0.05), "Bc": (0
 #: Parameters that can only be estimated >= 0 (the rest: > 0).
 NONNEGATIVE = ("b", "b1", "b2", "Bc", "Beq", "Ba", "Bf", "Bp", "K")
 HELD_OUT = 0.25
+#: Computation delays tried, in whole samples of the log: the one with the lowest cost is kept (a plant
+#: FMU on the lab bench delays the logged voltage by one sample; the lockstep rig behind the adapter does not).
+DELAY_SAMPLES = (0, 1)
 HAC_LAG = 200
 #: Relative standard error (from the encoders' resolution alone) above which a parameter is refused.
 UNIDENTIFIABLE = 0.3
@@ -186,10 +191,13 @@ class Identification:
     time: np.ndarray | None = field(default=None, repr=False)
     measured: np.ndarray | None = field(default=None, repr=False)
     simulated: np.ndarray | None = field(default=None, repr=False)
+    input_delay_s: float = 0.0
+    written: list[Path] = field(default_factory=list)   # the files ``options.out`` received
 
     def to_json(self) -> dict[str, Any]:
         """``{"parameters": {NAME: {"value", "ci95", "unit"}}, "nrmse": {OUTPUT: fraction}, ...}``."""
         return {"parameters": self.parameters, "nrmse": self.nrmse, "plant": self.plant, "preset": self.preset,
+                "input_delay_s": self.input_delay_s,
                 "held_out_from_s": self.held_out_from_s, "fit_time_s": self.fit_time_s,
                 "iterations": self.iterations, "source": self.source}
 
@@ -197,9 +205,9 @@ class Identification:
 class _Problem:
     """The output-error problem of one log: parameters scaled to ~1, residuals scaled per output."""
 
-    def __init__(self, log: Log, kind: str, fit: Sequence[str], base: Any) -> None:
+    def __init__(self, log: Log, kind: str, fit: Sequence[str], base: Any, instruments: Instruments) -> None:
         self.log, self.kind, self.fit, self.base = log, kind, tuple(fit), base
-        self.instruments = realism("lab", kind)[0]
+        self.instruments = instruments
         self.scale = np.array([ZERO_NOMINAL.get(n, (getattr(base, n), 0))[0] or 1.0 for n in fit])
         self.start = np.array([getattr(base, n) or ZERO_NOMINAL.get(n, (0, 1.0))[1] for n in fit]) / self.scale
         x0 = [0.0] * len(state_names(kind))
@@ -211,8 +219,6 @@ class _Problem:
         self._last: tuple[np.ndarray, np.ndarray] | None = None
 
     def params(self, theta: np.ndarray) -> Any:
-        from dataclasses import replace
-
         return replace(self.base, **{n: float(t * s) for n, t, s in zip(self.fit, theta, self.scale)})
 
     def simulate(self, theta: np.ndarray, rows: int) -> np.ndarray:
@@ -291,27 +297,48 @@ def nrmse(y: np.ndarray, y_sim: np.ndarray) -> float:
 
 
 def identify(options: IdentifyOptions) -> Identification:
-    """Estimate ``options.fit`` from the log ``options.source`` (see the module docstring).
+    """Estimate ``options.fit`` from the log ``options.source`` (see the module docstring); with
+    ``options.out``, write ``identified.ssv`` and ``identified.png`` there (:func:`write_identified`).
 
     Raises
     ------
     IdentifyError
         A log without the needed columns, or one whose excitation did not move a requested parameter.
     """
-    from scipy.optimize import least_squares
-
     kind = options.plant
     name = options.preset or DEFAULT_PRESET[kind]
     log = read_log(options.source, kind)
-    problem = _Problem(log, kind, options.fit, preset(name))
+    bench = realism("lab", kind)[0]
+    problem = _Problem(log, kind, options.fit, preset(name), bench)
     t0 = _time.perf_counter()
-    r0 = problem.residuals(problem.start)
-    _check_identifiable(problem, problem.jacobian(problem.start, r0))
+    _check_identifiable(problem, problem.jacobian(problem.start))
+    sol = _fit(problem, problem.start)
+    for samples in DELAY_SAMPLES:   # the computation delay: whole samples, the one that fits best
+        delay = samples * log.step
+        if abs(delay - problem.instruments.input_delay) > 1e-12:
+            other = _Problem(log, kind, options.fit, preset(name), replace(bench, input_delay=delay))
+            refit = _fit(other, sol.x, max_nfev=12)
+            if refit.cost < sol.cost:
+                problem, sol = other, refit
+    result = _result(problem, sol, name, _time.perf_counter() - t0)
+    if options.out is not None:
+        result.written = write_identified(result, options.out)
+    return result
+
+
+def _fit(problem: _Problem, start: np.ndarray, max_nfev: int = 40) -> Any:
+    """``scipy.optimize.least_squares`` of the problem's residuals from ``start`` (bounded, trust region)."""
+    from scipy.optimize import least_squares
+
     lower = [0.0 if n in NONNEGATIVE else 1e-3 for n in problem.fit]
-    sol = least_squares(problem.residuals, problem.start, jac=lambda t: problem.jacobian(t), method="trf",
-                        bounds=(lower, np.inf), x_scale=1.0, xtol=1e-8, ftol=1e-10, max_nfev=40)
+    return least_squares(problem.residuals, start, jac=lambda t: problem.jacobian(t), method="trf",
+                         bounds=(lower, np.inf), x_scale=1.0, xtol=1e-8, ftol=1e-10, max_nfev=max_nfev)
+
+
+def _result(problem: _Problem, sol: Any, preset_name: str, fit_time: float) -> Identification:
+    """Estimates with their intervals (:func:`_covariance`) and the held-out NRMSE of a finished fit."""
+    log = problem.log
     cov = _covariance(sol.jac, sol.fun, len(log.outputs))
-    fit_time = _time.perf_counter() - t0
     sim = problem.simulate(sol.x, len(log.time))
     k = problem.n_fit
     params = problem.params(sol.x)
@@ -323,10 +350,11 @@ def identify(options: IdentifyOptions) -> Identification:
         lo = value - 1.96 * se
         out[n] = {"value": value, "ci95": [max(lo, 0.0) if n in NONNEGATIVE else lo, value + 1.96 * se],
                   "unit": units[n]}
-    return Identification(kind, name, out, {o: nrmse(log.y[k:, j], sim[k:, j]) for j, o in enumerate(log.outputs)},
+    return Identification(problem.kind, preset_name, out,
+                          {o: nrmse(log.y[k:, j], sim[k:, j]) for j, o in enumerate(log.outputs)},
                           float(log.time[k]), fit_time, int(sol.nfev), log.display,
                           {f.name: float(getattr(params, f.name)) for f in fields(params)}, log.outputs,
-                          log.time, log.y, sim)
+                          log.time, log.y, sim, problem.instruments.input_delay)
 
 
 def write_identified(result: Identification, out: Path) -> list[Path]:
