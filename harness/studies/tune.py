@@ -23,9 +23,9 @@ import numpy as np
 
 from ipcosim.errors import UsageError
 from ipcosim.harness.studies import cost as costmod
+from ipcosim.harness.studies.cases import SweepCase, case_seed
 from ipcosim.harness.studies.robustness import fmt
 from ipcosim.harness.studies.runners import RunSpec
-from ipcosim.harness.studies.vary import Case, case_seed
 
 #: Default search range around a nominal value g: [g / DEFAULT_FACTOR, g * DEFAULT_FACTOR].
 DEFAULT_FACTOR = 2.0
@@ -213,7 +213,8 @@ class SweepMap:
         cases, owner = [], {}
         for i, (values, (excess, _)) in enumerate(zip(candidates, checks)):
             for plant in (plants if excess == 0.0 else ()):
-                cases.append(Case(index=self._runs, params={**values, **plant}, seed=case_seed(self.seed, self._runs)))
+                cases.append(SweepCase(index=self._runs, params={**values, **plant},
+                                       seed=case_seed(self.seed, self._runs)))
                 owner[self._runs] = i
                 self._runs += 1
         runs: dict[int, list[dict[str, Any]]] = {}
@@ -310,7 +311,7 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
     robust : Robustness, optional
         Loop limits and a plant spread (the robust objective); ``budget`` then counts candidates.
     """
-    from ipcosim.harness.studies.sweep import open_executor
+    from ipcosim.harness.studies.executors import open_executor
 
     population = plan_population(budget, len(names))  # checks the budget before any run
     nominal = {n: float(spec.parameters[n]) for n in names}
