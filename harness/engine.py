@@ -32,7 +32,8 @@ from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
 from ipcosim.harness.master.manipulators import Manipulator
-from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
+from ipcosim.harness.master.observers import Observer, Progress
+from ipcosim.harness.master.realtime import RealtimePacer
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
 from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.master.system import System
@@ -220,7 +221,7 @@ class Prepared:
         if progress:
             observers.append(Progress())
         if realtime or (realtime is None and self.system.realtime):
-            observers += [realtime_observer(), CardObserver(overruns=True)]
+            observers += [RealtimePacer(), CardObserver(overruns=True)]
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
             observers.append(CardObserver())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
