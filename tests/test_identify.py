@@ -25,7 +25,7 @@ DOUBLE_TRUTH = {"Ma": 1.04, "Mc": 0.86, "K": 155.0, "Ba": 7.6, "Bf": 2.6, "b1": 
 STOP_TIME = 12.0
 
 
-def ipcosim(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+def cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", *args], capture_output=True, text=True,
                           timeout=timeout, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)))
 
@@ -154,9 +154,9 @@ def test_missing_columns_and_unknown_names_are_one_line_refusals(tmp_path):
 def test_a_log_that_does_not_move_a_parameter_is_refused(tmp_path):
     import ipcosim
 
-    # the pendulum hangs still and the cart barely creeps: nothing about the pivot damping is in the log
+    # 0.05 V does not break the cart loose (stick-slip friction): nothing about its mass is in the log
     ipcosim.run("single-mass-identify", stop_time=2.0, set={"controller.amplitude": 0.05}, out=tmp_path / "still")
-    with pytest.raises(IdentifyError, match="cannot identify Bp: the excitation did not move it"):
+    with pytest.raises(IdentifyError, match="cannot identify Mc: the excitation did not move it"):
         identify(IdentifyOptions.create(tmp_path / "still", plant="single-mass"))
     # a log that does not start hanging (pi on the plant FMU, 0 on an encoder zeroed there) is not the experiment's
     t = np.arange(2000) * 1e-3
@@ -175,7 +175,7 @@ def test_command_line_json_ssv_and_parameter_file(tmp_path):
     run = tmp_path / "run"
     ipcosim.run("single-mass-identify", stop_time=STOP_TIME, set={f"plant.{k}": v for k, v in SINGLE_TRUTH.items()},
                 out=run)
-    p = ipcosim("identify", str(run), "--plant", "single-mass", "--fit", "Mc,Beq", "--json", "--out",
+    p = cli("identify", str(run), "--plant", "single-mass", "--fit", "Mc,Beq", "--json", "--out",
                 str(tmp_path / "id"))
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
@@ -191,5 +191,5 @@ def test_command_line_json_ssv_and_parameter_file(tmp_path):
     col = "plant.cart_position"
     assert np.array_equal(via_file.data[col], by_hand.data[col])
     assert not np.array_equal(via_file.data[col], plain.data[col])
-    bad = ipcosim("run", "single-mass-lqr", "--parameter-file", str(tmp_path / "missing.ssv"))
+    bad = cli("run", "single-mass-lqr", "--parameter-file", str(tmp_path / "missing.ssv"))
     assert bad.returncode != 0 and "missing.ssv: no such file" in bad.stderr and len(bad.stderr.splitlines()) == 1
