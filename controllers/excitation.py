@@ -37,7 +37,7 @@ from ipcosim.controllers.laws import DiscreteLaw, LawParameterError
 class ExcitationGains:
     """Parameters of the excitation (see the module docstring)."""
 
-    amplitude: float = 2.5      # V
+    amplitude: float = 3.0      # V
     seed: float = 1.0
     band_low: float = 0.2       # Hz
     band_high: float = 10.0     # Hz
