@@ -33,13 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(f"ipcosim.harness.cli.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"ipcosim.harness.cli.{name}":
-                continue  # command not part of this installation
-            raise
-        module.register(sub)
+        importlib.import_module(f"ipcosim.harness.cli.{name}").register(sub)
     return parser
 
 

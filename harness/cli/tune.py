@@ -60,10 +60,8 @@ def _scenario_dir(scenario: str) -> Path | None:
         return path
     if path.suffix == ".ssp" and path.exists():
         return path.parent
-    try:
-        from ipcosim.harness.paths import SCENARIO_DIR
-    except ImportError:
-        return None
+    from ipcosim.harness.paths import SCENARIO_DIR
+
     candidate = SCENARIO_DIR / scenario
     return candidate if candidate.is_dir() else None
 
