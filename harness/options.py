@@ -16,9 +16,9 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import UsageError
-
-ALGORITHM_CHOICES = ("gauss-seidel", "jacobi")
-LOOP_CHOICES = ("auto", "c", "python")
+from ipcosim.harness.master.algorithm import ALGORITHMS
+from ipcosim.harness.master.cloop import LOOPS
+from ipcosim.harness.scenario.flavour import FLAVOURS
 
 
 def seconds_option(option: str, value: Any) -> float | None:
@@ -121,12 +121,12 @@ class RunOptions:
     loop: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.loop not in LOOP_CHOICES:
-            raise UsageError(f"--loop {self.loop}: expected one of {', '.join(LOOP_CHOICES)}")
-        if self.fmus not in ("python", "native"):
-            raise UsageError(f"--fmus {self.fmus}: expected python or native")
-        if self.algorithm not in ALGORITHM_CHOICES:
-            raise UsageError(f"--algorithm {self.algorithm}: expected one of {', '.join(ALGORITHM_CHOICES)}")
+        if self.loop not in LOOPS:
+            raise UsageError(f"--loop {self.loop}: expected one of {', '.join(LOOPS)}")
+        if self.fmus not in FLAVOURS:
+            raise UsageError(f"--fmus {self.fmus}: expected {' or '.join(FLAVOURS)}")
+        if self.algorithm not in ALGORITHMS:
+            raise UsageError(f"--algorithm {self.algorithm}: expected one of {', '.join(ALGORITHMS)}")
         if not os.fspath(self.scenario):
             raise UsageError("scenario: empty name")
 

@@ -17,7 +17,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s = rs.add_parser("serve", help="serve a virtual rig (Ctrl-C to stop)",
                       description="Serve a virtual rig on HOST:PORT (card id N@tcpip://HOST:PORT). Binds 127.0.0.1 "
                                   "unless told otherwise; one controlling client at a time.")
-    s.add_argument("--plant", choices=["single-mass", "double-mass"], default="single-mass")
+    from ipcosim.fmus.params import KINDS
+
+    s.add_argument("--plant", choices=KINDS, default=KINDS[0])
     s.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     s.add_argument("--port", type=int, default=18920, help="TCP port (default 18920; 0 = any free port)")
     s.add_argument("--clock", choices=["lockstep", "wallclock"], default="wallclock",

@@ -4,6 +4,7 @@ from __future__ import annotations
 from typing import Any, Callable, Iterable, Mapping
 
 from ipcosim.errors import UsageError
+from ipcosim.harness.scenario.flavour import FLAVOURS
 from ipcosim.harness.studies.runners import PurePlantSpec, RunSpec
 
 #: Scenario names served without FMUs (pure-Python stand-ins, see ``ipcosim.harness.studies.runners``).
@@ -89,7 +90,7 @@ def for_executor(spec: RunSpec, executor: object) -> RunSpec:
 
 #: ``--fmus`` of the studies: ``auto`` (the default) takes the native FMUs when they are built and
 #: can run the study, else the Python ones.
-STUDY_FLAVOURS = ("auto", "python", "native")
+STUDY_FLAVOURS = ("auto", *FLAVOURS)
 
 
 def study_spec(scenario: str, fmus: str = "auto", names: Iterable[str] = (),
