@@ -90,21 +90,6 @@ def _token(args: argparse.Namespace) -> str | None:
     return token or None
 
 
-def _pairs(items: list[str], what: str) -> dict[str, float]:
-    from ipcosim.errors import UsageError
-
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        try:
-            if not sep:
-                raise ValueError
-            out[key.strip()] = float(value)
-        except ValueError:
-            raise UsageError(f"{what} {item!r}: expected NAME=NUMBER") from None
-    return out
-
-
 def main(args: argparse.Namespace) -> int:
     if args.rig_command == "serve":
         return serve(args)
@@ -170,13 +155,16 @@ def serve(args: argparse.Namespace) -> int:
     from ipcosim.errors import UsageError
     from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig
     from ipcosim.fmus.hil.server import RigServer, escape
+    from ipcosim.harness.grammar import parse_numbers
 
     _check_numbers(args)
+    params = parse_numbers("--set", args.set, "NAME=NUMBER")
+    initial = parse_numbers("--initial", args.initial, "NAME=NUMBER")
     cart_limit = _limit(args.cart_limit, "--cart-limit", END_STOP_M)
     pend_limit = _limit(args.pendulum_limit_deg, "--pendulum-limit-deg", 180.0)
     try:
-        config = RigConfig(plant=args.plant, preset=args.preset, params=_pairs(args.set, "--set"),
-                           initial_state=_pairs(args.initial, "--initial"), clock=args.clock, tick=args.tick,
+        config = RigConfig(plant=args.plant, preset=args.preset, params=params,
+                           initial_state=initial, clock=args.clock, tick=args.tick,
                            cart_limit=cart_limit,
                            pendulum_limit=None if pend_limit is None else math.radians(pend_limit),
                            noise_counts=args.noise_counts, latency=args.latency, seed=args.seed).checked()

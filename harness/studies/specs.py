@@ -11,21 +11,6 @@ from ipcosim.harness.studies.runners import PurePlantSpec, RunSpec
 PURE_SCENARIOS = {"pure:single-mass-lqr": PurePlantSpec}
 
 
-def parse_set(items: list[str] | None) -> dict[str, float]:
-    """``--set comp.var=value`` options as a dict (values must be numbers)."""
-    out: dict[str, float] = {}
-    for item in items or []:
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or "." not in key:
-            raise UsageError(f"--set {item!r}: expected COMPONENT.VARIABLE=VALUE")
-        try:
-            out[key] = float(value)
-        except ValueError:
-            raise UsageError(f"--set {item!r}: {value.strip()!r} is not a number") from None
-    return out
-
-
 def spec_for(scenario: str, stop_time: float | None = None, step: float | None = None,
              overrides: Mapping[str, float] | None = None, series: bool = False,
              parameter_set: str | None = None, fmus: str = "python") -> RunSpec:
