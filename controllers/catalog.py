@@ -748,8 +748,8 @@ def make_law(kind: str, law: str, parameter_set: str | None = None, design_param
 
     Parameters
     ----------
-    law, kind : str
-        Law and plant kind.
+    kind, law : str
+        Plant kind and law.
     parameter_set : str, optional
         ``thesis`` or ``tuned``.
     design_params : PlantParams, optional
