@@ -62,12 +62,12 @@ def test_multisine_has_its_peak_and_band():
                                           ({"seed": 1.5}, "seed")])
 def test_excitation_refuses_bad_parameters(values, name):
     with pytest.raises(LawParameterError) as info:
-        make_law("Excitation", "single-mass", **values)
+        make_law("single-mass", "Excitation", **values)
     assert name in str(info.value)
 
 
 def test_weak_hold_pulls_the_cart_back():
-    law = make_law("Excitation", "double-mass", amplitude=0.0)
+    law = make_law("double-mass", "Excitation", amplitude=0.0)
     assert law.step([0.1, 0.0, math.pi], 0.0) == pytest.approx(-2.0)      # 20 V/m on the active cart
 
 

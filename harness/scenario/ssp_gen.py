@@ -82,13 +82,10 @@ def plant_signals(plant: str) -> tuple[list[str], list[str]]:
 def parameter_sets(plant: str, controller: str) -> dict[str, dict[str, Any]]:
     """The controller's named parameter sets (``thesis``, ``tuned``): variable -> value.
 
-    Taken from ``ipcosim.controllers.catalog.parameter_sets(plant, law)`` when the controller design
-    provides it; empty otherwise.
+    Taken from ``ipcosim.controllers.catalog.parameter_sets(kind, law)``.
     """
-    try:
-        from ipcosim.controllers.catalog import parameter_sets as catalog_sets  # type: ignore[import-not-found]
-    except ImportError:
-        return {}
+    from ipcosim.controllers.catalog import parameter_sets as catalog_sets
+
     return {k: dict(v) for k, v in catalog_sets(plant, CONTROLLERS[controller][0]).items() if v}
 
 
@@ -281,7 +278,7 @@ def variant_files(name: str) -> dict[str, str]:
 
     plant, law = VARIANTS[name][:2]
     sets = {k: dict(v) for k, v in catalog_sets(plant, law).items() if v}
-    default = default_set(law, plant)
+    default = default_set(plant, law)
     files = {f"{s}.ssv": _ssv(s, v, f"{name}: {s} controller parameters") for s, v in sets.items()}
     files["SystemStructure.ssd"] = ssd_text(plant, "", default, float(sets[default].get("sample_period", STEP)),
                                             variant=name)
