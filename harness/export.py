@@ -72,11 +72,23 @@ def export(options: ExportOptions) -> Path:
         An unknown scenario, a scenario the native flavour cannot run (it names the component
         and parameter), no C compiler, an unwritable ``out`` (one line each).
     """
+    out = Path(options.out)
+    _check_out(out)
+    return build_container(loop_spec(options), out, fmi=options.fmi)
+
+
+def loop_spec(options: ExportOptions) -> ContainerSpec:
+    """The :class:`ContainerSpec` of the scenario's loop, bound and ordered as ``ipcosim run
+    SCENARIO --fmus native`` runs it (``options.out`` and ``options.fmi`` are not used).
+
+    Raises
+    ------
+    IpcosimError
+        An unknown scenario, or one the native flavour cannot run (one line).
+    """
     from ipcosim.harness.api import Prepared, resolve_relative
     from ipcosim.harness.scenario.flavour import FlavourError
 
-    out = Path(options.out)
-    _check_out(out)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -89,8 +101,7 @@ def export(options: ExportOptions) -> Path:
         spec = container_spec(prepared.system, [execution.instances[i].name for i in execution.order],
                               execution.multiples, execution.step_size,
                               options.model_identifier or identifier(prepared.scenario.name), execution.overrides)
-        spec = dataclasses.replace(spec, start_time=execution.start_time, stop_time=execution.stop_time)
-    return build_container(spec, out, fmi=options.fmi)
+        return dataclasses.replace(spec, start_time=execution.start_time, stop_time=execution.stop_time)
 
 
 def _check_out(out: Path) -> None:

@@ -1,0 +1,276 @@
+/* A small FMI 2.0 co-simulation host for the platform tests: runs a closed loop of FMUs' shared
+ * libraries (or one FMU) from a plan file and prints every output after every tick, bit for bit.
+ * The same source compiles for Linux (dlopen) and, with mingw-w64, for Windows (LoadLibrary;
+ * run under wine), so the linux64 and win64 binaries of an FMU run in the same loop.
+ *
+ * usage: loop_host PLAN
+ * PLAN, one command a line (integers in decimal; every Real X as the 16 hex digits of its IEEE bits,
+ * so that no strtod of either C library rounds it; paths without spaces):
+ *   fmu LIBRARY GUID MULTIPLE     an FMU (index 0, 1, ... in order); steps every MULTIPLE ticks
+ *   set I VR TYPE VALUE           before initialization: parameter VR of FMU I (TYPE r, i or b)
+ *   link I VR J VR2 FACTOR OFFSET before each step of FMU I: its Real input VR = FACTOR * out + OFFSET,
+ *                                 out the Real output VR2 of FMU J (as read after J's last step)
+ *   out I VR                      a Real output printed after each tick (also read after each step)
+ *   order I ...                   the Gauss-Seidel step order
+ *   run H TICKS                   the base step [s] and the number of ticks
+ * Output: one line per tick (and one after initialization), each printed value as 16 hex digits
+ * (the IEEE bits, so no printf rounding differs between the C libraries). Exit status non-zero on
+ * any FMI error, naming the call.
+ */
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+
+#ifdef _WIN32
+#include <windows.h>
+typedef HMODULE Library;
+static Library open_library(const char *path) { return LoadLibraryA(path); }
+static void *symbol(Library lib, const char *name) { return (void *)(size_t)GetProcAddress(lib, name); }
+#else
+#include <dlfcn.h>
+typedef void *Library;
+static Library open_library(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
+static void *symbol(Library lib, const char *name) { return dlsym(lib, name); }
+#endif
+
+#define MAX_FMUS 8
+#define MAX_ITEMS 256
+
+typedef struct {
+    fmi2InstantiateTYPE *instantiate;
+    fmi2SetupExperimentTYPE *setup;
+    fmi2EnterInitializationModeTYPE *enter_init;
+    fmi2ExitInitializationModeTYPE *exit_init;
+    fmi2SetRealTYPE *set_real;
+    fmi2SetIntegerTYPE *set_integer;
+    fmi2SetBooleanTYPE *set_boolean;
+    fmi2GetRealTYPE *get_real;
+    fmi2DoStepTYPE *do_step;
+    fmi2TerminateTYPE *terminate;
+    fmi2FreeInstanceTYPE *free_instance;
+    fmi2Component c;
+    int multiple;
+} Fmu;
+
+typedef struct { int fmu; unsigned vr; char type; double value; } Set;
+typedef struct { int fmu; unsigned vr; int src; unsigned src_vr; double factor, offset; } Link;
+typedef struct { int fmu; unsigned vr; double value; } Out;
+
+static Fmu fmus[MAX_FMUS];
+static Set sets[MAX_ITEMS];
+static Link links[MAX_ITEMS];
+static Out outs[MAX_ITEMS];
+static int order[MAX_FMUS];
+static int nfmus, nsets, nlinks, nouts, norder;
+
+static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
+                   fmi2String message, ...) {
+    va_list ap;
+    (void)env;
+    fprintf(stderr, "[%s %d %s] ", name, (int)status, category);
+    va_start(ap, message);
+    vfprintf(stderr, message, ap);
+    va_end(ap);
+    fputc('\n', stderr);
+}
+
+static int fail(const char *what, int i) {
+    fprintf(stderr, "loop_host: %s failed (FMU %d)\n", what, i);
+    return 1;
+}
+
+/* memcpy: ISO C has no cast from the object pointer the loaders return to a function pointer. */
+#define LOAD(field, name)                                                               \
+    p = symbol(lib, #name);                                                              \
+    memcpy(&f->field, &p, sizeof p);                                                     \
+    if (p == NULL) {                                                                     \
+        fprintf(stderr, "loop_host: %s has no %s\n", path, #name);                     \
+        return 1;                                                                        \
+    }
+
+static fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
+
+static int load(const char *path, const char *guid, int multiple) {
+    Fmu *f = &fmus[nfmus];
+    Library lib = open_library(path);
+    void *p;
+    if (lib == NULL) {
+        fprintf(stderr, "loop_host: cannot load %s\n", path);
+        return 1;
+    }
+    LOAD(instantiate, fmi2Instantiate)
+    LOAD(setup, fmi2SetupExperiment)
+    LOAD(enter_init, fmi2EnterInitializationMode)
+    LOAD(exit_init, fmi2ExitInitializationMode)
+    LOAD(set_real, fmi2SetReal)
+    LOAD(set_integer, fmi2SetInteger)
+    LOAD(set_boolean, fmi2SetBoolean)
+    LOAD(get_real, fmi2GetReal)
+    LOAD(do_step, fmi2DoStep)
+    LOAD(terminate, fmi2Terminate)
+    LOAD(free_instance, fmi2FreeInstance)
+    f->c = f->instantiate("host", fmi2CoSimulation, guid, "", &callbacks, fmi2False, fmi2False);
+    if (f->c == NULL) return fail("fmi2Instantiate", nfmus);
+    f->multiple = multiple;
+    nfmus++;
+    return 0;
+}
+
+static int set_parameter(const Set *s) {
+    Fmu *f = &fmus[s->fmu];
+    fmi2Integer i = (fmi2Integer)s->value;
+    fmi2Boolean b = s->value != 0.0 ? fmi2True : fmi2False;
+    if (s->type == 'i') return f->set_integer(f->c, &s->vr, 1, &i) != fmi2OK;
+    if (s->type == 'b') return f->set_boolean(f->c, &s->vr, 1, &b) != fmi2OK;
+    return f->set_real(f->c, &s->vr, 1, &s->value) != fmi2OK;
+}
+
+/* Read FMU k's outputs of the plan (those of `out` lines, and those links read). */
+static int read_outputs(int k) {
+    int i;
+    for (i = 0; i < nouts; i++)
+        if (outs[i].fmu == k && fmus[k].get_real(fmus[k].c, &outs[i].vr, 1, &outs[i].value) != fmi2OK)
+            return fail("fmi2GetReal", k);
+    return 0;
+}
+
+static double output_value(int k, unsigned vr) {
+    int i;
+    for (i = 0; i < nouts; i++)
+        if (outs[i].fmu == k && outs[i].vr == vr) return outs[i].value;
+    fprintf(stderr, "loop_host: output %u of FMU %d is linked but not an `out` of the plan\n", vr, k);
+    exit(2);
+}
+
+static int write_inputs(int k) {
+    int i;
+    for (i = 0; i < nlinks; i++) {
+        if (links[i].fmu == k) {
+            double x = links[i].factor * output_value(links[i].src, links[i].src_vr) + links[i].offset;
+            if (fmus[k].set_real(fmus[k].c, &links[i].vr, 1, &x) != fmi2OK) return fail("fmi2SetReal", k);
+        }
+    }
+    return 0;
+}
+
+static void print_row(void) {
+    int i;
+    for (i = 0; i < nouts; i++) {
+        unsigned char b[8];
+        int j;
+        memcpy(b, &outs[i].value, 8);
+        for (j = 7; j >= 0; j--) printf("%02x", b[j]);
+        putchar(i + 1 < nouts ? ' ' : '\n');
+    }
+}
+
+static int initialize(void) {
+    int i, j;
+    for (i = 0; i < nfmus; i++)
+        if (fmus[i].setup(fmus[i].c, fmi2False, 0.0, 0.0, fmi2False, 0.0) != fmi2OK) return fail("fmi2SetupExperiment", i);
+    for (i = 0; i < nsets; i++)
+        if (set_parameter(&sets[i])) return fail("fmi2Set (parameter)", sets[i].fmu);
+    for (i = 0; i < nfmus; i++) {
+        if (fmus[i].enter_init(fmus[i].c) != fmi2OK) return fail("fmi2EnterInitializationMode", i);
+        if (read_outputs(i)) return 1;
+    }
+    for (j = 0; j < norder; j++) {
+        int k = order[j];
+        if (write_inputs(k)) return 1;
+        if (fmus[k].exit_init(fmus[k].c) != fmi2OK) return fail("fmi2ExitInitializationMode", k);
+        if (read_outputs(k)) return 1;
+    }
+    return 0;
+}
+
+static int run(double h, long ticks) {
+    long n;
+    int j;
+    if (initialize()) return 1;
+    print_row();
+    for (n = 0; n < ticks; n++) {
+        for (j = 0; j < norder; j++) {
+            int k = order[j], m = fmus[k].multiple;
+            if ((n + 1) % m != 0) continue;
+            if (write_inputs(k)) return 1;
+            if (fmus[k].do_step(fmus[k].c, (double)((n / m) * m) * h, (double)m * h, fmi2True) != fmi2OK)
+                return fail("fmi2DoStep", k);
+            if (read_outputs(k)) return 1;
+        }
+        print_row();
+    }
+    for (j = 0; j < nfmus; j++) {
+        fmus[j].terminate(fmus[j].c);
+        fmus[j].free_instance(fmus[j].c);
+    }
+    return 0;
+}
+
+/* A Real of the plan: 16 hex digits, the IEEE bits, most significant first. */
+static int read_real(FILE *plan, double *x) {
+    char hex[17];
+    unsigned char b[8];
+    int i;
+    if (fscanf(plan, "%16s", hex) != 1 || strlen(hex) != 16) return 0;
+    for (i = 0; i < 8; i++) {
+        unsigned v;
+        if (sscanf(hex + 2 * i, "%2x", &v) != 1) return 0;
+        b[7 - i] = (unsigned char)v;
+    }
+    memcpy(x, b, 8);
+    return 1;
+}
+
+static int parse(FILE *plan) {
+    char cmd[32], a[4096], b[512];
+    double h = 0.0;
+    long ticks = 0;
+    while (fscanf(plan, "%31s", cmd) == 1) {
+        if (strcmp(cmd, "fmu") == 0) {
+            int m;
+            if (nfmus >= MAX_FMUS || fscanf(plan, "%4095s %511s %d", a, b, &m) != 3 || load(a, b, m)) return 1;
+        } else if (strcmp(cmd, "set") == 0 && nsets < MAX_ITEMS) {
+            Set *s = &sets[nsets++];
+            if (fscanf(plan, "%d %u %c", &s->fmu, &s->vr, &s->type) != 3 || !read_real(plan, &s->value)) return 1;
+        } else if (strcmp(cmd, "link") == 0 && nlinks < MAX_ITEMS) {
+            Link *l = &links[nlinks++];
+            if (fscanf(plan, "%d %u %d %u", &l->fmu, &l->vr, &l->src, &l->src_vr) != 4 ||
+                !read_real(plan, &l->factor) || !read_real(plan, &l->offset))
+                return 1;
+        } else if (strcmp(cmd, "out") == 0 && nouts < MAX_ITEMS) {
+            Out *o = &outs[nouts++];
+            if (fscanf(plan, "%d %u", &o->fmu, &o->vr) != 2) return 1;
+        } else if (strcmp(cmd, "order") == 0) {
+            for (norder = 0; norder < nfmus; norder++)
+                if (fscanf(plan, "%d", &order[norder]) != 1) return 1;
+        } else if (strcmp(cmd, "run") == 0) {
+            if (!read_real(plan, &h) || fscanf(plan, "%ld", &ticks) != 1) return 1;
+            return run(h, ticks);
+        } else {
+            fprintf(stderr, "loop_host: unknown or excess plan command %s\n", cmd);
+            return 2;
+        }
+    }
+    fprintf(stderr, "loop_host: the plan has no `run` line\n");
+    return 2;
+}
+
+int main(int argc, char **argv) {
+    FILE *plan;
+    int status;
+    if (argc != 2) {
+        fprintf(stderr, "usage: loop_host PLAN\n");
+        return 2;
+    }
+    plan = fopen(argv[1], "r");
+    if (plan == NULL) {
+        fprintf(stderr, "loop_host: cannot open %s\n", argv[1]);
+        return 2;
+    }
+    status = parse(plan);
+    fclose(plan);
+    return status;
+}
