@@ -1,8 +1,8 @@
 """The native FMUs' Windows DLLs, run under wine, against their Linux libraries.
 
-One small FMI 2.0 host (``tests/c/loop_host.c``) is compiled twice, with the system C compiler and
+One small FMI 2.0 / 3.0 host (``tests/c/loop_host.c``) is compiled twice, with the system C compiler and
 with mingw-w64; it runs a scenario's closed loop (setpoint, law, plant) from the FMUs' binaries,
-or an exported loop, and prints every output after every tick as its IEEE bits. The Windows host
+or an exported loop, of either FMI version, and prints every output after every tick as its IEEE bits. The Windows host
 runs the ``win64`` DLLs under wine, the Linux host the ``linux64`` libraries, from the same plan;
 the outputs must agree to 1e-12 (the differences seen are printed). Skipped, with the reason,
 where the cross compiler or wine is missing.
@@ -34,7 +34,9 @@ pytestmark = [
 SCENARIOS = ("single-mass-lqr", "double-mass-lqr")
 TICKS = 3000  # 3 s at the scenarios' 1 ms step
 TOLERANCE = 1e-12
-BINARY = {"linux64": ("linux64", ".so"), "win64": ("win64", ".dll")}
+#: Binary folder and suffix per (FMI version, platform).
+BINARY = {("2.0", "linux64"): ("linux64", ".so"), ("2.0", "win64"): ("win64", ".dll"),
+          ("3.0", "linux64"): ("x86_64-linux", ".so"), ("3.0", "win64"): ("x86_64-windows", ".dll")}
 
 
 def _hex(x: float) -> str:
@@ -46,7 +48,7 @@ def _binary(fmu: Path, dest: Path, platform: str) -> tuple[Path, str, object]:
     from fmpy import read_model_description
 
     md = read_model_description(str(fmu))
-    folder, suffix = BINARY[platform]
+    folder, suffix = BINARY[(md.fmiVersion, platform)]
     name = f"binaries/{folder}/{md.coSimulation.modelIdentifier}{suffix}"
     dest.mkdir(parents=True, exist_ok=True)
     with zipfile.ZipFile(fmu) as z:
@@ -59,15 +61,19 @@ def _path(p: Path, platform: str) -> str:
     return f"Z:{p}" if platform == "win64" else str(p)
 
 
-def write_plan(spec, dest: Path, platform: str) -> tuple[Path, list[str]]:
-    """A loop_host plan running the loop of ``spec`` (a ContainerSpec) on ``platform``'s binaries;
-    returns (plan, column names)."""
+def _fmu_line(lib: Path, guid: str, multiple: int, md, platform: str) -> str:
+    return f"{'fmu3' if md.fmiVersion == '3.0' else 'fmu'} {_path(lib, platform)} {guid} {multiple}"
+
+
+def write_plan(spec, dest: Path, platform: str, folder: Path | None = None) -> tuple[Path, list[str]]:
+    """A loop_host plan running the loop of ``spec`` (a ContainerSpec) on ``platform``'s binaries
+    (of the FMUs of the same names in ``folder``, if given); returns (plan, column names)."""
     pos = {c.name: k for k, c in enumerate(spec.components)}
     lines, outs, columns, vrs = [], [], [], {}
     for k, c in enumerate(spec.components):
-        lib, guid, md = _binary(c.fmu, dest / platform / c.name, platform)
+        lib, guid, md = _binary(folder / c.fmu.name if folder else c.fmu, dest / platform / c.name, platform)
         vrs[c.name] = {v.name: v for v in md.modelVariables}
-        lines.append(f"fmu {_path(lib, platform)} {guid} {c.multiple}")
+        lines.append(_fmu_line(lib, guid, c.multiple, md, platform))
         for name, value in c.parameters.items():
             v = vrs[c.name][name]
             lines.append(f"set {k} {v.valueReference} {dict(Integer='i', Boolean='b').get(v.type, 'r')} "
@@ -91,7 +97,7 @@ def write_single_plan(fmu: Path, dest: Path, platform: str, step: float, ticks: 
     """A loop_host plan stepping one FMU (an exported loop) alone; returns (plan, output names)."""
     lib, guid, md = _binary(fmu, dest / platform, platform)
     outputs = [v for v in md.modelVariables if v.causality == "output"]
-    lines = [f"fmu {_path(lib, platform)} {guid} 1", *(f"out 0 {v.valueReference}" for v in outputs),
+    lines = [_fmu_line(lib, guid, 1, md, platform), *(f"out 0 {v.valueReference}" for v in outputs),
              "order 0", f"run {_hex(step)} {ticks}"]
     plan = dest / f"{platform}.plan"
     plan.write_text("\n".join(lines) + "\n")
@@ -137,17 +143,19 @@ def compare(name: str, linux: np.ndarray, win: np.ndarray, columns: list[str]) -
     return float(diff.max())
 
 
+@pytest.mark.parametrize("fmi", ("2", "3"))
 @pytest.mark.parametrize("scenario", SCENARIOS)
-def test_closed_loop_win64_dlls_equal_linux64(scenario: str, hosts, native_fmus, tmp_path: Path) -> None:
+def test_closed_loop_win64_dlls_equal_linux64(scenario: str, fmi: str, hosts, native_fmus, native_fmus3,
+                                              tmp_path: Path) -> None:
     from ipcosim.harness.export import ExportOptions, loop_spec
 
     spec = loop_spec(ExportOptions(scenario, tmp_path / "unused.fmu", fmu_dirs=(native_fmus[1],)))
     assert [c.fmu.stem for c in spec.components][0] == "Setpoint" and len(spec.components) == 3
     results = {}
     for platform in ("linux64", "win64"):
-        plan, columns = write_plan(spec, tmp_path, platform)
+        plan, columns = write_plan(spec, tmp_path, platform, native_fmus3 if fmi == "3" else None)
         results[platform] = run_host(hosts, platform, plan)
-    compare(scenario, results["linux64"], results["win64"], columns)
+    compare(f"{scenario} FMI {fmi}.0", results["linux64"], results["win64"], columns)
     # the host runs the scenario's loop: its Linux rows are the master's (same FMUs, same order)
     import ipcosim
 
@@ -163,13 +171,14 @@ def _cart(columns: list[str]) -> str:
     return next(c.split(".", 1)[1] for c in columns if c.startswith("plant.") and c.endswith("cart_position"))
 
 
-def test_exported_loop_win64_dll_equals_linux64(hosts, native_fmus, tmp_path: Path) -> None:
+@pytest.mark.parametrize("fmi", ("2", "3"))
+def test_exported_loop_win64_dll_equals_linux64(fmi: str, hosts, native_fmus, tmp_path: Path) -> None:
     from ipcosim.harness.export import ExportOptions, export
 
-    fmu = export(ExportOptions("double-mass-lqr", tmp_path / "loop.fmu", fmu_dirs=(native_fmus[1],)))
+    fmu = export(ExportOptions("double-mass-lqr", tmp_path / "loop.fmu", fmu_dirs=(native_fmus[1],), fmi=fmi))
     results = {}
     for platform in ("linux64", "win64"):
         plan, names = write_single_plan(fmu, tmp_path, platform, 0.01, 300)
         results[platform] = run_host(hosts, platform, plan)
-    compare("double-mass-lqr exported", results["linux64"], results["win64"], names)
+    compare(f"double-mass-lqr exported, FMI {fmi}.0", results["linux64"], results["win64"], names)
     assert np.abs(results["win64"][:, names.index("plant.passive_cart_position")]).max() > 1e-3
