@@ -32,7 +32,7 @@ def test_fmi3_fmus_validate_and_describe_their_sources(native_fmus3: Path) -> No
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
 
-    from ipcosim.fmus.native.build import model_names
+    from ipcosim.harness.native.cbuild import model_names
 
     fmus = sorted(native_fmus3.glob("*.fmu"))
     assert [f.stem for f in fmus] == sorted(model_names())

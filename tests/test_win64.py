@@ -113,7 +113,7 @@ def parse(stdout: str) -> np.ndarray:
 @pytest.fixture(scope="session")
 def hosts(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
     """The loop host for each platform, as the command prefix that runs it (wine started once here)."""
-    from ipcosim.fmus.native.build import fmi_header_dir
+    from ipcosim.harness.native.cbuild import fmi_header_dir
 
     out = tmp_path_factory.mktemp("hosts")
     src = ROOT / "tests" / "c" / "loop_host.c"

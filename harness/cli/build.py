@@ -24,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out: Path = args.out
     if args.fmi != "2" and not args.native:
@@ -34,7 +34,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"{'built' if result.built else 'up to date'}: {result.fmu}")
     pack_ssp(out)
     if getattr(args, "native", False):
-        from ipcosim.fmus.native.build import OUT_DIRS, build_native
+        from ipcosim.harness.native.cbuild import OUT_DIRS, build_native
 
         for native in build_native(out / "fmus", out / OUT_DIRS[args.fmi], fmi=args.fmi):
             binaries = " + ".join(native.platforms) if native.binary else "sources only"

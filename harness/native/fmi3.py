@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from xml.etree import ElementTree
 
-from ipcosim.fmus.native import cgen
+from ipcosim.harness.native import cgen
 
 #: FMI 2.0 type element -> FMI 3.0 variable element.
 TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
