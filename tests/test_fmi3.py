@@ -118,3 +118,17 @@ def test_build_fmi3_needs_native() -> None:
                           text=True)
     assert proc.returncode != 0
     assert proc.stderr.strip().splitlines()[-1].endswith("only the native FMUs have an FMI 3.0 variant (add --native)")
+
+
+def test_missing_cross_compiler_is_one_line(native_fmus: tuple[Path, Path], tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    from ipcosim.harness.native.cbuild import build_native
+
+    monkeypatch.setenv("MINGW_CC", "no-such-cross-compiler")
+    (result,) = build_native(native_fmus[0], tmp_path, names=["Setpoint"], fmi="3")
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines == ["ipcosim build --native: no mingw-w64 cross compiler found (set MINGW_CC, or install Debian's "
+                     "gcc-mingw-w64-x86-64): no win64 binary, Linux only"]
+    assert result.platforms == ("linux64",)
+    with zipfile.ZipFile(result.fmu) as z:
+        assert [n for n in z.namelist() if n.startswith("binaries/")] == ["binaries/x86_64-linux/Setpoint.so"]

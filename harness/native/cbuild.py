@@ -224,7 +224,7 @@ def missing_compilers(compilers: Compilers, what: str) -> list[str]:
         lines.append(f"{what}: no C compiler found (set CC, or install gcc or clang): no linux64 binary")
     if compilers.win64 is None:
         lines.append(f"{what}: no mingw-w64 cross compiler found (set MINGW_CC, or install Debian's "
-                     "gcc-mingw-w64-x86-64): no win64 binary, the FMUs are Linux-only")
+                     "gcc-mingw-w64-x86-64): no win64 binary, Linux only")
     return lines
 
 
