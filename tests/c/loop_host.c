@@ -79,16 +79,7 @@ static Out outs[MAX_ITEMS];
 static int order[MAX_FMUS];
 static int nfmus, nsets, nlinks, nouts, norder;
 
-static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
-                   fmi2String message, ...) {
-    va_list ap;
-    (void)env;
-    fprintf(stderr, "[%s %d %s] ", name, (int)status, category);
-    va_start(ap, message);
-    vfprintf(stderr, message, ap);
-    va_end(ap);
-    fputc('\n', stderr);
-}
+#include "host_logger.h"
 
 static int fail(const char *what, int i) {
     fprintf(stderr, "loop_host: %s failed (FMU %d)\n", what, i);
