@@ -71,7 +71,7 @@ def test_fmi3_variables_are_the_fmi2_ones(native_fmus: tuple[Path, Path], native
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_master_runs_fmi3_like_fmi2(scenario: str, native_fmus: tuple[Path, Path], native_fmus3: Path) -> None:
     import ipcosim
-    from ipcosim.harness.api import Prepared
+    from ipcosim.harness.engine import Prepared
 
     with Prepared(scenario, fmus="native", fmu_dirs=[native_fmus3], warn=False) as prepared:
         assert {i.model.fmi_version for i in prepared.system.instances} == {"3.0"}
@@ -99,13 +99,13 @@ def test_exported_loop_fmi3_like_fmi2(native_fmus: tuple[Path, Path], tmp_path: 
     import fmpy
     from fmpy.validation import validate_fmu
 
-    fmus = {}
-    for fmi in ("2", "3"):
-        fmus[fmi] = tmp_path / f"loop{fmi}.fmu"
-        proc = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "export", "single-mass-lqr", "--fmi", fmi,
-                               "--fmu-dir", str(native_fmus[1]), "--out", str(fmus[fmi])],
-                              capture_output=True, text=True)
-        assert proc.returncode == 0, proc.stderr
+    from ipcosim.harness.export import ExportOptions, export
+
+    fmus = {"2": export(ExportOptions("single-mass-lqr", tmp_path / "loop2.fmu", fmu_dirs=(native_fmus[1],))),
+            "3": tmp_path / "loop3.fmu"}
+    proc = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "export", "single-mass-lqr", "--fmi", "3",
+                           "--fmu-dir", str(native_fmus[1]), "--out", str(fmus["3"])], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
     assert validate_fmu(str(fmus["3"])) == []
     runs = [fmpy.simulate_fmu(str(fmus[f]), stop_time=10.0, step_size=0.01, output_interval=0.01) for f in "23"]
     worst = _max_diff(*runs, [n for n in runs[0].dtype.names if n != "time"])
