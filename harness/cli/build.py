@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 from pathlib import Path
 
 
@@ -25,6 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from ipcosim.fmus.pybuild import build_all
+    from ipcosim.harness.scenario.ssp_pack import pack_all
 
     out: Path = args.out
     if args.fmi != "2" and not args.native:
@@ -32,7 +32,8 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError(f"--fmi {args.fmi}: only the native FMUs have an FMI {args.fmi}.0 variant (add --native)")
     for result in build_all(out / "fmus", force=args.force):
         print(f"{'built' if result.built else 'up to date'}: {result.fmu}")
-    pack_ssp(out)
+    for archive in pack_all(out):
+        print(f"packed: {archive}")
     if getattr(args, "native", False):
         from ipcosim.harness.native.cbuild import OUT_DIRS, build_native
 
@@ -40,14 +41,3 @@ def main(args: argparse.Namespace) -> int:
             binaries = " + ".join(native.platforms) if native.binary else "sources only"
             print(f"built (native FMI {args.fmi}.0, {binaries}): {native.fmu}")
     return 0
-
-
-def pack_ssp(out: Path) -> None:
-    """Hook for the SSP packer: calls ``ipcosim.harness.scenario.ssp_pack.pack_all(out)`` if that module exists."""
-    try:
-        ssp_pack = importlib.import_module("ipcosim.harness.scenario.ssp_pack")
-    except ModuleNotFoundError as exc:
-        if exc.name == "ipcosim.harness.scenario.ssp_pack":
-            return
-        raise
-    ssp_pack.pack_all(out)
