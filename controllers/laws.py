@@ -552,7 +552,7 @@ class LQG(DiscreteLaw):
         applied = self.applied
         feedback = d.K_voltage * applied + sum(k * (x - xr * r) for k, x, xr in zip(d.K, x_hat, d.reference_states))
         u = -feedback - d.K_integral * self.integral
-        integral = self.integral + (r - self._motor_cart(y)) * self.sample_period
+        integral = self.integral + (r - self._motor_cart(y)) * d.sample_period  # the design's T (a gain)
         limit = self.voltage_limit
         if abs(u) <= limit or (u > 0) != (-d.K_integral * (integral - self.integral) > 0):
             self.integral = integral
