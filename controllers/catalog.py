@@ -239,7 +239,7 @@ TUNED_ADAPTIVE: dict[str, tuple[HSMCGains, AdaptiveSchedules]] = {
 TUNED_LQG: dict[str, dict[str, Any]] = {
     "single-mass": {"Q": THESIS_SINGLE_MASS_Q_DIAGONAL, "Q_integral": 3.0e7, "R": 30 * THESIS_SINGLE_MASS_R,
                     "process_noise": 0.3, "acceleration_noise": 0.0},
-    "double-mass": {"Q": THESIS_DOUBLE_MASS_Q_DIAGONAL, "Q_integral": 1.0e3, "R": THESIS_DOUBLE_MASS_R,
+    "double-mass": {"Q": THESIS_DOUBLE_MASS_Q_DIAGONAL, "Q_integral": 1.0e4, "R": 0.4,
                     "process_noise": 1.0, "acceleration_noise": 3.0},
 }
 
