@@ -173,7 +173,7 @@ def test_dac_quantizes_the_voltage_to_whole_codes() -> None:
 
 
 def test_tap_metrics() -> None:
-    from ipcosim.fmus.task import tap_metrics
+    from ipcosim.fmus.metrics import tap_metrics
 
     t = np.arange(0, 5, 1e-3)
     th = np.where(t < 1.0, 0.0, 0.05 * np.exp(-(t - 1.0) / 0.2) * np.cos(10 * (t - 1.0)))

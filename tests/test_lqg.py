@@ -119,7 +119,7 @@ def test_fmu_redesigns_for_a_changed_weight() -> None:
 
     from fmi_helpers import instantiate
 
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     root = Path(__file__).resolve().parents[1]
     import tempfile
