@@ -431,6 +431,9 @@ def _lqg_specs(kind: str) -> list[ParamSpec]:
               ParamSpec("R", 1.0, "1/V2", "LQG input weight", "positive"),
               ParamSpec("process_noise", 1.0, "V", "Kalman filter: standard deviation of the voltage-equivalent "
                                                    "input disturbance (held over a sample)", "positive"),
+              ParamSpec("reference_time_constant", 1.0, "s", "the law follows the reference through "
+                                                              "1/(tau s + 1), started at the measured motor-cart "
+                                                              "position (0 = the reference as given)", "nonnegative"),
               ParamSpec("acceleration_noise", 0.0, "m/s2", "Kalman filter: standard deviation of an acceleration "
                                                            "disturbance on every body (rad/s2 on the pendulum), held "
                                                            "over a sample", "nonnegative")]
@@ -741,7 +744,7 @@ def lqg_from_gains(kind: str, values: Mapping[str, Any], gains: Mapping[str, flo
     m = _sampled_model(kind, values, gains)
     coef = LQGCoefficients(K=tuple(float(gains[f"K_{s}"]) for s in m["states"]), K_voltage=float(gains["K_voltage"]),
                            K_integral=float(gains["K_integral"]), reference_states=rest_state(m["states"]), **m)
-    return LQG(kind, coef, float(values["voltage_limit"]))
+    return LQG(kind, coef, float(values["voltage_limit"]), float(values["reference_time_constant"]))
 
 
 # ============================================================ every law with designed gains
@@ -758,7 +761,9 @@ def gain_specs(law: str, kind: str) -> list[ParamSpec]:
 
 def weight_parameters(law: str, kind: str) -> tuple[str, ...]:
     """The parameters of a designed law that enter only through the design (weights, poles, noises)."""
-    return tuple(s.name for s in _lqg_specs(kind)) if law == "LQG" else lqr_weight_parameters(kind)
+    if law == "LQG":
+        return tuple(s.name for s in _lqg_specs(kind) if s.name != "reference_time_constant")
+    return lqr_weight_parameters(kind)
 
 
 def design_parameters(law: str, kind: str) -> tuple[str, ...]:
@@ -820,7 +825,8 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
         design = lqr_design_from(kind, v, backend)
         return LQR(kind, design, vlim, output_filter_time_constant=float(v["output_filter_time_constant"]))
     if law == "LQG":
-        return LQG(kind, LQGCoefficients.from_design(lqg_design_from(kind, v, backend)), vlim)
+        return LQG(kind, LQGCoefficients.from_design(lqg_design_from(kind, v, backend)), vlim,
+                   float(v["reference_time_constant"]))
     if law == "SwingUp":
         balance = LQR(kind, lqr_design_from(kind, v, backend), vlim,
                       output_filter_time_constant=float(v["output_filter_time_constant"]))

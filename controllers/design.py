@@ -384,15 +384,14 @@ def design_lqr(model: LinearModel, Q: Any, R: Any, *, observer_poles: Sequence[c
     R = np.atleast_2d(np.asarray(R, dtype=float)) if np.ndim(R) < 2 else R
     Ad, Bd = zoh(A, B, T, backend)
     C1 = C[reference_output:reference_output + 1]
+    K = dlqr_gain(Ad, Bd, Q, R, backend) if discrete else lqr_gain(A, B, Q, R, backend)
+    check_observable(A, C)
     if discrete:
-        K = dlqr_gain(Ad, Bd, Q, R, backend)
         poles = np.log(np.linalg.eigvals(Ad - Bd @ K).astype(complex)) / T
         N = reference_gain(Ad - np.eye(n), Bd, K, C1)  # x = (I - Ad + Bd K)^-1 Bd N r at rest
     else:
-        K = lqr_gain(A, B, Q, R, backend)
         poles = np.linalg.eigvals(A - B @ K)
         N = reference_gain(A, B, K, C1)
-    check_observable(A, C)
     if observer_poles is None:
         if observer_pole_factor is None:
             raise DesignError("observer_poles", "give observer_poles or observer_pole_factor")

@@ -514,7 +514,9 @@ class LQG(DiscreteLaw):
     At instant k the law outputs the voltage ``v[k]`` it computed at instant k - 1 (0 V at the first
     instant), corrects its estimate with the measurements of instant k, and computes the voltage
     for instant k + 1. The integral of the motor-cart position error (measured) is frozen while the
-    new voltage saturates in the direction the integral pushes.
+    new voltage saturates in the direction the integral pushes. With ``reference_time_constant`` tau > 0
+    the law follows the reference through a first-order lag ``1/(tau s + 1)`` (sampled exactly), started
+    at the first measured motor-cart position: a step then does not wind the integrator up.
 
     Parameters
     ----------
@@ -524,14 +526,19 @@ class LQG(DiscreteLaw):
         The design's numbers (``LQGCoefficients.from_design``, or gains a controller FMU holds).
     voltage_limit : float
         [V].
+    reference_time_constant : float
+        tau [s] of the reference lag; 0 = the reference as given.
     """
 
-    def __init__(self, kind: str, coefficients: LQGCoefficients, voltage_limit: float = 10.0) -> None:
+    def __init__(self, kind: str, coefficients: LQGCoefficients, voltage_limit: float = 10.0,
+                 reference_time_constant: float = 0.0) -> None:
         super().__init__(kind, coefficients.sample_period, voltage_limit)
         if coefficients.outputs != tuple(self.measured):
             raise LawParameterError("design", f"LQG design is for outputs {coefficients.outputs}, the "
                                               f"{kind} plant measures {self.measured}")
         self.coefficients = coefficients
+        tau = _check_nonneg("reference_time_constant", reference_time_constant)
+        self.reference_pole = math.exp(-self.sample_period / tau) if tau > 0 else 0.0
         self._Cpinv = _right_inverse(coefficients.C)
         self.reset()
 
@@ -541,9 +548,13 @@ class LQG(DiscreteLaw):
         self.x_hat = [0.0] * len(self.coefficients.states)
         self.applied = 0.0
         self.integral = 0.0
+        self.reference_filtered: float | None = None
 
     def _compute(self, y: Sequence[float], r: float) -> float:
         d = self.coefficients
+        a = self.reference_pole
+        rf = self._motor_cart(y) if self.reference_filtered is None else self.reference_filtered
+        self.reference_filtered = r = a * rf + (1.0 - a) * r
         xp = self.x_pred
         if xp is None:  # plant assumed at rest at the measured positions
             xp = [sum(map(mul, row, y)) for row in self._Cpinv]

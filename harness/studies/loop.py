@@ -197,7 +197,8 @@ def _lqg(law: LQG, b: Builder) -> tuple[Lin, list[str]]:
         b.feed(xp[i], lsum([xh[j] * d.Ad[i][j] for j in range(n)]) + applied * d.Bd[i])
     b.feed(applied, u)
     b.feed(integral, integral - ys[0] * T)
-    return applied, ["output: the voltage computed a sample earlier (one-sample computation delay)"]
+    return applied, ["output: the voltage computed a sample earlier (one-sample computation delay)",
+                     "reference lag left out (the reference is 0)"]
 
 
 def _hsmc(law: HSMC, b: Builder) -> tuple[Lin, list[str]]:
