@@ -39,7 +39,7 @@ percent (``sampled_closed_loop_poles``, tested); the single-mass thesis weights 
 fast regulator pole (-548 rad/s long pendulum, -680 rad/s short) which sampling moves (to about
 -1150 rad/s for the short pendulum) but which stays stable.
 
-``discrete=True`` designs K with the discrete LQR on the sampled model instead (``dlqr_gain`` on
+``discrete=True`` designs K with the discrete LQR on the sampled model instead (``lqr_gain`` with ``discrete``, on
 ``Ad, Bd`` with the same Q and R, per-sample cost ``x'Qx + u'Ru``), and N for unit DC gain of the
 sampled loop, ``N = 1 / (C1 (I - Ad + Bd K)^-1 Bd)``: the gain is then right for the sample period
 it runs at (the emulated one fails at 5 ms on the single mass, see docs/controllers.md).
@@ -158,8 +158,11 @@ def check_observable(A: np.ndarray, C: np.ndarray, name: str = "model") -> None:
 
 # --- the numerical kernels, per back end -----------------------------------------------------------
 
-def lqr_gain(A: np.ndarray, B: np.ndarray, Q: Any, R: Any, backend: str = "control") -> np.ndarray:
-    """Continuous LQR gain K (1 x n) for ``u = -K x`` minimizing ``int x'Qx + u'Ru dt``.
+def lqr_gain(A: np.ndarray, B: np.ndarray, Q: Any, R: Any, backend: str = "control",
+             discrete: bool = False) -> np.ndarray:
+    """LQR gain K (m x n) for ``u = -K x``: continuous, minimizing ``int x'Qx + u'Ru dt``
+    (``K = R^-1 B'P``), or with ``discrete`` for ``x[k+1] = A x[k] + B u[k]`` minimizing
+    ``sum x'Qx + u'Ru`` (``K = (R + B'P B)^-1 B'P A``), P from the algebraic Riccati equation.
 
     Raises
     ------
@@ -169,58 +172,30 @@ def lqr_gain(A: np.ndarray, B: np.ndarray, Q: Any, R: Any, backend: str = "contr
     n, m = B.shape
     Q, R = check_weights(Q, R, n, m)
     check_controllable(A, B)
+    what = "discrete LQR" if discrete else "LQR"
     try:
         if backend == "control":
             import control
-            K, _, _ = control.lqr(A, B, Q, R)
-            K = np.asarray(K, dtype=float)
+            K = np.asarray((control.dlqr if discrete else control.lqr)(A, B, Q, R)[0], dtype=float)
+        elif backend == "scipy" and discrete:
+            P = scipy.linalg.solve_discrete_are(A, B, Q, R)
+            K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
         elif backend == "scipy":
-            P = scipy.linalg.solve_continuous_are(A, B, Q, R)
-            K = np.linalg.solve(R, B.T @ P)
+            K = np.linalg.solve(R, B.T @ scipy.linalg.solve_continuous_are(A, B, Q, R))
         else:
             raise DesignError("backend", f"unknown design backend {backend!r}; expected one of {BACKENDS}")
     except DesignError:
         raise
     except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:
-        raise DesignError("Q", f"LQR has no stabilizing solution for these weights "
+        raise DesignError("Q", f"{what} has no stabilizing solution for these weights "
                                f"(is every unstable mode weighted in Q?): {exc}") from None
     poles = np.linalg.eigvals(A - B @ K)
-    margin = 1e-8 * max(1.0, float(np.linalg.norm(A, 2)))
-    if not np.all(np.isfinite(K)) or np.max(poles.real) >= -margin:
-        raise DesignError("Q", "LQR has no stabilizing solution for these weights (an unstable mode is "
-                               "not weighted in Q)")
-    return K.reshape(m, n)
-
-
-def dlqr_gain(Ad: np.ndarray, Bd: np.ndarray, Q: Any, R: Any, backend: str = "control") -> np.ndarray:
-    """Discrete LQR gain K (m x n) for ``u[k] = -K x[k]`` minimizing ``sum x'Qx + u'Ru`` on
-    ``x[k+1] = Ad x[k] + Bd u[k]``: ``K = (R + Bd'P Bd)^-1 Bd'P Ad`` with P from the discrete
-    algebraic Riccati equation.
-
-    Raises
-    ------
-    DesignError
-        Bad weights (``Q``/``R``), uncontrollable model (``model``), or no stabilizing solution.
-    """
-    n, m = Bd.shape
-    Q, R = check_weights(Q, R, n, m)
-    check_controllable(Ad, Bd)
-    try:
-        if backend == "control":
-            import control
-            K = np.asarray(control.dlqr(Ad, Bd, Q, R)[0], dtype=float)
-        elif backend == "scipy":
-            P = scipy.linalg.solve_discrete_are(Ad, Bd, Q, R)
-            K = np.linalg.solve(R + Bd.T @ P @ Bd, Bd.T @ P @ Ad)
-        else:
-            raise DesignError("backend", f"unknown design backend {backend!r}; expected one of {BACKENDS}")
-    except DesignError:
-        raise
-    except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:
-        raise DesignError("Q", f"discrete LQR has no stabilizing solution for these weights "
-                               f"(is every unstable mode weighted in Q?): {exc}") from None
-    if not np.all(np.isfinite(K)) or np.max(np.abs(np.linalg.eigvals(Ad - Bd @ K))) >= 1.0 - 1e-12:
-        raise DesignError("Q", "discrete LQR has no stabilizing solution for these weights (an unstable mode is "
+    if discrete:
+        unstable = np.max(np.abs(poles)) >= 1.0 - 1e-12
+    else:
+        unstable = np.max(poles.real) >= -1e-8 * max(1.0, float(np.linalg.norm(A, 2)))
+    if not np.all(np.isfinite(K)) or unstable:
+        raise DesignError("Q", f"{what} has no stabilizing solution for these weights (an unstable mode is "
                                "not weighted in Q)")
     return K.reshape(m, n)
 
@@ -384,7 +359,7 @@ def design_lqr(model: LinearModel, Q: Any, R: Any, *, observer_poles: Sequence[c
     R = np.atleast_2d(np.asarray(R, dtype=float)) if np.ndim(R) < 2 else R
     Ad, Bd = zoh(A, B, T, backend)
     C1 = C[reference_output:reference_output + 1]
-    K = dlqr_gain(Ad, Bd, Q, R, backend) if discrete else lqr_gain(A, B, Q, R, backend)
+    K = lqr_gain(Ad, Bd, Q, R, backend, discrete=True) if discrete else lqr_gain(A, B, Q, R, backend)
     check_observable(A, C)
     if discrete:
         poles = np.log(np.linalg.eigvals(Ad - Bd @ K).astype(complex)) / T

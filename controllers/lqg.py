@@ -13,7 +13,7 @@ voltage being applied ``v`` and by the integral ``q`` of the motor-cart position
 
     u[k]   = -K (x^[k] - x_r r) - K_voltage v[k] - K_integral q[k]
 
-with ``[K, K_voltage, K_integral]`` the discrete LQR gain (``design.dlqr_gain``) of the augmented
+with ``[K, K_voltage, K_integral]`` the discrete LQR gain (``design.lqr_gain``, discrete) of the augmented
 model for the per-sample cost ``(x - x_r r)' Q (x - x_r r) + Q_integral q^2 + R u^2``. ``x_r``
 holds 1 for every cart position and 0 otherwise (at rest both carts stand at the reference, the
 pendulum upright, the voltage 0: viscous friction alone needs no holding voltage); the
@@ -54,7 +54,7 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.linalg
 
-from ipcosim.controllers.design import BACKENDS, check_observable, check_weights, dlqr_gain, zoh
+from ipcosim.controllers.design import BACKENDS, check_observable, check_weights, lqr_gain, zoh
 from ipcosim.controllers.errors import DesignError
 from ipcosim.controllers.laws import check_sample_period, rest_state
 from ipcosim.fmus.linearize import LinearModel
@@ -212,7 +212,7 @@ def design_lqg(model: LinearModel, Q: Any, q_integral: float, R: float, *, sampl
     Ad, Bd = zoh(A, B, T, backend)
     Phi, Gamma = augmented_model(Ad, Bd, C[0], T)
     Qa = scipy.linalg.block_diag(Q, [[0.0]], [[qi]])
-    Ka = dlqr_gain(Phi, Gamma, Qa, Rm, backend)
+    Ka = lqr_gain(Phi, Gamma, Qa, Rm, backend, discrete=True)
     variance = np.array([float(r) ** 2 / 12.0 for r in resolutions])
     if variance.size != C.shape[0]:
         raise DesignError("resolution", f"need {C.shape[0]} resolutions ({', '.join(model.outputs)}), "
