@@ -82,7 +82,7 @@ class ControllerFmu(FmuBase):
         kind = self.kind
         self._measured = MEASURED[kind]
         self._controller: DiscreteLaw | None = None
-        self._specs = schema(self.law, kind)
+        self._specs = schema(kind, self.law)
         self.add_input("reference", start=0.0, unit="m",
                        description="reference position of the motor-driven cart")
         for name in self._measured:
@@ -96,7 +96,7 @@ class ControllerFmu(FmuBase):
             self.add_parameter(spec.name, start=bool(spec.default) if is_bool else float(spec.default),
                                type_=bool if is_bool else float, unit=None if is_bool else spec.unit,
                                description=spec.description, check=None if is_bool else spec.check)
-        self._gain_specs = gain_specs(self.law, kind) if self.law in DESIGNED_LAWS else []
+        self._gain_specs = gain_specs(kind, self.law) if self.law in DESIGNED_LAWS else []
         if self._gain_specs:
             shipped = type(self).shipped_design(self.resources)["gains"]
             for spec in self._gain_specs:
@@ -110,7 +110,7 @@ class ControllerFmu(FmuBase):
     @classmethod
     def shipped_name(cls) -> str:
         """File name of the shipped design inside the FMU's private package."""
-        return f"shipped_{model_name(cls.law, cls.kind)}.json"
+        return f"shipped_{model_name(cls.kind, cls.law)}.json"
 
     @classmethod
     def shipped_design(cls, resources: str | None = None) -> dict[str, Any]:
@@ -133,10 +133,10 @@ class ControllerFmu(FmuBase):
     @classmethod
     def design_record(cls) -> dict[str, Any]:
         """Design the gains for the default parameters (imports numpy and scipy): the shipped design."""
-        values = defaults(cls.law, cls.kind)
-        law = build_law(cls.law, cls.kind, values, backend="scipy")
-        design = {name: values[name] for name in design_parameters(cls.law, cls.kind)}
-        return {"model": model_name(cls.law, cls.kind), "design": design, "gains": designed_gains(law)}
+        values = defaults(cls.kind, cls.law)
+        law = build_law(cls.kind, cls.law, values, backend="scipy")
+        design = {name: values[name] for name in design_parameters(cls.kind, cls.law)}
+        return {"model": model_name(cls.kind, cls.law), "design": design, "gains": designed_gains(law)}
 
     @classmethod
     def build_files(cls) -> dict[str, str]:
@@ -149,21 +149,21 @@ class ControllerFmu(FmuBase):
 
     def _build_law(self) -> DiscreteLaw:
         values = {s.name: getattr(self, s.name) for s in self._specs}
-        name = model_name(self.law, self.kind)
+        name = model_name(self.kind, self.law)
         if self.law not in DESIGNED_LAWS:
-            return build_law(self.law, self.kind, values)
+            return build_law(self.kind, self.law, values)
         shipped = type(self).shipped_design(self.resources)
         gains = {s.name: float(getattr(self, s.name)) for s in self._gain_specs}
-        changed = [n for n in design_parameters(self.law, self.kind) if float(values[n]) != shipped["design"][n]]
+        changed = [n for n in design_parameters(self.kind, self.law) if float(values[n]) != shipped["design"][n]]
         set_gains = [n for n, v in gains.items() if v != shipped["gains"][n]]
-        weights = [n for n in changed if n in weight_parameters(self.law, self.kind)]
+        weights = [n for n in changed if n in weight_parameters(self.kind, self.law)]
         if set_gains and weights:
             raise FmuError(f"{name}: parameters {weights[0]} and {set_gains[0]} were both set: give either the "
                            "design (weights, observer poles) or the gains K_*, N, M_*, not both")
         if not changed or set_gains:
-            return law_from_gains(self.law, self.kind, values, gains)
+            return law_from_gains(self.kind, self.law, values, gains)
         try:
-            law = build_law(self.law, self.kind, values, backend="scipy")
+            law = build_law(self.kind, self.law, values, backend="scipy")
         except ImportError as exc:
             raise FmuError(f"{name}: parameter {changed[0]} = {values[changed[0]]:g} differs from the shipped "
                            f"design, and redesigning the gains needs numpy and scipy ({exc}); install them in "
@@ -176,7 +176,7 @@ class ControllerFmu(FmuBase):
         try:
             law = self._build_law()
         except ControllerParameterError as exc:
-            raise FmuError(f"{model_name(self.law, self.kind)}: {exc}") from None
+            raise FmuError(f"{model_name(self.kind, self.law)}: {exc}") from None
         self._controller = law
         self._tick = 0
         self.voltage = self._sample()

@@ -96,7 +96,7 @@ def test_cosimulation_equals_a_monolithic_loop_of_the_pure_models(built, name, l
     stop, h = 3.0, 1e-3
     result = ipcosim.run(built / "ssp" / f"{name}.ssp", stop_time=stop, step=h)
     amplitude, step_time = _setpoint(scenario)
-    ctrl = make_law(law, kind, bound)
+    ctrl = make_law(kind, law, bound)
     m = round(ctrl.sample_period / h)
     plant = Plant(preset(DEFAULT_PRESET[kind]))
     n = round(stop / h)
