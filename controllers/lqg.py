@@ -54,9 +54,9 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.linalg
 
-from ipcosim.controllers.design import BACKENDS, check_observable, check_weights, lqr_gain, zoh
+from ipcosim.controllers.design import BACKENDS, check_observable, check_weights, design_inputs, lqr_gain, zoh
 from ipcosim.controllers.errors import DesignError
-from ipcosim.controllers.laws import check_sample_period, rest_state
+from ipcosim.controllers.laws import rest_state
 from ipcosim.fmus.linearize import LinearModel
 
 
@@ -200,11 +200,7 @@ def design_lqg(model: LinearModel, Q: Any, q_integral: float, R: float, *, sampl
     DesignError
         With ``parameter`` naming the bad input.
     """
-    if backend not in BACKENDS:
-        raise DesignError("backend", f"unknown design backend {backend!r}; expected one of {BACKENDS}")
-    T = check_sample_period(sample_period)
-    A, B, C = model.A, model.B, model.C
-    n = A.shape[0]
+    T, A, B, C, n = design_inputs(model, sample_period, backend)
     Q, Rm = check_weights(Q, [[R]], n)
     qi = float(q_integral)
     if not (math.isfinite(qi) and qi >= 0):
