@@ -426,8 +426,9 @@ def _lqg_specs(kind: str) -> list[ParamSpec]:
     specs = [ParamSpec(f"Q_{s}", 0.0, _unit_div({}, {b: 2 * e for b, e in _state_dim(s).items()}),
                        f"LQG state weight on {s} (diagonal of Q, on x - x_r r)", "nonnegative")
              for s in design_states(kind)]
-    specs += [ParamSpec("Q_integral", 0.0, "1/m2.s2", "LQG weight on the integral of the motor-cart position error",
-                        "nonnegative"),
+    specs += [ParamSpec("Q_integral", 1.0, "1/m2.s2", "LQG weight on the integral of the motor-cart position error "
+                                                      "(> 0: the integrator must be weighted to be stabilized)",
+                        "positive"),
               ParamSpec("R", 1.0, "1/V2", "LQG input weight", "positive"),
               ParamSpec("process_noise", 1.0, "V", "Kalman filter: standard deviation of the voltage-equivalent "
                                                    "input disturbance (held over a sample)", "positive"),

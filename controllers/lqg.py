@@ -181,7 +181,7 @@ def design_lqg(model: LinearModel, Q: Any, q_integral: float, R: float, *, sampl
     Q : array_like (n x n)
         State weight (positive semidefinite), on ``x - x_r r``.
     q_integral : float
-        Weight on the integral of the motor-cart position error [1/(m^2 s^2)], >= 0.
+        Weight on the integral of the motor-cart position error [1/(m^2 s^2)], > 0.
     R : float
         Voltage weight [1/V^2], > 0.
     sample_period : float
@@ -203,8 +203,9 @@ def design_lqg(model: LinearModel, Q: Any, q_integral: float, R: float, *, sampl
     T, A, B, C, n = design_inputs(model, sample_period, backend)
     Q, Rm = check_weights(Q, [[R]], n)
     qi = float(q_integral)
-    if not (math.isfinite(qi) and qi >= 0):
-        raise DesignError("Q_integral", f"Q_integral = {qi} must be >= 0 and finite")
+    if not (math.isfinite(qi) and qi > 0):
+        raise DesignError("Q_integral", f"Q_integral = {qi} must be positive and finite (an unweighted integrator "
+                                        "is not stabilized)")
     Ad, Bd = zoh(A, B, T, backend)
     Phi, Gamma = augmented_model(Ad, Bd, C[0], T)
     Qa = scipy.linalg.block_diag(Q, [[0.0]], [[qi]])
