@@ -21,7 +21,7 @@ The first set listed is the default: the FMU parameter defaults are its values, 
 scenarios bind it (``parameter_sets`` feeds ``ipcosim.harness.scenario.ssp_gen``'s ``.ssv`` files).
 
 Flat parameter names (``schema``): the law's gains as in ``ipcosim.controllers.laws``; ``sample_period``
-[s]; ``voltage_limit`` [V]; for the model-based laws (LQR, HSMC, AdaptiveHSMC) the design model's
+[s]; ``voltage_limit`` [V]; for the model-based laws (LQR, LQG, HSMC, AdaptiveHSMC) the design model's
 physical constants as ``model_<name>`` (``ipcosim.fmus.params`` names, defaults = the plant kind's default
 preset): the controller's *belief* about the plant, independent of the plant component.
 """
