@@ -28,7 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     """The top-level parser with every available sub-command registered."""
     parser = argparse.ArgumentParser(
         prog="ipcosim",
-        description="FMI co-simulation of the Quanser IP02 inverted pendulum (single and double mass).")
+        description="FMI co-simulation of the Quanser IP02 inverted pendulum (single and double mass).",
+        allow_abbrev=False)
     parser.add_argument("--debug", action="store_true", help="show the full traceback on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
@@ -40,22 +41,27 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # command not part of this installation
             raise
         module.register(sub)
+    for each in parsers(parser):
+        each.allow_abbrev = False  # options are never abbreviated: `--token` is not `--token-file`
     return parser
+
+
+def parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """``parser`` and every sub-command parser below it (``ipcosim rig status`` too), depth first."""
+    out = [parser]
+    for action in parser._actions:  # noqa: SLF001 -- argparse offers no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            for child in dict.fromkeys(action.choices.values()):
+                out.extend(parsers(child))
+    return out
 
 
 def _negative_values(parser: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
     """``--step -1e-3`` as ``--step=-1e-3``: argparse takes a token that starts with ``-`` and is
     not a plain decimal for an option, so a negative value in exponent form would print a
     usage block instead of reaching the value check that names it."""
-    takes_value = set()
-    parsers = [parser]
-    while parsers:
-        p = parsers.pop()
-        for action in p._actions:  # noqa: SLF001 -- argparse offers no public walk
-            if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
-                parsers.extend(action.choices.values())
-            elif action.option_strings and action.nargs is None:
-                takes_value.update(action.option_strings)
+    takes_value = {option for p in parsers(parser) for action in p._actions  # noqa: SLF001
+                   if action.option_strings and action.nargs is None for option in action.option_strings}
     out: list[str] = []
     args = list(argv)
     i = 0
