@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import sys
 import tempfile
 import time
 import weakref
@@ -142,6 +143,8 @@ class Prepared:
             if self.fmus == "native":
                 fmu_dirs = [*(fmu_dirs or []), native_fmu_dir()]
             scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
+            if build_missing(scenario):
+                scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
         if parameter_set:
             scenario = select_parameter_set(scenario, parameter_set)
         return scenario
@@ -323,6 +326,31 @@ class Prepared:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+def build_missing(scenario: Scenario) -> list[str]:
+    """Build the project's FMUs that ``scenario`` names but cannot find (the first run after a
+    wheel install) into the build folder (:mod:`ipcosim.harness.paths`: the user cache for an
+    installed wheel), saying so in one line on stderr; they are found there from then on.
+
+    Returns
+    -------
+    list of str
+        The models built (none: nothing was missing, or only FMUs this project does not make,
+        which binding then reports by name).
+    """
+    if scenario.location.is_file():
+        return []  # an .ssp archive carries its FMUs
+    from ipcosim.fmus.build import build_all, model_scripts
+    from ipcosim.harness.scenario import ssp
+
+    scripts = model_scripts()
+    missing = sorted({Path(c.source).stem for c in scenario.components if c.fmu is None} & set(scripts))
+    if missing:
+        print(f"ipcosim: building the FMUs {scenario.name} needs ({', '.join(missing)}) into {ssp.BUILD_FMU_DIR}, "
+              f"once", file=sys.stderr, flush=True)
+        build_all(ssp.BUILD_FMU_DIR, scripts=[scripts[m] for m in missing])
+    return missing
 
 
 def prepare(scenario_or_path: str | os.PathLike[str] | Scenario, **kwargs: Any) -> Prepared:

@@ -17,6 +17,8 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping
 
+from ipcosim.errors import closest
+
 
 class NativeParameterError(KeyError):
     """A parameter the native flavour does not have (names the model and the flavour)."""
@@ -123,4 +125,5 @@ def check_settable(info: Mapping[str, Any], fmu_name: str, names: list[str], kno
             extra = " (a design parameter of the python flavour only: the native flavour takes the numbers " \
                     "the design computes; run with --fmus python, or see docs/native.md to redesign)" \
                 if name in info.get("python_only", ()) else ""
-            raise NativeParameterError(f"the native flavour of {fmu_name} has no parameter {name!r}{extra}")
+            near = "" if extra else f"; {closest(name, known)}"
+            raise NativeParameterError(f"the native flavour of {fmu_name} has no parameter {name!r}{extra}{near}")

@@ -24,9 +24,20 @@ def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
                         "them and they can run this study, else python), python, or native")
 
 
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose invalid choices (sub-command, plant kind, flavour) answer with the
+    closest known ones; sub-command parsers are of this class too."""
+
+    def _check_value(self, action: argparse.Action, value: object) -> None:
+        from ipcosim.errors import closest
+
+        if action.choices is not None and value not in action.choices:
+            raise argparse.ArgumentError(action, f"invalid choice {value!r}; {closest(str(value), action.choices)}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The top-level parser with every available sub-command registered."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="ipcosim",
         description="FMI co-simulation of the Quanser IP02 inverted pendulum (single and double mass).",
         allow_abbrev=False)

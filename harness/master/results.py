@@ -15,7 +15,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.errors import IpcosimError, UsageError, closest
 
 #: Draws a result's figure: ``plotter(result, path or None)`` (see :attr:`Result.plotter`).
 Plotter = Callable[["Result", "Path | None"], Any]
@@ -133,7 +133,7 @@ def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> li
     for p in patterns:
         hits = [c for c in cols if fnmatch.fnmatchcase(c, p)]
         if not hits:
-            raise UsageError(f"--record {p}: no such variable (recorded: {', '.join(cols[1:])})")
+            raise UsageError(f"--record {p}: no such variable; {closest(p, cols[1:], listing=40)}")
         chosen.update(hits)
     return [c for c in cols if c in chosen]
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from ipcosim.errors import IpcosimError
+from ipcosim.errors import IpcosimError, closest
 from ipcosim.harness.master.system import (
     SSP_TYPE,
     TRANSFORMATION_TYPES,
@@ -205,8 +205,8 @@ def resolve_swap(scenario: Scenario, component: str, target: str | os.PathLike[s
         return SwapTarget(fmu=path.resolve(), description=f"FMU {text}")
     _load_alias_providers()
     if text not in swap_aliases:
-        known = ", ".join(sorted(swap_aliases)) or "none registered"
-        raise BindingError(f"--swap {component}={text}: not an .fmu file and not a known alias (aliases: {known})")
+        raise BindingError(f"--swap {component}={text}: not an .fmu file and not a known alias; "
+                           f"{closest(text, swap_aliases)}")
     return swap_aliases[text](SwapRequest(scenario, component, model))
 
 
@@ -262,8 +262,8 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
     swaps = dict(swaps or {})
     for comp in swaps:
         if comp not in {c.name for c in scenario.components}:
-            raise BindingError(f"--swap {comp}=...: scenario {scenario.name!r} has no component {comp!r} "
-                               f"(components: {', '.join(c.name for c in scenario.components)})")
+            raise BindingError(f"--swap {comp}=...: scenario {scenario.name!r} has no component {comp!r}; "
+                               f"{closest(comp, (c.name for c in scenario.components))}")
     notes: list[str] = []   # warnings: what may be wrong (unconnected inputs, ignored parameters)
     infos: list[str] = []   # notes: what was done (swaps, connectors left out)
     instances = [_bind_component(scenario, comp, swaps, dict(fmu_files or {}), dict(models or {}),
@@ -318,7 +318,8 @@ def _bind_component(scenario: Scenario, comp: Component, swaps: Mapping[str, Any
     for name, value in extra.items():
         var = model.variables.get(name)
         if var is None or not var.settable:
-            raise BindingError(f"--swap {comp.name}: the swapped-in FMU has no settable variable {name!r}")
+            raise BindingError(f"--swap {comp.name}: the swapped-in FMU has no settable variable {name!r}; "
+                               f"{closest(name, (n for n, v in model.variables.items() if v.settable))}")
         params.append((var, convert_value(var, value, f"--swap {comp.name}: {name}")))
     return Instance(name=comp.name, model=model, connectors=tuple(connectors), parameters=tuple(params),
                     step_size_hint=comp.step_size_hint, swapped_from=swapped_from, realtime=realtime)
@@ -378,7 +379,7 @@ def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str,
         if v is None:
             raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: FMU of component "
                                f"{inst.name!r} ({inst.model.path.name if inst.model.path else inst.model.name}) "
-                               f"has no variable {cname!r}")
+                               f"has no variable {cname!r}; {closest(cname, inst.model.variables)}")
     kinds = (va.causality, vb.causality)
     if kinds == ("input", "output"):
         a, b, va, vb = b, a, vb, va
@@ -506,13 +507,15 @@ def with_overrides(system: System, overrides: Mapping[str, Any]) -> tuple[System
         try:
             inst = system.instance(comp)
         except KeyError:
-            raise BindingError(f"--set {key}={value}: no component {comp!r} (components: "
-                               f"{', '.join(i.name for i in system.instances)})") from None
+            raise BindingError(f"--set {key}={value}: no component {comp!r}; "
+                               f"{closest(comp, (i.name for i in system.instances))}") from None
         v = inst.model.variables.get(var)
         model_name = inst.model.path.name if inst.model.path else inst.model.name
         where = f"--set {key}={value}: component {comp!r} ({model_name})"
         if v is None:
-            raise BindingError(f"{where} has no variable {var!r}")
+            settable = (n for n, x in inst.model.variables.items() if x.settable)
+            raise BindingError(f"{where} has no variable {var!r}; {closest(var, settable)} "
+                               f"(`ipcosim describe {system.scenario.name}` lists them)")
         if not v.settable:
             raise BindingError(f"{where}: {var!r} is {v.causality}/{v.variability} and cannot be set")
         link = system.link_into(comp, var)
