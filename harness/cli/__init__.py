@@ -13,7 +13,8 @@ import sys
 from typing import Sequence
 
 #: Sub-command modules, in the order ``ipcosim --help`` lists them.
-COMMAND_MODULES = ("build", "list_", "run", "export", "linearize", "analyze", "rig", "compare", "sweep", "tune")
+COMMAND_MODULES = ("build", "list_", "describe", "run", "export", "linearize", "analyze", "rig", "compare", "sweep",
+                   "tune")
 
 
 def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
