@@ -197,9 +197,12 @@ class Prepared:
                   overrides: Mapping[str, Any] | None = None, *, start_time: float | None = None,
                   algorithm: str | None = None, observers: Sequence[Observer] = (),
                   manipulators: Sequence[Manipulator] = (), realtime: bool | None = None, progress: bool = False,
-                  record_every: int = 1, max_init_iterations: int = 20, loop: str = "auto") -> Execution:
+                  record_every: int = 1, max_init_iterations: int = 20, loop: str = "auto",
+                  overrun_budget: float | None = None) -> Execution:
         """A ready :class:`Execution` (checked: step, stop time, overrides, step multiples);
-        ``loop``: the stepping loop, ``auto``, ``c`` or ``python`` (see :class:`Execution`)."""
+        ``loop``: the stepping loop, ``auto``, ``c`` or ``python`` (see :class:`Execution`);
+        ``overrun_budget``: a paced run's allowed overrun fraction
+        (:class:`~ipcosim.harness.master.realtime.RealtimePacer`)."""
         stop, why_stop = (stop_time, "") if stop_time is not None else default_stop_time(self.system)
         h, why_step = (step, "") if step is not None else default_step(self.system)
         if stop is None:
@@ -222,7 +225,7 @@ class Prepared:
         if progress:
             observers.append(Progress())
         if realtime or (realtime is None and self.system.realtime):
-            observers.append(realtime_observer())
+            observers.append(realtime_observer(overrun_budget=overrun_budget))
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
             from ipcosim.harness.master.realtime import CardFaultRecorder
             observers.append(CardFaultRecorder())
@@ -257,7 +260,8 @@ class Prepared:
             ``observers``, ``manipulators`` (:mod:`ipcosim.harness.master.observers`,
             :mod:`ipcosim.harness.master.manipulators`), ``start_time``, ``record_every`` (record
             every n-th communication point), ``loop`` (``auto``, ``c``, ``python``: the stepping
-            loop, :class:`~ipcosim.harness.master.execution.Execution`).
+            loop, :class:`~ipcosim.harness.master.execution.Execution`), ``overrun_budget`` (a
+            paced run's allowed overrun fraction).
 
         Raises
         ------
@@ -393,6 +397,7 @@ def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers
         result = prepared.run(options.stop_time, options.step, overrides, out_dir=options.out,
                               variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
                               progress=options.progress, loop=options.loop, observers=observers,
+                              overrun_budget=options.overrun_budget,
                               manipulators=manipulators, raise_on_error=raise_on_error)
     if options.save_baseline is not None:
         from ipcosim.harness.baseline import save_baseline

@@ -40,6 +40,25 @@ def seconds_option(option: str, value: Any) -> float | None:
     return number
 
 
+def fraction_option(option: str, value: Any) -> float | None:
+    """A fraction in [0, 1] (text or number), or None.
+
+    Raises
+    ------
+    UsageError
+        Naming the option and the value.
+    """
+    if value is None:
+        return None
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = math.nan
+    if not 0.0 <= number <= 1.0:  # NaN fails too
+        raise UsageError(f"{option} {value}: expected a fraction in [0, 1] (0.01: 1 % of the steps)")
+    return number
+
+
 def _pairs(option: str, items: Mapping[str, Any] | Sequence[str] | None) -> dict[str, Any]:
     """``{"a.b": v}`` from a mapping or from ``["a.b=v", ...]`` (the command line's form)."""
     if items is None:
@@ -100,6 +119,11 @@ class RunOptions:
     loop : str
         The master's stepping loop: ``auto`` (the C loop where it can run, else the Python
         loop), ``c`` (an error where it cannot run) or ``python`` (see docs/master.md).
+    overrun_budget : float or None
+        A real-time run's allowed overruns, as a fraction of its steps; beyond it
+        ``metrics["overrun_budget_exceeded"]`` is true (the command line warns and exits 3).
+        None: ``IPCOSIM_RT_OVERRUN_BUDGET``, else 0.01
+        (:data:`ipcosim.harness.master.realtime.DEFAULT_OVERRUN_BUDGET`).
     """
 
     scenario: str | os.PathLike[str]
@@ -119,6 +143,7 @@ class RunOptions:
     fmus: str = "python"
     timeout: float | None = None
     loop: str = "auto"
+    overrun_budget: float | None = None
 
     def __post_init__(self) -> None:
         if self.loop not in LOOP_CHOICES:
@@ -138,7 +163,8 @@ class RunOptions:
                record: Sequence[str] | str | None = None, algorithm: str = "gauss-seidel",
                fmu_dirs: Sequence[str | os.PathLike[str]] | None = None,
                save_baseline: str | os.PathLike[str] | None = None, progress: bool = False,
-               fmus: str = "python", timeout: Any = None, loop: str = "auto") -> "RunOptions":
+               fmus: str = "python", timeout: Any = None, loop: str = "auto",
+               overrun_budget: Any = None) -> "RunOptions":
         """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
 
         Raises
@@ -155,7 +181,8 @@ class RunOptions:
                    realtime=realtime, out=Path(out) if out is not None else None, plot=plot, record=columns,
                    algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
                    save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,
-                   fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop)
+                   fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop,
+                   overrun_budget=fraction_option("--overrun-budget", overrun_budget))
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "RunOptions":
@@ -166,7 +193,7 @@ class RunOptions:
                           plot=args.plot, record=args.record, algorithm=args.algorithm, fmu_dirs=args.fmu_dir,
                           save_baseline=args.save_baseline, progress=not args.quiet,
                           fmus=getattr(args, "fmus", "python"), timeout=getattr(args, "timeout", None),
-                          loop=getattr(args, "loop", "auto"))
+                          loop=getattr(args, "loop", "auto"), overrun_budget=getattr(args, "overrun_budget", None))
 
 
 def scenario_label(text: str | os.PathLike[str]) -> str:

@@ -4,6 +4,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+#: Exit status of a real-time run that went over its overrun budget (its results are written).
+EXIT_REALTIME_DEGRADED = 3
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="co-simulate a scenario (SSP folder or archive)",
@@ -37,6 +40,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the master's stepping loop: auto (default: compiled C where it can run, else Python), "
                         "c (an error where it cannot run) or python")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.add_argument("--overrun-budget", metavar="FRACTION",
+                   help="a real-time run's allowed late steps, as a fraction of its steps (default: "
+                        "IPCOSIM_RT_OVERRUN_BUDGET, else 0.01); a run beyond it warns and exits with status "
+                        f"{EXIT_REALTIME_DEGRADED}")
     p.add_argument("--timeout", metavar="S",
                    help="wall-clock limit [s]: stop the run there with its results so far (exit status 124)")
     p.set_defaults(func=main)
@@ -46,6 +53,7 @@ def main(args: argparse.Namespace) -> int:
     import warnings
 
     from ipcosim.harness.api import prepare_with, run_with
+    from ipcosim.harness.master.realtime import budget_warning
     from ipcosim.harness.master.results import json_safe
     from ipcosim.harness.options import RunOptions
 
@@ -74,4 +82,8 @@ def main(args: argparse.Namespace) -> int:
             print(f"  {key:22s} {value if not isinstance(value, float) else f'{value:.6g}'}")
         print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if args.plot else "")
               + (f", baseline {options.save_baseline}" if options.save_baseline else ""))
+    degraded = budget_warning(result.metrics)
+    if degraded:
+        print(f"ipcosim run: warning: {degraded}", file=sys.stderr)
+        return EXIT_REALTIME_DEGRADED
     return 0
