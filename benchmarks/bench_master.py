@@ -89,7 +89,7 @@ def _median(xs: list[float]) -> float:
 
 def bench_scenario(name: str, repeats: int = REPEATS) -> list[str]:
     import ipcosim.harness
-    from ipcosim.harness.studies.crosscheck import run_fmpy_ssp, run_libcosim
+    from ipcosim.harness.evidence.crosscheck import run_fmpy_ssp, run_libcosim
 
     ssp = BUILD_SSP_DIR / f"{name}.ssp"
     if not ssp.is_file():

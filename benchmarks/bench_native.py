@@ -162,8 +162,8 @@ def _sweep_ratio(python: Path, native: Path) -> tuple[float, float]:
 
 
 def run() -> list[str]:
-    from ipcosim.fmus.build import build_all
-    from ipcosim.fmus.native.build import build_native
+    from ipcosim.fmus.pybuild import build_all
+    from ipcosim.harness.native.cbuild import build_native
 
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)

@@ -10,9 +10,9 @@ import re
 import numpy as np
 import pytest
 
+from ipcosim.harness.grammar import parse_all
 from ipcosim.harness.studies import report
 from ipcosim.harness.studies.robustness import DEFAULT_UNCERTAINTY, default_vary, summarize
-from ipcosim.harness.studies.vary import parse_all
 
 
 def row(status="ok", **metrics):

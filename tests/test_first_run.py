@@ -28,7 +28,7 @@ def test_first_run_builds_the_missing_fmus_once(tmp_path: Path, monkeypatch: pyt
 
 def test_fmus_of_other_makers_are_not_built(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A scenario naming an FMU this project does not make still fails with binding's one line."""
-    from ipcosim.harness.api import build_missing
+    from ipcosim.harness.engine import build_missing
 
     folder = tmp_path / "mine"
     folder.mkdir()

@@ -15,7 +15,7 @@ Interface (subclass :class:`Observer`, override what you need)::
     metrics() -> dict           entries merged into the run's metrics.json
 
 The result recorder itself is built into the stepping loop (one ``memmove`` per step, see
-``ipcosim.harness.master.algorithm``); :class:`Progress` is the progress bar. Real-time pacing is provided
+``ipcosim.harness.master.pyloop``); :class:`Progress` is the progress bar. Real-time pacing is provided
 by the module named in ``REALTIME_OBSERVER`` (``module:Class``), constructed with no
 arguments when a run asks for ``realtime=True`` or a swapped-in component asks for it.
 """

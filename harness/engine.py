@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import UsageError
-from ipcosim.fmus.task import streamed_task_metrics
+from ipcosim.fmus.metrics import streamed_task_metrics
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
@@ -38,8 +38,8 @@ from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
+from ipcosim.harness.scenario.binding import SwapTarget, bind, default_step, default_stop_time, warn_all, with_overrides
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
-from ipcosim.harness.scenario.system import SwapTarget, bind, default_step, default_stop_time, warn_all, with_overrides
 
 
 def plot_run(result: Result, path: Path | None = None) -> Any:
@@ -80,7 +80,7 @@ class Prepared:
         Issue the binding's notes (unconnected inputs...) as Python warnings.
     task_metrics : callable, optional
         The task's metrics of a run's rows (``ipcosim.harness.master.execution.TaskMetrics``);
-        default the IP02 task's, :func:`ipcosim.fmus.task.streamed_task_metrics` (a scenario
+        default the IP02 task's, :func:`ipcosim.fmus.metrics.streamed_task_metrics` (a scenario
         without the pendulum's columns gets none).
     """
 
@@ -345,7 +345,7 @@ def build_missing(scenario: Scenario) -> list[str]:
     """
     if scenario.location.is_file():
         return []  # an .ssp archive carries its FMUs
-    from ipcosim.fmus.build import build_all, model_scripts
+    from ipcosim.fmus.pybuild import build_all, model_scripts
     from ipcosim.harness.scenario import ssp
 
     scripts = model_scripts()
