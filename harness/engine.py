@@ -16,6 +16,7 @@ Example::
 """
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import sys
@@ -27,7 +28,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import UsageError
-from ipcosim.fmus.metrics import streamed_task_metrics
+from ipcosim.fmus.metrics import streamed_task_metrics, task_kinds
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
@@ -234,7 +235,24 @@ class Prepared:
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
                          unzip_dirs=self.unzip_dirs,
                          record_every=record_every, max_init_iterations=max_init_iterations,
-                         task_metrics=self.task_metrics, loop=loop)
+                         task_metrics=self._run_task_metrics(values), loop=loop)
+
+    def _run_task_metrics(self, values: Mapping[tuple[str, str], Any]) -> TaskMetrics | None:
+        """The task metrics of one run: the IP02 task's with the metrics of the run's scenario kinds
+        (:func:`ipcosim.fmus.metrics.task_kinds` of the plant's start values after ``values``)."""
+        if self.task_metrics is not streamed_task_metrics:
+            return self.task_metrics
+        try:
+            plant = self.system.instance("plant")
+        except KeyError:
+            return self.task_metrics
+
+        def start(name: str) -> Any:
+            if ("plant", name) in values:
+                return values[("plant", name)]
+            return plant.start_value(name) if name in plant.model.variables else None
+
+        return functools.partial(streamed_task_metrics, kinds=task_kinds(start))
 
     def run(self, stop_time: float | None = None, step: float | None = None,
             overrides: Mapping[str, Any] | None = None, *, out_dir: str | os.PathLike[str] | None = None,

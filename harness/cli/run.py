@@ -4,6 +4,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+#: How the summary shows a metric that has no value (docs/metrics.md).
+NOT_REACHED = {"settling_time_s": "not settled", "recovery_time_s": "not recovered",
+               "time_to_upright_s": "not upright at the end"}
 #: Exit status of a real-time run that went over its overrun budget (its results are written).
 EXIT_REALTIME_DEGRADED = 3
 
@@ -79,7 +82,8 @@ def main(args: argparse.Namespace) -> int:
         for key, value in m.items():
             if key in ("wall_time_s", "real_time_factor", "loop_real_time_factor"):
                 continue
-            print(f"  {key:22s} {value if not isinstance(value, float) else f'{value:.6g}'}")
+            shown = f"{value:.6g}" if isinstance(value, float) else value
+            print(f"  {key:24s} {NOT_REACHED.get(key, 'none') if value is None else shown}")
         print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if args.plot else "")
               + (f", baseline {options.save_baseline}" if options.save_baseline else ""))
     degraded = budget_warning(result.metrics)

@@ -39,7 +39,7 @@ class Result:
         Field ``time`` [s], then one field ``component.variable`` per recorded connector
         (SI units), one row per recorded communication point (row 0 is the initial state).
     metrics : dict
-        ``metrics.json`` content (see DESIGN.md): the task metrics, ``wall_time_s`` (the whole
+        ``metrics.json`` content (see docs/metrics.md): the task metrics, ``wall_time_s`` (the whole
         run: load, instantiate, initialize, step, write), ``real_time_factor`` (simulated /
         wall_time_s) and ``loop_real_time_factor`` (simulated / stepping-loop seconds).
     metadata : dict

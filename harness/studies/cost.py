@@ -22,7 +22,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-#: |angle| at or above which the pendulum counts as fallen [rad] (the DESIGN.md upright limit).
+#: |angle| at or above which the pendulum counts as fallen [rad] (the ``upright`` limit of docs/metrics.md).
 FALL_ANGLE = 0.35
 #: Default weight of the angle term [m/rad].
 W_ANGLE = 0.1
@@ -127,7 +127,7 @@ def surrogate_cost(metrics: Mapping[str, Any], stop_time: float, w_angle: float 
 
 def task_metrics(time: np.ndarray, position: np.ndarray, reference: np.ndarray, angle: np.ndarray,
                  voltage: np.ndarray) -> dict[str, Any]:
-    """DESIGN.md metrics (``ipcosim.fmus.metrics.compute_metrics``) plus the cost terms."""
+    """The task metrics (``ipcosim.fmus.metrics.compute_metrics``) plus the cost terms (docs/metrics.md)."""
     from ipcosim.fmus.metrics import compute_metrics
 
     metrics = dict(compute_metrics(time, position, reference, angle, voltage))
