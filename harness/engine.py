@@ -304,6 +304,8 @@ class Prepared:
                     partial.write(out_dir, variables=variables, plot=plot, csv=False)
             raise
         result.plotter = plot_run
+        result.metadata["voltage_limit_V"] = next(  # the limit the figure draws (ipcosim.harness.plot)
+            (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
         result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
         result.metadata["swaps"] = dict(self.swaps)
         if out_dir is not None:
@@ -348,6 +350,17 @@ class Prepared:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+def _start(execution: Execution, component: str, variable: str) -> Any:
+    """The value ``component.variable`` starts a run with (its override, else its bound start), or None."""
+    try:
+        inst = execution.system.instance(component)
+    except KeyError:
+        return None
+    if variable not in inst.model.variables:
+        return None
+    return execution.overrides.get((component, variable), inst.start_value(variable))
 
 
 def build_missing(scenario: Scenario) -> list[str]:
