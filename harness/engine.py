@@ -79,6 +79,9 @@ class Prepared:
         An already bound system (tests); skips loading and binding.
     warn : bool
         Issue the binding's notes (unconnected inputs...) as Python warnings.
+    strict : bool
+        Parameters of the scenario that a swapped-in FMU does not have are an error (default:
+        ignored, with one warning per component).
     task_metrics : callable, optional
         The task's metrics of a run's rows (``ipcosim.harness.master.execution.TaskMetrics``);
         default the IP02 task's, :func:`ipcosim.fmus.metrics.streamed_task_metrics` (a scenario
@@ -90,7 +93,7 @@ class Prepared:
                  swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
                  fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, algorithm: str = GAUSS_SEIDEL,
                  workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
-                 system: System | None = None, warn: bool = True, fmus: str = "python",
+                 system: System | None = None, warn: bool = True, fmus: str = "python", strict: bool = False,
                  task_metrics: TaskMetrics | None = streamed_task_metrics) -> None:
         from ipcosim.harness.scenario.flavour import check_flavour, to_native
 
@@ -122,7 +125,7 @@ class Prepared:
             if fmus == "native":
                 scenario, self._python_values = to_native(_with_fmus(scenario, archived))
             self.scenario = scenario
-            self.system = bind(scenario, swaps=swaps, fmu_files=archived)
+            self.system = bind(scenario, swaps=swaps, fmu_files=archived, strict_swaps=strict)
             if warn:
                 warn_all(self.system)
             if slave_factory is None:
@@ -396,7 +399,8 @@ def prepare(scenario_or_path: str | os.PathLike[str] | Scenario, **kwargs: Any) 
 def prepare_with(options: RunOptions, *, warn: bool = True) -> Prepared:
     """A :class:`Prepared` scenario for ``options`` (scenario, parameter set, swaps, FMU folders, algorithm)."""
     return Prepared(options.scenario, parameter_set=options.parameter_set, swaps=options.swap,
-                    fmu_dirs=options.fmu_dirs, algorithm=options.algorithm, warn=warn, fmus=options.fmus)
+                    fmu_dirs=options.fmu_dirs, algorithm=options.algorithm, warn=warn, fmus=options.fmus,
+                    strict=options.strict)
 
 
 def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers: Sequence[Observer] = (),

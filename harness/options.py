@@ -124,6 +124,9 @@ class RunOptions:
         ``metrics["overrun_budget_exceeded"]`` is true (the command line warns and exits 3).
         None: ``IPCOSIM_RT_OVERRUN_BUDGET``, else 0.01
         (:data:`ipcosim.harness.master.realtime.DEFAULT_OVERRUN_BUDGET`).
+    strict : bool
+        Parameters of the scenario that a swapped-in FMU does not have are an error (default:
+        ignored, named in one warning line per component).
     """
 
     scenario: str | os.PathLike[str]
@@ -144,6 +147,7 @@ class RunOptions:
     timeout: float | None = None
     loop: str = "auto"
     overrun_budget: float | None = None
+    strict: bool = False
 
     def __post_init__(self) -> None:
         if self.loop not in LOOP_CHOICES:
@@ -164,7 +168,7 @@ class RunOptions:
                fmu_dirs: Sequence[str | os.PathLike[str]] | None = None,
                save_baseline: str | os.PathLike[str] | None = None, progress: bool = False,
                fmus: str = "python", timeout: Any = None, loop: str = "auto",
-               overrun_budget: Any = None) -> "RunOptions":
+               overrun_budget: Any = None, strict: bool = False) -> "RunOptions":
         """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
 
         Raises
@@ -182,7 +186,7 @@ class RunOptions:
                    algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
                    save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,
                    fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop,
-                   overrun_budget=fraction_option("--overrun-budget", overrun_budget))
+                   overrun_budget=fraction_option("--overrun-budget", overrun_budget), strict=strict)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "RunOptions":
@@ -193,7 +197,8 @@ class RunOptions:
                           plot=args.plot, record=args.record, algorithm=args.algorithm, fmu_dirs=args.fmu_dir,
                           save_baseline=args.save_baseline, progress=not args.quiet,
                           fmus=getattr(args, "fmus", "python"), timeout=getattr(args, "timeout", None),
-                          loop=getattr(args, "loop", "auto"), overrun_budget=getattr(args, "overrun_budget", None))
+                          loop=getattr(args, "loop", "auto"), overrun_budget=getattr(args, "overrun_budget", None),
+                          strict=getattr(args, "strict", False))
 
 
 def scenario_label(text: str | os.PathLike[str]) -> str:

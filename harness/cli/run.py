@@ -23,6 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="override a parameter or input start value, e.g. --set plant.Mp=0.2 (repeatable)")
     p.add_argument("--swap", action="append", default=[], metavar="COMPONENT=FMU_OR_ALIAS",
                    help="replace a component by another FMU with compatible connectors, e.g. --swap plant=hil")
+    p.add_argument("--strict", action="store_true",
+                   help="parameters of the scenario that a swapped-in FMU does not have are an error (default: "
+                        "ignored, named in one warning line)")
     p.add_argument("--realtime", action="store_true", help="pace the run to wall-clock time")
     p.add_argument("--out", metavar="DIR", help="output folder (default: out/<scenario>)")
     p.add_argument("--plot", action="store_true", help="also write DIR/plot.png")

@@ -237,7 +237,7 @@ def unit_conversion(src: str | None, dst: str | None, table: Mapping[str, Unit])
 # --------------------------------------------------------------------------- binding
 def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
          fmu_files: Mapping[str, Path] | None = None, models: Mapping[str, Model] | None = None,
-         strict_parameters: bool = True) -> System:
+         strict_parameters: bool = True, strict_swaps: bool = False) -> System:
     """Check a scenario against its FMUs and resolve it into a :class:`System`.
 
     Parameters
@@ -252,7 +252,10 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
         Ready model interfaces (tests with mock slaves); bypasses reading FMU files.
     strict_parameters : bool
         An unknown parameter in a binding is an error (True) or a warning (False; SSP allows
-        ignoring it). Bindings of swapped components are always lenient.
+        ignoring it).
+    strict_swaps : bool
+        The same for the bindings of swapped-in components (``--strict``); by default the
+        parameters such an FMU does not have are ignored, named in one warning per component.
 
     Raises
     ------
@@ -267,7 +270,7 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
     notes: list[str] = []   # warnings: what may be wrong (unconnected inputs, ignored parameters)
     infos: list[str] = []   # notes: what was done (swaps, connectors left out)
     instances = [_bind_component(scenario, comp, swaps, dict(fmu_files or {}), dict(models or {}),
-                                 strict_parameters, notes, infos) for comp in scenario.components]
+                                 (strict_parameters, strict_swaps), notes, infos) for comp in scenario.components]
     by_name = {i.name: i for i in instances}
     fed: dict[str, str] = {}  # which output feeds each input: {"comp.input": "comp.output"}
     links = [_bind_connection(scenario, conn, by_name, fed) for conn in scenario.connections]
@@ -297,10 +300,11 @@ def _component_model(scenario: Scenario, comp: Component, swapped: bool, fmu_fil
 
 
 def _bind_component(scenario: Scenario, comp: Component, swaps: Mapping[str, Any], fmu_files: Mapping[str, Path],
-                    models: Mapping[str, Model], strict_parameters: bool, notes: list[str],
+                    models: Mapping[str, Model], strict: tuple[bool, bool], notes: list[str],
                     infos: list[str]) -> Instance:
     """One component as an :class:`Instance`: its FMU (or the one swapped in), connectors checked
-    against the FMU's variables, and its parameter bindings converted; appends to ``notes``/``infos``."""
+    against the FMU's variables, and its parameter bindings converted (``strict``: for its own
+    FMU, for one swapped in); appends to ``notes``/``infos``."""
     model = _component_model(scenario, comp, comp.name in swaps, fmu_files, models)
     swapped_from, realtime, extra = None, False, {}
     if comp.name in swaps:
@@ -314,7 +318,7 @@ def _bind_component(scenario: Scenario, comp: Component, swaps: Mapping[str, Any
     assert model is not None
     where = f"{scenario.origin}: component {comp.name!r} ({model.path.name if model.path else comp.source})"
     connectors = _bind_connectors(scenario, comp, model, where, swapped_from, infos)
-    params = _bind_parameters(comp, model, where, strict_parameters and swapped_from is None, notes)
+    params = _bind_parameters(comp, model, where, strict[0] if swapped_from is None else strict[1], notes)
     for name, value in extra.items():
         var = model.variables.get(name)
         if var is None or not var.settable:
@@ -346,18 +350,22 @@ def _bind_connectors(scenario: Scenario, comp: Component, model: Model, where: s
 
 def _bind_parameters(comp: Component, model: Model, where: str, strict: bool,
                      notes: list[str]) -> list[tuple[Variable, Any]]:
-    """A component's parameter bindings as (variable, converted value); an unknown name is an
-    error when ``strict``, else a note in ``notes``; a variable that cannot be set is always an error."""
+    """A component's parameter bindings as (variable, converted value); names the FMU does not
+    have are an error when ``strict``, else one note per parameter set in ``notes``; a variable
+    that cannot be set is always an error."""
     params: list[tuple[Variable, Any]] = []
     for pset in comp.bindings:
+        src = pset.source or "inline ParameterValues"
+        missing = [p.name for p in pset.parameters if p.name not in model.variables]
+        if missing:
+            msg = (f"{where}: parameter set {pset.name!r} ({src}) sets {len(missing)} parameter(s) the FMU does "
+                   f"not have: {', '.join(missing)}")
+            if strict:
+                raise BindingError(msg)
+            notes.append(msg + "; ignored (--strict: an error)")
         for p in pset.parameters:
             var = model.variables.get(p.name)
-            src = pset.source or "inline ParameterValues"
             if var is None:
-                msg = f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which the FMU does not have"
-                if strict:
-                    raise BindingError(msg)
-                notes.append(msg + "; ignored")
                 continue
             if not var.settable:
                 raise BindingError(f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which is "
