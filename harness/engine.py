@@ -51,6 +51,46 @@ def plot_run(result: Result, path: Path | None = None) -> Any:
     return figure(result) if path is None else plot_result(result, path)
 
 
+#: Name of a run's temporary extraction folder, followed by the owning process's id: ``ipcosim-run-<pid>-*``.
+EXTRACT_PREFIX = "ipcosim-run-"
+
+
+def remove_stale_extractions(root: str | os.PathLike[str] | None = None) -> list[Path]:
+    """Remove the extraction folders (:data:`EXTRACT_PREFIX`) in ``root`` (default: the temporary
+    folder) whose owning process is gone -- a run killed before it could clean up -- and that
+    belong to this user; folders of running processes are left alone.
+
+    Returns
+    -------
+    list of Path
+        The folders removed.
+    """
+    removed = []
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{EXTRACT_PREFIX}*-*"):
+        pid = folder.name[len(EXTRACT_PREFIX):].split("-", 1)[0]
+        try:
+            mine = folder.is_dir() and folder.stat().st_uid == os.getuid()
+        except (OSError, AttributeError):  # gone meanwhile; no uids on this OS
+            continue
+        if mine and pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (True where that cannot be asked safely)."""
+    if os.name == "nt":  # os.kill(pid, 0) would send it CTRL_C_EVENT there
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, someone else's
+        return True
+    return True
+
+
 def _remove_temp(path: str) -> None:
     shutil.rmtree(path, ignore_errors=True)
     signals.unregister_temp(path)
@@ -155,12 +195,13 @@ class Prepared:
 
     def _workdir(self, workdir: str | os.PathLike[str] | None) -> Path:
         """The folder FMUs are extracted to: ``workdir``, or a temporary one removed by :meth:`close`
-        (and on a forced exit)."""
+        (and on a forced exit; a killed process's is removed by the next run, :func:`remove_stale_extractions`)."""
         if workdir is not None:
             work = Path(workdir)
             work.mkdir(parents=True, exist_ok=True)
             return work
-        self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
+        remove_stale_extractions()
+        self._tmp = Path(tempfile.mkdtemp(prefix=f"{EXTRACT_PREFIX}{os.getpid()}-"))
         self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
         signals.register_temp(self._tmp)
         return self._tmp
