@@ -20,6 +20,7 @@ arrays (the FMI 2.0 representation), String buffers Python lists of ``bytes``.
 from __future__ import annotations
 
 import ctypes
+import math
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -97,6 +98,11 @@ class Slave:
         """After a Discard from ``do_step``: whether the FMU ended the simulation itself, and
         what its status query returned (for messages)."""
         return False, "the slave offers no status query"
+
+    def last_successful_time(self) -> float | None:
+        """After the FMU ended the simulation in a step: the time it reached in that step (FMI 2.0
+        ``fmi2GetRealStatus(fmi2LastSuccessfulTime)``, FMI 3.0 ``lastSuccessfulTime``), or None."""
+        return None
 
     def messages(self) -> list[str]:
         """Log messages the slave reported, oldest first (bounded)."""
@@ -350,6 +356,11 @@ class FMUSlave(Slave):
         return bool(value.value), (f"fmi2GetBooleanStatus(fmi2Terminated) returned "
                                    f"{'fmi2True' if value.value else 'fmi2False'}")
 
+    def last_successful_time(self) -> float | None:
+        value = ctypes.c_double(math.nan)
+        status = self._fmu._functions["fmi2GetRealStatus"](self._fmu.component, 2, ctypes.byref(value))
+        return float(value.value) if status <= WARNING and math.isfinite(value.value) else None
+
 
 _FMI3_CTYPES = {"Float64": ctypes.c_double, "Float32": ctypes.c_float, "Int8": ctypes.c_int8,
                 "UInt8": ctypes.c_uint8, "Int16": ctypes.c_int16, "UInt16": ctypes.c_uint16,
@@ -495,6 +506,10 @@ class FMU3Slave(FMUSlave):
     def terminated(self) -> tuple[bool, str]:
         flag = bool(self._flags[1].value)
         return flag, f"fmi3DoStep set terminateSimulation = {'true' if flag else 'false'}"
+
+    def last_successful_time(self) -> float | None:
+        value = float(self._flags[3].value)
+        return value if math.isfinite(value) else None
 
 
 def load_library(instance: Instance, unzip_dir: Path) -> Any:
