@@ -28,12 +28,14 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import UsageError
+from ipcosim.fmus.hil.observer import CardObserver
 from ipcosim.fmus.metrics import streamed_task_metrics, task_kinds
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
 from ipcosim.harness.master.manipulators import Manipulator
-from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
+from ipcosim.harness.master.observers import Observer, Progress
+from ipcosim.harness.master.realtime import RealtimePacer
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
 from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.master.system import System
@@ -270,10 +272,9 @@ class Prepared:
         if progress:
             observers.append(Progress())
         if realtime or (realtime is None and self.system.realtime):
-            observers.append(realtime_observer(overrun_budget=overrun_budget))
+            observers += [RealtimePacer(overrun_budget=overrun_budget), CardObserver(overruns=True)]
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
-            from ipcosim.harness.master.realtime import CardFaultRecorder
-            observers.append(CardFaultRecorder())
+            observers.append(CardObserver())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
                          algorithm=algorithm or self.algorithm, overrides=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
