@@ -102,9 +102,13 @@ def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, floa
         elif value != 0.0:
             raise NativeParameterError(f"the native flavour of {info['model']} has no integrator coefficient {name} "
                                        f"(0 in its generated code), but these parameters make it {value!r}: "
-                                       "run with --fmus python")
+                                       f"{PYTHON_FLAVOUR}")
     out["integrator_step"] = step
     return out
+
+
+#: Where such a run goes instead (``ipcosim export`` has no flavour option: it exports native FMUs only).
+PYTHON_FLAVOUR = "`ipcosim run --fmus python` runs it"
 
 
 def check_instruments(info: Mapping[str, Any], values: Mapping[str, Any]) -> None:
@@ -114,8 +118,8 @@ def check_instruments(info: Mapping[str, Any], values: Mapping[str, Any]) -> Non
         if name in values and float(values[name]) != 0.0:
             raise NativeParameterError(
                 f"the native flavour of {info['model']} has no instruments: parameter {name} = {values[name]} must "
-                "be 0 there (quantization, noise, end stops, delay and taps are in the python flavour only: run "
-                "with --fmus python)")
+                f"be 0 there (quantization, noise, end stops, delay and taps are in the python flavour only: "
+                f"{PYTHON_FLAVOUR})")
 
 
 def check_settable(info: Mapping[str, Any], fmu_name: str, names: list[str], known: set[str]) -> None:
@@ -123,7 +127,7 @@ def check_settable(info: Mapping[str, Any], fmu_name: str, names: list[str], kno
     for name in names:
         if name not in known:
             extra = " (a design parameter of the python flavour only: the native flavour takes the numbers " \
-                    "the design computes; run with --fmus python, or see docs/native.md to redesign)" \
+                    f"the design computes; {PYTHON_FLAVOUR}, or see docs/native.md to redesign)" \
                 if name in info.get("python_only", ()) else ""
             near = "" if extra else f"; {closest(name, known)}"
             raise NativeParameterError(f"the native flavour of {fmu_name} has no parameter {name!r}{extra}{near}")
