@@ -124,6 +124,10 @@ class Prepared:
     strict : bool
         Parameters of the scenario that a swapped-in FMU does not have are an error (default:
         ignored, with one warning per component).
+    reuse_instances : bool
+        Keep each component's FMU instance between runs and reset it (``fmi2Reset``) instead of
+        instantiating anew (:attr:`ipcosim.harness.master.slave.FMUSlave.reusable`): for studies
+        of many runs, where each pythonfmu instantiation would keep a few kB alive.
     task_metrics : callable, optional
         The task's metrics of a run's rows (``ipcosim.harness.master.execution.TaskMetrics``);
         default the IP02 task's, :func:`ipcosim.fmus.metrics.streamed_task_metrics` (a scenario
@@ -136,6 +140,7 @@ class Prepared:
                  fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, algorithm: str = GAUSS_SEIDEL,
                  workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
                  system: System | None = None, warn: bool = True, fmus: str = "python", strict: bool = False,
+                 reuse_instances: bool = False,
                  task_metrics: TaskMetrics | None = streamed_task_metrics) -> None:
         from ipcosim.harness.scenario.flavour import check_flavour, to_native
 
@@ -153,6 +158,8 @@ class Prepared:
         self.swaps = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
                       for k, v in (swaps or {}).items()}
         self._libraries: dict[str, Any] = {}
+        self.reuse_instances = reuse_instances
+        self._kept: dict[str, FMUSlave] = {}  # component -> its instance between runs (reuse_instances)
         self._tmp: Path | None = None
         self._finalizer: Any = None
         self.unzip_dirs: dict[str, Path] = {}
@@ -374,13 +381,26 @@ class Prepared:
     def _fmu_slave(self, instance: Any) -> FMUSlave:
         """A slave on this preparation's loaded library of the component (loaded on first use
         and kept for the following runs: one run at a time per Prepared)."""
+        kept = self._kept.get(instance.name)
+        if kept is not None and kept.state == "parked":
+            return kept
         lib = self._libraries.get(instance.name)
         if lib is None:
             lib = self._libraries[instance.name] = load_library(instance, self.unzip_dirs[instance.name])
-        return FMUSlave(instance, self.unzip_dirs[instance.name], library=lib)
+        slave = FMUSlave(instance, self.unzip_dirs[instance.name], library=lib)
+        if self.reuse_instances:
+            slave.reusable = True
+            self._kept[instance.name] = slave
+        return slave
 
     def close(self) -> None:
         """Unload the FMUs' libraries and remove the extracted FMUs (if this object created the folder)."""
+        for slave in self._kept.values():
+            try:
+                slave.release()
+            except Exception:  # noqa: BLE001 -- best effort, as unloading below
+                pass
+        self._kept.clear()
         for lib in self._libraries.values():
             try:
                 lib.freeLibrary()
