@@ -29,15 +29,8 @@ def seconds_option(option: str, value: Any) -> float | None:
     UsageError
         Naming the option and the value.
     """
-    if value is None:
-        return None
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise UsageError(f"{option} {value!r}: not a number of seconds") from None
-    if not (math.isfinite(number) and number > 0):
-        raise UsageError(f"{option} {value}: must be a positive number of seconds")
-    return number
+    return _number_option(option, value, lambda x: math.isfinite(x) and x > 0, "not a number of seconds",
+                          "must be a positive number of seconds")
 
 
 def fraction_option(option: str, value: Any) -> float | None:
@@ -48,14 +41,20 @@ def fraction_option(option: str, value: Any) -> float | None:
     UsageError
         Naming the option and the value.
     """
+    expected = "expected a fraction in [0, 1] (0.01: 1 % of the steps)"
+    return _number_option(option, value, lambda x: 0.0 <= x <= 1.0, expected, expected)
+
+
+def _number_option(option: str, value: Any, ok: Any, not_number: str, out_of_range: str) -> float | None:
+    """``value`` as a float if ``ok(float)``, None for None; else UsageError ``"OPTION VALUE: why"``."""
     if value is None:
         return None
     try:
         number = float(value)
     except (TypeError, ValueError):
-        number = math.nan
-    if not 0.0 <= number <= 1.0:  # NaN fails too
-        raise UsageError(f"{option} {value}: expected a fraction in [0, 1] (0.01: 1 % of the steps)")
+        raise UsageError(f"{option} {value!r}: {not_number}") from None
+    if not ok(number):  # NaN fails every check
+        raise UsageError(f"{option} {value}: {out_of_range}")
     return number
 
 
