@@ -14,7 +14,7 @@ def test_a_reset_instance_runs_as_a_fresh_one() -> None:
     with Prepared("single-mass-lqr", warn=False) as fresh:
         reference = fresh.run(stop_time=0.5)
     with Prepared("single-mass-lqr", warn=False, reuse_instances=True) as p:
-        changed = p.run(stop_time=0.5, overrides={"plant.Mp": 0.3, "controller.sample_period": 0.002})
+        changed = p.run(stop_time=0.5, set={"plant.Mp": 0.3, "controller.sample_period": 0.002})
         kept = dict(p._kept)
         assert {s.state for s in kept.values()} == {"parked"}
         again = p.run(stop_time=0.5)
@@ -27,7 +27,7 @@ def test_a_reset_instance_runs_as_a_fresh_one() -> None:
 
 def test_an_instance_whose_run_failed_is_not_reused() -> None:
     with Prepared("single-mass-lqr", warn=False, reuse_instances=True) as p:
-        failed = p.run(stop_time=0.2, overrides={"plant.Mp": -1.0}, raise_on_error=False)
+        failed = p.run(stop_time=0.2, set={"plant.Mp": -1.0}, raise_on_error=False)
         assert failed.error is not None
         before = dict(p._kept)
         ok = p.run(stop_time=0.2)

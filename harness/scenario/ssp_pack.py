@@ -60,23 +60,15 @@ def pack_all(out: Path | str = "build", root: Path = SCENARIO_DIR) -> list[Path]
     """Pack every scenario of ``root`` into ``<out>/ssp/<name>.ssp`` with the FMUs of ``<out>/fmus``.
 
     A scenario whose FMUs are not built is skipped with a note on stderr; an archive newer than
-    its files is left as it is.
-
-    Returns
-    -------
-    list of Path
-        Every archive of ``<out>/ssp`` that is up to date now.
+    every file it holds is left as it is. Returns the archives written.
     """
     out = Path(out)
     written = []
     for name in scenario_names(root):
         target = out / "ssp" / f"{name}.ssp"
         try:
-            if up_to_date(root / name, out / "fmus", target):
-                print(f"up to date: {target}")
-            else:
-                print(f"packed: {pack(root / name, out / 'fmus', target)}")
-            written.append(target)
+            if not up_to_date(root / name, out / "fmus", target):
+                written.append(pack(root / name, out / "fmus", target))
         except FileNotFoundError as exc:
             print(f"skipped {name}.ssp: {exc}", file=sys.stderr)
     return written

@@ -1,6 +1,6 @@
 """``docs/api.md``'s table of the Python API beside the command line, generated from the functions'
 signatures and from the ``ipcosim run`` parser, so the reference cannot fall behind the code:
-``python -m ipcosim.harness.apidoc --update`` rewrites the block between the ``api:run`` markers.
+``python -m ipcosim.harness.cli.apidoc --update`` rewrites the block between the ``api:run`` markers.
 """
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 #: Name of the generated block in docs/api.md (``<!-- api:run -->`` ... ``<!-- /api:run -->``).
 BLOCK = "api:run"
-DOC = Path(__file__).resolve().parents[1] / "docs" / "api.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "api.md"
 
 
 def python_call(function: object, name: str) -> str:
@@ -92,7 +92,7 @@ def update(doc: Path = DOC) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     """``--update``: rewrite docs/api.md; else print the block."""
-    parser = argparse.ArgumentParser(prog="python -m ipcosim.harness.apidoc", allow_abbrev=False,
+    parser = argparse.ArgumentParser(prog="python -m ipcosim.harness.cli.apidoc", allow_abbrev=False,
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--update", action="store_true", help="rewrite the block in docs/api.md")
     args = parser.parse_args(argv)
