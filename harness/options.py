@@ -30,14 +30,32 @@ def seconds_option(option: str, value: Any) -> float | None:
     UsageError
         Naming the option and the value.
     """
+    return _number_option(option, value, lambda x: math.isfinite(x) and x > 0, "not a number of seconds",
+                          "must be a positive number of seconds")
+
+
+def fraction_option(option: str, value: Any) -> float | None:
+    """A fraction in [0, 1] (text or number), or None.
+
+    Raises
+    ------
+    UsageError
+        Naming the option and the value.
+    """
+    expected = "expected a fraction in [0, 1] (0.01: 1 % of the steps)"
+    return _number_option(option, value, lambda x: 0.0 <= x <= 1.0, expected, expected)
+
+
+def _number_option(option: str, value: Any, ok: Any, not_number: str, out_of_range: str) -> float | None:
+    """``value`` as a float if ``ok(float)``, None for None; else UsageError ``"OPTION VALUE: why"``."""
     if value is None:
         return None
     try:
         number = float(value)
     except (TypeError, ValueError):
-        raise UsageError(f"{option} {value!r}: not a number of seconds") from None
-    if not (math.isfinite(number) and number > 0):
-        raise UsageError(f"{option} {value}: must be a positive number of seconds")
+        raise UsageError(f"{option} {value!r}: {not_number}") from None
+    if not ok(number):  # NaN fails every check
+        raise UsageError(f"{option} {value}: {out_of_range}")
     return number
 
 
@@ -86,6 +104,14 @@ class RunOptions:
     parameter_file : Path or None
         An SSV file of ``component.variable`` values (``ipcosim identify --out``'s ``identified.ssv``),
         applied after the scenario's own sets; ``set`` applies after it (:func:`with_parameter_file`).
+    overrun_budget : float or None
+        A real-time run's allowed overruns, as a fraction of its steps; beyond it
+        ``metrics["overrun_budget_exceeded"]`` is true (the command line warns and exits 3).
+        None: ``IPCOSIM_RT_OVERRUN_BUDGET``, else 0.01
+        (:data:`ipcosim.harness.master.realtime.DEFAULT_OVERRUN_BUDGET`).
+    strict : bool
+        Parameters of the scenario that a swapped-in FMU does not have are an error (default:
+        ignored, named in one warning line per component).
     """
 
     scenario: str | os.PathLike[str]
@@ -106,6 +132,8 @@ class RunOptions:
     timeout: float | None = None
     loop: str = "auto"
     parameter_file: Path | None = None
+    overrun_budget: float | None = None
+    strict: bool = False
 
     def __post_init__(self) -> None:
         if self.loop not in LOOPS:
@@ -126,6 +154,7 @@ class RunOptions:
                fmu_dirs: Sequence[str | os.PathLike[str]] | None = None,
                save_baseline: str | os.PathLike[str] | None = None, progress: bool = False,
                fmus: str = "python", timeout: Any = None, loop: str = "auto",
+               overrun_budget: Any = None, strict: bool = False,
                parameter_file: str | os.PathLike[str] | None = None) -> "RunOptions":
         """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
 
@@ -146,6 +175,7 @@ class RunOptions:
                    algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
                    save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,
                    fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop,
+                   overrun_budget=fraction_option("--overrun-budget", overrun_budget), strict=strict,
                    parameter_file=Path(parameter_file) if parameter_file is not None else None)
 
     @classmethod
@@ -157,7 +187,9 @@ class RunOptions:
                           plot=args.plot, record=args.record, algorithm=args.algorithm, fmu_dirs=args.fmu_dir,
                           save_baseline=args.save_baseline, progress=not args.quiet,
                           fmus=getattr(args, "fmus", "python"), timeout=getattr(args, "timeout", None),
-                          loop=getattr(args, "loop", "auto"), parameter_file=getattr(args, "parameter_file", None))
+                          loop=getattr(args, "loop", "auto"), overrun_budget=getattr(args, "overrun_budget", None),
+                          strict=getattr(args, "strict", False),
+                          parameter_file=getattr(args, "parameter_file", None))
 
 
 def with_parameter_file(path: str | os.PathLike[str] | None, values: Mapping[str, Any]) -> dict[str, Any]:

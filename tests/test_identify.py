@@ -148,7 +148,7 @@ def test_missing_columns_and_unknown_names_are_one_line_refusals(tmp_path):
     csv = _log(tmp_path / "log.csv", {"time": t, "plant.voltage": np.sin(t), "plant.cart_position": 0 * t})
     with pytest.raises(IdentifyError, match=r"log\.csv: no column plant\.pendulum_angle"):
         identify(IdentifyOptions.create(csv, plant="single-mass"))
-    with pytest.raises(ValueError, match=r"--fit Bq: .*closest: Beq"):
+    with pytest.raises(ValueError, match=r"--fit Bq: .*did you mean .Beq."):
         IdentifyOptions.create(csv, plant="single-mass", fit="Mc,Bq")
     with pytest.raises(ValueError, match=r"--preset thesis-ch4: not a single-mass preset"):
         IdentifyOptions.create(csv, plant="single-mass", preset="thesis-ch4")

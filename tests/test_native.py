@@ -147,14 +147,13 @@ def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int
     """
     from fmi_helpers import instantiate
 
-    from ipcosim.controllers.catalog import build_law, defaults, lqr_from_gains, lqr_gains, swing_up_around
+    from ipcosim.controllers.catalog import DESIGNED_LAWS, build_law, defaults, designed_gains, law_from_gains
     from ipcosim.fmus.physics import MEASURED
 
     law, kind = _laws()[law_name]
     py = build_law(kind, law, defaults(kind, law), backend="scipy")
-    if law in ("LQR", "SwingUp"):  # what the Python FMU runs on its shipped gains (controller_fmu)
-        lqr = lqr_from_gains(kind, defaults(kind, law), lqr_gains(getattr(py, "balance", py)))
-        py = swing_up_around(kind, defaults(kind, law), lqr) if law == "SwingUp" else lqr
+    if law in DESIGNED_LAWS:  # what the Python FMU runs on its shipped gains (controller_fmu)
+        py = law_from_gains(kind, law, defaults(kind, law), designed_gains(py))
     inst = instantiate(fmu, unzip)
     s = inst.slave
     rng = random.Random(zlib.crc32(law_name.encode()))
@@ -287,7 +286,9 @@ def test_native_fmus_validate(native_fmus: tuple[Path, Path]) -> None:
 
     _, native = native_fmus
     fmus = sorted(native.glob("*.fmu"))
-    assert len(fmus) == 14
+    from ipcosim.harness.native.cbuild import model_names
+    assert [f.stem for f in fmus] == sorted(model_names())  # every native model, LQG laws included
+    assert {"LQGSingleMass", "LQGDoubleMass", "SwingUpSingleMass"} <= {f.stem for f in fmus}
     for fmu in fmus:
         assert validate_fmu(str(fmu)) == [], fmu.name
         md = read_model_description(str(fmu))
@@ -480,7 +481,8 @@ def test_crosscheck_layout_validates_and_flavours_agree(native_fmus: tuple[Path,
 
     python, native = native_fmus
     count, problems = write_tree(tmp_path, {"ipcosim-python": python, "ipcosim-native": native}, "test")
-    assert problems == [] and count == 28  # 14 models (not the HIL adapter) in each flavour
+    from ipcosim.harness.native.cbuild import model_names
+    assert problems == [] and count == 2 * len(model_names())  # every native model (not the HIL adapter), twice
     base = tmp_path / "fmus" / "2.0" / "cs" / "linux64"
     for folder in sorted((base / "ipcosim-native" / "test").iterdir()):
         a = np.genfromtxt(base / "ipcosim-python" / "test" / folder.name / f"{folder.name}_ref.csv", delimiter=",",

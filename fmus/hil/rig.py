@@ -45,6 +45,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from ipcosim.errors import closest
 from ipcosim.fmus import instruments
 from ipcosim.fmus.hil.api import (
     CardInfo,
@@ -100,7 +101,7 @@ def experiment_config(name: str | None, given: Mapping[str, object]) -> dict[str
     """``RigConfig`` keywords for the experiment ``name`` (``EXPERIMENTS``; None: none) under the ones
     ``given``: a given value wins, given initial-state values join the experiment's."""
     if name is not None and name not in EXPERIMENTS:
-        raise ValueError(f"rig experiment {name!r}: expected one of {', '.join(EXPERIMENTS)}")
+        raise ValueError(f"--experiment {name}: no such rig experiment; {closest(name, EXPERIMENTS)}")
     setup = EXPERIMENTS.get(name or "", {})
     out = {**{k: v for k, v in setup.items() if k != "initial_state"}, **given}
     out["initial_state"] = {**setup.get("initial_state", {}), **given.get("initial_state", {})}  # type: ignore[dict-item]

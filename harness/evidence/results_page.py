@@ -175,7 +175,7 @@ def update(path: Path, samples: int = 20, workers: int = 2) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     parser.add_argument("--update", type=Path, help="rewrite this markdown file between the results markers")
     parser.add_argument("--samples", type=int, default=20, help="robustness runs per row (default 20)")
     parser.add_argument("--workers", type=int, default=2)

@@ -24,7 +24,6 @@ that is wrong (docs/identify.md).
 from __future__ import annotations
 
 import csv
-import difflib
 import math
 import time as _time
 from dataclasses import dataclass, field, fields, replace
@@ -33,7 +32,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ipcosim.errors import UsageError
+from ipcosim.errors import UsageError, closest
 from ipcosim.fmus.instruments import Instruments, realism
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, PRESETS, preset
 from ipcosim.fmus.physics import MEASURED, state_names
@@ -106,20 +105,15 @@ class IdentifyOptions:
             raise UsageError(f"--plant {plant}: expected one of {', '.join(KINDS)}")
         if preset is not None and (preset not in PRESETS or PRESETS[preset][0] != plant):
             known = [p for p, (k, _, _) in PRESETS.items() if k == plant]
-            raise UsageError(f"--preset {preset}: not a {plant} preset{_closest(preset, known)}")
+            raise UsageError(f"--preset {preset}: not a {plant} preset; {closest(preset, known)}")
         names = [n.strip() for item in ([fit] if isinstance(fit, str) else (fit or ()))
                  for n in str(item).split(",") if n.strip()]
         known = [f.name for f in fields(PLANT_KINDS[plant])]
         for name in names:
             if name not in known:
-                raise UsageError(f"--fit {name}: the {plant} plant has no parameter {name!r}{_closest(name, known)}")
+                raise UsageError(f"--fit {name}: the {plant} plant has no parameter {name!r}; {closest(name, known)}")
         return cls(source=Path(source), plant=plant, fit=tuple(dict.fromkeys(names)) or DEFAULT_FIT[plant],
                    preset=preset, out=Path(out) if out is not None else None)
-
-
-def _closest(name: str, known: Sequence[str]) -> str:
-    near = difflib.get_close_matches(name, known, n=3, cutoff=0.4)
-    return f" (closest: {', '.join(near)})" if near else f" (known: {', '.join(known)})"
 
 
 @dataclass(frozen=True)
