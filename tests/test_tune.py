@@ -147,9 +147,10 @@ def test_loop_limits_refuse_the_thesis_hsmc_and_measure_like_analyze():
     assert worst["delay_margin_s"] == pytest.approx(full["delay_margin_s"], rel=0.02)
     assert excess == pytest.approx(full["peak_sensitivity"] / 2.5 - 1 + 1 - full["delay_margin_s"] / 2e-3, rel=0.05)
     assert Robustness("double-mass-hsmc", "thesis", max_peak_sensitivity=10.0).violation({})[0] == 0.0
-    low, high = spread_plants({"plant.Mp": 0.2, "plant.K": 100.0, "controller.k": 8.0}, ["plant.Mp", "plant.K"],
-                              0.1)
-    assert low == {"plant.Mp": pytest.approx(0.18), "plant.K": pytest.approx(90.0)} and high["plant.K"] == pytest.approx(110.0)
+    nominal = {"plant.Mp": 0.2, "plant.K": 100.0, "controller.k": 8.0}
+    low, high = spread_plants(nominal, ["plant.Mp", "plant.K"], 0.1)
+    assert low == {"plant.Mp": pytest.approx(0.18), "plant.K": pytest.approx(90.0)}
+    assert high["plant.K"] == pytest.approx(110.0)
 
 
 class _Refuse:
