@@ -101,6 +101,12 @@ def output_filter_lists(time_constant: float, sample_period: float) -> tuple[Mat
     return Ad, Bd, [0.0, 1.0]
 
 
+def rest_state(states: Sequence[str]) -> tuple[float, ...]:
+    """The design state at rest per metre of reference: 1 for every cart position, 0 for the velocities
+    and the pendulum angle (both carts stand at the reference, the pendulum upright)."""
+    return tuple(1.0 if s.endswith("cart_position") else 0.0 for s in states)
+
+
 def _dot(a: Sequence[float], b: Sequence[float]) -> float:
     return sum(map(mul, a, b))
 
@@ -463,6 +469,107 @@ class LQR(DiscreteLaw):
         u_applied = limit if u > limit else (-limit if u < -limit else u)
         self.x_pred = [sum(map(mul, row, x_hat)) + b * u_applied for row, b in zip(d.Ad, d.Bd)]
         return u
+
+
+# ============================================================================================ LQG
+
+@dataclass(frozen=True)
+class LQGCoefficients:
+    """Everything the LQG law computes with, as plain floats (design-model state order).
+
+    ``K`` (n), ``K_voltage``, ``K_integral``: the feedback ``u = -K (x^ - x_r r) - K_voltage v -
+    K_integral q`` (``ipcosim.controllers.lqg``); ``M`` (n x p): the Kalman current-estimator gain;
+    ``Ad`` (n x n), ``Bd`` (n): the zero-order-hold model; ``C`` (p x n): the measured rows;
+    ``reference_states`` (n): ``x_r``.
+    """
+
+    states: tuple[str, ...]
+    outputs: tuple[str, ...]
+    sample_period: float
+    K: tuple[float, ...]
+    K_voltage: float
+    K_integral: float
+    M: tuple[tuple[float, ...], ...]
+    Ad: tuple[tuple[float, ...], ...]
+    Bd: tuple[float, ...]
+    C: tuple[tuple[float, ...], ...]
+    reference_states: tuple[float, ...]
+
+    @classmethod
+    def from_design(cls, design: Any) -> LQGCoefficients:
+        """The coefficients of an ``ipcosim.controllers.lqg.LQGDesign``."""
+        def rows(m: Any) -> tuple[tuple[float, ...], ...]:
+            return tuple(tuple(float(v) for v in row) for row in as_matrix(m))
+        n = len(design.model.states)
+        ka = rows(design.K_augmented)[0]
+        return cls(states=tuple(design.model.states), outputs=tuple(design.model.outputs),
+                   sample_period=float(design.sample_period), K=ka[:n], K_voltage=ka[n], K_integral=ka[n + 1],
+                   M=rows(design.M), Ad=rows(design.Ad), Bd=tuple(r[0] for r in rows(design.Bd)),
+                   C=rows(design.model.C), reference_states=tuple(map(float, design.reference_states)))
+
+
+class LQG(DiscreteLaw):
+    """Discrete LQG with integral action and a one-sample computation delay (``ipcosim.controllers.lqg``).
+
+    At instant k the law outputs the voltage ``v[k]`` it computed at instant k - 1 (0 V at the first
+    instant), corrects its estimate with the measurements of instant k, and computes the voltage
+    for instant k + 1. The integral of the motor-cart position error (measured) is frozen while the
+    new voltage saturates in the direction the integral pushes. With ``reference_time_constant`` tau > 0
+    the law follows the reference through a first-order lag ``1/(tau s + 1)`` (sampled exactly), started
+    at the first measured motor-cart position: a step then does not wind the integrator up.
+
+    Parameters
+    ----------
+    kind : str
+        Plant kind.
+    coefficients : LQGCoefficients
+        The design's numbers (``LQGCoefficients.from_design``, or gains a controller FMU holds).
+    voltage_limit : float
+        [V].
+    reference_time_constant : float
+        tau [s] of the reference lag; 0 = the reference as given.
+    """
+
+    def __init__(self, kind: str, coefficients: LQGCoefficients, voltage_limit: float = 10.0,
+                 reference_time_constant: float = 0.0) -> None:
+        super().__init__(kind, coefficients.sample_period, voltage_limit)
+        if coefficients.outputs != tuple(self.measured):
+            raise LawParameterError("design", f"LQG design is for outputs {coefficients.outputs}, the "
+                                              f"{kind} plant measures {self.measured}")
+        self.coefficients = coefficients
+        tau = _check_nonneg("reference_time_constant", reference_time_constant)
+        self.reference_pole = math.exp(-self.sample_period / tau) if tau > 0 else 0.0
+        self._Cpinv = _right_inverse(coefficients.C)
+        self.reset()
+
+    def reset(self) -> None:
+        super().reset()
+        self.x_pred: list[float] | None = None
+        self.x_hat = [0.0] * len(self.coefficients.states)
+        self.applied = 0.0
+        self.integral = 0.0
+        self.reference_filtered: float | None = None
+
+    def _compute(self, y: Sequence[float], r: float) -> float:
+        d = self.coefficients
+        a = self.reference_pole
+        rf = self._motor_cart(y) if self.reference_filtered is None else self.reference_filtered
+        self.reference_filtered = r = a * rf + (1.0 - a) * r
+        xp = self.x_pred
+        if xp is None:  # plant assumed at rest at the measured positions
+            xp = [sum(map(mul, row, y)) for row in self._Cpinv]
+        innovation = [v - sum(map(mul, row, xp)) for v, row in zip(y, d.C)]
+        self.x_hat = x_hat = [a + sum(map(mul, row, innovation)) for a, row in zip(xp, d.M)]
+        applied = self.applied
+        feedback = d.K_voltage * applied + sum(k * (x - xr * r) for k, x, xr in zip(d.K, x_hat, d.reference_states))
+        u = -feedback - d.K_integral * self.integral
+        integral = self.integral + (r - self._motor_cart(y)) * d.sample_period  # the design's T (a gain)
+        limit = self.voltage_limit
+        if abs(u) <= limit or (u > 0) != (-d.K_integral * (integral - self.integral) > 0):
+            self.integral = integral
+        self.applied = limit if u > limit else (-limit if u < -limit else u)
+        self.x_pred = [sum(map(mul, row, x_hat)) + b * applied for row, b in zip(d.Ad, d.Bd)]
+        return applied
 
 
 # =========================================================================== Hierarchical SMC

@@ -147,14 +147,13 @@ def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int
     """
     from fmi_helpers import instantiate
 
-    from ipcosim.controllers.catalog import build_law, defaults, lqr_from_gains, lqr_gains, swing_up_around
+    from ipcosim.controllers.catalog import DESIGNED_LAWS, build_law, defaults, designed_gains, law_from_gains
     from ipcosim.fmus.physics import MEASURED
 
     law, kind = _laws()[law_name]
     py = build_law(law, kind, defaults(law, kind), backend="scipy")
-    if law in ("LQR", "SwingUp"):  # what the Python FMU runs on its shipped gains (controller_fmu)
-        lqr = lqr_from_gains(kind, defaults(law, kind), lqr_gains(getattr(py, "balance", py)))
-        py = swing_up_around(kind, defaults(law, kind), lqr) if law == "SwingUp" else lqr
+    if law in DESIGNED_LAWS:  # what the Python FMU runs on its shipped gains (controller_fmu)
+        py = law_from_gains(law, kind, defaults(law, kind), designed_gains(py))
     inst = instantiate(fmu, unzip)
     s = inst.slave
     rng = random.Random(zlib.crc32(law_name.encode()))

@@ -25,10 +25,10 @@ from ipcosim.harness.scenario.ssp_pack import pack
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPECTED = sorted(f"{p}-{c}" for p in ("single-mass", "double-mass")
-                  for c in ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc"))
+                  for c in ("pid", "cascade-pid", "lqr", "lqg", "hsmc", "adaptive-hsmc"))
 
 
-def test_the_ten_scenarios_exist_and_follow_the_contract():
+def test_the_twelve_scenarios_exist_and_follow_the_contract():
     from ipcosim.harness.scenario.ssp_gen import VARIANTS
 
     assert scenario_names() == sorted(EXPECTED + list(VARIANTS))

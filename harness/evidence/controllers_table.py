@@ -35,6 +35,8 @@ THESIS_CLAIMS = {
     ("HSMC", "double-mass"): "meets the goal, steady-state error 5.575 mm",
     ("AdaptiveHSMC", "single-mass"): "reaches the position faster than HSMC",
     ("AdaptiveHSMC", "double-mass"): "smaller steady-state error and settling time than HSMC",
+    ("LQG", "single-mass"): "(not in the thesis)",
+    ("LQG", "double-mass"): "(not in the thesis)",
 }
 
 BEGIN, END = "<!-- evidence:begin -->", "<!-- evidence:end -->"

@@ -429,9 +429,10 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
                         python_vars: list[Variable]) -> tuple[list[Variable], dict[str, str]]:
     """Native-only parameters for law numbers that equal no Python parameter.
 
-    The LQR's feedback and estimator gains (``K[i]``, ``N``, ``M[i][j]`` of its ``coefficients``, also
-    reachable as its ``design``: ``ipcosim.controllers.laws.LQRCoefficients``) keep the Python FMU's
-    names ``K_<state>``, ``N``, ``M_<state>_<output>`` (``ipcosim.controllers.catalog.lqr_gain_specs``).
+    The designed gains of an LQR or LQG (``K[i]``, ``N`` or ``K_voltage``, ``K_integral``, ``M[i][j]`` of
+    its ``coefficients``, for the LQR also reachable as its ``design``: ``ipcosim.controllers.laws``) keep
+    the Python FMU's names ``K_<state>``, ``N``, ``K_voltage``, ``K_integral``, ``M_<state>_<output>``
+    (``ipcosim.controllers.catalog.gain_specs``).
     """
     renamed: dict[str, str] = {}
     extra: list[Variable] = []
@@ -441,7 +442,7 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
     gains: dict[str, str] = {}
     for at in (f"{where}coefficients", f"{where}design") if coef is not None else ():  # one object, two names
         gains.update({f"{at}.K[{i}]": f"K_{s}" for i, s in enumerate(coef.states)})
-        gains[f"{at}.N"] = "N"
+        gains.update({f"{at}.{g}": g for g in ("N", "K_voltage", "K_integral") if hasattr(coef, g)})
         gains.update({f"{at}.M[{i}][{j}]": f"M_{s}_{o}" for i, s in enumerate(coef.states)
                       for j, o in enumerate(coef.outputs)})
     for p in paths:
@@ -459,30 +460,29 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
 def native_law(law: str, kind: str, values: Mapping[str, Any]) -> Any:
     """The law the Python controller FMU runs for flat parameter ``values`` (``controller_fmu``).
 
-    The LQR's (and the swing-up's balancing LQR's) ``values`` may hold its gains ``K_*``, ``N``, ``M_*``:
-    they replace the designed ones, and the zero-order-hold model comes from the plain-Python
-    ``lqr_from_gains`` as in the Python FMU with its shipped gains. Gains together with a changed weight
-    or observer pole are refused, as there.
+    A designed law's (LQR, LQG, the swing-up's balancing LQR) ``values`` may hold its gains (``K_*``,
+    ``N``, ``M_*``, ...): they replace the designed ones, and the zero-order-hold model comes from the
+    plain-Python ``catalog.law_from_gains`` as in the Python FMU with its shipped gains. Gains together
+    with a changed weight or observer pole are refused, as there.
     """
     from ipcosim.controllers import catalog
 
-    lqr_laws = ("LQR", "SwingUp")
-    gain_names = {s.name for s in catalog.lqr_gain_specs(kind)} if law in lqr_laws else set()
+    designed = law in catalog.DESIGNED_LAWS
+    gain_names = {s.name for s in catalog.gain_specs(law, kind)} if designed else set()
     gains = {k: float(v) for k, v in values.items() if k in gain_names}
     design = {k: v for k, v in values.items() if k not in gain_names}
     built = catalog.build_law(law, kind, design, backend="scipy")
-    if law not in lqr_laws:
+    if not designed:
         return built
     full = {**catalog.defaults(law, kind), **design}
     if gains:
         base = catalog.defaults(law, kind)
-        weights = [n for n in catalog.lqr_weight_parameters(kind) if float(full[n]) != float(base[n])]
+        weights = [n for n in catalog.weight_parameters(law, kind) if float(full[n]) != float(base[n])]
         if weights:
             raise NativeModelError(f"{catalog.model_name(law, kind)}: parameters {weights[0]} and "
                                    f"{sorted(gains)[0]} were both set: give either the design (weights, observer "
                                    "poles) or the gains K_*, N, M_*, not both")
-    lqr = catalog.lqr_from_gains(kind, full, {**catalog.lqr_gains(getattr(built, "balance", built)), **gains})
-    return catalog.swing_up_around(kind, full, lqr) if law == "SwingUp" else lqr
+    return catalog.law_from_gains(law, kind, full, {**catalog.designed_gains(built), **gains})
 
 
 def _leaves(roots: list[Node]) -> set[str]:
