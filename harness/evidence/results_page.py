@@ -23,11 +23,11 @@ from typing import Any, Sequence
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 SCENARIOS = [f"{p}-{c}" for p in ("single-mass", "double-mass")
-             for c in ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")] + ["single-mass-lqr-tap"]
+             for c in ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc", "lqg")] + ["single-mass-lqr-tap"]
 #: The loops of the robustness table (scenario, parameter set).
-ROBUST_SCENARIOS = [("single-mass-lqr", "thesis"), ("single-mass-hsmc", "tuned"), ("single-mass-cascade-pid", "tuned"),
-                    ("double-mass-lqr", "thesis"), ("double-mass-hsmc", "tuned"),
-                    ("double-mass-cascade-pid", "tuned")]
+ROBUST_SCENARIOS = [("single-mass-lqr", "thesis"), ("single-mass-hsmc", "tuned"), ("single-mass-lqg", "tuned"),
+                    ("double-mass-lqr", "thesis"), ("double-mass-hsmc", "tuned"), ("double-mass-cascade-pid", "tuned"),
+                    ("double-mass-lqg", "tuned")]
 ROBUST_STOP_TIME = 15.0
 ROBUST_SAMPLES = 200
 
@@ -119,12 +119,16 @@ def robustness_rows(samples: int = ROBUST_SAMPLES, workers: int = 2) -> list[dic
     from ipcosim.harness.studies.sweep import open_executor
 
     executor = open_executor(workers)
+    rows = []
     try:
-        return [{"scenario": name, "set": pset, "kind": kind,
-                 "factors": factor_study(name, kind, pset, samples, ROBUST_STOP_TIME, executor=executor)}
-                for name, pset in ROBUST_SCENARIOS for kind in [name.split("-")[0] + "-mass"]]
+        for name, pset in ROBUST_SCENARIOS:
+            print(f"results: robustness of {name} ({pset}), {samples} runs per factor", file=sys.stderr, flush=True)
+            kind = name.split("-")[0] + "-mass"
+            rows.append({"scenario": name, "set": pset, "kind": kind,
+                         "factors": factor_study(name, kind, pset, samples, ROBUST_STOP_TIME, executor=executor)})
     finally:
         executor.close()
+    return rows
 
 
 def robustness_table(rows: list[dict[str, Any]]) -> str:
