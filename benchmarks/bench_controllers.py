@@ -36,7 +36,7 @@ def run() -> list[str]:
     lines = ["law           plant         law step us   loop 10 s [s]   real-time factor   law share"]
     for law in LAWS:
         for kind in KINDS:
-            timed = _Timed(make_law(law, kind))
+            timed = _Timed(make_law(kind, law))
             t = time.perf_counter()
             run_loop(timed, preset(default_preset(kind)))  # type: ignore[arg-type]
             total = time.perf_counter() - t

@@ -42,11 +42,11 @@ def test_margins_meet_the_targets(scenario: str) -> None:
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_closed_loop_poles_inside_the_unit_circle(kind: str) -> None:
-    d = lqg_design_from(kind, defaults("LQG", kind))
+    d = lqg_design_from(kind, defaults(kind, "LQG"))
     assert np.max(np.abs(d.regulator_poles)) < 1.0
     assert np.max(np.abs(d.estimator_poles)) < 1.0
     # the separation principle on the sampled design model: the loop of law and model has both sets
-    law = build_law("LQG", kind, defaults("LQG", kind))
+    law = build_law(kind, "LQG", defaults(kind, "LQG"))
     from ipcosim.harness.studies.analyze import closed_loop_poles, loop_from
     from ipcosim.harness.studies.loop import linear_law
 
@@ -59,7 +59,7 @@ def test_closed_loop_poles_inside_the_unit_circle(kind: str) -> None:
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_kalman_gain_is_the_one_of_the_stated_noises(kind: str) -> None:
-    v = defaults("LQG", kind)
+    v = defaults(kind, "LQG")
     d = lqg_design_from(kind, v)
     res = [PENDULUM_RAD_PER_COUNT if o == "pendulum_angle" else CART_M_PER_COUNT for o in d.model.outputs]
     assert np.allclose(d.measurement_variance, np.square(res) / 12.0, rtol=1e-15)
@@ -74,15 +74,15 @@ def test_kalman_gain_is_the_one_of_the_stated_noises(kind: str) -> None:
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_control_and_scipy_back_ends_agree(kind: str) -> None:
-    a = lqg_design_from(kind, defaults("LQG", kind), backend="control")
-    b = lqg_design_from(kind, defaults("LQG", kind), backend="scipy")
+    a = lqg_design_from(kind, defaults(kind, "LQG"), backend="control")
+    b = lqg_design_from(kind, defaults(kind, "LQG"), backend="scipy")
     assert np.allclose(a.K_augmented, b.K_augmented, rtol=1e-6)
     assert np.allclose(a.M, b.M, rtol=1e-6, atol=1e-9)
 
 
 def test_output_is_the_voltage_computed_a_sample_earlier() -> None:
-    law = make_law("LQG", "double-mass")
-    twin = make_law("LQG", "double-mass")
+    law = make_law("double-mass", "LQG")
+    twin = make_law("double-mass", "LQG")
     rng = np.random.default_rng(3)
     ys = rng.normal(scale=1e-3, size=(20, 3))
     assert law.step(ys[0], 0.05) == 0.0  # nothing computed before the first instant
@@ -109,8 +109,8 @@ def test_integral_action_removes_a_constant_disturbance() -> None:
     """A constant 0.3 V disturbance at the plant input: the LQG's error goes to zero (integrator), the
     thesis LQR's does not."""
     p = preset(DEFAULT_PRESET["single-mass"])
-    lqg = run_loop(_Offset(make_law("LQG", "single-mass"), 0.3), p, stop_time=10.0)
-    lqr = run_loop(_Offset(make_law("LQR", "single-mass"), 0.3), p, stop_time=10.0)
+    lqg = run_loop(_Offset(make_law("single-mass", "LQG"), 0.3), p, stop_time=10.0)
+    lqr = run_loop(_Offset(make_law("single-mass", "LQR"), 0.3), p, stop_time=10.0)
     assert lqg.metrics["steady_state_error_m"] < 1e-5 < 1e-3 < lqr.metrics["steady_state_error_m"]
 
 
@@ -133,10 +133,10 @@ def test_fmu_redesigns_for_a_changed_weight() -> None:
         got = f.get("K_cart_position", "K_pendulum_angle", "K_voltage", "K_integral")
         f.slave.terminate()
         f.slave.freeInstance()
-    law = make_law("LQG", "single-mass", R=0.1)
+    law = make_law("single-mass", "LQG", R=0.1)
     c = law.coefficients
     assert np.allclose(got, [c.K[0], c.K[2], c.K_voltage, c.K_integral], rtol=1e-9)
-    assert not np.allclose(got[1], make_law("LQG", "single-mass").coefficients.K[2], rtol=1e-2)
+    assert not np.allclose(got[1], make_law("single-mass", "LQG").coefficients.K[2], rtol=1e-2)
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -144,21 +144,21 @@ def test_discrete_lqr_balances_and_settles_at_5_ms(kind: str) -> None:
     """The ``discrete`` set (dlqr at the period it runs at) does the task at 5 ms; the emulated
     continuous gain of the ``thesis`` set does not settle there on the single mass."""
     p = preset(DEFAULT_PRESET[kind])
-    r = run_loop(make_law("LQR", kind, "discrete", sample_period=0.005), p, stop_time=15.0)
+    r = run_loop(make_law(kind, "LQR", "discrete", sample_period=0.005), p, stop_time=15.0)
     assert r.metrics["upright"] and r.metrics["settling_time_s"] is not None
     assert r.metrics["settling_time_s"] < 10.0
     if kind == "single-mass":
-        e = run_loop(make_law("LQR", kind, "thesis", sample_period=0.005), p, stop_time=15.0)
+        e = run_loop(make_law(kind, "LQR", "thesis", sample_period=0.005), p, stop_time=15.0)
         assert e.metrics["settling_time_s"] is None or not e.metrics["upright"]
 
 
 def test_discrete_lqr_gain_is_the_dlqr_of_the_sampled_model() -> None:
-    law = make_law("LQR", "single-mass", "discrete", sample_period=0.005)
+    law = make_law("single-mass", "LQR", "discrete", sample_period=0.005)
     d = law.design
     K, _, _ = control.dlqr(d.Ad, d.Bd, d.Q, d.R)
     assert np.allclose(d.K, K, rtol=1e-6)
     # unit DC gain of the sampled loop from the reference to the cart
     x = np.linalg.solve(np.eye(4) - d.Ad + d.Bd @ d.K, d.Bd * d.N)
     assert math.isclose(float(x[0, 0]), 1.0, rel_tol=1e-9)
-    emulated = make_law("LQR", "single-mass", "thesis", sample_period=0.005).design.K
+    emulated = make_law("single-mass", "LQR", "thesis", sample_period=0.005).design.K
     assert not np.allclose(d.K, emulated, rtol=0.05)

@@ -26,7 +26,7 @@ import numpy as np
 from ipcosim.controllers.catalog import make_law
 from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT, Instruments, realism
 from ipcosim.fmus.metrics import UPRIGHT_LIMIT_RAD, compute_metrics
-from ipcosim.fmus.params import preset
+from ipcosim.fmus.params import KINDS, preset
 from ipcosim.fmus.physics import MOTOR_CART
 from ipcosim.fmus.plant import InstrumentedPlant, PlantStepError
 
@@ -110,15 +110,15 @@ def thesis_runs(realism_name: str, stop_time: float = STOP_TIME) -> dict[tuple[s
     """Every law with the thesis's gain set, on both plants (CascadePID: no thesis set, left out), each
     on its own model (``OWN_MODEL``: plant and design model; else the kind's thesis preset)."""
     out = {}
-    for kind in ("single-mass", "double-mass"):
+    for kind in KINDS:
         for law in ("PID", "LQR", "HSMC", "AdaptiveHSMC"):
             own = OWN_MODEL.get((law, kind))
             inst, phys = realism(realism_name, kind)
             params = preset(own or PRESET[kind], **phys)
             design = {"design_params": preset(own)} if own else {}
-            out[(law, kind)] = run(make_law(law, kind, "thesis", **design), kind, params, inst, stop_time)
+            out[(law, kind)] = run(make_law(kind, law, "thesis", **design), kind, params, inst, stop_time)
             if own:
-                out[(f"{law} on {PRESET[kind]}", kind)] = run(make_law(law, kind, "thesis", **design), kind,
+                out[(f"{law} on {PRESET[kind]}", kind)] = run(make_law(kind, law, "thesis", **design), kind,
                                                               preset(PRESET[kind], **phys), inst, stop_time)
     return out
 
@@ -196,7 +196,7 @@ def _fewer_oscillations(R):
 
 def _hsmc_better(R):
     parts, ok = [], True
-    for kind in ("single-mass", "double-mass"):
+    for kind in KINDS:
         h, lq, p = R[("HSMC", kind)], R[LQR_ON_CH3 if kind == "single-mass" else ("LQR", kind)], R[("PID", kind)]
         better = h.metrics["upright"] and (not lq.metrics["upright"] or h.itae < lq.itae) and \
             (not p.metrics["upright"] or h.itae < p.itae)
@@ -282,7 +282,7 @@ def _lqr_case(sample_period: float = 1e-3, voltage_limit: float = 10.0, filters:
     kind = "double-mass"
     phys = {k: bench.pop(k) for k in ("b1", "b2") if k in bench}
     params = preset(PRESET[kind], voltage_limit=10.0, **phys)
-    law = make_law("LQR", kind, "thesis", sample_period=sample_period, voltage_limit=voltage_limit,
+    law = make_law(kind, "LQR", "thesis", sample_period=sample_period, voltage_limit=voltage_limit,
                    **({} if filters else {"output_filter_time_constant": 0.0}))
     return run(law, kind, params, Instruments(**bench), stop_time)
 

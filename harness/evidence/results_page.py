@@ -21,8 +21,10 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
+from ipcosim.fmus.params import KINDS
+
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
-SCENARIOS = [f"{p}-{c}" for p in ("single-mass", "double-mass")
+SCENARIOS = [f"{p}-{c}" for p in KINDS
              for c in ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc", "lqg")] + ["single-mass-lqr-tap"]
 #: The loops of the robustness table (scenario, parameter set).
 ROBUST_SCENARIOS = [("single-mass-lqr", "thesis"), ("single-mass-hsmc", "tuned"), ("single-mass-lqg", "tuned"),
