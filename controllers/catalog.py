@@ -21,7 +21,7 @@ The first set listed is the default: the FMU parameter defaults are its values, 
 scenarios bind it (``parameter_sets`` feeds ``ipcosim.harness.scenario.ssp_gen``'s ``.ssv`` files).
 
 Flat parameter names (``schema``): the law's gains as in ``ipcosim.controllers.laws``; ``sample_period``
-[s]; ``voltage_limit`` [V]; for the model-based laws (LQR, HSMC, AdaptiveHSMC) the design model's
+[s]; ``voltage_limit`` [V]; for the model-based laws (LQR, LQG, HSMC, AdaptiveHSMC) the design model's
 physical constants as ``model_<name>`` (``ipcosim.fmus.params`` names, defaults = the plant kind's default
 preset): the controller's *belief* about the plant, independent of the plant component.
 """
@@ -434,8 +434,9 @@ def _lqg_specs(kind: str) -> list[ParamSpec]:
     specs = [ParamSpec(f"Q_{s}", 0.0, _unit_div({}, {b: 2 * e for b, e in _state_dim(s).items()}),
                        f"LQG state weight on {s} (diagonal of Q, on x - x_r r)", "nonnegative")
              for s in design_states(kind)]
-    specs += [ParamSpec("Q_integral", 0.0, "1/m2.s2", "LQG weight on the integral of the motor-cart position error",
-                        "nonnegative"),
+    specs += [ParamSpec("Q_integral", 1.0, "1/m2.s2", "LQG weight on the integral of the motor-cart position error "
+                                                      "(> 0: the integrator must be weighted to be stabilized)",
+                        "positive"),
               ParamSpec("R", 1.0, "1/V2", "LQG input weight", "positive"),
               ParamSpec("process_noise", 1.0, "V", "Kalman filter: standard deviation of the voltage-equivalent "
                                                    "input disturbance (held over a sample)", "positive"),
@@ -680,7 +681,7 @@ def lqr_weight_parameters(kind: str) -> tuple[str, ...]:
 
 def lqr_design_parameters(kind: str) -> tuple[str, ...]:
     """Every LQR parameter the gains depend on: weights, observer poles, ``model_*``, ``sample_period``."""
-    return design_parameters("LQR", kind)
+    return design_parameters(kind, "LQR")
 
 
 def lqr_gains(law: LQR) -> dict[str, float]:
@@ -762,21 +763,21 @@ def lqg_from_gains(kind: str, values: Mapping[str, Any], gains: Mapping[str, flo
 DESIGNED_LAWS = ("LQR", "SwingUp", "LQG")
 
 
-def gain_specs(law: str, kind: str) -> list[ParamSpec]:
+def gain_specs(kind: str, law: str) -> list[ParamSpec]:
     """The gain parameters of a law of ``DESIGNED_LAWS``."""
     return lqg_gain_specs(kind) if law == "LQG" else lqr_gain_specs(kind)
 
 
-def weight_parameters(law: str, kind: str) -> tuple[str, ...]:
+def weight_parameters(kind: str, law: str) -> tuple[str, ...]:
     """The parameters of a designed law that enter only through the design (weights, poles, noises)."""
     if law == "LQG":
         return tuple(s.name for s in _lqg_specs(kind) if s.name != "reference_time_constant")
     return lqr_weight_parameters(kind)
 
 
-def design_parameters(law: str, kind: str) -> tuple[str, ...]:
+def design_parameters(kind: str, law: str) -> tuple[str, ...]:
     """Every parameter a designed law's gains depend on: weights, ``model_*``, ``sample_period``."""
-    return (*weight_parameters(law, kind), *(s.name for s in _model_specs(kind)), "sample_period")
+    return (*weight_parameters(kind, law), *(s.name for s in _model_specs(kind)), "sample_period")
 
 
 def designed_gains(law: DiscreteLaw) -> dict[str, float]:
@@ -784,7 +785,7 @@ def designed_gains(law: DiscreteLaw) -> dict[str, float]:
     return lqg_gains(law) if isinstance(law, LQG) else lqr_gains(getattr(law, "balance", law))
 
 
-def law_from_gains(law: str, kind: str, values: Mapping[str, Any], gains: Mapping[str, float]) -> DiscreteLaw:
+def law_from_gains(kind: str, law: str, values: Mapping[str, Any], gains: Mapping[str, float]) -> DiscreteLaw:
     """A designed law from flat values and given gains, without the design stack."""
     if law == "LQG":
         return lqg_from_gains(kind, values, gains)

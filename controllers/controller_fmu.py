@@ -96,7 +96,7 @@ class ControllerFmu(FmuBase):
             self.add_parameter(spec.name, start=bool(spec.default) if is_bool else float(spec.default),
                                type_=bool if is_bool else float, unit=None if is_bool else spec.unit,
                                description=spec.description, check=None if is_bool else spec.check)
-        self._gain_specs = gain_specs(self.law, kind) if self.law in DESIGNED_LAWS else []
+        self._gain_specs = gain_specs(kind, self.law) if self.law in DESIGNED_LAWS else []
         if self._gain_specs:
             shipped = type(self).shipped_design(self.resources)["gains"]
             for spec in self._gain_specs:
@@ -135,7 +135,7 @@ class ControllerFmu(FmuBase):
         """Design the gains for the default parameters (imports numpy and scipy): the shipped design."""
         values = defaults(cls.kind, cls.law)
         law = build_law(cls.kind, cls.law, values, backend="scipy")
-        design = {name: values[name] for name in design_parameters(cls.law, cls.kind)}
+        design = {name: values[name] for name in design_parameters(cls.kind, cls.law)}
         return {"model": model_name(cls.kind, cls.law), "design": design, "gains": designed_gains(law)}
 
     @classmethod
@@ -154,14 +154,14 @@ class ControllerFmu(FmuBase):
             return build_law(self.kind, self.law, values)
         shipped = type(self).shipped_design(self.resources)
         gains = {s.name: float(getattr(self, s.name)) for s in self._gain_specs}
-        changed = [n for n in design_parameters(self.law, self.kind) if float(values[n]) != shipped["design"][n]]
+        changed = [n for n in design_parameters(self.kind, self.law) if float(values[n]) != shipped["design"][n]]
         set_gains = [n for n, v in gains.items() if v != shipped["gains"][n]]
-        weights = [n for n in changed if n in weight_parameters(self.law, self.kind)]
+        weights = [n for n in changed if n in weight_parameters(self.kind, self.law)]
         if set_gains and weights:
             raise FmuError(f"{name}: parameters {weights[0]} and {set_gains[0]} were both set: give either the "
                            "design (weights, observer poles) or the gains K_*, N, M_*, not both")
         if not changed or set_gains:
-            return law_from_gains(self.law, self.kind, values, gains)
+            return law_from_gains(self.kind, self.law, values, gains)
         try:
             law = build_law(self.kind, self.law, values, backend="scipy")
         except ImportError as exc:

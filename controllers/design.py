@@ -351,11 +351,7 @@ def design_lqr(model: LinearModel, Q: Any, R: Any, *, observer_poles: Sequence[c
     DesignError
         With ``parameter`` naming the bad input.
     """
-    if backend not in BACKENDS:
-        raise DesignError("backend", f"unknown design backend {backend!r}; expected one of {BACKENDS}")
-    T = check_sample_period(sample_period)
-    A, B, C = model.A, model.B, model.C
-    n = A.shape[0]
+    T, A, B, C, n = design_inputs(model, sample_period, backend)
     R = np.atleast_2d(np.asarray(R, dtype=float)) if np.ndim(R) < 2 else R
     Ad, Bd = zoh(A, B, T, backend)
     C1 = C[reference_output:reference_output + 1]
@@ -383,6 +379,14 @@ def design_lqr(model: LinearModel, Q: Any, R: Any, *, observer_poles: Sequence[c
     M = place_gain(Ad.T, (C @ Ad).T, z, backend).T
     return LQRDesign(model=model, Q=np.asarray(check_weights(Q, R, n)[0]), R=R, K=K, N=N, poles=poles,
                      observer_poles=obs, L=L, sample_period=T, Ad=Ad, Bd=Bd, M=M, backend=backend)
+
+
+def design_inputs(model: LinearModel, sample_period: float, backend: str
+                  ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, int]:
+    """``(T, A, B, C, n)`` of a design after checking the back end and the sample period."""
+    if backend not in BACKENDS:
+        raise DesignError("backend", f"unknown design backend {backend!r}; expected one of {BACKENDS}")
+    return check_sample_period(sample_period), model.A, model.B, model.C, model.A.shape[0]
 
 
 def sampled_closed_loop_poles(design: LQRDesign) -> np.ndarray:

@@ -408,7 +408,31 @@ def _right_inverse(C: Sequence[Sequence[float]]) -> Matrix:
     return [list(r) for r in zip(*solve(matmul(as_matrix(C), Ct), [list(r) for r in zip(*Ct)]))]
 
 
-class LQR(DiscreteLaw):
+class CurrentEstimatorLaw(DiscreteLaw):
+    """Base of the laws on a discrete current estimator (``coefficients`` with ``C``, ``M``, ``states``):
+    ``x^[k] = x-[k] + M (y[k] - C x-[k])``, the first prediction the plant at rest at the measured
+    positions. Subclasses predict ``x_pred`` for the next instant."""
+
+    coefficients: Any
+    _Cpinv: Matrix
+
+    def reset(self) -> None:
+        super().reset()
+        self.x_pred: list[float] | None = None
+        self.x_hat = [0.0] * len(self.coefficients.states)
+
+    def _correct(self, y: Sequence[float]) -> list[float]:
+        """The corrected estimate ``x^`` of this instant (also kept as ``x_hat``)."""
+        d = self.coefficients
+        xp = self.x_pred
+        if xp is None:  # plant assumed at rest at the measured positions
+            xp = [sum(map(mul, row, y)) for row in self._Cpinv]
+        innovation = [v - sum(map(mul, row, xp)) for v, row in zip(y, d.C)]
+        self.x_hat = x_hat = [a + sum(map(mul, row, innovation)) for a, row in zip(xp, d.M)]
+        return x_hat
+
+
+class LQR(CurrentEstimatorLaw):
     """LQR state feedback on a discrete current estimator, ``u = sat(-K x^ + N r)``
     (see ``ipcosim.controllers.design``).
 
@@ -442,8 +466,6 @@ class LQR(DiscreteLaw):
 
     def reset(self) -> None:
         super().reset()
-        self.x_pred: list[float] | None = None
-        self.x_hat = [0.0] * len(self.coefficients.states)
         self._filt: list[list[float]] | None = None
 
     def _filter(self, y: Sequence[float]) -> Sequence[float]:
@@ -458,12 +480,7 @@ class LQR(DiscreteLaw):
 
     def _compute(self, y: Sequence[float], r: float) -> float:
         d = self.coefficients
-        yf = self._filter(y)
-        xp = self.x_pred
-        if xp is None:  # plant assumed at rest at the measured positions
-            xp = [sum(map(mul, row, yf)) for row in self._Cpinv]
-        innovation = [v - sum(map(mul, row, xp)) for v, row in zip(yf, d.C)]
-        self.x_hat = x_hat = [a + sum(map(mul, row, innovation)) for a, row in zip(xp, d.M)]
+        x_hat = self._correct(self._filter(y))
         u = d.N * r - sum(map(mul, d.K, x_hat))
         limit = self.voltage_limit
         u_applied = limit if u > limit else (-limit if u < -limit else u)
@@ -508,7 +525,7 @@ class LQGCoefficients:
                    C=rows(design.model.C), reference_states=tuple(map(float, design.reference_states)))
 
 
-class LQG(DiscreteLaw):
+class LQG(CurrentEstimatorLaw):
     """Discrete LQG with integral action and a one-sample computation delay (``ipcosim.controllers.lqg``).
 
     At instant k the law outputs the voltage ``v[k]`` it computed at instant k - 1 (0 V at the first
@@ -544,8 +561,6 @@ class LQG(DiscreteLaw):
 
     def reset(self) -> None:
         super().reset()
-        self.x_pred: list[float] | None = None
-        self.x_hat = [0.0] * len(self.coefficients.states)
         self.applied = 0.0
         self.integral = 0.0
         self.reference_filtered: float | None = None
@@ -555,11 +570,7 @@ class LQG(DiscreteLaw):
         a = self.reference_pole
         rf = self._motor_cart(y) if self.reference_filtered is None else self.reference_filtered
         self.reference_filtered = r = a * rf + (1.0 - a) * r
-        xp = self.x_pred
-        if xp is None:  # plant assumed at rest at the measured positions
-            xp = [sum(map(mul, row, y)) for row in self._Cpinv]
-        innovation = [v - sum(map(mul, row, xp)) for v, row in zip(y, d.C)]
-        self.x_hat = x_hat = [a + sum(map(mul, row, innovation)) for a, row in zip(xp, d.M)]
+        x_hat = self._correct(y)
         applied = self.applied
         feedback = d.K_voltage * applied + sum(k * (x - xr * r) for k, x, xr in zip(d.K, x_hat, d.reference_states))
         u = -feedback - d.K_integral * self.integral

@@ -54,9 +54,9 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.linalg
 
-from ipcosim.controllers.design import BACKENDS, check_observable, check_weights, lqr_gain, zoh
+from ipcosim.controllers.design import BACKENDS, check_observable, check_weights, design_inputs, lqr_gain, zoh
 from ipcosim.controllers.errors import DesignError
-from ipcosim.controllers.laws import check_sample_period, rest_state
+from ipcosim.controllers.laws import rest_state
 from ipcosim.fmus.linearize import LinearModel
 
 
@@ -181,7 +181,7 @@ def design_lqg(model: LinearModel, Q: Any, q_integral: float, R: float, *, sampl
     Q : array_like (n x n)
         State weight (positive semidefinite), on ``x - x_r r``.
     q_integral : float
-        Weight on the integral of the motor-cart position error [1/(m^2 s^2)], >= 0.
+        Weight on the integral of the motor-cart position error [1/(m^2 s^2)], > 0.
     R : float
         Voltage weight [1/V^2], > 0.
     sample_period : float
@@ -200,15 +200,12 @@ def design_lqg(model: LinearModel, Q: Any, q_integral: float, R: float, *, sampl
     DesignError
         With ``parameter`` naming the bad input.
     """
-    if backend not in BACKENDS:
-        raise DesignError("backend", f"unknown design backend {backend!r}; expected one of {BACKENDS}")
-    T = check_sample_period(sample_period)
-    A, B, C = model.A, model.B, model.C
-    n = A.shape[0]
+    T, A, B, C, n = design_inputs(model, sample_period, backend)
     Q, Rm = check_weights(Q, [[R]], n)
     qi = float(q_integral)
-    if not (math.isfinite(qi) and qi >= 0):
-        raise DesignError("Q_integral", f"Q_integral = {qi} must be >= 0 and finite")
+    if not (math.isfinite(qi) and qi > 0):
+        raise DesignError("Q_integral", f"Q_integral = {qi} must be positive and finite (an unweighted integrator "
+                                        "is not stabilized)")
     Ad, Bd = zoh(A, B, T, backend)
     Phi, Gamma = augmented_model(Ad, Bd, C[0], T)
     Qa = scipy.linalg.block_diag(Q, [[0.0]], [[qi]])

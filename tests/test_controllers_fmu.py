@@ -136,7 +136,7 @@ def test_contract_variables_units_and_structure(controller_fmus, model: str) -> 
         # K_integral (LQG), M per state and output
         from ipcosim.controllers.catalog import gain_specs
         n, p = (4, 2) if kind == "single-mass" else (6, 3)
-        gains = gain_specs(law, kind)
+        gains = gain_specs(kind, law)
         assert len(gains) == n + (1 if law == "LQR" else 2) + n * p
         for spec in gains:
             sv = by_name[spec.name]

@@ -162,3 +162,14 @@ def test_discrete_lqr_gain_is_the_dlqr_of_the_sampled_model() -> None:
     assert math.isclose(float(x[0, 0]), 1.0, rel_tol=1e-9)
     emulated = make_law("single-mass", "LQR", "thesis", sample_period=0.005).design.K
     assert not np.allclose(d.K, emulated, rtol=0.05)
+
+
+@pytest.mark.parametrize("values,name", [({"Q_integral": 0.0}, "Q_integral"), ({"process_noise": 0.0}, "process_noise"),
+                                         ({"resolution_pendulum_angle": 0.0}, "resolution_pendulum_angle"),
+                                         ({"reference_time_constant": -1.0}, "reference_time_constant")])
+def test_bad_lqg_parameter_names_it(values: dict, name: str) -> None:
+    from ipcosim.controllers.errors import ControllerParameterError
+
+    with pytest.raises(ControllerParameterError) as err:
+        build_law("single-mass", "LQG", values)
+    assert err.value.parameter == name and name in str(err.value)

@@ -153,7 +153,7 @@ def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int
     law, kind = _laws()[law_name]
     py = build_law(kind, law, defaults(kind, law), backend="scipy")
     if law in DESIGNED_LAWS:  # what the Python FMU runs on its shipped gains (controller_fmu)
-        py = law_from_gains(law, kind, defaults(kind, law), designed_gains(py))
+        py = law_from_gains(kind, law, defaults(kind, law), designed_gains(py))
     inst = instantiate(fmu, unzip)
     s = inst.slave
     rng = random.Random(zlib.crc32(law_name.encode()))

@@ -66,7 +66,7 @@ def thesis_claims(out: Path) -> int:
 
 
 def available_scenarios() -> list[str]:
-    """The ten plant x controller scenarios of the project, in report order, plus any other folder
+    """The plant x controller scenarios of the project, in report order, plus any other folder
     that is not one of the generator's variants (swing-up, tap, lab: they pose other tasks)."""
     from ipcosim.harness.paths import SCENARIO_DIR
     from ipcosim.harness.scenario.ssp_gen import VARIANTS

@@ -468,7 +468,7 @@ def native_law(kind: str, law: str, values: Mapping[str, Any]) -> Any:
     from ipcosim.controllers import catalog
 
     designed = law in catalog.DESIGNED_LAWS
-    gain_names = {s.name for s in catalog.gain_specs(law, kind)} if designed else set()
+    gain_names = {s.name for s in catalog.gain_specs(kind, law)} if designed else set()
     gains = {k: float(v) for k, v in values.items() if k in gain_names}
     design = {k: v for k, v in values.items() if k not in gain_names}
     built = catalog.build_law(kind, law, design, backend="scipy")
@@ -477,12 +477,12 @@ def native_law(kind: str, law: str, values: Mapping[str, Any]) -> Any:
     full = {**catalog.defaults(kind, law), **design}
     if gains:
         base = catalog.defaults(kind, law)
-        weights = [n for n in catalog.weight_parameters(law, kind) if float(full[n]) != float(base[n])]
+        weights = [n for n in catalog.weight_parameters(kind, law) if float(full[n]) != float(base[n])]
         if weights:
             raise NativeModelError(f"{catalog.model_name(kind, law)}: parameters {weights[0]} and "
                                    f"{sorted(gains)[0]} were both set: give either the design (weights, observer "
                                    "poles) or the gains K_*, N, M_*, not both")
-    return catalog.law_from_gains(law, kind, full, {**catalog.designed_gains(built), **gains})
+    return catalog.law_from_gains(kind, law, full, {**catalog.designed_gains(built), **gains})
 
 
 def _leaves(roots: list[Node]) -> set[str]:
