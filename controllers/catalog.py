@@ -61,6 +61,7 @@ from ipcosim.controllers.thesis import (
     THESIS_SINGLE_MASS_Q_DIAGONAL,
     THESIS_SINGLE_MASS_R,
 )
+from ipcosim.errors import closest
 from ipcosim.fmus.linearize import LinearModel, linear_matrices
 from ipcosim.fmus.params import (
     DEFAULT_PRESET,
@@ -497,9 +498,9 @@ def schema(kind: str, law: str) -> list[ParamSpec]:
 
 def _check(kind: str, law: str) -> None:
     if law not in PARAMETER_SETS:
-        raise CatalogError("law", f"unknown control law {law!r}; expected one of {', '.join(PARAMETER_SETS)}")
+        raise CatalogError("law", f"unknown control law {law!r}; {closest(law, PARAMETER_SETS)}")
     if kind not in PLANT_SUFFIX:
-        raise CatalogError("kind", f"unknown plant kind {kind!r}; expected one of {', '.join(KINDS)}")
+        raise CatalogError("kind", f"unknown plant kind {kind!r}; {closest(kind, KINDS)}")
     if kind not in PARAMETER_SETS[law]:
         raise CatalogError("kind", f"control law {law} is not available for the {kind} plant")
 
@@ -534,7 +535,7 @@ def set_values(kind: str, law: str, parameter_set: str) -> dict[str, Any]:
     sets = PARAMETER_SETS[law][kind]
     if parameter_set not in sets:
         raise CatalogError("parameter_set", f"{model_name(kind, law)} has no parameter set {parameter_set!r}; "
-                                            f"available: {', '.join(sets)}")
+                                            f"{closest(parameter_set, sets)}")
     if law == "PID":
         g = PIDGains()
         return {"Kp": g.Kp, "Ki": g.Ki, "Kd": g.Kd, "derivative_time_constant": g.derivative_time_constant}
@@ -849,7 +850,7 @@ def _checked_values(kind: str, law: str, values: Mapping[str, Any] | None) -> di
     v = {name: s.default for name, s in spec.items()}
     for name, value in (values or {}).items():
         if name not in spec:
-            raise CatalogError(name, f"{model_name(kind, law)} has no parameter {name!r}")
+            raise CatalogError(name, f"{model_name(kind, law)} has no parameter {name!r}; {closest(name, spec)}")
         v[name] = value
     for name, s in spec.items():
         reason = s.check(v[name])

@@ -28,7 +28,7 @@ from operator import mul
 from typing import Any, Sequence
 
 from ipcosim.controllers.errors import ControllerParameterError, DesignError
-from ipcosim.errors import IpcosimError
+from ipcosim.errors import IpcosimError, closest
 from ipcosim.fmus.expm import Matrix, as_matrix, expm
 from ipcosim.fmus.params import KINDS
 from ipcosim.fmus.physics import MEASURED
@@ -70,7 +70,7 @@ def _check_positive(name: str, value: float) -> float:
 
 def _check_kind(kind: str) -> str:
     if kind not in KINDS:
-        raise LawParameterError("kind", f"unknown plant kind {kind!r}; expected one of {', '.join(KINDS)}")
+        raise LawParameterError("kind", f"unknown plant kind {kind!r}; {closest(kind, KINDS)}")
     return kind
 
 

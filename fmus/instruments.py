@@ -31,6 +31,8 @@ import random
 from dataclasses import dataclass, fields
 from typing import Sequence
 
+from ipcosim.errors import closest
+
 #: IP02 encoders: 4096 counts/rev; cart through the 1.48 cm position pinion, pendulum direct.
 CART_M_PER_COUNT = 2.275e-5
 PENDULUM_RAD_PER_COUNT = 2 * math.pi / 4096
@@ -219,6 +221,6 @@ LAB_SOURCES = {
 def realism(name: str, kind: str) -> tuple[Instruments, dict[str, float]]:
     """``(instruments, plant-parameter overrides)`` of the option set ``name`` for plant ``kind``."""
     if name not in REALISM:
-        raise InstrumentError(f"unknown realism preset {name!r}; known: {', '.join(REALISM)}")
+        raise InstrumentError(f"unknown realism preset {name!r}; {closest(name, REALISM)}")
     entry = REALISM[name]
     return entry["instruments"], dict(entry[kind])  # type: ignore[return-value,arg-type]

@@ -121,7 +121,7 @@ def update(path: Path, text: str) -> bool:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ipcosim.harness.evidence.controllers_table",
-                                     description=__doc__.splitlines()[0])
+                                     description=__doc__.splitlines()[0], allow_abbrev=False)
     parser.add_argument("--update", type=Path, help="rewrite the table block in this markdown file")
     args = parser.parse_args(argv)
     text = document()

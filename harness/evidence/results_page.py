@@ -217,7 +217,7 @@ def replace_between_markers(text: str, generated: str) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     parser.add_argument("--update", type=Path, help="rewrite this markdown file between the results markers")
     parser.add_argument("--samples", type=int, default=ROBUST_SAMPLES,
                         help=f"robustness runs per cell (default {ROBUST_SAMPLES})")

@@ -279,8 +279,8 @@ def variant_files(name: str) -> dict[str, str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("names", nargs="*", help="scenarios to write (default: all twelve)")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    parser.add_argument("names", nargs="*", help="scenarios to write (default: all)")
     args = parser.parse_args(argv)
     for path in write_scenarios(names=args.names or None):
         print(path)
