@@ -179,7 +179,8 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
         initialize=list(zip(zkeys, started)) + [(f"V:{s}", leaf(f"V:initial_{s}")) for s in states],
         step=list(zip(zkeys, stepped[:n])) + [(f"V:{s}", v) for s, v in zip(states, stepped[n:])],
         checked=zkeys, meta={"role": "plant", "plant": kind, "integrator_step": repr(step), "instruments_off": off,
-                             "stage_coefficients": sorted(coefficients)},
+                             "stage_coefficients": sorted(coefficients),
+                             "design_values": {f: getattr(p0, f) for f in cls.__dataclass_fields__}},
         checks={**{f.name: ("positive" if f.metadata.get("positive") else
                             "nonnegative" if f.metadata.get("nonnegative") else "finite")
                    for f in cls.__dataclass_fields__.values()},
@@ -335,7 +336,7 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
                        unit_definitions=units, states=states, initialize=step, step=step,
                        checked=["V:voltage"] + [f"L:{p}" for p in state_paths], python_only=python_only,
                        paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
-                       meta={"role": "law", "law": law, "plant": kind},
+                       meta={"role": "law", "law": law, "plant": kind, "design_values": dict(defaults)},
                        checks={**{p: "finite" for p in settable},
                                **{s.name: s.constraint for s in catalog.schema(law, kind)
                                   if s.constraint != "bool" and s.name in {v.name for v in native_vars}}})
