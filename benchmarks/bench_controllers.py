@@ -59,7 +59,8 @@ def run() -> list[str]:
                 lqr_design_for(kind, preset(default_preset(kind)), backend=backend)
             row.append((time.perf_counter() - t) / 20)
         lines.append(f"LQR design {kind}: python-control {1e3 * row[0]:.2f} ms, scipy "
-                     f"{figure(f'controllers.lqr_design_{kind.replace(chr(45), chr(95))}_ms', 1e3 * row[1], 'ms')} "
+                     + figure(f"controllers.lqr_design_{kind.replace('-', '_')}_ms", 1e3 * row[1], "ms",
+                              what=f"LQR design, {kind}, scipy") + " "
                      f"(ratio {row[0] / row[1]:.2f})")
     lines.append(f"sum of the {len(steps)} median law steps: {sum(steps):.1f} us ("
                  + target("controllers.law_steps_us", sum(steps), LAW_STEPS_US, "us",

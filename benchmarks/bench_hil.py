@@ -143,7 +143,8 @@ def single_mass(lines: list[str]) -> None:
                                       what="LQR single 1 kHz rt, period jitter p99")
                              + "; max " + figure("hil.lqr_1khz_jitter_max_us",
                                                  m.get("period_jitter_max_s", float("nan")) * US, "us",
-                                                 anchor="pacer alone, rt: hil.pacer_rt_jitter_max_us"))
+                                                 anchor="pacer alone, rt: hil.pacer_rt_jitter_max_us",
+                                                 what="LQR single 1 kHz rt, period jitter max"))
                 print('   ' + lines[-1], flush=True)
 
 

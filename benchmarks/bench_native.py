@@ -34,8 +34,8 @@ CYCLES = int(os.environ.get("IPCOSIM_BENCH_CYCLES", "50"))
 SCENARIO = "single-mass-lqr"
 SWEEP_RUNS = int(os.environ.get("IPCOSIM_BENCH_SWEEP_RUNS", "10"))
 #: Targets: the native plant cycle / the trivial native FMU's (measured 1.8-1.9x); the native sweep's
-#: median CPU seconds per 10 s run (measured 0.010-0.011 s).
-PLANT_OVER_TRIVIAL, SWEEP_NATIVE_S = 2.4, 0.014
+#: median CPU seconds per 10 s run (measured 0.011-0.0136 s at load 2-10).
+PLANT_OVER_TRIVIAL, SWEEP_NATIVE_S = 2.4, 0.016
 
 
 def _cycle(fmu: Path, unzip: Path, inputs: dict[str, float], outputs: list[str]) -> Callable[[int], None]:
@@ -167,26 +167,38 @@ def run() -> list[str]:
         lib = _libcosim(Path(d), native)
     sweep = _sweep()
     plant, trivial = c["native plant"], c["trivial native FMU"]
-    floor_text = (f"{figure('native.libcosim_floor_rtf', lib['floor'], 'x', what='libcosim, one trivial native FMU')}"
-                  f" real time, {1e3 / lib['floor']:.1f} us per 1 ms step of its own")
     anchor = f"libcosim alone with one trivial native FMU: {lib['floor']:.0f}x"
+    f = {"floor": figure("native.libcosim_floor_rtf", lib["floor"], "x", what="libcosim, one trivial native FMU"),
+         "native": figure("native.plant_cycle_us", plant, "us", what="native plant cycle through fmpy"),
+         "python": figure("native.python_plant_cycle_us", c["python plant"], "us",
+                          what="Python plant cycle through fmpy"),
+         "trivial": figure("native.trivial_cycle_us", trivial, "us", anchor="fmpy ctypes calls",
+                           what="trivial native FMU cycle"),
+         "over": target("native.plant_over_trivial", plant / trivial, PLANT_OVER_TRIVIAL, "x",
+                        what="native plant cycle / trivial native FMU cycle"),
+         "py/nat": figure("native.python_over_native_cycle", c["python plant"] / plant, "x",
+                          what="plant cycle: Python / native"),
+         "sweep py": figure("native.sweep_python_s", sweep["python"], "s", what="Python sweep, CPU s per run"),
+         "sweep nat": target("native.sweep_native_s", sweep["native"], SWEEP_NATIVE_S, "s",
+                             what="native sweep, CPU s per run"),
+         "sweep ratio": figure("native.sweep_ratio", sweep["python"] / sweep["native"], "x",
+                               what="sweep: Python / native"),
+         "lib": figure("native.libcosim_rtf", lib["scenario"], "x", anchor=anchor,
+                       what="libcosim, native FMUs, real-time factor"),
+         "lib 1": figure("native.libcosim_export_1ms_rtf", lib["export 1 ms"], "x", anchor=anchor,
+                         what="libcosim, exported loop, 1 ms steps"),
+         "lib 10": figure("native.libcosim_export_10ms_rtf", lib["export 10 ms"], "x", anchor=anchor,
+                          what="libcosim, exported loop, 10 ms steps")}
     return [
         f"plant cycle (set, doStep 1 ms, get 5 outputs) through fmpy, least disturbed of {ROUNDS} x {CYCLES}: native "
-        f"{figure('native.plant_cycle_us', plant, 'us')}, python "
-        f"{figure('native.python_plant_cycle_us', c['python plant'], 'us')}, trivial native FMU "
-        f"{figure('native.trivial_cycle_us', trivial, 'us', anchor='fmpy ctypes calls')}",
-        f"  native plant / trivial native FMU {plant / trivial:.2f}x ("
-        + target("native.plant_over_trivial", plant / trivial, PLANT_OVER_TRIVIAL, "x",
-                 what="native plant cycle / trivial native FMU cycle")
-        + f"); python plant / native plant {figure('native.python_over_native_cycle', c['python plant'] / plant, 'x')}",
+        f"{f['native']}, python {f['python']}, trivial native FMU {f['trivial']}",
+        f"  native plant / trivial native FMU {plant / trivial:.2f}x ({f['over']}); python plant / native plant "
+        f"{f['py/nat']}",
         f"robustness sweep of {SCENARIO} ({SWEEP_RUNS} runs of 10 s each, one worker, median CPU time): python "
-        f"{figure('native.sweep_python_s', sweep['python'], 's')}/run, native {sweep['native']:.4f} s/run "
-        f"({target('native.sweep_native_s', sweep['native'], SWEEP_NATIVE_S, 's', what='native sweep, s per run')}); "
-        f"python/native {figure('native.sweep_ratio', sweep['python'] / sweep['native'], 'x')}",
-        f"libcosim on native FMUs (reference, capped by libcosim's own step cost: {floor_text}):",
-        f"  {SCENARIO} folder, 1 ms: {figure('native.libcosim_rtf', lib['scenario'], 'x', anchor=anchor)} real time",
-        f"  exported as one FMU (ipcosim export): "
-        f"{figure('native.libcosim_export_1ms_rtf', lib['export 1 ms'], 'x', anchor=anchor)} at 1 ms steps, "
-        f"{figure('native.libcosim_export_10ms_rtf', lib['export 10 ms'], 'x', anchor=anchor)} at 10 ms "
+        f"{f['sweep py']}/run, native {sweep['native']:.4f} s/run ({f['sweep nat']}); python/native {f['sweep ratio']}",
+        f"libcosim on native FMUs (reference, capped by libcosim's own step cost: {f['floor']} real time, "
+        f"{1e3 / lib['floor']:.1f} us per 1 ms step of its own):",
+        f"  {SCENARIO} folder, 1 ms: {f['lib']} real time",
+        f"  exported as one FMU (ipcosim export): {f['lib 1']} at 1 ms steps, {f['lib 10']} at 10 ms "
         "(ten 1 ms ticks inside each step; the same results)",
     ]

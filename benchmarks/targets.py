@@ -29,7 +29,7 @@ def _record(key: str, value: float, unit: str, what: str, **extra: Any) -> None:
     FIGURES[key] = {"value": value if math.isfinite(value) else None, "unit": unit, "what": what or key, **extra}
 
 
-def target(key: str, value: float, limit: float, unit: str = "", *, at_most: bool = True, what: str = "") -> str:
+def target(key: str, value: float, limit: float, unit: str = "", *, at_most: bool = True, what: str) -> str:
     """Record a checked figure; return its verdict text for the module's line.
 
     Parameters
@@ -43,7 +43,7 @@ def target(key: str, value: float, limit: float, unit: str = "", *, at_most: boo
     at_most : bool
         True: the target is ``value <= limit``; False: ``value >= limit``.
     what : str
-        What was measured, for the summary of misses (default: the key).
+        What was measured, in words (the docs' tables and the summary of misses show it).
 
     Returns
     -------
@@ -55,7 +55,7 @@ def target(key: str, value: float, limit: float, unit: str = "", *, at_most: boo
     return f"target {'<=' if at_most else '>='} {limit:g}{_space(unit)}: {'met' if met else 'MISSED'}"
 
 
-def figure(key: str, value: float, unit: str = "", *, anchor: str = "", what: str = "") -> str:
+def figure(key: str, value: float, unit: str = "", *, anchor: str = "", what: str) -> str:
     """Record a figure that is never checked; return ``value`` formatted with its unit.
 
     Parameters
