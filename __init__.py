@@ -29,7 +29,7 @@ _EXPORTS = {
     "build_fmu": "ipcosim.harness.public", "ScenarioInfo": "ipcosim.harness.public",
     "FMUBuildError": "ipcosim.harness.public", "linearize": "ipcosim.harness.public",
     "RunOptions": "ipcosim.harness.options",
-    "prepare": "ipcosim.harness.api", "Prepared": "ipcosim.harness.api",
+    "prepare": "ipcosim.harness.engine", "Prepared": "ipcosim.harness.engine",
     "Result": "ipcosim.harness.master.results", "SimulationError": "ipcosim.harness.master.results",
     "load_scenario": "ipcosim.harness.scenario.ssp", "scenario_names": "ipcosim.harness.scenario.ssp",
     "IpcosimError": "ipcosim.errors", "UsageError": "ipcosim.errors",

@@ -2,7 +2,7 @@
 
 Each subclasses the built-in it refines, so callers that do not know ipcosim can still
 catch ``ValueError``, ``OSError`` or ``RuntimeError``. The FMUs carry this module in their
-private runtime (``ipcosim.fmus.build``), so an FMU's errors share the base with the host's
+private runtime (``ipcosim.fmus.pybuild``), so an FMU's errors share the base with the host's
 by name and by meaning.
 """
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The system C compiler, for the two things that compile C: ``ipcosim build --native`` (the native
-FMUs, ``ipcosim.fmus.native``) and the master's compiled stepping loop (``ipcosim.harness.master.cloop``).
+FMUs, ``ipcosim.harness.native``) and the master's compiled stepping loop (``ipcosim.harness.master.cloop``).
 Below every room: it imports nothing of the package."""
 from __future__ import annotations
 

@@ -88,8 +88,8 @@ def overhead(repeats: int = LOOP_REPEATS) -> list[str]:
 def other_masters(name: str, repeats: int = REPEATS) -> list[str]:
     """Ours against libcosim and fmpy on the same archive, extraction included on every side."""
     import ipcosim
+    from ipcosim.harness.evidence.crosscheck import run_fmpy_ssp, run_libcosim
     from ipcosim.harness.paths import BUILD_SSP_DIR
-    from ipcosim.harness.studies.crosscheck import run_fmpy_ssp, run_libcosim
 
     ssp = BUILD_SSP_DIR / f"{name}.ssp"
     if not ssp.is_file():

@@ -83,7 +83,7 @@ def _cycles(python: Path, native: Path, tmp: Path) -> dict[str, float]:
 
 def _libcosim_rtf(folder: Path, step_ns: int = 1_000_000) -> float:
     """Median of three real-time factors of libcosim's ``simulate_until`` over 10 s (1 ms steps by default)."""
-    from ipcosim.harness.errors import require
+    from ipcosim.harness.extras import require
 
     require("libcosimpy")
     from libcosimpy.CosimExecution import CosimExecution

@@ -129,7 +129,7 @@ def measure() -> dict[str, float]:
     from pythonfmu import FmuBuilder
 
     from ipcosim.fmus import wrapper
-    from ipcosim.fmus.build import ROOT, build_all
+    from ipcosim.fmus.pybuild import ROOT, build_all
 
     with tempfile.TemporaryDirectory(prefix="ipcosim-bench-") as tmp:
         work = Path(tmp)

@@ -142,7 +142,7 @@ def _init_ms(fmu: Path, unzip: Path) -> tuple[float, float]:
     """One fresh process: (wall, CPU) milliseconds from instantiate to initialized (a HIL adapter
     against a lockstep virtual rig served by this process)."""
     from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-    from ipcosim.harness.hil.server import RigServer
+    from ipcosim.fmus.hil.server import RigServer
 
     uri, server = "", None
     if fmu.stem.startswith("IP02HIL"):
@@ -193,7 +193,7 @@ def module_counts(fmu_dir: Path) -> dict[str, tuple[int, int]]:
 
 def run() -> list[str]:
     """Lines for ``make bench``."""
-    from ipcosim.fmus.build import ROOT
+    from ipcosim.fmus.pybuild import ROOT
     from ipcosim.harness.paths import BUILD_SSP_DIR
 
     fmu_dir = ROOT / "build" / "fmus"

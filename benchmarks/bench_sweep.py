@@ -48,8 +48,10 @@ def measure(spec: Any, runs: int = RUNS, repeats: int = REPEATS) -> dict[str, fl
     The three are measured in turn, ``repeats`` times, on pools kept warm; each figure is the
     best of its repeats (the least disturbed by other load on the machine).
     """
-    from ipcosim.harness.studies.sweep import LocalExecutor, run_sweep
-    from ipcosim.harness.studies.vary import make_cases, parse_all
+    from ipcosim.harness.grammar import parse_all
+    from ipcosim.harness.studies.cases import make_cases
+    from ipcosim.harness.studies.executors import LocalExecutor
+    from ipcosim.harness.studies.sweep import run_sweep
 
     name = "plant.Mp"
     varies = parse_all([f"{name}=uniform(0.9,1.1)*nominal"], spec.parameters)

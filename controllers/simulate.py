@@ -15,10 +15,10 @@ import numpy as np
 
 from ipcosim.controllers.laws import DiscreteLaw
 from ipcosim.errors import IpcosimError
+from ipcosim.fmus.metrics import compute_metrics
 from ipcosim.fmus.params import PlantParams
 from ipcosim.fmus.physics import MEASURED, MOTOR_CART
 from ipcosim.fmus.plant import Plant, PlantStepError
-from ipcosim.fmus.task import compute_metrics
 
 
 class LoopError(IpcosimError, ValueError):
@@ -61,7 +61,7 @@ ENCODER_RESOLUTION = {"cart_position": 2.275e-5, "active_cart_position": 2.275e-
 def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, plant_step: float = 1e-3,
              reference: Callable[[float], float] | float = 0.05, x0: Sequence[float] | None = None,
              quantize: bool = False) -> LoopResult:
-    """Simulate the closed loop and compute its metrics (``ipcosim.fmus.task``).
+    """Simulate the closed loop and compute its metrics (``ipcosim.fmus.metrics``).
 
     Parameters
     ----------

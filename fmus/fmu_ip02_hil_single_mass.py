@@ -1,5 +1,5 @@
 """FMU ``IP02HILSingleMass``: the single-mass plant's connectors on a data-acquisition card (HIL adapter)."""
-from ipcosim.fmus.hil_fmu import HilFmu
+from ipcosim.fmus.hil.adapter import HilFmu
 
 
 class IP02HILSingleMass(HilFmu):

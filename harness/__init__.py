@@ -12,9 +12,9 @@ from __future__ import annotations
 from typing import Any
 
 _EXPORTS = {
-    "swap_aliases": "ipcosim.harness.scenario.system", "register_swap_alias": "ipcosim.harness.scenario.system",
-    "SwapTarget": "ipcosim.harness.scenario.system",
-    "SwapRequest": "ipcosim.harness.scenario.system",
+    "swap_aliases": "ipcosim.harness.scenario.binding", "register_swap_alias": "ipcosim.harness.scenario.binding",
+    "SwapTarget": "ipcosim.harness.scenario.binding",
+    "SwapRequest": "ipcosim.harness.scenario.binding",
     "Observer": "ipcosim.harness.master.observers", "Manipulator": "ipcosim.harness.master.manipulators",
 }
 

@@ -2,9 +2,9 @@
 
 The loop is built from the scenario's native components (``ipcosim build --native``), bound and
 ordered exactly as ``ipcosim run SCENARIO --fmus native`` runs it (the same
-:class:`~ipcosim.harness.api.Prepared` binding and redesign, the master's
+:class:`~ipcosim.harness.engine.Prepared` binding and redesign, the master's
 ``gauss_seidel_order`` and ``step_multiples``), and compiled into one FMU by
-:mod:`ipcosim.fmus.native.container`. Its variables:
+:mod:`ipcosim.harness.native.container`. Its variables:
 
 - input ``reference`` [m], start 0: added to what the scenario's setpoint component feeds the
   controller (set the setpoint's ``amplitude`` to 0 to drive the loop from this input alone);
@@ -24,8 +24,8 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ipcosim.errors import IpcosimError, UsageError
-from ipcosim.fmus.native.container import ComponentSpec, ContainerSpec, InputSpec, build_container, c_name
 from ipcosim.harness.master.system import Instance, System
+from ipcosim.harness.native.container import ComponentSpec, ContainerSpec, InputSpec, build_container, c_name
 
 #: Model name of the component whose output the container's ``reference`` input adds to.
 SETPOINT_MODEL = "Setpoint"
@@ -71,7 +71,7 @@ def export(options: ExportOptions) -> Path:
         An unknown scenario, a scenario the native flavour cannot run (it names the component
         and parameter), no C compiler, an unwritable ``out`` (one line each).
     """
-    from ipcosim.harness.api import Prepared, resolve_relative
+    from ipcosim.harness.engine import Prepared, resolve_relative
     from ipcosim.harness.scenario.flavour import FlavourError
 
     out = Path(options.out)

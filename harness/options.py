@@ -2,7 +2,7 @@
 
 The command line builds a :class:`RunOptions` from its arguments (:meth:`RunOptions.from_args`),
 the Python API from keywords (:meth:`RunOptions.create`); both hand it to
-:func:`ipcosim.harness.api.run_with`. A check that fails names the option the way the command
+:func:`ipcosim.harness.engine.run_with`. A check that fails names the option the way the command
 line spells it (``--stop-time -1: must be a positive number of seconds``), so the API raises
 the same one-line message the command line prints.
 """

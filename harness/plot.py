@@ -77,7 +77,7 @@ def figure(result: "Result", title: str | None = None, backend: str | None = Non
     isolated spikes do not squash it; they are marked with red triangles on its edge and
     their count and range are written in the panel.
     """
-    from ipcosim.harness.errors import require
+    from ipcosim.harness.extras import require
 
     require("matplotlib")
     import matplotlib

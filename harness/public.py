@@ -1,7 +1,7 @@
 """The public Python API, re-exported at the top of the package: ``ipcosim.run``,
 ``ipcosim.scenarios``, ``ipcosim.build`` and ``ipcosim.build_fmu``.
 
-A thin layer over :mod:`ipcosim.harness.api`: the keywords become one
+A thin layer over :mod:`ipcosim.harness.engine`: the keywords become one
 :class:`~ipcosim.harness.options.RunOptions`, the object the command line builds from its
 arguments, so ``ipcosim.run(...)`` and ``ipcosim run ...`` check and do the same thing and
 fail with the same one-line message (an :class:`ipcosim.IpcosimError`).
@@ -87,7 +87,7 @@ def run(scenario: str | os.PathLike[str], *, swap: Mapping[str, Any] | None = No
     ...
     ipcosim.errors.UsageError: --stop-time -1: must be a positive number of seconds
     """
-    from ipcosim.harness.api import run_with
+    from ipcosim.harness.engine import run_with
 
     options = RunOptions.create(scenario, swap=swap, set=set, stop_time=stop_time, step=step,
                                 parameter_set=parameter_set, realtime=True if realtime else None, out=out, **more)
@@ -162,7 +162,7 @@ def build(out: str | os.PathLike[str] | None = None, *, force: bool = False) -> 
     >>> sorted(p.name for p in ipcosim.build())[:2]
     ['AdaptiveHSMCDoubleMass.fmu', 'AdaptiveHSMCSingleMass.fmu']
     """
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
     from ipcosim.harness.cli.build import pack_ssp
     from ipcosim.harness.paths import BUILD_DIR
 
@@ -247,7 +247,7 @@ def _sources(script: str | os.PathLike[str],
     FMUBuildError
         A file that does not exist.
     """
-    from ipcosim.fmus.build import runtime_modules
+    from ipcosim.fmus.pybuild import runtime_modules
 
     script = Path(script).resolve()
     extra = [Path(f).resolve() for f in files]
@@ -281,7 +281,7 @@ def _build_isolated(script: Path, target: Path, digest: str, extra: Sequence[Pat
     FMUBuildError
         The first line of the builder's error.
     """
-    from ipcosim.fmus.build import BuildError, build_one
+    from ipcosim.fmus.pybuild import BuildError, build_one
 
     saved = set(sys.modules)
     try:

@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 import numpy as np
 
 from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.fmus.metrics import ANGLE_COLUMNS, POSITION_COLUMNS, REFERENCE_COLUMNS, first_column
 from ipcosim.fmus.params import KINDS
-from ipcosim.fmus.task import ANGLE_COLUMNS, POSITION_COLUMNS, REFERENCE_COLUMNS, first_column
 
 if TYPE_CHECKING:  # pragma: no cover
     from ipcosim.harness.master.results import Result
@@ -244,7 +244,7 @@ def cases(plants: Sequence[str] = KINDS, vary: Mapping[str, str | Sequence[float
     """
     import itertools
 
-    from ipcosim.harness.studies.vary import parse_vary
+    from ipcosim.harness.grammar import parse_vary
 
     for p in plants:
         if p not in KINDS:

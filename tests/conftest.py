@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="session")
 def plant_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """``{"single-mass": IP02SingleMass.fmu, "double-mass": IP02DoubleMass.fmu}`` built for this session."""
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out = tmp_path_factory.mktemp("plant-fmus")
     scripts = [ROOT / "fmus" / "fmu_ip02_single_mass.py", ROOT / "fmus" / "fmu_ip02_double_mass.py"]
@@ -23,8 +23,8 @@ def plant_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 @pytest.fixture(scope="session")
 def native_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """(Python FMU folder, native FMU folder), built for this session (tests/test_native.py, test_export.py)."""
-    from ipcosim.fmus.build import build_all
-    from ipcosim.fmus.native.build import build_native
+    from ipcosim.fmus.pybuild import build_all
+    from ipcosim.harness.native.cbuild import build_native
 
     out = tmp_path_factory.mktemp("native")
     build_all(out / "fmus")

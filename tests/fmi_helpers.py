@@ -96,7 +96,7 @@ def assert_vdmcheck_clean(fmu: Path) -> None:
 
 def loaded_copies(module_suffix: str) -> list:
     """Every loaded copy of a project module: the host's (``ipcosim.<suffix>``) and each FMU's
-    private one (``_ipcosim_<model>_<hash>.<suffix>``, see ``ipcosim.fmus.build``)."""
+    private one (``_ipcosim_<model>_<hash>.<suffix>``, see ``ipcosim.fmus.pybuild``)."""
     import sys
 
     return [m for name, m in list(sys.modules.items())

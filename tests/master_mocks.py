@@ -1,5 +1,5 @@
 """Mock components for testing the master without FMUs: models, Python slaves and a builder
-that turns them into a bound System (as ipcosim.harness.scenario.system.bind would from an SSD and FMUs)."""
+that turns them into a bound System (as ipcosim.harness.scenario.binding.bind would from an SSD and FMUs)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,8 +7,8 @@ from typing import Any, Callable, Sequence
 
 from ipcosim.harness.master.slave import DISCARD, ERROR, OK, PySlave
 from ipcosim.harness.master.system import Instance, Model, System, Variable
+from ipcosim.harness.scenario.binding import bind
 from ipcosim.harness.scenario.ssp import Component, Connection, Connector, Experiment, Scenario
-from ipcosim.harness.scenario.system import bind
 
 
 def model(name: str, inputs: Sequence[str] = (), outputs: Sequence[str] = (),

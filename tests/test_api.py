@@ -87,8 +87,8 @@ def test_task_metrics_and_the_plotter_come_from_the_api_not_the_master():
     """The master computes whatever task metrics it is given (the IP02 task's by default), and a
     result draws its figure only through the plotter the API set on it."""
     from ipcosim.errors import UsageError
-    from ipcosim.fmus.task import METRIC_KEYS
-    from ipcosim.harness.api import Prepared
+    from ipcosim.fmus.metrics import METRIC_KEYS
+    from ipcosim.harness.engine import Prepared
 
     def count_rows(chunks, names):
         return {"rows_seen": sum(len(c) for c in chunks()), "fields": len(names)}

@@ -2,10 +2,10 @@
 
 Rooms (docs/architecture.md), lowest first; a room may import only rooms to its left:
 
-    errors, toolchain  <-  fmus (physics, plant FMU glue, HIL card API)  <-  controllers (laws, controller
-            FMU glue)  <-  fmus.native (the C generator: a build tool over both)
-            <-  harness.master  <-  harness.scenario  <-  harness.hil (rig server, swap alias)
-            <-  harness.api, harness.export  <-  harness.studies  <-  harness.cli
+    errors, toolchain  <-  fmus (physics, plant FMU glue, HIL)  <-  controllers (laws, controller
+            FMU glue)  <-  harness.native (the C generator: a build tool over both)
+            <-  harness.master  <-  harness.scenario
+            <-  harness.engine, harness.export  <-  harness.studies  <-  harness.evidence  <-  harness.cli
 
 Every import counts, at module level or inside a function (a lazy import is still a
 dependency), except those under ``if TYPE_CHECKING:``, which only name types for readers and
@@ -25,15 +25,16 @@ BOTTOM = ("errors", "toolchain")
 FORBIDDEN = {
     **{base: PACKAGES for base in BOTTOM},
     "fmus": ("controllers", "harness"),
-    "fmus.native": ("harness",),
-    "controllers": ("harness", "fmus.native"),
-    "harness.master": ("harness.scenario", "harness.studies", "harness.cli", "harness.api", "harness.hil",
-                       "harness.plot", "controllers", "fmus"),
-    "harness.scenario": ("harness.studies", "harness.cli", "harness.api"),
-    "harness.hil": ("harness.studies", "harness.cli", "harness.api"),
-    "harness.api": ("harness.studies", "harness.cli"),
+    "controllers": ("harness",),
+    "harness.native": ("harness.master", "harness.scenario", "harness.engine", "harness.export",
+                       "harness.studies", "harness.cli"),
+    "harness.master": ("harness.scenario", "harness.studies", "harness.cli", "harness.engine",
+                       "harness.plot", "harness.native", "controllers", "fmus"),
+    "harness.scenario": ("harness.studies", "harness.cli", "harness.engine"),
+    "harness.engine": ("harness.studies", "harness.cli"),
     "harness.export": ("harness.studies", "harness.cli"),
-    "harness.studies": ("harness.cli",),
+    "harness.studies": ("harness.evidence", "harness.cli"),
+    "harness.evidence": ("harness.cli",),
 }
 
 
@@ -145,9 +146,9 @@ def test_the_checks_see_a_forbidden_edge(tmp_path) -> None:
     and a type-only import is not."""
     path = tmp_path / "physics.py"
     path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
-                    "    from ipcosim.harness.api import run_with\n"
+                    "    from ipcosim.harness.engine import run_with\n"
                     "def f():\n    from ipcosim.harness.master.results import Result\n")
-    mods = {"fmus.physics": path, "harness.master.results": path, "harness.api": path}
+    mods = {"fmus.physics": path, "harness.master.results": path, "harness.engine": path}
     assert _imports("fmus.physics", path, mods) == {"harness.master.results"}
 
 

@@ -28,7 +28,7 @@ DATA = Path(__file__).resolve().parent / "data"
 # ------------------------------------------------------------------ fixtures
 @pytest.fixture(scope="session")
 def corpus_fmus(tmp_path_factory) -> dict[str, Path]:
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out = tmp_path_factory.mktemp("corpus-fmus")
     scripts = [DATA / "fmu_master_source.py", DATA / "fmu_master_gain.py", DATA / "fmu_corpus_fault.py"]

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipcosim.harness.studies.claims import _lqr_case, oscillation
+from ipcosim.harness.evidence.claims import _lqr_case, oscillation
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,14 +31,14 @@ def test_lqr_falls_between_the_analysed_delay_margin_and_the_search_result() -> 
 
 
 def test_results_margins_table_is_current() -> None:
-    from ipcosim.harness.studies.results import margins_table
+    from ipcosim.harness.evidence.results_page import margins_table
 
     assert margins_table() in (ROOT / "docs" / "results.md").read_text()
 
 
 def test_judge_gives_a_verdict_per_claim_on_both_plants() -> None:
     """Short runs: every claim gets a verdict and evidence on both plants; the PID claims hold on both."""
-    from ipcosim.harness.studies.claims import CLAIMS, judge
+    from ipcosim.harness.evidence.claims import CLAIMS, judge
 
     rows = judge(stop_time=3.0)
     assert [r["claim"] for r in rows] == [c.text for c in CLAIMS]

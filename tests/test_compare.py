@@ -10,9 +10,9 @@ import re
 import numpy as np
 import pytest
 
+from ipcosim.harness.grammar import parse_all
 from ipcosim.harness.studies import report
 from ipcosim.harness.studies.robustness import DEFAULT_UNCERTAINTY, default_vary, summarize
-from ipcosim.harness.studies.vary import parse_all
 
 
 def row(status="ok", **metrics):
@@ -124,10 +124,10 @@ def test_default_uncertainty_names_only_physical_parameters():
 
 
 def test_compare_builds_missing_fmus_once_then_runs(tmp_path, monkeypatch, capsys):
-    import ipcosim.fmus.build
+    import ipcosim.fmus.pybuild
     import ipcosim.harness.studies.specs as specs
     from ipcosim.harness.cli import main as cli_main
-    from ipcosim.harness.scenario.system import FMUNotFoundError
+    from ipcosim.harness.scenario.binding import FMUNotFoundError
 
     real = specs.spec_for
     calls, builds = [], []
@@ -139,7 +139,7 @@ def test_compare_builds_missing_fmus_once_then_runs(tmp_path, monkeypatch, capsy
         return real("pure:single-mass-lqr", **kwargs)
 
     monkeypatch.setattr(specs, "spec_for", fake_spec_for)
-    monkeypatch.setattr(ipcosim.fmus.build, "build_all", lambda out, **kw: builds.append(out) or [])
+    monkeypatch.setattr(ipcosim.fmus.pybuild, "build_all", lambda out, **kw: builds.append(out) or [])
     code = cli_main(["compare", "--scenarios", "a,b", "--stop-time", "0.5", "--workers", "1", "--fmus", "python",
                      "--out", str(tmp_path), "--quiet"])
     err = capsys.readouterr().err

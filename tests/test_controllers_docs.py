@@ -5,7 +5,7 @@ import re
 from pathlib import Path
 
 from ipcosim.controllers.catalog import TUNED_CASCADE, TUNED_HSMC
-from ipcosim.controllers.evidence import BEGIN, END, document
+from ipcosim.harness.evidence.controllers_table import BEGIN, END, document
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "controllers.md"
 
@@ -41,7 +41,8 @@ def test_evidence_table_in_the_docs_is_current() -> None:
     for doc in (DOC,):
         text = doc.read_text()
         block = text[text.index(BEGIN) + len(BEGIN):text.index(END)].strip()
-        assert _same_table(block, expected), f"run: python -m ipcosim.controllers.evidence --update {doc.name}"
+        assert _same_table(block, expected), \
+            f"run: python -m ipcosim.harness.evidence.controllers_table --update {doc.name}"
 
 
 def test_tuned_gains_in_the_docs_match_the_catalog() -> None:

@@ -30,7 +30,7 @@ H = 1e-3
 @pytest.fixture(scope="session")
 def controller_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """Every controller FMU and Setpoint, built for this session: ``{model name: path}``."""
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out = tmp_path_factory.mktemp("controller-fmus")
     results = build_all(out, scripts=sorted((ROOT / "controllers").glob("fmu_*.py")))

@@ -45,7 +45,7 @@ def loop_args(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
     """The FMU arguments of both loops (``DIR:MODEL_IDENTIFIER:GUID:IN_VRS:OUT_VRS``), FMUs built and unzipped once."""
     from fmpy import extract, read_model_description
 
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out = tmp_path_factory.mktemp("exit-fmus")
     built = {r.fmu.stem: r.fmu for r in build_all(out / "fmus", scripts=[ROOT / s for s in MODELS.values()])}

@@ -100,7 +100,7 @@ def test_model_description_validates_and_carries_the_scenarios_values(exported: 
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
 
-    from ipcosim.harness.api import Prepared
+    from ipcosim.harness.engine import Prepared
     from ipcosim.harness.export import ExportOptions, export
 
     for sc, fmu in exported.items():
@@ -133,7 +133,7 @@ def test_model_description_validates_and_carries_the_scenarios_values(exported: 
 def test_sources_compile_warning_free(exported: dict[str, Path], tmp_path: Path) -> None:
     from fmpy import read_model_description
 
-    from ipcosim.fmus.native.build import compile_sources
+    from ipcosim.harness.native.cbuild import compile_sources
 
     fmu = exported["double-mass-lqr"]
     md = read_model_description(str(fmu))
@@ -163,7 +163,7 @@ def _host_run(host: Path, fmu: Path, tmp_path: Path, step: str, steps: int, out:
 
 @pytest.fixture(scope="module")
 def host(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from ipcosim.fmus.native.build import fmi_header_dir
+    from ipcosim.harness.native.cbuild import fmi_header_dir
 
     exe = tmp_path_factory.mktemp("host") / "native_host"
     assert CC is not None
@@ -256,7 +256,7 @@ def test_unconnected_inputs_become_container_inputs(native_fmus: tuple[Path, Pat
     the container's inputs ``controller.<input>`` and act as on the controller FMU alone."""
     import fmpy
 
-    from ipcosim.fmus.native.container import ComponentSpec, ContainerSpec, InputSpec, build_container
+    from ipcosim.harness.native.container import ComponentSpec, ContainerSpec, InputSpec, build_container
 
     native = native_fmus[1]
     spec = ContainerSpec(

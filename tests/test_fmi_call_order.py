@@ -11,7 +11,7 @@ import pytest
 from fmi_helpers import instantiate
 from fmpy.fmi1 import FMICallException
 
-from ipcosim.fmus.build import build_all
+from ipcosim.fmus.pybuild import build_all
 
 pytestmark = pytest.mark.integration
 DATA = Path(__file__).resolve().parent / "data"

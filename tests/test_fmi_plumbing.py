@@ -1,4 +1,4 @@
-"""ipcosim.fmus.fmi (the shared FMU plumbing over pythonfmu 0.7.0) and ipcosim.fmus.build: model description
+"""ipcosim.fmus.fmi (the shared FMU plumbing over pythonfmu 0.7.0) and ipcosim.fmus.pybuild: model description
 content, the status codes and log messages an importer sees, several instances per process,
 tunable/fixed parameters, and the incremental build."""
 from __future__ import annotations
@@ -13,8 +13,8 @@ from fmi_helpers import assert_vdmcheck_clean, instantiate, private_resource
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from ipcosim.fmus.build import BuildError, build_all, check_fmu
 from ipcosim.fmus.fmi import FmuBase, FmuError, parse_unit
+from ipcosim.fmus.pybuild import BuildError, build_all, check_fmu
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBE = Path(__file__).resolve().parent / "data" / "fmu_plumbing_probe.py"
@@ -280,7 +280,7 @@ def test_check_fmu_rejects_undefined_units(tmp_path: Path) -> None:
 
 
 def test_discover_finds_the_fmu_scripts() -> None:
-    from ipcosim.fmus.build import discover
+    from ipcosim.fmus.pybuild import discover
     scripts = discover(ROOT)
     names = {s.name for s in scripts}
     assert {"fmu_ip02_single_mass.py", "fmu_ip02_double_mass.py"} <= names

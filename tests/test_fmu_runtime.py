@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.harness.hil.server import RigServer
+from ipcosim.fmus.hil.server import RigServer
 
 pytestmark = pytest.mark.integration
 
@@ -34,7 +34,7 @@ LQR_GAINS = [f"K_{s}" for s in ("cart_position", "cart_velocity", "pendulum_angl
 @pytest.fixture(scope="module")
 def unzipped_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """Every FMU of the project, built and extracted: ``{model: folder}``."""
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out = tmp_path_factory.mktemp("runtime-fmus")
     folders = {}
@@ -165,7 +165,7 @@ def test_build_in_a_process_that_loaded_the_same_build_from_a_deleted_folder(unz
 
     from fmi_helpers import instantiate
 
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     fmu = unzipped_fmus["LQRSingleMass"].parent / "fmus" / "LQRSingleMass.fmu"
     loaded = instantiate(fmu, tmp_path / "loaded")

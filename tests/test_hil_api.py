@@ -166,7 +166,8 @@ def test_inproc_creates_a_rig_from_the_query():
 
 
 def test_swap_alias_picks_the_adapter_by_plant_kind(tmp_path, monkeypatch):
-    from ipcosim.harness.hil.swap import HilSwapError, card_clock, find_adapter, plant_kind
+    from ipcosim.fmus.hil.swap import HilSwapError, card_clock, find_adapter, plant_kind
+    from ipcosim.harness.scenario.ssp import fmu_search_path
 
     assert plant_kind("x", "IP02SingleMass", set()) == "single-mass"
     assert plant_kind("x", "IP02DoubleMass", set()) == "double-mass"
@@ -175,11 +176,11 @@ def test_swap_alias_picks_the_adapter_by_plant_kind(tmp_path, monkeypatch):
     with pytest.raises(HilSwapError):
         plant_kind("mine", "Other", {"voltage"})
     (tmp_path / "IP02HILSingleMass.fmu").write_bytes(b"")
-    assert find_adapter("IP02HILSingleMass", tmp_path) == (tmp_path / "IP02HILSingleMass.fmu").resolve()
+    assert find_adapter("IP02HILSingleMass", [tmp_path]) == (tmp_path / "IP02HILSingleMass.fmu").resolve()
     monkeypatch.setenv("IPCOSIM_FMU_PATH", str(tmp_path))
-    assert find_adapter("IP02HILSingleMass") == (tmp_path / "IP02HILSingleMass.fmu").resolve()
+    assert find_adapter("IP02HILSingleMass", fmu_search_path()) == (tmp_path / "IP02HILSingleMass.fmu").resolve()
     with pytest.raises(HilSwapError, match="ipcosim build"):
-        find_adapter("IP02HILNoSuchPlant", tmp_path)
+        find_adapter("IP02HILNoSuchPlant", [tmp_path])
     assert card_clock("q4:0") == "wallclock"                              # a real card runs in real time
     assert card_clock("q4:0@inproc://nowhere?clock=lockstep") == "lockstep"
     assert card_clock("q4:0@tcpip://127.0.0.1:1") == "wallclock"          # unreachable: assume real time

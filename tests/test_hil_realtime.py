@@ -49,7 +49,7 @@ pytestmark = pytest.mark.integration
 @pytest.fixture(scope="session")
 def realtime_fmus(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The FMUs of the two scenarios, the HIL adapters and the slow-initializing controllers."""
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out = tmp_path_factory.mktemp("realtime-fmus")
     names = ["fmus/fmu_ip02_single_mass.py", "fmus/fmu_ip02_double_mass.py", "fmus/fmu_ip02_hil_single_mass.py",

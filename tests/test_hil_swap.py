@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.harness.hil.server import RigServer
+from ipcosim.fmus.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
 CART_RES, PEND_RES = 2.275e-5, 1.534e-3          # thesis-data.md, encoders
@@ -34,13 +34,13 @@ RES = {"cart_position": CART_RES, "active_cart_position": CART_RES, "passive_car
 # The open-loop scenarios leave plant.voltage unconnected on purpose (manipulators drive it).
 pytestmark = [pytest.mark.integration,
               pytest.mark.filterwarnings("ignore:.*plant.voltage is not connected:"
-                                         "ipcosim.harness.scenario.system.UnconnectedInputWarning")]
+                                         "ipcosim.harness.scenario.binding.UnconnectedInputWarning")]
 
 
 @pytest.fixture(scope="session")
 def fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Every FMU of the project, built for this session."""
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out = tmp_path_factory.mktemp("all-fmus")
     build_all(out)

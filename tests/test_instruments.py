@@ -147,7 +147,7 @@ def test_input_delay_holds_the_voltage_back_whole_steps() -> None:
 
 
 def test_tap_metrics() -> None:
-    from ipcosim.fmus.task import tap_metrics
+    from ipcosim.fmus.metrics import tap_metrics
 
     t = np.arange(0, 5, 1e-3)
     th = np.where(t < 1.0, 0.0, 0.05 * np.exp(-(t - 1.0) / 0.2) * np.cos(10 * (t - 1.0)))

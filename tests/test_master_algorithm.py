@@ -22,11 +22,11 @@ from master_mocks import (
     system,
 )
 
-from ipcosim.harness.api import Prepared
+from ipcosim.harness.engine import Prepared
 from ipcosim.harness.master.algorithm import AlgebraicLoopError, StepSizeError, gauss_seidel_order
 from ipcosim.harness.master.manipulators import ScheduledValues
 from ipcosim.harness.master.observers import Observer, Progress
-from ipcosim.harness.scenario.system import BindingError, UnconnectedInputWarning
+from ipcosim.harness.scenario.binding import BindingError, UnconnectedInputWarning
 
 K, H = 5.0, 0.01
 
@@ -365,7 +365,7 @@ def test_unconnected_input_is_a_warning_naming_it():
     assert any("input plant.voltage is not connected" in w for w in sysm.warnings)
     with pytest.warns(UnconnectedInputWarning, match="plant.voltage"):
         Prepared(system=sysm, slave_factory=loop_factory(), warn=False)  # no warning yet...
-        from ipcosim.harness.scenario.system import warn_all
+        from ipcosim.harness.scenario.binding import warn_all
         warn_all(sysm)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -400,7 +400,9 @@ def test_a_traceback_through_the_generated_loop_shows_its_source() -> None:
     import linecache
     import traceback
 
-    from ipcosim.harness.master.algorithm import GAUSS_SEIDEL, Block, TimeBase, compile_loop
+    from ipcosim.harness.master.algorithm import GAUSS_SEIDEL, TimeBase
+    from ipcosim.harness.master.plan import Block
+    from ipcosim.harness.master.pyloop import compile_loop
 
     def failing_step(*args):
         return 1 / 0

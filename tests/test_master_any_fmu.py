@@ -17,11 +17,11 @@ import ipcosim
 from ipcosim.harness import cli
 from ipcosim.harness.master.algorithm import StepSizeError
 from ipcosim.harness.master.results import SimulationError
-from ipcosim.harness.scenario.system import BindingError
+from ipcosim.harness.scenario.binding import BindingError
 
 pytestmark = [pytest.mark.skipif(shutil.which("gcc") is None and shutil.which("cc") is None,
                                  reason="needs a C compiler to build the test FMUs"),
-              pytest.mark.filterwarnings("ignore::ipcosim.harness.scenario.system.UnconnectedInputWarning")]
+              pytest.mark.filterwarnings("ignore::ipcosim.harness.scenario.binding.UnconnectedInputWarning")]
 
 SPECS = {s.name: s for s in (cfmu.STAIR, cfmu.PASSTHROUGH, cfmu.BOUNCING_BALL, cfmu.counter(),
                              cfmu.counter("CounterFixed", variable_step=False), cfmu.counter("Counter25", step=0.25),

@@ -19,7 +19,7 @@ DATA = Path(__file__).resolve().parent / "data"
 
 @pytest.fixture(scope="session")
 def test_fmus(tmp_path_factory) -> dict[str, Path]:
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out = tmp_path_factory.mktemp("master-test-fmus")
     results = build_all(out, scripts=[DATA / "fmu_master_source.py", DATA / "fmu_master_gain.py"])
@@ -252,7 +252,7 @@ def test_fmu_raising_an_exception_is_fatal_and_reported_with_its_message(tmp_pat
     assert data["time"][-1] == 0.5 and len(data) == 51
 
 
-@pytest.mark.filterwarnings("ignore::ipcosim.harness.scenario.system.UnconnectedInputWarning")
+@pytest.mark.filterwarnings("ignore::ipcosim.harness.scenario.binding.UnconnectedInputWarning")
 def test_fmu_failure_through_the_api_keeps_the_partial_result(tmp_path, test_fmus):
     import ipcosim.harness
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from master_mocks import DISCARD, ERROR, OK, Factory, loop_factory, loop_system, model, system
 
-from ipcosim.harness.api import Prepared
+from ipcosim.harness.engine import Prepared
 from ipcosim.harness.master import cloop
 from ipcosim.harness.master.slave import TERMINATE
 from ipcosim.toolchain import find_compiler
@@ -192,7 +192,8 @@ def test_parallel_compiles_of_one_loop_each_end_with_a_whole_library(tmp_path):
 
 def _source() -> str:
     """The C source of a multi-rate Jacobi loop with transfers (built without running it)."""
-    from ipcosim.harness.master.algorithm import JACOBI, Block, TimeBase
+    from ipcosim.harness.master.algorithm import JACOBI, TimeBase
+    from ipcosim.harness.master.plan import Block
 
     def block(i, n_out, n_in, m, transfers=()):
         return Block(index=i, name=f"b{i}", handle=None, do_step=None, get_real=None, set_real=None, out_vrs=None,

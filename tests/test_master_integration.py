@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import ipcosim.harness
+from ipcosim.harness.evidence.crosscheck import run_libcosim
 from ipcosim.harness.scenario.ssp import load_scenario
-from ipcosim.harness.studies.crosscheck import run_libcosim
 
 pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,7 +29,7 @@ def built(tmp_path_factory) -> Path:
     ready = os.environ.get("IPCOSIM_TEST_BUILD")
     if ready:
         return Path(ready)
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
     from ipcosim.harness.scenario.ssp_pack import pack_all
 
     out = tmp_path_factory.mktemp("master-build")

@@ -1,4 +1,4 @@
-"""ipcosim.fmus.task: the DESIGN.md metric definitions on synthetic signals with known answers."""
+"""ipcosim.fmus.metrics: the DESIGN.md metric definitions on synthetic signals with known answers."""
 from __future__ import annotations
 
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from ipcosim.fmus.task import METRIC_KEYS, MetricsError, compute_metrics
+from ipcosim.fmus.metrics import METRIC_KEYS, MetricsError, compute_metrics
 
 T = np.linspace(0.0, 10.0, 10001)  # 1 ms grid
 

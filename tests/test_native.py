@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipcosim.fmus.native import tracer
+from ipcosim.harness.native import tracer
 from ipcosim.toolchain import find_compiler
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -81,7 +81,7 @@ def test_c_literals_round_trip() -> None:
 def kernels(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     if CC is None:
         pytest.skip("no C compiler")
-    from ipcosim.fmus.native.kernels import kernels_source
+    from ipcosim.harness.native.kernels import kernels_source
 
     d = tmp_path_factory.mktemp("kernels")
     (d / "k.c").write_text(kernels_source())
@@ -94,8 +94,8 @@ def kernels(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
 @pytest.mark.parametrize("name", ["single_mass_rhs", "double_mass_rhs", "single_mass_momentum_rhs"])
 def test_generated_rhs_agrees_with_python(kernels: ctypes.CDLL, name: str) -> None:
     from ipcosim.fmus import physics
-    from ipcosim.fmus.native.kernels import KERNELS, param_names
     from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, make
+    from ipcosim.harness.native.kernels import KERNELS, param_names
 
     fn_name, kind = KERNELS[name]
     py = getattr(physics, fn_name)
@@ -320,7 +320,7 @@ def test_same_connectors_as_the_python_flavour(native_fmus: tuple[Path, Path]) -
 @pytest.mark.integration
 @pytest.mark.skipif(shutil.which("clang") is None, reason="clang not installed")
 def test_sources_compile_warning_free_with_clang(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
-    from ipcosim.fmus.native.build import FLAGS, compile_sources
+    from ipcosim.harness.native.cbuild import FLAGS, compile_sources
 
     _, native = native_fmus
     for fmu in sorted(native.glob("*.fmu")):
@@ -334,7 +334,7 @@ def test_sources_compile_warning_free_with_clang(native_fmus: tuple[Path, Path],
 def host(tmp_path_factory: pytest.TempPathFactory) -> Path:
     if CC is None:
         pytest.skip("no C compiler")
-    from ipcosim.fmus.native.build import fmi_header_dir
+    from ipcosim.harness.native.cbuild import fmi_header_dir
 
     exe = tmp_path_factory.mktemp("host") / "native_host"
     subprocess.run([CC, "-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-D_POSIX_C_SOURCE=200809L",
@@ -384,7 +384,7 @@ def test_native_scenario_runs_in_libcosim(native_fmus: tuple[Path, Path], tmp_pa
     pytest.importorskip("libcosimpy")
     import ipcosim
     import ipcosim.harness.scenario.flavour as flavour
-    from ipcosim.harness.studies.crosscheck import run_libcosim
+    from ipcosim.harness.evidence.crosscheck import run_libcosim
 
     _, native = native_fmus
     monkeypatch.setattr(flavour, "native_fmu_dir", lambda: native)
@@ -467,7 +467,7 @@ def test_set_lqr_gains_acts_alike_on_both_flavours(native_fmus: tuple[Path, Path
 def test_crosscheck_layout_validates_and_flavours_agree(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
     """``make crosscheck``'s tree passes fmpy.cross_check, and each model's reference result is the same
     in both flavours (each FMU alone on the same input signal)."""
-    from ipcosim.harness.studies.fmi_crosscheck import write_tree
+    from ipcosim.harness.evidence.fmi_crosscheck import write_tree
 
     python, native = native_fmus
     count, problems = write_tree(tmp_path, {"ipcosim-python": python, "ipcosim-native": native}, "test")

@@ -1,6 +1,6 @@
 """``ipcosim run <scenario> --fmus native`` loads no design code unless a design parameter changed:
 the native FMUs carry the design's numbers for the values they were built with
-(``design_values`` of ``native.json``, ``ipcosim.fmus.native.redesign.unchanged``)."""
+(``design_values`` of ``native.json``, ``ipcosim.harness.native.redesign.unchanged``)."""
 from __future__ import annotations
 
 import json
@@ -47,7 +47,7 @@ def test_a_changed_design_parameter_is_redesigned(native_fmus, tmp_path):
 def test_unchanged_design_runs_the_same_numbers(native_fmus, tmp_path):
     """The run that skips the redesign equals the one that redesigns (a design value set to itself
     through the parameter the redesign reads: the weights are the same, so the numbers are)."""
-    from ipcosim.fmus.native.redesign import native_info, redesign, unchanged
+    from ipcosim.harness.native.redesign import native_info, redesign, unchanged
 
     _, native = native_fmus
     info = native_info(native / "LQRSingleMass.fmu")

@@ -29,7 +29,7 @@ def test_every_non_python_file_the_code_reads_is_package_data() -> None:
     """The native FMUs' hand-written C glue is copied from the package at build time."""
     data = _config()["package-data"]
     patterns = [(pkg, pat) for pkg, pats in data.items() for pat in pats]
-    needed = sorted(p.relative_to(ROOT) for p in (ROOT / "fmus" / "native" / "c").iterdir() if p.is_file())
+    needed = sorted(p.relative_to(ROOT) for p in (ROOT / "harness" / "native" / "c").iterdir() if p.is_file())
     assert needed
     for rel in needed:
         covered = False

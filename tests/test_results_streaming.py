@@ -1,11 +1,11 @@
 """Streamed results (``ipcosim.harness.master.results.RowWriter``) and the task metrics computed
-from them a chunk at a time (``ipcosim.fmus.task``), which must equal those of the whole arrays."""
+from them a chunk at a time (``ipcosim.fmus.metrics``), which must equal those of the whole arrays."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from ipcosim.fmus.task import compute_metrics, streamed_task_metrics, task_metrics
+from ipcosim.fmus.metrics import compute_metrics, streamed_task_metrics, task_metrics
 from ipcosim.harness.master.results import RowWriter
 
 NAMES = ["time", "setpoint.reference", "plant.cart_position", "plant.pendulum_angle", "controller.voltage"]

@@ -10,6 +10,7 @@ import pytest
 from lxml import etree
 from ssd_helpers import component, connection, connector, ssd, ssv, write_scenario
 
+from ipcosim.harness.scenario.binding import unit_conversion
 from ipcosim.harness.scenario.ssp import (
     NS,
     ScenarioError,
@@ -21,7 +22,6 @@ from ipcosim.harness.scenario.ssp import (
 )
 from ipcosim.harness.scenario.ssp_gen import CONTROLLERS, PLANTS, ssd_text
 from ipcosim.harness.scenario.ssp_pack import pack
-from ipcosim.harness.scenario.system import unit_conversion
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPECTED = sorted(f"{p}-{c}" for p in ("single-mass", "double-mass")

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from ipcosim.harness.cli import main as cli_main
-from ipcosim.harness.studies.sweep import read_results
+from ipcosim.harness.studies.store import read_results
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.integration
@@ -18,7 +18,7 @@ pytestmark = pytest.mark.integration
 @pytest.fixture(scope="session")
 def study_fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Every FMU of the project (setpoint, controllers, plants), built for this session."""
-    from ipcosim.fmus.build import build_all, discover
+    from ipcosim.fmus.pybuild import build_all, discover
 
     scripts = discover(ROOT)
     names = {p.name for p in scripts}

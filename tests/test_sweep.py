@@ -17,10 +17,13 @@ import numpy as np
 import pytest
 
 from ipcosim.harness.cli import main as cli_main
+from ipcosim.harness.grammar import VaryError, parse_all, parse_vary
+from ipcosim.harness.studies.cases import SweepCase, case_seed, make_cases
+from ipcosim.harness.studies.executors import DaskExecutor, SchedulerError
 from ipcosim.harness.studies.robustness import summarize, wilson_interval
 from ipcosim.harness.studies.runners import PurePlantSpec, SyntheticSpec, classify_task
-from ipcosim.harness.studies.sweep import DaskExecutor, SchedulerError, SweepMismatchError, read_results, run_sweep
-from ipcosim.harness.studies.vary import Case, VaryError, case_seed, make_cases, parse_all, parse_vary
+from ipcosim.harness.studies.store import read_results
+from ipcosim.harness.studies.sweep import SweepMismatchError, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMS = {"plant.Mp": 0.2, "plant.K": 140.0, "controller.c1": 4.7}
@@ -179,7 +182,9 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
     calls2.mkdir()
     script = textwrap.dedent(f"""
         import sys
-        from ipcosim.harness.studies.sweep import run_sweep, make_cases, parse_all
+        from ipcosim.harness.studies.sweep import run_sweep
+        from ipcosim.harness.grammar import parse_all
+        from ipcosim.harness.studies.cases import make_cases
         from ipcosim.harness.studies.runners import SyntheticSpec
         if __name__ == "__main__":
             spec = SyntheticSpec(delay_s=0.3, calls_dir={str(calls1)!r})
@@ -227,7 +232,7 @@ def test_dask_local_cluster_gives_the_same_rows_as_the_process_pool(tmp_path):
     spec = PurePlantSpec(stop_time=2.0)
     cases = make_cases(parse_all(["plant.Mp=uniform(0.8,1.2)*nominal", "plant.Beq=[9,14]"], spec.parameters),
                        spec.parameters, samples=2, seed=11)
-    cases.append(Case(index=len(cases), params={"plant.Mp": -1.0}, seed=1))  # an invalid value: an error row
+    cases.append(SweepCase(index=len(cases), params={"plant.Mp": -1.0}, seed=1))  # an invalid value: an error row
     local = run_sweep(spec, cases, workers=2)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:

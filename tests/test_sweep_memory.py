@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 from ssd_helpers import component, connection, connector, ssd, write_scenario
 
+from ipcosim.harness.studies.cases import SweepCase
+from ipcosim.harness.studies.executors import RECYCLE_RUNS, LocalExecutor
 from ipcosim.harness.studies.runners import SyntheticSpec
-from ipcosim.harness.studies.sweep import RECYCLE_RUNS, LocalExecutor
-from ipcosim.harness.studies.vary import Case
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -23,7 +23,7 @@ def test_local_pool_is_replaced_after_its_share_of_runs(tmp_path):
     spec = SyntheticSpec(calls_dir=str(tmp_path))
     executor = LocalExecutor(1, recycle_runs=5)
     try:
-        rows = list(executor.run(spec, [Case(index=i, params={"model.x": 1.0}, seed=i) for i in range(12)]))
+        rows = list(executor.run(spec, [SweepCase(index=i, params={"model.x": 1.0}, seed=i) for i in range(12)]))
     finally:
         executor.close()
     assert sorted(r["index"] for r in rows) == list(range(12)) and all(r["status"] == "ok" for r in rows)
@@ -35,7 +35,7 @@ def test_local_pool_is_replaced_after_its_share_of_runs(tmp_path):
 def test_worker_memory_growth_over_its_runs(tmp_path):
     """One process runs as many co-simulations (three pythonfmu FMUs each) as a worker of a
     2-worker pool can before it is replaced, and reports its resident memory growth."""
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     fmus = {r.fmu.stem: r.fmu for r in build_all(tmp_path / "fmus", scripts=[
         DATA / "fmu_master_source.py", DATA / "fmu_master_gain.py", DATA / "fmu_corpus_fault.py"])}

@@ -11,9 +11,9 @@ import pytest
 from ipcosim.controllers.catalog import CatalogError, make_law
 from ipcosim.controllers.laws import LawParameterError, wrap_angle
 from ipcosim.fmus.instruments import realism
+from ipcosim.fmus.metrics import upright_metrics
 from ipcosim.fmus.params import preset
 from ipcosim.fmus.plant import InstrumentedPlant
-from ipcosim.fmus.task import upright_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 H = 1e-3
@@ -62,7 +62,7 @@ def test_swing_up_parameters_are_checked() -> None:
 
 @pytest.fixture(scope="module")
 def fmu_env(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out = tmp_path_factory.mktemp("extra-fmus")
     scripts = [ROOT / "controllers" / f for f in ("fmu_setpoint.py", "fmu_swing_up_single_mass.py",

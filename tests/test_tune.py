@@ -9,8 +9,8 @@ import pytest
 
 from ipcosim.harness.cli import main as cli_main
 from ipcosim.harness.studies import cost as costmod
+from ipcosim.harness.studies.executors import LocalExecutor
 from ipcosim.harness.studies.runners import PurePlantSpec
-from ipcosim.harness.studies.sweep import LocalExecutor
 from ipcosim.harness.studies.tune import (
     TuneError,
     parse_bounds,

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from ipcosim.fmus import wrapper
-from ipcosim.fmus.build import BuildError, build_one
+from ipcosim.fmus.pybuild import BuildError, build_one
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -9,7 +9,7 @@ Open a card by type and id (the Quanser convention), or by one URI ``[TYPE:]ID``
 
 Backends: ``quanser`` (:mod:`.quanser`), ``tcpip`` (:mod:`.tcpip`, served by
 ``ipcosim rig serve``), in-process (:mod:`.inproc`). The virtual rig is :mod:`.rig`, its
-wire protocol :mod:`.protocol`; the server is :mod:`ipcosim.harness.hil.server`.
+wire protocol :mod:`.protocol`; the server is :mod:`ipcosim.fmus.hil.server`.
 """
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ from ipcosim.fmus.hil.rig import NS, RigConfig, VirtualRig, to_ns
 def _process_registry() -> tuple[dict, dict, threading.Lock]:
     """The one registry of in-process rigs of this process, whatever copy of this module asks.
 
-    Every FMU carries its own private copy of this module (``ipcosim.fmus.build``), so a
+    Every FMU carries its own private copy of this module (``ipcosim.fmus.pybuild``), so a
     module-level dict would give each FMU, and the host, a registry of its own. The registry
     lives on the ``threading`` module instead: a standard-library module every copy shares.
     Its layout (rigs by name, controlling card by rig id, a lock) is versioned by the name.

@@ -21,14 +21,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ipcosim.fmus.build import build_all
+    from ipcosim.fmus.pybuild import build_all
 
     out: Path = args.out
     for result in build_all(out / "fmus", force=args.force):
         print(f"{'built' if result.built else 'up to date'}: {result.fmu}")
     pack_ssp(out)
     if getattr(args, "native", False):
-        from ipcosim.fmus.native.build import build_native
+        from ipcosim.harness.native.cbuild import build_native
 
         for native in build_native(out / "fmus", out / "fmus-native"):
             print(f"built (native{'' if native.binary else ', sources only'}): {native.fmu}")

@@ -50,9 +50,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def thesis_claims(out: Path) -> int:
-    """``--thesis-claims``: verdict, evidence and condition per claim (``ipcosim.harness.studies.claims``)."""
-    from ipcosim.harness.studies.claims import judge, search_lqr_fall
-    from ipcosim.harness.studies.results import claims_table, fall_table
+    """``--thesis-claims``: verdict, evidence and condition per claim (``ipcosim.harness.evidence.claims``)."""
+    from ipcosim.harness.evidence.claims import judge, search_lqr_fall
+    from ipcosim.harness.evidence.results_page import claims_table, fall_table
 
     out.mkdir(parents=True, exist_ok=True)
     rows, falls = judge(), search_lqr_fall()
@@ -106,8 +106,9 @@ def main(args: argparse.Namespace) -> int:
     if args.thesis_claims:
         return thesis_claims(Path(args.out))
     from ipcosim.errors import IpcosimError, UsageError
+    from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.report import render
-    from ipcosim.harness.studies.sweep import open_executor, package_versions
+    from ipcosim.harness.studies.store import package_versions
 
     names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else available_scenarios()
     if not names:
@@ -158,8 +159,8 @@ def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[s
     """The run spec of each scenario, by name; a scenario that cannot be loaded gets an error row
     in ``results`` instead. Missing FMUs (a fresh checkout) are built once, as ``ipcosim build`` does."""
     from ipcosim.errors import IpcosimError
+    from ipcosim.harness.studies.executors import one_line
     from ipcosim.harness.studies.specs import study_spec
-    from ipcosim.harness.studies.sweep import one_line
 
     specs: dict[str, Any] = {}
     built = False
@@ -171,7 +172,7 @@ def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[s
             except FileNotFoundError as exc:
                 if built or "ipcosim build" not in str(exc):
                     raise
-                from ipcosim.fmus.build import build_all
+                from ipcosim.fmus.pybuild import build_all
                 from ipcosim.harness.paths import BUILD_FMU_DIR
 
                 print(f"compare: FMUs missing; building them into {BUILD_FMU_DIR}", file=sys.stderr)
@@ -191,17 +192,17 @@ def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[s
 def _run_all(specs: dict[str, Any], executor: Any, args: argparse.Namespace) -> dict[str, dict[str, Any]]:
     """One run of every scenario, as one sweep whose case parameter picks the scenario; each row
     with its ``cost`` (inf for a run that failed) and the controller's ``gains``, by scenario."""
+    from ipcosim.harness.studies.cases import SweepCase, case_seed
     from ipcosim.harness.studies.cost import cost
     from ipcosim.harness.studies.runners import SCENARIO_PARAM, MultiSpec
     from ipcosim.harness.studies.specs import for_executor
     from ipcosim.harness.studies.sweep import run_sweep
-    from ipcosim.harness.studies.vary import Case, case_seed
 
     if not specs:
         return {}
     names, spec_list = list(specs), list(specs.values())
     multi = for_executor(MultiSpec(specs=spec_list), executor)
-    cases = [Case(index=i, params={SCENARIO_PARAM: float(i)}, seed=case_seed(args.seed, i))
+    cases = [SweepCase(index=i, params={SCENARIO_PARAM: float(i)}, seed=case_seed(args.seed, i))
              for i in range(len(spec_list))]
     sweep = run_sweep(multi, cases, executor=executor, progress=not args.quiet)
     results: dict[str, dict[str, Any]] = {}
@@ -218,10 +219,11 @@ def _robustness(specs: dict[str, Any], executor: Any, args: argparse.Namespace, 
                 ) -> dict[str, dict[str, Any]]:
     """A resumable robustness sweep of each scenario (masses, friction, stiffness within +-20 %) on the
     flavour its comparison run took, under ``out/robustness/<scenario>/``, summarized by scenario."""
+    from ipcosim.harness.grammar import parse_all
     from ipcosim.harness.studies import robustness as rob
+    from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.specs import for_executor, spec_for
     from ipcosim.harness.studies.sweep import run_sweep
-    from ipcosim.harness.studies.vary import make_cases, parse_all
 
     summaries: dict[str, dict[str, Any]] = {}
     for name, spec in specs.items():

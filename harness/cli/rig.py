@@ -167,7 +167,7 @@ def _check_numbers(args: argparse.Namespace) -> None:
 def serve(args: argparse.Namespace) -> int:
     from ipcosim.errors import UsageError
     from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig
-    from ipcosim.harness.hil.server import RigServer, escape
+    from ipcosim.fmus.hil.server import RigServer, escape
 
     _check_numbers(args)
     cart_limit = _limit(args.cart_limit, "--cart-limit", END_STOP_M)

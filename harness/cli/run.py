@@ -45,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     import warnings
 
-    from ipcosim.harness.api import prepare_with, run_with
+    from ipcosim.harness.engine import prepare_with, run_with
     from ipcosim.harness.master.results import json_safe
     from ipcosim.harness.options import RunOptions
 

@@ -56,10 +56,12 @@ def default_out(scenario: str, kind: str = "sweep") -> Path:
 
 def main(args: argparse.Namespace) -> int:
     from ipcosim.errors import IpcosimError
+    from ipcosim.harness.grammar import parse_all
     from ipcosim.harness.studies import robustness
+    from ipcosim.harness.studies.cases import make_cases
+    from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.specs import for_executor, parse_set, study_spec
-    from ipcosim.harness.studies.sweep import open_executor, run_sweep
-    from ipcosim.harness.studies.vary import make_cases, parse_all
+    from ipcosim.harness.studies.sweep import run_sweep
 
     overrides = parse_set(args.set)
     spec, flavour = study_spec(args.scenario, args.fmus, names=[*overrides, *(v.partition("=")[0].strip()

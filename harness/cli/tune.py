@@ -96,8 +96,8 @@ def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.cli.sweep import default_out
     from ipcosim.harness.studies import cost as costmod
     from ipcosim.harness.studies import tune as tunemod
+    from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.specs import for_executor, parse_set, study_spec
-    from ipcosim.harness.studies.sweep import open_executor
 
     overrides = parse_set(args.set)
     pset = _parameter_set(args)

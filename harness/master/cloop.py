@@ -1,4 +1,4 @@
-"""The stepping loop in C: the same plan as the Python loop (:func:`~ipcosim.harness.master.algorithm.loop_plan`),
+"""The stepping loop in C: the same plan as the Python loop (:func:`~ipcosim.harness.master.plan.loop_plan`),
 compiled once per structure and called a chunk of ticks at a time.
 
 The C source holds only the system's *structure*: which component steps when, its step
@@ -33,7 +33,8 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from ipcosim.errors import IpcosimError
-from ipcosim.harness.master.algorithm import FUNCTIONS, Block, Op, TimeBase, loop_plan
+from ipcosim.harness.master.algorithm import TimeBase
+from ipcosim.harness.master.plan import FUNCTIONS, Block, Op, loop_plan
 from ipcosim.toolchain import find_compiler
 
 #: Flags of the compile: C99, no fused multiply-add (the Python loop rounds every operation).
@@ -280,7 +281,7 @@ def python_functions(blocks: Sequence[Block]) -> list[str]:
 class CLoop:
     """The C loop bound to one execution's blocks, with the Python loop's calling convention:
     ``run(n0, n1, rec_address, value_address, row_bytes, int_rec_address=0)`` -> None or
-    ``(n, block index, function name, status)`` (see :func:`~ipcosim.harness.master.algorithm.generate_loop`)."""
+    ``(n, block index, function name, status)`` (see :func:`~ipcosim.harness.master.pyloop.generate_loop`)."""
 
     def __init__(self, blocks: Sequence[Block], order: Sequence[int], algorithm: str, time: TimeBase,
                  record_every: int, row_bytes: int, value_address: int, cache: Path | None = None) -> None:

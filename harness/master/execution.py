@@ -30,20 +30,18 @@ from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import (
     ALGORITHMS,
     GAUSS_SEIDEL,
-    Block,
-    Channel,
     InitializationError,
     StepSizeError,
     TimeBase,
-    TypedRecord,
     check_last_steps,
-    compile_loop,
     gauss_seidel_order,
     step_multiples,
 )
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
 from ipcosim.harness.master.manipulators import Manipulator, Overrides
 from ipcosim.harness.master.observers import Observer
+from ipcosim.harness.master.plan import Block, Channel, TypedRecord
+from ipcosim.harness.master.pyloop import compile_loop
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError
 from ipcosim.harness.master.slave import DISCARD, TERMINATE, FMUSlave, Slave
 from ipcosim.harness.master.system import Instance, System, Variable, kind_of
@@ -52,7 +50,7 @@ SlaveFactory = Callable[[Instance], Slave]
 #: The task's metrics of a run: ``task_metrics(chunks, names) -> dict``, where ``chunks()``
 #: iterates over the recorded rows (structured arrays, a chunk at a time; it may be called more
 #: than once) and ``names`` are the fields. Given by whoever knows the scenario (the master
-#: knows no task): ``ipcosim.harness.api`` gives ``ipcosim.fmus.task.streamed_task_metrics``.
+#: knows no task): ``ipcosim.harness.engine`` gives ``ipcosim.fmus.metrics.streamed_task_metrics``.
 TaskMetrics = Callable[[Callable[[], Iterable[np.ndarray]], Sequence[str]], Mapping[str, Any]]
 
 #: At most this many ticks run between two looks at the record for non-finite values, at
@@ -112,7 +110,7 @@ class Execution:
     Parameters
     ----------
     system : System
-        From :func:`ipcosim.harness.scenario.system.bind`.
+        From :func:`ipcosim.harness.scenario.binding.bind`.
     step : float
         Communication step [s] (the master's tick).
     stop_time : float

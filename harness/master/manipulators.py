@@ -1,6 +1,6 @@
 """Manipulators: what changes an execution from outside its components (start-value
 overrides, scheduled changes, disturbances). Structural changes (``--swap``) happen before
-anything runs, in :func:`ipcosim.harness.scenario.system.bind`.
+anything runs, in :func:`ipcosim.harness.scenario.binding.bind`.
 
 Interface (subclass :class:`Manipulator`)::
 
@@ -38,7 +38,7 @@ class Overrides(Manipulator):
     Parameters
     ----------
     values : mapping of (component, variable) to value
-        Already checked and converted (see :func:`ipcosim.harness.scenario.system.with_overrides`).
+        Already checked and converted (see :func:`ipcosim.harness.scenario.binding.with_overrides`).
     """
 
     def __init__(self, values: Mapping[tuple[str, str], Any]) -> None:

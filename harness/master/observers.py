@@ -15,9 +15,9 @@ Interface (subclass :class:`Observer`, override what you need)::
     metrics() -> dict           entries merged into the run's metrics.json
 
 The result recorder itself is built into the stepping loop (one ``memmove`` per step, see
-``ipcosim.harness.master.algorithm``); :class:`Progress` is the progress bar. Real-time pacing is provided
-by the module named in ``REALTIME_OBSERVER`` (``module:Class``), constructed with no
-arguments when a run asks for ``realtime=True`` or a swapped-in component asks for it.
+``ipcosim.harness.master.pyloop``); :class:`Progress` is the progress bar. Real-time pacing is
+:class:`ipcosim.harness.master.realtime.RealtimePacer`, which the run engine adds when a run
+asks for ``realtime=True`` or a swapped-in component asks for it.
 """
 from __future__ import annotations
 
@@ -25,13 +25,9 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any, TextIO
 
-from ipcosim.errors import IpcosimError
-
 if TYPE_CHECKING:  # pragma: no cover
     from ipcosim.harness.master.execution import Execution
 
-#: The real-time pacing observer (``module:Class``), provided by the hardware-in-the-loop part.
-REALTIME_OBSERVER = "ipcosim.harness.master.realtime:RealtimePacer"
 
 
 class Observer:
@@ -103,23 +99,3 @@ class Progress(Observer):
         if self.shown:
             self.stream.write("\n")
             self.stream.flush()
-
-
-def realtime_observer(**kwargs: Any) -> Observer:
-    """The real-time pacing observer (see ``REALTIME_OBSERVER``).
-
-    Raises
-    ------
-    IpcosimError
-        If the module providing it is not installed.
-    """
-    import importlib
-
-    module, _, cls = REALTIME_OBSERVER.partition(":")
-    try:
-        mod = importlib.import_module(module)
-    except ModuleNotFoundError as exc:
-        if exc.name == module:
-            raise IpcosimError(f"real-time pacing is not available ({module} is not installed)") from None
-        raise
-    return getattr(mod, cls)(**kwargs)

@@ -47,10 +47,8 @@ study) can ask for them without new arguments:
     Overruns allowed, as a fraction of the steps (e.g. ``0.005``); a run beyond it says so
     in one line on stderr at its end, and metrics.json gets ``overrun_budget_exceeded``.
 
-A HIL run's failure that comes from the card (a limit trip, a watchdog expiry, a rig that
-stopped answering or went away) is recorded in metrics.json as ``rig_fault`` (the message)
-with ``upright`` false, whatever the last recorded sample says: the step that tripped is
-never recorded. :class:`CardFaultRecorder` does the same for runs that are not paced.
+What a run learns from a card it drives (its faults, its overruns) is recorded by the
+hardware-in-the-loop room's own observer, :mod:`ipcosim.fmus.hil.observer`.
 """
 from __future__ import annotations
 
@@ -329,10 +327,7 @@ class RealtimePacer(Observer):
     adapter opens its card and arms the watchdog there, whatever the other components'
     initialization took), and the schedule is anchored when it ends: ``t0`` is the end of
     step 0. Its :meth:`metrics` add the statistics of :class:`RealtimeStats` to
-    metrics.json, ``realtime_setup`` (see :func:`realtime_setup`), ``card_overruns`` (the sum
-    of the ``overruns`` outputs of the components that have one: steps whose request reached
-    the card after their sample instant) and, after a fault of a card, ``rig_fault`` and
-    ``upright: false``.
+    metrics.json and ``realtime_setup`` (see :func:`realtime_setup`).
 
     Parameters
     ----------
@@ -352,10 +347,8 @@ class RealtimePacer(Observer):
                                else _env_number("IPCOSIM_RT_OVERRUN_BUDGET", float, 0.0, 1.0))
         self.pacer: Pacer | None = None
         self._open = False
-        self._card_overruns: int | None = None
         self._setup: dict[str, str] = {}
         self._restore: Callable[[], None] = lambda: None
-        self._fault: str | None = None
         self._over_budget: str | None = None
 
     def start(self, execution) -> None:  # noqa: ANN001 -- ipcosim.harness.master.execution.Execution
@@ -373,7 +366,6 @@ class RealtimePacer(Observer):
         self.pacer.end()
         self._open = False
         if n >= execution.n_ticks:
-            self._read_card_overruns(execution)
             return
         if n == 1:      # the start-up step is done: the real-time schedule starts now
             self.pacer.start(1)
@@ -385,7 +377,6 @@ class RealtimePacer(Observer):
             self.pacer.end()
             self._open = False
         self._restore()
-        self._fault = card_fault(execution, error)
         if self.pacer is not None and self.overrun_budget is not None:
             st = self.pacer.stats()
             if st.steps and st.overruns > self.overrun_budget * st.steps:
@@ -394,59 +385,12 @@ class RealtimePacer(Observer):
                                      f"{100 * self.overrun_budget:.2f} %)")
                 print(f"ipcosim: {self._over_budget}", file=sys.stderr, flush=True)
 
-    def _read_card_overruns(self, execution) -> None:  # noqa: ANN001
-        total = None
-        for inst, slave in zip(execution.instances, execution.slaves):
-            var = inst.model.variables.get("overruns")
-            if var is None or var.causality != "output":
-                continue
-            try:
-                total = (total or 0) + int(slave.get_values([var])[0])
-            except Exception:  # noqa: BLE001 -- statistics must not fail a run
-                pass
-        self._card_overruns = total
-
     def metrics(self) -> dict[str, Any]:
         if self.pacer is None:
             return {}
         out: dict[str, Any] = self.pacer.metrics()
         out["realtime_setup"] = dict(self._setup)
-        if self._card_overruns is not None:
-            out["card_overruns"] = self._card_overruns
         if self.overrun_budget is not None:
             out["overrun_budget"] = self.overrun_budget
             out["overrun_budget_exceeded"] = self._over_budget is not None
-        if self._fault is not None:
-            out["upright"] = False
-            out["rig_fault"] = self._fault
         return out
-
-
-class CardFaultRecorder(Observer):
-    """Records, in metrics.json, a run's failure that came from a card (``rig_fault``, ``upright:
-    false``) for runs that are not paced (a lockstep rig); :class:`RealtimePacer` does the same."""
-
-    def __init__(self) -> None:
-        self.fault: str | None = None
-
-    def finish(self, execution, error: BaseException | None) -> None:  # noqa: ANN001
-        self.fault = card_fault(execution, error)
-
-    def metrics(self) -> dict[str, Any]:
-        return {"upright": False, "rig_fault": self.fault} if self.fault is not None else {}
-
-
-def card_fault(execution, error: BaseException | None) -> str | None:  # noqa: ANN001
-    """The message of a run's failure if it came from a component driving a card (a HIL adapter), else None.
-
-    An adapter is recognised by its ``limit_tripped`` and ``last_error`` outputs.
-    """
-    if error is None:
-        return None
-    text = str(error).strip()
-    first = text.splitlines()[0] if text else type(error).__name__
-    for inst in execution.instances:
-        names = inst.model.variables
-        if "limit_tripped" in names and "last_error" in names and f"component {inst.name} " in first:
-            return first
-    return None

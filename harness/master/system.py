@@ -1,7 +1,7 @@
 """What the master runs: a system of FMU instances and the links between them.
 
 These immutable descriptions are the master's input. The scenario room builds them
-(:func:`ipcosim.harness.scenario.system.bind` checks an SSP scenario against its FMUs); the
+(:func:`ipcosim.harness.scenario.binding.bind` checks an SSP scenario against its FMUs); the
 master never reads an SSD itself, and knows nothing of what the FMUs model.
 """
 from __future__ import annotations

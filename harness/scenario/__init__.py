@@ -3,5 +3,5 @@ archive extraction, binding to the FMUs (``system.bind``: parameters, swaps, ove
 place), the scenario generator and the ``.ssp`` packer.
 
 May import: ``harness.master`` (the system types it builds), ``ipcosim.errors``,
-``harness.errors``; ``controllers`` in the generator only.
+``harness.extras``; ``controllers`` in the generator only.
 """

@@ -1,7 +1,7 @@
 """FMU flavours: run a scenario on the Python FMUs (``build/fmus``) or the native ones (``build/fmus-native``).
 
 A scenario's parameter sets are written in the Python flavour's parameter names. On the native
-flavour, each component's bound values are translated by ``ipcosim.fmus.native.redesign`` (the
+flavour, each component's bound values are translated by ``ipcosim.harness.native.redesign`` (the
 same Python design code computes the gains and matrices the native FMU takes as parameters),
 and a ``--set`` on a parameter the native FMU lacks is an error that names the flavour.
 """
@@ -45,14 +45,14 @@ def to_native(scenario: Scenario) -> tuple[Scenario, dict[str, dict[str, Any]]]:
     FlavourError
         A component whose FMU is not a native ipcosim FMU, or a binding the redesign rejects.
     """
-    from ipcosim.fmus.native.redesign import native_info, redesign
+    from ipcosim.harness.native.redesign import native_info, redesign
 
     components = []
     python_values: dict[str, dict[str, Any]] = {}
     for comp in scenario.components:
         info = native_info(comp.fmu) if comp.fmu is not None else None
         if info is None:
-            from ipcosim.fmus.native.build import model_names
+            from ipcosim.harness.native.cbuild import model_names
 
             model = Path(str(comp.source)).stem
             hint = (f"{model} has no native flavour (docs/native.md lists the models)" if model not in model_names()
@@ -89,7 +89,7 @@ def native_overrides(system: Any, overrides: Mapping[str, Any], python_values: M
     FlavourError
         Naming the component, the parameter and the flavour.
     """
-    from ipcosim.fmus.native.redesign import NativeParameterError, check_settable, native_info, redesign
+    from ipcosim.harness.native.redesign import NativeParameterError, check_settable, native_info, redesign
 
     by_comp: dict[str, dict[str, Any]] = {}
     for key, value in overrides.items():

@@ -443,7 +443,7 @@ def plot_loop(loop: Loop, result: Mapping[str, Any], out_dir: str, title: str) -
     on -1 with the modulus-margin circle) into ``out_dir``; returns their paths."""
     from pathlib import Path
 
-    from ipcosim.harness.errors import require
+    from ipcosim.harness.extras import require
 
     require("matplotlib")
     import matplotlib

@@ -82,9 +82,9 @@ class CosimSpec(RunSpec):
         IpcosimError
             Unknown scenario, unreadable SSD/FMU, unknown ``--set`` names (one line each).
         """
-        from ipcosim.fmus.task import METRIC_KEYS
-        from ipcosim.harness.api import Prepared
-        from ipcosim.harness.scenario.system import with_overrides
+        from ipcosim.fmus.metrics import METRIC_KEYS
+        from ipcosim.harness.engine import Prepared
+        from ipcosim.harness.scenario.binding import with_overrides
         from ipcosim.harness.studies.cost import COST_TERMS
 
         prepared = Prepared(scenario, parameter_set=parameter_set, slave_factory=_no_slave, warn=False, fmus=fmus)
@@ -147,7 +147,7 @@ class CosimSpec(RunSpec):
 
     def build(self) -> Runner:
         """Load the scenario and extract its FMUs (once per worker); return the run function."""
-        from ipcosim.harness.api import Prepared
+        from ipcosim.harness.engine import Prepared
 
         location = self.location
         if self.archive is not None:  # the archive's bytes travelled with the spec: a local copy
@@ -192,7 +192,7 @@ class CosimSpec(RunSpec):
         RunFailure
             A result without those columns, or a run cut short before the pendulum fell.
         """
-        from ipcosim.fmus.task import (
+        from ipcosim.fmus.metrics import (
             ANGLE_COLUMNS,
             POSITION_COLUMNS,
             REFERENCE_COLUMNS,

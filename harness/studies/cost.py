@@ -127,8 +127,8 @@ def surrogate_cost(metrics: Mapping[str, Any], stop_time: float, w_angle: float 
 
 def task_metrics(time: np.ndarray, position: np.ndarray, reference: np.ndarray, angle: np.ndarray,
                  voltage: np.ndarray) -> dict[str, Any]:
-    """DESIGN.md metrics (``ipcosim.fmus.task.compute_metrics``) plus the cost terms."""
-    from ipcosim.fmus.task import compute_metrics
+    """DESIGN.md metrics (``ipcosim.fmus.metrics.compute_metrics``) plus the cost terms."""
+    from ipcosim.fmus.metrics import compute_metrics
 
     metrics = dict(compute_metrics(time, position, reference, angle, voltage))
     metrics.update(cost_terms(time, position, reference, angle, voltage))

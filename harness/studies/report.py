@@ -249,7 +249,7 @@ def check_claims(results: Results) -> list[tuple[Claim, Verdict]]:
 def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
     """Thesis-style overlaid time series of every controller on one plant: cart position with the
     reference, pendulum angle and voltage, one line per controller. None if no series."""
-    from ipcosim.harness.errors import require
+    from ipcosim.harness.extras import require
 
     require("matplotlib")
     import matplotlib

@@ -2,7 +2,7 @@
 
 A run is a success when its status is ``ok``: the pendulum stayed upright (|angle| < 0.35 rad
 throughout) and the cart ended inside the +-2 % settling band of the step (the task's band,
-``ipcosim.fmus.task``). The success rate is reported with its 95 % Wilson score interval.
+``ipcosim.fmus.metrics``). The success rate is reported with its 95 % Wilson score interval.
 """
 from __future__ import annotations
 
@@ -125,7 +125,7 @@ def plot_distributions(rows: Sequence[Mapping[str, Any]], metric_names: Sequence
     list of Path
         The written figures, ``out_dir/<metric>.png``.
     """
-    from ipcosim.harness.errors import require
+    from ipcosim.harness.extras import require
 
     require("matplotlib")
     import matplotlib
@@ -171,7 +171,7 @@ def plot_parameters(rows: Sequence[Mapping[str, Any]], parameters: Sequence[str]
                     title: str = "") -> Path | None:
     """Which parameter values fail: one panel per varied parameter, ``metric`` against the
     parameter's value, each run coloured by its status. Written to ``out_dir/parameters.png``."""
-    from ipcosim.harness.errors import require
+    from ipcosim.harness.extras import require
 
     require("matplotlib")
     import matplotlib

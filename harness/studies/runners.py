@@ -173,8 +173,8 @@ class PurePlantSpec(RunSpec):
     SETPOINT_DEFAULTS = {"setpoint.amplitude": 0.05, "setpoint.step_time": 0.0}
 
     def __post_init__(self) -> None:
+        from ipcosim.fmus.metrics import METRIC_KEYS
         from ipcosim.fmus.params import preset
-        from ipcosim.fmus.task import METRIC_KEYS
         from ipcosim.harness.studies.cost import COST_TERMS
 
         plant = preset(self.preset)

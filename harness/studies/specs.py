@@ -75,7 +75,7 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
 def for_executor(spec: RunSpec, executor: object) -> RunSpec:
     """The spec to send to ``executor``: on a Dask cluster, co-simulation specs carry their
     scenario and FMUs (workers may be other machines); locally, workers read the files."""
-    from ipcosim.harness.studies.sweep import DaskExecutor
+    from ipcosim.harness.studies.executors import DaskExecutor
 
     if not isinstance(executor, DaskExecutor):
         return spec
@@ -129,7 +129,7 @@ def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], 
                     kwargs: Mapping[str, Any]) -> RunSpec | str:
     """The native spec of a study, or why the native flavour cannot run it (one line)."""
     from ipcosim.errors import IpcosimError
-    from ipcosim.fmus.native.models import NATIVE_INSTRUMENTS_OFF
+    from ipcosim.harness.native.models import NATIVE_INSTRUMENTS_OFF
     from ipcosim.harness.scenario.flavour import native_fmu_dir
 
     if not any(native_fmu_dir().glob("*.fmu")):

@@ -23,9 +23,9 @@ import numpy as np
 
 from ipcosim.errors import UsageError
 from ipcosim.harness.studies import cost as costmod
+from ipcosim.harness.studies.cases import SweepCase, case_seed
 from ipcosim.harness.studies.robustness import fmt
 from ipcosim.harness.studies.runners import RunSpec
-from ipcosim.harness.studies.vary import Case, case_seed
 
 #: Default search range around a nominal value g: [g / DEFAULT_FACTOR, g * DEFAULT_FACTOR].
 DEFAULT_FACTOR = 2.0
@@ -142,7 +142,7 @@ class SweepMap:
         start = len(self.rows)
         if not vectors:
             return []
-        cases = [Case(index=start + i, params=dict(zip(self.names, map(float, v))),
+        cases = [SweepCase(index=start + i, params=dict(zip(self.names, map(float, v))),
                       seed=case_seed(self.seed, start + i))
                  for i, v in enumerate(vectors)]
         result = self._run_sweep(self.spec, cases, executor=self.executor)
@@ -215,7 +215,7 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
     progress : bool
         Print one line per generation on stderr.
     """
-    from ipcosim.harness.studies.sweep import open_executor
+    from ipcosim.harness.studies.executors import open_executor
 
     population = plan_population(budget, len(names))  # checks the budget before any run
     nominal = {n: float(spec.parameters[n]) for n in names}

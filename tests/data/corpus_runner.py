@@ -11,7 +11,7 @@ import os
 import signal
 import sys
 
-from ipcosim.harness import api, cli
+from ipcosim.harness import cli, engine
 from ipcosim.harness.master import results
 from ipcosim.harness.master.slave import FMUSlave
 
@@ -58,7 +58,7 @@ def _counted_free(self):
         counts["freed"] += 1
 
 
-_wrap(api.Prepared, "_extract", before=lambda: _kill("load"))
+_wrap(engine.Prepared, "_extract", before=lambda: _kill("load"))
 _wrap(FMUSlave, "instantiate", before=lambda: _kill("instantiate"), after=_instantiated)
 _wrap(FMUSlave, "enter_initialization_mode", before=lambda: _kill("initialize"))
 _wrap(results.Result, "write", before=lambda: _kill("write"))

@@ -26,19 +26,21 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import UsageError
-from ipcosim.fmus.task import streamed_task_metrics
+from ipcosim.fmus.hil.observer import CardObserver
+from ipcosim.fmus.metrics import streamed_task_metrics
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
 from ipcosim.harness.master.manipulators import Manipulator
-from ipcosim.harness.master.observers import Observer, Progress, realtime_observer
+from ipcosim.harness.master.observers import Observer, Progress
+from ipcosim.harness.master.realtime import RealtimePacer
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
 from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
+from ipcosim.harness.scenario.binding import SwapTarget, bind, default_step, default_stop_time, warn_all, with_overrides
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
-from ipcosim.harness.scenario.system import SwapTarget, bind, default_step, default_stop_time, warn_all, with_overrides
 
 
 def plot_run(result: Result, path: Path | None = None) -> Any:
@@ -79,7 +81,7 @@ class Prepared:
         Issue the binding's notes (unconnected inputs...) as Python warnings.
     task_metrics : callable, optional
         The task's metrics of a run's rows (``ipcosim.harness.master.execution.TaskMetrics``);
-        default the IP02 task's, :func:`ipcosim.fmus.task.streamed_task_metrics` (a scenario
+        default the IP02 task's, :func:`ipcosim.fmus.metrics.streamed_task_metrics` (a scenario
         without the pendulum's columns gets none).
     """
 
@@ -219,10 +221,9 @@ class Prepared:
         if progress:
             observers.append(Progress())
         if realtime or (realtime is None and self.system.realtime):
-            observers.append(realtime_observer())
+            observers += [RealtimePacer(), CardObserver(overruns=True)]
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
-            from ipcosim.harness.master.realtime import CardFaultRecorder
-            observers.append(CardFaultRecorder())
+            observers.append(CardObserver())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
                          algorithm=algorithm or self.algorithm, overrides=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,

@@ -1,6 +1,6 @@
 """Closed-loop evidence without the master: every law x plant x parameter set in the pure loop.
 
-``python -m ipcosim.controllers.evidence`` prints the metrics table (markdown) that docs/controllers.md
+``python -m ipcosim.harness.evidence.controllers_table`` prints the metrics table (markdown) that docs/controllers.md
 show beside the thesis's claims; ``--update docs/controllers.md`` rewrites the table between
 the ``<!-- evidence:begin -->`` / ``<!-- evidence:end -->`` markers (a test checks the document
 holds what this module computes).
@@ -8,7 +8,7 @@ holds what this module computes).
 Experiment (the thesis's task): plant at its default preset (``thesis-ch3`` single mass,
 ``thesis-ch4`` double mass; one extra row: the long-pendulum ``thesis-appendix-a`` plant with
 its own LQR design), upright at rest at 0, reference step 0 -> 0.05 m at t = 0, 10 s, plant
-step 1 ms, law sampled at 1 ms with zero-order hold, +-10 V. Metrics: ``ipcosim.fmus.task``.
+step 1 ms, law sampled at 1 ms with zero-order hold, +-10 V. Metrics: ``ipcosim.fmus.metrics``.
 """
 from __future__ import annotations
 
@@ -118,7 +118,8 @@ def update(path: Path, text: str) -> bool:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m ipcosim.controllers.evidence", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m ipcosim.harness.evidence.controllers_table",
+                                     description=__doc__.splitlines()[0])
     parser.add_argument("--update", type=Path, help="rewrite the table block in this markdown file")
     args = parser.parse_args(argv)
     text = document()

@@ -1,17 +1,19 @@
 """The ``hil`` swap alias: ``ipcosim run SCENARIO --swap plant=hil``.
 
 The alias picks the adapter FMU for the scenario's plant kind (``IP02HILSingleMass`` or
-``IP02HILDoubleMass``), found next to the scenario's plant FMU, in ``IPCOSIM_FMU_PATH``
-or in ``build/fmus``; its ``card_uri`` is ``IPCOSIM_HIL_URI`` if set, else the virtual
-rig's default address ``q4:0@tcpip://127.0.0.1:18920`` (``--set plant.card_uri=...``
-overrides it for one run). The run is paced to wall-clock time unless the card is a
-``lockstep`` virtual rig (asked when the alias is resolved; an unreachable card counts as
-real time, and the run then fails at start with the card's own message).
+``IP02HILDoubleMass``), found next to the scenario's plant FMU or in the FMU folders the
+swap request names (``IPCOSIM_FMU_PATH``, ``build/fmus``); its ``card_uri`` is
+``IPCOSIM_HIL_URI`` if set, else the virtual rig's default address
+``q4:0@tcpip://127.0.0.1:18920`` (``--set plant.card_uri=...`` overrides it for one run).
+The run is paced to wall-clock time unless the card is a ``lockstep`` virtual rig (asked
+when the alias is resolved; an unreachable card counts as real time, and the run then fails
+at start with the card's own message).
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any, Sequence
 
 from ipcosim.fmus.hil import DEFAULT_URI, HILError, parse_card_uri
 
@@ -38,11 +40,8 @@ def plant_kind(scenario_name: str, model_name: str | None, connectors: set[str])
                            f"(expected an IP02SingleMass/IP02DoubleMass component)")
 
 
-def find_adapter(model: str, near: Path | None = None) -> Path:
-    """The adapter FMU file ``<model>.fmu``: next to ``near``, in IPCOSIM_FMU_PATH, in build/fmus."""
-    from ipcosim.harness.scenario.ssp import fmu_search_path
-
-    dirs = ([near] if near is not None else []) + [Path(d) for d in fmu_search_path()]
+def find_adapter(model: str, dirs: Sequence[Path | str]) -> Path:
+    """The adapter FMU file ``<model>.fmu`` in the first of ``dirs`` that holds it."""
     for d in dirs:
         cand = Path(d) / f"{model}.fmu"
         if cand.is_file():
@@ -83,27 +82,26 @@ def card_clock(uri: str) -> str:
     return "wallclock"
 
 
-def resolve_hil(request):  # noqa: ANN001, ANN201 -- ipcosim.harness.scenario.system.SwapRequest -> SwapTarget
-    """Resolver of the ``hil`` alias (registered with :func:`ipcosim.harness.scenario.system.register_swap_alias`)."""
-    from ipcosim.harness.scenario.system import SwapTarget
+def resolve_hil(request: Any) -> dict[str, Any]:
+    """Resolver of the ``hil`` alias: a swap request -> the fields of its swap target.
 
+    ``request`` is an :class:`ipcosim.harness.scenario.binding.SwapRequest` (read by attribute:
+    ``scenario``, ``component``, ``model``, ``fmu_dirs``); the answer holds the target's ``fmu``,
+    ``parameters``, ``realtime`` and ``description``, which the binding turns into its
+    ``SwapTarget``.
+    """
     model = request.model
     connectors = {c.name for c in request.scenario.component(request.component).connectors} \
         if hasattr(request.scenario, "component") else set()
     kind = plant_kind(request.scenario.name, model.name if model is not None else None, connectors)
     near = model.path.parent if model is not None and getattr(model, "path", None) else None
-    fmu = find_adapter(ADAPTERS[kind], near)
+    fmu = find_adapter(ADAPTERS[kind], ([near] if near is not None else []) + list(request.fmu_dirs))
     uri = os.environ.get("IPCOSIM_HIL_URI", DEFAULT_URI)
     clock = card_clock(uri)
-    return SwapTarget(fmu=fmu, parameters={"card_uri": uri}, realtime=clock != "lockstep",
-                      description=f"HIL adapter {ADAPTERS[kind]} on {uri} ({clock})")
+    return {"fmu": fmu, "parameters": {"card_uri": uri}, "realtime": clock != "lockstep",
+            "description": f"HIL adapter {ADAPTERS[kind]} on {uri} ({clock})"}
 
 
-def register() -> None:
-    """Register the ``hil`` alias with the master."""
-    from ipcosim.harness.scenario.system import register_swap_alias
-
-    register_swap_alias("hil", resolve_hil)
-
-
-register()
+#: The swap aliases this module provides, read by :mod:`ipcosim.harness.scenario.binding` (which
+#: lists this module among its alias providers).
+SWAP_ALIASES = {"hil": resolve_hil}

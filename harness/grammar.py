@@ -11,18 +11,18 @@ One expression per parameter, ``COMPONENT.VARIABLE=FORM`` with FORM one of::
 Any form may be scaled by the parameter's nominal value (its value in the scenario):
 ``uniform(0.8,1.2)*nominal`` or ``nominal*uniform(0.8,1.2)``. Random forms are sampled
 once per run; grid and list forms span a Cartesian product, and each grid point is run
-``samples`` times (with fresh random values of the random forms).
+``samples`` times (with fresh random values of the random forms; the expansion into runs is
+:func:`ipcosim.harness.studies.cases.make_cases`).
 
 Parsing never evaluates Python: numbers are read with ``float``. A malformed expression or
 an unknown parameter raises :class:`VaryError` with one line naming the expression.
 """
 from __future__ import annotations
 
-import itertools
 import math
 import re
-from dataclasses import dataclass, field
-from typing import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Iterable, Mapping
 
 import numpy as np
 
@@ -202,63 +202,3 @@ def parse_all(exprs: Iterable[str], parameters: Mapping[str, float] | None = Non
     return varies
 
 
-@dataclass(frozen=True)
-class Case:
-    """One run of a sweep: its position, its parameter values and its seed.
-
-    ``params`` maps ``component.variable`` to the value set for this run. ``seed`` is
-    handed to the run (for any randomness inside it) and recorded with its results.
-    """
-
-    index: int
-    params: Mapping[str, float] = field(default_factory=dict)
-    seed: int = 0
-
-
-def case_seed(seed: int, index: int) -> int:
-    """The seed of run ``index`` of a sweep seeded with ``seed`` (independent of run order)."""
-    return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, dtype=np.uint32)[0])
-
-
-def make_cases(varies: Sequence[Vary], nominal: Mapping[str, float], samples: int | None = None,
-               seed: int = 0, fixed: Mapping[str, float] | None = None) -> list[Case]:
-    """Expand parsed variations into the list of runs.
-
-    Parameters
-    ----------
-    varies : sequence of Vary
-        Parsed ``--vary`` expressions.
-    nominal : mapping
-        Nominal value of each varied parameter (``component.variable`` -> value).
-    samples : int, optional
-        Runs per grid point (default: 100 when a random form is present, else 1).
-    seed : int
-        Master seed. Run ``i`` draws its random values from its own generator seeded by
-        ``(seed, i)``, so the values do not depend on the executor or the order of runs.
-    fixed : mapping, optional
-        Values set in every run (like ``--set``), recorded with each case.
-
-    Returns
-    -------
-    list of Case
-    """
-    if samples is None:
-        samples = 100 if any(v.is_random for v in varies) else 1
-    if samples < 1:
-        raise VaryError(f"--samples {samples}: need at least 1 sample")
-    grid_varies = [v for v in varies if not v.is_random]
-    random_varies = [v for v in varies if v.is_random]
-    grids = [v.points(nominal.get(v.name, 1.0)) for v in grid_varies]
-    cases: list[Case] = []
-    index = 0
-    for point in itertools.product(*grids):
-        for _ in range(samples):
-            cs = case_seed(seed, index)
-            rng = np.random.default_rng(cs)
-            params: dict[str, float] = dict(fixed or {})
-            params.update({v.name: float(x) for v, x in zip(grid_varies, point)})
-            for v in random_varies:
-                params[v.name] = v.sample(rng, nominal.get(v.name, 1.0))
-            cases.append(Case(index=index, params=params, seed=cs))
-            index += 1
-    return cases

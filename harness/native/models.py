@@ -1,6 +1,6 @@
 """Native models: each plant, control law and the setpoint traced from its Python definition.
 
-A :class:`NativeModel` is what the C generator (``ipcosim.fmus.native.cgen``) needs: the model's
+A :class:`NativeModel` is what the C generator (``ipcosim.harness.native.cgen``) needs: the model's
 variables (read from the Python flavour's model description, so names, value references,
 units and start values cannot drift), its internal state slots, and the traced assignments
 of its ``initialize`` and ``step`` functions.
@@ -11,7 +11,7 @@ of its ``initialize`` and ``step`` functions.
   stay parameters; the integrator's stage matrices (computed in Python for ``integrator_step``)
   are further parameters ``etdrk4_S<k>_<i>_<j>``.
 * Laws: the law object built by ``ipcosim.controllers.catalog.build_law`` for the default
-  parameter values has every number replaced by a leaf (``ipcosim.fmus.native.leaves``) and its
+  parameter values has every number replaced by a leaf (``ipcosim.harness.native.leaves``) and its
   own ``step`` traced twice: once from the reset state (first sample) and once from the state
   after a sample; a ``first`` flag selects between them. Numbers that a step assigns are state;
   the others are parameters, named like the Python FMU's parameter they equal
@@ -27,9 +27,9 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 from xml.etree import ElementTree
 
-from ipcosim.fmus.native import tracer
-from ipcosim.fmus.native.leaves import c_name, numbers
-from ipcosim.fmus.native.tracer import Node, leaf, select
+from ipcosim.harness.native import tracer
+from ipcosim.harness.native.leaves import c_name, numbers
+from ipcosim.harness.native.tracer import Node, leaf, select
 
 
 class NativeModelError(RuntimeError):

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from ipcosim.fmus.native import tracer
-from ipcosim.fmus.native.tracer import leaf
+from ipcosim.harness.native import tracer
+from ipcosim.harness.native.tracer import leaf
 
 #: kernel name -> (physics function name, plant kind)
 KERNELS = {"single_mass_rhs": ("single_mass_rhs", "single-mass"),

@@ -1,4 +1,4 @@
-"""C source and model description of a :class:`~ipcosim.fmus.native.models.NativeModel`.
+"""C source and model description of a :class:`~ipcosim.harness.native.models.NativeModel`.
 
 ``model.c`` holds the value-array layout, the variable table, the start values and the two
 traced functions; ``fmi2glue.c`` + ``model.h`` (hand-written, shared) do the rest.
@@ -9,8 +9,8 @@ import uuid
 from typing import Any
 from xml.etree import ElementTree
 
-from ipcosim.fmus.native import tracer
-from ipcosim.fmus.native.models import NativeModel
+from ipcosim.harness.native import tracer
+from ipcosim.harness.native.models import NativeModel
 
 _KIND = {"plant": "MODEL_KIND_PLANT", "sampled": "MODEL_KIND_SAMPLED", "source": "MODEL_KIND_SOURCE"}
 _BASE_UNITS = {"s": {"s": "1"}, "1": {}}

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ipcosim.fmus.native.tracer import Node, leaf
+from ipcosim.harness.native.tracer import Node, leaf
 
 #: Integer attributes that are state (counted by the law), not structure.
 COUNTERS = ("ticks", "catches")

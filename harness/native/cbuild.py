@@ -18,7 +18,7 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from ipcosim.fmus.native import cgen, models
+from ipcosim.harness.native import cgen, models
 from ipcosim.toolchain import find_compiler
 
 C_DIR = Path(__file__).resolve().parent / "c"
@@ -100,7 +100,7 @@ def compile_sources(sources: Path, files: list[str], out: Path, cc: str, flags: 
 
 def build_one(name: str, python_dir: Path, out_dir: Path, cc: str | None) -> NativeResult:
     """Generate, compile and pack ``<out_dir>/<name>.fmu``."""
-    from ipcosim.fmus.native.tracer import reset_table
+    from ipcosim.harness.native.tracer import reset_table
 
     reset_table()
     model = native_model(name, python_dir)

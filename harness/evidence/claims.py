@@ -25,10 +25,10 @@ import numpy as np
 
 from ipcosim.controllers.catalog import make_law
 from ipcosim.fmus.instruments import Instruments, realism
+from ipcosim.fmus.metrics import UPRIGHT_LIMIT_RAD, compute_metrics
 from ipcosim.fmus.params import preset
 from ipcosim.fmus.physics import MOTOR_CART
 from ipcosim.fmus.plant import InstrumentedPlant, PlantStepError
-from ipcosim.fmus.task import UPRIGHT_LIMIT_RAD, compute_metrics
 
 STOP_TIME = 20.0
 PLANT_STEP = 1e-3

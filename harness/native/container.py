@@ -31,7 +31,7 @@ from typing import Any, Mapping
 from xml.etree import ElementTree
 
 from ipcosim.errors import IpcosimError
-from ipcosim.fmus.native import build, cgen, tracer
+from ipcosim.harness.native import cbuild, cgen, tracer
 from ipcosim.toolchain import find_compiler
 
 CONTAINER_FILES = ("container.c", "container.h", "fmi2glue.c", "model.h", "fmi2shared.h")
@@ -302,9 +302,9 @@ def write_sources(spec: ContainerSpec, dest: Path) -> tuple[list[str], str, _Lay
     lay = _Layout(spec, comps)
     dest.mkdir(parents=True, exist_ok=True)
     for name in CONTAINER_FILES:
-        shutil.copy(build.C_DIR / name, dest / name)
-    for name in build.FMI_HEADERS:
-        shutil.copy(build.fmi_header_dir() / name, dest / name)
+        shutil.copy(cbuild.C_DIR / name, dest / name)
+    for name in cbuild.FMI_HEADERS:
+        shutil.copy(cbuild.fmi_header_dir() / name, dest / name)
     files = ["container_table.c", "container.c"]
     digest = hashlib.sha256()
     for c in spec.components:
@@ -314,7 +314,7 @@ def write_sources(spec: ContainerSpec, dest: Path) -> tuple[list[str], str, _Lay
         files.append(f"{comp.symbol}_unit.c")
         digest.update(comp.model_c.encode())
     for name in CONTAINER_FILES:
-        digest.update((build.C_DIR / name).read_bytes())
+        digest.update((cbuild.C_DIR / name).read_bytes())
     digest.update(table_c(spec, comps, lay, "").encode())
     gid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"ipcosim-export/{spec.name}/{digest.hexdigest()}")) + "}"
     (dest / "container_table.c").write_text(table_c(spec, comps, lay, gid))
@@ -370,7 +370,7 @@ def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None)
     ContainerError
         No C compiler (the container is useful only compiled), a component that is not a
         native FMU, an unwritable ``out``.
-    build.NativeBuildError
+    cbuild.NativeBuildError
         The compiler failed on the sources.
     """
     cc = cc or find_compiler()
@@ -381,7 +381,7 @@ def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None)
         root = Path(tmp)
         files, gid, lay, comps = write_sources(spec, root / "sources")
         (root / "modelDescription.xml").write_bytes(model_description(spec, gid, files, lay))
-        build.compile_sources(root / "sources", files, root / "binaries" / "linux64" / f"{spec.name}.so", cc)
+        cbuild.compile_sources(root / "sources", files, root / "binaries" / "linux64" / f"{spec.name}.so", cc)
         (root / "documentation").mkdir()
         (root / "documentation" / "index.txt").write_text(_readme(spec, comps))
         tmp_fmu = root / "out.fmu"

@@ -7,7 +7,7 @@ Python design code from the Python flavour's parameters (weights, poles, design 
 constants), which is how ``ipcosim`` runs a scenario whose parameter set was written for the
 Python flavour on native FMUs, and how a user writes a native parameter set for a new design::
 
-    from ipcosim.fmus.native.redesign import redesign
+    from ipcosim.harness.native.redesign import redesign
     values = redesign("build/fmus-native/LQRSingleMass.fmu", {"R": 0.05})   # {native name: value}
 """
 from __future__ import annotations
@@ -90,8 +90,8 @@ def unchanged(info: Mapping[str, Any], python_values: Mapping[str, Any]) -> bool
 
 def _law(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]:
     from ipcosim.controllers.catalog import defaults
-    from ipcosim.fmus.native.leaves import numbers
-    from ipcosim.fmus.native.models import native_law
+    from ipcosim.harness.native.leaves import numbers
+    from ipcosim.harness.native.models import native_law
 
     full = dict(defaults(info["law"], info["plant"]))
     full.update(values)
@@ -108,9 +108,9 @@ def _law(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]
 
 def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]:
     from ipcosim.fmus.integrator import etdrk4_f_form
-    from ipcosim.fmus.native.models import stage_coefficients
     from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, make
     from ipcosim.fmus.plant import Plant
+    from ipcosim.harness.native.models import stage_coefficients
 
     kind = info["plant"]
     fields = set(PLANT_KINDS[kind].__dataclass_fields__)
@@ -133,7 +133,7 @@ def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, floa
 
 def check_instruments(info: Mapping[str, Any], values: Mapping[str, Any]) -> None:
     """Raise NativeParameterError for an instrument option of the Python plant set to a value other than 0
-    (off): the native plant has ideal instruments (``ipcosim.fmus.native.models.NATIVE_INSTRUMENTS_OFF``)."""
+    (off): the native plant has ideal instruments (``ipcosim.harness.native.models.NATIVE_INSTRUMENTS_OFF``)."""
     for name in info.get("instruments_off", ()):
         if name in values and float(values[name]) != 0.0:
             raise NativeParameterError(

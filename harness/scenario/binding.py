@@ -27,7 +27,7 @@ from ipcosim.harness.master.system import (
     Variable,
     kind_of,
 )
-from ipcosim.harness.scenario.ssp import BASE_UNITS, Component, Connection, Connector, Scenario, Unit
+from ipcosim.harness.scenario.ssp import BASE_UNITS, Component, Connection, Connector, Scenario, Unit, fmu_search_path
 
 
 class BindingError(IpcosimError, ValueError):
@@ -162,13 +162,15 @@ class SwapRequest:
     scenario: Scenario
     component: str
     model: Model | None  # the original FMU's interface (None if its FMU is missing)
+    fmu_dirs: tuple[Path, ...] = ()  # the folders FMUs are looked for in (``ssp.fmu_search_path``)
 
 
 #: Swap aliases: ``--swap plant=hil`` looks up ``hil`` here. A resolver takes a SwapRequest and
-#: returns a SwapTarget. Modules listed in ``SWAP_ALIAS_PROVIDERS`` are imported on first use
-#: so that they can register their aliases (``ipcosim.harness.scenario.system.swap_aliases['hil'] = resolver``).
+#: returns a SwapTarget (or a mapping of its fields). The modules listed in
+#: ``SWAP_ALIAS_PROVIDERS`` are imported on first use and their ``SWAP_ALIASES`` (name ->
+#: resolver) registered; :func:`register_swap_alias` adds one from anywhere.
 swap_aliases: dict[str, Callable[[SwapRequest], SwapTarget]] = {}
-SWAP_ALIAS_PROVIDERS: tuple[str, ...] = ("ipcosim.harness.hil.swap",)
+SWAP_ALIAS_PROVIDERS: tuple[str, ...] = ("ipcosim.fmus.hil.swap",)
 _providers_loaded = False
 
 
@@ -185,11 +187,8 @@ def _load_alias_providers() -> None:
     import importlib
 
     for module in SWAP_ALIAS_PROVIDERS:
-        try:
-            importlib.import_module(module)
-        except ModuleNotFoundError as exc:
-            if exc.name != module:
-                raise
+        for name, resolver in importlib.import_module(module).SWAP_ALIASES.items():
+            register_swap_alias(name, resolver)
 
 
 def resolve_swap(scenario: Scenario, component: str, target: str | os.PathLike[str] | SwapTarget,
@@ -207,7 +206,8 @@ def resolve_swap(scenario: Scenario, component: str, target: str | os.PathLike[s
     if text not in swap_aliases:
         known = ", ".join(sorted(swap_aliases)) or "none registered"
         raise BindingError(f"--swap {component}={text}: not an .fmu file and not a known alias (aliases: {known})")
-    return swap_aliases[text](SwapRequest(scenario, component, model))
+    target = swap_aliases[text](SwapRequest(scenario, component, model, tuple(fmu_search_path())))
+    return target if isinstance(target, SwapTarget) else SwapTarget(**target)
 
 
 # --------------------------------------------------------------------------- units

@@ -1,0 +1,80 @@
+"""What a run learns from its cards: the observer the run engine adds when a component drives a
+card (a HIL adapter, recognised by its ``limit_tripped`` and ``last_error`` outputs).
+
+A run's failure that comes from a card (a limit trip, a watchdog expiry, a rig that stopped
+answering or went away) is recorded in metrics.json as ``rig_fault`` (the message) with
+``upright`` false, whatever the last recorded sample says: the step that tripped is never
+recorded. In a paced run it also records ``card_overruns``: the sum of the ``overruns``
+outputs of the components that have one (steps whose request reached the card after their
+sample instant), read after the last step.
+
+:class:`CardObserver` keeps the master's observer interface
+(:class:`ipcosim.harness.master.observers.Observer`: ``start``, ``next_tick``, ``step``,
+``finish``, ``metrics``) without importing the master: it reads the execution's
+``instances``, ``slaves`` and ``n_ticks`` by attribute.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+
+class CardObserver:
+    """Records a card's fault (``rig_fault``, ``upright: false``) and, with ``overruns``, the
+    cards' ``card_overruns`` after the last step."""
+
+    def __init__(self, overruns: bool = False) -> None:
+        self.overruns = overruns
+        self.fault: str | None = None
+        self._last_tick: int | None = None
+        self._card_overruns: int | None = None
+
+    def start(self, execution: Any) -> None:
+        """Note the run's last tick (the overruns are read there)."""
+        self._last_tick = execution.n_ticks if self.overruns else None
+
+    def next_tick(self, n: int) -> int | None:
+        """Only the last tick, and only when counting overruns."""
+        return self._last_tick if self._last_tick is not None and n < self._last_tick else None
+
+    def step(self, execution: Any, n: int) -> None:
+        """After the last step: the sum of the ``overruns`` outputs."""
+        total = None
+        for inst, slave in zip(execution.instances, execution.slaves):
+            var = inst.model.variables.get("overruns")
+            if var is None or var.causality != "output":
+                continue
+            try:
+                total = (total or 0) + int(slave.get_values([var])[0])
+            except Exception:  # noqa: BLE001 -- statistics must not fail a run
+                pass
+        self._card_overruns = total
+
+    def finish(self, execution: Any, error: BaseException | None) -> None:
+        """Keep the failure's message if it came from a card."""
+        self.fault = card_fault(execution, error)
+
+    def metrics(self) -> dict[str, Any]:
+        """``card_overruns`` (when read) and, after a card's fault, ``upright`` and ``rig_fault``."""
+        out: dict[str, Any] = {}
+        if self._card_overruns is not None:
+            out["card_overruns"] = self._card_overruns
+        if self.fault is not None:
+            out["upright"] = False
+            out["rig_fault"] = self.fault
+        return out
+
+
+def card_fault(execution: Any, error: BaseException | None) -> str | None:
+    """The message of a run's failure if it came from a component driving a card (a HIL adapter), else None.
+
+    An adapter is recognised by its ``limit_tripped`` and ``last_error`` outputs.
+    """
+    if error is None:
+        return None
+    text = str(error).strip()
+    first = text.splitlines()[0] if text else type(error).__name__
+    for inst in execution.instances:
+        names = inst.model.variables
+        if "limit_tripped" in names and "last_error" in names and f"component {inst.name} " in first:
+            return first
+    return None
