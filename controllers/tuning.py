@@ -31,6 +31,7 @@ from scipy.optimize import minimize
 
 from ipcosim.controllers.laws import CascadeGains, G, HSMCGains, SubsystemModel
 from ipcosim.fmus.linearize import LinearModel
+from ipcosim.fmus.params import KINDS
 
 POSITION_SCALE = 0.01    # m
 ANGLE_SCALE = 0.05       # rad
@@ -223,7 +224,7 @@ def main() -> None:  # pragma: no cover - documentation aid
     from ipcosim.controllers.catalog import default_preset, subsystem_models, thesis_hsmc_gains
     from ipcosim.controllers.design import design_model
     from ipcosim.fmus.params import preset
-    for kind in ("single-mass", "double-mass"):
+    for kind in KINDS:
         model = design_model(preset(default_preset(kind)))
         print(kind, "cascade:", tune_cascade(model, CascadeGains(), with_motor_damping=kind == "double-mass"))
         if kind == "single-mass":

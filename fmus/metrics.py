@@ -73,10 +73,6 @@ def _as_1d(name: str, values: Any, n: int | None) -> np.ndarray:
     return arr
 
 
-def _finite_or_none(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
-
-
 def compute_metrics(time: Any, position: Any, reference: Any, angle: Any, voltage: Any) -> dict[str, Any]:
     """Metrics of one run (see the module docstring for the definitions).
 
@@ -113,44 +109,44 @@ def compute_metrics(time: Any, position: Any, reference: Any, angle: Any, voltag
     r = _as_1d("reference", reference, n)
     th = _as_1d("angle", angle, n)
     v = _as_1d("voltage", voltage, n)
-
-    finite = bool(np.all(np.isfinite(x)) and np.all(np.isfinite(r)) and np.all(np.isfinite(th))
-                  and np.all(np.isfinite(v)))
-    max_angle = float(np.max(np.abs(th))) if np.all(np.isfinite(th)) else math.inf
-    peak_v = float(np.max(np.abs(v))) if np.all(np.isfinite(v)) else math.inf
-    rms_v = float(np.sqrt(np.mean(v * v))) if np.all(np.isfinite(v)) else math.inf
-    result: dict[str, Any] = {"settling_time_s": None, "overshoot_m": None, "steady_state_error_m": None,
-                              "max_abs_angle_rad": _finite_or_none(max_angle),
-                              "peak_voltage_V": _finite_or_none(peak_v),
-                              "rms_voltage_V": _finite_or_none(rms_v),
-                              "upright": bool(finite and max_angle < UPRIGHT_LIMIT_RAD)}
-    if finite:
-        result.update(_step_response(t, x, r))
-    return result
+    return _step_task(_one_chunk(time=t, x=x, r=r, th=th, v=v), "x", "th", "r", "v")
 
 
-def _step_response(t: np.ndarray, x: np.ndarray, r: np.ndarray) -> dict[str, float | None]:
-    """Overshoot, steady-state error and settling time of position ``x`` after reference ``r``
-    (finite signals): settling counts from the last change of the reference before the final
-    entry into the +-``SETTLING_BAND`` band of the step (None if the run ends outside it)."""
-    r_final = float(r[-1])
-    step = r_final - float(x[0])
-    direction = 1.0 if step >= 0 else -1.0
-    out: dict[str, float | None] = {"overshoot_m": max(0.0, float(np.max(direction * (x - r_final))))}
-    t_start = t[-1] - STEADY_STATE_FRACTION * (t[-1] - t[0])
-    tail = t >= t_start
-    out["steady_state_error_m"] = float(abs(np.mean(x[tail] - r[tail])))
-    if step != 0.0:
-        band = SETTLING_BAND * abs(step)
-        outside = np.abs(x - r_final) > band
-        if not outside[-1]:
-            idx_out = np.flatnonzero(outside)
-            entry = int(idx_out[-1]) + 1 if idx_out.size else 0
-            # instant the reference last changed at or before the entry (t0 if never)
-            changed = np.flatnonzero(r[1:entry + 1] != r[:entry])
-            t_ref = t[int(changed[-1]) + 1] if changed.size else t[0]
-            out["settling_time_s"] = float(t[entry] - t_ref)
-    return out
+def settling_time(time: Any, position: Any, reference: Any, band: float = SETTLING_BAND) -> float | None:
+    """``settling_time_s`` of the module docstring with a band of ``+- band * |step|``: from the last
+    change of the reference before the cart's last entry into the band to that entry [s]; None if
+    the run ends outside the band, the step is zero or a sample is not finite."""
+    t = _as_1d("time", time, None)
+    x, r = _as_1d("position", position, t.size), _as_1d("reference", reference, t.size)
+    if t.size < 2 or not (np.all(np.isfinite(x)) and np.all(np.isfinite(r))):
+        return None
+    rows = _one_chunk(time=t, x=x, r=r)
+    return _step_metrics(rows, _ends(t, x, r), "x", "r", band, STEADY_STATE_FRACTION)["settling_time_s"]
+
+
+def steady_state_start(t0: float, t_end: float, fraction: float = STEADY_STATE_FRACTION) -> float:
+    """The time from which on the steady-state error is averaged: the final ``fraction`` of the run."""
+    return t_end - fraction * (t_end - t0)
+
+
+def steady_state_error(time: Any, position: Any, reference: Any, fraction: float = STEADY_STATE_FRACTION) -> float:
+    """``steady_state_error_m`` of the module docstring over the final ``fraction`` of the run [m]."""
+    t = _as_1d("time", time, None)
+    x, r = _as_1d("position", position, t.size), _as_1d("reference", reference, t.size)
+    rows = _one_chunk(time=t, x=x, r=r)
+    return _step_metrics(rows, _ends(t, x, r), "x", "r", SETTLING_BAND, fraction)["steady_state_error_m"]
+
+
+def _one_chunk(**columns: np.ndarray) -> Callable[[], list[np.ndarray]]:
+    """Arrays of one length as the chunks of one structured array (the streamed passes' input)."""
+    rows = np.empty(len(next(iter(columns.values()))), dtype=[(k, "f8") for k in columns])
+    for k, v in columns.items():
+        rows[k] = v
+    return lambda: [rows]
+
+
+def _ends(t: np.ndarray, x: np.ndarray, r: np.ndarray) -> dict[str, float]:
+    return {"t0": float(t[0]), "x0": float(x[0]), "t_end": float(t[-1]), "r_final": float(r[-1])}
 
 
 def wrapped(angle: np.ndarray) -> np.ndarray:
@@ -161,20 +157,11 @@ def wrapped(angle: np.ndarray) -> np.ndarray:
 def upright_metrics(time: Any, position: Any, angle: Any) -> dict[str, Any]:
     """Metrics of a run that need not start upright (a swing-up): ``time_to_upright_s`` (from which
     on ``|wrapped angle| < UPRIGHT_LIMIT_RAD`` to the end of the run; None if it does not end
-    upright) and ``track_used_m`` (largest ``|position|`` of the motor-driven cart)."""
+    upright) and ``track_used_m`` (largest ``|position|`` of the motor-driven cart), with the
+    :func:`tap_metrics`."""
     t = _as_1d("time", time, None)
-    th = np.abs(wrapped(_as_1d("angle", angle, t.size)))
-    x = _as_1d("position", position, t.size)
-    down = np.nonzero(~(th < UPRIGHT_LIMIT_RAD))[0]
-    if down.size == 0:
-        t_up: float | None = float(t[0])
-    elif down[-1] == t.size - 1:
-        t_up = None
-    else:
-        t_up = float(t[down[-1] + 1])
-    out = {"time_to_upright_s": t_up, "track_used_m": _finite_or_none(float(np.max(np.abs(x))))}
-    out.update(tap_metrics(t, angle))
-    return out
+    return _upright_pass(_one_chunk(time=t, x=_as_1d("position", position, t.size),
+                                    th=_as_1d("angle", angle, t.size)), "x", "th")
 
 
 #: Band the pendulum must re-enter (and stay in) after a tap to count as recovered [rad].
@@ -188,19 +175,8 @@ def tap_metrics(time: Any, angle: Any) -> dict[str, Any]:
     good; None if it ends outside). Both None when the angle never moves. On a step-task run they
     describe the step's angle excursion instead."""
     t = _as_1d("time", time, None)
-    th = wrapped(_as_1d("angle", angle, t.size))
-    moved = np.nonzero(np.abs(th - th[0]) > 1e-6)[0]
-    if moved.size == 0 or not np.all(np.isfinite(th)):
-        return {"peak_angle_after_tap_rad": None, "recovery_time_s": None}
-    k0 = int(moved[0])
-    outside = np.nonzero(np.abs(th[k0:]) >= RECOVERY_BAND_RAD)[0]
-    if outside.size == 0:
-        rec: float | None = 0.0
-    elif k0 + outside[-1] == t.size - 1:
-        rec = None
-    else:
-        rec = float(t[k0 + outside[-1] + 1] - t[k0])
-    return {"peak_angle_after_tap_rad": float(np.max(np.abs(th[k0:]))), "recovery_time_s": rec}
+    m = _upright_pass(_one_chunk(time=t, x=np.zeros(t.size), th=_as_1d("angle", angle, t.size)), "x", "th")
+    return {k: m[k] for k in ("peak_angle_after_tap_rad", "recovery_time_s")}
 
 
 def first_column(columns: Sequence[str], candidates: Sequence[str]) -> str | None:
@@ -211,20 +187,10 @@ def first_column(columns: Sequence[str], candidates: Sequence[str]) -> str | Non
 
 
 def task_metrics(data: np.ndarray) -> dict[str, Any]:
-    """The DESIGN.md metrics of a pendulum run (:func:`compute_metrics`), from the
-    plant's motor-cart position and angle, the reference and the controller's voltage; an
+    """The DESIGN.md metrics of a pendulum run (:func:`compute_metrics` and :func:`upright_metrics`), from
+    the plant's motor-cart position and angle, the reference and the controller's voltage; an
     empty dict when the result lacks those columns or has fewer than two rows."""
-    cols = list(data.dtype.names or ())
-    pos, ang = first_column(cols, POSITION_COLUMNS), first_column(cols, ANGLE_COLUMNS)
-    ref, volt = first_column(cols, REFERENCE_COLUMNS), first_column(cols, VOLTAGE_COLUMNS)
-    if None in (pos, ang, ref, volt) or len(data) < 2:
-        return {}
-    out = dict(compute_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
-                               np.asarray(data[ref], float), np.asarray(data[ang], float),
-                               np.asarray(data[volt], float)))
-    out.update(upright_metrics(np.asarray(data["time"], float), np.asarray(data[pos], float),
-                               np.asarray(data[ang], float)))
-    return out
+    return streamed_task_metrics(lambda: [data], list(data.dtype.names or ()))
 
 
 def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: Sequence[str]) -> dict[str, Any]:
@@ -249,6 +215,15 @@ def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: S
     ref, volt = first_column(columns, REFERENCE_COLUMNS), first_column(columns, VOLTAGE_COLUMNS)
     if None in (pos, ang, ref, volt):
         return {}
+    result = _step_task(chunks, pos, ang, ref, volt)
+    if result:
+        result.update(_upright_pass(chunks, pos, ang))
+    return result
+
+
+def _step_task(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, ref: str, volt: str) -> dict[str, Any]:
+    """The :data:`METRIC_KEYS` from the rows (empty for fewer than two rows); the one implementation
+    behind :func:`compute_metrics`, :func:`task_metrics` and :func:`streamed_task_metrics`."""
     a = _first_pass(chunks, pos, ang, ref, volt)
     if a["n"] < 2:
         return {}
@@ -261,8 +236,7 @@ def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: S
         "rms_voltage_V": math.sqrt(a["sum_v2"] / a["n"]) if a["v_finite"] else None,
         "upright": bool(a["finite"] and a["max_angle"] < UPRIGHT_LIMIT_RAD)}
     if a["finite"]:
-        result.update(_second_pass(chunks, a, pos, ref, SETTLING_BAND, STEADY_STATE_FRACTION))
-    result.update(_upright_pass(chunks, pos, ang))
+        result.update(_step_metrics(chunks, a, pos, ref, SETTLING_BAND, STEADY_STATE_FRACTION))
     return result
 
 
@@ -294,13 +268,14 @@ def _first_pass(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, 
     return a
 
 
-def _second_pass(chunks: Callable[[], Iterable[np.ndarray]], a: dict[str, Any], pos: str, ref: str,
-                 band_fraction: float, tail_fraction: float) -> dict[str, Any]:
-    """Overshoot, steady-state error and settling time, once the final reference is known."""
+def _step_metrics(chunks: Callable[[], Iterable[np.ndarray]], a: dict[str, Any], pos: str, ref: str,
+                  band_fraction: float, tail_fraction: float) -> dict[str, Any]:
+    """Overshoot, steady-state error and settling time of finite rows, once their ends ``a`` are known
+    (``t0``, ``x0``, ``t_end``, ``r_final``)."""
     r_final, step = a["r_final"], a["r_final"] - a["x0"]
     direction = 1.0 if step >= 0 else -1.0
     band = band_fraction * abs(step)
-    t_start = a["t_end"] - tail_fraction * (a["t_end"] - a["t0"])
+    t_start = steady_state_start(a["t0"], a["t_end"], tail_fraction)
     over, tail_sum, tail_n = -math.inf, 0.0, 0
     last_out, last_outside = -1, False      # index of the last sample outside the band
     last_change_t = a["t0"]                 # time of the last reference change seen so far

@@ -28,7 +28,7 @@ import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
+from typing import Callable, Iterable
 from xml.etree import ElementTree
 
 import pythonfmu
@@ -125,14 +125,20 @@ def _privatize(text: str, private: str) -> str:
     return _IMPORT_RE.sub(lambda m: f"{private}.{m.group(1)}", text)
 
 
-def _digest(script: Path, files: Iterable[Path], root: Path = ROOT) -> str:
+def source_digest(script: Path, files: Iterable[Path], root: Path = ROOT) -> str:
+    """The build cache's key of one FMU: a digest of everything it is built from.
+
+    That is pythonfmu's version and the wrapper patch, this module (how the FMU is made), the
+    interpreter's bytecode tag, the script and ``files`` (each by its path below ``root``, or its
+    name when outside it, and its content).
+    """
     h = hashlib.sha256()
     h.update(f"pythonfmu {pythonfmu.__version__} {wrapper.PATCH_ID}\n".encode())
     h.update(Path(__file__).read_bytes())  # how the FMU is made (packing, stored design, bytecode)
     h.update(sys.implementation.cache_tag.encode())
     h.update(script.read_bytes())
     for f in files:
-        h.update(str(f.relative_to(root)).encode())
+        h.update(str(f.relative_to(root) if f.is_relative_to(root) else f.name).encode())
         h.update(f.read_bytes())
     return h.hexdigest()
 
@@ -165,11 +171,37 @@ def _write_build_files(staged_script: Path, package: Path) -> None:
                 (package / name).write_text(text)
 
 
-def _load_stamps(fmu_dir: Path) -> dict[str, dict[str, str]]:
+def read_stamps(fmu_dir: Path) -> dict[str, dict[str, str]]:
+    """The build cache of a folder: key -> ``{"sha256": digest, "fmu": file name}`` (empty if unreadable)."""
     try:
         return json.loads((fmu_dir / STAMP_FILE).read_text())
     except (OSError, ValueError):
         return {}
+
+
+def write_stamps(fmu_dir: Path, stamps: dict[str, dict[str, str]]) -> None:
+    """Replace the folder's build cache at once (a concurrent build sees the old or the new one)."""
+    tmp = fmu_dir / f".{STAMP_FILE}.{os.getpid()}.tmp"
+    tmp.write_text(json.dumps(stamps, indent=1, sort_keys=True))
+    os.replace(tmp, fmu_dir / STAMP_FILE)
+
+
+def build_cached(script: Path, fmu_dir: Path, key: str, digest: str, build: Callable[[], Path],
+                 force: bool = False) -> BuildResult:
+    """The FMU of ``script`` in ``fmu_dir``: the cached one when its stamp under ``key`` has this
+    ``digest`` (:func:`source_digest`) and the file is there, else ``build()``, whose FMU is stamped.
+
+    The one build cache of the project: ``ipcosim build`` (:func:`build_all`) and
+    ``ipcosim.build_fmu`` both use it.
+    """
+    entry = read_stamps(fmu_dir).get(key)
+    if not force and entry and entry.get("sha256") == digest and (fmu_dir / entry.get("fmu", "")).is_file():
+        return BuildResult(script, fmu_dir / entry["fmu"], built=False)
+    fmu = build()
+    stamps = read_stamps(fmu_dir)
+    stamps[key] = {"sha256": digest, "fmu": fmu.name}
+    write_stamps(fmu_dir, stamps)
+    return BuildResult(script, fmu, built=True)
 
 
 def _ensure_binaries(fmu: Path) -> None:
@@ -235,7 +267,7 @@ def build_one(script: Path, fmu_dir: Path, *, root: Path = ROOT, digest: str | N
         raise BuildError(f"{script}: {exc}") from exc
     fmu_dir.mkdir(parents=True, exist_ok=True)
     files = runtime_modules(script, root)
-    digest = digest or _digest(script, files, root)
+    digest = digest or source_digest(script, files, root)
     private = private_package(script.stem.removeprefix("fmu_"), digest)
     # an FMU of this build loaded earlier in this process (from an extraction folder that may be
     # gone) must not stand in for the staged sources the build imports
@@ -353,20 +385,11 @@ def build_all(fmu_dir: Path | str, *, root: Path = ROOT, force: bool = False,
     """
     fmu_dir = Path(fmu_dir)
     fmu_dir.mkdir(parents=True, exist_ok=True)
-    stamps = _load_stamps(fmu_dir)
     results: list[BuildResult] = []
     for script in (discover(root) if scripts is None else [Path(s) for s in scripts]):
         script = script.resolve()
-        digest = _digest(script, runtime_modules(script, root), root)
+        digest = source_digest(script, runtime_modules(script, root), root)
         key = str(script.relative_to(root)) if script.is_relative_to(root) else str(script)
-        entry = stamps.get(key)
-        if not force and entry and entry.get("sha256") == digest and (fmu_dir / entry.get("fmu", "")).is_file():
-            results.append(BuildResult(script, fmu_dir / entry["fmu"], built=False))
-            continue
-        fmu = build_one(script, fmu_dir, root=root, digest=digest)
-        stamps[key] = {"sha256": digest, "fmu": fmu.name}
-        tmp = fmu_dir / f".{STAMP_FILE}.{os.getpid()}.tmp"
-        tmp.write_text(json.dumps(stamps, indent=1, sort_keys=True))
-        os.replace(tmp, fmu_dir / STAMP_FILE)
-        results.append(BuildResult(script, fmu, built=True))
+        results.append(build_cached(script, fmu_dir, key, digest, force=force,
+                                    build=lambda s=script, d=digest: build_one(s, fmu_dir, root=root, digest=d)))
     return results

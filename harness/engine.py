@@ -28,6 +28,7 @@ from typing import Any, Mapping, Sequence
 from ipcosim.errors import UsageError
 from ipcosim.fmus.hil.observer import CardObserver
 from ipcosim.fmus.metrics import streamed_task_metrics
+from ipcosim.harness.grammar import strip_nominal
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
@@ -387,11 +388,10 @@ def resolve_relative(system: System, overrides: Mapping[str, Any]) -> dict[str, 
     """
     out: dict[str, Any] = {}
     for key, value in overrides.items():
-        body = value.replace(" ", "") if isinstance(value, str) else ""
-        if "nominal" not in body:
+        factor, relative = strip_nominal(value, f"--set {key}={value}") if isinstance(value, str) else ("", False)
+        if not relative:
             out[key] = value
             continue
-        factor = body.removesuffix("*nominal") if body.endswith("*nominal") else body.removeprefix("nominal*")
         comp, _, var = key.partition(".")
         try:
             out[key] = float(factor) * float(system.instance(comp).start_value(var))

@@ -1,4 +1,11 @@
-"""The ``--vary`` grammar: how a sweep varies one scenario parameter.
+"""The grammar of the value options: ``--set``/``--swap`` assignments and the ``--vary`` forms.
+
+Assignments (:func:`parse_set`, :func:`parse_pairs`, :func:`parse_numbers`): ``KEY=VALUE`` items
+(``COMPONENT.VARIABLE=VALUE`` for ``--set``), given on the command line or as a mapping. A
+``--set`` value may be relative to the scenario's: ``1.1*nominal`` or ``nominal*1.1``
+(:func:`strip_nominal`), the same scaling the ``--vary`` forms take.
+
+``--vary``: how a sweep varies one scenario parameter.
 
 One expression per parameter, ``COMPONENT.VARIABLE=FORM`` with FORM one of::
 
@@ -22,11 +29,72 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from ipcosim.errors import UsageError
+
+#: The form of a ``--set`` item.
+SET_FORM = "COMPONENT.VARIABLE=VALUE"
+
+
+def parse_pairs(option: str, items: Mapping[str, Any] | Sequence[str] | str | None, form: str) -> dict[str, Any]:
+    """``{"KEY": value}`` from a mapping, or from ``["KEY=VALUE", ...]`` (the command line's form;
+    keys and values stripped).
+
+    Raises
+    ------
+    UsageError
+        ``{option} 'item': expected {form}`` for an item without ``=``, key or value.
+    """
+    if items is None:
+        return {}
+    if isinstance(items, Mapping):
+        return {str(k): v for k, v in items.items()}
+    if isinstance(items, str):
+        items = [items]
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = str(item).partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise UsageError(f"{option} {item!r}: expected {form}")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def parse_numbers(option: str, items: Mapping[str, Any] | Sequence[str] | str | None, form: str) -> dict[str, float]:
+    """:func:`parse_pairs` with every value a number.
+
+    Raises
+    ------
+    UsageError
+        As :func:`parse_pairs`, or ``{option} KEY=VALUE: 'VALUE' is not a number``.
+    """
+    out: dict[str, float] = {}
+    for key, value in parse_pairs(option, items, form).items():
+        try:
+            out[key] = float(value)
+        except (TypeError, ValueError):
+            raise UsageError(f"{option} {key}={value}: {value!r} is not a number") from None
+    return out
+
+
+def parse_set(items: Mapping[str, Any] | Sequence[str] | str | None, numbers: bool = False) -> dict[str, Any]:
+    """``--set COMPONENT.VARIABLE=VALUE`` items: values as given (text from the command line, relative
+    ``X*nominal`` included) or, with ``numbers``, as numbers.
+
+    Raises
+    ------
+    UsageError
+        An item that is not ``COMPONENT.VARIABLE=VALUE`` (or, with ``numbers``, not a number).
+    """
+    out = parse_numbers("--set", items, SET_FORM) if numbers else parse_pairs("--set", items, SET_FORM)
+    for key, value in out.items():
+        if "." not in key:
+            raise UsageError(f"--set {key}={value}: expected {SET_FORM}")
+    return out
+
 
 FORMS_HELP = ("uniform(a,b), normal(mean,std), grid(start,stop,n), [v1,v2,...] or a number, "
               "each optionally '*nominal'")
@@ -138,7 +206,7 @@ def parse_vary(expr: str, parameters: Mapping[str, float] | None = None) -> Vary
         hint = (f"{component} parameters: {', '.join(known)}" if known else
                 f"components: {', '.join(sorted({k.split('.', 1)[0] for k in parameters}))}")
         raise VaryError(f"--vary {expr!r}: unknown parameter {name!r} ({hint})")
-    body, relative = _strip_nominal(form, expr)
+    body, relative = strip_nominal(form, f"--vary {expr!r}")
     if relative and parameters is not None:
         nominal = parameters[name]
         if nominal is None or not isinstance(nominal, (int, float)) or not math.isfinite(nominal):
@@ -157,8 +225,14 @@ def parse_vary(expr: str, parameters: Mapping[str, float] | None = None) -> Vary
     return Vary(name, "values", (_number(body, expr),), relative, expr)
 
 
-def _strip_nominal(form: str, expr: str) -> tuple[str, bool]:
-    """The form without spaces and without a ``*nominal`` (or ``nominal*``) factor, and whether it had one."""
+def strip_nominal(form: str, what: str) -> tuple[str, bool]:
+    """The form without spaces and without a ``*nominal`` (or ``nominal*``) factor, and whether it had one.
+
+    Raises
+    ------
+    VaryError
+        ``nominal`` anywhere else (``what`` starts the message: the option and the item).
+    """
     body = form.replace(" ", "")
     relative = False
     if body.endswith("*nominal"):
@@ -166,7 +240,7 @@ def _strip_nominal(form: str, expr: str) -> tuple[str, bool]:
     elif body.startswith("nominal*"):
         relative, body = True, body[len("nominal*"):]
     if "nominal" in body:
-        raise VaryError(f"--vary {expr!r}: 'nominal' may only multiply the whole form, e.g. uniform(0.8,1.2)*nominal")
+        raise VaryError(f"{what}: 'nominal' may only multiply the whole form, e.g. uniform(0.8,1.2)*nominal")
     return body, relative
 
 

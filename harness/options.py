@@ -16,9 +16,10 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import UsageError
-
-ALGORITHM_CHOICES = ("gauss-seidel", "jacobi")
-LOOP_CHOICES = ("auto", "c", "python")
+from ipcosim.harness.grammar import parse_pairs, parse_set
+from ipcosim.harness.master.algorithm import ALGORITHMS
+from ipcosim.harness.master.cloop import LOOPS
+from ipcosim.harness.scenario.flavour import FLAVOURS
 
 
 def seconds_option(option: str, value: Any) -> float | None:
@@ -38,24 +39,6 @@ def seconds_option(option: str, value: Any) -> float | None:
     if not (math.isfinite(number) and number > 0):
         raise UsageError(f"{option} {value}: must be a positive number of seconds")
     return number
-
-
-def _pairs(option: str, items: Mapping[str, Any] | Sequence[str] | None) -> dict[str, Any]:
-    """``{"a.b": v}`` from a mapping or from ``["a.b=v", ...]`` (the command line's form)."""
-    if items is None:
-        return {}
-    if isinstance(items, Mapping):
-        return {str(k): v for k, v in items.items()}
-    if isinstance(items, str):
-        items = [items]
-    out: dict[str, Any] = {}
-    for item in items:
-        key, sep, value = str(item).partition("=")
-        if not sep or not key.strip() or not value.strip():
-            form = "COMPONENT.VARIABLE=VALUE" if option == "--set" else "COMPONENT=FMU_OR_ALIAS"
-            raise UsageError(f"{option} {item!r}: expected {form}")
-        out[key.strip()] = value.strip()
-    return out
 
 
 @dataclass(frozen=True)
@@ -121,12 +104,12 @@ class RunOptions:
     loop: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.loop not in LOOP_CHOICES:
-            raise UsageError(f"--loop {self.loop}: expected one of {', '.join(LOOP_CHOICES)}")
-        if self.fmus not in ("python", "native"):
-            raise UsageError(f"--fmus {self.fmus}: expected python or native")
-        if self.algorithm not in ALGORITHM_CHOICES:
-            raise UsageError(f"--algorithm {self.algorithm}: expected one of {', '.join(ALGORITHM_CHOICES)}")
+        if self.loop not in LOOPS:
+            raise UsageError(f"--loop {self.loop}: expected one of {', '.join(LOOPS)}")
+        if self.fmus not in FLAVOURS:
+            raise UsageError(f"--fmus {self.fmus}: expected {' or '.join(FLAVOURS)}")
+        if self.algorithm not in ALGORITHMS:
+            raise UsageError(f"--algorithm {self.algorithm}: expected one of {', '.join(ALGORITHMS)}")
         if not os.fspath(self.scenario):
             raise UsageError("scenario: empty name")
 
@@ -151,7 +134,8 @@ class RunOptions:
         columns = tuple(v.strip() for item in (record or ()) for v in str(item).split(",") if v.strip())
         return cls(scenario=scenario, stop_time=seconds_option("--stop-time", stop_time),
                    step=seconds_option("--step", step),
-                   set=_pairs("--set", set), swap=_pairs("--swap", swap), parameter_set=parameter_set,
+                   set=parse_set(set), swap=parse_pairs("--swap", swap, "COMPONENT=FMU_OR_ALIAS"),
+                   parameter_set=parameter_set,
                    realtime=realtime, out=Path(out) if out is not None else None, plot=plot, record=columns,
                    algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
                    save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,

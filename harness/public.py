@@ -8,8 +8,6 @@ fail with the same one-line message (an :class:`ipcosim.IpcosimError`).
 """
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import sys
 from dataclasses import dataclass
@@ -163,16 +161,12 @@ def build(out: str | os.PathLike[str] | None = None, *, force: bool = False) -> 
     ['AdaptiveHSMCDoubleMass.fmu', 'AdaptiveHSMCSingleMass.fmu']
     """
     from ipcosim.fmus.pybuild import build_all
-    from ipcosim.harness.cli.build import pack_ssp
     from ipcosim.harness.paths import BUILD_DIR
+    from ipcosim.harness.scenario.ssp_pack import pack_all
 
     root = Path(out) if out is not None else BUILD_DIR
-    import contextlib
-    import io
-
     fmus = [r.fmu for r in build_all(root / "fmus", force=force)]
-    with contextlib.redirect_stdout(io.StringIO()):  # the packer reports each archive; a library call stays quiet
-        pack_ssp(root)
+    pack_all(root)
     return fmus
 
 
@@ -224,17 +218,13 @@ def build_fmu(script: str | os.PathLike[str], *, files: Sequence[str | os.PathLi
     >>> ipcosim.build_fmu(folder / "gain.py").name
     'Gain.fmu'
     """
+    from ipcosim.fmus.pybuild import build_cached
+
     script, extra, digest = _sources(script, files)
     target = Path(out) if out is not None else script.parent / "build"
     target.mkdir(parents=True, exist_ok=True)
-    stamps = _read_stamps(target)
-    entry = stamps.get(str(script))
-    if entry and entry.get("sha256") == digest and (target / entry["fmu"]).is_file():
-        return target / entry["fmu"]
-    fmu = _build_isolated(script, target, digest, extra)
-    stamps[str(script)] = {"sha256": digest, "fmu": fmu.name}
-    _write_stamps(target, stamps)
-    return fmu
+    return build_cached(script, target, str(script), digest,
+                        build=lambda: _build_isolated(script, target, digest, extra)).fmu
 
 
 def _sources(script: str | os.PathLike[str],
@@ -247,7 +237,7 @@ def _sources(script: str | os.PathLike[str],
     FMUBuildError
         A file that does not exist.
     """
-    from ipcosim.fmus.pybuild import runtime_modules
+    from ipcosim.fmus.pybuild import runtime_modules, source_digest
 
     script = Path(script).resolve()
     extra = [Path(f).resolve() for f in files]
@@ -255,22 +245,7 @@ def _sources(script: str | os.PathLike[str],
         if not f.exists():
             raise FMUBuildError(f"build_fmu: {f} does not exist")
     contents = [p for f in extra for p in ([f] if f.is_file() else sorted(f.rglob("*.py")))]
-    return script, extra, _digest([script, *runtime_modules(script), *contents])
-
-
-def _read_stamps(target: Path) -> dict[str, Any]:
-    """The build cache of a folder: script path -> {"sha256": digest, "fmu": file name} (empty if unreadable)."""
-    try:
-        return json.loads((target / ".build-stamps.json").read_text())
-    except (OSError, ValueError):
-        return {}
-
-
-def _write_stamps(target: Path, stamps: Mapping[str, Any]) -> None:
-    """Replace the folder's build cache at once (a concurrent build sees the old or the new one)."""
-    tmp = target / f".build-stamps.{os.getpid()}.tmp"
-    tmp.write_text(json.dumps(stamps, indent=1, sort_keys=True))
-    os.replace(tmp, target / ".build-stamps.json")
+    return script, extra, source_digest(script, [*runtime_modules(script), *contents])
 
 
 def _build_isolated(script: Path, target: Path, digest: str, extra: Sequence[Path]) -> Path:
@@ -292,15 +267,6 @@ def _build_isolated(script: Path, target: Path, digest: str, extra: Sequence[Pat
         for name in set(sys.modules) - saved:
             if str(getattr(sys.modules.get(name), "__file__", "") or "").startswith(str(script.parent)):
                 del sys.modules[name]
-
-
-def _digest(files: Sequence[Path]) -> str:
-    import pythonfmu
-
-    h = hashlib.sha256(f"pythonfmu {pythonfmu.__version__}\n".encode())
-    for f in files:
-        h.update(f.name.encode() + b"\0" + f.read_bytes())
-    return h.hexdigest()
 
 
 def linearize(plant: str, *, preset: str | None = None, inductance: bool = True, **params: float) -> Any:

@@ -21,7 +21,8 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 import numpy as np
 
 from ipcosim.errors import IpcosimError, UsageError
-from ipcosim.fmus.metrics import ANGLE_COLUMNS, POSITION_COLUMNS, REFERENCE_COLUMNS, first_column
+from ipcosim.fmus import metrics
+from ipcosim.fmus.metrics import ANGLE_COLUMNS, POSITION_COLUMNS, REFERENCE_COLUMNS, UPRIGHT_LIMIT_RAD, first_column
 from ipcosim.fmus.params import KINDS
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -61,7 +62,7 @@ def _fail(result: "Result", text: str) -> None:
     raise CheckFailed(f"{describe(result)}: {text}" + (f"\n  results: {where}" if where else ""))
 
 
-def assert_upright(result: "Result", limit_rad: float = 0.35) -> None:
+def assert_upright(result: "Result", limit_rad: float = UPRIGHT_LIMIT_RAD) -> None:
     """Check that the pendulum stayed up: ``|angle| < limit_rad`` at every recorded point.
 
     Examples
@@ -93,24 +94,15 @@ def _step_target(result: "Result") -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return t, x, r, float(r[-1])
 
 
-def settling_time(result: "Result", band: float = 0.02) -> float | None:
+def settling_time(result: "Result", band: float = metrics.SETTLING_BAND) -> float | None:
     """Time [s] from the last change of the reference to the cart's last entry into
-    ``reference +- band * |step|`` (None: outside the band at the end, or no step)."""
-    t, x, r, r_final = _step_target(result)
-    step = r_final - x[0]
-    if step == 0 or not np.isfinite(x).all():
-        return None
-    outside = np.abs(x - r_final) > band * abs(step)
-    if outside[-1]:
-        return None
-    idx = np.flatnonzero(outside)
-    entry = int(idx[-1]) + 1 if idx.size else 0
-    changed = np.flatnonzero(r[1:entry + 1] != r[:entry])
-    t_ref = t[int(changed[-1]) + 1] if changed.size else t[0]
-    return float(t[entry] - t_ref)
+    ``reference +- band * |step|`` (None: outside the band at the end, or no step):
+    :func:`ipcosim.fmus.metrics.settling_time` on the run's columns."""
+    t, x, r, _ = _step_target(result)
+    return metrics.settling_time(t, x, r, band)
 
 
-def assert_settles(result: "Result", within_s: float, band: float = 0.02) -> None:
+def assert_settles(result: "Result", within_s: float, band: float = metrics.SETTLING_BAND) -> None:
     """Check that the cart settles into ``reference +- band * |step|`` within ``within_s`` seconds
     of the reference step, and stays there to the end of the run.
 
@@ -133,7 +125,7 @@ def assert_settles(result: "Result", within_s: float, band: float = 0.02) -> Non
         _fail(result, f"the cart settled after {ts:.3f} s, not within {within_s:g} s (last entry into {where})")
 
 
-def assert_steady_state(result: "Result", error_m: float, fraction: float = 0.1) -> None:
+def assert_steady_state(result: "Result", error_m: float, fraction: float = metrics.STEADY_STATE_FRACTION) -> None:
     """Check ``|mean(position - reference)|`` over the last ``fraction`` of the run is at most ``error_m``.
 
     Examples
@@ -145,8 +137,8 @@ def assert_steady_state(result: "Result", error_m: float, fraction: float = 0.1)
     if result.error:
         _fail(result, f"the run failed: {result.error}")
     t, x, r, _ = _step_target(result)
-    tail = t >= t[-1] - fraction * (t[-1] - t[0])
-    err = float(abs(np.mean(x[tail] - r[tail])))
+    tail = t >= metrics.steady_state_start(t[0], t[-1], fraction)
+    err = metrics.steady_state_error(t, x, r, fraction)
     if not err <= error_m:
         _fail(result, f"steady-state error {err * 1e3:.3g} mm over {t[tail][0]:.2f}..{t[-1]:.2f} s exceeds "
                       f"{error_m * 1e3:.3g} mm (cart at {np.mean(x[tail]):.5g} m, reference {np.mean(r[tail]):.5g} m)")

@@ -1,79 +1,111 @@
-"""The layout's promises, checked: one-way imports between the rooms and no import cycles.
+"""The layout's promises, checked: every module in a room, imports only downwards, no import cycles.
 
-Rooms (docs/architecture.md), lowest first; a room may import only rooms to its left:
+Rooms (docs/architecture.md), lowest first; a module may import its own room and the rooms
+below it, never one above:
 
-    errors, toolchain  <-  fmus (physics, plant FMU glue, HIL)  <-  controllers (laws, controller
-            FMU glue)  <-  harness.native (the C generator: a build tool over both)
-            <-  harness.master  <-  harness.scenario
-            <-  harness.engine, harness.export  <-  harness.studies  <-  harness.evidence  <-  harness.cli
+    errors, toolchain                          the base exceptions, the C-compiler rule
+    fmus                                       physics, plant FMU glue, task metrics, the Python FMU
+                                               build, the whole of HIL (card API, virtual rig, adapter
+                                               glue, rig server, swap alias, card observer)
+    controllers                                control-law design, discrete laws, the pure closed loop,
+                                               controller FMU glue
+    harness.paths, harness.extras              where things are found and built; the missing-extra check
+    harness.native                             the C generator, over the plants and the laws
+    harness.master                             the generic master (knows no plant, law or generator)
+    harness.scenario                           SSP read, validate, bind, pack, flavours
+    ipcosim, harness (the facade)              the lazy public names, options, grammar, engine, public,
+                                               export, testing helpers, baselines, plots, pytest plugin
+    harness.studies                            the generic study engine
+    harness.evidence                           the thesis's own evidence
+    harness.cli                                the command line
 
-Every import counts, at module level or inside a function (a lazy import is still a
-dependency), except those under ``if TYPE_CHECKING:``, which only name types for readers and
-checkers and never run.
+An import is any ``import``/``from`` statement, at module level or inside a function (a lazy
+import is still a dependency), and any string naming a project module the way
+``importlib.import_module`` is given it (``"ipcosim.harness.cli.run"``, ``f"ipcosim.harness.cli.{name}"``,
+``"module:Class"``); imports under ``if TYPE_CHECKING:`` only name types and do not count.
 """
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("fmus", "controllers", "harness")
 
-#: Modules of the package's top folder: below every room.
-BOTTOM = ("errors", "toolchain")
-#: room -> rooms it must not import (prefix match on the dotted name below ``ipcosim``).
-FORBIDDEN = {
-    **{base: PACKAGES for base in BOTTOM},
-    "fmus": ("controllers", "harness"),
-    "controllers": ("harness",),
-    "harness.native": ("harness.master", "harness.scenario", "harness.engine", "harness.export",
-                       "harness.studies", "harness.cli"),
-    "harness.master": ("harness.scenario", "harness.studies", "harness.cli", "harness.engine",
-                       "harness.plot", "harness.native", "controllers", "fmus"),
-    "harness.scenario": ("harness.studies", "harness.cli", "harness.engine"),
-    "harness.engine": ("harness.studies", "harness.cli"),
-    "harness.export": ("harness.studies", "harness.cli"),
-    "harness.studies": ("harness.evidence", "harness.cli"),
-    "harness.evidence": ("harness.cli",),
-}
+#: The rooms, lowest first: each a tuple of module names or package prefixes (dotted, below ``ipcosim``;
+#: ``""`` is the package itself). A module belongs to the room of its longest matching prefix.
+ROOMS: tuple[tuple[str, ...], ...] = (
+    ("errors", "toolchain"),
+    ("fmus",),
+    ("controllers",),
+    ("harness.paths", "harness.extras"),
+    ("harness.native",),
+    ("harness.master",),
+    ("harness.scenario",),
+    ("", "harness", "harness.options", "harness.grammar", "harness.engine", "harness.public", "harness.export",
+     "harness.testing", "harness.baseline", "harness.plot", "harness.pytest_plugin"),
+    ("harness.studies",),
+    ("harness.evidence",),
+    ("harness.cli",),
+)
+#: Prefixes that name one module only, not the package below them (the rest have rooms of their own).
+EXACT = ("", "harness")
+#: Rooms a room must not import although they lie below it: the master is generic.
+FORBIDDEN_BELOW = {"harness.master": ("fmus", "controllers", "harness.native")}
+
+_MODULE_STRING = re.compile(r"^ipcosim((?:\.\w+)+)(?::\w+)?$")
 
 
-def _modules() -> dict[str, Path]:
-    mods = {base: ROOT / f"{base}.py" for base in BOTTOM if (ROOT / f"{base}.py").is_file()}
+def _modules(root: Path = ROOT) -> dict[str, Path]:
+    mods = {"": root / "__init__.py"}
+    mods.update({f.stem: f for f in root.glob("*.py") if f.stem != "__init__"})
     for pkg in PACKAGES:
-        for f in (ROOT / pkg).rglob("*.py"):
-            parts = f.relative_to(ROOT).with_suffix("").parts
-            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-            mods[name] = f
+        for f in (root / pkg).rglob("*.py"):
+            parts = f.relative_to(root).with_suffix("").parts
+            mods[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = f
     return mods
 
 
+def _targets(node: ast.AST, package: str) -> list[str]:
+    """The dotted names (with ``ipcosim.``) an AST node imports or names as a module string."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    if isinstance(node, ast.ImportFrom):
+        base = node.module or ""
+        if node.level:
+            parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+            base = ".".join(["ipcosim", *[p for p in parts if p], *([base] if base else [])])
+        return [base] + [f"{base}.{a.name}" for a in node.names]
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        m = _MODULE_STRING.match(node.value)
+        return [f"ipcosim{m.group(1)}"] if m else []
+    if isinstance(node, ast.JoinedStr) and node.values and isinstance(node.values[0], ast.Constant):
+        head = str(node.values[0].value)
+        return [head.rstrip(".")] if head.startswith("ipcosim.") and head.endswith(".") else []
+    return []
+
+
 def _imports(name: str, path: Path, mods: dict[str, Path]) -> set[str]:
+    """The project modules that module ``name`` (file ``path``) imports, in ``mods``' names."""
     found: set[str] = set()
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     tree = ast.parse(path.read_text())
     type_only = {id(n) for block in ast.walk(tree) if isinstance(block, ast.If) and _is_type_checking(block.test)
                  for stmt in block.body for n in ast.walk(stmt)}
+    in_fstring = {id(v) for n in ast.walk(tree) if isinstance(n, ast.JoinedStr) for v in n.values}
     for node in ast.walk(tree):
-        if id(node) in type_only:
+        if id(node) in type_only or id(node) in in_fstring:
             continue
-        if isinstance(node, ast.Import):
-            targets = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                pkg = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join(pkg + ([base] if base else []))
-            else:
-                base = base
-            targets = [base] + [f"{base}.{a.name}" for a in node.names]
-        else:
-            continue
-        for target in targets:
-            target = target.removeprefix("ipcosim.")
+        for target in _targets(node, package):
+            if target != "ipcosim" and not target.startswith("ipcosim."):
+                continue
+            target = target.removeprefix("ipcosim").removeprefix(".")
+            if isinstance(node, ast.Constant) and target not in mods:
+                continue  # a string that merely looks like a module path
             while target and target not in mods:
                 target = target.rpartition(".")[0]
-            if target and target != name:
+            if target != name and (target or isinstance(node, (ast.Import, ast.ImportFrom))):
                 found.add(target)
     return found
 
@@ -83,24 +115,46 @@ def _is_type_checking(test: ast.expr) -> bool:
         (isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
 
 
-def _graph() -> dict[str, set[str]]:
-    mods = _modules()
+def _graph(root: Path = ROOT) -> dict[str, set[str]]:
+    mods = _modules(root)
     return {name: _imports(name, path, mods) for name, path in mods.items()}
 
 
-def _room_of(module: str) -> str:
-    return max((room for room in FORBIDDEN if module == room or module.startswith(room + ".")), key=len,
-               default=module)
+def room_of(module: str, rooms: tuple[tuple[str, ...], ...] = ROOMS) -> tuple[int, str] | None:
+    """(level, prefix) of the room a module belongs to (its longest matching prefix), or None."""
+    best: tuple[int, str] | None = None
+    for level, prefixes in enumerate(rooms):
+        for p in prefixes:
+            if module == p or (p not in EXACT and module.startswith(p + ".")):
+                if best is None or len(p) > len(best[1]):
+                    best = (level, p)
+    return best
+
+
+def against_the_layers(graph: dict[str, set[str]], rooms: tuple[tuple[str, ...], ...] = ROOMS,
+                       forbidden_below: dict[str, tuple[str, ...]] = FORBIDDEN_BELOW) -> list[str]:
+    """Every edge ``module -> target`` of ``graph`` that imports upwards (or into a room forbidden below)."""
+    bad = []
+    for module, targets in graph.items():
+        here = room_of(module, rooms)
+        for target in targets:
+            there = room_of(target, rooms)
+            if here is None or there is None:
+                continue
+            no = forbidden_below.get(here[1], ())
+            if there[0] > here[0] or any(target == f or target.startswith(f + ".") for f in no):
+                bad.append(f"{module} -> {target}")
+    return sorted(bad)
+
+
+def test_every_module_is_in_a_room() -> None:
+    lost = sorted(m for m in _modules() if room_of(m) is None)
+    assert not lost, f"modules in no room (add them to ROOMS): {lost}"
 
 
 def test_imports_go_one_way() -> None:
-    bad = []
-    for module, targets in _graph().items():
-        room = _room_of(module)
-        for target in targets:
-            if any(target == f or target.startswith(f + ".") for f in FORBIDDEN.get(room, ())):
-                bad.append(f"{module} -> {target}")
-    assert not bad, "imports against the layout's direction:\n" + "\n".join(sorted(bad))
+    bad = against_the_layers(_graph())
+    assert not bad, "imports against the layout's direction:\n" + "\n".join(bad)
 
 
 def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -142,14 +196,24 @@ def test_no_import_cycles() -> None:
 
 
 def test_the_checks_see_a_forbidden_edge(tmp_path) -> None:
-    """The direction check itself: a physics module importing the master is caught, lazily too,
-    and a type-only import is not."""
+    """The direction check itself: a physics module importing the master is caught, lazily too and by
+    a module string, and a type-only import and a string that is no module are not."""
     path = tmp_path / "physics.py"
-    path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+    path.write_text("from typing import TYPE_CHECKING\nimport importlib\nif TYPE_CHECKING:\n"
                     "    from ipcosim.harness.engine import run_with\n"
-                    "def f():\n    from ipcosim.harness.master.results import Result\n")
-    mods = {"fmus.physics": path, "harness.master.results": path, "harness.engine": path}
-    assert _imports("fmus.physics", path, mods) == {"harness.master.results"}
+                    "TOOL = 'ipcosim.fmus.gone'\n"
+                    "def f():\n    from ipcosim.harness.master.results import Result\n"
+                    "def g(name):\n    return importlib.import_module(f'ipcosim.harness.cli.{name}')\n"
+                    "PLUGIN = 'ipcosim.harness.studies.sweep:run_sweep'\n")
+    mods = {"fmus.physics": path, "fmus": path, "harness.master.results": path, "harness.engine": path,
+            "harness.cli": path, "harness.studies.sweep": path}
+    found = _imports("fmus.physics", path, mods)
+    assert found == {"harness.master.results", "harness.cli", "harness.studies.sweep"}
+    assert against_the_layers({"fmus.physics": found}) == [
+        "fmus.physics -> harness.cli", "fmus.physics -> harness.master.results",
+        "fmus.physics -> harness.studies.sweep"]
+    assert against_the_layers({"harness.master.slave": {"fmus.params", "errors"}}) == [
+        "harness.master.slave -> fmus.params"]
 
 
 def test_the_cycle_check_sees_a_cycle() -> None:

@@ -19,7 +19,9 @@ COMMAND_MODULES = ("build", "list_", "run", "export", "linearize", "analyze", "r
 def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
     """``--fmus`` of the studies (sweep, tune, compare): ``auto`` by default
     (``ipcosim.harness.studies.specs.study_spec``)."""
-    p.add_argument("--fmus", choices=["auto", "python", "native"], default="auto",
+    from ipcosim.harness.studies.specs import STUDY_FLAVOURS
+
+    p.add_argument("--fmus", choices=STUDY_FLAVOURS, default=STUDY_FLAVOURS[0],
                    help="FMU flavour: auto (default: the native C FMUs when `ipcosim build --native` has built "
                         "them and they can run this study, else python), python, or native")
 
@@ -33,13 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(f"ipcosim.harness.cli.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"ipcosim.harness.cli.{name}":
-                continue  # command not part of this installation
-            raise
-        module.register(sub)
+        importlib.import_module(f"ipcosim.harness.cli.{name}").register(sub)
     return parser
 
 

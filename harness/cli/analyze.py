@@ -25,11 +25,12 @@ def _fmt(v: float | None, spec: str, unit: str = "") -> str:
 
 
 def main(args: argparse.Namespace) -> int:
+    from ipcosim.harness.grammar import parse_set
     from ipcosim.harness.studies.analyze import analyze
-    from ipcosim.harness.studies.specs import parse_set
 
     out = args.out or f"out/analyze/{args.scenario.rstrip('/').split('/')[-1]}"
-    r = analyze(args.scenario, parameter_set=args.parameter_set, overrides=parse_set(args.set), out_dir=out)
+    overrides = parse_set(args.set, numbers=True)
+    r = analyze(args.scenario, parameter_set=args.parameter_set, overrides=overrides, out_dir=out)
     if args.json:
         print(json.dumps(r))
         return 0

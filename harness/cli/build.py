@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 from pathlib import Path
 
 
@@ -22,25 +21,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from ipcosim.fmus.pybuild import build_all
+    from ipcosim.harness.scenario.ssp_pack import pack_all
 
     out: Path = args.out
     for result in build_all(out / "fmus", force=args.force):
         print(f"{'built' if result.built else 'up to date'}: {result.fmu}")
-    pack_ssp(out)
+    for archive in pack_all(out):
+        print(f"packed: {archive}")
     if getattr(args, "native", False):
         from ipcosim.harness.native.cbuild import build_native
 
         for native in build_native(out / "fmus", out / "fmus-native"):
             print(f"built (native{'' if native.binary else ', sources only'}): {native.fmu}")
     return 0
-
-
-def pack_ssp(out: Path) -> None:
-    """Hook for the SSP packer: calls ``ipcosim.harness.scenario.ssp_pack.pack_all(out)`` if that module exists."""
-    try:
-        ssp_pack = importlib.import_module("ipcosim.harness.scenario.ssp_pack")
-    except ModuleNotFoundError as exc:
-        if exc.name == "ipcosim.harness.scenario.ssp_pack":
-            return
-        raise
-    ssp_pack.pack_all(out)

@@ -68,13 +68,10 @@ def thesis_claims(out: Path) -> int:
 def available_scenarios() -> list[str]:
     """The ten plant x controller scenarios of the project, in report order, plus any other folder
     that is not one of the generator's variants (swing-up, tap, lab: they pose other tasks)."""
+    from ipcosim.harness.paths import SCENARIO_DIR
     from ipcosim.harness.scenario.ssp_gen import VARIANTS
     from ipcosim.harness.studies.report import SCENARIOS
 
-    try:
-        from ipcosim.harness.paths import SCENARIO_DIR
-    except ImportError:
-        return []
     found = sorted(p.name for p in SCENARIO_DIR.iterdir() if (p / "SystemStructure.ssd").exists()) \
         if SCENARIO_DIR.is_dir() else []
     return [s for s in SCENARIOS if s in found] + [s for s in found if s not in SCENARIOS and s not in VARIANTS]

@@ -10,7 +10,9 @@ import numpy as np
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("linearize", help="linear state-space model of a plant about upright",
                        description="Linearize a plant preset about the upright equilibrium.")
-    p.add_argument("plant", choices=["single-mass", "double-mass"])
+    from ipcosim.fmus.params import KINDS
+
+    p.add_argument("plant", choices=KINDS)
     p.add_argument("--preset", help="parameter preset (default: thesis-ch3 / thesis-ch4)")
     p.add_argument("--no-inductance", action="store_true",
                    help="neglect the motor inductance (current eliminated: 4 or 6 states)")

@@ -17,7 +17,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s = rs.add_parser("serve", help="serve a virtual rig (Ctrl-C to stop)",
                       description="Serve a virtual rig on HOST:PORT (card id N@tcpip://HOST:PORT). Binds 127.0.0.1 "
                                   "unless told otherwise; one controlling client at a time.")
-    s.add_argument("--plant", choices=["single-mass", "double-mass"], default="single-mass")
+    from ipcosim.fmus.params import KINDS
+
+    s.add_argument("--plant", choices=KINDS, default=KINDS[0])
     s.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     s.add_argument("--port", type=int, default=18920, help="TCP port (default 18920; 0 = any free port)")
     s.add_argument("--clock", choices=["lockstep", "wallclock"], default="wallclock",
@@ -88,21 +90,6 @@ def _token(args: argparse.Namespace) -> str | None:
     return token or None
 
 
-def _pairs(items: list[str], what: str) -> dict[str, float]:
-    from ipcosim.errors import UsageError
-
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        try:
-            if not sep:
-                raise ValueError
-            out[key.strip()] = float(value)
-        except ValueError:
-            raise UsageError(f"{what} {item!r}: expected NAME=NUMBER") from None
-    return out
-
-
 def main(args: argparse.Namespace) -> int:
     if args.rig_command == "serve":
         return serve(args)
@@ -168,13 +155,16 @@ def serve(args: argparse.Namespace) -> int:
     from ipcosim.errors import UsageError
     from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig
     from ipcosim.fmus.hil.server import RigServer, escape
+    from ipcosim.harness.grammar import parse_numbers
 
     _check_numbers(args)
+    params = parse_numbers("--set", args.set, "NAME=NUMBER")
+    initial = parse_numbers("--initial", args.initial, "NAME=NUMBER")
     cart_limit = _limit(args.cart_limit, "--cart-limit", END_STOP_M)
     pend_limit = _limit(args.pendulum_limit_deg, "--pendulum-limit-deg", 180.0)
     try:
-        config = RigConfig(plant=args.plant, preset=args.preset, params=_pairs(args.set, "--set"),
-                           initial_state=_pairs(args.initial, "--initial"), clock=args.clock, tick=args.tick,
+        config = RigConfig(plant=args.plant, preset=args.preset, params=params,
+                           initial_state=initial, clock=args.clock, tick=args.tick,
                            cart_limit=cart_limit,
                            pendulum_limit=None if pend_limit is None else math.radians(pend_limit),
                            noise_counts=args.noise_counts, latency=args.latency, seed=args.seed).checked()

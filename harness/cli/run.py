@@ -6,6 +6,10 @@ import sys
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL
+    from ipcosim.harness.master.cloop import LOOPS
+    from ipcosim.harness.scenario.flavour import FLAVOURS
+
     p = sub.add_parser("run", help="co-simulate a scenario (SSP folder or archive)",
                        description="Run an SSP scenario with the fmpy-based master and write DIR/results.csv "
                                    "(time, then component.variable), DIR/metrics.json and, with --plot, DIR/plot.png.")
@@ -22,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", action="store_true", help="also write DIR/plot.png")
     p.add_argument("--parameter-set", metavar="NAME",
                    help="bind this parameter set of the scenario (thesis, tuned...) instead of the default")
-    p.add_argument("--algorithm", choices=["gauss-seidel", "jacobi"], default="gauss-seidel",
+    p.add_argument("--algorithm", choices=ALGORITHMS, default=GAUSS_SEIDEL,
                    help="co-simulation algorithm (default gauss-seidel, ordered by the FMUs' dependencies)")
     p.add_argument("--record", action="append", default=[], metavar="VAR[,VAR...]",
                    help="columns of results.csv: names or patterns like 'plant.*' (default: every connector)")
@@ -30,10 +34,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="extra folder to look for FMUs in (also IPCOSIM_FMU_PATH; default build/fmus)")
     p.add_argument("--save-baseline", metavar="FILE",
                    help="also write the recorded columns (see --record) as a baseline CSV for assert_close_to")
-    p.add_argument("--fmus", choices=["python", "native"], default="python",
+    p.add_argument("--fmus", choices=FLAVOURS, default=FLAVOURS[0],
                    help="FMU flavour: python (build/fmus, default) or native (build/fmus-native: C, from "
                         "`ipcosim build --native`)")
-    p.add_argument("--loop", choices=["auto", "c", "python"], default="auto",
+    p.add_argument("--loop", choices=LOOPS, default=LOOPS[0],
                    help="the master's stepping loop: auto (default: compiled C where it can run, else Python), "
                         "c (an error where it cannot run) or python")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")

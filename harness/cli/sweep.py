@@ -56,14 +56,14 @@ def default_out(scenario: str, kind: str = "sweep") -> Path:
 
 def main(args: argparse.Namespace) -> int:
     from ipcosim.errors import IpcosimError
-    from ipcosim.harness.grammar import parse_all
+    from ipcosim.harness.grammar import parse_all, parse_set
     from ipcosim.harness.studies import robustness
     from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.executors import open_executor
-    from ipcosim.harness.studies.specs import for_executor, parse_set, study_spec
+    from ipcosim.harness.studies.specs import for_executor, study_spec
     from ipcosim.harness.studies.sweep import run_sweep
 
-    overrides = parse_set(args.set)
+    overrides = parse_set(args.set, numbers=True)
     spec, flavour = study_spec(args.scenario, args.fmus, names=[*overrides, *(v.partition("=")[0].strip()
                                                                               for v in args.vary)],
                                check=lambda s: parse_all(args.vary, s.parameters), stop_time=args.stop_time,

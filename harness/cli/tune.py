@@ -60,10 +60,8 @@ def _scenario_dir(scenario: str) -> Path | None:
         return path
     if path.suffix == ".ssp" and path.exists():
         return path.parent
-    try:
-        from ipcosim.harness.paths import SCENARIO_DIR
-    except ImportError:
-        return None
+    from ipcosim.harness.paths import SCENARIO_DIR
+
     candidate = SCENARIO_DIR / scenario
     return candidate if candidate.is_dir() else None
 
@@ -94,12 +92,13 @@ def main(args: argparse.Namespace) -> int:
     """Tune the named parameters of a scenario (differential evolution on the cost J over a run
     budget), then write the evaluations, the tuned parameter set and the report."""
     from ipcosim.harness.cli.sweep import default_out
+    from ipcosim.harness.grammar import parse_set
     from ipcosim.harness.studies import cost as costmod
     from ipcosim.harness.studies import tune as tunemod
     from ipcosim.harness.studies.executors import open_executor
-    from ipcosim.harness.studies.specs import for_executor, parse_set, study_spec
+    from ipcosim.harness.studies.specs import for_executor, study_spec
 
-    overrides = parse_set(args.set)
+    overrides = parse_set(args.set, numbers=True)
     pset = _parameter_set(args)
     spec, flavour = study_spec(args.scenario, args.fmus, names=list(overrides),
                                check=lambda s: tunemod.parse_bounds(

@@ -26,7 +26,7 @@ import numpy as np
 from ipcosim.controllers.catalog import make_law
 from ipcosim.fmus.instruments import Instruments, realism
 from ipcosim.fmus.metrics import UPRIGHT_LIMIT_RAD, compute_metrics
-from ipcosim.fmus.params import preset
+from ipcosim.fmus.params import KINDS, preset
 from ipcosim.fmus.physics import MOTOR_CART
 from ipcosim.fmus.plant import InstrumentedPlant, PlantStepError
 
@@ -105,7 +105,7 @@ def thesis_runs(realism_name: str, stop_time: float = STOP_TIME) -> dict[tuple[s
     """Every law with the thesis's gain set, on both plants (CascadePID: no thesis set, left out), each
     on its own model (``OWN_MODEL``: plant and design model; else the kind's thesis preset)."""
     out = {}
-    for kind in ("single-mass", "double-mass"):
+    for kind in KINDS:
         for law in ("PID", "LQR", "HSMC", "AdaptiveHSMC"):
             own = OWN_MODEL.get((law, kind))
             inst, phys = realism(realism_name, kind)
@@ -174,7 +174,7 @@ def _fewer_oscillations(R):
 
 def _hsmc_better(R):
     parts, ok = [], True
-    for kind in ("single-mass", "double-mass"):
+    for kind in KINDS:
         h, lq, p = R[("HSMC", kind)], R[("LQR", kind)], R[("PID", kind)]
         better = h.metrics["upright"] and (not lq.metrics["upright"] or h.itae < lq.itae) and \
             (not p.metrics["upright"] or h.itae < p.itae)

@@ -22,8 +22,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ipcosim.fmus.params import KINDS
+
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
-SCENARIOS = [f"{p}-{c}" for p in ("single-mass", "double-mass")
+SCENARIOS = [f"{p}-{c}" for p in KINDS
              for c in ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")] + ["single-mass-lqr-tap"]
 ROBUST_LAWS = [("PID", "single-mass", "thesis"), ("CascadePID", "single-mass", "tuned"),
                ("LQR", "single-mass", "thesis"), ("HSMC", "single-mass", "thesis"), ("HSMC", "single-mass", "tuned"),

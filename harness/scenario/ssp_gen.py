@@ -73,13 +73,10 @@ def plant_signals(plant: str) -> tuple[list[str], list[str]]:
 def parameter_sets(plant: str, controller: str) -> dict[str, dict[str, Any]]:
     """The controller's named parameter sets (``thesis``, ``tuned``): variable -> value.
 
-    Taken from ``ipcosim.controllers.catalog.parameter_sets(plant, law)`` when the controller design
-    provides it; empty otherwise.
+    Taken from ``ipcosim.controllers.catalog.parameter_sets(kind, law)``.
     """
-    try:
-        from ipcosim.controllers.catalog import parameter_sets as catalog_sets  # type: ignore[import-not-found]
-    except ImportError:
-        return {}
+    from ipcosim.controllers.catalog import parameter_sets as catalog_sets
+
     return {k: dict(v) for k, v in catalog_sets(plant, CONTROLLERS[controller][0]).items() if v}
 
 

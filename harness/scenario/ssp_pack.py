@@ -45,7 +45,7 @@ def pack(scenario_dir: Path, fmu_dir: Path, target: Path) -> Path:
 def pack_all(out: Path | str = "build", root: Path = SCENARIO_DIR) -> list[Path]:
     """Pack every scenario of ``root`` into ``<out>/ssp/<name>.ssp`` with the FMUs of ``<out>/fmus``.
 
-    A scenario whose FMUs are not built is skipped with a note on stderr.
+    A scenario whose FMUs are not built is skipped with a note on stderr. Returns the archives written.
     """
     out = Path(out)
     written = []
@@ -53,7 +53,6 @@ def pack_all(out: Path | str = "build", root: Path = SCENARIO_DIR) -> list[Path]
         target = out / "ssp" / f"{name}.ssp"
         try:
             written.append(pack(root / name, out / "fmus", target))
-            print(f"packed: {target}")
         except FileNotFoundError as exc:
             print(f"skipped {name}.ssp: {exc}", file=sys.stderr)
     return written

@@ -22,8 +22,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-#: |angle| at or above which the pendulum counts as fallen [rad] (the DESIGN.md upright limit).
-FALL_ANGLE = 0.35
+from ipcosim.fmus.metrics import UPRIGHT_LIMIT_RAD, compute_metrics
+
 #: Default weight of the angle term [m/rad].
 W_ANGLE = 0.1
 #: Default weight of the voltage term [m s/V^2].
@@ -85,7 +85,7 @@ def cost_terms(time: np.ndarray, position: np.ndarray, reference: np.ndarray, an
     -------
     dict
         ``itae_position`` [m s^2], ``itae_angle`` [rad s^2], ``ise_voltage`` [V^2 s] and
-        ``fall_time_s`` (first time |angle| >= FALL_ANGLE, or None), ``angle_reversals``
+        ``fall_time_s`` (first time |angle| >= UPRIGHT_LIMIT_RAD, or None), ``angle_reversals``
         (``reversals`` of the angle).
     """
     t = np.asarray(time, dtype=float)
@@ -93,7 +93,7 @@ def cost_terms(time: np.ndarray, position: np.ndarray, reference: np.ndarray, an
     e = np.abs(np.asarray(position, dtype=float) - np.asarray(reference, dtype=float))
     th = np.abs(np.asarray(angle, dtype=float))
     u = np.asarray(voltage, dtype=float)
-    fallen = np.nonzero(~(th < FALL_ANGLE))[0]  # also catches NaN
+    fallen = np.nonzero(~(th < UPRIGHT_LIMIT_RAD))[0]  # also catches NaN
     return {"itae_position": _trapezoid(t_rel * e, t),
             "itae_angle": _trapezoid(t_rel * th, t),
             "ise_voltage": _trapezoid(u * u, t),
@@ -125,11 +125,9 @@ def surrogate_cost(metrics: Mapping[str, Any], stop_time: float, w_angle: float 
     return 2.0 * FALL_PENALTY
 
 
-def task_metrics(time: np.ndarray, position: np.ndarray, reference: np.ndarray, angle: np.ndarray,
-                 voltage: np.ndarray) -> dict[str, Any]:
+def metrics_and_cost_terms(time: np.ndarray, position: np.ndarray, reference: np.ndarray, angle: np.ndarray,
+                           voltage: np.ndarray) -> dict[str, Any]:
     """DESIGN.md metrics (``ipcosim.fmus.metrics.compute_metrics``) plus the cost terms."""
-    from ipcosim.fmus.metrics import compute_metrics
-
     metrics = dict(compute_metrics(time, position, reference, angle, voltage))
     metrics.update(cost_terms(time, position, reference, angle, voltage))
     return metrics

@@ -192,7 +192,7 @@ class PurePlantSpec(RunSpec):
         from ipcosim.fmus.linearize import linearize
         from ipcosim.fmus.params import preset, with_values
         from ipcosim.fmus.plant import Plant
-        from ipcosim.harness.studies.cost import series, task_metrics
+        from ipcosim.harness.studies.cost import metrics_and_cost_terms, series
 
         nominal_plant = preset(self.preset)
         design = linearize(nominal_plant, inductance=False)
@@ -240,7 +240,7 @@ class PurePlantSpec(RunSpec):
                     pos[k + 1:], ang[k + 1:], ref[k + 1:], volt[k + 1:] = x[0], x[2], r, u
                     break
                 plant.do_step(float(t[k]), h, u)
-            metrics = task_metrics(t, pos, ref, ang, volt)
+            metrics = metrics_and_cost_terms(t, pos, ref, ang, volt)
             if spec.with_series:
                 metrics["series"] = series(t, pos, ref, ang, volt)
             return metrics

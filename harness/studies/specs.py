@@ -4,25 +4,11 @@ from __future__ import annotations
 from typing import Any, Callable, Iterable, Mapping
 
 from ipcosim.errors import UsageError
+from ipcosim.harness.scenario.flavour import FLAVOURS
 from ipcosim.harness.studies.runners import PurePlantSpec, RunSpec
 
 #: Scenario names served without FMUs (pure-Python stand-ins, see ``ipcosim.harness.studies.runners``).
 PURE_SCENARIOS = {"pure:single-mass-lqr": PurePlantSpec}
-
-
-def parse_set(items: list[str] | None) -> dict[str, float]:
-    """``--set comp.var=value`` options as a dict (values must be numbers)."""
-    out: dict[str, float] = {}
-    for item in items or []:
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or "." not in key:
-            raise UsageError(f"--set {item!r}: expected COMPONENT.VARIABLE=VALUE")
-        try:
-            out[key] = float(value)
-        except ValueError:
-            raise UsageError(f"--set {item!r}: {value.strip()!r} is not a number") from None
-    return out
 
 
 def spec_for(scenario: str, stop_time: float | None = None, step: float | None = None,
@@ -89,7 +75,7 @@ def for_executor(spec: RunSpec, executor: object) -> RunSpec:
 
 #: ``--fmus`` of the studies: ``auto`` (the default) takes the native FMUs when they are built and
 #: can run the study, else the Python ones.
-STUDY_FLAVOURS = ("auto", "python", "native")
+STUDY_FLAVOURS = ("auto", *FLAVOURS)
 
 
 def study_spec(scenario: str, fmus: str = "auto", names: Iterable[str] = (),
