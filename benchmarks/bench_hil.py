@@ -137,7 +137,8 @@ def single_mass(lines: list[str]) -> None:
             lines.append(describe(f"LQR single, {rate} Hz{', rt' if rt else ''}", m))
             print('   ' + lines[-1], flush=True)
             if rt and rate == 1000:
-                lines.append(f"{'':32s}" + _targets("hil.lqr_1khz", m, TARGET_1KHZ["overruns_pct"]) + "; p99 "
+                checks = _targets("hil.lqr_1khz", "LQR single 1 kHz rt", m, TARGET_1KHZ["overruns_pct"])
+                lines.append(f"{'':32s}" + checks + "; p99 "
                              + target("hil.lqr_1khz_jitter_p99_us", m.get("period_jitter_p99_s", float("nan")) * US,
                                       TARGET_1KHZ["period_jitter_p99_us"], "us",
                                       what="LQR single 1 kHz rt, period jitter p99")
@@ -148,14 +149,14 @@ def single_mass(lines: list[str]) -> None:
                 print('   ' + lines[-1], flush=True)
 
 
-def _targets(key: str, m: dict[str, Any], overruns_pct: float) -> str:
+def _targets(key: str, label: str, m: dict[str, Any], overruns_pct: float) -> str:
     """The targets every rt run at 1 kHz has: it ran, the pendulum is upright, few overruns."""
     if m.get("error"):
-        raise RuntimeError(f"{key}: the HIL run failed: {m['error']}")
+        raise RuntimeError(f"{label}: the HIL run failed: {m['error']}")
     pct = 100 * (m.get("overruns") or 0) / max(1, m.get("realtime_steps") or 1)
     return ("upright " + target(f"{key}_upright", float(bool(m.get("upright"))), 1.0, "", at_most=False,
-                                what=f"{key}: pendulum upright at the end (1 = yes)")
-            + "; overruns " + target(f"{key}_overruns_pct", pct, overruns_pct, "%", what=f"{key}: overruns"))
+                                what=f"{label}, pendulum upright at the end (1 = yes)")
+            + "; overruns " + target(f"{key}_overruns_pct", pct, overruns_pct, "%", what=f"{label}, overruns"))
 
 
 def double_mass(lines: list[str]) -> None:
@@ -172,7 +173,8 @@ def double_mass(lines: list[str]) -> None:
                      + f"\n{'':32s}rms: lockstep rig {lock['rms_voltage_V']:.3f} V (HIL differs by {100 * rel:.0f} %), "
                        f"plant FMU {sim['rms_voltage_V']:.3f} V")
         if rate == 1000:
-            lines[-1] += (f"\n{'':32s}" + _targets("hil.hsmc_1khz", m, TARGET_DOUBLE["overruns_pct"]) + "; rms "
+            checks = _targets("hil.hsmc_1khz", "HSMC double 1 kHz rt", m, TARGET_DOUBLE["overruns_pct"])
+            lines[-1] += (f"\n{'':32s}" + checks + "; rms "
                           + target("hil.hsmc_1khz_rms_vs_lockstep_pct", 100 * rel, TARGET_DOUBLE["rms_voltage_rel_pct"],
                                    "%", what="HSMC double 1 kHz rt, RMS voltage against the lockstep rig"))
         print('   ' + lines[-1], flush=True)
