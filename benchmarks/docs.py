@@ -45,11 +45,12 @@ BEGIN = re.compile(r"^<!-- bench:([\w-]+) -->$", re.M)
 #: A speed or memory figure written as prose: a time in us, a time per step / tick / run / cycle,
 #: a memory size, any "Nx" (real-time factors, "Nx faster", ratios of times; other multiples are
 #: written "N times").
+_N = r"\b\d+(?:[.,]\d+)*"
 SPEED = re.compile(
-    r"\b\d[\d.,]*\s?(?:us|µs|μs)\b"
-    r"|\b\d[\d.,]*\s?(?:ms|s|us)\s?(?:/\s?|per\s)(?:step|tick|run|cycle|sample|call)\b"
-    r"|\b\d[\d.,]*\s?(?:kB|MB|GB|KiB|MiB|GiB)\b"
-    r"|\b\d[\d.,]*x\b"
+    _N + r"\s?(?:us|µs|μs)\b"
+    r"|" + _N + r"\s?(?:ms|s|us)\s?(?:/\s?|per\s)(?:step|tick|run|cycle|sample|call)\b"
+    r"|" + _N + r"\s?(?:kB|MB|GB|KiB|MiB|GiB)\b"
+    r"|" + _N + r"x\b(?!\.\d)"
     r"|runs?/min",
     re.I)
 
