@@ -44,7 +44,7 @@ def run() -> list[str]:
     steps = []
     for law in LAWS:
         for kind in KINDS:
-            timed = _Timed(make_law(law, kind))
+            timed = _Timed(make_law(kind, law))
             t = time.perf_counter()
             run_loop(timed, preset(default_preset(kind)))  # type: ignore[arg-type]
             total = time.perf_counter() - t

@@ -92,7 +92,7 @@ class CatalogError(ControllerParameterError):
     """Unknown law, plant kind, parameter set or parameter name."""
 
 
-def model_name(law: str, kind: str) -> str:
+def model_name(kind: str, law: str) -> str:
     """FMU model name ``<Law><Plant>``, e.g. ``LQRSingleMass``."""
     return f"{law}{PLANT_SUFFIX[kind]}"
 
@@ -102,7 +102,7 @@ def default_preset(kind: str) -> str:
     return DEFAULT_PRESET[kind]
 
 
-def default_set(law: str, kind: str) -> str:
+def default_set(kind: str, law: str) -> str:
     """The parameter set used when none is named."""
     return PARAMETER_SETS[law][kind][0]
 
@@ -421,9 +421,9 @@ def _cascade_specs() -> list[ParamSpec]:
             for f in CascadeGains.UNITS]
 
 
-def schema(law: str, kind: str) -> list[ParamSpec]:
+def schema(kind: str, law: str) -> list[ParamSpec]:
     """Every parameter of ``law`` on ``kind``, with the default set's values as defaults."""
-    _check(law, kind)
+    _check(kind, law)
     specs = _common_specs()
     if law == "PID":
         specs += _pid_specs()
@@ -435,11 +435,11 @@ def schema(law: str, kind: str) -> list[ParamSpec]:
         specs += _swing_up_specs() + _lqr_specs(kind) + _model_specs(kind)
     else:
         specs += _hsmc_specs(kind, law) + _model_specs(kind)
-    values = set_values(law, kind, default_set(law, kind))
+    values = set_values(kind, law, default_set(kind, law))
     return [replace(s, default=values.get(s.name, s.default)) for s in specs]
 
 
-def _check(law: str, kind: str) -> None:
+def _check(kind: str, law: str) -> None:
     if law not in PARAMETER_SETS:
         raise CatalogError("law", f"unknown control law {law!r}; expected one of {', '.join(PARAMETER_SETS)}")
     if kind not in PLANT_SUFFIX:
@@ -472,12 +472,12 @@ def _schedule_values(g: HSMCGains, s: AdaptiveSchedules) -> dict[str, float]:
     return v
 
 
-def set_values(law: str, kind: str, parameter_set: str) -> dict[str, Any]:
+def set_values(kind: str, law: str, parameter_set: str) -> dict[str, Any]:
     """The values a named parameter set gives (only the parameters it fixes)."""
-    _check(law, kind)
+    _check(kind, law)
     sets = PARAMETER_SETS[law][kind]
     if parameter_set not in sets:
-        raise CatalogError("parameter_set", f"{model_name(law, kind)} has no parameter set {parameter_set!r}; "
+        raise CatalogError("parameter_set", f"{model_name(kind, law)} has no parameter set {parameter_set!r}; "
                                             f"available: {', '.join(sets)}")
     if law == "PID":
         g = PIDGains()
@@ -487,7 +487,7 @@ def set_values(law: str, kind: str, parameter_set: str) -> dict[str, Any]:
         return {f: getattr(g, f) for f in CascadeGains.UNITS}
     if law == "SwingUp":
         g = SwingUpGains()
-        return {**{f: getattr(g, f) for f in SwingUpGains.UNITS}, **set_values("LQR", kind, "thesis")}
+        return {**{f: getattr(g, f) for f in SwingUpGains.UNITS}, **set_values(kind, "LQR", "thesis")}
     if law == "LQR":
         states = design_states(kind)
         if kind == "single-mass":
@@ -519,12 +519,12 @@ def parameter_sets(kind: str, law: str) -> dict[str, dict[str, Any]]:
 
     Used by ``ipcosim.harness.scenario.ssp_gen``.
     """
-    return {name: set_values(law, kind, name) for name in PARAMETER_SETS[law][kind]}
+    return {name: set_values(kind, law, name) for name in PARAMETER_SETS[law][kind]}
 
 
-def defaults(law: str, kind: str) -> dict[str, Any]:
+def defaults(kind: str, law: str) -> dict[str, Any]:
     """``{name: default}`` of every parameter (``schema``)."""
-    return {s.name: s.default for s in schema(law, kind)}
+    return {s.name: s.default for s in schema(kind, law)}
 
 
 # ============================================================================ the factory
@@ -641,7 +641,7 @@ def _fmu_message(exc: DesignError, kind: str) -> str:
     return f"{where}: {exc}"
 
 
-def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, backend: str = "control") -> DiscreteLaw:
+def build_law(kind: str, law: str, values: Mapping[str, Any] | None = None, backend: str = "control") -> DiscreteLaw:
     """A law from flat parameter values (missing ones take their defaults).
 
     Parameters
@@ -660,7 +660,7 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
     ControllerParameterError
         Naming the parameter (``parameter`` attribute and the message).
     """
-    v = _checked_values(law, kind, values)
+    v = _checked_values(kind, law, values)
     T, vlim = float(v["sample_period"]), float(v["voltage_limit"])
     if law == "PID":
         g = PIDGains(**{f: float(v[f]) for f in ("Kp", "Ki", "Kd", "derivative_time_constant")})
@@ -674,16 +674,16 @@ def build_law(law: str, kind: str, values: Mapping[str, Any] | None = None, back
         balance = LQR(kind, lqr_design_from(kind, v, backend), vlim,
                       output_filter_time_constant=float(v["output_filter_time_constant"]))
         return swing_up_around(kind, v, balance)
-    return _sliding_mode(law, kind, v, T, vlim)
+    return _sliding_mode(kind, law, v, T, vlim)
 
 
-def _checked_values(law: str, kind: str, values: Mapping[str, Any] | None) -> dict[str, Any]:
+def _checked_values(kind: str, law: str, values: Mapping[str, Any] | None) -> dict[str, Any]:
     """Every parameter of the law: the given values over the defaults, each checked against its schema."""
-    spec = {s.name: s for s in schema(law, kind)}
+    spec = {s.name: s for s in schema(kind, law)}
     v = {name: s.default for name, s in spec.items()}
     for name, value in (values or {}).items():
         if name not in spec:
-            raise CatalogError(name, f"{model_name(law, kind)} has no parameter {name!r}")
+            raise CatalogError(name, f"{model_name(kind, law)} has no parameter {name!r}")
         v[name] = value
     for name, s in spec.items():
         reason = s.check(v[name])
@@ -693,7 +693,7 @@ def _checked_values(law: str, kind: str, values: Mapping[str, Any] | None) -> di
     return v
 
 
-def _sliding_mode(law: str, kind: str, v: Mapping[str, Any], T: float, vlim: float) -> DiscreteLaw:
+def _sliding_mode(kind: str, law: str, v: Mapping[str, Any], T: float, vlim: float) -> DiscreteLaw:
     """The HSMC or adaptive HSMC law of the checked values ``v``: gains, subsystem models (the
     thesis's coefficients or designed), and for the adaptive law its gain schedules."""
     n = 2 if kind == "single-mass" else 3
@@ -741,15 +741,15 @@ def _through_motor(law: HSMC, kind: str, v: Mapping[str, Any]) -> HSMC:
     return law
 
 
-def make_law(law: str, kind: str, parameter_set: str | None = None, design_params: PlantParams | None = None,
+def make_law(kind: str, law: str, parameter_set: str | None = None, design_params: PlantParams | None = None,
              sample_period: float = 1e-3, voltage_limit: float = 10.0, backend: str = "control",
              **overrides: Any) -> DiscreteLaw:
     """A law from a named parameter set (default: the first of ``PARAMETER_SETS``).
 
     Parameters
     ----------
-    law, kind : str
-        Law and plant kind.
+    kind, law : str
+        Plant kind and law.
     parameter_set : str, optional
         ``thesis`` or ``tuned``.
     design_params : PlantParams, optional
@@ -761,24 +761,24 @@ def make_law(law: str, kind: str, parameter_set: str | None = None, design_param
     **overrides
         Further flat parameter values (``schema`` names), e.g. ``use_thesis_coefficients=True``.
     """
-    _check(law, kind)
-    values: dict[str, Any] = dict(set_values(law, kind, parameter_set or default_set(law, kind)))
+    _check(kind, law)
+    values: dict[str, Any] = dict(set_values(kind, law, parameter_set or default_set(kind, law)))
     values.update(sample_period=sample_period, voltage_limit=voltage_limit)
     if design_params is not None and law in ("LQR", "HSMC", "AdaptiveHSMC", "SwingUp"):
-        names = {s.name for s in schema(law, kind)}
+        names = {s.name for s in schema(kind, law)}
         for k2, val in vars(design_params).items():
             if f"model_{k2}" in names:
                 values[f"model_{k2}"] = val
     values.update(overrides)
-    return build_law(law, kind, values, backend)
+    return build_law(kind, law, values, backend)
 
 
 def lqr_design_for(kind: str, params: PlantParams, sample_period: float = 1e-3, backend: str = "control"):
     """The thesis's LQR design (App. A.2 / B.3 weights and observer poles) on ``params``."""
-    values = dict(set_values("LQR", kind, "thesis"))
+    values = dict(set_values(kind, "LQR", "thesis"))
     values.update({f"model_{k}": v for k, v in vars(params).items() if k not in _NOT_IN_DESIGN},
                   sample_period=sample_period)
-    full = {s.name: s.default for s in schema("LQR", kind)}
+    full = {s.name: s.default for s in schema(kind, "LQR")}
     full.update(values)
     return lqr_design_from(kind, full, backend)
 

@@ -90,7 +90,7 @@ class ControllerFmu(FmuBase):
         kind = self.kind
         self._measured = MEASURED[kind]
         self._controller: DiscreteLaw | None = None
-        self._specs = schema(self.law, kind)
+        self._specs = schema(kind, self.law)
         self.add_input("reference", start=0.0, unit="m",
                        description="reference position of the motor-driven cart")
         for name in self._measured:
@@ -118,7 +118,7 @@ class ControllerFmu(FmuBase):
     @classmethod
     def shipped_name(cls) -> str:
         """File name of the shipped design inside the FMU's private package."""
-        return f"shipped_{model_name(cls.law, cls.kind)}.json"
+        return f"shipped_{model_name(cls.kind, cls.law)}.json"
 
     @classmethod
     def shipped_design(cls, resources: str | None = None) -> dict[str, Any]:
@@ -141,10 +141,10 @@ class ControllerFmu(FmuBase):
     @classmethod
     def design_record(cls) -> dict[str, Any]:
         """Design the gains for the default parameters (imports numpy and scipy): the shipped design."""
-        values = defaults(cls.law, cls.kind)
-        law = build_law(cls.law, cls.kind, values, backend="scipy")
+        values = defaults(cls.kind, cls.law)
+        law = build_law(cls.kind, cls.law, values, backend="scipy")
         design = {name: values[name] for name in lqr_design_parameters(cls.kind)}
-        return {"model": model_name(cls.law, cls.kind), "design": design, "gains": lqr_gains(_lqr_of(law))}
+        return {"model": model_name(cls.kind, cls.law), "design": design, "gains": lqr_gains(_lqr_of(law))}
 
     @classmethod
     def build_files(cls) -> dict[str, str]:
@@ -157,9 +157,9 @@ class ControllerFmu(FmuBase):
 
     def _build_law(self) -> DiscreteLaw:
         values = {s.name: getattr(self, s.name) for s in self._specs}
-        name = model_name(self.law, self.kind)
+        name = model_name(self.kind, self.law)
         if self.law not in LQR_LAWS:
-            return build_law(self.law, self.kind, values)
+            return build_law(self.kind, self.law, values)
         shipped = type(self).shipped_design(self.resources)
         gains = {s.name: float(getattr(self, s.name)) for s in self._gain_specs}
         changed = [n for n in lqr_design_parameters(self.kind) if float(values[n]) != shipped["design"][n]]
@@ -172,7 +172,7 @@ class ControllerFmu(FmuBase):
             lqr = lqr_from_gains(self.kind, values, gains)
             return swing_up_around(self.kind, values, lqr) if self.law == "SwingUp" else lqr
         try:
-            law = build_law(self.law, self.kind, values, backend="scipy")
+            law = build_law(self.kind, self.law, values, backend="scipy")
         except ImportError as exc:
             raise FmuError(f"{name}: parameter {changed[0]} = {values[changed[0]]:g} differs from the shipped "
                            f"design, and redesigning the gains needs numpy and scipy ({exc}); install them in "
@@ -185,7 +185,7 @@ class ControllerFmu(FmuBase):
         try:
             law = self._build_law()
         except ControllerParameterError as exc:
-            raise FmuError(f"{model_name(self.law, self.kind)}: {exc}") from None
+            raise FmuError(f"{model_name(self.kind, self.law)}: {exc}") from None
         self._controller = law
         self._tick = 0
         self.voltage = self._sample()

@@ -12,7 +12,7 @@ Example::
 
     with ipcosim.prepare("double-mass-hsmc") as prepared:      # load and extract once
         for mp in (0.10, 0.12, 0.14):
-            r = prepared.run(overrides={"plant.Mp": mp}, raise_on_error=False)
+            r = prepared.run(set={"plant.Mp": mp}, raise_on_error=False)
 """
 from __future__ import annotations
 
@@ -66,8 +66,8 @@ class Prepared:
         Scenario name, folder, SSD file or ``.ssp`` archive (or a loaded Scenario).
     parameter_set : str, optional
         Bind this parameter set (``thesis``, ``tuned``...) instead of the SSD's default.
-    swaps : mapping of component to FMU path, alias or SwapTarget, optional
-        Components to replace (``{"plant": "hil"}``).
+    swap : mapping of component to FMU path, alias or SwapTarget, optional
+        Components to replace (``{"plant": "hil"}``), as ``ipcosim.run(swap=...)``.
     fmu_dirs : sequence of path, optional
         Extra folders to look for FMUs in.
     algorithm : str
@@ -88,7 +88,7 @@ class Prepared:
 
     def __init__(self, scenario_or_path: str | os.PathLike[str] | Scenario | None = None, *,
                  parameter_set: str | None = None,
-                 swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
+                 swap: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
                  fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, algorithm: str = GAUSS_SEIDEL,
                  workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
                  system: System | None = None, warn: bool = True, fmus: str = "python",
@@ -106,8 +106,8 @@ class Prepared:
         self.slave_factory = slave_factory
         self.task_metrics = task_metrics
         self.parameter_set = parameter_set
-        self.swaps = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
-                      for k, v in (swaps or {}).items()}
+        self.swap = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
+                     for k, v in (swap or {}).items()}
         self._libraries: dict[str, Any] = {}
         self._tmp: Path | None = None
         self._finalizer: Any = None
@@ -123,7 +123,7 @@ class Prepared:
             if fmus == "native":
                 scenario, self._python_values = to_native(_with_fmus(scenario, archived))
             self.scenario = scenario
-            self.system = bind(scenario, swaps=swaps, fmu_files=archived)
+            self.system = bind(scenario, swaps=swap, fmu_files=archived)
             if warn:
                 warn_all(self.system)
             if slave_factory is None:
@@ -194,11 +194,11 @@ class Prepared:
 
     # ------------------------------------------------------------------ running
     def execution(self, stop_time: float | None = None, step: float | None = None,
-                  overrides: Mapping[str, Any] | None = None, *, start_time: float | None = None,
+                  set: Mapping[str, Any] | None = None, *, start_time: float | None = None,
                   algorithm: str | None = None, observers: Sequence[Observer] = (),
                   manipulators: Sequence[Manipulator] = (), realtime: bool | None = None, progress: bool = False,
                   record_every: int = 1, max_init_iterations: int = 20, loop: str = "auto") -> Execution:
-        """A ready :class:`Execution` (checked: step, stop time, overrides, step multiples);
+        """A ready :class:`Execution` (checked: step, stop time, the ``set`` start values, step multiples);
         ``loop``: the stepping loop, ``auto``, ``c`` or ``python`` (see :class:`Execution`)."""
         stop, why_stop = (stop_time, "") if stop_time is not None else default_stop_time(self.system)
         h, why_step = (step, "") if step is not None else default_step(self.system)
@@ -214,10 +214,10 @@ class Prepared:
             "step": "--step" if step is not None else (f"{origin}: osp:FixedStepAlgorithm baseStepSize"
                                                         if self.scenario.experiment.step_size is not None
                                                         else why_step)})
-        if self.fmus == "native" and overrides:
+        if self.fmus == "native" and set:
             from ipcosim.harness.scenario.flavour import native_overrides
-            overrides = native_overrides(self.system, overrides, self._python_values)
-        _, values = with_overrides(self.system, overrides or {})
+            set = native_overrides(self.system, set, self._python_values)
+        _, values = with_overrides(self.system, set or {})
         observers = list(observers)
         if progress:
             observers.append(Progress())
@@ -233,7 +233,7 @@ class Prepared:
                          task_metrics=self.task_metrics, loop=loop)
 
     def run(self, stop_time: float | None = None, step: float | None = None,
-            overrides: Mapping[str, Any] | None = None, *, out_dir: str | os.PathLike[str] | None = None,
+            set: Mapping[str, Any] | None = None, *, out: str | os.PathLike[str] | None = None,
             variables: Sequence[str] | None = None, plot: bool = False, raise_on_error: bool = True,
             **kwargs: Any) -> Result:
         """Run once.
@@ -242,14 +242,14 @@ class Prepared:
         ----------
         stop_time, step : float, optional
             [s]; default the scenario's DefaultExperiment (10 s at 1 ms for the project's scenarios).
-        overrides : mapping of ``"component.variable"`` to value, optional
-            Start values (``{"plant.Mp": 0.2, "controller.sample_period": 0.002}``).
-        out_dir : path, optional
+        set : mapping of ``"component.variable"`` to value, optional
+            Start values (``{"plant.Mp": 0.2, "controller.sample_period": 0.002}``), as ``ipcosim.run(set=...)``.
+        out : path, optional
             Write ``results.csv``, ``metrics.json`` (and ``plot.png`` with ``plot``) there.
         variables : sequence of str, optional
             Columns of results.csv (names or patterns like ``plant.*``); default all connectors.
         raise_on_error : bool
-            Raise SimulationError on failure (after writing ``out_dir``); else return the partial
+            Raise SimulationError on failure (after writing ``out``); else return the partial
             Result with ``error`` set.
         **kwargs
             ``realtime`` (None: only when a swapped-in component asks for it), ``progress``,
@@ -262,43 +262,43 @@ class Prepared:
         ------
         SimulationError
             If the run failed and ``raise_on_error`` (``.result`` holds the partial result,
-            already written to ``out_dir`` when given).
+            already written to ``out`` when given).
         """
         t0 = time.perf_counter()
         load, self.load_seconds = self.load_seconds, 0.0  # the loading belongs to the first run
-        execution = self.execution(stop_time, step, overrides, **kwargs)
+        execution = self.execution(stop_time, step, set, **kwargs)
         columns = select_columns(execution.row_names(), variables)  # unknown names fail before the run
-        if out_dir is not None:  # results.csv streamed while the run proceeds
-            out = open_output(out_dir)
-            execution.writer = RowWriter(execution.row_fields(), out / "results.csv", columns)
+        if out is not None:  # results.csv streamed while the run proceeds
+            folder = open_output(out)
+            execution.writer = RowWriter(execution.row_fields(), folder / "results.csv", columns)
         try:
             result = execution.run()
         except KeyboardInterrupt as exc:  # save what was computed, then stop
             partial = getattr(exc, "result", None)
             if partial is not None:
                 partial.plotter = plot_run
-                if out_dir is not None:
-                    partial.write(out_dir, variables=variables, plot=plot, csv=False)
+                if out is not None:
+                    partial.write(out, variables=variables, plot=plot, csv=False)
             raise
         result.plotter = plot_run
         result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
-        result.metadata["swaps"] = dict(self.swaps)
-        if out_dir is not None:
+        result.metadata["swaps"] = dict(self.swap)
+        if out is not None:
             result.metadata["files"] = {k: str(v) for k, v in
-                                        result.write(out_dir, variables=variables, plot=plot, csv=False).items()}
-        self._whole_run_timing(result, load + time.perf_counter() - t0, out_dir)
+                                        result.write(out, variables=variables, plot=plot, csv=False).items()}
+        self._whole_run_timing(result, load + time.perf_counter() - t0, out)
         if result.error is not None and raise_on_error:
             raise SimulationError(result.error, result)
         return result
 
     @staticmethod
-    def _whole_run_timing(result: Result, wall: float, out_dir: str | os.PathLike[str] | None) -> None:
+    def _whole_run_timing(result: Result, wall: float, out: str | os.PathLike[str] | None) -> None:
         """Make ``wall_time_s`` the whole run's (load, instantiate, initialize, step, write) and
         ``real_time_factor`` relative to it; ``metrics.json`` is rewritten with the final figures."""
         meta = result.metadata
         result.metrics.update(timing_metrics(meta.get("simulated_s", 0.0), wall, meta.get("loop_wall_time_s", 0.0)))
         meta["wall_time_s"] = wall
-        if out_dir is not None and "metrics" in meta.get("files", {}):
+        if out is not None and "metrics" in meta.get("files", {}):
             result.write_metrics(Path(meta["files"]["metrics"]))
 
     def _fmu_slave(self, instance: Any) -> FMUSlave:
@@ -334,7 +334,7 @@ def prepare(scenario_or_path: str | os.PathLike[str] | Scenario, **kwargs: Any) 
 
 def prepare_with(options: RunOptions, *, warn: bool = True) -> Prepared:
     """A :class:`Prepared` scenario for ``options`` (scenario, parameter set, swaps, FMU folders, algorithm)."""
-    return Prepared(options.scenario, parameter_set=options.parameter_set, swaps=options.swap,
+    return Prepared(options.scenario, parameter_set=options.parameter_set, swap=options.swap,
                     fmu_dirs=options.fmu_dirs, algorithm=options.algorithm, warn=warn, fmus=options.fmus)
 
 
@@ -362,9 +362,9 @@ def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers
         with prepare_with(options) as own:
             return run_with(options, own, observers=observers, manipulators=manipulators,
                             raise_on_error=raise_on_error)
-    overrides = resolve_relative(prepared.system, options.set)
+    values = resolve_relative(prepared.system, options.set)
     with signals.deferred(timeout=options.timeout):  # a no-op inside the command line's own
-        result = prepared.run(options.stop_time, options.step, overrides, out_dir=options.out,
+        result = prepared.run(options.stop_time, options.step, values, out=options.out,
                               variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
                               progress=options.progress, loop=options.loop, observers=observers,
                               manipulators=manipulators, raise_on_error=raise_on_error)
@@ -376,8 +376,8 @@ def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers
     return result
 
 
-def resolve_relative(system: System, overrides: Mapping[str, Any]) -> dict[str, Any]:
-    """``overrides`` with values relative to the scenario's (``"1.1*nominal"``, the ``--vary``
+def resolve_relative(system: System, values: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``--set`` ``values`` with those relative to the scenario's (``"1.1*nominal"``, the ``--vary``
     grammar's scaling) turned into numbers: the value the scenario binds to the variable
     (else the FMU's start value) times the factor.
 
@@ -387,7 +387,7 @@ def resolve_relative(system: System, overrides: Mapping[str, Any]) -> dict[str, 
         A relative value for an unknown component or variable, or one without a numeric nominal.
     """
     out: dict[str, Any] = {}
-    for key, value in overrides.items():
+    for key, value in values.items():
         factor, relative = strip_nominal(value, f"--set {key}={value}") if isinstance(value, str) else ("", False)
         if not relative:
             out[key] = value

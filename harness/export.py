@@ -84,7 +84,7 @@ def export(options: ExportOptions) -> Path:
     except FlavourError as exc:
         raise ExportError(f"{NATIVE_ONLY}: {exc}") from None
     with prepared:
-        execution = prepared.execution(overrides=resolve_relative(prepared.system, options.set))
+        execution = prepared.execution(set=resolve_relative(prepared.system, options.set))
         spec = container_spec(prepared.system, [execution.instances[i].name for i in execution.order],
                               execution.multiples, execution.step_size,
                               options.model_identifier or identifier(prepared.scenario.name), execution.overrides)

@@ -29,7 +29,7 @@ CASES = [(law, kind, s) for law, per in PARAMETER_SETS.items() if law != "SwingU
 @pytest.mark.parametrize("law_name,kind,pset", CASES)
 def test_linear_law_reproduces_the_law(law_name: str, kind: str, pset: str) -> None:
     """Driven by the same small random measurements, the linear model and the law give the same voltages."""
-    law = make_law(law_name, kind, pset, voltage_limit=1e9)
+    law = make_law(kind, law_name, pset, voltage_limit=1e9)
     if law_name == "AdaptiveHSMC":
         law.ticks = 400_000  # t = 400 s: the schedules have reached their final values
     lin = linear_law(law)
@@ -79,7 +79,7 @@ def _pendulum_zero(name: str) -> float:
 @pytest.mark.parametrize("name,zero,pole", [("thesis-ch3", 6.471, 6.604), ("thesis-appendix-a", 4.752, 4.831)])
 def test_position_only_limit(name: str, zero: float, pole: float) -> None:
     """The RHP zero of voltage -> cart position is the pendulum's; the bound is |(z + p)/(z - p)|."""
-    law = make_law("PID", "single-mass")
+    law = make_law("single-mass", "PID")
     loop = scenario_loop("single-mass-pid", overrides={"plant.Lp": preset(name).Lp})[0]
     lim = position_only_limit(loop)
     (z,), (p,) = lim["rhp_zeros_rad_s"], lim["rhp_poles_rad_s"]

@@ -60,7 +60,7 @@ _CACHE: dict = {}
 def loop(law: str, kind: str, parameter_set: str | None = None, **kw):
     key = (law, kind, parameter_set, tuple(sorted(kw.items())))
     if key not in _CACHE:
-        _CACHE[key] = run_loop(make_law(law, kind, parameter_set, **kw), plant(kind))
+        _CACHE[key] = run_loop(make_law(kind, law, parameter_set, **kw), plant(kind))
     return _CACHE[key]
 
 
@@ -97,7 +97,7 @@ def test_thesis_pid_fails_within_the_voltage_limit(kind: str) -> None:
 
 
 def test_thesis_pid_asks_for_kilovolts() -> None:
-    law = make_law("PID", "single-mass", voltage_limit=1e6)
+    law = make_law("single-mass", "PID", voltage_limit=1e6)
     law.reset()
     v = law.step([0.0, 0.0], 0.05)
     assert abs(v) > 1e4  # 2.009e6 V/m * 0.05 m ~ 100 kV
@@ -110,7 +110,7 @@ def test_lqr_thesis_design_works_on_its_own_model(kind: str) -> None:
 
 def test_lqr_on_the_long_pendulum_with_its_own_design() -> None:
     params = preset("thesis-appendix-a")
-    r = run_loop(make_law("LQR", "single-mass", design_params=params), params)
+    r = run_loop(make_law("single-mass", "LQR", design_params=params), params)
     assert reaches_and_balances(r.metrics), r.metrics
 
 
@@ -149,7 +149,7 @@ def test_tuned_adaptive_hsmc_is_gentler_than_tuned_hsmc() -> None:
 @pytest.mark.parametrize("law", ["HSMC", "AdaptiveHSMC", "LQR", "CascadePID"])
 def test_single_mass_default_sets_survive_encoder_quantization(law: str) -> None:
     """4096-count encoders (the rig's): the single-mass default sets still settle within 10 s."""
-    r = run_loop(make_law(law, "single-mass"), plant("single-mass"), quantize=True)
+    r = run_loop(make_law("single-mass", law), plant("single-mass"), quantize=True)
     assert reaches_and_balances(r.metrics), r.metrics
 
 
@@ -158,7 +158,7 @@ def test_fast_derivative_filter_lets_quantization_through_the_tuned_hsmc() -> No
     counts make the voltage chatter and the cart wanders out of the settling band for most of the
     run (whether it happens to be inside the band in the last instants is chance, so the share of
     time outside is what is checked)."""
-    runs = {tau: run_loop(make_law("HSMC", "single-mass", derivative_time_constant=tau), plant("single-mass"),
+    runs = {tau: run_loop(make_law("single-mass", "HSMC", derivative_time_constant=tau), plant("single-mass"),
                           quantize=True) for tau in (0.002, 0.01)}
 
     def share_outside_after_2s(r) -> float:
@@ -182,34 +182,34 @@ def test_thesis_coefficients_and_linearization_agree_for_the_double_mass() -> No
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("law", ["HSMC", "AdaptiveHSMC"])
 def test_sliding_mode_with_the_other_coefficient_source_also_works(law: str, kind: str) -> None:
-    other = not set_values(law, kind, PARAMETER_SETS[law][kind][0])["use_thesis_coefficients"]
-    r = run_loop(make_law(law, kind, use_thesis_coefficients=other), plant(kind))
+    other = not set_values(kind, law, PARAMETER_SETS[law][kind][0])["use_thesis_coefficients"]
+    r = run_loop(make_law(kind, law, use_thesis_coefficients=other), plant(kind))
     assert reaches_and_balances(r.metrics), r.metrics
 
 
 @pytest.mark.parametrize("law,T", [("LQR", 0.003), ("HSMC", 0.005), ("CascadePID", 0.005)])
 def test_slower_sampling_still_works(law: str, T: float) -> None:
-    r = run_loop(make_law(law, "single-mass", sample_period=T), plant("single-mass"))
+    r = run_loop(make_law("single-mass", law, sample_period=T), plant("single-mass"))
     assert reaches_and_balances(r.metrics), r.metrics
 
 
 def test_thesis_single_mass_lqr_needs_fast_sampling() -> None:
     """The App. A.2 weights put one regulator pole near -680 rad/s (short pendulum): at 5 ms the
     emulated continuous gain chatters on the voltage limit and the cart never settles."""
-    r = run_loop(make_law("LQR", "single-mass", sample_period=0.005), plant("single-mass"))
+    r = run_loop(make_law("single-mass", "LQR", sample_period=0.005), plant("single-mass"))
     assert not reaches_and_balances(r.metrics)
     assert r.metrics["rms_voltage_V"] > 5.0
 
 
 def test_the_loop_holds_the_output_between_samples() -> None:
-    r = run_loop(make_law("LQR", "single-mass", sample_period=0.004), plant("single-mass"), stop_time=1.0)
+    r = run_loop(make_law("single-mass", "LQR", sample_period=0.004), plant("single-mass"), stop_time=1.0)
     v = r.voltage[:-1].reshape(-1, 4)
     assert np.all(v == v[:, :1])
 
 
 def test_the_loop_rejects_a_sample_period_off_the_plant_grid() -> None:
     with pytest.raises(LoopError, match="integer multiple"):
-        run_loop(make_law("LQR", "single-mass", sample_period=0.0015), plant("single-mass"), stop_time=0.1)
+        run_loop(make_law("single-mass", "LQR", sample_period=0.0015), plant("single-mass"), stop_time=0.1)
 
 
 # --- tuned sets: the documented constraints hold ---------------------------------------------------------
@@ -350,7 +350,7 @@ def test_saturate() -> None:
 
 @pytest.mark.parametrize("law", LAWS)
 def test_non_finite_measurements_are_rejected(law: str) -> None:
-    c = make_law(law, "double-mass")
+    c = make_law("double-mass", law)
     with pytest.raises(LawInputError, match="passive_cart_position"):
         c.step([0.0, math.nan, 0.0], 0.05)
     with pytest.raises(LawInputError, match="reference"):
@@ -364,7 +364,7 @@ def test_non_finite_measurements_are_rejected(law: str) -> None:
                                          ("voltage_limit", math.nan)])
 def test_bad_common_parameters(law: str, param: str, value: float) -> None:
     with pytest.raises(ControllerParameterError) as err:
-        build_law(law, "single-mass", {param: value})
+        build_law("single-mass", law, {param: value})
     assert err.value.parameter == param and param in str(err.value)
 
 
@@ -373,13 +373,13 @@ def test_bad_common_parameters(law: str, param: str, value: float) -> None:
 @pytest.mark.parametrize("value", [math.nan, math.inf])
 def test_non_finite_gains_are_rejected_naming_them(law: str, param: str, value: float) -> None:
     with pytest.raises(ControllerParameterError) as err:
-        build_law(law, "single-mass", {param: value})
+        build_law("single-mass", law, {param: value})
     assert err.value.parameter == param and f"parameter {param} =" in str(err.value)
 
 
 def test_unknown_parameter_is_rejected() -> None:
     with pytest.raises(ControllerParameterError, match="no parameter 'Kq'"):
-        build_law("PID", "single-mass", {"Kq": 1.0})
+        build_law("single-mass", "PID", {"Kq": 1.0})
 
 
 def test_parameter_sets_for_the_scenarios() -> None:
@@ -387,11 +387,11 @@ def test_parameter_sets_for_the_scenarios() -> None:
         for kind in KINDS:
             sets = parameter_sets(kind, law)
             assert list(sets) == list(PARAMETER_SETS[law][kind])
-            names = {s.name for s in schema(law, kind)}
+            names = {s.name for s in schema(kind, law)}
             for values in sets.values():
                 assert set(values) <= names
                 assert all(isinstance(v, (bool, int, float)) for v in values.values())
-                build_law(law, kind, values)  # every set builds
+                build_law(kind, law, values)  # every set builds
 
 
 def test_reference_waveforms() -> None:

@@ -223,8 +223,8 @@ def test_reference_gain_formula() -> None:
 # --- through the flat parameters (what the FMUs do) -------------------------------------------------------
 
 def test_changing_a_weight_changes_the_gains_it_implies() -> None:
-    base = make_law("LQR", "double-mass")
-    heavier = make_law("LQR", "double-mass", Q_pendulum_angle=3400.0)
+    base = make_law("double-mass", "LQR")
+    heavier = make_law("double-mass", "LQR", Q_pendulum_angle=3400.0)
     assert not np.allclose(base.design.K, heavier.design.K)
     d = design_lqr(design_model(preset("thesis-ch4")), np.diag([32, 0.5, 19, 2, 3400, 0.4]), THESIS_DOUBLE_MASS_R,
                    observer_pole_factor=10)
@@ -245,7 +245,7 @@ def test_changing_a_weight_changes_the_gains_it_implies() -> None:
 ])
 def test_flat_parameter_errors_name_the_parameter(values: dict, param: str) -> None:
     with pytest.raises(ControllerParameterError) as err:
-        build_law("LQR", "double-mass", values, backend="scipy")
+        build_law("double-mass", "LQR", values, backend="scipy")
     assert err.value.parameter == param
     assert param.rstrip("*") in str(err.value)
 
@@ -253,7 +253,7 @@ def test_flat_parameter_errors_name_the_parameter(values: dict, param: str) -> N
 def test_schema_defaults_build_the_default_sets() -> None:
     for law in ("PID", "CascadePID", "LQR", "HSMC", "AdaptiveHSMC"):
         for kind in ("single-mass", "double-mass"):
-            names = [s.name for s in schema(law, kind)]
+            names = [s.name for s in schema(kind, law)]
             assert "sample_period" in names and "voltage_limit" in names
             assert len(names) == len(set(names))
-            assert all(s.unit for s in schema(law, kind) if s.constraint != "bool")
+            assert all(s.unit for s in schema(kind, law) if s.constraint != "bool")

@@ -22,7 +22,7 @@ from ipcosim.fmus.physics import MEASURED
 pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[1]
-MODELS = [model_name(law, kind) for law in LAWS for kind in KINDS]
+MODELS = [model_name(kind, law) for law in LAWS for kind in KINDS]
 FMI_DISCARD, FMI_FATAL = 2, 4
 H = 1e-3
 
@@ -120,7 +120,7 @@ def test_contract_variables_units_and_structure(controller_fmus, model: str) -> 
     assert by_name["voltage"].find("Real").get("unit") == "V"
     assert by_name["reference"].find("Real").get("unit") == "m"
     # every parameter of the law, documented, with a unit (Booleans excepted)
-    for spec in schema(law, kind):
+    for spec in schema(kind, law):
         sv = by_name[spec.name]
         assert sv.get("causality") == "parameter" and sv.get("description")
         if spec.constraint != "bool":
@@ -151,7 +151,7 @@ def test_output_is_right_at_time_zero(controller_fmus, model: str) -> None:
     f = start(controller_fmus[model])
     f.set(reference=0.05, **dict(zip(MEASURED[kind], y0)))
     f.slave.exitInitializationMode()
-    expected = make_law(law, kind).step(y0, 0.05)
+    expected = make_law(kind, law).step(y0, 0.05)
     assert f.get("voltage")[0] == pytest.approx(expected, rel=1e-12, abs=1e-12)
     assert f.get("voltage")[0] != 0.0
 
@@ -179,7 +179,7 @@ def test_closed_loop_through_fmpy_equals_the_pure_loop(controller_fmus, plant_fm
     kind, law = kind_of(model), law_of(model)
     n = 3000
     ys, us = cosimulate(controller_fmus[model], plant_fmus[kind], controller_fmus["Setpoint"], kind, n)
-    ref = run_loop(make_law(law, kind), preset(DEFAULT_PRESET[kind]), stop_time=n * H)
+    ref = run_loop(make_law(kind, law), preset(DEFAULT_PRESET[kind]), stop_time=n * H)
     idx = [ref.state_names.index(m) for m in MEASURED[kind]]
     assert np.allclose(ys, ref.states[:, idx], rtol=0, atol=1e-9)
     assert np.allclose(us, ref.voltage, rtol=0, atol=1e-7)
@@ -192,7 +192,7 @@ def test_sample_period_holds_the_output(controller_fmus, plant_fmus) -> None:
     ys, us = cosimulate(controller_fmus["LQRSingleMass"], plant_fmus["single-mass"], controller_fmus["Setpoint"],
                         "single-mass", n, controller_params={"sample_period": 0.004})
     assert np.all(us[:-1].reshape(-1, 4) == us[:-1].reshape(-1, 4)[:, :1])
-    ref = run_loop(make_law("LQR", "single-mass", sample_period=0.004), preset("thesis-ch3"), stop_time=n * H)
+    ref = run_loop(make_law("single-mass", "LQR", sample_period=0.004), preset("thesis-ch3"), stop_time=n * H)
     assert np.allclose(us, ref.voltage, atol=1e-7)
 
 
@@ -201,7 +201,7 @@ def test_a_changed_weight_gives_the_gains_it_implies(controller_fmus) -> None:
     f.slave.exitInitializationMode()
     K = f.get("K_active_cart_position", "K_active_cart_velocity", "K_passive_cart_position",
               "K_passive_cart_velocity", "K_pendulum_angle", "K_pendulum_velocity")
-    law = make_law("LQR", "double-mass", Q_pendulum_angle=3400.0, R=0.01)
+    law = make_law("double-mass", "LQR", Q_pendulum_angle=3400.0, R=0.01)
     assert np.allclose(K, law.design.K[0], rtol=1e-9)
     assert f.get("N")[0] == pytest.approx(law.design.N, rel=1e-9)
     g = start(controller_fmus["LQRDoubleMass"])

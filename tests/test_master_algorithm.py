@@ -119,7 +119,7 @@ def test_jacobi_uses_the_values_of_the_previous_communication_point():
 
 def test_controller_with_twice_the_step_as_sample_period_steps_every_second_tick():
     f = loop_factory()
-    r = run(loop_system(), f, stop_time=1.0, step=H, overrides={"controller.sample_period": 2 * H})
+    r = run(loop_system(), f, stop_time=1.0, step=H, set={"controller.sample_period": 2 * H})
     assert r.metadata["step_multiples"] == {"setpoint": 1, "controller": 2, "plant": 1}
     steps = f.slaves["controller"].steps
     assert len(steps) == 50
@@ -133,7 +133,7 @@ def test_controller_with_twice_the_step_as_sample_period_steps_every_second_tick
 
 def test_jacobi_multirate_publishes_at_the_end_of_the_period():
     f = loop_factory()
-    r = run(loop_system(), f, stop_time=0.2, step=H, overrides={"controller.sample_period": 2 * H},
+    r = run(loop_system(), f, stop_time=0.2, step=H, set={"controller.sample_period": 2 * H},
             algorithm="jacobi")
     assert len(f.slaves["controller"].steps) == 10
     u = r["controller.voltage"]
@@ -144,7 +144,7 @@ def test_jacobi_multirate_publishes_at_the_end_of_the_period():
 def test_sample_period_that_the_step_does_not_divide_is_rejected():
     with pytest.raises(StepSizeError,
                        match=r"controller.sample_period = 0.015 s is not a whole multiple of the step 0.01 s"):
-        run(loop_system(), loop_factory(), stop_time=1.0, step=H, overrides={"controller.sample_period": 0.015})
+        run(loop_system(), loop_factory(), stop_time=1.0, step=H, set={"controller.sample_period": 0.015})
     with pytest.raises(StepSizeError, match="sample_period"):
         run(loop_system(), loop_factory(), stop_time=1.0, step=0.02)  # period 0.01 < step
 
@@ -162,7 +162,7 @@ def test_bad_stop_time_or_step(kw, match):
 def test_time_is_integer_ticks_never_accumulated():
     assert sum([0.001] * 1000) != 1.0  # what accumulating would give
     f = loop_factory()
-    r = run(loop_system(), f, stop_time=1.0, step=0.001, overrides={"controller.sample_period": 0.001})
+    r = run(loop_system(), f, stop_time=1.0, step=0.001, set={"controller.sample_period": 0.001})
     times = [t for t, _ in f.slaves["plant"].steps]
     assert times == [(n * 1_000_000) / 1e9 for n in range(1000)]
     assert r["time"][-1] == 1.0 and r["time"][700] == 0.7
@@ -338,7 +338,7 @@ def test_overrides_are_applied_after_the_bindings():
     r = run(sysm, loop_factory(), stop_time=1.0, step=H)
     x1, u1 = expected_gauss_seidel(100, k=1.0)
     assert np.array_equal(r["controller.voltage"], u1)
-    r = run(sysm, loop_factory(), stop_time=1.0, step=H, overrides={"controller.k": "2.5"})
+    r = run(sysm, loop_factory(), stop_time=1.0, step=H, set={"controller.k": "2.5"})
     x2, u2 = expected_gauss_seidel(100, k=2.5)
     assert np.array_equal(r["controller.voltage"], u2)
     assert r.metadata["overrides"] == {"controller.k": 2.5}
@@ -355,7 +355,7 @@ def test_overrides_are_applied_after_the_bindings():
 def test_bad_overrides(key, value, match):
     f = loop_factory()
     with pytest.raises(BindingError, match=match):
-        run(loop_system(), f, stop_time=0.1, step=H, overrides={key: value})
+        run(loop_system(), f, stop_time=0.1, step=H, set={key: value})
     assert f.slaves == {}
 
 

@@ -139,7 +139,7 @@ def test_typed_columns_stream_over_many_chunks(tmp_path, fmus):
     folder = scenario(tmp_path, fmus, [comp("src", "Source3"), comp("pt", "PassThrough"), comp("pt3", "PassThrough3")],
                       CHAIN, stop=3.0, step=0.001)
     with ipcosim.prepare(folder) as prepared:
-        r = prepared.run(out_dir=tmp_path / "out", overrides={"pt.offset": 5, "pt.prefix": "x-", "pt.invert": True,
+        r = prepared.run(out=tmp_path / "out", set={"pt.offset": 5, "pt.prefix": "x-", "pt.invert": True,
                                                                "src.step_time": 1.2}, record_every=3)
     assert len(r.data) == 1001 and r.data.dtype["src.count"] == np.int32 and r.data.dtype["src.on"] == np.bool_
     ticks = np.arange(1001) * 3

@@ -51,13 +51,13 @@ def assert_same(c, py):
 @pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
 @pytest.mark.parametrize("case", [
     {"stop_time": 1.0},                                                     # one rate
-    {"stop_time": 1.0, "overrides": {"controller.sample_period": 2 * H}},   # multi-rate, whole periods
-    {"stop_time": 1.0, "overrides": {"controller.sample_period": 3 * H}},   # partial last period
+    {"stop_time": 1.0, "set": {"controller.sample_period": 2 * H}},   # multi-rate, whole periods
+    {"stop_time": 1.0, "set": {"controller.sample_period": 3 * H}},   # partial last period
     {"stop_time": 1.005},                                                   # short last tick
-    {"stop_time": 0.995, "overrides": {"controller.sample_period": 4 * H}},  # both
+    {"stop_time": 0.995, "set": {"controller.sample_period": 4 * H}},  # both
     {"stop_time": 1.0, "record_every": 3},
     {"stop_time": 1.0, "start_time": 0.1},
-    {"stop_time": 1.0, "step": 0.1 / 3, "overrides": {"controller.sample_period": 0.2 / 3}},  # no whole ns
+    {"stop_time": 1.0, "step": 0.1 / 3, "set": {"controller.sample_period": 0.2 / 3}},  # no whole ns
 ], ids=["one-rate", "multi-rate", "partial-period", "short-tick", "partial-and-short", "record-every",
         "start-time", "float-times"])
 def test_records_equal_the_python_loops(algorithm, case):
@@ -165,10 +165,10 @@ def test_a_failed_compile_runs_the_python_loop_and_says_why(tmp_path, monkeypatc
 def test_the_library_is_keyed_by_the_structure_alone(tmp_path, monkeypatch):
     monkeypatch.setattr("ipcosim.harness.paths.LOOP_DIR", tmp_path)
     runs = [({"stop_time": 1.0, "step": H}, "a"),
-            ({"stop_time": 2.5, "step": 0.002, "start_time": 0.5, "overrides": {"controller.sample_period": 0.002}},
+            ({"stop_time": 2.5, "step": 0.002, "start_time": 0.5, "set": {"controller.sample_period": 0.002}},
              "a"),
-            ({"stop_time": 1.0, "step": H, "overrides": {"controller.k": 2.0}}, "a"),
-            ({"stop_time": 1.0, "step": H, "overrides": {"controller.sample_period": 2 * H}}, "b")]
+            ({"stop_time": 1.0, "step": H, "set": {"controller.k": 2.0}}, "a"),
+            ({"stop_time": 1.0, "step": H, "set": {"controller.sample_period": 2 * H}}, "b")]
     seen = {}
     for kw, structure in runs:
         c, py = both(loop_system(), loop_factory, **kw)

@@ -96,7 +96,7 @@ def test_cosimulation_equals_a_monolithic_loop_of_the_pure_models(built, name, l
     stop, h = 3.0, 1e-3
     result = ipcosim.run(built / "ssp" / f"{name}.ssp", stop_time=stop, step=h)
     amplitude, step_time = _setpoint(scenario)
-    ctrl = make_law(law, kind, bound)
+    ctrl = make_law(kind, law, bound)
     m = round(ctrl.sample_period / h)
     plant = Plant(preset(DEFAULT_PRESET[kind]))
     n = round(stop / h)
@@ -142,9 +142,9 @@ def test_prepared_runs_many_times_with_different_overrides(built):
     from ipcosim.harness.master.slave import FMUSlave
 
     with ipcosim.prepare(built / "ssp" / "single-mass-lqr.ssp") as prepared:
-        a = prepared.run(0.5, overrides={"plant.Mp": 0.2303})
-        b = prepared.run(0.5, overrides={"plant.Mp": 0.30})
-        c = prepared.run(0.5, overrides={"plant.Mp": 0.2303})
+        a = prepared.run(0.5, set={"plant.Mp": 0.2303})
+        b = prepared.run(0.5, set={"plant.Mp": 0.30})
+        c = prepared.run(0.5, set={"plant.Mp": 0.2303})
         assert np.array_equal(a.data, c.data)  # runs are independent: nothing leaks from one to the next
         assert not np.array_equal(a["plant.pendulum_angle"], b["plant.pendulum_angle"])
         assert b.metadata["overrides"] == {"plant.Mp": 0.30}

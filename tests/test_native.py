@@ -131,7 +131,7 @@ def test_generated_rhs_agrees_with_python(kernels: ctypes.CDLL, name: str) -> No
 def _laws() -> dict[str, tuple[str, str]]:
     """{controller FMU name: (law, plant kind)}: every law on both plants, and the swing-up."""
     from ipcosim.controllers.catalog import KINDS, LAWS, model_name
-    return {**{model_name(law, kind): (law, kind) for law in LAWS for kind in KINDS},
+    return {**{model_name(kind, law): (law, kind) for law in LAWS for kind in KINDS},
             "SwingUpSingleMass": ("SwingUp", "single-mass")}
 
 
@@ -148,10 +148,10 @@ def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int
     from ipcosim.fmus.physics import MEASURED
 
     law, kind = _laws()[law_name]
-    py = build_law(law, kind, defaults(law, kind), backend="scipy")
+    py = build_law(kind, law, defaults(kind, law), backend="scipy")
     if law in ("LQR", "SwingUp"):  # what the Python FMU runs on its shipped gains (controller_fmu)
-        lqr = lqr_from_gains(kind, defaults(law, kind), lqr_gains(getattr(py, "balance", py)))
-        py = swing_up_around(kind, defaults(law, kind), lqr) if law == "SwingUp" else lqr
+        lqr = lqr_from_gains(kind, defaults(kind, law), lqr_gains(getattr(py, "balance", py)))
+        py = swing_up_around(kind, defaults(kind, law), lqr) if law == "SwingUp" else lqr
     inst = instantiate(fmu, unzip)
     s = inst.slave
     rng = random.Random(zlib.crc32(law_name.encode()))

@@ -22,7 +22,7 @@ H = 1e-3
 def swing(realism_name: str, stop_time: float = 10.0):
     inst, overrides = realism(realism_name, "single-mass")
     plant = InstrumentedPlant(preset("thesis-ch3", **overrides), [0.0, 0.0, math.pi, 0.0, 0.0], instruments=inst)
-    law = make_law("SwingUp", "single-mass")
+    law = make_law("single-mass", "SwingUp")
     t, x, th, v = [], [], [], []
     for k in range(round(stop_time / H)):
         u = law.step(plant.readings, 0.0)
@@ -44,7 +44,7 @@ def test_swing_up_reaches_upright_within_the_track_and_the_voltage(realism_name:
 
 def test_swing_up_pumps_energy_monotonically_at_first() -> None:
     """While far from the target the pumping term only adds energy (dE/dt = Mp l cos(th) th' xc'' >= 0)."""
-    law = make_law("SwingUp", "single-mass")
+    law = make_law("single-mass", "SwingUp")
     plant = InstrumentedPlant(preset("thesis-ch3"), [0.0, 0.0, math.pi, 0.0, 0.0])
     energies = []
     for k in range(600):
@@ -55,9 +55,9 @@ def test_swing_up_pumps_energy_monotonically_at_first() -> None:
 
 def test_swing_up_parameters_are_checked() -> None:
     with pytest.raises(LawParameterError, match="catch_angle"):
-        make_law("SwingUp", "single-mass", catch_angle=0.8, release_angle=0.5)
+        make_law("single-mass", "SwingUp", catch_angle=0.8, release_angle=0.5)
     with pytest.raises(CatalogError, match="not available for the double-mass plant"):
-        make_law("SwingUp", "double-mass")
+        make_law("double-mass", "SwingUp")
 
 
 @pytest.fixture(scope="module")

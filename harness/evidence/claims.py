@@ -111,7 +111,7 @@ def thesis_runs(realism_name: str, stop_time: float = STOP_TIME) -> dict[tuple[s
             inst, phys = realism(realism_name, kind)
             params = preset(own or PRESET[kind], **phys)
             design = {"design_params": preset(own)} if own else {}
-            out[(law, kind)] = run(make_law(law, kind, "thesis", **design), kind, params, inst, stop_time)
+            out[(law, kind)] = run(make_law(kind, law, "thesis", **design), kind, params, inst, stop_time)
     return out
 
 
@@ -244,7 +244,7 @@ def _lqr_case(sample_period: float = 1e-3, voltage_limit: float = 10.0, filters:
     kind = "double-mass"
     phys = {k: bench.pop(k) for k in ("b1", "b2") if k in bench}
     params = preset(PRESET[kind], voltage_limit=10.0, **phys)
-    law = make_law("LQR", kind, "thesis", sample_period=sample_period, voltage_limit=voltage_limit,
+    law = make_law(kind, "LQR", "thesis", sample_period=sample_period, voltage_limit=voltage_limit,
                    **({} if filters else {"output_filter_time_constant": 0.0}))
     return run(law, kind, params, Instruments(**bench), stop_time)
 

@@ -61,11 +61,11 @@ def runs(quantize: bool = False) -> list[Row]:
         for kind in KINDS:
             for ps in PARAMETER_SETS[law][kind][:1] if quantize else PARAMETER_SETS[law][kind]:
                 name = default_preset(kind)
-                r = run_loop(make_law(law, kind, ps), preset(name), quantize=quantize)
+                r = run_loop(make_law(kind, law, ps), preset(name), quantize=quantize)
                 rows.append(Row(law, kind, ps, name, r.metrics))
     if not quantize:
         long = preset("thesis-appendix-a")
-        r = run_loop(make_law("LQR", "single-mass", "thesis", design_params=long), long)
+        r = run_loop(make_law("single-mass", "LQR", "thesis", design_params=long), long)
         rows.append(Row("LQR", "single-mass", "thesis", "thesis-appendix-a", r.metrics))
     return rows
 

@@ -32,7 +32,7 @@ def hsmc_error(b2: float, stop_time: float = 20.0) -> float:
     from ipcosim.controllers.simulate import run_loop
     from ipcosim.fmus.params import preset
 
-    result = run_loop(make_law("HSMC", "double-mass", "thesis"), preset("thesis-ch4", b2=b2), stop_time=stop_time)
+    result = run_loop(make_law("double-mass", "HSMC", "thesis"), preset("thesis-ch4", b2=b2), stop_time=stop_time)
     return float(result.metrics["steady_state_error_m"])
 
 

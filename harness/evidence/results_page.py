@@ -118,7 +118,7 @@ def _robust_case(args: tuple[str, str, str, int]) -> dict[str, Any]:
     varied = {n.split(".", 1)[1]: getattr(nominal, n.split(".", 1)[1]) * rng.uniform(0.8, 1.2)
               for n in DEFAULT_UNCERTAINTY[kind]}
     params = preset(PRESET[kind], **phys, **varied)
-    r = run(make_law(law, kind, pset), kind, params, replace(inst, input_delay=1e-3, noise_seed=seed), ROBUST_STOP_TIME)
+    r = run(make_law(kind, law, pset), kind, params, replace(inst, input_delay=1e-3, noise_seed=seed), ROBUST_STOP_TIME)
     return {"done": r.done, "upright": bool(r.metrics["upright"]), "error": r.metrics["steady_state_error_m"]}
 
 

@@ -44,7 +44,7 @@ class NativeResult:
 def model_names() -> list[str]:
     """Every model with a native flavour."""
     from ipcosim.controllers.catalog import model_name
-    return [*PLANTS, *(model_name(law, kind) for law, kind in _laws()), "Setpoint"]
+    return [*PLANTS, *(model_name(kind, law) for law, kind in _laws()), "Setpoint"]
 
 
 def _laws() -> list[tuple[str, str]]:
@@ -66,8 +66,8 @@ def native_model(name: str, python_dir: Path) -> models.NativeModel:
     if name == "Setpoint":
         return models.setpoint_model(fmu)
     for law, kind in _laws():
-        if model_name(law, kind) == name:
-            return models.law_model(law, kind, fmu)
+        if model_name(kind, law) == name:
+            return models.law_model(kind, law, fmu)
     raise NativeBuildError(f"no native model named {name!r}")
 
 

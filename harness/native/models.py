@@ -278,7 +278,7 @@ def _trace_step(base: Any, measured: tuple[str, ...]) -> tuple[Any, dict[str, An
     return out[0], dict(zip(keys, out[1:])), before
 
 
-def gain_aliases(law: str, kind: str, defaults: dict[str, Any],
+def gain_aliases(kind: str, law: str, defaults: dict[str, Any],
                  build: Callable[[dict[str, Any]], Any]) -> tuple[dict[str, str], set[str]]:
     """Which law numbers equal which Python parameter, found by perturbing each parameter in turn.
 
@@ -309,21 +309,21 @@ def gain_aliases(law: str, kind: str, defaults: dict[str, Any],
     return alias, design_only
 
 
-def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
+def law_model(kind: str, law: str, python_fmu: Path) -> NativeModel:
     """The native controller ``<Law><Plant>`` traced from ``ipcosim.controllers.laws``."""
     from ipcosim.controllers import catalog
 
-    name = catalog.model_name(law, kind)
+    name = catalog.model_name(kind, law)
     variables, units, description = python_variables(python_fmu)
-    defaults = catalog.defaults(law, kind)
-    build = lambda values: native_law(law, kind, values)  # noqa: E731
+    defaults = catalog.defaults(kind, law)
+    build = lambda values: native_law(kind, law, values)  # noqa: E731
     law0 = build(defaults)
     if hasattr(law0, "balance"):
         # a swing-up sets its balancing law's predicted state on every catch, before that law uses it: start
         # it at zeros instead of None, so that every path of the first sample has the same state layout
         law0.balance.x_pred = [0.0] * len(law0.balance.coefficients.states)
     step, state_paths, param_paths, before1, before2 = _trace_law(law0, kind)
-    alias, design_only = gain_aliases(law, kind, defaults, build)
+    alias, design_only = gain_aliases(kind, law, defaults, build)
     alias = {p: a for p, a in alias.items() if a not in design_only}
     extra, renamed = _derived_parameters(law0, [p for p in param_paths if p not in alias], before2, variables)
     native_vars, python_only = _law_variables(name, variables, extra, param_paths, alias, renamed, before2)
@@ -338,7 +338,7 @@ def law_model(law: str, kind: str, python_fmu: Path) -> NativeModel:
                        paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
                        meta={"role": "law", "law": law, "plant": kind, "design_values": dict(defaults)},
                        checks={**{p: "finite" for p in settable},
-                               **{s.name: s.constraint for s in catalog.schema(law, kind)
+                               **{s.name: s.constraint for s in catalog.schema(kind, law)
                                   if s.constraint != "bool" and s.name in {v.name for v in native_vars}}})
 
 
@@ -424,7 +424,7 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
     return extra, renamed
 
 
-def native_law(law: str, kind: str, values: Mapping[str, Any]) -> Any:
+def native_law(kind: str, law: str, values: Mapping[str, Any]) -> Any:
     """The law the Python controller FMU runs for flat parameter ``values`` (``controller_fmu``).
 
     The LQR's (and the swing-up's balancing LQR's) ``values`` may hold its gains ``K_*``, ``N``, ``M_*``:
@@ -438,15 +438,15 @@ def native_law(law: str, kind: str, values: Mapping[str, Any]) -> Any:
     gain_names = {s.name for s in catalog.lqr_gain_specs(kind)} if law in lqr_laws else set()
     gains = {k: float(v) for k, v in values.items() if k in gain_names}
     design = {k: v for k, v in values.items() if k not in gain_names}
-    built = catalog.build_law(law, kind, design, backend="scipy")
+    built = catalog.build_law(kind, law, design, backend="scipy")
     if law not in lqr_laws:
         return built
-    full = {**catalog.defaults(law, kind), **design}
+    full = {**catalog.defaults(kind, law), **design}
     if gains:
-        base = catalog.defaults(law, kind)
+        base = catalog.defaults(kind, law)
         weights = [n for n in catalog.lqr_weight_parameters(kind) if float(full[n]) != float(base[n])]
         if weights:
-            raise NativeModelError(f"{catalog.model_name(law, kind)}: parameters {weights[0]} and "
+            raise NativeModelError(f"{catalog.model_name(kind, law)}: parameters {weights[0]} and "
                                    f"{sorted(gains)[0]} were both set: give either the design (weights, observer "
                                    "poles) or the gains K_*, N, M_*, not both")
     lqr = catalog.lqr_from_gains(kind, full, {**catalog.lqr_gains(getattr(built, "balance", built)), **gains})

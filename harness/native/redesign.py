@@ -93,9 +93,9 @@ def _law(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]
     from ipcosim.harness.native.leaves import numbers
     from ipcosim.harness.native.models import native_law
 
-    full = dict(defaults(info["law"], info["plant"]))
+    full = dict(defaults(info["plant"], info["law"]))
     full.update(values)
-    law = native_law(info["law"], info["plant"], full)
+    law = native_law(info["plant"], info["law"], full)
     nums = numbers(law)
     out = {name: nums[path] for path, name in info["paths"].items()}
     for name in ("sample_period", "voltage_limit"):

@@ -82,7 +82,7 @@ def make_loop(law_name: str, kind: str, law_values: Mapping[str, Any], plant_val
     ControllerParameterError, ParameterError
         A bad law or plant parameter (naming it).
     """
-    law = build_law(law_name, kind, dict(law_values))
+    law = build_law(kind, law_name, dict(law_values))
     params = preset(DEFAULT_PRESET[kind], **dict(plant_values))
     model = linearize(params, inductance=True)
     pc = control.ss(model.A, model.B, model.C, model.D)
@@ -128,10 +128,10 @@ def scenario_loop(scenario: str, parameter_set: str | None = None,
     except KeyError as exc:
         raise AnalysisError(str(exc).strip("'\"")) from None
     ctrl_model, plant_model = PurePosixPath(ctrl.source).stem, PurePosixPath(plant.source).stem
-    found = [(lw, k) for lw in LAWS for k in KINDS if model_name(lw, k) == ctrl_model]
+    found = [(lw, k) for lw in LAWS for k in KINDS if model_name(k, lw) == ctrl_model]
     if not found:
         raise AnalysisError(f"{sc.origin}: controller {ctrl_model!r} is not a law of the catalog; analyze "
-                            f"knows {', '.join(model_name(lw, k) for lw in LAWS for k in KINDS)}")
+                            f"knows {', '.join(model_name(k, lw) for lw in LAWS for k in KINDS)}")
     kind_plant = PLANT_MODELS.get(plant_model)
     if kind_plant is None:
         raise AnalysisError(f"{sc.origin}: plant {plant_model!r} is not a plant model analyze knows "
