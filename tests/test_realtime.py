@@ -179,19 +179,24 @@ def test_a_run_over_its_overrun_budget_says_so_in_one_line(capsys):
 
 
 def test_a_fault_of_the_card_makes_the_run_not_upright_whatever_the_last_sample():
+    """The card's observer (the HIL room's) records the fault; the pacer itself knows no cards."""
+    from ipcosim.fmus.hil.observer import CardObserver
     from ipcosim.harness.master.realtime import RealtimePacer
 
-    obs = RealtimePacer()
-    paced(obs, SimClock(), late_steps=set())
     message = ("component plant (IP02HILSingleMass): fmi2DoStep returned fmi2Discard at t = 2.5 s: pendulum limit "
                "tripped: pendulum_angle = +0.3498 rad beyond +-0.3491 rad")
+    obs = CardObserver(overruns=True)
+    obs.start(_Execution())
     obs.finish(_Execution(), RuntimeError(message))
     m = obs.metrics()
     assert m["upright"] is False and m["rig_fault"] == message
-    other = RealtimePacer()
-    paced(other, SimClock(), late_steps=set())
+    other = CardObserver()
     other.finish(_Execution(), RuntimeError("component controller (LQRSingleMass): fmi2DoStep returned fmi2Error"))
     assert "rig_fault" not in other.metrics() and "upright" not in other.metrics()
+    pacer = RealtimePacer()
+    paced(pacer, SimClock(), late_steps=set())
+    pacer.finish(_Execution(), RuntimeError(message))
+    assert "rig_fault" not in pacer.metrics() and "upright" not in pacer.metrics()
 
 
 def test_realtime_setup_reports_each_option_as_applied_or_not(monkeypatch):

@@ -2,6 +2,7 @@
 Jacobi), the execution that owns them and runs the FMI lifecycle, observers, manipulators,
 real-time pacing and results. ``system`` describes what it runs.
 
-May import: ``ipcosim.errors`` and ``harness.extras``. It knows nothing of pendulums,
-scenario files, studies or the command line: task metrics come in as plug-ins.
+May import: ``ipcosim.errors``, ``ipcosim.toolchain``, ``harness.paths`` and ``harness.extras``.
+It knows nothing of pendulums, laws, cards, scenario files, studies or the command line: task
+metrics come in as plug-ins.
 """

@@ -1,2 +1,4 @@
-"""Studies at scale: parameter variation grammar, run specifications, robustness, tuning
-and the controller comparison report. The sweep engine itself is ``ipcosim.harness.studies.sweep``."""
+"""The generic study engine: the sweep (``sweep``; its runs ``cases``, ``executors``, ``store``,
+``progress``), run specifications, robustness, tuning, analysis and the controller comparison
+report. The ``--vary`` grammar is :mod:`ipcosim.harness.grammar`; the thesis's own evidence is
+:mod:`ipcosim.harness.evidence`. May import every room below the evidence."""
