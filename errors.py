@@ -7,6 +7,9 @@ by name and by meaning.
 """
 from __future__ import annotations
 
+import difflib
+from typing import Iterable
+
 
 class IpcosimError(Exception):
     """Base of every error ipcosim reports as one line to the user."""
@@ -16,4 +19,44 @@ class UsageError(IpcosimError, ValueError):
     """A bad command-line or option value (unknown scenario, malformed --set, non-positive step...)."""
 
 
-__all__ = ["IpcosimError", "UsageError"]
+def closest(name: str, known: Iterable[str], *, listing: int = 12) -> str:
+    """What to tell a user who gave an unknown ``name``: the closest known names, or all of them
+    when none is close and they are few (the one phrasing of every "unknown name" message).
+
+    Parameters
+    ----------
+    name : str
+        The name as given.
+    known : iterable of str
+        The names that exist.
+    listing : int
+        Without a close name, list every known name when there are at most this many.
+
+    Returns
+    -------
+    str
+        ``"did you mean 'Mp'?"``; without a close name ``"known: Jm, Lp, Mp"`` (or, when there are
+        more than ``listing``, how many there are).
+
+    Examples
+    --------
+    >>> closest("Mpp", ["Mp", "Lp", "Jm"])
+    "did you mean 'Mp'?"
+    >>> closest("x", ["Mp", "Lp", "Jm"])
+    'known: Jm, Lp, Mp'
+    >>> closest("x", [])
+    'none known'
+    """
+    names = sorted(dict.fromkeys(str(k) for k in known))
+    if not names:
+        return "none known"
+    near = difflib.get_close_matches(name, names, n=3, cutoff=0.6)
+    if not near:  # case slips (mp for Mp) and prefixes (sample for sample_period) count too
+        near = [n for n in names if n.lower() == name.lower() or n.lower().startswith(name.lower())][:3]
+    quoted = [repr(n) for n in near]
+    guess = f"did you mean {' or '.join(filter(None, [', '.join(quoted[:-1]), quoted[-1]]))}?" if near else ""
+    every = f"known: {', '.join(names)}" if len(names) <= listing else f"none close among {len(names)} names"
+    return guess or every
+
+
+__all__ = ["IpcosimError", "UsageError", "closest"]

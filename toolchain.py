@@ -1,5 +1,6 @@
 """The system C compiler, for the two things that compile C: ``ipcosim build --native`` (the native
-FMUs, ``ipcosim.harness.native``) and the master's compiled stepping loop (``ipcosim.harness.master.cloop``).
+FMUs, ``ipcosim.harness.native``) and the master's compiled stepping loop (``ipcosim.harness.master.cloop``),
+and the mingw-w64 cross compiler for the native FMUs' Windows DLLs.
 Below every room: it imports nothing of the package."""
 from __future__ import annotations
 
@@ -18,3 +19,16 @@ def find_compiler() -> str | None:
         if path:
             return path
     return None
+
+
+#: Debian's mingw-w64 cross compiler for 64-bit Windows (package gcc-mingw-w64-x86-64).
+CROSS_COMPILER = "x86_64-w64-mingw32-gcc"
+
+
+def find_cross_compiler() -> str | None:
+    """The compiler of Windows x86-64 DLLs: ``$MINGW_CC`` if set (None when it names no program),
+    else ``x86_64-w64-mingw32-gcc`` on PATH; None when there is none."""
+    env = os.environ.get("MINGW_CC")
+    if env:
+        return shutil.which(env)
+    return shutil.which(CROSS_COMPILER)

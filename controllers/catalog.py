@@ -11,16 +11,17 @@ law            single mass                  double mass
 =============  ===========================  =========================================
 PID            thesis (fails: by design)    thesis (fails: by design)
 CascadePID     tuned (no thesis set)        tuned (no thesis set)
-LQR            thesis                       thesis
+LQR            thesis; discrete             thesis; discrete
 HSMC           tuned; thesis (too slow)     thesis
 AdaptiveHSMC   tuned; thesis (too slow)     thesis
+LQG            tuned (not in the thesis)    tuned (not in the thesis)
 =============  ===========================  =========================================
 
 The first set listed is the default: the FMU parameter defaults are its values, and the SSP
 scenarios bind it (``parameter_sets`` feeds ``ipcosim.harness.scenario.ssp_gen``'s ``.ssv`` files).
 
 Flat parameter names (``schema``): the law's gains as in ``ipcosim.controllers.laws``; ``sample_period``
-[s]; ``voltage_limit`` [V]; for the model-based laws (LQR, HSMC, AdaptiveHSMC) the design model's
+[s]; ``voltage_limit`` [V]; for the model-based laws (LQR, LQG, HSMC, AdaptiveHSMC) the design model's
 physical constants as ``model_<name>`` (``ipcosim.fmus.params`` names, defaults = the plant kind's default
 preset): the controller's *belief* about the plant, independent of the plant component.
 """
@@ -33,6 +34,7 @@ from typing import Any, Mapping
 from ipcosim.controllers.errors import ControllerParameterError, DesignError
 from ipcosim.controllers.laws import (
     HSMC,
+    LQG,
     LQR,
     PID,
     AdaptiveHSMC,
@@ -41,12 +43,14 @@ from ipcosim.controllers.laws import (
     CascadePID,
     DiscreteLaw,
     HSMCGains,
+    LQGCoefficients,
     LQRCoefficients,
     PIDGains,
     Schedule,
     SubsystemModel,
     SwingUp,
     SwingUpGains,
+    rest_state,
     zoh_lists,
 )
 from ipcosim.controllers.thesis import (
@@ -57,6 +61,7 @@ from ipcosim.controllers.thesis import (
     THESIS_SINGLE_MASS_Q_DIAGONAL,
     THESIS_SINGLE_MASS_R,
 )
+from ipcosim.errors import closest
 from ipcosim.fmus.linearize import LinearModel, linear_matrices
 from ipcosim.fmus.params import (
     DEFAULT_PRESET,
@@ -70,16 +75,19 @@ from ipcosim.fmus.params import (
 )
 from ipcosim.fmus.physics import MEASURED
 
-LAWS = ("PID", "CascadePID", "LQR", "HSMC", "AdaptiveHSMC")
+LAWS = ("PID", "CascadePID", "LQR", "HSMC", "AdaptiveHSMC", "LQG")
 PLANT_SUFFIX = {"single-mass": "SingleMass", "double-mass": "DoubleMass"}
 
 #: Parameter sets per law and plant kind; the first is the default (the one that does the task).
 PARAMETER_SETS: dict[str, dict[str, tuple[str, ...]]] = {
     "PID": {"single-mass": ("thesis",), "double-mass": ("thesis",)},
     "CascadePID": {"single-mass": ("tuned",), "double-mass": ("tuned",)},
-    "LQR": {"single-mass": ("thesis",), "double-mass": ("thesis",)},
+    # discrete: the thesis's weights, K from the discrete LQR at the sample period it runs at
+    "LQR": {"single-mass": ("thesis", "discrete"), "double-mass": ("thesis", "discrete")},
     "HSMC": {"single-mass": ("tuned", "thesis"), "double-mass": ("thesis",)},
     "AdaptiveHSMC": {"single-mass": ("tuned", "thesis"), "double-mass": ("thesis",)},
+    # not in the thesis: discrete LQG with integral action (ipcosim.controllers.lqg), weights TUNED_LQG
+    "LQG": {"single-mass": ("tuned",), "double-mass": ("tuned",)},
     # not in the thesis, single mass only: energy swing-up from hanging, balanced by the thesis's LQR
     "SwingUp": {"single-mass": ("tuned",)},
 }
@@ -224,6 +232,16 @@ TUNED_ADAPTIVE: dict[str, tuple[HSMCGains, AdaptiveSchedules]] = {
     # gains after ~1 s (a search over the thesis's schedule forms on top of the tuned HSMC)
     "single-mass": (TUNED_HSMC["single-mass"], AdaptiveSchedules(k=Schedule(76.7, -60.0, 1.0),
                                                                  c=(None, Schedule(2.46, -1.0, 3.0)))),
+}
+
+#: LQG weights (``ipcosim.controllers.lqg``; docs/controllers.md, "LQG", says how they were chosen): the
+#: thesis's state weights, Q_integral on the integral of the motor-cart error, R on the voltage, and the
+#: Kalman filter's input-disturbance standard deviation process_noise [V].
+TUNED_LQG: dict[str, dict[str, Any]] = {
+    "single-mass": {"Q": THESIS_SINGLE_MASS_Q_DIAGONAL, "Q_integral": 3.0e7, "R": 30 * THESIS_SINGLE_MASS_R,
+                    "process_noise": 0.3, "acceleration_noise": 0.0},
+    "double-mass": {"Q": THESIS_DOUBLE_MASS_Q_DIAGONAL, "Q_integral": 1.0e4, "R": 0.4,
+                    "process_noise": 1.0, "acceleration_noise": 3.0},
 }
 
 
@@ -385,6 +403,9 @@ def _lqr_specs(kind: str) -> list[ParamSpec]:
         specs.append(ParamSpec(f"Q_{s}", 0.0, _unit_div({}, {b: 2 * e for b, e in dim.items()}),
                                f"LQR state weight on {s} (diagonal of Q)", "nonnegative"))
     specs.append(ParamSpec("R", 1.0, "1/V2", "LQR input weight", "positive"))
+    specs.append(ParamSpec("discrete_design", False, None, "K from the discrete LQR on the zero-order-hold model "
+                                                           "at sample_period (true) or the continuous LQR used at "
+                                                           "the sample instants (false, the thesis's)", "bool"))
     specs.append(ParamSpec("observer_pole_factor", 0.0, "1", "observer poles = factor * eig(A - B K) if > 0 "
                                                               "(thesis double mass: 10); 0 = use observer_pole_*",
                            "nonnegative"))
@@ -397,6 +418,32 @@ def _lqr_specs(kind: str) -> list[ParamSpec]:
     specs.append(ParamSpec("output_filter_time_constant", 0.0, "s", "each measurement passes 1/(tau s + 1)^2 "
                                                                      "before the observer if > 0 (thesis double "
                                                                      "mass: 0.0008)", "nonnegative"))
+    return specs
+
+
+def _lqg_specs(kind: str) -> list[ParamSpec]:
+    from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT  # noqa: PLC0415
+
+    specs = [ParamSpec(f"Q_{s}", 0.0, _unit_div({}, {b: 2 * e for b, e in _state_dim(s).items()}),
+                       f"LQG state weight on {s} (diagonal of Q, on x - x_r r)", "nonnegative")
+             for s in design_states(kind)]
+    specs += [ParamSpec("Q_integral", 1.0, "1/m2.s2", "LQG weight on the integral of the motor-cart position error "
+                                                      "(> 0: the integrator must be weighted to be stabilized)",
+                        "positive"),
+              ParamSpec("R", 1.0, "1/V2", "LQG input weight", "positive"),
+              ParamSpec("process_noise", 1.0, "V", "Kalman filter: standard deviation of the voltage-equivalent "
+                                                   "input disturbance (held over a sample)", "positive"),
+              ParamSpec("reference_time_constant", 1.0, "s", "the law follows the reference through "
+                                                              "1/(tau s + 1), started at the measured motor-cart "
+                                                              "position (0 = the reference as given)", "nonnegative"),
+              ParamSpec("acceleration_noise", 0.0, "m/s2", "Kalman filter: standard deviation of an acceleration "
+                                                           "disturbance on every body (rad/s2 on the pendulum), held "
+                                                           "over a sample", "nonnegative")]
+    for o in MEASURED[kind]:
+        res = PENDULUM_RAD_PER_COUNT if o == "pendulum_angle" else CART_M_PER_COUNT
+        specs.append(ParamSpec(f"resolution_{o}", res, "rad" if o == "pendulum_angle" else "m",
+                               f"Kalman filter: encoder resolution of the {o}; noise variance resolution^2/12",
+                               "positive"))
     return specs
 
 
@@ -433,6 +480,8 @@ def schema(kind: str, law: str) -> list[ParamSpec]:
         specs += _lqr_specs(kind) + _model_specs(kind)
     elif law == "SwingUp":
         specs += _swing_up_specs() + _lqr_specs(kind) + _model_specs(kind)
+    elif law == "LQG":
+        specs += _lqg_specs(kind) + _model_specs(kind)
     else:
         specs += _hsmc_specs(kind, law) + _model_specs(kind)
     values = set_values(kind, law, default_set(kind, law))
@@ -441,9 +490,9 @@ def schema(kind: str, law: str) -> list[ParamSpec]:
 
 def _check(kind: str, law: str) -> None:
     if law not in PARAMETER_SETS:
-        raise CatalogError("law", f"unknown control law {law!r}; expected one of {', '.join(PARAMETER_SETS)}")
+        raise CatalogError("law", f"unknown control law {law!r}; {closest(law, PARAMETER_SETS)}")
     if kind not in PLANT_SUFFIX:
-        raise CatalogError("kind", f"unknown plant kind {kind!r}; expected one of {', '.join(KINDS)}")
+        raise CatalogError("kind", f"unknown plant kind {kind!r}; {closest(kind, KINDS)}")
     if kind not in PARAMETER_SETS[law]:
         raise CatalogError("kind", f"control law {law} is not available for the {kind} plant")
 
@@ -478,7 +527,7 @@ def set_values(kind: str, law: str, parameter_set: str) -> dict[str, Any]:
     sets = PARAMETER_SETS[law][kind]
     if parameter_set not in sets:
         raise CatalogError("parameter_set", f"{model_name(kind, law)} has no parameter set {parameter_set!r}; "
-                                            f"available: {', '.join(sets)}")
+                                            f"{closest(parameter_set, sets)}")
     if law == "PID":
         g = PIDGains()
         return {"Kp": g.Kp, "Ki": g.Ki, "Kd": g.Kd, "derivative_time_constant": g.derivative_time_constant}
@@ -488,6 +537,11 @@ def set_values(kind: str, law: str, parameter_set: str) -> dict[str, Any]:
     if law == "SwingUp":
         g = SwingUpGains()
         return {**{f: getattr(g, f) for f in SwingUpGains.UNITS}, **set_values(kind, "LQR", "thesis")}
+    if law == "LQG":
+        t = TUNED_LQG[kind]
+        v: dict[str, Any] = {f"Q_{s}": float(q) for s, q in zip(design_states(kind), t["Q"])}
+        v.update({k: float(t[k]) for k in ("Q_integral", "R", "process_noise", "acceleration_noise")})
+        return v
     if law == "LQR":
         states = design_states(kind)
         if kind == "single-mass":
@@ -496,8 +550,9 @@ def set_values(kind: str, law: str, parameter_set: str) -> dict[str, Any]:
         else:
             Q, R, factor = THESIS_DOUBLE_MASS_Q_DIAGONAL, THESIS_DOUBLE_MASS_R, THESIS_DOUBLE_MASS_OBSERVER_FACTOR
             poles, tau = None, 0.0008
-        v: dict[str, Any] = {f"Q_{s}": float(Q[i]) for i, s in enumerate(states)}
-        v.update(R=float(R), observer_pole_factor=factor, output_filter_time_constant=tau)
+        v = {f"Q_{s}": float(Q[i]) for i, s in enumerate(states)}
+        v.update(R=float(R), observer_pole_factor=factor, output_filter_time_constant=tau,
+                 discrete_design=parameter_set == "discrete")
         if poles is not None:
             upper = [p for p in poles if p.imag >= 0]
             for i, p in enumerate(upper, 1):
@@ -567,7 +622,8 @@ def lqr_design_from(kind: str, v: Mapping[str, Any], backend: str = "control"):
     try:
         return design_lqr(model, Q, [[float(v["R"])]], observer_poles=poles,
                           observer_pole_factor=factor if factor > 0 else None,
-                          sample_period=float(v["sample_period"]), backend=backend)
+                          sample_period=float(v["sample_period"]), backend=backend,
+                          discrete=bool(v["discrete_design"]))
     except DesignError as exc:
         raise DesignError(_fmu_name(exc.parameter, kind), _fmu_message(exc, kind)) from None
 
@@ -585,10 +641,29 @@ def lqr_gain_specs(kind: str) -> list[ParamSpec]:
     specs = [ParamSpec(f"K_{s}", 0.0, _unit_div({"V": 1}, _state_dim(s)),
                        f"LQR gain on the estimated {s} (u = -K x^ + N r)") for s in states]
     specs.append(ParamSpec("N", 0.0, "V/m", "reference gain N = -1/(C1 (A - B K)^-1 B)"))
-    specs += [ParamSpec(f"M_{s}_{o}", 0.0, _unit_div(_state_dim(s), _state_dim(o)),
-                        f"current-estimator gain from the {o} innovation to the estimated {s}")
-              for s in states for o in outputs]
-    return specs
+    return specs + _estimator_gain_specs(states, outputs)
+
+
+def _estimator_gain_specs(states: tuple[str, ...], outputs: tuple[str, ...]) -> list[ParamSpec]:
+    return [ParamSpec(f"M_{s}_{o}", 0.0, _unit_div(_state_dim(s), _state_dim(o)),
+                      f"current-estimator gain from the {o} innovation to the estimated {s}")
+            for s in states for o in outputs]
+
+
+def _estimator_gains(c: Any) -> dict[str, float]:
+    return {f"M_{s}_{o}": m for s, row in zip(c.states, c.M) for o, m in zip(c.outputs, row)}
+
+
+def _sampled_model(kind: str, values: Mapping[str, Any], gains: Mapping[str, float]) -> dict[str, Any]:
+    """The coefficient fields every estimator law shares, in plain Python: states, outputs, the
+    zero-order-hold model (``linear_matrices`` of the ``model_*`` values and a plain-Python matrix
+    exponential), the measured rows C and the estimator gain M taken from ``gains``."""
+    A, B, states, outputs = linear_matrices(_design_params(kind, values), inductance=False)
+    T = float(values["sample_period"])
+    Ad, Bd = zoh_lists(A, B, T)
+    return dict(states=states, outputs=outputs, sample_period=T, Ad=tuple(map(tuple, Ad)), Bd=tuple(Bd),
+                M=tuple(tuple(float(gains[f"M_{s}_{o}"]) for o in outputs) for s in states),
+                C=tuple(tuple(1.0 if s == o else 0.0 for s in states) for o in outputs))
 
 
 #: LQR parameters that only the design stack turns into gains (weights, observer poles).
@@ -599,7 +674,7 @@ def lqr_weight_parameters(kind: str) -> tuple[str, ...]:
 
 def lqr_design_parameters(kind: str) -> tuple[str, ...]:
     """Every LQR parameter the gains depend on: weights, observer poles, ``model_*``, ``sample_period``."""
-    return (*lqr_weight_parameters(kind), *(s.name for s in _model_specs(kind)), "sample_period")
+    return design_parameters(kind, "LQR")
 
 
 def lqr_gains(law: LQR) -> dict[str, float]:
@@ -607,7 +682,7 @@ def lqr_gains(law: LQR) -> dict[str, float]:
     c = law.coefficients
     out = {f"K_{s}": k for s, k in zip(c.states, c.K)}
     out["N"] = c.N
-    out.update({f"M_{s}_{o}": m for s, row in zip(c.states, c.M) for o, m in zip(c.outputs, row)})
+    out.update(_estimator_gains(c))
     return out
 
 
@@ -618,16 +693,97 @@ def lqr_from_gains(kind: str, values: Mapping[str, Any], gains: Mapping[str, flo
     (``ipcosim.fmus.linearize.linear_matrices`` and a plain-Python matrix exponential); ``K``, ``N``
     and ``M`` are taken as given.
     """
-    A, B, states, outputs = linear_matrices(_design_params(kind, values), inductance=False)
-    T = float(values["sample_period"])
-    Ad, Bd = zoh_lists(A, B, T)
-    coef = LQRCoefficients(states=states, outputs=outputs, sample_period=T,
-                           K=tuple(float(gains[f"K_{s}"]) for s in states), N=float(gains["N"]),
-                           M=tuple(tuple(float(gains[f"M_{s}_{o}"]) for o in outputs) for s in states),
-                           Ad=tuple(map(tuple, Ad)), Bd=tuple(Bd),
-                           C=tuple(tuple(1.0 if s == o else 0.0 for s in states) for o in outputs))
+    m = _sampled_model(kind, values, gains)
+    coef = LQRCoefficients(K=tuple(float(gains[f"K_{s}"]) for s in m["states"]), N=float(gains["N"]), **m)
     return LQR(kind, coef, float(values["voltage_limit"]),
                output_filter_time_constant=float(values["output_filter_time_constant"]))
+
+
+# ============================================================ LQG
+
+def lqg_design_from(kind: str, v: Mapping[str, Any], backend: str = "control"):
+    """The LQG design the flat values describe (``ipcosim.controllers.lqg.design_lqg``; the design stack
+    is imported here)."""
+    import numpy as np  # noqa: PLC0415 -- the design stack, imported only to design
+
+    from ipcosim.controllers.design import design_model  # noqa: PLC0415
+    from ipcosim.controllers.lqg import design_lqg  # noqa: PLC0415
+
+    Q = np.diag([float(v[f"Q_{s}"]) for s in design_states(kind)])
+    try:
+        return design_lqg(design_model(_design_params(kind, v)), Q, float(v["Q_integral"]), float(v["R"]),
+                          sample_period=float(v["sample_period"]), process_noise=float(v["process_noise"]),
+                          acceleration_noise=float(v["acceleration_noise"]),
+                          resolutions=[float(v[f"resolution_{o}"]) for o in MEASURED[kind]], backend=backend)
+    except DesignError as exc:
+        raise DesignError(_fmu_name(exc.parameter, kind), _fmu_message(exc, kind)) from None
+
+
+def lqg_gain_specs(kind: str) -> list[ParamSpec]:
+    """The LQG's gains as flat parameters: ``K_<state>``, ``K_voltage``, ``K_integral`` and the Kalman
+    current-estimator gain ``M_<state>_<output>`` (``ipcosim.controllers.laws.LQGCoefficients``)."""
+    states = design_states(kind)
+    law = "u = -K (x^ - x_r r) - K_voltage v - K_integral q"
+    specs = [ParamSpec(f"K_{s}", 0.0, _unit_div({"V": 1}, _state_dim(s)), f"LQG gain on the estimated {s} ({law})")
+             for s in states]
+    specs += [ParamSpec("K_voltage", 0.0, "1", f"LQG gain on the voltage v being applied, computed a sample "
+                                              f"earlier ({law})"),
+              ParamSpec("K_integral", 0.0, "V/m.s", f"LQG gain on the integral q of the motor-cart position "
+                                                   f"error ({law})")]
+    return specs + _estimator_gain_specs(states, MEASURED[kind])
+
+
+def lqg_gains(law: LQG) -> dict[str, float]:
+    """``{K_<state>, K_voltage, K_integral, M_<state>_<output>: value}`` of an LQG law."""
+    c = law.coefficients
+    out = {f"K_{s}": k for s, k in zip(c.states, c.K)}
+    out.update(K_voltage=c.K_voltage, K_integral=c.K_integral, **_estimator_gains(c))
+    return out
+
+
+def lqg_from_gains(kind: str, values: Mapping[str, Any], gains: Mapping[str, float]) -> LQG:
+    """An LQG law from flat values and given gains, in plain Python (as ``lqr_from_gains``)."""
+    m = _sampled_model(kind, values, gains)
+    coef = LQGCoefficients(K=tuple(float(gains[f"K_{s}"]) for s in m["states"]), K_voltage=float(gains["K_voltage"]),
+                           K_integral=float(gains["K_integral"]), reference_states=rest_state(m["states"]), **m)
+    return LQG(kind, coef, float(values["voltage_limit"]), float(values["reference_time_constant"]))
+
+
+# ============================================================ every law with designed gains
+
+#: Laws whose gains the design stack computes, shipped designed for the defaults and parameters of
+#: their FMU (the swing-up hands over to an LQR).
+DESIGNED_LAWS = ("LQR", "SwingUp", "LQG")
+
+
+def gain_specs(kind: str, law: str) -> list[ParamSpec]:
+    """The gain parameters of a law of ``DESIGNED_LAWS``."""
+    return lqg_gain_specs(kind) if law == "LQG" else lqr_gain_specs(kind)
+
+
+def weight_parameters(kind: str, law: str) -> tuple[str, ...]:
+    """The parameters of a designed law that enter only through the design (weights, poles, noises)."""
+    if law == "LQG":
+        return tuple(s.name for s in _lqg_specs(kind) if s.name != "reference_time_constant")
+    return lqr_weight_parameters(kind)
+
+
+def design_parameters(kind: str, law: str) -> tuple[str, ...]:
+    """Every parameter a designed law's gains depend on: weights, ``model_*``, ``sample_period``."""
+    return (*weight_parameters(kind, law), *(s.name for s in _model_specs(kind)), "sample_period")
+
+
+def designed_gains(law: DiscreteLaw) -> dict[str, float]:
+    """The gains (``gain_specs`` names) of a designed law object (a swing-up: its balancing LQR's)."""
+    return lqg_gains(law) if isinstance(law, LQG) else lqr_gains(getattr(law, "balance", law))
+
+
+def law_from_gains(kind: str, law: str, values: Mapping[str, Any], gains: Mapping[str, float]) -> DiscreteLaw:
+    """A designed law from flat values and given gains, without the design stack."""
+    if law == "LQG":
+        return lqg_from_gains(kind, values, gains)
+    lqr = lqr_from_gains(kind, values, gains)
+    return swing_up_around(kind, values, lqr) if law == "SwingUp" else lqr
 
 
 def _fmu_name(parameter: str, kind: str) -> str:
@@ -670,6 +826,9 @@ def build_law(kind: str, law: str, values: Mapping[str, Any] | None = None, back
     if law == "LQR":
         design = lqr_design_from(kind, v, backend)
         return LQR(kind, design, vlim, output_filter_time_constant=float(v["output_filter_time_constant"]))
+    if law == "LQG":
+        return LQG(kind, LQGCoefficients.from_design(lqg_design_from(kind, v, backend)), vlim,
+                   float(v["reference_time_constant"]))
     if law == "SwingUp":
         balance = LQR(kind, lqr_design_from(kind, v, backend), vlim,
                       output_filter_time_constant=float(v["output_filter_time_constant"]))
@@ -683,7 +842,7 @@ def _checked_values(kind: str, law: str, values: Mapping[str, Any] | None) -> di
     v = {name: s.default for name, s in spec.items()}
     for name, value in (values or {}).items():
         if name not in spec:
-            raise CatalogError(name, f"{model_name(kind, law)} has no parameter {name!r}")
+            raise CatalogError(name, f"{model_name(kind, law)} has no parameter {name!r}; {closest(name, spec)}")
         v[name] = value
     for name, s in spec.items():
         reason = s.check(v[name])
@@ -764,7 +923,7 @@ def make_law(kind: str, law: str, parameter_set: str | None = None, design_param
     _check(kind, law)
     values: dict[str, Any] = dict(set_values(kind, law, parameter_set or default_set(kind, law)))
     values.update(sample_period=sample_period, voltage_limit=voltage_limit)
-    if design_params is not None and law in ("LQR", "HSMC", "AdaptiveHSMC", "SwingUp"):
+    if design_params is not None and law in ("LQR", "HSMC", "AdaptiveHSMC", "SwingUp", "LQG"):
         names = {s.name for s in schema(kind, law)}
         for k2, val in vars(design_params).items():
             if f"model_{k2}" in names:
@@ -787,4 +946,6 @@ __all__ = ["LAWS", "KINDS", "PARAMETER_SETS", "ParamSpec", "schema", "set_values
            "build_law", "make_law", "model_name", "default_set", "default_preset", "subsystem_models",
            "thesis_subsystem_models", "thesis_hsmc_gains", "thesis_adaptive", "lqr_design_for",
            "design_params_from", "lqr_gain_specs", "lqr_design_parameters", "lqr_weight_parameters", "lqr_gains",
-           "lqr_from_gains", "swing_up_around", "TUNED_CASCADE", "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]
+           "lqr_from_gains", "swing_up_around", "DESIGNED_LAWS", "gain_specs", "weight_parameters",
+           "design_parameters", "designed_gains", "law_from_gains", "lqg_design_from", "TUNED_LQG", "TUNED_CASCADE",
+           "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]

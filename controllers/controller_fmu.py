@@ -3,17 +3,17 @@
 Variables (DESIGN.md contract): inputs ``reference`` [m] and the plant's measured positions
 (``ipcosim.fmus.physics.MEASURED``); output ``voltage`` [V]; parameters = ``ipcosim.controllers.catalog.schema``
 (every gain and weight with its unit; ``sample_period``, ``voltage_limit``; the model-based laws'
-``model_*`` design-model constants). The LQR FMUs also have the gains as parameters
-(``ipcosim.controllers.catalog.lqr_gain_specs``): ``K_<state>``, ``N`` and the estimator gain
-``M_<state>_<output>``.
+``model_*`` design-model constants). The LQR and LQG FMUs also have the gains as parameters
+(``ipcosim.controllers.catalog.gain_specs``): ``K_<state>``, ``N`` (LQR) or ``K_voltage``,
+``K_integral`` (LQG), and the estimator gain ``M_<state>_<output>``.
 
 Runtime: on its default path an FMU imports only the Python standard library. The laws run on
 plain floats (``ipcosim.controllers.laws``); the HSMC laws' design model is a plain-Python
-linearization. The LQR's gains for the parameter values an FMU ships with are designed when the
+linearization. The LQR's and LQG's gains for the parameter values an FMU ships with are designed when the
 FMU is built and stored in it (``shipped_<Model>.json`` in its private package, start values of
 the gain parameters). On leaving initialization mode:
 
-* no design parameter changed (``catalog.lqr_design_parameters``: weights, observer poles,
+* no design parameter changed (``catalog.design_parameters``: weights, observer poles, noises,
   ``model_*``, ``sample_period``) -> the gain parameters as set (the shipped ones, or the user's);
 * a design parameter changed and no gain was set -> the gains are redesigned with the ``scipy``
   back end, importing numpy and scipy only then; if they are missing, initialization fails
@@ -41,16 +41,16 @@ from pathlib import Path
 from typing import Any
 
 from ipcosim.controllers.catalog import (
+    DESIGNED_LAWS,
     build_law,
     defaults,
-    lqr_design_parameters,
-    lqr_from_gains,
-    lqr_gain_specs,
-    lqr_gains,
-    lqr_weight_parameters,
+    design_parameters,
+    designed_gains,
+    gain_specs,
+    law_from_gains,
     model_name,
     schema,
-    swing_up_around,
+    weight_parameters,
 )
 from ipcosim.controllers.errors import ControllerParameterError
 from ipcosim.controllers.laws import DiscreteLaw, LawInputError
@@ -66,14 +66,6 @@ _INPUT_DOC = {
 #: Shipped designs read (or designed) in this process, by file name (the FMU class is re-created
 #: on every instantiation by pythonfmu's wrapper; this module is not).
 _SHIPPED: dict[str, dict[str, Any]] = {}
-#: Laws whose LQR gains are designed at build time and are parameters of the FMU (the swing-up
-#: hands over to an LQR).
-LQR_LAWS = ("LQR", "SwingUp")
-
-
-def _lqr_of(law: DiscreteLaw) -> DiscreteLaw:
-    """The LQR inside ``law`` (the law itself, or a swing-up's balancing law)."""
-    return getattr(law, "balance", law)
 #: Slack when deciding whether the end of a step is a sample instant, in sample periods.
 TICK_TOLERANCE = 1e-6
 
@@ -104,7 +96,7 @@ class ControllerFmu(FmuBase):
             self.add_parameter(spec.name, start=bool(spec.default) if is_bool else float(spec.default),
                                type_=bool if is_bool else float, unit=None if is_bool else spec.unit,
                                description=spec.description, check=None if is_bool else spec.check)
-        self._gain_specs = lqr_gain_specs(kind) if self.law in LQR_LAWS else []
+        self._gain_specs = gain_specs(kind, self.law) if self.law in DESIGNED_LAWS else []
         if self._gain_specs:
             shipped = type(self).shipped_design(self.resources)["gains"]
             for spec in self._gain_specs:
@@ -143,13 +135,13 @@ class ControllerFmu(FmuBase):
         """Design the gains for the default parameters (imports numpy and scipy): the shipped design."""
         values = defaults(cls.kind, cls.law)
         law = build_law(cls.kind, cls.law, values, backend="scipy")
-        design = {name: values[name] for name in lqr_design_parameters(cls.kind)}
-        return {"model": model_name(cls.kind, cls.law), "design": design, "gains": lqr_gains(_lqr_of(law))}
+        design = {name: values[name] for name in design_parameters(cls.kind, cls.law)}
+        return {"model": model_name(cls.kind, cls.law), "design": design, "gains": designed_gains(law)}
 
     @classmethod
     def build_files(cls) -> dict[str, str]:
-        """Files the build adds to the FMU's private package: the LQR's shipped design."""
-        if cls.law not in LQR_LAWS:
+        """Files the build adds to the FMU's private package: the shipped design of a designed law."""
+        if cls.law not in DESIGNED_LAWS:
             return {}
         return {cls.shipped_name(): json.dumps(cls.design_record(), indent=1, sort_keys=True)}
 
@@ -158,26 +150,25 @@ class ControllerFmu(FmuBase):
     def _build_law(self) -> DiscreteLaw:
         values = {s.name: getattr(self, s.name) for s in self._specs}
         name = model_name(self.kind, self.law)
-        if self.law not in LQR_LAWS:
+        if self.law not in DESIGNED_LAWS:
             return build_law(self.kind, self.law, values)
         shipped = type(self).shipped_design(self.resources)
         gains = {s.name: float(getattr(self, s.name)) for s in self._gain_specs}
-        changed = [n for n in lqr_design_parameters(self.kind) if float(values[n]) != shipped["design"][n]]
+        changed = [n for n in design_parameters(self.kind, self.law) if float(values[n]) != shipped["design"][n]]
         set_gains = [n for n, v in gains.items() if v != shipped["gains"][n]]
-        weights = [n for n in changed if n in lqr_weight_parameters(self.kind)]
+        weights = [n for n in changed if n in weight_parameters(self.kind, self.law)]
         if set_gains and weights:
             raise FmuError(f"{name}: parameters {weights[0]} and {set_gains[0]} were both set: give either the "
                            "design (weights, observer poles) or the gains K_*, N, M_*, not both")
         if not changed or set_gains:
-            lqr = lqr_from_gains(self.kind, values, gains)
-            return swing_up_around(self.kind, values, lqr) if self.law == "SwingUp" else lqr
+            return law_from_gains(self.kind, self.law, values, gains)
         try:
             law = build_law(self.kind, self.law, values, backend="scipy")
         except ImportError as exc:
             raise FmuError(f"{name}: parameter {changed[0]} = {values[changed[0]]:g} differs from the shipped "
                            f"design, and redesigning the gains needs numpy and scipy ({exc}); install them in "
                            "this Python, or keep the design parameters and set the gains K_*, N, M_* instead") from None
-        for gain, value in lqr_gains(_lqr_of(law)).items():
+        for gain, value in designed_gains(law).items():
             setattr(self, gain, value)
         return law
 

@@ -38,6 +38,11 @@ default 1 ms the sampled loop keeps every continuous pole slower than ~300 rad/s
 percent (``sampled_closed_loop_poles``, tested); the single-mass thesis weights also give one very
 fast regulator pole (-548 rad/s long pendulum, -680 rad/s short) which sampling moves (to about
 -1150 rad/s for the short pendulum) but which stays stable.
+
+``discrete=True`` designs K with the discrete LQR on the sampled model instead (``lqr_gain`` with ``discrete``, on
+``Ad, Bd`` with the same Q and R, per-sample cost ``x'Qx + u'Ru``), and N for unit DC gain of the
+sampled loop, ``N = 1 / (C1 (I - Ad + Bd K)^-1 Bd)``: the gain is then right for the sample period
+it runs at (the emulated one fails at 5 ms on the single mass, see docs/controllers.md).
 """
 from __future__ import annotations
 
@@ -153,8 +158,11 @@ def check_observable(A: np.ndarray, C: np.ndarray, name: str = "model") -> None:
 
 # --- the numerical kernels, per back end -----------------------------------------------------------
 
-def lqr_gain(A: np.ndarray, B: np.ndarray, Q: Any, R: Any, backend: str = "control") -> np.ndarray:
-    """Continuous LQR gain K (1 x n) for ``u = -K x`` minimizing ``int x'Qx + u'Ru dt``.
+def lqr_gain(A: np.ndarray, B: np.ndarray, Q: Any, R: Any, backend: str = "control",
+             discrete: bool = False) -> np.ndarray:
+    """LQR gain K (m x n) for ``u = -K x``: continuous, minimizing ``int x'Qx + u'Ru dt``
+    (``K = R^-1 B'P``), or with ``discrete`` for ``x[k+1] = A x[k] + B u[k]`` minimizing
+    ``sum x'Qx + u'Ru`` (``K = (R + B'P B)^-1 B'P A``), P from the algebraic Riccati equation.
 
     Raises
     ------
@@ -164,25 +172,30 @@ def lqr_gain(A: np.ndarray, B: np.ndarray, Q: Any, R: Any, backend: str = "contr
     n, m = B.shape
     Q, R = check_weights(Q, R, n, m)
     check_controllable(A, B)
+    what = "discrete LQR" if discrete else "LQR"
     try:
         if backend == "control":
             import control
-            K, _, _ = control.lqr(A, B, Q, R)
-            K = np.asarray(K, dtype=float)
+            K = np.asarray((control.dlqr if discrete else control.lqr)(A, B, Q, R)[0], dtype=float)
+        elif backend == "scipy" and discrete:
+            P = scipy.linalg.solve_discrete_are(A, B, Q, R)
+            K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
         elif backend == "scipy":
-            P = scipy.linalg.solve_continuous_are(A, B, Q, R)
-            K = np.linalg.solve(R, B.T @ P)
+            K = np.linalg.solve(R, B.T @ scipy.linalg.solve_continuous_are(A, B, Q, R))
         else:
             raise DesignError("backend", f"unknown design backend {backend!r}; expected one of {BACKENDS}")
     except DesignError:
         raise
     except (ValueError, np.linalg.LinAlgError, ArithmeticError) as exc:
-        raise DesignError("Q", f"LQR has no stabilizing solution for these weights "
+        raise DesignError("Q", f"{what} has no stabilizing solution for these weights "
                                f"(is every unstable mode weighted in Q?): {exc}") from None
     poles = np.linalg.eigvals(A - B @ K)
-    margin = 1e-8 * max(1.0, float(np.linalg.norm(A, 2)))
-    if not np.all(np.isfinite(K)) or np.max(poles.real) >= -margin:
-        raise DesignError("Q", "LQR has no stabilizing solution for these weights (an unstable mode is "
+    if discrete:
+        unstable = np.max(np.abs(poles)) >= 1.0 - 1e-12
+    else:
+        unstable = np.max(poles.real) >= -1e-8 * max(1.0, float(np.linalg.norm(A, 2)))
+    if not np.all(np.isfinite(K)) or unstable:
+        raise DesignError("Q", f"{what} has no stabilizing solution for these weights (an unstable mode is "
                                "not weighted in Q)")
     return K.reshape(m, n)
 
@@ -265,11 +278,11 @@ class LQRDesign:
     Q, R : ndarray
         Weights.
     K : ndarray (1, n)
-        Continuous LQR gain; ``u = -K x^ + N r``.
+        LQR gain (continuous, or discrete with ``discrete``); ``u = -K x^ + N r``.
     N : float
         Reference gain (unit DC gain from r to the motor cart position).
     poles : ndarray
-        Continuous closed-loop poles eig(A - B K).
+        Closed-loop poles eig(A - B K) (continuous equivalents ``log(z)/T`` with ``discrete``).
     observer_poles : ndarray
         Continuous observer poles.
     L : ndarray (n, p)
@@ -311,7 +324,7 @@ def reference_gain(A: np.ndarray, B: np.ndarray, K: np.ndarray, C1: np.ndarray) 
 
 def design_lqr(model: LinearModel, Q: Any, R: Any, *, observer_poles: Sequence[complex] | None = None,
                observer_pole_factor: float | None = None, sample_period: float = 1e-3,
-               reference_output: int = 0, backend: str = "control") -> LQRDesign:
+               reference_output: int = 0, backend: str = "control", discrete: bool = False) -> LQRDesign:
     """LQR + reference gain + Luenberger observer, discretized for ``sample_period``.
 
     Parameters
@@ -330,22 +343,26 @@ def design_lqr(model: LinearModel, Q: Any, R: Any, *, observer_poles: Sequence[c
         Row of ``model.C`` holding the motor-driven cart position (0 for both plants).
     backend : {'control', 'scipy'}
         Numerical back end (see the module docstring).
+    discrete : bool
+        Design K with the discrete LQR on the zero-order-hold model (see the module docstring).
 
     Raises
     ------
     DesignError
         With ``parameter`` naming the bad input.
     """
-    if backend not in BACKENDS:
-        raise DesignError("backend", f"unknown design backend {backend!r}; expected one of {BACKENDS}")
-    T = check_sample_period(sample_period)
-    A, B, C = model.A, model.B, model.C
-    n = A.shape[0]
+    T, A, B, C, n = design_inputs(model, sample_period, backend)
     R = np.atleast_2d(np.asarray(R, dtype=float)) if np.ndim(R) < 2 else R
-    K = lqr_gain(A, B, Q, R, backend)
+    Ad, Bd = zoh(A, B, T, backend)
+    C1 = C[reference_output:reference_output + 1]
+    K = lqr_gain(Ad, Bd, Q, R, backend, discrete=True) if discrete else lqr_gain(A, B, Q, R, backend)
     check_observable(A, C)
-    poles = np.linalg.eigvals(A - B @ K)
-    N = reference_gain(A, B, K, C[reference_output:reference_output + 1])
+    if discrete:
+        poles = np.log(np.linalg.eigvals(Ad - Bd @ K).astype(complex)) / T
+        N = reference_gain(Ad - np.eye(n), Bd, K, C1)  # x = (I - Ad + Bd K)^-1 Bd N r at rest
+    else:
+        poles = np.linalg.eigvals(A - B @ K)
+        N = reference_gain(A, B, K, C1)
     if observer_poles is None:
         if observer_pole_factor is None:
             raise DesignError("observer_poles", "give observer_poles or observer_pole_factor")
@@ -358,11 +375,18 @@ def design_lqr(model: LinearModel, Q: Any, R: Any, *, observer_poles: Sequence[c
     if obs.size and np.max(obs.real) >= 0:
         raise DesignError("observer_poles", "observer poles must have negative real parts")
     L = place_gain(A.T, C.T, obs, backend).T
-    Ad, Bd = zoh(A, B, T, backend)
     z = np.exp(obs * T)
     M = place_gain(Ad.T, (C @ Ad).T, z, backend).T
     return LQRDesign(model=model, Q=np.asarray(check_weights(Q, R, n)[0]), R=R, K=K, N=N, poles=poles,
                      observer_poles=obs, L=L, sample_period=T, Ad=Ad, Bd=Bd, M=M, backend=backend)
+
+
+def design_inputs(model: LinearModel, sample_period: float, backend: str
+                  ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, int]:
+    """``(T, A, B, C, n)`` of a design after checking the back end and the sample period."""
+    if backend not in BACKENDS:
+        raise DesignError("backend", f"unknown design backend {backend!r}; expected one of {BACKENDS}")
+    return check_sample_period(sample_period), model.A, model.B, model.C, model.A.shape[0]
 
 
 def sampled_closed_loop_poles(design: LQRDesign) -> np.ndarray:

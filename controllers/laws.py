@@ -28,7 +28,7 @@ from operator import mul
 from typing import Any, Sequence
 
 from ipcosim.controllers.errors import ControllerParameterError, DesignError
-from ipcosim.errors import IpcosimError
+from ipcosim.errors import IpcosimError, closest
 from ipcosim.fmus.expm import Matrix, as_matrix, expm
 from ipcosim.fmus.params import KINDS
 from ipcosim.fmus.physics import MEASURED
@@ -70,7 +70,7 @@ def _check_positive(name: str, value: float) -> float:
 
 def _check_kind(kind: str) -> str:
     if kind not in KINDS:
-        raise LawParameterError("kind", f"unknown plant kind {kind!r}; expected one of {', '.join(KINDS)}")
+        raise LawParameterError("kind", f"unknown plant kind {kind!r}; {closest(kind, KINDS)}")
     return kind
 
 
@@ -99,6 +99,12 @@ def output_filter_lists(time_constant: float, sample_period: float) -> tuple[Mat
     a = 1.0 / time_constant
     Ad, Bd = zoh_lists([[-a, 0.0], [a, -a]], [a, 0.0], sample_period)
     return Ad, Bd, [0.0, 1.0]
+
+
+def rest_state(states: Sequence[str]) -> tuple[float, ...]:
+    """The design state at rest per metre of reference: 1 for every cart position, 0 for the velocities
+    and the pendulum angle (both carts stand at the reference, the pendulum upright)."""
+    return tuple(1.0 if s.endswith("cart_position") else 0.0 for s in states)
 
 
 def _dot(a: Sequence[float], b: Sequence[float]) -> float:
@@ -402,7 +408,31 @@ def _right_inverse(C: Sequence[Sequence[float]]) -> Matrix:
     return [list(r) for r in zip(*solve(matmul(as_matrix(C), Ct), [list(r) for r in zip(*Ct)]))]
 
 
-class LQR(DiscreteLaw):
+class CurrentEstimatorLaw(DiscreteLaw):
+    """Base of the laws on a discrete current estimator (``coefficients`` with ``C``, ``M``, ``states``):
+    ``x^[k] = x-[k] + M (y[k] - C x-[k])``, the first prediction the plant at rest at the measured
+    positions. Subclasses predict ``x_pred`` for the next instant."""
+
+    coefficients: Any
+    _Cpinv: Matrix
+
+    def reset(self) -> None:
+        super().reset()
+        self.x_pred: list[float] | None = None
+        self.x_hat = [0.0] * len(self.coefficients.states)
+
+    def _correct(self, y: Sequence[float]) -> list[float]:
+        """The corrected estimate ``x^`` of this instant (also kept as ``x_hat``)."""
+        d = self.coefficients
+        xp = self.x_pred
+        if xp is None:  # plant assumed at rest at the measured positions
+            xp = [sum(map(mul, row, y)) for row in self._Cpinv]
+        innovation = [v - sum(map(mul, row, xp)) for v, row in zip(y, d.C)]
+        self.x_hat = x_hat = [a + sum(map(mul, row, innovation)) for a, row in zip(xp, d.M)]
+        return x_hat
+
+
+class LQR(CurrentEstimatorLaw):
     """LQR state feedback on a discrete current estimator, ``u = sat(-K x^ + N r)``
     (see ``ipcosim.controllers.design``).
 
@@ -436,8 +466,6 @@ class LQR(DiscreteLaw):
 
     def reset(self) -> None:
         super().reset()
-        self.x_pred: list[float] | None = None
-        self.x_hat = [0.0] * len(self.coefficients.states)
         self._filt: list[list[float]] | None = None
 
     def _filter(self, y: Sequence[float]) -> Sequence[float]:
@@ -452,17 +480,107 @@ class LQR(DiscreteLaw):
 
     def _compute(self, y: Sequence[float], r: float) -> float:
         d = self.coefficients
-        yf = self._filter(y)
-        xp = self.x_pred
-        if xp is None:  # plant assumed at rest at the measured positions
-            xp = [sum(map(mul, row, yf)) for row in self._Cpinv]
-        innovation = [v - sum(map(mul, row, xp)) for v, row in zip(yf, d.C)]
-        self.x_hat = x_hat = [a + sum(map(mul, row, innovation)) for a, row in zip(xp, d.M)]
+        x_hat = self._correct(self._filter(y))
         u = d.N * r - sum(map(mul, d.K, x_hat))
         limit = self.voltage_limit
         u_applied = limit if u > limit else (-limit if u < -limit else u)
         self.x_pred = [sum(map(mul, row, x_hat)) + b * u_applied for row, b in zip(d.Ad, d.Bd)]
         return u
+
+
+# ============================================================================================ LQG
+
+@dataclass(frozen=True)
+class LQGCoefficients:
+    """Everything the LQG law computes with, as plain floats (design-model state order).
+
+    ``K`` (n), ``K_voltage``, ``K_integral``: the feedback ``u = -K (x^ - x_r r) - K_voltage v -
+    K_integral q`` (``ipcosim.controllers.lqg``); ``M`` (n x p): the Kalman current-estimator gain;
+    ``Ad`` (n x n), ``Bd`` (n): the zero-order-hold model; ``C`` (p x n): the measured rows;
+    ``reference_states`` (n): ``x_r``.
+    """
+
+    states: tuple[str, ...]
+    outputs: tuple[str, ...]
+    sample_period: float
+    K: tuple[float, ...]
+    K_voltage: float
+    K_integral: float
+    M: tuple[tuple[float, ...], ...]
+    Ad: tuple[tuple[float, ...], ...]
+    Bd: tuple[float, ...]
+    C: tuple[tuple[float, ...], ...]
+    reference_states: tuple[float, ...]
+
+    @classmethod
+    def from_design(cls, design: Any) -> LQGCoefficients:
+        """The coefficients of an ``ipcosim.controllers.lqg.LQGDesign``."""
+        def rows(m: Any) -> tuple[tuple[float, ...], ...]:
+            return tuple(tuple(float(v) for v in row) for row in as_matrix(m))
+        n = len(design.model.states)
+        ka = rows(design.K_augmented)[0]
+        return cls(states=tuple(design.model.states), outputs=tuple(design.model.outputs),
+                   sample_period=float(design.sample_period), K=ka[:n], K_voltage=ka[n], K_integral=ka[n + 1],
+                   M=rows(design.M), Ad=rows(design.Ad), Bd=tuple(r[0] for r in rows(design.Bd)),
+                   C=rows(design.model.C), reference_states=tuple(map(float, design.reference_states)))
+
+
+class LQG(CurrentEstimatorLaw):
+    """Discrete LQG with integral action and a one-sample computation delay (``ipcosim.controllers.lqg``).
+
+    At instant k the law outputs the voltage ``v[k]`` it computed at instant k - 1 (0 V at the first
+    instant), corrects its estimate with the measurements of instant k, and computes the voltage
+    for instant k + 1. The integral of the motor-cart position error (measured) is frozen while the
+    new voltage saturates in the direction the integral pushes. With ``reference_time_constant`` tau > 0
+    the law follows the reference through a first-order lag ``1/(tau s + 1)`` (sampled exactly), started
+    at the first measured motor-cart position: a step then does not wind the integrator up.
+
+    Parameters
+    ----------
+    kind : str
+        Plant kind.
+    coefficients : LQGCoefficients
+        The design's numbers (``LQGCoefficients.from_design``, or gains a controller FMU holds).
+    voltage_limit : float
+        [V].
+    reference_time_constant : float
+        tau [s] of the reference lag; 0 = the reference as given.
+    """
+
+    def __init__(self, kind: str, coefficients: LQGCoefficients, voltage_limit: float = 10.0,
+                 reference_time_constant: float = 0.0) -> None:
+        super().__init__(kind, coefficients.sample_period, voltage_limit)
+        if coefficients.outputs != tuple(self.measured):
+            raise LawParameterError("design", f"LQG design is for outputs {coefficients.outputs}, the "
+                                              f"{kind} plant measures {self.measured}")
+        self.coefficients = coefficients
+        tau = _check_nonneg("reference_time_constant", reference_time_constant)
+        self.reference_pole = math.exp(-self.sample_period / tau) if tau > 0 else 0.0
+        self._Cpinv = _right_inverse(coefficients.C)
+        self.reset()
+
+    def reset(self) -> None:
+        super().reset()
+        self.applied = 0.0
+        self.integral = 0.0
+        self.reference_filtered: float | None = None
+
+    def _compute(self, y: Sequence[float], r: float) -> float:
+        d = self.coefficients
+        a = self.reference_pole
+        rf = self._motor_cart(y) if self.reference_filtered is None else self.reference_filtered
+        self.reference_filtered = r = a * rf + (1.0 - a) * r
+        x_hat = self._correct(y)
+        applied = self.applied
+        feedback = d.K_voltage * applied + sum(k * (x - xr * r) for k, x, xr in zip(d.K, x_hat, d.reference_states))
+        u = -feedback - d.K_integral * self.integral
+        integral = self.integral + (r - self._motor_cart(y)) * d.sample_period  # the design's T (a gain)
+        limit = self.voltage_limit
+        if abs(u) <= limit or (u > 0) != (-d.K_integral * (integral - self.integral) > 0):
+            self.integral = integral
+        self.applied = limit if u > limit else (-limit if u < -limit else u)
+        self.x_pred = [sum(map(mul, row, x_hat)) + b * applied for row, b in zip(d.Ad, d.Bd)]
+        return applied
 
 
 # =========================================================================== Hierarchical SMC

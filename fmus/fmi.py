@@ -229,6 +229,15 @@ class VariableInfo:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
+def _one_path_entry(folder: str | None) -> None:
+    """Keep one ``sys.path`` entry of an instance's resources folder: pythonfmu 0.7.0's wrapper inserts
+    it at the front at every instantiation (``fmi2Instantiate``), and sys.path would grow by one
+    entry a cycle in a process that instantiates and frees an FMU again and again."""
+    if folder and sys.path.count(folder) > 1:
+        first = sys.path.index(folder)
+        sys.path[first + 1:] = [p for p in sys.path[first + 1:] if p != folder]
+
+
 class FmuBase(Fmi2Slave):
     """Base class of every ipcosim FMU (a pythonfmu ``Fmi2Slave``); see the module docstring.
 
@@ -251,6 +260,7 @@ class FmuBase(Fmi2Slave):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
+        _one_path_entry(self.resources)
         doc = (type(self).__doc__ or "").strip().splitlines()
         if self.description is None and doc:
             self.description = doc[0].strip()

@@ -11,6 +11,11 @@ Python floats and the standard library only (this module runs inside the plant F
   resolution is 0), from a generator seeded by ``noise_seed``: the same seed gives the same run.
 * **Track end stops**: a cart that reaches ``+-end_stop`` stops dead there (inelastic: its
   outward velocity is set to zero). 0 = no end stops.
+* **D/A quantization**: the voltage the amplifier receives is a whole code of the card's DAC,
+  ``quantize(v, voltage_resolution)`` (the nearest code). 0 = exact.
+* **Computation delay**: the voltage reaches the amplifier ``input_delay`` later, in whole plant
+  steps (:func:`delay_line`): the rig writes the voltage computed from one sample's readings at the
+  next sample.
 
 The amplifier's saturation is the plant parameter ``voltage_limit``; Coulomb and viscous friction
 per cart are the plant parameters ``b``/``b1``/``b2`` and ``Beq``/``Ba``/``Bc``/``Bp``.
@@ -26,11 +31,19 @@ import random
 from dataclasses import dataclass, fields
 from typing import Sequence
 
+from ipcosim.errors import closest
+
 #: IP02 encoders: 4096 counts/rev; cart through the 1.48 cm position pinion, pendulum direct.
 CART_M_PER_COUNT = 2.275e-5
 PENDULUM_RAD_PER_COUNT = 2 * math.pi / 4096
 #: Half the 0.814 m track: where a cart hits the end of the rack.
 END_STOP_M = 0.407
+#: Q4 analog output: 12-bit DAC over +-10 V (thesis-data.md section 1; ``ipcosim.fmus.hil.rig``).
+DAC_BITS = 12
+DAC_RANGE_V = 10.0
+DAC_V_PER_CODE = 2 * DAC_RANGE_V / (1 << DAC_BITS)
+#: The lab's controller sample period [s]: the one-sample computation delay of the rig.
+LAB_SAMPLE_PERIOD = 1e-3
 
 
 class InstrumentError(ValueError):
@@ -56,6 +69,8 @@ class Instruments:
         Track end stops at +-end_stop [m] for every cart; 0 = none.
     input_delay : float
         Transport delay of the voltage [s] (a computation delay), rounded to whole plant steps; 0 = none.
+    voltage_resolution : float
+        D/A converter resolution [V/code]: the voltage is the nearest code; 0 = exact.
     tap_time : float
         When the taps act [s] (the step that starts at or just before it).
     tap_force_impulse : float
@@ -73,6 +88,7 @@ class Instruments:
     tap_time: float = 0.0
     tap_force_impulse: float = 0.0
     tap_torque_impulse: float = 0.0
+    voltage_resolution: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -84,7 +100,8 @@ class Instruments:
     def ideal(self) -> bool:
         """True when every option is off."""
         return not (self.cart_resolution or self.pendulum_resolution or self.noise_counts or self.end_stop
-                    or self.input_delay or self.tap_force_impulse or self.tap_torque_impulse)
+                    or self.input_delay or self.tap_force_impulse or self.tap_torque_impulse
+                    or self.voltage_resolution)
 
 
 def tap_velocity_change(mass_matrix: tuple[float, float, float], force_impulse: float,
@@ -132,20 +149,45 @@ class Readout:
         return tuple(out)
 
 
+def delay_steps(delay: float, h: float) -> float:
+    """A transport delay of ``delay`` [s] in whole steps of ``h`` [s] (the nearest whole number, as a float)."""
+    return math.floor(delay / h + 0.5)
+
+
+def delay_line(buffer: Sequence[float], v: float, n: float) -> tuple[float, list[float]]:
+    """One step of a delay of ``n`` whole steps: ``(the input of n steps ago, the new buffer)``.
+
+    ``buffer[k]`` holds the input of ``k + 1`` steps ago (zeros before the start); ``n`` = 0 passes
+    ``v`` through. The buffer must hold at least ``n`` values.
+    """
+    out = v
+    for k, past in enumerate(buffer):
+        if n == k + 1:
+            out = past
+            break
+    return out, [v, *buffer[:-1]]
+
+
+def stop_carts(x: Sequence[float], carts: Sequence[tuple[int, int]], stop: float) -> tuple[list[float], float]:
+    """``(state, number of carts stopped)`` after the end stops at ``+-stop`` (``carts``: (position, velocity)
+    indices; 0 = no end stops). Plain arithmetic and comparisons (the native plant traces it)."""
+    out = list(x)
+    hits = 0.0
+    for ip, iv in carts:
+        if stop and abs(out[ip]) > stop:
+            side = 1.0 if out[ip] > 0.0 else -1.0
+            out[ip] = side * stop
+            if out[iv] * side > 0.0:
+                out[iv] = 0.0
+            hits = hits + 1.0
+    return out, hits
+
+
 def end_stop_state(x: Sequence[float], carts: Sequence[tuple[int, int]], stop: float) -> list[float] | None:
     """The state after the end stops at ``+-stop`` (``carts``: (position, velocity) indices), or
     None if no cart is beyond them."""
-    if not stop:
-        return None
-    out = None
-    for ip, iv in carts:
-        if abs(x[ip]) > stop:
-            out = list(x) if out is None else out
-            side = math.copysign(1.0, x[ip])
-            out[ip] = side * stop
-            if out[iv] * side > 0:
-                out[iv] = 0.0
-    return out
+    out, hits = stop_carts(x, carts, stop)
+    return out if hits else None
 
 
 #: The two option sets (instrument options and plant-parameter overrides per plant kind).
@@ -154,9 +196,10 @@ REALISM: dict[str, dict[str, object]] = {
               "single-mass": {"b": 0.0, "voltage_limit": 1000.0},
               "double-mass": {"b1": 0.0, "b2": 0.0, "voltage_limit": 1000.0}},
     "lab": {"instruments": Instruments(cart_resolution=CART_M_PER_COUNT, pendulum_resolution=PENDULUM_RAD_PER_COUNT,
-                                       noise_counts=0.0, end_stop=END_STOP_M),
-            "single-mass": {"b": 0.1006, "voltage_limit": 10.0},
-            "double-mass": {"b1": 0.1006, "b2": 0.1006, "voltage_limit": 10.0}},
+                                       noise_counts=0.0, end_stop=END_STOP_M, input_delay=LAB_SAMPLE_PERIOD,
+                                       voltage_resolution=DAC_V_PER_CODE),
+            "single-mass": {"b": 0.1047, "voltage_limit": 10.0},
+            "double-mass": {"b1": 0.1047, "b2": 0.1047, "voltage_limit": 10.0}},
 }
 
 LAB_SOURCES = {
@@ -165,14 +208,18 @@ LAB_SOURCES = {
     "noise_counts": "0: optical quadrature encoders have no analog noise; their error is the count itself",
     "end_stop": "IP02: 0.814 m track, end stops at +-0.407 m",
     "voltage_limit": "Q4 analog output range +-10 V, amplifier gain 1",
-    "b, b1, b2": "FITTED, not measured: 0.1006 N is the passive-cart Coulomb force that reproduces the thesis's "
-                 "5.575 mm double-mass HSMC error (ipcosim.harness.studies.friction); assumed the same for every cart",
+    "voltage_resolution": "Q4 12-bit DAC over +-10 V: 20 V / 4096 = 4.883 mV per code",
+    "input_delay": "one sample (1 ms at the rig's 1 kHz): the voltage computed from a sample's readings is written "
+                   "at the next sample",
+    "b, b1, b2": "FITTED, not measured: 0.1047 N is the passive-cart Coulomb force that reproduces the thesis's "
+                 "5.575 mm double-mass HSMC error (ipcosim.harness.studies.friction); assumed the same for every cart; "
+                 "stick-slip (Karnopp 1985, ipcosim.fmus.physics): below this force a cart does not move",
 }
 
 
 def realism(name: str, kind: str) -> tuple[Instruments, dict[str, float]]:
     """``(instruments, plant-parameter overrides)`` of the option set ``name`` for plant ``kind``."""
     if name not in REALISM:
-        raise InstrumentError(f"unknown realism preset {name!r}; known: {', '.join(REALISM)}")
+        raise InstrumentError(f"unknown realism preset {name!r}; {closest(name, REALISM)}")
     entry = REALISM[name]
     return entry["instruments"], dict(entry[kind])  # type: ignore[return-value,arg-type]

@@ -7,7 +7,7 @@ plant's columns named by :data:`POSITION_COLUMNS`, :data:`ANGLE_COLUMNS`,
 :data:`REFERENCE_COLUMNS` and :data:`VOLTAGE_COLUMNS`; a run without them has no task metrics.
 
 The task (thesis ch. 3 and 4): move the motor-driven cart from its initial position to the
-reference (0.05 m) while the pendulum stays upright. Definitions (DESIGN.md, "Metrics"):
+reference (0.05 m) while the pendulum stays upright. Definitions (``docs/metrics.md`` for users):
 
 ``settling_time_s``
     The step is ``r_f - x(t0)``, with ``r_f`` the final reference value and ``x(t0)`` the
@@ -15,8 +15,8 @@ reference (0.05 m) while the pendulum stays upright. Definitions (DESIGN.md, "Me
     time of the *last entry* into the band (the first sample from which the position stays
     inside until the end of the run), measured from the instant the reference last changed
     before that entry (``t0`` for a reference that is already at ``r_f`` at ``t0``). ``None``
-    if the position is outside the band at the end of the run, if the step is zero, or if the
-    run holds a non-finite sample.
+    (not settled) if the position is outside the band at the end of the run, if the step is
+    zero, if the run holds a non-finite sample, or if the pendulum fell (``upright`` false).
 ``overshoot_m``
     ``max(0, max over the run of sign(step) (x - r_f))``: how far the cart went past the final
     reference, in metres.
@@ -29,6 +29,11 @@ reference (0.05 m) while the pendulum stays upright. Definitions (DESIGN.md, "Me
     equal weight; the recorders sample on a uniform grid).
 ``upright``
     ``True`` if ``|angle| < 0.35 rad`` at every sample (and every sample is finite).
+
+The metrics of a scenario kind (:func:`task_kinds`) come only with runs of that kind:
+``time_to_upright_s`` and ``track_used_m`` with a swing-up (the pendulum starts outside the
+upright limit), ``peak_angle_after_tap_rad`` and ``recovery_time_s`` with a tap (a tap impulse
+is set) -- :func:`upright_metrics` and :func:`tap_metrics` define them.
 
 A run that diverged (NaN/inf samples) gives ``upright = False`` and ``None`` for the metrics that
 lose their meaning, never an exception: failed runs must still produce their metrics file.
@@ -58,6 +63,39 @@ STEADY_STATE_FRACTION = 0.10
 
 METRIC_KEYS = ("settling_time_s", "overshoot_m", "steady_state_error_m", "max_abs_angle_rad",
                "peak_voltage_V", "rms_voltage_V", "upright")
+#: The metrics of each scenario kind (:func:`task_kinds`), present only in runs of that kind.
+KIND_METRICS = {"swing-up": ("time_to_upright_s", "track_used_m"),
+                "tap": ("peak_angle_after_tap_rad", "recovery_time_s")}
+#: Plant parameters whose non-zero value makes a run a tap run.
+TAP_PARAMETERS = ("tap_force_impulse", "tap_torque_impulse")
+
+
+def task_kinds(plant_start: Callable[[str], Any]) -> frozenset[str]:
+    """The scenario kinds of a run (keys of :data:`KIND_METRICS`), from its plant's start values.
+
+    Parameters
+    ----------
+    plant_start : callable
+        ``plant_start(name)`` -> the plant parameter's value in this run (None if it has none).
+
+    Returns
+    -------
+    frozenset of str
+        ``"tap"`` if a tap impulse is set, ``"swing-up"`` if the pendulum starts outside the
+        upright limit; empty for a plain step run.
+    """
+    kinds = set()
+    if any(float(plant_start(name) or 0.0) != 0.0 for name in TAP_PARAMETERS):
+        kinds.add("tap")
+    if abs(float(wrapped(float(plant_start("initial_pendulum_angle") or 0.0)))) >= UPRIGHT_LIMIT_RAD:
+        kinds.add("swing-up")
+    return frozenset(kinds)
+
+
+def _of_kinds(metrics: dict[str, Any], kinds: Iterable[str]) -> dict[str, Any]:
+    """``metrics`` without the metrics of the scenario kinds not in ``kinds``."""
+    keep = {key for kind in kinds for key in KIND_METRICS.get(kind, ())}
+    return {k: v for k, v in metrics.items() if k in keep or not any(k in keys for keys in KIND_METRICS.values())}
 
 
 class MetricsError(IpcosimError, ValueError):
@@ -186,14 +224,15 @@ def first_column(columns: Sequence[str], candidates: Sequence[str]) -> str | Non
     return None
 
 
-def task_metrics(data: np.ndarray) -> dict[str, Any]:
-    """The DESIGN.md metrics of a pendulum run (:func:`compute_metrics` and :func:`upright_metrics`), from
-    the plant's motor-cart position and angle, the reference and the controller's voltage; an
-    empty dict when the result lacks those columns or has fewer than two rows."""
-    return streamed_task_metrics(lambda: [data], list(data.dtype.names or ()))
+def task_metrics(data: np.ndarray, kinds: Iterable[str] = ()) -> dict[str, Any]:
+    """The metrics of a pendulum run (:func:`compute_metrics`, and the metrics of its ``kinds``,
+    :data:`KIND_METRICS`), from the plant's motor-cart position and angle, the reference and the
+    controller's voltage; an empty dict when the result lacks those columns or has fewer than two rows."""
+    return streamed_task_metrics(lambda: [data], list(data.dtype.names or ()), kinds)
 
 
-def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: Sequence[str]) -> dict[str, Any]:
+def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: Sequence[str],
+                          kinds: Iterable[str] = ()) -> dict[str, Any]:
     """:func:`task_metrics` computed in two passes over the rows, a chunk at a time, so that
     the metrics of a run of any length need no more memory than one chunk.
 
@@ -203,6 +242,8 @@ def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: S
         ``chunks()`` -> iterable of structured arrays (consecutive rows; called twice).
     columns : sequence of str
         The field names.
+    kinds : iterable of str
+        The run's scenario kinds (:func:`task_kinds`): their metrics are included.
 
     Returns
     -------
@@ -216,9 +257,10 @@ def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: S
     if None in (pos, ang, ref, volt):
         return {}
     result = _step_task(chunks, pos, ang, ref, volt)
-    if result:
+    kinds = set(kinds)
+    if result and kinds:  # the kind metrics' pass only where they are reported
         result.update(_upright_pass(chunks, pos, ang))
-    return result
+    return _of_kinds(result, kinds)
 
 
 def _step_task(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, ref: str, volt: str) -> dict[str, Any]:
@@ -237,6 +279,8 @@ def _step_task(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, r
         "upright": bool(a["finite"] and a["max_angle"] < UPRIGHT_LIMIT_RAD)}
     if a["finite"]:
         result.update(_step_metrics(chunks, a, pos, ref, SETTLING_BAND, STEADY_STATE_FRACTION))
+    if not result["upright"]:  # a pendulum that fell has not settled, wherever its cart came to rest
+        result["settling_time_s"] = None
     return result
 
 

@@ -19,6 +19,8 @@ import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, Mapping
 
+from ipcosim.errors import closest
+
 
 class ParameterError(ValueError):
     """A plant parameter is missing, non-finite or physically impossible."""
@@ -52,7 +54,7 @@ class MotorParams:
     voltage_limit: float = _p(10.0, "V", "amplifier/DAC output range: input is clipped to +-voltage_limit",
                               "Q4 data sheet", positive=True)
     coulomb_velocity: float = _p(1e-3, "m/s",
-                                 "velocity scale of the smoothed Coulomb friction b*tanh(v/coulomb_velocity)",
+                                 "stick band of the stick-slip Coulomb friction: |v| below it sticks (Karnopp)",
                                  "assumed", positive=True)
 
     @property
@@ -135,8 +137,8 @@ PRESETS: dict[str, tuple[str, dict[str, float], str]] = {
     "thesis-ch4": ("double-mass", {},
                    "double mass, medium pendulum: reproduces thesis eq. 4.23 and App. B.3"),
     # b2 FITTED (not measured): ipcosim.harness.evidence.friction.fit_passive_cart_friction()
-    "thesis-ch4-friction": ("double-mass", {"b2": 0.1006},
-                            "thesis-ch4 plus a passive-cart Coulomb force b2 = 0.1006 N, FITTED so that the "
+    "thesis-ch4-friction": ("double-mass", {"b2": 0.1047},
+                            "thesis-ch4 plus a passive-cart Coulomb force b2 = 0.1047 N, FITTED so that the "
                             "thesis's double-mass HSMC leaves the thesis's 5.575 mm steady-state error (20 s)"),
 }
 
@@ -201,7 +203,7 @@ def preset(name: str, **overrides: float) -> PlantParams:
         If an override names no parameter or has an invalid value.
     """
     if name not in PRESETS:
-        raise UnknownPresetError(f"unknown preset {name!r}; known presets: {', '.join(PRESETS)}")
+        raise UnknownPresetError(f"unknown preset {name!r}; {closest(name, PRESETS)}")
     kind, values, _ = PRESETS[name]
     return make(kind, **{**values, **overrides})
 
@@ -209,12 +211,12 @@ def preset(name: str, **overrides: float) -> PlantParams:
 def make(kind: str, **values: float) -> PlantParams:
     """Build validated parameters of plant ``kind`` ('single-mass' or 'double-mass')."""
     if kind not in PLANT_KINDS:
-        raise ParameterError(f"unknown plant kind {kind!r}; expected one of {', '.join(PLANT_KINDS)}")
+        raise ParameterError(f"unknown plant kind {kind!r}; {closest(kind, PLANT_KINDS)}")
     cls = PLANT_KINDS[kind]
     names = {f.name for f in fields(cls)}
     for key in values:
         if key not in names:
-            raise ParameterError(f"{kind} plant has no parameter {key!r}")
+            raise ParameterError(f"{kind} plant has no parameter {key!r}; {closest(key, names)}")
     return validate(cls(**{k: float(v) for k, v in values.items()}))
 
 
@@ -223,7 +225,7 @@ def with_values(params: PlantParams, values: Mapping[str, float]) -> PlantParams
     names = {f.name for f in fields(params)}
     for key in values:
         if key not in names:
-            raise ParameterError(f"plant has no parameter {key!r}")
+            raise ParameterError(f"plant has no parameter {key!r}; {closest(key, names)}")
     return validate(replace(params, **{k: float(v) for k, v in values.items()}))
 
 

@@ -19,11 +19,18 @@ Double mass, state ``x = [xa, xa_dot, xc, xc_dot, theta, theta_dot, i]``::
                     - K (xa - xc) + fc(xc') = 0
     (Mp Lp^2/3) th'' - (Mp Lp/2) cos(th) xc'' + Bp th' - Mp g (Lp/2) sin(th) = 0
 
-``vA`` is the commanded voltage clipped to ``+-voltage_limit`` (the amplifier). Coulomb
-friction ``f(v) = b sign(v)`` is discontinuous at v = 0; it is replaced by the smooth
-``b tanh(v / coulomb_velocity)`` (default scale 1 mm/s), which differs from the sign law
-only for |v| below a few mm/s, keeps the right-hand side Lipschitz so that fixed-step
-integration converges, and is exactly zero for the thesis's default b = 0.
+``vA`` is the commanded voltage clipped to ``+-voltage_limit`` (the amplifier).
+
+Coulomb friction is stick-slip, after D. Karnopp, "Computer simulation of stick-slip friction in
+mechanical dynamic systems", ASME J. Dyn. Syst. Meas. Control 107(1), 100-103 (1985)
+(:func:`karnopp`): outside a small velocity band ``|v| < coulomb_velocity`` the force is the
+kinetic ``b sign(v)``; inside it the cart sticks: the friction balances the *applied* force (every
+other force on the cart, with the coupled pendulum's reaction, :func:`single_mass_applied_force`,
+:func:`double_mass_applied_forces`) up to the breakaway force ``b`` (static = kinetic level), so the
+cart's acceleration is zero. The band replaces the zero-velocity instant a fixed-step integrator
+never hits; ``ipcosim.fmus.plant.constrain`` then holds a stuck cart exactly still at the end of
+each step. A cart pushed with less than ``b`` does not move. Every friction term is exactly zero
+(and the arithmetic that of the frictionless model) for the thesis's default b = 0.
 """
 from __future__ import annotations
 
@@ -56,6 +63,30 @@ def clip_voltage(v: float, limit: float) -> float:
     return limit if v > limit else (-limit if v < -limit else v)
 
 
+def karnopp(v: float, applied: float, b: float, band: float) -> float:
+    """Karnopp's stick-slip Coulomb force [N] on a cart at velocity ``v`` [m/s] under ``applied`` force [N].
+
+    Kinetic ``b sign(v)`` for ``|v| >= band``; inside the band the force that cancels ``applied``,
+    saturated at the breakaway force ``b`` (Karnopp 1985, module docstring).
+    """
+    if -band < v < band:
+        return b if applied > b else (-b if applied < -b else applied)
+    return b if v > 0.0 else -b
+
+
+def single_mass_applied_force(x: Sequence[float], p: SingleMassParams) -> float:
+    """Force on the single-mass cart [N] besides Coulomb friction, with the pendulum's reaction at zero cart
+    acceleration: the force the friction must balance for the cart to stick."""
+    _, xd, th, thd, i = x
+    ml = 0.5 * p.Mp * p.Lp
+    s = math.sin(th)
+    m12 = -ml * math.cos(th)
+    m22 = p.Mp * p.Lp * p.Lp / 3.0
+    r1 = p.force_per_amp * i - ml * thd * thd * s - p.Beq * xd
+    r2 = ml * p.g * s - p.Bp * thd
+    return r1 - m12 * r2 / m22
+
+
 def single_mass_rhs(x: Sequence[float], v: float, p: SingleMassParams) -> tuple[float, ...]:
     """Time derivative of the single-mass state ``[xc, xc', th, th', i]`` for voltage ``v`` [V]."""
     _, xd, th, thd, i = x
@@ -65,7 +96,7 @@ def single_mass_rhs(x: Sequence[float], v: float, p: SingleMassParams) -> tuple[
     m11 = p.Meq + p.Mp
     m12 = -ml * c
     m22 = p.Mp * p.Lp * p.Lp / 3.0
-    fric = p.b * math.tanh(xd / p.coulomb_velocity) if p.b else 0.0
+    fric = karnopp(xd, single_mass_applied_force(x, p), p.b, p.coulomb_velocity) if p.b else 0.0
     r1 = p.force_per_amp * i - ml * thd * thd * s - p.Beq * xd - fric
     r2 = ml * p.g * s - p.Bp * thd
     det = m11 * m22 - m12 * m12
@@ -80,8 +111,11 @@ def double_mass_rhs(x: Sequence[float], v: float, p: DoubleMassParams) -> tuple[
     xa, xad, xc, xcd, th, thd, i = x
     vA = clip_voltage(v, p.voltage_limit)
     spring = p.K * (xa - xc)
-    fa = p.b1 * math.tanh(xad / p.coulomb_velocity) if p.b1 else 0.0
-    fc = p.b2 * math.tanh(xcd / p.coulomb_velocity) if p.b2 else 0.0
+    fa = fc = 0.0
+    if p.b1 or p.b2:
+        applied_a, applied_c = double_mass_applied_forces(x, p)
+        fa = karnopp(xad, applied_a, p.b1, p.coulomb_velocity) if p.b1 else 0.0
+        fc = karnopp(xcd, applied_c, p.b2, p.coulomb_velocity) if p.b2 else 0.0
     xadd = (p.force_per_amp * i - p.Ba * xad + p.Bf * xcd - spring - fa) / p.Ma_eq
     ml = 0.5 * p.Mp * p.Lp
     s, c = math.sin(th), math.cos(th)
@@ -95,6 +129,20 @@ def double_mass_rhs(x: Sequence[float], v: float, p: DoubleMassParams) -> tuple[
     thdd = (m11 * r2 - m12 * r1) / det
     di = (vA - p.Ra * i - p.emf_per_velocity * xad) / p.La
     return (xad, xadd, xcd, xcdd, thd, thdd, di)
+
+
+def double_mass_applied_forces(x: Sequence[float], p: DoubleMassParams) -> tuple[float, float]:
+    """Forces [N] on the active and on the passive cart besides Coulomb friction (the passive cart's with the
+    pendulum's reaction at zero cart acceleration): what each cart's friction must balance for it to stick."""
+    xa, xad, xc, xcd, th, thd, i = x
+    spring = p.K * (xa - xc)
+    ml = 0.5 * p.Mp * p.Lp
+    s = math.sin(th)
+    m12 = -ml * math.cos(th)
+    m22 = p.Mp * p.Lp * p.Lp / 3.0
+    r1 = p.Bf * xad - (p.Bf + p.Bc) * xcd + spring - ml * thd * thd * s
+    r2 = ml * p.g * s - p.Bp * thd
+    return p.force_per_amp * i - p.Ba * xad + p.Bf * xcd - spring, r1 - m12 * r2 / m22
 
 
 def rhs_for(params: PlantParams) -> Callable[[Sequence[float], float, PlantParams], tuple[float, ...]]:
@@ -149,7 +197,7 @@ def single_mass_momentum_rhs(z: Sequence[float], v: float, p: SingleMassParams) 
     vA = clip_voltage(v, p.voltage_limit)
     ml = 0.5 * p.Mp * p.Lp
     s = math.sin(th)
-    fric = p.b * math.tanh(xd / p.coulomb_velocity) if p.b else 0.0
+    fric = karnopp(xd, single_mass_applied_force((0.0, xd, th, thd, i), p), p.b, p.coulomb_velocity) if p.b else 0.0
     dp1 = p.force_per_amp * i - p.Beq * xd - fric
     dp2 = ml * p.g * s - p.Bp * thd + ml * s * thd * xd
     di = (vA - p.Ra * i - p.emf_per_velocity * xd) / p.La

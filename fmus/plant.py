@@ -4,12 +4,23 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Sequence
 
-from ipcosim.fmus.instruments import Instruments, Readout, end_stop_state, tap_velocity_change
+from ipcosim.fmus.instruments import (
+    Instruments,
+    Readout,
+    delay_line,
+    delay_steps,
+    quantize,
+    stop_carts,
+    tap_velocity_change,
+)
 from ipcosim.fmus.integrator import FastETDRK4
 from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, kind_of, validate
 from ipcosim.fmus.physics import (
     MEASURED,
+    double_mass_applied_forces,
+    karnopp,
     rhs_for,
+    single_mass_applied_force,
     single_mass_momentum_rhs,
     single_mass_to_momentum,
     state_names,
@@ -23,7 +34,7 @@ class PlantStepError(FloatingPointError):
 def single_mass_internal_rhs(p: SingleMassParams) -> Callable[..., tuple[float, ...]]:
     """``f(xc, p1, th, p2, i, vA)``: ``ipcosim.fmus.physics.single_mass_momentum_rhs`` with the parameters folded
     into constants and the voltage already clipped (same arithmetic; checked equal in the tests)."""
-    sin, cos, tanh = math.sin, math.cos, math.tanh
+    sin, cos = math.sin, math.cos
     ml = 0.5 * p.Mp * p.Lp
     m11 = p.Meq + p.Mp
     m22 = p.Mp * p.Lp * p.Lp / 3.0
@@ -37,7 +48,8 @@ def single_mass_internal_rhs(p: SingleMassParams) -> Callable[..., tuple[float, 
         det = m11 * m22 - m12 * m12
         xd = (m22 * p1 - m12 * p2) / det
         thd = (m11 * p2 - m12 * p1) / det
-        fric = b * tanh(xd / cv) if b else 0.0
+        fric = karnopp(xd, kf * i - ml * thd * thd * s - beq * xd - m12 * (mlg * s - bp * thd) / m22, b, cv) \
+            if b else 0.0
         return (xd, kf * i - beq * xd - fric, thd, mlg * s - bp * thd + ml * s * thd * xd,
                 (vA - ra * i - ke * xd) / la)
     return f
@@ -62,7 +74,7 @@ def single_mass_output_map(p: SingleMassParams) -> Callable[[Sequence[float]], t
 def double_mass_internal_rhs(p: DoubleMassParams) -> Callable[..., tuple[float, ...]]:
     """``f(xa, xa', xc, xc', th, th', i, vA)``: ``ipcosim.fmus.physics.double_mass_rhs`` with the parameters folded
     into constants and the voltage already clipped (same arithmetic; checked equal in the tests)."""
-    sin, cos, tanh = math.sin, math.cos, math.tanh
+    sin, cos = math.sin, math.cos
     K, kf, ke, ra, la = p.K, p.force_per_amp, p.emf_per_velocity, p.Ra, p.La
     Ba, Bf, Bc, Bp, Ma_eq = p.Ba, p.Bf, p.Bc, p.Bp, p.Ma_eq
     b1, b2, cv = p.b1, p.b2, p.coulomb_velocity
@@ -75,17 +87,62 @@ def double_mass_internal_rhs(p: DoubleMassParams) -> Callable[..., tuple[float, 
     def f(xa: float, xad: float, xc: float, xcd: float, th: float, thd: float, i: float,
           vA: float) -> tuple[float, ...]:
         spring = K * (xa - xc)
-        fa = b1 * tanh(xad / cv) if b1 else 0.0
-        fc = b2 * tanh(xcd / cv) if b2 else 0.0
-        xadd = (kf * i - Ba * xad + Bf * xcd - spring - fa) / Ma_eq
         s = sin(th)
         m12 = -ml * cos(th)
-        r1 = Bf * xad - bfc * xcd + spring - ml * thd * thd * s - fc
         r2 = mlg * s - Bp * thd
+        fa = karnopp(xad, kf * i - Ba * xad + Bf * xcd - spring, b1, cv) if b1 else 0.0
+        fc = karnopp(xcd, Bf * xad - bfc * xcd + spring - ml * thd * thd * s - m12 * r2 / m22, b2, cv) \
+            if b2 else 0.0
+        xadd = (kf * i - Ba * xad + Bf * xcd - spring - fa) / Ma_eq
+        r1 = Bf * xad - bfc * xcd + spring - ml * thd * thd * s - fc
         det = m11 * m22 - m12 * m12
         return (xad, xadd, xcd, (m22 * r1 - m12 * r2) / det, thd, (m11 * r2 - m12 * r1) / det,
                 (vA - ra * i - ke * xad) / la)
     return f
+
+
+#: (position, velocity) state indices of each cart, per plant kind.
+CARTS = {"single-mass": ((0, 1),), "double-mass": ((0, 1), (2, 3))}
+
+
+def coulomb_forces(p: PlantParams) -> tuple[float, ...]:
+    """The Coulomb (breakaway) force of each cart [N], ``CARTS`` order."""
+    return (p.b1, p.b2) if isinstance(p, DoubleMassParams) else (p.b,)  # type: ignore[union-attr]
+
+
+def stick(before: Sequence[float], after: Sequence[float], p: PlantParams) -> tuple[list[float], float]:
+    """``(state, number of carts stuck)`` at the end of a step: Karnopp's stick phase made exact.
+
+    A cart with Coulomb friction whose velocity ended inside the stick band (or changed sign during the
+    step) while the applied force at rest is within its breakaway force (``ipcosim.fmus.physics``) has
+    stuck: its velocity is set to 0 and, if it was at rest at the start of the step, its position to
+    the start's (a stuck cart does not move). Plain arithmetic and comparisons (the native plant traces it).
+    """
+    x = list(after)
+    single = isinstance(p, SingleMassParams)
+    band = p.coulomb_velocity
+    stuck = 0.0
+    for k, ((ip, iv), b) in enumerate(zip(CARTS["single-mass" if single else "double-mass"], coulomb_forces(p))):
+        if not b:
+            continue
+        v0, v1 = before[iv], x[iv]
+        if -band < v1 < band or v0 * v1 < 0.0:
+            rest = list(x)
+            rest[iv] = 0.0
+            applied = single_mass_applied_force(rest, p) if single else double_mass_applied_forces(rest, p)[k]
+            if -b <= applied <= b:
+                rest[ip] = before[ip] if v0 == 0.0 else rest[ip]
+                x = rest
+                stuck = stuck + 1.0
+    return x, stuck
+
+
+def constrain(before: Sequence[float], after: Sequence[float], p: PlantParams, end_stop: float) -> list[float]:
+    """``[*state, carts stuck, carts stopped]`` after a step's constraints: :func:`stick`, then the end stops
+    (``ipcosim.fmus.instruments.stop_carts``)."""
+    x, stuck = stick(before, after, p)
+    x, stopped = stop_carts(x, CARTS[kind_of(p)], end_stop)
+    return [*x, stuck, stopped]
 
 
 class Plant:
@@ -126,6 +183,10 @@ class Plant:
         self._L = self._circuit_part(self._internal_jacobian())
         self._steppers: dict[float, FastETDRK4] = {}
         self._limit = params.voltage_limit
+        #: track end stops [m] (0 = none; set by ``InstrumentedPlant``)
+        self.end_stop = 0.0
+        self._friction = any(coulomb_forces(params))
+        self.end_stop_hits = 0
         self.t = float(t0)
         self.voltage = 0.0
         self._xl: list[float] = [0.0] * len(self.state_names)
@@ -185,8 +246,14 @@ class Plant:
             state = ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.state_names, self._xl))
             raise PlantStepError(f"plant state became non-finite in the step from t = {t:.6g} s "
                                  f"(h = {h:g} s, voltage = {voltage:g} V); state at t: {state}")
+        x = list(x)
+        if self._friction or self.end_stop:
+            *x, stuck, stopped = constrain(self._xl, x, self.params, self.end_stop)
+            self.end_stop_hits += int(stopped)
+            if stuck or stopped:
+                z = list(self._to_int(x, self.params))
         self._z = z
-        self._xl = list(x)
+        self._xl = x
         self.voltage = voltage
         self.t = t + h
 
@@ -233,7 +300,8 @@ class Plant:
 
 class InstrumentedPlant(Plant):
     """``Plant`` with the bench's instruments (``ipcosim.fmus.instruments``): encoder quantization and
-    seeded noise on the measured positions (``readings``), and track end stops applied after each step.
+    seeded noise on the measured positions (``readings``), track end stops applied after each step, the
+    DAC's quantization and the computation delay of the voltage, and taps.
 
     With ``Instruments()`` (the default, everything off) it behaves exactly as ``Plant`` and its
     readings are the true positions.
@@ -243,13 +311,10 @@ class InstrumentedPlant(Plant):
                  instruments: Instruments | None = None) -> None:
         super().__init__(params, x0, t0)
         self.instruments = instruments or Instruments()
-        names = self.state_names
         res = [self.instruments.pendulum_resolution if n == "pendulum_angle" else self.instruments.cart_resolution
                for n in MEASURED[self.kind]]
         self._readout = Readout(self.instruments, res)
-        self._carts = [(names.index(n), names.index(n.replace("position", "velocity")))
-                       for n in names if n.endswith("cart_position")]
-        self.end_stop_hits = 0
+        self.end_stop = self.instruments.end_stop
         self.tapped = False
         self._delayed: list[float] = []
         self.readings = self._readout.read(self.measured())
@@ -273,20 +338,19 @@ class InstrumentedPlant(Plant):
         self.set_state(x)
 
     def _delay(self, h: float, voltage: float) -> float:
-        n = round(self.instruments.input_delay / h)
-        if n <= 0:
+        """The DAC's code of ``voltage``, delayed by the computation delay (``delay_line``)."""
+        inst = self.instruments
+        voltage = quantize(voltage, inst.voltage_resolution)
+        if not inst.input_delay:
             return voltage
-        if not self._delayed:
-            self._delayed = [0.0] * n
-        self._delayed.append(voltage)
-        return self._delayed.pop(0)
+        n = delay_steps(inst.input_delay, h)
+        if len(self._delayed) < n:
+            self._delayed = [0.0] * int(n)
+        out, self._delayed = delay_line(self._delayed, voltage, n)
+        return out
 
     def do_step(self, t: float, h: float, voltage: float) -> None:
-        """``Plant.do_step`` with the delayed voltage and the taps, then the end stops and new readings."""
+        """``Plant.do_step`` with the DAC's and the delayed voltage and the taps, then new readings."""
         self._tap(t, h)
         super().do_step(t, h, self._delay(h, voltage))
-        stopped = end_stop_state(self._xl, self._carts, self.instruments.end_stop)
-        if stopped is not None:
-            self.set_state(stopped)
-            self.end_stop_hits += 1
         self.readings = self._readout.read(self.measured())

@@ -12,7 +12,8 @@ algebraic loop. At initialization each output equals its ``initial_*`` parameter
 
 The measured positions are what the encoders read (``ipcosim.fmus.instruments``): exact by
 default; whole counts with ``cart_resolution`` / ``pendulum_resolution``, plus seeded noise with
-``noise_counts``; ``end_stop`` stops the carts at the ends of the track.
+``noise_counts``; ``end_stop`` stops the carts at the ends of the track; ``voltage_resolution`` and
+``input_delay`` are the DAC's codes and the computation delay of the voltage.
 """
 from __future__ import annotations
 
@@ -37,6 +38,8 @@ _INSTRUMENT_DOC = (
     ("tap_time", "s", "time of the taps"),
     ("tap_force_impulse", "N.s", "impulse of a force tap on the cart carrying the pendulum; 0 = none"),
     ("tap_torque_impulse", "N.m.s", "impulse of a torque tap on the pendulum (counter-clockwise); 0 = none"),
+    ("voltage_resolution", "V", "D/A converter resolution: the voltage is a whole number of codes of it; 0 = exact "
+                                "(Q4: 20/4096 = 4.883e-3)"),
 )
 
 _STATE_DOC = {

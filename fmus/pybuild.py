@@ -66,6 +66,18 @@ def discover(root: Path = ROOT) -> list[Path]:
     return scripts
 
 
+def model_scripts(root: Path = ROOT) -> dict[str, Path]:
+    """The FMU each discovered script builds, by model name (``LQRSingleMass``: the FMU is
+    ``<Model>.fmu``) -> its script; read from the scripts' source, nothing is imported."""
+    out: dict[str, Path] = {}
+    for script in discover(root):
+        tree = ast.parse(script.read_text(encoding="utf-8"))
+        name = next((node.name for node in tree.body if isinstance(node, ast.ClassDef)), None)
+        if name is not None:
+            out[name] = script
+    return out
+
+
 def _imported_modules(source: str) -> set[str]:
     """Dotted names of the ``ipcosim`` modules a source file imports (anywhere in it)."""
     names: set[str] = set()

@@ -16,8 +16,10 @@ Example::
 """
 from __future__ import annotations
 
+import functools
 import os
 import shutil
+import sys
 import tempfile
 import time
 import weakref
@@ -27,7 +29,7 @@ from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import UsageError
 from ipcosim.fmus.hil.observer import CardObserver
-from ipcosim.fmus.metrics import streamed_task_metrics
+from ipcosim.fmus.metrics import streamed_task_metrics, task_kinds
 from ipcosim.harness.grammar import strip_nominal
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
@@ -50,6 +52,46 @@ def plot_run(result: Result, path: Path | None = None) -> Any:
     from ipcosim.harness.plot import figure, plot_result
 
     return figure(result) if path is None else plot_result(result, path)
+
+
+#: Name of a run's temporary extraction folder, followed by the owning process's id: ``ipcosim-run-<pid>-*``.
+EXTRACT_PREFIX = "ipcosim-run-"
+
+
+def remove_stale_extractions(root: str | os.PathLike[str] | None = None) -> list[Path]:
+    """Remove the extraction folders (:data:`EXTRACT_PREFIX`) in ``root`` (default: the temporary
+    folder) whose owning process is gone -- a run killed before it could clean up -- and that
+    belong to this user; folders of running processes are left alone.
+
+    Returns
+    -------
+    list of Path
+        The folders removed.
+    """
+    removed = []
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{EXTRACT_PREFIX}*-*"):
+        pid = folder.name[len(EXTRACT_PREFIX):].split("-", 1)[0]
+        try:
+            mine = folder.is_dir() and folder.stat().st_uid == os.getuid()
+        except (OSError, AttributeError):  # gone meanwhile; no uids on this OS
+            continue
+        if mine and pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (True where that cannot be asked safely)."""
+    if os.name == "nt":  # os.kill(pid, 0) would send it CTRL_C_EVENT there
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, someone else's
+        return True
+    return True
 
 
 def _remove_temp(path: str) -> None:
@@ -80,6 +122,13 @@ class Prepared:
         An already bound system (tests); skips loading and binding.
     warn : bool
         Issue the binding's notes (unconnected inputs...) as Python warnings.
+    strict : bool
+        Parameters of the scenario that a swapped-in FMU does not have are an error (default:
+        ignored, with one warning per component).
+    reuse_instances : bool
+        Keep each component's FMU instance between runs and reset it (``fmi2Reset``) instead of
+        instantiating anew (:attr:`ipcosim.harness.master.slave.FMUSlave.reusable`): for studies
+        of many runs, where each pythonfmu instantiation would keep a few kB alive.
     task_metrics : callable, optional
         The task's metrics of a run's rows (``ipcosim.harness.master.execution.TaskMetrics``);
         default the IP02 task's, :func:`ipcosim.fmus.metrics.streamed_task_metrics` (a scenario
@@ -91,7 +140,8 @@ class Prepared:
                  swap: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
                  fmu_dirs: Sequence[str | os.PathLike[str]] | None = None, algorithm: str = GAUSS_SEIDEL,
                  workdir: str | os.PathLike[str] | None = None, slave_factory: SlaveFactory | None = None,
-                 system: System | None = None, warn: bool = True, fmus: str = "python",
+                 system: System | None = None, warn: bool = True, fmus: str = "python", strict: bool = False,
+                 reuse_instances: bool = False,
                  task_metrics: TaskMetrics | None = streamed_task_metrics) -> None:
         from ipcosim.harness.scenario.flavour import check_flavour, to_native
 
@@ -109,6 +159,8 @@ class Prepared:
         self.swap = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
                      for k, v in (swap or {}).items()}
         self._libraries: dict[str, Any] = {}
+        self.reuse_instances = reuse_instances
+        self._kept: dict[str, FMUSlave] = {}  # component -> its instance between runs (reuse_instances)
         self._tmp: Path | None = None
         self._finalizer: Any = None
         self.unzip_dirs: dict[str, Path] = {}
@@ -123,7 +175,7 @@ class Prepared:
             if fmus == "native":
                 scenario, self._python_values = to_native(_with_fmus(scenario, archived))
             self.scenario = scenario
-            self.system = bind(scenario, swaps=swap, fmu_files=archived)
+            self.system = bind(scenario, swaps=swap, fmu_files=archived, strict_swaps=strict)
             if warn:
                 warn_all(self.system)
             if slave_factory is None:
@@ -145,18 +197,21 @@ class Prepared:
             if self.fmus == "native":
                 fmu_dirs = [*(fmu_dirs or []), native_fmu_dir()]
             scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
+            if build_missing(scenario):
+                scenario = load_scenario(scenario_or_path, fmu_dirs=fmu_dirs)  # type: ignore[arg-type]
         if parameter_set:
             scenario = select_parameter_set(scenario, parameter_set)
         return scenario
 
     def _workdir(self, workdir: str | os.PathLike[str] | None) -> Path:
         """The folder FMUs are extracted to: ``workdir``, or a temporary one removed by :meth:`close`
-        (and on a forced exit)."""
+        (and on a forced exit; a killed process's is removed by the next run, :func:`remove_stale_extractions`)."""
         if workdir is not None:
             work = Path(workdir)
             work.mkdir(parents=True, exist_ok=True)
             return work
-        self._tmp = Path(tempfile.mkdtemp(prefix="ipcosim-"))
+        remove_stale_extractions()
+        self._tmp = Path(tempfile.mkdtemp(prefix=f"{EXTRACT_PREFIX}{os.getpid()}-"))
         self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
         signals.register_temp(self._tmp)
         return self._tmp
@@ -197,9 +252,12 @@ class Prepared:
                   set: Mapping[str, Any] | None = None, *, start_time: float | None = None,
                   algorithm: str | None = None, observers: Sequence[Observer] = (),
                   manipulators: Sequence[Manipulator] = (), realtime: bool | None = None, progress: bool = False,
-                  record_every: int = 1, max_init_iterations: int = 20, loop: str = "auto") -> Execution:
+                  record_every: int = 1, max_init_iterations: int = 20, loop: str = "auto",
+                  overrun_budget: float | None = None) -> Execution:
         """A ready :class:`Execution` (checked: step, stop time, the ``set`` start values, step multiples);
-        ``loop``: the stepping loop, ``auto``, ``c`` or ``python`` (see :class:`Execution`)."""
+        ``loop``: the stepping loop, ``auto``, ``c`` or ``python`` (see :class:`Execution`);
+        ``overrun_budget``: a paced run's allowed overrun fraction
+        (:class:`~ipcosim.harness.master.realtime.RealtimePacer`)."""
         stop, why_stop = (stop_time, "") if stop_time is not None else default_stop_time(self.system)
         h, why_step = (step, "") if step is not None else default_step(self.system)
         if stop is None:
@@ -222,7 +280,7 @@ class Prepared:
         if progress:
             observers.append(Progress())
         if realtime or (realtime is None and self.system.realtime):
-            observers += [RealtimePacer(), CardObserver(overruns=True)]
+            observers += [RealtimePacer(overrun_budget=overrun_budget), CardObserver(overruns=True)]
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
             observers.append(CardObserver())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
@@ -230,7 +288,24 @@ class Prepared:
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
                          unzip_dirs=self.unzip_dirs,
                          record_every=record_every, max_init_iterations=max_init_iterations,
-                         task_metrics=self.task_metrics, loop=loop)
+                         task_metrics=self._run_task_metrics(values), loop=loop)
+
+    def _run_task_metrics(self, values: Mapping[tuple[str, str], Any]) -> TaskMetrics | None:
+        """The task metrics of one run: the IP02 task's with the metrics of the run's scenario kinds
+        (:func:`ipcosim.fmus.metrics.task_kinds` of the plant's start values after ``values``)."""
+        if self.task_metrics is not streamed_task_metrics:
+            return self.task_metrics
+        try:
+            plant = self.system.instance("plant")
+        except KeyError:
+            return self.task_metrics
+
+        def start(name: str) -> Any:
+            if ("plant", name) in values:
+                return values[("plant", name)]
+            return plant.start_value(name) if name in plant.model.variables else None
+
+        return functools.partial(streamed_task_metrics, kinds=task_kinds(start))
 
     def run(self, stop_time: float | None = None, step: float | None = None,
             set: Mapping[str, Any] | None = None, *, out: str | os.PathLike[str] | None = None,
@@ -256,7 +331,8 @@ class Prepared:
             ``observers``, ``manipulators`` (:mod:`ipcosim.harness.master.observers`,
             :mod:`ipcosim.harness.master.manipulators`), ``start_time``, ``record_every`` (record
             every n-th communication point), ``loop`` (``auto``, ``c``, ``python``: the stepping
-            loop, :class:`~ipcosim.harness.master.execution.Execution`).
+            loop, :class:`~ipcosim.harness.master.execution.Execution`), ``overrun_budget`` (a
+            paced run's allowed overrun fraction).
 
         Raises
         ------
@@ -281,6 +357,8 @@ class Prepared:
                     partial.write(out, variables=variables, plot=plot, csv=False)
             raise
         result.plotter = plot_run
+        result.metadata["voltage_limit_V"] = next(  # the limit the figure draws (ipcosim.harness.plot)
+            (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
         result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
         result.metadata["swaps"] = dict(self.swap)
         if out is not None:
@@ -304,13 +382,26 @@ class Prepared:
     def _fmu_slave(self, instance: Any) -> FMUSlave:
         """A slave on this preparation's loaded library of the component (loaded on first use
         and kept for the following runs: one run at a time per Prepared)."""
+        kept = self._kept.get(instance.name)
+        if kept is not None and kept.state == "parked":
+            return kept
         lib = self._libraries.get(instance.name)
         if lib is None:
             lib = self._libraries[instance.name] = load_library(instance, self.unzip_dirs[instance.name])
-        return FMUSlave(instance, self.unzip_dirs[instance.name], library=lib)
+        slave = FMUSlave(instance, self.unzip_dirs[instance.name], library=lib)
+        if self.reuse_instances:
+            slave.reusable = True
+            self._kept[instance.name] = slave
+        return slave
 
     def close(self) -> None:
         """Unload the FMUs' libraries and remove the extracted FMUs (if this object created the folder)."""
+        for slave in self._kept.values():
+            try:
+                slave.release()
+            except Exception:  # noqa: BLE001 -- best effort, as unloading below
+                pass
+        self._kept.clear()
         for lib in self._libraries.values():
             try:
                 lib.freeLibrary()
@@ -327,6 +418,42 @@ class Prepared:
         self.close()
 
 
+def _start(execution: Execution, component: str, variable: str) -> Any:
+    """The value ``component.variable`` starts a run with (its override, else its bound start), or None."""
+    try:
+        inst = execution.system.instance(component)
+    except KeyError:
+        return None
+    if variable not in inst.model.variables:
+        return None
+    return execution.overrides.get((component, variable), inst.start_value(variable))
+
+
+def build_missing(scenario: Scenario) -> list[str]:
+    """Build the project's FMUs that ``scenario`` names but cannot find (the first run after a
+    wheel install) into the build folder (:mod:`ipcosim.harness.paths`: the user cache for an
+    installed wheel), saying so in one line on stderr; they are found there from then on.
+
+    Returns
+    -------
+    list of str
+        The models built (none: nothing was missing, or only FMUs this project does not make,
+        which binding then reports by name).
+    """
+    if scenario.location.is_file():
+        return []  # an .ssp archive carries its FMUs
+    from ipcosim.fmus.pybuild import build_all, model_scripts
+    from ipcosim.harness.scenario import ssp
+
+    scripts = model_scripts()
+    missing = sorted({Path(c.source).stem for c in scenario.components if c.fmu is None} & set(scripts))
+    if missing:
+        print(f"ipcosim: building the FMUs {scenario.name} needs ({', '.join(missing)}) into {ssp.BUILD_FMU_DIR}, "
+              f"once", file=sys.stderr, flush=True)
+        build_all(ssp.BUILD_FMU_DIR, scripts=[scripts[m] for m in missing])
+    return missing
+
+
 def prepare(scenario_or_path: str | os.PathLike[str] | Scenario, **kwargs: Any) -> Prepared:
     """Load, check and extract a scenario once for many runs (see :class:`Prepared`)."""
     return Prepared(scenario_or_path, **kwargs)
@@ -335,7 +462,8 @@ def prepare(scenario_or_path: str | os.PathLike[str] | Scenario, **kwargs: Any) 
 def prepare_with(options: RunOptions, *, warn: bool = True) -> Prepared:
     """A :class:`Prepared` scenario for ``options`` (scenario, parameter set, swaps, FMU folders, algorithm)."""
     return Prepared(options.scenario, parameter_set=options.parameter_set, swap=options.swap,
-                    fmu_dirs=options.fmu_dirs, algorithm=options.algorithm, warn=warn, fmus=options.fmus)
+                    fmu_dirs=options.fmu_dirs, algorithm=options.algorithm, warn=warn, fmus=options.fmus,
+                    strict=options.strict)
 
 
 def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers: Sequence[Observer] = (),
@@ -367,6 +495,7 @@ def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers
         result = prepared.run(options.stop_time, options.step, values, out=options.out,
                               variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
                               progress=options.progress, loop=options.loop, observers=observers,
+                              overrun_budget=options.overrun_budget,
                               manipulators=manipulators, raise_on_error=raise_on_error)
     if options.save_baseline is not None:
         from ipcosim.harness.baseline import save_baseline

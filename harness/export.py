@@ -1,4 +1,4 @@
-"""``ipcosim export``: a scenario's whole closed loop as one FMI 2.0 co-simulation FMU.
+"""``ipcosim export``: a scenario's whole closed loop as one FMI 2.0 (or 3.0) co-simulation FMU.
 
 The loop is built from the scenario's native components (``ipcosim build --native``), bound and
 ordered exactly as ``ipcosim run SCENARIO --fmus native`` runs it (the same
@@ -35,9 +35,9 @@ SETPOINT_MODEL = "Setpoint"
 class ExportOptions:
     """What ``ipcosim export`` does: the scenario (name or folder), the FMU file to write, and
     optionally a parameter set of the scenario, the model identifier (default from the
-    scenario's name), extra FMU folders and parameter values (``{"controller.sample_period":
+    scenario's name), extra FMU folders, parameter values (``{"controller.sample_period":
     0.002}``, the grammar and the native redesign of ``ipcosim run --set``) that become the
-    FMU's parameter start values."""
+    FMU's parameter start values, and the FMI version of the FMU (``"2"`` or ``"3"``)."""
 
     scenario: str
     out: Path
@@ -45,6 +45,7 @@ class ExportOptions:
     model_identifier: str | None = None
     fmu_dirs: tuple[Path, ...] = ()
     set: Mapping[str, Any] = field(default_factory=dict)  # noqa: A003 -- the option's name (as RunOptions.set)
+    fmi: str = "2"
 
 
 class ExportError(IpcosimError, ValueError):
@@ -71,11 +72,23 @@ def export(options: ExportOptions) -> Path:
         An unknown scenario, a scenario the native flavour cannot run (it names the component
         and parameter), no C compiler, an unwritable ``out`` (one line each).
     """
+    out = Path(options.out)
+    _check_out(out)
+    return build_container(loop_spec(options), out, fmi=options.fmi)
+
+
+def loop_spec(options: ExportOptions) -> ContainerSpec:
+    """The :class:`ContainerSpec` of the scenario's loop, bound and ordered as ``ipcosim run
+    SCENARIO --fmus native`` runs it (``options.out`` and ``options.fmi`` are not used).
+
+    Raises
+    ------
+    IpcosimError
+        An unknown scenario, or one the native flavour cannot run (one line).
+    """
     from ipcosim.harness.engine import Prepared, resolve_relative
     from ipcosim.harness.scenario.flavour import FlavourError
 
-    out = Path(options.out)
-    _check_out(out)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -88,8 +101,7 @@ def export(options: ExportOptions) -> Path:
         spec = container_spec(prepared.system, [execution.instances[i].name for i in execution.order],
                               execution.multiples, execution.step_size,
                               options.model_identifier or identifier(prepared.scenario.name), execution.overrides)
-        spec = dataclasses.replace(spec, start_time=execution.start_time, stop_time=execution.stop_time)
-    return build_container(spec, out)
+        return dataclasses.replace(spec, start_time=execution.start_time, stop_time=execution.stop_time)
 
 
 def _check_out(out: Path) -> None:

@@ -33,7 +33,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from ipcosim.errors import UsageError
+from ipcosim.errors import UsageError, closest
 
 #: The form of a ``--set`` item.
 SET_FORM = "COMPONENT.VARIABLE=VALUE"
@@ -201,11 +201,7 @@ def parse_vary(expr: str, parameters: Mapping[str, float] | None = None) -> Vary
     if not _NAME.match(name):
         raise VaryError(f"--vary {expr!r}: {name!r} is not a COMPONENT.VARIABLE name (e.g. plant.Mp)")
     if parameters is not None and name not in parameters:
-        component = name.split(".", 1)[0]
-        known = sorted(k.split(".", 1)[1] for k in parameters if k.split(".", 1)[0] == component)
-        hint = (f"{component} parameters: {', '.join(known)}" if known else
-                f"components: {', '.join(sorted({k.split('.', 1)[0] for k in parameters}))}")
-        raise VaryError(f"--vary {expr!r}: unknown parameter {name!r} ({hint})")
+        raise VaryError(f"--vary {expr!r}: unknown parameter {name!r}; {closest(name, parameters)}")
     body, relative = strip_nominal(form, f"--vary {expr!r}")
     if relative and parameters is not None:
         nominal = parameters[name]

@@ -30,14 +30,32 @@ def seconds_option(option: str, value: Any) -> float | None:
     UsageError
         Naming the option and the value.
     """
+    return _number_option(option, value, lambda x: math.isfinite(x) and x > 0, "not a number of seconds",
+                          "must be a positive number of seconds")
+
+
+def fraction_option(option: str, value: Any) -> float | None:
+    """A fraction in [0, 1] (text or number), or None.
+
+    Raises
+    ------
+    UsageError
+        Naming the option and the value.
+    """
+    expected = "expected a fraction in [0, 1] (0.01: 1 % of the steps)"
+    return _number_option(option, value, lambda x: 0.0 <= x <= 1.0, expected, expected)
+
+
+def _number_option(option: str, value: Any, ok: Any, not_number: str, out_of_range: str) -> float | None:
+    """``value`` as a float if ``ok(float)``, None for None; else UsageError ``"OPTION VALUE: why"``."""
     if value is None:
         return None
     try:
         number = float(value)
     except (TypeError, ValueError):
-        raise UsageError(f"{option} {value!r}: not a number of seconds") from None
-    if not (math.isfinite(number) and number > 0):
-        raise UsageError(f"{option} {value}: must be a positive number of seconds")
+        raise UsageError(f"{option} {value!r}: {not_number}") from None
+    if not ok(number):  # NaN fails every check
+        raise UsageError(f"{option} {value}: {out_of_range}")
     return number
 
 
@@ -83,6 +101,14 @@ class RunOptions:
     loop : str
         The master's stepping loop: ``auto`` (the C loop where it can run, else the Python
         loop), ``c`` (an error where it cannot run) or ``python`` (see docs/master.md).
+    overrun_budget : float or None
+        A real-time run's allowed overruns, as a fraction of its steps; beyond it
+        ``metrics["overrun_budget_exceeded"]`` is true (the command line warns and exits 3).
+        None: ``IPCOSIM_RT_OVERRUN_BUDGET``, else 0.01
+        (:data:`ipcosim.harness.master.realtime.DEFAULT_OVERRUN_BUDGET`).
+    strict : bool
+        Parameters of the scenario that a swapped-in FMU does not have are an error (default:
+        ignored, named in one warning line per component).
     """
 
     scenario: str | os.PathLike[str]
@@ -102,6 +128,8 @@ class RunOptions:
     fmus: str = "python"
     timeout: float | None = None
     loop: str = "auto"
+    overrun_budget: float | None = None
+    strict: bool = False
 
     def __post_init__(self) -> None:
         if self.loop not in LOOPS:
@@ -121,7 +149,8 @@ class RunOptions:
                record: Sequence[str] | str | None = None, algorithm: str = "gauss-seidel",
                fmu_dirs: Sequence[str | os.PathLike[str]] | None = None,
                save_baseline: str | os.PathLike[str] | None = None, progress: bool = False,
-               fmus: str = "python", timeout: Any = None, loop: str = "auto") -> "RunOptions":
+               fmus: str = "python", timeout: Any = None, loop: str = "auto",
+               overrun_budget: Any = None, strict: bool = False) -> "RunOptions":
         """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
 
         Raises
@@ -139,7 +168,8 @@ class RunOptions:
                    realtime=realtime, out=Path(out) if out is not None else None, plot=plot, record=columns,
                    algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
                    save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,
-                   fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop)
+                   fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop,
+                   overrun_budget=fraction_option("--overrun-budget", overrun_budget), strict=strict)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "RunOptions":
@@ -150,7 +180,8 @@ class RunOptions:
                           plot=args.plot, record=args.record, algorithm=args.algorithm, fmu_dirs=args.fmu_dir,
                           save_baseline=args.save_baseline, progress=not args.quiet,
                           fmus=getattr(args, "fmus", "python"), timeout=getattr(args, "timeout", None),
-                          loop=getattr(args, "loop", "auto"))
+                          loop=getattr(args, "loop", "auto"), overrun_budget=getattr(args, "overrun_budget", None),
+                          strict=getattr(args, "strict", False))
 
 
 def scenario_label(text: str | os.PathLike[str]) -> str:

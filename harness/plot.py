@@ -1,5 +1,6 @@
-"""The run figure, stacked like the thesis's result figures: reference and cart position(s),
-pendulum angle, motor voltage, over a shared time axis."""
+"""The run figure, stacked like the thesis's result figures: reference and cart position(s) with
+the settling band, pendulum angle (radians, as the metrics; degrees on the right), motor voltage
+with its limits, over a shared time axis."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -57,6 +58,34 @@ def _mark_spikes(ax, t: np.ndarray, y: np.ndarray, limits: tuple[float, float]) 
     return int(above.sum() + below.sum())
 
 
+def _decorate(ax, ylabel: str, result: "Result", lines: list, limits: tuple[float, float] | None  # noqa: ANN001
+              ) -> tuple[float, float] | None:
+    """What a control engineer reads a panel against: the settling band and time on the position,
+    degrees beside the angle, the voltage limits; returns the panel's y limits (spanning them)."""
+    from ipcosim.fmus.metrics import SETTLING_BAND
+
+    if ylabel.startswith("position") and lines[0][0] == "reference" and len(lines) > 1:
+        r_final, x0 = float(lines[0][1][-1]), float(lines[1][1][0])
+        band = SETTLING_BAND * abs(r_final - x0)
+        if band > 0:
+            ax.axhspan(r_final - band, r_final + band, color="tab:green", alpha=0.15,
+                       label=f"settling band +-{100 * SETTLING_BAND:g} %")
+        settled = result.metrics.get("settling_time_s")
+        if settled is not None:
+            ax.axvline(float(result["time"][0]) + settled, color="tab:green", linestyle=":",
+                       label=f"settled after {settled:.3g} s")
+    elif ylabel.startswith("pendulum angle"):
+        ax.secondary_yaxis("right", functions=(np.degrees, np.radians)).set_ylabel("pendulum angle [deg]")
+    elif ylabel.startswith("voltage") and result.metadata.get("voltage_limit_V"):
+        limit = float(result.metadata["voltage_limit_V"])
+        for sign in (1, -1):
+            ax.axhline(sign * limit, color="tab:red", linestyle="--", linewidth=0.8,
+                       label=f"+-{limit:g} V limit" if sign > 0 else None)
+        lo, hi = limits if limits is not None else (0.0, 0.0)
+        limits = (min(lo, -1.08 * limit), max(hi, 1.08 * limit))
+    return limits
+
+
 def plot_result(result: "Result", path: str | Path, title: str | None = None) -> Path:
     """Write the three-panel figure of a run (:func:`figure`) to ``path`` (PNG); returns the path."""
     fig = figure(result, title, backend="Agg")
@@ -71,11 +100,13 @@ def plot_result(result: "Result", path: str | Path, title: str | None = None) ->
 def figure(result: "Result", title: str | None = None, backend: str | None = None) -> "Figure":
     """The three-panel matplotlib figure of a run.
 
-    Panels: (1) reference and cart position(s) [m], (2) pendulum angle [deg], (3) controller
-    voltage [V]. Panels whose signals the result lacks are left out; with none of them, every
-    recorded column is drawn in one panel. Each panel's axis comes from :func:`axis_limits`:
-    isolated spikes do not squash it; they are marked with red triangles on its edge and
-    their count and range are written in the panel.
+    Panels: (1) reference and cart position(s) [m] with the +-2 % settling band around the final
+    reference and the settling time (docs/metrics.md), (2) pendulum angle [rad] (degrees on the
+    right axis), (3) controller voltage [V] with the +-``voltage_limit`` lines when the run's
+    metadata has ``voltage_limit_V`` (the axis then spans them). Panels whose signals the
+    result lacks are left out; with none of them, every recorded column is drawn in one panel.
+    Each panel's axis comes from :func:`axis_limits`: isolated spikes do not squash it; they are
+    marked with red triangles on its edge and their count and range are written in the panel.
     """
     from ipcosim.harness.extras import require
 
@@ -96,7 +127,7 @@ def figure(result: "Result", title: str | None = None, backend: str | None = Non
     if pos:
         panels.append(("position [m]", pos))
     if "plant.pendulum_angle" in cols:
-        panels.append(("pendulum angle [deg]", [("angle", np.degrees(result["plant.pendulum_angle"]), {})]))
+        panels.append(("pendulum angle [rad]", [("angle", result["plant.pendulum_angle"], {})]))
     volt = next((c for c in ("controller.voltage", "plant.voltage") if c in cols), None)
     if volt:
         panels.append(("voltage [V]", [("voltage", result[volt], {"drawstyle": "steps-post"})]))
@@ -106,7 +137,7 @@ def figure(result: "Result", title: str | None = None, backend: str | None = Non
     for ax, (ylabel, lines) in zip(axes[:, 0], panels):
         for label, y, style in lines:
             ax.plot(t, y, label=label, **style)
-        limits = axis_limits([y for _, y, _ in lines])
+        limits = _decorate(ax, ylabel, result, lines, axis_limits([y for _, y, _ in lines]))
         if limits is not None:
             ax.set_ylim(*limits)
             spikes = sum(_mark_spikes(ax, np.asarray(t), y, limits) for _, y, _ in lines)
@@ -117,7 +148,7 @@ def figure(result: "Result", title: str | None = None, backend: str | None = Non
                             fontsize="x-small", color="tab:red")
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
-        if len(lines) > 1:
+        if len(ax.get_legend_handles_labels()[0]) > 1:
             ax.legend(loc="best", fontsize="small")
     axes[-1, 0].set_xlabel("time [s]")
     meta = result.metadata

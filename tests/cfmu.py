@@ -67,6 +67,7 @@ STAIR = Spec("Stair", "stair.c", "2.0", (
     _out("counter", "Integer", "i", 0, (), variability="discrete"),
     _out("height", "Real", "r", 0, (), variability="discrete"),
     _par("limit", "Integer", "i", 1, "10"), _par("end_simulation", "Boolean", "b", 0, "true"),
+    _par("end_midstep", "Boolean", "b", 1, "false"),
 ), step=0.1, stop=2.0)
 
 PASSTHROUGH = Spec("PassThrough", "passthrough.c", "2.0", (

@@ -32,6 +32,17 @@ def native_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return out / "fmus", out / "fmus-native"
 
 
+@pytest.fixture(scope="session")
+def native_fmus3(native_fmus: tuple[Path, Path]) -> Path:
+    """The FMI 3.0 variant of the native FMUs (``build_native(..., fmi="3")``), built for this session
+    next to ``native_fmus``' FMI 2.0 ones (tests/test_fmi3.py, test_from_sources.py)."""
+    from ipcosim.harness.native.cbuild import build_native
+
+    out = native_fmus[1].parent / "fmus-native-fmi3"
+    build_native(native_fmus[0], out, fmi="3")
+    return out
+
+
 @pytest.fixture
 def tracked(monkeypatch: pytest.MonkeyPatch) -> tuple[list, list]:
     """Every FMUSlave instantiated and freed during the test: ``(made, freed)``."""

@@ -46,7 +46,7 @@ def test_python_raises_the_line_the_command_line_prints(capsys, argv, keywords, 
 
 
 def test_unknown_scenario_and_missing_fmu_are_project_errors():
-    with pytest.raises(ipcosim.IpcosimError, match="unknown scenario 'nope'; known scenarios: double-mass"):
+    with pytest.raises(ipcosim.IpcosimError, match="unknown scenario 'nope'; known: double-mass"):
         ipcosim.run("nope")
     with pytest.raises(FileNotFoundError, match="--swap controller=missing.fmu: FMU file does not exist"):
         ipcosim.run("single-mass-lqr", swap={"controller": "missing.fmu"})

@@ -44,7 +44,7 @@ ROOMS: tuple[tuple[str, ...], ...] = (
     ("harness.master",),
     ("harness.scenario",),
     ("", "harness", "harness.options", "harness.grammar", "harness.engine", "harness.public", "harness.export",
-     "harness.testing", "harness.baseline", "harness.plot", "harness.pytest_plugin"),
+     "harness.testing", "harness.baseline", "harness.plot", "harness.pytest_plugin", "harness.describe"),
     ("harness.studies",),
     ("harness.evidence",),
     ("harness.cli",),

@@ -121,29 +121,3 @@ def test_default_uncertainty_names_only_physical_parameters():
     assert "plant.K" in DEFAULT_UNCERTAINTY["double-mass"]
     # a scenario lacking one of them simply does not vary it
     assert default_vary("double-mass", {"plant.K": 142.0}) == ["plant.K=uniform(0.8,1.2)*nominal"]
-
-
-def test_compare_builds_missing_fmus_once_then_runs(tmp_path, monkeypatch, capsys):
-    import ipcosim.fmus.pybuild
-    import ipcosim.harness.studies.specs as specs
-    from ipcosim.harness.cli import main as cli_main
-    from ipcosim.harness.scenario.binding import FMUNotFoundError
-
-    real = specs.spec_for
-    calls, builds = [], []
-
-    def fake_spec_for(name, **kwargs):
-        calls.append(name)
-        if not builds:
-            raise FMUNotFoundError(f"{name}: FMU resources/Setpoint.fmu not found (run `ipcosim build`)")
-        return real("pure:single-mass-lqr", **kwargs)
-
-    monkeypatch.setattr(specs, "spec_for", fake_spec_for)
-    monkeypatch.setattr(ipcosim.fmus.pybuild, "build_all", lambda out, **kw: builds.append(out) or [])
-    code = cli_main(["compare", "--scenarios", "a,b", "--stop-time", "0.5", "--workers", "1", "--fmus", "python",
-                     "--out", str(tmp_path), "--quiet"])
-    err = capsys.readouterr().err
-    assert code == 0, err
-    assert len(builds) == 1 and "building them into" in err
-    assert calls == ["a", "a", "b"]
-    assert (tmp_path / "report.html").exists()

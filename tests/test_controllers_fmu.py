@@ -131,12 +131,13 @@ def test_contract_variables_units_and_structure(controller_fmus, model: str) -> 
     unknown = root.find("ModelStructure/Outputs/Unknown")
     assert unknown.get("index") == str(index["voltage"])
     assert sorted(map(int, unknown.get("dependencies").split())) == sorted(index[n] for n in inputs)
-    if law == "LQR":
-        # the gains are parameters too (designed at build time): K per state, N, M per state and output
-        from ipcosim.controllers.catalog import lqr_gain_specs
+    if law in ("LQR", "LQG"):
+        # the gains are parameters too (designed at build time): K per state, N (LQR) or K_voltage and
+        # K_integral (LQG), M per state and output
+        from ipcosim.controllers.catalog import gain_specs
         n, p = (4, 2) if kind == "single-mass" else (6, 3)
-        gains = lqr_gain_specs(kind)
-        assert len(gains) == n + 1 + n * p
+        gains = gain_specs(kind, law)
+        assert len(gains) == n + (1 if law == "LQR" else 2) + n * p
         for spec in gains:
             sv = by_name[spec.name]
             assert sv.get("causality") == "parameter" and sv.find("Real").get("unit") == spec.unit

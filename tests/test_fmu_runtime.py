@@ -61,7 +61,7 @@ def both(folder: Path, spec: dict, tmp: Path) -> tuple[dict, dict]:
 
 def test_every_fmu_runs_on_the_standard_library_alone(unzipped_fmus, tmp_path: Path) -> None:
     models = sorted(m for m in unzipped_fmus if not m.startswith("IP02HIL"))
-    assert len(models) == 14  # two plants, ten controllers, the swing-up, the setpoint
+    assert len(models) == 16  # two plants, twelve controllers, the swing-up, the setpoint
     spec = {"steps": STEPS}
     with ThreadPoolExecutor(max_workers=2) as pool:
         results = dict(zip(models, pool.map(lambda m: both(unzipped_fmus[m], spec, tmp_path), models)))

@@ -94,7 +94,11 @@ class Rig:
 
 @pytest.fixture
 def env(realtime_fmus: Path) -> dict[str, str]:
-    return dict(os.environ, IPCOSIM_FMU_PATH=str(realtime_fmus), PYTHONPATH=str(ROOT), IPCOSIM_RT_PRIORITY=RT_PRIORITY)
+    """These tests check what a run on the shared machine did (upright, step counts, faults); its load
+    is not theirs to judge, so any overrun fraction is within budget (the budget's warning and exit
+    status are tests/test_realtime.py's)."""
+    return dict(os.environ, IPCOSIM_FMU_PATH=str(realtime_fmus), PYTHONPATH=str(ROOT), IPCOSIM_RT_PRIORITY=RT_PRIORITY,
+                IPCOSIM_RT_OVERRUN_BUDGET="1")
 
 
 def run_args(scenario: str, rig: Rig, out: Path, fmus: Path, *extra: str) -> list[str]:

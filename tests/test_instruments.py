@@ -11,7 +11,9 @@ from fmpy.fmi1 import FMICallException
 
 from ipcosim.fmus.instruments import (
     CART_M_PER_COUNT,
+    DAC_V_PER_CODE,
     END_STOP_M,
+    LAB_SAMPLE_PERIOD,
     InstrumentError,
     Instruments,
     Readout,
@@ -144,6 +146,30 @@ def test_input_delay_holds_the_voltage_back_whole_steps() -> None:
         plant.do_step(k * H, H, float(k + 1))
         applied.append(plant.voltage)
     assert applied == [0.0, 0.0, 0.0, 1.0, 2.0, 3.0]
+
+
+def test_one_sample_computation_delay() -> None:
+    """The lab bench's delay: the voltage of one step acts during the next (zero before the first)."""
+    inst, _ = realism("lab", "single-mass")
+    assert inst.input_delay == LAB_SAMPLE_PERIOD == H
+    plant = InstrumentedPlant(preset("thesis-ch3"), instruments=Instruments(input_delay=H))
+    applied = []
+    for k in range(4):
+        plant.do_step(k * H, H, float(k + 1))
+        applied.append(plant.voltage)
+    assert applied == [0.0, 1.0, 2.0, 3.0]
+
+
+def test_dac_quantizes_the_voltage_to_whole_codes() -> None:
+    """The Q4's 12-bit DAC over +-10 V: 4.883 mV codes; a command is the nearest code, so a command below half
+    a code gives 0 V, and one of 0.6 codes one code."""
+    inst, _ = realism("lab", "single-mass")
+    assert inst.voltage_resolution == DAC_V_PER_CODE == pytest.approx(20 / 4096)
+    plant = InstrumentedPlant(preset("thesis-ch3"), instruments=Instruments(voltage_resolution=DAC_V_PER_CODE))
+    for k, (command, code) in enumerate([(0.4 * DAC_V_PER_CODE, 0), (0.6 * DAC_V_PER_CODE, 1), (1.0, 205),
+                                         (-2.5 * DAC_V_PER_CODE + 1e-9, -2)]):
+        plant.do_step(k * H, H, command)
+        assert plant.voltage == code * DAC_V_PER_CODE, (command, plant.voltage)
 
 
 def test_tap_metrics() -> None:

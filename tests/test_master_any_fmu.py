@@ -225,6 +225,21 @@ def test_fmu_ending_the_simulation_ends_the_run_normally_and_matches_fmpy(tmp_pa
     assert header == ["time", "stair.counter", "stair.height"] and rows[-1][1] == "10"
 
 
+def test_an_fmu_ending_within_a_step_gets_its_last_successful_time_recorded_as_fmpy_does(tmp_path, fmus):
+    """The Reference-FMUs' Stair ends between two communication points: the row at its last successful
+    time (here 0.95 s, counting to 11) is recorded after the last full step, as simulate_fmu records it."""
+    folder = scenario(tmp_path, fmus, [comp("stair", "Stair")], stop=2.0)
+    r = ipcosim.run(folder, set={"stair.end_midstep": True}, out=tmp_path / "out")
+    assert r.ok and r.metadata["terminated_by"]["last_successful_time"] == pytest.approx(0.95)
+    ref = fmpy_result(fmus["Stair"], 2.0, 0.1, start_values={"end_midstep": True})
+    assert list(ref["time"][-2:]) == pytest.approx([0.9, 0.95]) and ref["counter"][-1] == 11
+    assert np.allclose(r["time"], ref["time"], rtol=0, atol=1e-15)
+    assert np.array_equal(r["stair.counter"], ref["counter"]) and np.array_equal(r["stair.height"], ref["height"])
+    header, rows = read_csv(tmp_path / "out" / "results.csv")
+    assert float(rows[-1][0]) == r["time"][-1] and rows[-1][1] == "11" and r.metadata["end_time"] == r["time"][-1]
+    assert "last successful time t = 0.95 s" in r.metadata["terminated_by"]["note"]
+
+
 def test_discard_without_termination_is_an_error_saying_what_the_status_query_returned(tmp_path, fmus):
     folder = scenario(tmp_path, fmus, [comp("stair", "Stair")], stop=2.0)
     with pytest.raises(SimulationError) as info:

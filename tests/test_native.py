@@ -114,6 +114,9 @@ def test_generated_rhs_agrees_with_python(kernels: ctypes.CDLL, name: str) -> No
                     scale[k] = rng.uniform(0.0, 2.0)
         p = make(kind, **scale)
         x = [rng.uniform(-1, 1) * s for s in [0.3, 1.0, 0.5, 5.0, 5.0, 3.0, 3.0][:n]]
+        if trial % 4 == 3:  # carts inside the stick band: Karnopp's stick branch
+            for k in ((1,) if n == 5 else (1, 3)):
+                x[k] *= 1e-3
         v = rng.uniform(-15, 15)
         out = (dbl * n)()
         c_fn((dbl * n)(*x), dbl(v), (dbl * len(names))(*[getattr(p, k) for k in names]), out)
@@ -144,14 +147,13 @@ def _drive_law(fmu: Path, law_name: str, unzip: Path, episodes: int = 10, n: int
     """
     from fmi_helpers import instantiate
 
-    from ipcosim.controllers.catalog import build_law, defaults, lqr_from_gains, lqr_gains, swing_up_around
+    from ipcosim.controllers.catalog import DESIGNED_LAWS, build_law, defaults, designed_gains, law_from_gains
     from ipcosim.fmus.physics import MEASURED
 
     law, kind = _laws()[law_name]
     py = build_law(kind, law, defaults(kind, law), backend="scipy")
-    if law in ("LQR", "SwingUp"):  # what the Python FMU runs on its shipped gains (controller_fmu)
-        lqr = lqr_from_gains(kind, defaults(kind, law), lqr_gains(getattr(py, "balance", py)))
-        py = swing_up_around(kind, defaults(kind, law), lqr) if law == "SwingUp" else lqr
+    if law in DESIGNED_LAWS:  # what the Python FMU runs on its shipped gains (controller_fmu)
+        py = law_from_gains(kind, law, defaults(kind, law), designed_gains(py))
     inst = instantiate(fmu, unzip)
     s = inst.slave
     rng = random.Random(zlib.crc32(law_name.encode()))
@@ -193,10 +195,9 @@ def test_generated_laws_agree_with_python(native_fmus: tuple[Path, Path], tmp_pa
         print(f"{name}: worst relative difference (1 V floor) {worst:.2e} over 10 x 200 samples")
 
 
-#: Scenarios the native flavour refuses, with what the refusal must name: the lab plant's encoders and
-#: the tap are instrument options the native plant lacks.
-NATIVE_UNSUPPORTED = {"double-mass-hsmc-lab": "parameter cart_resolution = 2.275e-05 must be 0",
-                      "single-mass-lqr-tap": "parameter tap_torque_impulse = 0.005 must be 0"}
+#: Scenarios the native flavour refuses, with what the refusal must name: the tap is an instrument option
+#: the native plant lacks (the lab bench's it has: double-mass-hsmc-lab runs on both flavours).
+NATIVE_UNSUPPORTED = {"single-mass-lqr-tap": "parameter tap_torque_impulse = 0.005 must be 0"}
 
 
 @needs_cc
@@ -421,8 +422,9 @@ def test_native_fmu_rejects_a_bad_parameter_by_name(native_fmus: tuple[Path, Pat
 @needs_cc
 @pytest.mark.integration
 def test_native_plant_refuses_instrument_options_by_name(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
-    """The native plant has ideal instruments: the Python plant's options are there (same value references)
-    but must stay 0, in the FMU itself and through ``--set``; 0 is accepted."""
+    """The native plant has no measurement noise or taps: the Python plant's options are there (same value
+    references) but must stay 0, in the FMU itself and through ``--set``; 0 is accepted. A computation delay
+    longer than its delay line is refused by name."""
     from fmi_helpers import instantiate
     from fmpy.fmi1 import FMICallException
 
@@ -433,16 +435,19 @@ def test_native_plant_refuses_instrument_options_by_name(native_fmus: tuple[Path
     inst = instantiate(native / "IP02DoubleMass.fmu", tmp_path / "p")
     inst.slave.setupExperiment(startTime=0.0)
     inst.slave.enterInitializationMode()
-    inst.set(end_stop=0.407)
+    inst.set(noise_counts=0.5)
     with pytest.raises(FMICallException):
         inst.slave.exitInitializationMode()
-    assert "IP02DoubleMass: parameter end_stop = 0.407 must be 0 in the native flavour" in inst.text()
+    assert "IP02DoubleMass: parameter noise_counts = 0.5 must be 0 in the native flavour" in inst.text()
     inst.slave.freeInstance()
-    with pytest.raises(FlavourError, match="native flavour of IP02SingleMass has no instruments: parameter "
-                                           "input_delay = 0.002 must be 0"):
-        ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"plant.input_delay": 0.002},
-            stop_time=0.01)
-    ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"plant.end_stop": 0.0}, stop_time=0.01)
+    with pytest.raises(FlavourError, match="native flavour of IP02SingleMass has no tap_torque_impulse: parameter "
+                                           "tap_torque_impulse = 0.002 must be 0"):
+        ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"plant.tap_torque_impulse": 0.002},
+                    stop_time=0.01)
+    with pytest.raises(FlavourError, match="at most 32 steps of 0.001 s: parameter input_delay = 0.05"):
+        ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"plant.input_delay": 0.05},
+                    stop_time=0.01)
+    ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"plant.noise_counts": 0.0}, stop_time=0.01)
 
 
 @needs_cc
@@ -508,11 +513,12 @@ def test_studies_take_the_native_flavour_when_it_can_run_them(built_here: tuple[
     spec, why = study_spec("single-mass-lqr", "auto", names=["plant.Mp"], stop_time=1.0)
     assert spec.fmus == "native" and why.startswith("native")
     refusals = {("single-mass-lqr", "controller.Q_cart_position"): "not a parameter of the native FMUs",
-                ("single-mass-lqr", "plant.end_stop"): "instrument option",
-                ("double-mass-hsmc-lab", "plant.Mp"): "must be 0"}
+                ("single-mass-lqr", "plant.noise_counts"): "instrument option"}
     for (scenario, name), said in refusals.items():
         spec, why = study_spec(scenario, "auto", names=[name], stop_time=1.0)
         assert spec.fmus == "python" and said in why, (scenario, name, why)
+    spec, why = study_spec("double-mass-hsmc-lab", "auto", names=["plant.Mp"], stop_time=1.0)
+    assert spec.fmus == "native", why  # the lab bench runs on the C flavour
     spec, why = study_spec("single-mass-lqr", "python", names=["plant.Mp"], stop_time=1.0)
     assert spec.fmus == "python"
     monkeypatch.setattr(flavour, "native_fmu_dir", lambda: tmp_path)  # nothing built there

@@ -162,6 +162,53 @@ def test_coulomb_friction_holds_the_cart_back() -> None:
     assert stuck[-1, 0] < 0.5 * free[-1, 0]
 
 
+def _pushed(name: str, breakaway: float, force: float, seconds: float = 2.0) -> list[float]:
+    """State after ``seconds`` of a constant voltage that pushes the motor cart with ``force`` [N] at stall, the
+    pendulum hanging, every cart with Coulomb (breakaway) force ``breakaway`` [N]."""
+    kw = {"b": breakaway} if name == "thesis-ch3" else {"b1": breakaway, "b2": breakaway}
+    p = preset(name, **kw)
+    plant = Plant(p, state(name, math.pi))
+    volts = force * p.Ra / p.force_per_amp
+    for k in range(round(seconds / H)):
+        plant.do_step(k * H, H, volts)
+    return plant.state
+
+
+@pytest.mark.parametrize("name", ["thesis-ch3", "thesis-ch4"])
+def test_a_cart_pushed_below_its_breakaway_force_does_not_move(name: str) -> None:
+    """Stick-slip (Karnopp): 95 % of the breakaway force for 2 s leaves every cart exactly where it was; 120 %
+    moves the motor cart by millimetres (a smoothed Coulomb law creeps under any force)."""
+    stuck = _pushed(name, 0.1, 0.095)
+    carts = (0,) if name == "thesis-ch3" else (0, 2)
+    assert all(stuck[i] == 0.0 and stuck[i + 1] == 0.0 for i in carts), stuck
+    assert _pushed(name, 0.1, 0.12)[0] > 1e-4
+
+
+def test_karnopp_force_sticks_inside_the_band_and_slides_outside() -> None:
+    from ipcosim.fmus.physics import karnopp
+
+    assert karnopp(0.0, 0.05, 0.1, 1e-3) == 0.05          # stuck: balances the applied force
+    assert karnopp(5e-4, -0.3, 0.1, 1e-3) == -0.1         # breaking away: the breakaway force
+    assert karnopp(-0.02, 0.05, 0.1, 1e-3) == -0.1        # sliding: kinetic, against the motion
+    assert karnopp(0.02, 5.0, 0.1, 1e-3) == 0.1
+
+
+def test_a_sliding_cart_sticks_where_it_stops() -> None:
+    """Thrown at 5 cm/s against 0.3 N of friction (no motor force), the cart stops within
+    v^2 M / (2 F) and stays there: no creep."""
+    p = preset("thesis-ch3", b=0.3)
+    x0 = state("thesis-ch3", math.pi)
+    x0[1] = 0.05
+    plant = Plant(p, x0)
+    positions = []
+    for k in range(1500):
+        plant.do_step(k * H, H, 0.0)
+        plant.set_state([*plant.state[:4], 0.0])  # the motor shorted out: no back-EMF braking
+        positions.append(plant.state[0])
+    assert positions[-1] == positions[700] and plant.state[1] == 0.0
+    assert 0.0 < positions[-1] < 0.05 ** 2 * (p.Meq + p.Mp) / (2 * 0.3) * 1.5
+
+
 @pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")
 @pytest.mark.parametrize("name", ["thesis-ch3", "thesis-ch4"])
 def test_non_finite_state_fails_the_step_with_time_and_state(name: str) -> None:

@@ -162,20 +162,60 @@ def test_lateness_histogram_counts_every_step():
     assert h[">=5000us"] == 1 and sum(h.values()) == 6
 
 
-def test_a_run_over_its_overrun_budget_says_so_in_one_line(capsys):
-    from ipcosim.harness.master.realtime import RealtimePacer
+def test_a_run_over_its_overrun_budget_says_so_in_one_line(monkeypatch):
+    from ipcosim.harness.master.realtime import DEFAULT_OVERRUN_BUDGET, RealtimePacer, budget_warning
 
     obs = RealtimePacer(overrun_budget=0.05)
     paced(obs, SimClock(), late_steps={4, 9})           # 4 late starts of 20: 20 % > 5 %
     obs.finish(_Execution(), None)
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "real-time budget exceeded" in err[0] and "budget 5.00 %" in err[0]
     m = obs.metrics()
     assert m["overrun_budget_exceeded"] is True and m["overruns"] >= 2
+    assert m["overrun_fraction"] == m["overruns"] / m["realtime_steps"]
+    assert m["realtime_priority"] is False and m["lateness_max_s"] > 0
+    line = budget_warning(m)
+    assert "\n" not in line and "budget 5.00 %" in line and f"{100 * m['overrun_fraction']:.2f} %" in line
+    assert "real-time priority not in force" in line and "--rt-priority" in line
     within = RealtimePacer(overrun_budget=0.5)
     paced(within, SimClock(), late_steps={4})
     within.finish(_Execution(), None)
-    assert not capsys.readouterr().err and within.metrics()["overrun_budget_exceeded"] is False
+    assert within.metrics()["overrun_budget_exceeded"] is False and budget_warning(within.metrics()) is None
+    monkeypatch.delenv("IPCOSIM_RT_OVERRUN_BUDGET", raising=False)
+    assert RealtimePacer().overrun_budget == DEFAULT_OVERRUN_BUDGET == 0.01
+    monkeypatch.setenv("IPCOSIM_RT_OVERRUN_BUDGET", "0.2")
+    assert RealtimePacer().overrun_budget == 0.2 and RealtimePacer(overrun_budget=0.3).overrun_budget == 0.3
+
+
+@pytest.mark.integration
+def test_a_degraded_realtime_run_warns_and_exits_3(tmp_path, monkeypatch, capsys):
+    """A host that starts every 10th step 2 ms late (a loaded machine) is over the default 1 % budget."""
+    import json
+
+    from ipcosim.harness.cli import main
+    from ipcosim.harness.master import realtime
+
+    begin = realtime.Pacer.begin
+
+    def loaded(self, tick):
+        if tick % 10 == 5:
+            time.sleep(2e-3)
+        return begin(self, tick)
+
+    monkeypatch.setattr(realtime.Pacer, "begin", loaded)
+    monkeypatch.delenv("IPCOSIM_RT_OVERRUN_BUDGET", raising=False)
+    out = tmp_path / "rt"
+    status = main(["run", "single-mass-lqr", "--realtime", "--stop-time", "0.3", "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 3, err
+    assert len(err) == 1 and err[0].startswith("ipcosim run: warning: real-time run degraded:"), err
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["overrun_budget_exceeded"] is True and m["overrun_fraction"] > 0.01 and m["lateness_max_s"] > 1e-3
+    assert (out / "results.csv").is_file(), "a degraded run keeps its results"
+    from test_metrics_kinds import documented_metrics
+    assert set(m) <= documented_metrics(), set(m) - documented_metrics()
+    assert main(["run", "single-mass-lqr", "--realtime", "--stop-time", "0.3", "--out", str(out), "--quiet",
+                 "--overrun-budget", "0.9"]) == 0
+    assert main(["run", "single-mass-lqr", "--overrun-budget", "2", "--out", str(out)]) == 1
+    assert "--overrun-budget 2: expected a fraction in [0, 1]" in capsys.readouterr().err
 
 
 def test_a_fault_of_the_card_makes_the_run_not_upright_whatever_the_last_sample():

@@ -25,10 +25,10 @@ from ipcosim.harness.scenario.ssp_pack import pack
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPECTED = sorted(f"{p}-{c}" for p in ("single-mass", "double-mass")
-                  for c in ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc"))
+                  for c in ("pid", "cascade-pid", "lqr", "lqg", "hsmc", "adaptive-hsmc"))
 
 
-def test_the_ten_scenarios_exist_and_follow_the_contract():
+def test_the_twelve_scenarios_exist_and_follow_the_contract():
     from ipcosim.harness.scenario.ssp_gen import VARIANTS
 
     assert scenario_names() == sorted(EXPECTED + list(VARIANTS))
@@ -110,7 +110,7 @@ def test_missing_fmu_of_a_packed_scenario_is_a_clear_error(tmp_path):
 
 # ------------------------------------------------------------------ bad files
 def test_unknown_name_or_path(tmp_path):
-    with pytest.raises(ScenarioNotFoundError, match="unknown scenario 'single-mass-foo'; known scenarios: double-mass"):
+    with pytest.raises(ScenarioNotFoundError, match="unknown scenario 'single-mass-foo'; did you mean 'single-mass-"):
         load_scenario("single-mass-foo")
     with pytest.raises(ScenarioNotFoundError, match="does not exist"):
         load_scenario(tmp_path / "nowhere.ssp")
@@ -193,7 +193,7 @@ def test_parameter_sets_bindings_transformations_and_units(tmp_path):
     thesis = select_parameter_set(sc, "thesis")
     assert thesis.component("b").bindings[0].parameters[0].value == 7.0
     assert thesis.component("a").bindings == sc.component("a").bindings  # inline values stay
-    with pytest.raises(ScenarioError, match=r"has no parameter set 'best' \(available: thesis, tuned\)"):
+    with pytest.raises(ScenarioError, match=r"has no parameter set 'best'; known: thesis, tuned"):
         select_parameter_set(sc, "best")
     assert sc.units["mm"].factor == 0.001
     assert unit_conversion("m", "mm", sc.units) == (pytest.approx(1000.0), 0.0)

@@ -16,7 +16,7 @@ SCRIPTS = {"single-mass": "my_controller_single_mass.py", "double-mass": "my_con
 BASELINE = HERE / "baselines" / "single-mass.csv"
 
 # The scenarios' thesis parameter sets configure their own controllers; mine ignores those values.
-pytestmark = pytest.mark.filterwarnings("ignore:.*which the FMU does not have:UserWarning")
+pytestmark = pytest.mark.filterwarnings("ignore:.*the FMU does not have:UserWarning")
 
 
 @pytest.fixture(scope="session")
@@ -47,7 +47,8 @@ def test_survives_pendulum_mass_spread(cosim, my_fmus, case):
 def test_stays_on_baseline(cosim, my_fmus):
     """The baseline was recorded with
     ``ipcosim run single-mass-lqr --swap controller=build/MyControllerSingleMass.fmu --stop-time 3
-    --record plant.cart_position,plant.pendulum_angle,controller.voltage --save-baseline baselines/single-mass.csv``."""
+    --record plant.cart_position,plant.pendulum_angle,controller.voltage --out out/single-mass
+    --save-baseline out/single-mass-baseline.csv`` and copied to ``baselines/single-mass.csv`` (README)."""
     result = cosim.run("single-mass-lqr", swap={"controller": my_fmus["single-mass"]}, stop_time=3.0)
     ipcosim.assert_close_to(result, BASELINE, tol={"plant.cart_position": 0.5e-3, "plant.pendulum_angle": 2e-3,
                                                    "controller.voltage": 0.2})

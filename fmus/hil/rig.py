@@ -45,6 +45,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from ipcosim.fmus import instruments
 from ipcosim.fmus.hil.api import (
     CardInfo,
     ErrorCode,
@@ -63,9 +64,9 @@ from ipcosim.fmus.plant import Plant, PlantStepError
 # Q4 card and IP02 facts (thesis-data.md section 1 table and section 3).
 ANALOG_OUTPUTS = 4
 ENCODER_INPUTS = 4
-DAC_BITS = 12
-DAC_RANGE = 10.0                         # +-10 V
-DAC_LSB = 2 * DAC_RANGE / (1 << DAC_BITS)
+DAC_BITS = instruments.DAC_BITS
+DAC_RANGE = instruments.DAC_RANGE_V      # +-10 V
+DAC_LSB = instruments.DAC_V_PER_CODE
 COUNTS_PER_REV = 4096
 CART_M_PER_COUNT = 2.275e-5
 PENDULUM_RAD_PER_COUNT = 1.534e-3

@@ -13,7 +13,8 @@ import sys
 from typing import Sequence
 
 #: Sub-command modules, in the order ``ipcosim --help`` lists them.
-COMMAND_MODULES = ("build", "list_", "run", "export", "linearize", "analyze", "rig", "compare", "sweep", "tune")
+COMMAND_MODULES = ("build", "list_", "describe", "run", "export", "linearize", "analyze", "rig", "compare", "sweep",
+                   "tune")
 
 
 def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
@@ -26,32 +27,49 @@ def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
                         "them and they can run this study, else python), python, or native")
 
 
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose invalid choices (sub-command, plant kind, flavour) answer with the
+    closest known ones; sub-command parsers are of this class too."""
+
+    def _check_value(self, action: argparse.Action, value: object) -> None:
+        from ipcosim.errors import closest
+
+        if action.choices is not None and value not in action.choices:
+            raise argparse.ArgumentError(action, f"invalid choice {value!r}; {closest(str(value), action.choices)}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The top-level parser with every available sub-command registered."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="ipcosim",
-        description="FMI co-simulation of the Quanser IP02 inverted pendulum (single and double mass).")
+        description="FMI co-simulation of the Quanser IP02 inverted pendulum (single and double mass).",
+        allow_abbrev=False)
     parser.add_argument("--debug", action="store_true", help="show the full traceback on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:
         importlib.import_module(f"ipcosim.harness.cli.{name}").register(sub)
+    for each in parsers(parser):
+        each.allow_abbrev = False  # options are never abbreviated: `--token` is not `--token-file`
     return parser
+
+
+def parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """``parser`` and every sub-command parser below it (``ipcosim rig status`` too), depth first."""
+    out = [parser]
+    for action in parser._actions:  # noqa: SLF001 -- argparse offers no public walk
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            for child in dict.fromkeys(action.choices.values()):
+                out.extend(parsers(child))
+    return out
 
 
 def _negative_values(parser: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
     """``--step -1e-3`` as ``--step=-1e-3``: argparse takes a token that starts with ``-`` and is
     not a plain decimal for an option, so a negative value in exponent form would print a
     usage block instead of reaching the value check that names it."""
-    takes_value = set()
-    parsers = [parser]
-    while parsers:
-        p = parsers.pop()
-        for action in p._actions:  # noqa: SLF001 -- argparse offers no public walk
-            if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
-                parsers.extend(action.choices.values())
-            elif action.option_strings and action.nargs is None:
-                takes_value.update(action.option_strings)
+    takes_value = {option for p in parsers(parser) for action in p._actions  # noqa: SLF001
+                   if action.option_strings and action.nargs is None for option in action.option_strings}
     out: list[str] = []
     args = list(argv)
     i = 0

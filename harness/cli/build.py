@@ -15,6 +15,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"output folder (default: {BUILD_DIR})")
     p.add_argument("--native", action="store_true",
                    help="also build the native (C source-code) FMUs into OUT/fmus-native/")
+    p.add_argument("--fmi", choices=("2", "3"), default="2",
+                   help="with --native: the FMI version of the native FMUs, 2 (into OUT/fmus-native/, default) or 3 "
+                        "(FMI 3.0, into OUT/fmus-native-fmi3/)")
     p.add_argument("--force", action="store_true", help="rebuild every FMU even if its sources are unchanged")
     p.set_defaults(func=main)
 
@@ -24,13 +27,17 @@ def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.scenario.ssp_pack import pack_all
 
     out: Path = args.out
+    if args.fmi != "2" and not args.native:
+        from ipcosim.errors import UsageError
+        raise UsageError(f"--fmi {args.fmi}: only the native FMUs have an FMI {args.fmi}.0 variant (add --native)")
     for result in build_all(out / "fmus", force=args.force):
         print(f"{'built' if result.built else 'up to date'}: {result.fmu}")
     for archive in pack_all(out):
         print(f"packed: {archive}")
     if getattr(args, "native", False):
-        from ipcosim.harness.native.cbuild import build_native
+        from ipcosim.harness.native.cbuild import OUT_DIRS, build_native
 
-        for native in build_native(out / "fmus", out / "fmus-native"):
-            print(f"built (native{'' if native.binary else ', sources only'}): {native.fmu}")
+        for native in build_native(out / "fmus", out / OUT_DIRS[args.fmi], fmi=args.fmi):
+            binaries = " + ".join(native.platforms) if native.binary else "sources only"
+            print(f"built (native FMI {args.fmi}.0, {binaries}): {native.fmu}")
     return 0

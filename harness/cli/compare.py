@@ -66,7 +66,7 @@ def thesis_claims(out: Path) -> int:
 
 
 def available_scenarios() -> list[str]:
-    """The ten plant x controller scenarios of the project, in report order, plus any other folder
+    """The plant x controller scenarios of the project, in report order, plus any other folder
     that is not one of the generator's variants (swing-up, tap, lab: they pose other tasks)."""
     from ipcosim.harness.paths import SCENARIO_DIR
     from ipcosim.harness.scenario.ssp_gen import VARIANTS
@@ -160,23 +160,10 @@ def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[s
     from ipcosim.harness.studies.specs import study_spec
 
     specs: dict[str, Any] = {}
-    built = False
     for name in names:
-        try:
-            try:
-                spec, flavour = study_spec(name, args.fmus, stop_time=args.stop_time, series=True,
-                                           parameter_set=_pset(name, args.parameter_set))
-            except FileNotFoundError as exc:
-                if built or "ipcosim build" not in str(exc):
-                    raise
-                from ipcosim.fmus.pybuild import build_all
-                from ipcosim.harness.paths import BUILD_FMU_DIR
-
-                print(f"compare: FMUs missing; building them into {BUILD_FMU_DIR}", file=sys.stderr)
-                build_all(BUILD_FMU_DIR)
-                built = True
-                spec, flavour = study_spec(name, args.fmus, stop_time=args.stop_time, series=True,
-                                           parameter_set=_pset(name, args.parameter_set))
+        try:  # FMUs not built yet are built on first use (ipcosim.harness.engine.build_missing)
+            spec, flavour = study_spec(name, args.fmus, stop_time=args.stop_time, series=True,
+                                       parameter_set=_pset(name, args.parameter_set))
             if not args.quiet:
                 print(f"compare: {name}: {flavour}", file=sys.stderr)
             specs[name] = spec

@@ -1,4 +1,4 @@
-"""``ipcosim export``: a scenario's whole closed loop as one FMI 2.0 co-simulation FMU."""
+"""``ipcosim export``: a scenario's whole closed loop as one FMI 2.0 or 3.0 co-simulation FMU."""
 from __future__ import annotations
 
 import argparse
@@ -8,8 +8,9 @@ from pathlib import Path
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("export", help="write a scenario's closed loop as one FMU",
                        description="Write the whole closed loop of a scenario (setpoint, controller, plant) as one "
-                                   "FMI 2.0 co-simulation FMU built from the native components (`ipcosim build "
-                                   "--native` first): input `reference` (added to the setpoint's output), outputs "
+                                   "FMI 2.0 (or, with --fmi 3, FMI 3.0) co-simulation FMU built from the native "
+                                   "components (`ipcosim build --native` first): input `reference` (added to the "
+                                   "setpoint's output), outputs "
                                    "`<component>.<output>`, parameters `<component>.<name>`. Its results equal "
                                    "`ipcosim run SCENARIO --fmus native`'s.")
     p.add_argument("scenario", metavar="SCENARIO", help="scenario name (see `ipcosim list`) or scenario folder")
@@ -23,6 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "--set controller.sample_period=0.002 (repeatable)")
     p.add_argument("--fmu-dir", action="append", default=[], type=Path, metavar="DIR",
                    help="extra folder to look for the native FMUs in (default build/fmus-native)")
+    p.add_argument("--fmi", choices=("2", "3"), default="2",
+                   help="FMI version of the FMU: 2 (FMI 2.0, default) or 3 (FMI 3.0, same variables and results)")
     p.set_defaults(func=main)
 
 
@@ -32,6 +35,6 @@ def main(args: argparse.Namespace) -> int:
 
     values = RunOptions.create(args.scenario, set=args.set).set  # the --set grammar of `ipcosim run`
     out = export(ExportOptions(args.scenario, args.out, args.parameter_set, args.model_identifier,
-                               tuple(args.fmu_dir), values))
+                               tuple(args.fmu_dir), values, args.fmi))
     print(f"exported: {out}")
     return 0

@@ -40,8 +40,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--seed", type=int, default=0, help="noise seed")
     s.add_argument("--duration", type=float, help="stop serving after this many seconds")
     _token_options(s)
-    s.add_argument("--token", help="access token on the command line (visible to other local users: prefer "
-                                   "--token-file or IPCOSIM_RIG_TOKEN)")
     s.add_argument("--idle-timeout", type=float, default=5.0,
                    help="lease [s]: a client that sends no request for this long is dropped (default 5)")
     s.add_argument("--io-timeout", type=float, default=1.0,
@@ -66,6 +64,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _token_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--token-file", metavar="FILE",
                    help="file holding the rig's shared access token (default: IPCOSIM_RIG_TOKEN, or none)")
+    p.add_argument("--token", help="access token on the command line (visible to other local users: prefer "
+                                   "--token-file or IPCOSIM_RIG_TOKEN)")
 
 
 def _token(args: argparse.Namespace) -> str | None:

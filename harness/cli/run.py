@@ -4,6 +4,12 @@ from __future__ import annotations
 import argparse
 import sys
 
+#: How the summary shows a metric that has no value (docs/metrics.md).
+NOT_REACHED = {"settling_time_s": "not settled", "recovery_time_s": "not recovered",
+               "time_to_upright_s": "not upright at the end"}
+#: Exit status of a real-time run that went over its overrun budget (its results are written).
+EXIT_REALTIME_DEGRADED = 3
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL
@@ -21,6 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="override a parameter or input start value, e.g. --set plant.Mp=0.2 (repeatable)")
     p.add_argument("--swap", action="append", default=[], metavar="COMPONENT=FMU_OR_ALIAS",
                    help="replace a component by another FMU with compatible connectors, e.g. --swap plant=hil")
+    p.add_argument("--strict", action="store_true",
+                   help="parameters of the scenario that a swapped-in FMU does not have are an error (default: "
+                        "ignored, named in one warning line)")
     p.add_argument("--realtime", action="store_true", help="pace the run to wall-clock time")
     p.add_argument("--out", metavar="DIR", help="output folder (default: out/<scenario>)")
     p.add_argument("--plot", action="store_true", help="also write DIR/plot.png")
@@ -41,6 +50,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the master's stepping loop: auto (default: compiled C where it can run, else Python), "
                         "c (an error where it cannot run) or python")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.add_argument("--overrun-budget", metavar="FRACTION",
+                   help="a real-time run's allowed late steps, as a fraction of its steps (default: "
+                        "IPCOSIM_RT_OVERRUN_BUDGET, else 0.01); a run beyond it warns and exits with status "
+                        f"{EXIT_REALTIME_DEGRADED}")
     p.add_argument("--timeout", metavar="S",
                    help="wall-clock limit [s]: stop the run there with its results so far (exit status 124)")
     p.set_defaults(func=main)
@@ -50,6 +63,7 @@ def main(args: argparse.Namespace) -> int:
     import warnings
 
     from ipcosim.harness.engine import prepare_with, run_with
+    from ipcosim.harness.master.realtime import budget_warning
     from ipcosim.harness.master.results import json_safe
     from ipcosim.harness.options import RunOptions
 
@@ -75,7 +89,12 @@ def main(args: argparse.Namespace) -> int:
         for key, value in m.items():
             if key in ("wall_time_s", "real_time_factor", "loop_real_time_factor"):
                 continue
-            print(f"  {key:22s} {value if not isinstance(value, float) else f'{value:.6g}'}")
+            shown = f"{value:.6g}" if isinstance(value, float) else value
+            print(f"  {key:24s} {NOT_REACHED.get(key, 'none') if value is None else shown}")
         print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if args.plot else "")
               + (f", baseline {options.save_baseline}" if options.save_baseline else ""))
+    degraded = budget_warning(result.metrics)
+    if degraded:
+        print(f"ipcosim run: warning: {degraded}", file=sys.stderr)
+        return EXIT_REALTIME_DEGRADED
     return 0

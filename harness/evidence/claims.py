@@ -254,7 +254,7 @@ FALL_CONDITIONS: tuple[tuple[str, str, tuple[float, ...], Callable[[float], dict
     ("voltage transport delay", "ms", (1, 2, 3, 4, 5, 6, 7, 8, 10, 12), lambda v: {"input_delay": v * 1e-3}),
     ("encoder quantization (IP02 counts x factor)", "x", (1, 2, 4, 8),
      lambda v: {"cart_resolution": 2.275e-5 * v, "pendulum_resolution": 2 * math.pi / 4096 * v}),
-    ("Coulomb friction on both carts", "N", (0.1006, 0.2, 0.4, 0.8), lambda v: {"b1": v, "b2": v}),
+    ("Coulomb friction on both carts", "N", (0.1047, 0.2, 0.4, 0.8), lambda v: {"b1": v, "b2": v}),
     ("voltage limit", "V", (8.0, 6.0, 4.0, 2.0), lambda v: {"voltage_limit": v}),
     ("sample period", "ms", (2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0), lambda v: {"sample_period": v * 1e-3}),
     ("output filters left out", "-", (1.0,), lambda v: {"filters": False}),

@@ -35,6 +35,8 @@ THESIS_CLAIMS = {
     ("HSMC", "double-mass"): "meets the goal, steady-state error 5.575 mm",
     ("AdaptiveHSMC", "single-mass"): "reaches the position faster than HSMC",
     ("AdaptiveHSMC", "double-mass"): "smaller steady-state error and settling time than HSMC",
+    ("LQG", "single-mass"): "(not in the thesis)",
+    ("LQG", "double-mass"): "(not in the thesis)",
 }
 
 BEGIN, END = "<!-- evidence:begin -->", "<!-- evidence:end -->"
@@ -119,7 +121,7 @@ def update(path: Path, text: str) -> bool:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ipcosim.harness.evidence.controllers_table",
-                                     description=__doc__.splitlines()[0])
+                                     description=__doc__.splitlines()[0], allow_abbrev=False)
     parser.add_argument("--update", type=Path, help="rewrite the table block in this markdown file")
     args = parser.parse_args(argv)
     text = document()

@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     """Command line (see the module docstring)."""
     from ipcosim.harness.paths import BUILD_DIR
 
-    p = argparse.ArgumentParser(prog="python -m ipcosim.harness.evidence.fmi_crosscheck")
+    p = argparse.ArgumentParser(prog="python -m ipcosim.harness.evidence.fmi_crosscheck", allow_abbrev=False)
     p.add_argument("out", nargs="?", default=str(Path(BUILD_DIR) / "crosscheck"))
     p.add_argument("--python", default=str(Path(BUILD_DIR) / "fmus"))
     p.add_argument("--native", default=str(Path(BUILD_DIR) / "fmus-native"))

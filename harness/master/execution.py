@@ -680,6 +680,7 @@ class Execution:
                 slave = self.slaves[idx]
                 logged_error = slave.errors_logged > marks[idx]
                 if not logged_error and self._ended_by_fmu(idx, function, status):
+                    self._record_last_successful(slave)
                     return
                 err = slave.fail(function, status, self.time_of(fn))
                 if status == DISCARD and function == "fmi2DoStep":
@@ -719,6 +720,29 @@ class Execution:
                               "note": f"component {slave.describe()} ended the simulation in its step from "
                                       f"t = {t:.6g} s to {t_next:.6g} s ({query}); the run ends at t = {t:.6g} s"}
         return True
+
+    def _record_last_successful(self, slave: Any) -> None:
+        """After a component ended the simulation within its step: the row at the time it reached
+        there (its last successful time, when past the last full row), with every component's
+        outputs as they are then -- the row FMPy's ``simulate_fmu`` records."""
+        t, t_next = self.time_of(self.tick), self.time_of(self.tick + 1)
+        t_last = slave.last_successful_time()
+        if t_last is None or not t + 1e-12 * max(1.0, abs(t)) < t_last <= t_next:
+            return
+        for b in self.blocks:
+            self._get_outputs(b, t_last)
+        self.record[0, :self.n_values] = self.values
+        self.record_i[0, :self.n_ints] = self.ints
+        if self._string_slots:
+            self.record_s[self._base_row] = tuple(lst[j] for lst, j in self._string_slots)
+        row = self._rows(self._base_row, 1)
+        row["time"] = t_last
+        self._check_finite(self._base_row, self._base_row + 1)
+        self.writer.append(row)
+        self._base_row += 1
+        assert self.terminated_by is not None
+        self.terminated_by.update(last_successful_time=t_last, note=self.terminated_by["note"].replace(
+            f"the run ends at t = {t:.6g} s", f"recorded up to its last successful time t = {t_last:.6g} s"))
 
     def _check_finite(self, row0: int, row1: int) -> None:
         """Raise for the first non-finite output in record rows ``row0 .. row1-1`` (absolute

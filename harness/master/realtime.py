@@ -14,10 +14,10 @@ metrics.json):
     Percentiles of ``|actual period - h|``, the actual period being the time between
     the starts of consecutive steps (from the second step on: the first one starts when
     the pacer does).
-``overruns``
-    Steps that started later than ``tolerance`` (default: half a period) after their
-    deadline, i.e. whose predecessor ended that late. Lateness is measured against the
-    schedule ``t0 + n*h`` anchored at the step that ran earliest: when the pacer paces,
+``overruns``, ``overrun_fraction``
+    Steps (and their fraction of ``realtime_steps``) that started later than ``tolerance``
+    (default: half a period) after their deadline, i.e. whose predecessor ended that late.
+    Lateness is measured against the schedule ``t0 + n*h`` anchored at the step that ran earliest: when the pacer paces,
     that is its own schedule; in a HIL run the card's clock paces the loop (the adapter
     returns at the card's sample instants, a constant offset after the pacer's deadlines)
     and the offset is not counted as lateness.
@@ -34,6 +34,13 @@ metrics.json):
     What the pacer arranged, each item ``applied ...`` or ``not applied: why``: ``gc``
     (cyclic garbage collection off during the loop, start-up objects frozen), ``cpu_affinity``
     and ``sched_fifo`` (only when asked for).
+``realtime_priority``
+    Whether the run was under real-time priority (``SCHED_FIFO``, ``IPCOSIM_RT_PRIORITY``).
+``overrun_budget``, ``overrun_budget_exceeded``
+    The overrun fraction allowed (``ipcosim run --overrun-budget``, else
+    ``IPCOSIM_RT_OVERRUN_BUDGET``, else :data:`DEFAULT_OVERRUN_BUDGET`) and whether the run went
+    beyond it: such a run was degraded by the host (its control may differ from the
+    controller's real behaviour); :func:`budget_warning` is the one line that says so.
 
 Options come from the environment, so that any run (``ipcosim run``, the Python API, a
 study) can ask for them without new arguments:
@@ -44,8 +51,8 @@ study) can ask for them without new arguments:
     Run under ``SCHED_FIFO`` at priority ``P`` (1..99) while paced (needs CAP_SYS_NICE or
     an rtprio limit; otherwise reported as not applied and the run goes on).
 ``IPCOSIM_RT_OVERRUN_BUDGET=F``
-    Overruns allowed, as a fraction of the steps (e.g. ``0.005``); a run beyond it says so
-    in one line on stderr at its end, and metrics.json gets ``overrun_budget_exceeded``.
+    Overruns allowed, as a fraction of the steps (e.g. ``0.005``), where the run is not given
+    one (``ipcosim run --overrun-budget``); default :data:`DEFAULT_OVERRUN_BUDGET`.
 
 What a run learns from a card it drives (its faults, its overruns) is recorded by the
 hardware-in-the-loop room's own observer, :mod:`ipcosim.fmus.hil.observer`.
@@ -55,7 +62,6 @@ from __future__ import annotations
 import gc
 import math
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -116,6 +122,7 @@ class RealtimeStats:
                 "period_jitter_max_s": self.period_jitter_max, "overruns": self.overruns,
                 "worst_step_time_s": self.worst_step_time, "lateness_p99_s": self.lateness_p99,
                 "lateness_max_s": self.lateness_max, "realtime_steps": self.steps,
+                "overrun_fraction": self.overruns / self.steps if self.steps else 0.0,
                 "lateness_histogram": dict(self.lateness_histogram)}
 
     def summary(self) -> str:
@@ -235,6 +242,28 @@ class Pacer:
         return self.stats().as_metrics()
 
 
+#: Overruns a paced run may have, as a fraction of its steps, before it counts as degraded.
+DEFAULT_OVERRUN_BUDGET = 0.01
+
+
+def budget_warning(metrics: dict[str, Any]) -> str | None:
+    """The one line telling that a paced run went over its overrun budget (None if it did not).
+
+    Parameters
+    ----------
+    metrics : dict
+        A run's metrics (the keys :class:`RealtimePacer` adds).
+    """
+    if not metrics.get("overrun_budget_exceeded"):
+        return None
+    priority = ("under real-time priority" if metrics.get("realtime_priority") else
+                "real-time priority not in force (IPCOSIM_RT_PRIORITY=P; the rig: ipcosim rig serve --rt-priority P)")
+    return (f"real-time run degraded: {100 * metrics['overrun_fraction']:.2f} % of {metrics['realtime_steps']} steps "
+            f"started late (budget {100 * metrics['overrun_budget']:.2f} %, --overrun-budget), worst lateness "
+            f"{1e3 * metrics['lateness_max_s']:.3g} ms, {priority}: the results may not show the controller's "
+            f"behaviour on a real-time host")
+
+
 def _env_number(name: str, kind: type, lo: float, hi: float) -> Any:
     """An optional numeric environment variable in [lo, hi] (None if unset)."""
     text = os.environ.get(name, "").strip()
@@ -336,20 +365,22 @@ class RealtimePacer(Observer):
     tolerance : float, optional
         Overrun tolerance [s] (default half a step).
     overrun_budget : float, optional
-        Allowed overruns as a fraction of the steps (default: ``IPCOSIM_RT_OVERRUN_BUDGET``).
+        Allowed overruns as a fraction of the steps (default: ``IPCOSIM_RT_OVERRUN_BUDGET``, else
+        :data:`DEFAULT_OVERRUN_BUDGET`).
     """
 
     def __init__(self, spin: float = 200e-6, tolerance: float | None = None,
                  overrun_budget: float | None = None) -> None:
         self.spin = spin
         self.tolerance = tolerance
-        self.overrun_budget = (overrun_budget if overrun_budget is not None
-                               else _env_number("IPCOSIM_RT_OVERRUN_BUDGET", float, 0.0, 1.0))
+        if overrun_budget is None:
+            overrun_budget = _env_number("IPCOSIM_RT_OVERRUN_BUDGET", float, 0.0, 1.0)
+        self.overrun_budget: float = DEFAULT_OVERRUN_BUDGET if overrun_budget is None else overrun_budget
         self.pacer: Pacer | None = None
         self._open = False
         self._setup: dict[str, str] = {}
         self._restore: Callable[[], None] = lambda: None
-        self._over_budget: str | None = None
+        self._over_budget = False
 
     def start(self, execution) -> None:  # noqa: ANN001 -- ipcosim.harness.master.execution.Execution
         self._setup, self._restore = realtime_setup()
@@ -377,20 +408,16 @@ class RealtimePacer(Observer):
             self.pacer.end()
             self._open = False
         self._restore()
-        if self.pacer is not None and self.overrun_budget is not None:
+        if self.pacer is not None:
             st = self.pacer.stats()
-            if st.steps and st.overruns > self.overrun_budget * st.steps:
-                self._over_budget = (f"real-time budget exceeded: {st.overruns} overruns in {st.steps} steps "
-                                     f"({100 * st.overruns / st.steps:.2f} %, budget "
-                                     f"{100 * self.overrun_budget:.2f} %)")
-                print(f"ipcosim: {self._over_budget}", file=sys.stderr, flush=True)
+            self._over_budget = bool(st.steps) and st.overruns > self.overrun_budget * st.steps
 
     def metrics(self) -> dict[str, Any]:
         if self.pacer is None:
             return {}
         out: dict[str, Any] = self.pacer.metrics()
         out["realtime_setup"] = dict(self._setup)
-        if self.overrun_budget is not None:
-            out["overrun_budget"] = self.overrun_budget
-            out["overrun_budget_exceeded"] = self._over_budget is not None
+        out["realtime_priority"] = self._setup.get("sched_fifo", "").startswith("applied")
+        out["overrun_budget"] = self.overrun_budget
+        out["overrun_budget_exceeded"] = self._over_budget
         return out

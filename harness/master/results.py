@@ -15,7 +15,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.errors import IpcosimError, UsageError, closest
 
 #: Draws a result's figure: ``plotter(result, path or None)`` (see :attr:`Result.plotter`).
 Plotter = Callable[["Result", "Path | None"], Any]
@@ -39,7 +39,7 @@ class Result:
         Field ``time`` [s], then one field ``component.variable`` per recorded connector
         (SI units), one row per recorded communication point (row 0 is the initial state).
     metrics : dict
-        ``metrics.json`` content (see DESIGN.md): the task metrics, ``wall_time_s`` (the whole
+        ``metrics.json`` content (see docs/metrics.md): the task metrics, ``wall_time_s`` (the whole
         run: load, instantiate, initialize, step, write), ``real_time_factor`` (simulated /
         wall_time_s) and ``loop_real_time_factor`` (simulated / stepping-loop seconds).
     metadata : dict
@@ -133,7 +133,7 @@ def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> li
     for p in patterns:
         hits = [c for c in cols if fnmatch.fnmatchcase(c, p)]
         if not hits:
-            raise UsageError(f"--record {p}: no such variable (recorded: {', '.join(cols[1:])})")
+            raise UsageError(f"--record {p}: no such variable; {closest(p, cols[1:], listing=40)}")
         chosen.update(hits)
     return [c for c in cols if c in chosen]
 
@@ -142,8 +142,16 @@ class OutputFolderError(IpcosimError, OSError):
     """The output folder cannot be created or written."""
 
 
+#: The files a run writes into its output folder (:meth:`Result.write`).
+RUN_FILES = ("results.csv", "metrics.json", "plot.png")
+
+
 def open_output(out_dir: str | Path, what: str = "--out") -> Path:
     """Create ``out_dir`` and check that files can be written there (before a run starts).
+
+    A previous run's files there (:data:`RUN_FILES`) are removed first, so that no stale figure
+    or metrics sit beside the new results; other files are left as they are. A ``results.csv``
+    that is not a run's (its first column is not ``time``: a sweep's, say) is never replaced.
 
     Raises
     ------
@@ -151,7 +159,10 @@ def open_output(out_dir: str | Path, what: str = "--out") -> Path:
         Naming the folder and the reason.
     """
     out = Path(out_dir)
+    _refuse_foreign_results(out / "results.csv", what)
     try:
+        for name in RUN_FILES if out.is_dir() else ():
+            (out / name).unlink(missing_ok=True)
         out.mkdir(parents=True, exist_ok=True)
         probe = tempfile.NamedTemporaryFile(dir=out, prefix=".ipcosim-write-check-", delete=True)
         probe.write(b"x")
@@ -160,6 +171,20 @@ def open_output(out_dir: str | Path, what: str = "--out") -> Path:
     except OSError as exc:
         raise OutputFolderError(f"{what} {out}: output folder is not writable ({exc.strerror or exc})") from None
     return out
+
+
+def _refuse_foreign_results(csv: Path, what: str) -> None:
+    """OutputFolderError if ``csv`` exists and is not a run's results (the first column is ``time``)."""
+    try:
+        with csv.open(encoding="utf-8", errors="replace") as fh:
+            first = fh.readline()
+    except (FileNotFoundError, NotADirectoryError):
+        return
+    except OSError as exc:
+        raise OutputFolderError(f"{what} {csv.parent}: cannot read its results.csv ({exc.strerror or exc})") from None
+    if first and first.split(",", 1)[0].strip() != "time":
+        raise OutputFolderError(f"{what} {csv.parent}: its results.csv is not a run's (first column "
+                                f"{first.split(',', 1)[0].strip()!r}, not 'time'); give another folder")
 
 
 class RowWriter:

@@ -20,6 +20,7 @@ arrays (the FMI 2.0 representation), String buffers Python lists of ``bytes``.
 from __future__ import annotations
 
 import ctypes
+import math
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -98,6 +99,11 @@ class Slave:
         what its status query returned (for messages)."""
         return False, "the slave offers no status query"
 
+    def last_successful_time(self) -> float | None:
+        """After the FMU ended the simulation in a step: the time it reached in that step (FMI 2.0
+        ``fmi2GetRealStatus(fmi2LastSuccessfulTime)``, FMI 3.0 ``lastSuccessfulTime``), or None."""
+        return None
+
     def messages(self) -> list[str]:
         """Log messages the slave reported, oldest first (bounded)."""
         return []
@@ -153,7 +159,17 @@ class FMUSlave(Slave):
     logging_on : bool
         Passed to fmi2Instantiate. On by default: pythonfmu FMUs forward their error messages
         only to instances instantiated with logging on.
+
+    Attributes
+    ----------
+    reusable : bool
+        Keep the instance when a run that ended cleanly frees it (state ``parked``), and reset it
+        (``fmi2Reset``) for the next run instead of instantiating anew: each pythonfmu 0.7.0
+        instantiation re-executes the FMU's module and keeps the class it defines alive (a few
+        kB a run in a study of many). :meth:`release` frees a parked instance for good.
     """
+
+    reusable = False
 
     MAX_MESSAGES = 50
 
@@ -206,6 +222,11 @@ class FMUSlave(Slave):
         )
         from fmpy.logging import addLoggerProxy  # type: ignore[import-not-found]
 
+        if self.state == "parked":  # a clean run's instance, kept: reset instead of instantiating anew
+            self._messages.clear()
+            self._call(f"{self.FMI}Reset")
+            self.state = "instantiated"
+            return
         if self._fmu is None:
             self._fmu = load_library(self.instance, self.unzip_dir)
         callbacks = fmi2CallbackFunctions()
@@ -259,7 +280,10 @@ class FMUSlave(Slave):
             self.state = "terminated"
 
     def free(self) -> None:
-        if self._fmu is None or self.state in ("freed", "created"):
+        if self._fmu is None or self.state in ("freed", "created", "parked"):
+            return
+        if self.reusable and self.state == "terminated" and self._fmu.component is not None:
+            self.state = "parked"
             return
         _SINKS.pop(getattr(self, "_sink", None), None)
         try:
@@ -273,6 +297,13 @@ class FMUSlave(Slave):
                     self._fmu.freeLibrary()
                 except Exception:  # noqa: BLE001 -- unloading is best effort
                     pass
+
+    def release(self) -> None:
+        """Free the instance for good (also a parked one)."""
+        self.reusable = False
+        if self.state == "parked":
+            self.state = "terminated"
+        self.free()
 
     def set_values(self, variables: Sequence[Variable], values: Sequence[Any]) -> None:
         groups: dict[str, tuple[list[int], list[Any]]] = {}
@@ -349,6 +380,11 @@ class FMUSlave(Slave):
             return False, f"fmi2GetBooleanStatus(fmi2Terminated) returned {STATUS.get(status, status)}"
         return bool(value.value), (f"fmi2GetBooleanStatus(fmi2Terminated) returned "
                                    f"{'fmi2True' if value.value else 'fmi2False'}")
+
+    def last_successful_time(self) -> float | None:
+        value = ctypes.c_double(math.nan)
+        status = self._fmu._functions["fmi2GetRealStatus"](self._fmu.component, 2, ctypes.byref(value))
+        return float(value.value) if status <= WARNING and math.isfinite(value.value) else None
 
 
 _FMI3_CTYPES = {"Float64": ctypes.c_double, "Float32": ctypes.c_float, "Int8": ctypes.c_int8,
@@ -495,6 +531,10 @@ class FMU3Slave(FMUSlave):
     def terminated(self) -> tuple[bool, str]:
         flag = bool(self._flags[1].value)
         return flag, f"fmi3DoStep set terminateSimulation = {'true' if flag else 'false'}"
+
+    def last_successful_time(self) -> float | None:
+        value = float(self._flags[3].value)
+        return value if math.isfinite(value) else None
 
 
 def load_library(instance: Instance, unzip_dir: Path) -> Any:

@@ -1,11 +1,16 @@
-"""``ipcosim build --native``: every plant, controller and the setpoint as an FMI 2.0 source-code FMU.
+"""``ipcosim build --native``: every plant, controller and the setpoint as a source-code FMU.
 
 Each ``<Model>.fmu`` holds ``sources/`` (the generated ``model.c``, the shared ``fmi2glue.c``,
-``fmi2shared.h`` and ``model.h``, the FMI 2.0 headers) listed in the model description's
-``<SourceFiles>``, and, where a C compiler is found (``$CC``, ``cc``, ``gcc``, ``clang``),
-``binaries/linux64/<Model>.so`` compiled with ``-std=c99 -Wall -Wextra -pedantic -Werror``. The
-variables are read from the Python flavour's FMU in ``python_dir`` (built first), so names, value references, units and
-start values are the same.
+``fmi2shared.h`` and ``model.h``, the FMI headers) and its binaries: ``linux64/<Model>.so``
+where a C compiler is found (``$CC``, ``cc``, ``gcc``, ``clang``) and ``win64/<Model>.dll``
+where the mingw-w64 cross compiler is (``toolchain.find_cross_compiler``), both compiled from the
+same files with the same flags (``-std=c99 -Wall -Wextra -pedantic -Werror -O2``). Two FMI
+versions, one generator (:data:`VARIANTS`): FMI 2.0 lists its C files in the model description's
+``<SourceFiles>``; FMI 3.0 (``--fmi 3``) adds ``fmi3glue.c`` (the FMI 3.0 functions over the
+FMI 2.0 glue, ``fmi3adapter.h``), lists them in ``sources/buildDescription.xml`` and derives its
+model description from the FMI 2.0 one (``fmi3.model_description``). The variables are read
+from the Python flavour's FMU in ``python_dir`` (built first), so names, value references,
+units and start values are the same.
 """
 from __future__ import annotations
 
@@ -18,14 +23,43 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from ipcosim.harness.native import cgen, models
-from ipcosim.toolchain import find_compiler
+from ipcosim.harness.native import cgen, fmi3, models
+from ipcosim.toolchain import find_compiler, find_cross_compiler
 
 C_DIR = Path(__file__).resolve().parent / "c"
 #: The hand-written glue every native FMU carries (``fmi2shared.h``: what it shares with the loop container).
 GLUE_FILES = ("fmi2glue.c", "model.h", "fmi2shared.h")
-FLAGS = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-O2", "-fPIC", "-shared")
+#: The warnings and the floating-point flags every binary is compiled with (Linux and Windows alike).
+STRICT = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-O2")
+FLAGS = (*STRICT, "-fPIC", "-shared")
+#: The Windows DLL: the same flags (position-independent anyway), libgcc linked in (no DLL of it needed).
+WIN_FLAGS = (*STRICT, "-shared", "-static-libgcc")
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One FMI version of the native FMUs: the C file holding a single model's FMI functions
+    (``fmi2glue.c``, or ``fmi3glue.c`` over it) and an exported loop's (``container.c``, or
+    ``fmi3container.c`` over it), the files both need besides the FMI 2.0 glue, the FMI headers,
+    and the binary folder per platform."""
+
+    fmi: str
+    model_glue: str
+    container_glue: str
+    extra: tuple[str, ...]
+    headers: tuple[str, ...]
+    binaries: dict[str, str]
+
+
+VARIANTS = {
+    "2": Variant("2", "fmi2glue.c", "container.c", (), FMI_HEADERS, {"linux64": "linux64", "win64": "win64"}),
+    "3": Variant("3", "fmi3glue.c", "fmi3container.c", ("fmi3adapter.h",),
+                 FMI_HEADERS + FMI3_HEADERS, {"linux64": "x86_64-linux", "win64": "x86_64-windows"}),
+}
+#: Where ``ipcosim build --native --fmi N`` writes (below the build folder).
+OUT_DIRS = {"2": "fmus-native", "3": "fmus-native-fmi3"}
 PLANTS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}
 
 
@@ -35,10 +69,11 @@ class NativeBuildError(RuntimeError):
 
 @dataclass(frozen=True)
 class NativeResult:
-    """One native FMU: its file and whether a binary is inside."""
+    """One native FMU: its file, whether a binary is inside and for which platforms."""
 
     fmu: Path
     binary: bool
+    platforms: tuple[str, ...] = ()
 
 
 def model_names() -> list[str]:
@@ -77,16 +112,21 @@ def fmi_header_dir() -> Path:
     return Path(fmpy.__file__).parent / "c-code"
 
 
-def write_sources(model: models.NativeModel, dest: Path) -> tuple[list[str], str]:
+def copy_glue(dest: Path, files: tuple[str, ...], variant: Variant) -> None:
+    """Copy the hand-written ``files`` (plus the variant's additions) and its FMI headers into ``dest``."""
+    for name in dict.fromkeys((*files, *variant.extra)):
+        shutil.copy(C_DIR / name, dest / name)
+    for name in variant.headers:
+        shutil.copy(fmi_header_dir() / name, dest / name)
+
+
+def write_sources(model: models.NativeModel, dest: Path, variant: Variant = VARIANTS["2"]) -> tuple[list[str], str]:
     """Write ``sources/`` for ``model`` into ``dest``; returns (listed C files, GUID)."""
     dest.mkdir(parents=True, exist_ok=True)
     text, gid = cgen.model_c(model)
     (dest / "model.c").write_text(text)
-    for name in GLUE_FILES:
-        shutil.copy(C_DIR / name, dest / name)
-    for name in FMI_HEADERS:
-        shutil.copy(fmi_header_dir() / name, dest / name)
-    return ["model.c", "fmi2glue.c"], gid
+    copy_glue(dest, (*GLUE_FILES, variant.model_glue), variant)
+    return ["model.c", variant.model_glue], gid
 
 
 def compile_sources(sources: Path, files: list[str], out: Path, cc: str, flags: tuple[str, ...] = FLAGS) -> None:
@@ -98,7 +138,56 @@ def compile_sources(sources: Path, files: list[str], out: Path, cc: str, flags: 
         raise NativeBuildError(f"{out.stem}: {Path(cc).name} failed on the generated sources:\n{proc.stderr.strip()}")
 
 
-def build_one(name: str, python_dir: Path, out_dir: Path, cc: str | None) -> NativeResult:
+@dataclass(frozen=True)
+class Compilers:
+    """The compilers found: ``linux64`` (the system C compiler) and ``win64`` (mingw-w64), each or None."""
+
+    linux64: str | None
+    win64: str | None
+
+    @classmethod
+    def find(cls) -> "Compilers":
+        """The compilers on this machine (``toolchain.find_compiler``, ``find_cross_compiler``)."""
+        return cls(find_compiler(), find_cross_compiler())
+
+
+def compile_binaries(root: Path, files: list[str], identifier: str, variant: Variant,
+                     compilers: Compilers) -> list[str]:
+    """Compile ``root/sources/files`` into ``root/binaries/<platform>/`` with every compiler in
+    ``compilers``; returns the platforms built (``linux64``, ``win64``)."""
+    built = []
+    for platform, cc, suffix, flags in (("linux64", compilers.linux64, ".so", FLAGS),
+                                        ("win64", compilers.win64, ".dll", WIN_FLAGS)):
+        if cc:
+            out = root / "binaries" / variant.binaries[platform] / f"{identifier}{suffix}"
+            compile_sources(root / "sources", files, out, cc, flags)
+            built.append(platform)
+    return built
+
+
+def describe(root: Path, fmi2_description: bytes, identifier: str, files: list[str], variant: Variant) -> None:
+    """Write the FMU's description files: ``modelDescription.xml`` (FMI 2.0, or FMI 3.0 derived
+    from it, with ``sources/buildDescription.xml``)."""
+    if variant.fmi == "2":
+        (root / "modelDescription.xml").write_bytes(fmi2_description)
+        return
+    (root / "modelDescription.xml").write_bytes(fmi3.model_description(fmi2_description))
+    (root / "sources" / "buildDescription.xml").write_bytes(fmi3.build_description(identifier, files))
+
+
+def pack(root: Path, target: Path) -> None:
+    """Zip the folder ``root`` into the FMU ``target`` (written next to it, then moved in place)."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp_fmu = target.with_suffix(".fmu.tmp")
+    with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
+        for path in sorted(root.rglob("*")):
+            if path.is_file():
+                z.write(path, path.relative_to(root).as_posix())
+    tmp_fmu.replace(target)
+
+
+def build_one(name: str, python_dir: Path, out_dir: Path, compilers: Compilers,
+              variant: Variant = VARIANTS["2"]) -> NativeResult:
     """Generate, compile and pack ``<out_dir>/<name>.fmu``."""
     from ipcosim.harness.native.tracer import reset_table
 
@@ -106,43 +195,47 @@ def build_one(name: str, python_dir: Path, out_dir: Path, cc: str | None) -> Nat
     model = native_model(name, python_dir)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
-        files, gid = write_sources(model, root / "sources")
-        (root / "modelDescription.xml").write_bytes(cgen.model_description(model, gid, files))
-        if cc:
-            compile_sources(root / "sources", files, root / "binaries" / "linux64" / f"{name}.so", cc)
+        files, gid = write_sources(model, root / "sources", variant)
+        describe(root, cgen.model_description(model, gid, files), name, files, variant)
+        platforms = compile_binaries(root, files, name, variant, compilers)
         (root / "resources").mkdir()
         (root / "resources" / "native.json").write_text(json.dumps(
             {"model": name, **model.meta, "paths": model.paths, "python_only": model.python_only}, indent=1))
         (root / "documentation").mkdir()
-        (root / "documentation" / "native.txt").write_text(_readme(model))
-        out_dir.mkdir(parents=True, exist_ok=True)
-        target = out_dir / f"{name}.fmu"
-        tmp_fmu = target.with_suffix(".fmu.tmp")
-        with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
-            for path in sorted(root.rglob("*")):
-                if path.is_file():
-                    z.write(path, path.relative_to(root).as_posix())
-        tmp_fmu.replace(target)
+        (root / "documentation" / "native.txt").write_text(_readme(model, files))
+        pack(root, out_dir / f"{name}.fmu")
     reset_table()
-    return NativeResult(target, cc is not None)
+    return NativeResult(out_dir / f"{name}.fmu", bool(platforms), tuple(platforms))
 
 
-def _readme(model: models.NativeModel) -> str:
+def _readme(model: models.NativeModel, files: list[str]) -> str:
     lines = [f"{model.name} (native flavour), generated by ipcosim.fmus.native from the Python model.",
-             "Compile: cc -std=c99 -shared -fPIC -I sources sources/model.c sources/fmi2glue.c -lm", ""]
+             "Compile: cc -std=c99 -shared -fPIC -I sources " + " ".join(f"sources/{f}" for f in files) + " -lm", ""]
     if model.python_only:
         lines.append("Parameters of the Python flavour this flavour lacks (design-only; redesign with "
                      "ipcosim.fmus.native.redesign): " + ", ".join(model.python_only))
     return "\n".join(lines) + "\n"
 
 
-def build_native(python_dir: Path | str, out_dir: Path | str, names: list[str] | None = None) -> list[NativeResult]:
-    """Build the native FMUs (all of ``model_names()`` by default) into ``out_dir``.
+def missing_compilers(compilers: Compilers, what: str) -> list[str]:
+    """One line per missing compiler, saying what ``what`` then lacks."""
+    lines = []
+    if compilers.linux64 is None:
+        lines.append(f"{what}: no C compiler found (set CC, or install gcc or clang): no linux64 binary")
+    if compilers.win64 is None:
+        lines.append(f"{what}: no mingw-w64 cross compiler found (set MINGW_CC, or install Debian's "
+                     "gcc-mingw-w64-x86-64): no win64 binary, Linux only")
+    return lines
 
-    Without a C compiler the FMUs carry their sources only, and a message on stderr says so.
+
+def build_native(python_dir: Path | str, out_dir: Path | str, names: list[str] | None = None,
+                 fmi: str = "2") -> list[NativeResult]:
+    """Build the native FMUs (all of ``model_names()`` by default) into ``out_dir``, as FMI ``fmi``
+    (``"2"`` or ``"3"``) co-simulation FMUs.
+
+    A missing compiler is said in one line on stderr: without any, the FMUs carry their sources only.
     """
-    cc = find_compiler()
-    if cc is None:
-        print("ipcosim build --native: no C compiler found (set CC, or install gcc or clang): the native FMUs "
-              "carry their C sources but no linux64 binary", file=sys.stderr)
-    return [build_one(n, Path(python_dir), Path(out_dir), cc) for n in (names or model_names())]
+    compilers = Compilers.find()
+    for line in missing_compilers(compilers, "ipcosim build --native"):
+        print(line, file=sys.stderr)
+    return [build_one(n, Path(python_dir), Path(out_dir), compilers, VARIANTS[fmi]) for n in (names or model_names())]

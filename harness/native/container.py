@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import re
 import shutil
+import sys
 import tempfile
 import uuid
 import zipfile
@@ -32,7 +33,6 @@ from xml.etree import ElementTree
 
 from ipcosim.errors import IpcosimError
 from ipcosim.harness.native import cbuild, cgen, tracer
-from ipcosim.toolchain import find_compiler
 
 CONTAINER_FILES = ("container.c", "container.h", "fmi2glue.c", "model.h", "fmi2shared.h")
 _TYPE = {"Real": "VAR_REAL", "Integer": "VAR_INTEGER", "Boolean": "VAR_BOOLEAN"}
@@ -288,6 +288,8 @@ def _check(spec: ContainerSpec) -> None:
     symbols = [c_name(n) for n in names]
     if len(set(symbols)) != len(symbols):
         raise ContainerError(f"component names {names} do not give distinct C identifiers")
+    if "fmi2" in symbols:  # the FMI 3.0 container's own prefix (fmi3container.c)
+        raise ContainerError(f"component name {names[symbols.index('fmi2')]!r} is reserved for the container itself")
     if sorted(spec.order) != sorted(names):
         raise ContainerError(f"step order {list(spec.order)} is not an order of the components {names}")
     step_ns = round(spec.step * 1e9)
@@ -295,17 +297,15 @@ def _check(spec: ContainerSpec) -> None:
         raise ContainerError(f"step {spec.step!r} s: the exported loop needs a step of a whole number of nanoseconds")
 
 
-def write_sources(spec: ContainerSpec, dest: Path) -> tuple[list[str], str, _Layout, dict[str, _Component]]:
+def write_sources(spec: ContainerSpec, dest: Path, variant: cbuild.Variant = cbuild.VARIANTS["2"]
+                  ) -> tuple[list[str], str, _Layout, dict[str, _Component]]:
     """Write ``sources/`` of the container into ``dest``: (listed C files, GUID, layout, components)."""
     _check(spec)
     comps = {c.name: _Component(c) for c in spec.components}
     lay = _Layout(spec, comps)
     dest.mkdir(parents=True, exist_ok=True)
-    for name in CONTAINER_FILES:
-        shutil.copy(cbuild.C_DIR / name, dest / name)
-    for name in cbuild.FMI_HEADERS:
-        shutil.copy(cbuild.fmi_header_dir() / name, dest / name)
-    files = ["container_table.c", "container.c"]
+    cbuild.copy_glue(dest, (*CONTAINER_FILES, variant.container_glue), variant)
+    files = ["container_table.c", variant.container_glue]
     digest = hashlib.sha256()
     for c in spec.components:
         comp = comps[c.name]
@@ -362,8 +362,10 @@ def model_description(spec: ContainerSpec, gid: str, files: list[str], lay: _Lay
     return cgen.xml_bytes(root)
 
 
-def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None) -> Path:
-    """Generate, compile and pack the container FMU into ``out``; returns ``out``.
+def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None, fmi: str = "2") -> Path:
+    """Generate, compile and pack the container FMU (FMI ``fmi``: ``"2"`` or ``"3"``) into ``out``;
+    returns ``out``. It carries a ``win64`` DLL beside the ``linux64`` library when the mingw-w64
+    cross compiler is found (else one line on stderr says it is Linux-only).
 
     Raises
     ------
@@ -373,22 +375,23 @@ def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None)
     cbuild.NativeBuildError
         The compiler failed on the sources.
     """
-    cc = cc or find_compiler()
-    if cc is None:
+    compilers = cbuild.Compilers.find()
+    compilers = cbuild.Compilers(cc or compilers.linux64, compilers.win64)
+    if compilers.linux64 is None:
         raise ContainerError("no C compiler found (set CC, or install gcc or clang): the exported FMU needs one")
+    for line in cbuild.missing_compilers(compilers, "ipcosim export"):
+        print(line, file=sys.stderr)
+    variant = cbuild.VARIANTS[fmi]
     out = Path(out)
     with tempfile.TemporaryDirectory() as tmp:
-        root = Path(tmp)
-        files, gid, lay, comps = write_sources(spec, root / "sources")
-        (root / "modelDescription.xml").write_bytes(model_description(spec, gid, files, lay))
-        cbuild.compile_sources(root / "sources", files, root / "binaries" / "linux64" / f"{spec.name}.so", cc)
+        root = Path(tmp) / "fmu"
+        files, gid, lay, comps = write_sources(spec, root / "sources", variant)
+        cbuild.describe(root, model_description(spec, gid, files, lay), spec.name, files, variant)
+        cbuild.compile_binaries(root, files, spec.name, variant, compilers)
         (root / "documentation").mkdir()
-        (root / "documentation" / "index.txt").write_text(_readme(spec, comps))
-        tmp_fmu = root / "out.fmu"
-        with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
-            for path in sorted(root.rglob("*")):
-                if path.is_file() and path != tmp_fmu:
-                    z.write(path, path.relative_to(root).as_posix())
+        (root / "documentation" / "index.txt").write_text(_readme(spec, comps, files))
+        tmp_fmu = Path(tmp) / "out.fmu"
+        cbuild.pack(root, tmp_fmu)
         try:
             shutil.copyfile(tmp_fmu, out)
         except OSError as exc:
@@ -396,11 +399,8 @@ def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None)
     return out
 
 
-def _readme(spec: ContainerSpec, comps: dict[str, _Component]) -> str:
+def _readme(spec: ContainerSpec, comps: dict[str, _Component], files: list[str]) -> str:
     parts = ", ".join(f"{c.name} ({comps[c.name].model}, every {c.multiple} step(s))" for c in spec.components)
     return (f"{spec.name}: {spec.description}\n\nComponents, in Gauss-Seidel step order {' -> '.join(spec.order)}: "
             f"{parts}. Base step {spec.step!r} s; the communication step must be a whole multiple of it.\n"
-            "Compile: cc -std=c99 -shared -fPIC -I sources " + " ".join(f"sources/{f}" for f in
-                                                                      ["container_table.c", "container.c"]
-                                                                      + [f"{comps[c.name].symbol}_unit.c"
-                                                                         for c in spec.components]) + " -lm\n")
+            "Compile: cc -std=c99 -shared -fPIC -I sources " + " ".join(f"sources/{f}" for f in files) + " -lm\n")

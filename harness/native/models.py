@@ -117,9 +117,10 @@ def python_variables(fmu: Path) -> tuple[list[Variable], list[ElementTree.Elemen
 
 #: Instrument options of the Python plant (``ipcosim.fmus.instruments``) that the native plant does not
 #: model: each must stay 0 (off) in the native flavour. ``noise_seed`` and ``tap_time`` act only through
-#: them and may take any value.
-NATIVE_INSTRUMENTS_OFF = ("cart_resolution", "pendulum_resolution", "noise_counts", "end_stop", "input_delay",
-                          "tap_force_impulse", "tap_torque_impulse")
+#: them and may take any value. The lab bench's (encoders, end stops, DAC, computation delay) it models.
+NATIVE_INSTRUMENTS_OFF = ("noise_counts", "tap_force_impulse", "tap_torque_impulse")
+#: Longest computation delay of the native plant, in integrator steps (its delay line's length).
+NATIVE_MAX_DELAY_STEPS = 32
 
 
 def stage_coefficients(stages: list[list[list[float]]], n: int) -> dict[str, float]:
@@ -170,16 +171,20 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
     n = len(states)
     stepped, started = _trace_plant(kind, cls, [(len(m), len(m[0])) for m in stages], set(coefficients))
     zkeys = [f"S:z{i}" for i in range(n)]
+    dkeys = [f"S:d{k}" for k in range(NATIVE_MAX_DELAY_STEPS)]
+    xkeys = [f"S:x{i}" for i in range(n)]
     _append(variables, _plant_parameters(step, coefficients))
     present = {v.name for v in variables}
     off = [name for name in NATIVE_INSTRUMENTS_OFF if name in present]
     return NativeModel(
         name=name, kind="plant", description=description, variables=variables, unit_definitions=units,
-        states={k: 0.0 for k in zkeys},
-        initialize=list(zip(zkeys, started)) + [(f"V:{s}", leaf(f"V:initial_{s}")) for s in states],
-        step=list(zip(zkeys, stepped[:n])) + [(f"V:{s}", v) for s, v in zip(states, stepped[n:])],
+        states={k: 0.0 for k in zkeys + dkeys + xkeys},
+        initialize=list(zip(zkeys, started[:n])) + [(f"V:{s}", v) for s, v in zip(states, started[n:2 * n])]
+        + [(k, tracer.const(0.0)) for k in dkeys] + list(zip(xkeys, started[2 * n:])),
+        step=list(zip(zkeys, stepped[:n])) + [(f"V:{s}", v) for s, v in zip(states, stepped[n:2 * n])]
+        + list(zip(dkeys, stepped[2 * n:2 * n + len(dkeys)])) + list(zip(xkeys, stepped[2 * n + len(dkeys):])),
         checked=zkeys, meta={"role": "plant", "plant": kind, "integrator_step": repr(step), "instruments_off": off,
-                             "stage_coefficients": sorted(coefficients),
+                             "max_delay_steps": NATIVE_MAX_DELAY_STEPS, "stage_coefficients": sorted(coefficients),
                              "design_values": {f: getattr(p0, f) for f in cls.__dataclass_fields__}},
         checks={**{f.name: ("positive" if f.metadata.get("positive") else
                             "nonnegative" if f.metadata.get("nonnegative") else "finite")
@@ -192,7 +197,7 @@ def _trace_plant(kind: str, cls: type, shapes: list[tuple[int, int]], nonzero: s
                  ) -> tuple[list[Any], list[Any]]:
     """One traced plant step (the integrator state ``z`` after the step, then the outputs) and the traced
     start (``z`` from the initial values), every parameter symbolic."""
-    from ipcosim.fmus import physics
+    from ipcosim.fmus import instruments, physics
     from ipcosim.fmus import plant as plant_mod
 
     states = physics.state_names(kind)
@@ -206,17 +211,45 @@ def _trace_plant(kind: str, cls: type, shapes: list[tuple[int, int]], nonzero: s
             object.__setattr__(p, pn, leaf("V:" + pn))
         return p
 
+    n = len(states)
+    to_x = plant_mod.single_mass_output_map if single else (lambda p: list)
+    flat = lambda pair: [*pair[0], pair[1]]  # noqa: E731 -- (state, count) -> one flat list
+    quantize = tracer.local(instruments.quantize)
+    resolutions = [leaf("V:pendulum_resolution" if s == "pendulum_angle" else "V:cart_resolution")
+                   for s in physics.MEASURED[kind]]
+
+    def outputs(x: list[Any]) -> list[Any]:
+        readings = dict(zip(physics.MEASURED[kind], map(quantize, [x[states.index(m)] for m in physics.MEASURED[kind]],
+                                                        resolutions)))
+        return [readings.get(s, v) for s, v in zip(states, x)]
+
     def step_fn() -> list[Any]:
         p = sym_params()
         f = tracer.local(rhs_factory(p))
-        vA = tracer.local(physics.clip_voltage)(leaf("V:voltage"), p.voltage_limit)
-        z = sym_stages([leaf(f"S:z{i}") for i in range(len(states))], f, (vA,), shapes, nonzero)
-        x = plant_mod.single_mass_output_map(p)(z) if single else z
-        return list(z) + list(x)
+        buffer = [leaf(f"S:d{k}") for k in range(NATIVE_MAX_DELAY_STEPS)]
+        v = quantize(leaf("V:voltage"), leaf("V:voltage_resolution"))
+        steps = tracer.local(lambda d, h: min(instruments.delay_steps(d, h), float(NATIVE_MAX_DELAY_STEPS)))(
+            leaf("V:input_delay"), leaf("V:integrator_step"))
+        delayed = tracer.local(lambda *a: instruments.delay_line(a[:-2], a[-2], a[-1])[0])(*buffer, v, steps)
+        vA = tracer.local(physics.clip_voltage)(delayed, p.voltage_limit)
+        z0 = [leaf(f"S:z{i}") for i in range(n)]
+        z = sym_stages(z0, f, (vA,), shapes, nonzero)
+        x = to_x(p)(z)
+        before = [leaf(f"S:x{i}") for i in range(n)]  # the state after the last step's constraints
+        # plant.constrain, in two traced calls (each merges its own branches)
+        *x, stuck = tracer.local(lambda *a: flat(plant_mod.stick(a[:n], a[n:], p)))(*before, *x)
+        *x, stopped = tracer.local(lambda *a: flat(instruments.stop_carts(a[:-1], plant_mod.CARTS[kind], a[-1])))(
+            *x, leaf("V:end_stop"))
+        if single:
+            zx = physics.single_mass_to_momentum(x, p)
+            z = [tracer.select(stuck + stopped > 0.0, a, b) for a, b in zip(zx, z)]
+        else:
+            z = x
+        return list(z) + outputs(x) + [v, *buffer[:-1]] + list(x)
 
     def init_fn() -> list[Any]:
         x0 = [leaf(f"V:initial_{s}") for s in states]
-        return list(physics.single_mass_to_momentum(x0, sym_params()) if single else x0)
+        return list(physics.single_mass_to_momentum(x0, sym_params()) if single else x0) + outputs(x0) + x0
 
     with tracer.math_hooks():
         return tracer.trace(step_fn), tracer.trace(init_fn)
@@ -397,9 +430,10 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
                         python_vars: list[Variable]) -> tuple[list[Variable], dict[str, str]]:
     """Native-only parameters for law numbers that equal no Python parameter.
 
-    The LQR's feedback and estimator gains (``K[i]``, ``N``, ``M[i][j]`` of its ``coefficients``, also
-    reachable as its ``design``: ``ipcosim.controllers.laws.LQRCoefficients``) keep the Python FMU's
-    names ``K_<state>``, ``N``, ``M_<state>_<output>`` (``ipcosim.controllers.catalog.lqr_gain_specs``).
+    The designed gains of an LQR or LQG (``K[i]``, ``N`` or ``K_voltage``, ``K_integral``, ``M[i][j]`` of
+    its ``coefficients``, for the LQR also reachable as its ``design``: ``ipcosim.controllers.laws``) keep
+    the Python FMU's names ``K_<state>``, ``N``, ``K_voltage``, ``K_integral``, ``M_<state>_<output>``
+    (``ipcosim.controllers.catalog.gain_specs``).
     """
     renamed: dict[str, str] = {}
     extra: list[Variable] = []
@@ -409,7 +443,7 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
     gains: dict[str, str] = {}
     for at in (f"{where}coefficients", f"{where}design") if coef is not None else ():  # one object, two names
         gains.update({f"{at}.K[{i}]": f"K_{s}" for i, s in enumerate(coef.states)})
-        gains[f"{at}.N"] = "N"
+        gains.update({f"{at}.{g}": g for g in ("N", "K_voltage", "K_integral") if hasattr(coef, g)})
         gains.update({f"{at}.M[{i}][{j}]": f"M_{s}_{o}" for i, s in enumerate(coef.states)
                       for j, o in enumerate(coef.outputs)})
     for p in paths:
@@ -427,30 +461,29 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
 def native_law(kind: str, law: str, values: Mapping[str, Any]) -> Any:
     """The law the Python controller FMU runs for flat parameter ``values`` (``controller_fmu``).
 
-    The LQR's (and the swing-up's balancing LQR's) ``values`` may hold its gains ``K_*``, ``N``, ``M_*``:
-    they replace the designed ones, and the zero-order-hold model comes from the plain-Python
-    ``lqr_from_gains`` as in the Python FMU with its shipped gains. Gains together with a changed weight
-    or observer pole are refused, as there.
+    A designed law's (LQR, LQG, the swing-up's balancing LQR) ``values`` may hold its gains (``K_*``,
+    ``N``, ``M_*``, ...): they replace the designed ones, and the zero-order-hold model comes from the
+    plain-Python ``catalog.law_from_gains`` as in the Python FMU with its shipped gains. Gains together
+    with a changed weight or observer pole are refused, as there.
     """
     from ipcosim.controllers import catalog
 
-    lqr_laws = ("LQR", "SwingUp")
-    gain_names = {s.name for s in catalog.lqr_gain_specs(kind)} if law in lqr_laws else set()
+    designed = law in catalog.DESIGNED_LAWS
+    gain_names = {s.name for s in catalog.gain_specs(kind, law)} if designed else set()
     gains = {k: float(v) for k, v in values.items() if k in gain_names}
     design = {k: v for k, v in values.items() if k not in gain_names}
     built = catalog.build_law(kind, law, design, backend="scipy")
-    if law not in lqr_laws:
+    if not designed:
         return built
     full = {**catalog.defaults(kind, law), **design}
     if gains:
         base = catalog.defaults(kind, law)
-        weights = [n for n in catalog.lqr_weight_parameters(kind) if float(full[n]) != float(base[n])]
+        weights = [n for n in catalog.weight_parameters(kind, law) if float(full[n]) != float(base[n])]
         if weights:
             raise NativeModelError(f"{catalog.model_name(kind, law)}: parameters {weights[0]} and "
                                    f"{sorted(gains)[0]} were both set: give either the design (weights, observer "
                                    "poles) or the gains K_*, N, M_*, not both")
-    lqr = catalog.lqr_from_gains(kind, full, {**catalog.lqr_gains(getattr(built, "balance", built)), **gains})
-    return catalog.swing_up_around(kind, full, lqr) if law == "SwingUp" else lqr
+    return catalog.law_from_gains(kind, law, full, {**catalog.designed_gains(built), **gains})
 
 
 def _leaves(roots: list[Node]) -> set[str]:

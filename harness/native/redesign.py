@@ -17,6 +17,9 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping
 
+from ipcosim.errors import closest
+from ipcosim.fmus.instruments import delay_steps
+
 
 class NativeParameterError(KeyError):
     """A parameter the native flavour does not have (names the model and the flavour)."""
@@ -126,20 +129,30 @@ def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, floa
         elif value != 0.0:
             raise NativeParameterError(f"the native flavour of {info['model']} has no integrator coefficient {name} "
                                        f"(0 in its generated code), but these parameters make it {value!r}: "
-                                       "run with --fmus python")
+                                       f"{PYTHON_FLAVOUR}")
     out["integrator_step"] = step
     return out
 
 
+#: Where such a run goes instead (``ipcosim export`` has no flavour option: it exports native FMUs only).
+PYTHON_FLAVOUR = "`ipcosim run --fmus python` runs it"
+
+
 def check_instruments(info: Mapping[str, Any], values: Mapping[str, Any]) -> None:
-    """Raise NativeParameterError for an instrument option of the Python plant set to a value other than 0
-    (off): the native plant has ideal instruments (``ipcosim.harness.native.models.NATIVE_INSTRUMENTS_OFF``)."""
+    """Raise NativeParameterError for an instrument option of the Python plant the native plant lacks set to
+    a value other than 0 (``ipcosim.harness.native.models.NATIVE_INSTRUMENTS_OFF``: noise and taps), or for a
+    computation delay longer than the native plant's delay line."""
     for name in info.get("instruments_off", ()):
         if name in values and float(values[name]) != 0.0:
             raise NativeParameterError(
-                f"the native flavour of {info['model']} has no instruments: parameter {name} = {values[name]} must "
-                "be 0 there (quantization, noise, end stops, delay and taps are in the python flavour only: run "
-                "with --fmus python)")
+                f"the native flavour of {info['model']} has no {name}: parameter {name} = {values[name]} must "
+                f"be 0 there (measurement noise and taps are in the python flavour only: {PYTHON_FLAVOUR})")
+    longest = int(info.get("max_delay_steps", 0))
+    step = float(values.get("integrator_step", info["integrator_step"]))
+    if "input_delay" in values and delay_steps(float(values["input_delay"]), step) > longest:
+        raise NativeParameterError(
+            f"the native flavour of {info['model']} delays the voltage by at most {longest} steps of {step:g} s: "
+            f"parameter input_delay = {values['input_delay']} is longer ({PYTHON_FLAVOUR})")
 
 
 def check_settable(info: Mapping[str, Any], fmu_name: str, names: list[str], known: set[str]) -> None:
@@ -147,6 +160,7 @@ def check_settable(info: Mapping[str, Any], fmu_name: str, names: list[str], kno
     for name in names:
         if name not in known:
             extra = " (a design parameter of the python flavour only: the native flavour takes the numbers " \
-                    "the design computes; run with --fmus python, or see docs/native.md to redesign)" \
+                    f"the design computes; {PYTHON_FLAVOUR}, or see docs/native.md to redesign)" \
                 if name in info.get("python_only", ()) else ""
-            raise NativeParameterError(f"the native flavour of {fmu_name} has no parameter {name!r}{extra}")
+            near = "" if extra else f"; {closest(name, known)}"
+            raise NativeParameterError(f"the native flavour of {fmu_name} has no parameter {name!r}{extra}{near}")

@@ -335,9 +335,13 @@ def emit(assignments: Sequence[tuple[str, Any]], indent: str = "    ",
         name = f"e{len(names)}"
         names[id(n)] = name
         lines.append(f"{indent}const {'int' if n.is_bool else 'double'} {name} = {_expr(n, ref)};")
+    for _, value in assignments:  # a leaf read as a value is copied first: another assignment may write it
+        if isinstance(value, Node) and value.op == "leaf" and id(value) not in names:
+            names[id(value)] = name = f"e{len(names)}"
+            lines.append(f"{indent}const double {name} = {leaf_ref(value.name)};")
     for target, value in assignments:
         node = wrap(value)
-        text = ref(node)
+        text = names[id(node)] if node.op == "leaf" else ref(node)
         lines.append(f"{indent}{target} = {'(double)' if node.is_bool else ''}{text};")
     return lines
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from ipcosim.errors import IpcosimError
+from ipcosim.errors import IpcosimError, closest
 from ipcosim.harness.master.system import (
     SSP_TYPE,
     TRANSFORMATION_TYPES,
@@ -204,8 +204,8 @@ def resolve_swap(scenario: Scenario, component: str, target: str | os.PathLike[s
         return SwapTarget(fmu=path.resolve(), description=f"FMU {text}")
     _load_alias_providers()
     if text not in swap_aliases:
-        known = ", ".join(sorted(swap_aliases)) or "none registered"
-        raise BindingError(f"--swap {component}={text}: not an .fmu file and not a known alias (aliases: {known})")
+        raise BindingError(f"--swap {component}={text}: not an .fmu file and not a known alias; "
+                           f"{closest(text, swap_aliases)}")
     target = swap_aliases[text](SwapRequest(scenario, component, model, tuple(fmu_search_path())))
     return target if isinstance(target, SwapTarget) else SwapTarget(**target)
 
@@ -237,7 +237,7 @@ def unit_conversion(src: str | None, dst: str | None, table: Mapping[str, Unit])
 # --------------------------------------------------------------------------- binding
 def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
          fmu_files: Mapping[str, Path] | None = None, models: Mapping[str, Model] | None = None,
-         strict_parameters: bool = True) -> System:
+         strict_parameters: bool = True, strict_swaps: bool = False) -> System:
     """Check a scenario against its FMUs and resolve it into a :class:`System`.
 
     Parameters
@@ -252,7 +252,10 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
         Ready model interfaces (tests with mock slaves); bypasses reading FMU files.
     strict_parameters : bool
         An unknown parameter in a binding is an error (True) or a warning (False; SSP allows
-        ignoring it). Bindings of swapped components are always lenient.
+        ignoring it).
+    strict_swaps : bool
+        The same for the bindings of swapped-in components (``--strict``); by default the
+        parameters such an FMU does not have are ignored, named in one warning per component.
 
     Raises
     ------
@@ -262,12 +265,12 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
     swaps = dict(swaps or {})
     for comp in swaps:
         if comp not in {c.name for c in scenario.components}:
-            raise BindingError(f"--swap {comp}=...: scenario {scenario.name!r} has no component {comp!r} "
-                               f"(components: {', '.join(c.name for c in scenario.components)})")
+            raise BindingError(f"--swap {comp}=...: scenario {scenario.name!r} has no component {comp!r}; "
+                               f"{closest(comp, (c.name for c in scenario.components))}")
     notes: list[str] = []   # warnings: what may be wrong (unconnected inputs, ignored parameters)
     infos: list[str] = []   # notes: what was done (swaps, connectors left out)
     instances = [_bind_component(scenario, comp, swaps, dict(fmu_files or {}), dict(models or {}),
-                                 strict_parameters, notes, infos) for comp in scenario.components]
+                                 (strict_parameters, strict_swaps), notes, infos) for comp in scenario.components]
     by_name = {i.name: i for i in instances}
     fed: dict[str, str] = {}  # which output feeds each input: {"comp.input": "comp.output"}
     links = [_bind_connection(scenario, conn, by_name, fed) for conn in scenario.connections]
@@ -297,10 +300,11 @@ def _component_model(scenario: Scenario, comp: Component, swapped: bool, fmu_fil
 
 
 def _bind_component(scenario: Scenario, comp: Component, swaps: Mapping[str, Any], fmu_files: Mapping[str, Path],
-                    models: Mapping[str, Model], strict_parameters: bool, notes: list[str],
+                    models: Mapping[str, Model], strict: tuple[bool, bool], notes: list[str],
                     infos: list[str]) -> Instance:
     """One component as an :class:`Instance`: its FMU (or the one swapped in), connectors checked
-    against the FMU's variables, and its parameter bindings converted; appends to ``notes``/``infos``."""
+    against the FMU's variables, and its parameter bindings converted (``strict``: for its own
+    FMU, for one swapped in); appends to ``notes``/``infos``."""
     model = _component_model(scenario, comp, comp.name in swaps, fmu_files, models)
     swapped_from, realtime, extra = None, False, {}
     if comp.name in swaps:
@@ -314,11 +318,12 @@ def _bind_component(scenario: Scenario, comp: Component, swaps: Mapping[str, Any
     assert model is not None
     where = f"{scenario.origin}: component {comp.name!r} ({model.path.name if model.path else comp.source})"
     connectors = _bind_connectors(scenario, comp, model, where, swapped_from, infos)
-    params = _bind_parameters(comp, model, where, strict_parameters and swapped_from is None, notes)
+    params = _bind_parameters(comp, model, where, strict[0] if swapped_from is None else strict[1], notes)
     for name, value in extra.items():
         var = model.variables.get(name)
         if var is None or not var.settable:
-            raise BindingError(f"--swap {comp.name}: the swapped-in FMU has no settable variable {name!r}")
+            raise BindingError(f"--swap {comp.name}: the swapped-in FMU has no settable variable {name!r}; "
+                               f"{closest(name, (n for n, v in model.variables.items() if v.settable))}")
         params.append((var, convert_value(var, value, f"--swap {comp.name}: {name}")))
     return Instance(name=comp.name, model=model, connectors=tuple(connectors), parameters=tuple(params),
                     step_size_hint=comp.step_size_hint, swapped_from=swapped_from, realtime=realtime)
@@ -345,18 +350,22 @@ def _bind_connectors(scenario: Scenario, comp: Component, model: Model, where: s
 
 def _bind_parameters(comp: Component, model: Model, where: str, strict: bool,
                      notes: list[str]) -> list[tuple[Variable, Any]]:
-    """A component's parameter bindings as (variable, converted value); an unknown name is an
-    error when ``strict``, else a note in ``notes``; a variable that cannot be set is always an error."""
+    """A component's parameter bindings as (variable, converted value); names the FMU does not
+    have are an error when ``strict``, else one note per parameter set in ``notes``; a variable
+    that cannot be set is always an error."""
     params: list[tuple[Variable, Any]] = []
     for pset in comp.bindings:
+        src = pset.source or "inline ParameterValues"
+        missing = [p.name for p in pset.parameters if p.name not in model.variables]
+        if missing:
+            msg = (f"{where}: parameter set {pset.name!r} ({src}) sets {len(missing)} parameter(s) the FMU does "
+                   f"not have: {', '.join(missing)}")
+            if strict:
+                raise BindingError(msg)
+            notes.append(msg + "; ignored (--strict: an error)")
         for p in pset.parameters:
             var = model.variables.get(p.name)
-            src = pset.source or "inline ParameterValues"
             if var is None:
-                msg = f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which the FMU does not have"
-                if strict:
-                    raise BindingError(msg)
-                notes.append(msg + "; ignored")
                 continue
             if not var.settable:
                 raise BindingError(f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which is "
@@ -378,7 +387,7 @@ def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str,
         if v is None:
             raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: FMU of component "
                                f"{inst.name!r} ({inst.model.path.name if inst.model.path else inst.model.name}) "
-                               f"has no variable {cname!r}")
+                               f"has no variable {cname!r}; {closest(cname, inst.model.variables)}")
     kinds = (va.causality, vb.causality)
     if kinds == ("input", "output"):
         a, b, va, vb = b, a, vb, va
@@ -506,13 +515,15 @@ def with_overrides(system: System, overrides: Mapping[str, Any]) -> tuple[System
         try:
             inst = system.instance(comp)
         except KeyError:
-            raise BindingError(f"--set {key}={value}: no component {comp!r} (components: "
-                               f"{', '.join(i.name for i in system.instances)})") from None
+            raise BindingError(f"--set {key}={value}: no component {comp!r}; "
+                               f"{closest(comp, (i.name for i in system.instances))}") from None
         v = inst.model.variables.get(var)
         model_name = inst.model.path.name if inst.model.path else inst.model.name
         where = f"--set {key}={value}: component {comp!r} ({model_name})"
         if v is None:
-            raise BindingError(f"{where} has no variable {var!r}")
+            settable = (n for n, x in inst.model.variables.items() if x.settable)
+            raise BindingError(f"{where} has no variable {var!r}; {closest(var, settable)} "
+                               f"(`ipcosim describe {system.scenario.name}` lists them)")
         if not v.settable:
             raise BindingError(f"{where}: {var!r} is {v.causality}/{v.variability} and cannot be set")
         link = system.link_into(comp, var)

@@ -25,7 +25,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from lxml import etree
 
-from ipcosim.errors import IpcosimError
+from ipcosim.errors import IpcosimError, closest
 from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
 
 #: XML namespaces of SSP 1.0 (as in fmpy.ssp.ssd) plus the OSP annotations libcosim reads.
@@ -188,8 +188,7 @@ class Scenario:
         for c in self.components:
             if c.name == name:
                 return c
-        raise KeyError(f"{self.origin}: no component {name!r} (components: "
-                       f"{', '.join(c.name for c in self.components)})")
+        raise KeyError(f"{self.origin}: no component {name!r}; {closest(name, (c.name for c in self.components))}")
 
     @property
     def bound_sets(self) -> tuple[str, ...]:
@@ -339,8 +338,8 @@ def resolve_location(scenario_or_path: str | os.PathLike[str]) -> Path:
     candidate = SCENARIO_DIR / text
     if (candidate / SSD_NAME).is_file():
         return candidate
-    known = scenario_names()
-    raise ScenarioNotFoundError(f"unknown scenario {text!r}; known scenarios: {', '.join(known) or 'none'}")
+    raise ScenarioNotFoundError(f"unknown scenario {text!r}; {closest(text, scenario_names(), listing=20)} "
+                                f"(`ipcosim list` describes them)")
 
 
 def fmu_search_path(extra: Sequence[str | os.PathLike[str]] | None = None) -> list[Path]:
@@ -660,9 +659,8 @@ def select_parameter_set(scenario: Scenario, name: str) -> Scenario:
     from dataclasses import replace
 
     if name not in scenario.parameter_sets:
-        known = ", ".join(sorted(scenario.parameter_sets)) or "none"
-        raise ScenarioError(f"{scenario.origin}: scenario {scenario.name!r} has no parameter set {name!r} "
-                            f"(available: {known})")
+        raise ScenarioError(f"{scenario.origin}: scenario {scenario.name!r} has no parameter set {name!r}; "
+                            f"{closest(name, scenario.parameter_sets)}")
     new_set = scenario.parameter_sets[name]
     files = set(scenario.set_files.values())
     replaced = False

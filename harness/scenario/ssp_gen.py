@@ -1,4 +1,4 @@
-"""Writes the project's ten SSP scenarios (``ssp/<plant>-<controller>/``) from one table, so
+"""Writes the project's twelve SSP scenarios (``ssp/<plant>-<controller>/``) from one table, so
 that they stay consistent: ``python -m ipcosim.harness.scenario.ssp_gen`` (the files are committed; run it
 after changing a component's connectors or a parameter set).
 
@@ -32,6 +32,7 @@ CONTROLLERS = {
     "lqr": ("LQR", "LQR state feedback with a Luenberger observer"),
     "hsmc": ("HSMC", "hierarchical sliding-mode control"),
     "adaptive-hsmc": ("AdaptiveHSMC", "hierarchical sliding-mode control with scheduled gains"),
+    "lqg": ("LQG", "discrete LQG with integral action and the computation delay (Kalman filter)"),
 }
 STATE_UNITS = {"cart_position": "m", "cart_velocity": "m/s", "active_cart_position": "m",
                "active_cart_velocity": "m/s", "passive_cart_position": "m", "passive_cart_velocity": "m/s",
@@ -43,17 +44,19 @@ STEP = 1e-3
 AMPLITUDE = 0.05
 STEP_TIME = 0.0
 
-#: Scenarios beyond the ten: (plant, law, description, setpoint amplitude [m], stop time [s], plant start values).
+#: Scenarios beyond the twelve: (plant, law, description, setpoint amplitude [m], stop time [s], plant start values).
 #: The lab values are ``ipcosim.fmus.instruments.REALISM["lab"]`` (written out so the files stay literal).
-_LAB_DOUBLE = {"b1": 0.1006, "b2": 0.1006, "cart_resolution": 2.275e-05, "pendulum_resolution": 0.0015339807878856412,
-               "end_stop": 0.407}
+_LAB_DOUBLE = {"b1": 0.1047, "b2": 0.1047, "cart_resolution": 2.275e-05, "pendulum_resolution": 0.0015339807878856412,
+               "end_stop": 0.407, "input_delay": 0.001, "voltage_resolution": 0.0048828125}
 VARIANTS: dict[str, tuple[str, str, str, float, float, dict[str, float]]] = {
     "single-mass-swing-up": ("single-mass", "SwingUp", "energy swing-up from hanging, hand-over to the thesis's LQR; "
                              "the cart stays at 0", 0.0, 15.0, {"initial_pendulum_angle": 3.141592653589793}),
     "single-mass-lqr-tap": ("single-mass", "LQR", "the thesis's LQR holding the cart at 0; a torque tap of 0.005 N m s "
                             "on the pendulum at t = 2 s", 0.0, 10.0, {"tap_time": 2.0, "tap_torque_impulse": 0.005}),
-    "double-mass-hsmc-lab": ("double-mass", "HSMC", "the thesis's HSMC on the lab plant (encoder counts, Coulomb "
-                             "friction, end stops); the active cart moves 0 -> 0.05 m", AMPLITUDE, 20.0, _LAB_DOUBLE),
+    "double-mass-hsmc-lab": ("double-mass", "HSMC", "the thesis's HSMC on the lab plant (encoder counts, stick-slip "
+                             "Coulomb friction, end stops, DAC codes, one-sample delay); the active cart moves "
+                             "0 -> 0.05 m",
+                             AMPLITUDE, 20.0, _LAB_DOUBLE),
 }
 
 
@@ -276,8 +279,8 @@ def variant_files(name: str) -> dict[str, str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("names", nargs="*", help="scenarios to write (default: all ten)")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    parser.add_argument("names", nargs="*", help="scenarios to write (default: all)")
     args = parser.parse_args(argv)
     for path in write_scenarios(names=args.names or None):
         print(path)

@@ -159,7 +159,8 @@ class CosimSpec(RunSpec):
             atexit.register(shutil.rmtree, folder, True)
             location = str(Path(folder) / f"{Path(self.location).stem or 'scenario'}.ssp")
             Path(location).write_bytes(self.archive)
-        holder = [Prepared(location, parameter_set=self.parameter_set, warn=False, fmus=self.fmus)]
+        holder = [Prepared(location, parameter_set=self.parameter_set, warn=False, fmus=self.fmus,
+                           reuse_instances=True)]  # many runs per worker: reset, not re-instantiate
         spec = self
 
         def release() -> None:

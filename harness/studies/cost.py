@@ -127,7 +127,7 @@ def surrogate_cost(metrics: Mapping[str, Any], stop_time: float, w_angle: float 
 
 def metrics_and_cost_terms(time: np.ndarray, position: np.ndarray, reference: np.ndarray, angle: np.ndarray,
                            voltage: np.ndarray) -> dict[str, Any]:
-    """DESIGN.md metrics (``ipcosim.fmus.metrics.compute_metrics``) plus the cost terms."""
+    """The task metrics (``ipcosim.fmus.metrics.compute_metrics``) plus the cost terms (docs/metrics.md)."""
     metrics = dict(compute_metrics(time, position, reference, angle, voltage))
     metrics.update(cost_terms(time, position, reference, angle, voltage))
     return metrics

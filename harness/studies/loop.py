@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ipcosim.controllers.laws import HSMC, LQR, PID, AdaptiveHSMC, CascadePID, DiscreteLaw
+from ipcosim.controllers.laws import HSMC, LQG, LQR, PID, AdaptiveHSMC, CascadePID, DiscreteLaw
 from ipcosim.errors import IpcosimError
 
 
@@ -185,6 +185,22 @@ def _lqr(law: LQR, b: Builder) -> tuple[Lin, list[str]]:
     return u, notes
 
 
+def _lqg(law: LQG, b: Builder) -> tuple[Lin, list[str]]:
+    d, T = law.coefficients, law.sample_period
+    p, n = len(law.measured), len(d.states)
+    ys = [b.input(j) for j in range(p)]
+    xp, applied, integral = [b.state() for _ in range(n)], b.state(), b.state()
+    innov = [ys[j] - lsum([xp[i] * d.C[j][i] for i in range(n)]) for j in range(p)]
+    xh = [xp[i] + lsum([innov[j] * d.M[i][j] for j in range(p)]) for i in range(n)]
+    u = lsum([xh[i] * -d.K[i] for i in range(n)]) - applied * d.K_voltage - integral * d.K_integral
+    for i in range(n):
+        b.feed(xp[i], lsum([xh[j] * d.Ad[i][j] for j in range(n)]) + applied * d.Bd[i])
+    b.feed(applied, u)
+    b.feed(integral, integral - ys[0] * T)
+    return applied, ["output: the voltage computed a sample earlier (one-sample computation delay)",
+                     "reference lag left out (the reference is 0)"]
+
+
 def _hsmc(law: HSMC, b: Builder) -> tuple[Lin, list[str]]:
     g, T, tau = law.gains, law.sample_period, law.gains.derivative_time_constant
     c, k, eta, KI = law.current_gains()
@@ -228,7 +244,7 @@ def linear_law(law: DiscreteLaw) -> LinearLaw:
     Parameters
     ----------
     law : DiscreteLaw
-        A PID, CascadePID, LQR, HSMC or AdaptiveHSMC of ``ipcosim.controllers.laws``.
+        A PID, CascadePID, LQR, LQG, HSMC or AdaptiveHSMC of ``ipcosim.controllers.laws``.
 
     Returns
     -------
@@ -239,7 +255,7 @@ def linear_law(law: DiscreteLaw) -> LinearLaw:
     LinearizationError
         For a law class without a transcription here.
     """
-    for cls, fn in ((PID, _pid), (CascadePID, _cascade), (LQR, _lqr), (HSMC, _hsmc)):
+    for cls, fn in ((PID, _pid), (CascadePID, _cascade), (LQR, _lqr), (LQG, _lqg), (HSMC, _hsmc)):
         if isinstance(law, cls):
             b = Builder(len(law.measured))
             u, notes = fn(law, b)

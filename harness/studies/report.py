@@ -248,7 +248,8 @@ def check_claims(results: Results) -> list[tuple[Claim, Verdict]]:
 
 def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
     """Thesis-style overlaid time series of every controller on one plant: cart position with the
-    reference, pendulum angle and voltage, one line per controller. None if no series."""
+    reference, pendulum angle and voltage, one line per controller; a run whose pendulum fell ends
+    at the fall (an x marks it: what follows is no controller's doing). None if no series."""
     from ipcosim.harness.extras import require
 
     require("matplotlib")
@@ -266,14 +267,17 @@ def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
     for controller, s in series:
         label = CONTROLLER_LABELS.get(controller, controller)
         color = CONTROLLER_COLORS.get(controller)
-        axes[0].plot(s["time"], s["position"], label=label, lw=1.2, color=color)
         if not ref_drawn:
             axes[0].plot(s["time"], s["reference"], "k--", lw=0.8, label="reference")
             ref_drawn = True
-        axes[1].plot(s["time"], s["angle"], label=label, lw=1.0, color=color)
+        fell = results[f"{plant}-{controller}"].get("fall_time_s")
+        s = until(s, fell)
         failed = results[f"{plant}-{controller}"].get("status") != "ok"
-        axes[2].plot(s["time"], s["voltage"], label=label, lw=0.8, color=color, alpha=0.35 if failed else 1.0,
-                     zorder=1 if failed else 2)
+        for ax, key, lw in ((axes[0], "position", 1.2), (axes[1], "angle", 1.0), (axes[2], "voltage", 0.8)):
+            ax.plot(s["time"], s[key], label=label if fell is None else f"{label} (fell at {fell:.2f} s)", lw=lw,
+                    color=color, zorder=1 if failed else 2)
+            if fell is not None and len(s["time"]):
+                ax.plot(s["time"][-1], s[key][-1], "x", color=color, markersize=7)
     cart = "active cart position [m]" if plant == "double-mass" else "cart position [m]"
     axes[0].set_ylabel(cart)
     axes[1].set_ylabel("pendulum angle [rad]")
@@ -291,6 +295,12 @@ def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
     return path
 
 
+def until(series: Mapping[str, Sequence[float]], end: float | None) -> dict[str, list[float]]:
+    """The samples of ``series`` (``time`` and signals) up to time ``end`` (all of them when None)."""
+    n = len(series["time"]) if end is None else sum(1 for t in series["time"] if t <= end)
+    return {key: list(values[:n]) for key, values in series.items()}
+
+
 # --------------------------------------------------------------------------- document
 
 
@@ -306,6 +316,9 @@ def _table(results: Results, robustness: Mapping[str, Mapping[str, Any]] | None)
                  str(row.get("gains") or "-")]
         for key, _, digits in TABLE_COLUMNS:
             v = row.get(key)
+            if key == "settling_time_s" and v is None and row.get("status") != "error":
+                cells.append("not settled")  # docs/metrics.md: a fallen pendulum has not settled either
+                continue
             cells.append(fmt(v, digits) if digits else fmt(v))
         if robustness:
             s = robustness.get(scenario)

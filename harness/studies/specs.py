@@ -84,8 +84,8 @@ def study_spec(scenario: str, fmus: str = "auto", names: Iterable[str] = (),
 
     ``fmus="auto"`` chooses the native flavour (C FMUs, ``ipcosim build --native``; several times
     faster, equal results to 1e-9, docs/native.md) when all of these hold, else the Python one:
-    the native FMUs are built; the scenario runs on them (no plant instruments, a native model for
-    every component); every parameter the study sets or varies (``names``, ``component.variable``)
+    the native FMUs are built; the scenario runs on them (no measurement noise or taps, a native model
+    for every component); every parameter the study sets or varies (``names``, ``component.variable``)
     is a parameter of the native FMUs and not an instrument option the native plant lacks; and
     ``check(spec)`` (the study's own parsing of its options against ``spec.parameters``) passes.
     ``python`` and ``native`` are taken as given (a study the flavour cannot run fails as with

@@ -21,7 +21,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ipcosim.errors import UsageError
+from ipcosim.errors import UsageError, closest
 from ipcosim.harness.studies import cost as costmod
 from ipcosim.harness.studies.cases import SweepCase, case_seed
 from ipcosim.harness.studies.robustness import fmt
@@ -42,10 +42,7 @@ def parse_params(text: str, parameters: Mapping[str, Any]) -> list[str]:
         raise TuneError("--params: give at least one COMPONENT.VARIABLE")
     for n in names:
         if n not in parameters:
-            component = n.split(".", 1)[0]
-            known = sorted(k.split(".", 1)[1] for k in parameters if k.split(".", 1)[0] == component)
-            hint = f"{component} parameters: {', '.join(known)}" if known else "no such component"
-            raise TuneError(f"--params: unknown parameter {n!r} ({hint})")
+            raise TuneError(f"--params: unknown parameter {n!r}; {closest(n, parameters)}")
     if len(set(names)) != len(names):
         raise TuneError(f"--params {text!r}: a parameter is listed twice")
     return names

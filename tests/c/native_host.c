@@ -13,16 +13,7 @@
 
 #include "fmi2Functions.h"
 
-static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
-                   fmi2String message, ...) {
-    va_list ap;
-    (void)env;
-    fprintf(stderr, "[%s %d %s] ", name, (int)status, category);
-    va_start(ap, message);
-    vfprintf(stderr, message, ap);
-    va_end(ap);
-    fputc('\n', stderr);
-}
+#include "host_logger.h"
 
 static int python_mapped(void) {
     char line[4096];

@@ -129,7 +129,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component comp) {
 static int parameters_valid(Instance *c) {
     int i;
     static const char *const need[] = {"be a finite number", "be > 0", "be >= 0",
-                                       "be 0 in the native flavour (it has no instruments: use the python flavour)"};
+                                       "be 0 in the native flavour (no measurement noise or taps: use the python flavour)"};
     for (i = 0; i < c->m->nchecks; i++) {
         const ParameterCheck *k = &c->m->checks[i];
         double x = c->v[k->index];

@@ -1,0 +1,159 @@
+"""Docs that hold: every file, section, command and option that README.md and docs/ name exists,
+and every `ipcosim ...` hint the code prints names options its command takes."""
+from __future__ import annotations
+
+import argparse
+import ast
+import glob
+import re
+from pathlib import Path
+
+import pytest
+
+from ipcosim.harness.cli import build_parser, parsers
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = sorted([ROOT / "README.md", ROOT / "examples" / "my-controller" / "README.md", *(ROOT / "docs").glob("*.md")])
+#: Top folders a doc may point into; generated ones (build/, out/) need not exist in a checkout.
+TRACKED = ("docs", "fmus", "controllers", "harness", "benchmarks", "examples", "ssp", "tests")
+PATH_RE = re.compile(r"(?<![\w./-])((?:%s)/[\w./*<>{},-]*[\w*])" % "|".join(TRACKED))
+LINK_RE = re.compile(r"\]\(([^)\s]+)\)")
+COMMAND_RE = re.compile(r"(?<![\w-])ipcosim ((?:[a-z]+)(?: [a-z]+)?)((?:[^`\n|;#(]*))")
+
+
+def _docs() -> list[tuple[Path, str]]:
+    return [(p, p.read_text(encoding="utf-8")) for p in DOCS]
+
+
+def _exists(ref: str, base: Path) -> bool:
+    ref = ref.rstrip(".,:;")
+    if "<" in ref or "{" in ref:      # a pattern such as ssp/<plant>-<controller>/: its folder must exist
+        ref = ref.split("<")[0].split("{")[0]
+        ref = ref.rsplit("/", 1)[0] if not ref.endswith("/") else ref
+    for root in (ROOT, base):
+        if glob.glob(str(root / ref)):
+            return True
+    return False
+
+
+def _prose(text: str) -> str:
+    """A doc without its generated snapshot blocks (``python -m benchmarks.rooms --write``: room labels)."""
+    return re.sub(r"<!-- rooms:begin -->.*?<!-- rooms:end -->", "", text, flags=re.S)
+
+
+def test_every_named_file_exists() -> None:
+    missing = [f"{p.relative_to(ROOT)}: {ref}" for p, text in _docs() for ref in PATH_RE.findall(_prose(text))
+               if not _exists(ref, p.parent)]
+    assert not missing, missing
+
+
+def _slug(title: str) -> str:
+    """GitHub's anchor of a heading."""
+    text = re.sub(r"[^\w\- ]", "", title.strip().lower().replace("`", ""))
+    return text.replace(" ", "-")
+
+
+def _anchors(path: Path) -> set[str]:
+    return {_slug(m) for m in re.findall(r"^#+ (.+)$", path.read_text(encoding="utf-8"), re.M)}
+
+
+def test_every_link_and_section_resolves() -> None:
+    broken = []
+    for p, text in _docs():
+        for target in LINK_RE.findall(text):
+            if re.match(r"[a-z]+:", target):  # https:, mailto:
+                continue
+            file, _, anchor = target.partition("#")
+            dest = (p.parent / file).resolve() if file else p
+            if not dest.exists():
+                broken.append(f"{p.relative_to(ROOT)}: {target} (no such file)")
+            elif anchor and dest.suffix == ".md" and anchor not in _anchors(dest):
+                broken.append(f"{p.relative_to(ROOT)}: {target} (no such section)")
+    assert not broken, broken
+
+
+def _command_options() -> dict[str, set[str]]:
+    """``{"run": {"--set", ...}, "rig serve": {...}}``: each sub-command's option strings."""
+    out: dict[str, set[str]] = {}
+    for p in parsers(build_parser()):
+        name = p.prog.removeprefix("ipcosim").strip()
+        if name:
+            out[name] = {s for a in p._actions for s in a.option_strings}  # noqa: SLF001
+    return out
+
+
+def _code(text: str, markdown: bool = True) -> str:
+    """The code of a text, one span a line: backtick spans, and in markdown fenced or indented blocks."""
+    spans = re.findall(r"`([^`\n]+)`", text)
+    if markdown:
+        spans += re.findall(r"^(?: {4}|\t)(.+)$", text, re.M)
+        spans += [line for block in re.findall(r"^```[^\n]*\n(.*?)^```", text, re.M | re.S)
+                  for line in block.splitlines()]
+    return "\n".join(spans)
+
+
+def _bad_uses(text: str, where: str, commands: dict[str, set[str]]) -> list[str]:
+    bad = []
+    for words, rest in COMMAND_RE.findall(text):
+        parts = words.split()
+        name = " ".join(parts) if " ".join(parts) in commands else parts[0]
+        if name not in commands:
+            bad.append(f"{where}: `ipcosim {words}`: no such command")
+            continue
+        tail = (" ".join(parts[1:]) + " " + rest) if name == parts[0] else rest
+        for option in re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", tail):
+            if option not in commands[name] and option != "--help":
+                bad.append(f"{where}: `ipcosim {name} ... {option}`: {name} has no {option}")
+    return bad
+
+
+def test_every_command_and_option_named_in_the_docs_exists() -> None:
+    commands = _command_options()
+    bad = [b for p, text in _docs() for b in _bad_uses(_code(text), str(p.relative_to(ROOT)), commands)]
+    assert not bad, bad
+
+
+def _string_literals(path: Path) -> list[tuple[int, str]]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.JoinedStr):
+            text = "".join(v.value if isinstance(v, ast.Constant) else "X" for v in node.values)
+            out.append((node.lineno, text))
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+            out.append((node.lineno, node.value))
+    return out
+
+
+def test_no_hint_names_an_option_its_command_does_not_take() -> None:
+    """The hints the code prints (`run ipcosim build --native`, ...): one command each."""
+    commands = _command_options()
+    bad = []
+    for path in sorted(ROOT.glob("harness/**/*.py")) + sorted(ROOT.glob("fmus/**/*.py")):
+        for line, text in _string_literals(path):
+            bad += _bad_uses(_code(text, markdown=False), f"{path.relative_to(ROOT)}:{line}", commands)
+    assert not bad, bad
+
+
+def test_the_api_table_is_the_signature() -> None:
+    from ipcosim.harness.cli.apidoc import BLOCK, render
+
+    text = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+    block = re.search(rf"<!-- {BLOCK} -->\n(.*?)<!-- /{BLOCK} -->", text, re.S)
+    assert block, f"docs/api.md has no <!-- {BLOCK} --> block"
+    assert block.group(1) == render(), "run `python -m ipcosim.harness.cli.apidoc --update`"
+
+
+@pytest.mark.parametrize("option", ["--fmus", "--overrun-budget", "--strict", "--timeout", "--loop", "--quiet"])
+def test_the_api_table_names_every_run_option(option: str) -> None:
+    from ipcosim.harness.cli.apidoc import render
+
+    assert option in render()
+
+
+def test_the_checker_sees_a_wrong_option() -> None:
+    commands = _command_options()
+    assert _bad_uses("`ipcosim export single-mass-lqr-tap --fmus python`", "x", commands)
+    assert _bad_uses("see `harness/bench_plant.py`", "x", commands) == []
+    assert not _exists("harness/bench_plant.py", ROOT)
+    assert isinstance(build_parser(), argparse.ArgumentParser)
