@@ -13,6 +13,7 @@ set with the tuned values), ``tune.md`` (before/after table) and ``evaluations.c
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -49,6 +50,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also copy the tuned parameter set beside the scenario (autotuned.ssv in its folder), "
                         "so that `ipcosim run SCENARIO --parameter-set autotuned` runs it")
     p.add_argument("--out", help="output folder: everything tuning writes goes there (default out/tune/<scenario>)")
+    p.add_argument("--max-peak-sensitivity", type=float, metavar="MS",
+                   help="robust objective: a candidate's peak |S| at the plant input (ipcosim analyze) must stay "
+                        "at most MS, on the nominal plant and the spread; others are not run")
+    p.add_argument("--min-delay-margin", type=float, metavar="SECONDS",
+                   help="robust objective: a candidate's delay margin (ipcosim analyze) must be at least this")
+    p.add_argument("--spread", type=float, metavar="FRACTION",
+                   help="robust objective: run every candidate also with the masses, dampings and spring all "
+                        "scaled by 1 - FRACTION and by 1 + FRACTION, and count its worst run (the budget then "
+                        "counts candidates)")
     p.add_argument("--quiet", action="store_true", help="no per-generation progress")
     p.set_defaults(func=main)
 
@@ -88,6 +98,25 @@ def _parameter_set(args: argparse.Namespace) -> str | None:
     return args.parameter_set
 
 
+def _robustness(args: argparse.Namespace, spec: Any, overrides: dict[str, Any], pset: str | None) -> Any:
+    """The robust objective of ``--max-peak-sensitivity``, ``--min-delay-margin``, ``--spread`` (None without)."""
+    from ipcosim.errors import UsageError
+    from ipcosim.harness.studies import tune as tunemod
+    from ipcosim.harness.studies.robustness import DEFAULT_UNCERTAINTY
+
+    limits = (args.max_peak_sensitivity, args.min_delay_margin)
+    if all(v is None for v in limits) and args.spread is None:
+        return None
+    for flag, value in (("--max-peak-sensitivity", args.max_peak_sensitivity),
+                        ("--min-delay-margin", args.min_delay_margin), ("--spread", args.spread)):
+        if value is not None and not (math.isfinite(value) and value > 0 and (flag != "--spread" or value < 1)):
+            raise UsageError(f"{flag} {value}: expected a number > 0" + (" and < 1" if flag == "--spread" else ""))
+    names = [n for kind in DEFAULT_UNCERTAINTY.values() for n in kind]
+    spread = tunemod.spread_plants(spec.parameters, list(dict.fromkeys(names)), args.spread) if args.spread else ()
+    return tunemod.Robustness(args.scenario, pset, {k: float(v) for k, v in overrides.items()},
+                              args.max_peak_sensitivity, args.min_delay_margin, spread)
+
+
 def main(args: argparse.Namespace) -> int:
     """Tune the named parameters of a scenario (differential evolution on the cost J over a run
     budget), then write the evaluations, the tuned parameter set and the report."""
@@ -114,14 +143,15 @@ def main(args: argparse.Namespace) -> int:
     ssv_path = Path(args.ssv) if args.ssv else out / "autotuned.ssv"
     install = _install_path(args) if args.install else None
 
+    robust = _robustness(args, spec, overrides, pset)  # checks its options before starting workers
     executor = open_executor(args.workers, args.scheduler)
     print(f"tune {spec.name}: {', '.join(names)} within "
           f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in bounds)}, budget {args.budget} runs on "
           f"{executor.description}, {flavour}", file=sys.stderr)
     try:
         res = tunemod.tune(for_executor(spec, executor), names, bounds, budget=args.budget, executor=executor,
-                           seed=args.seed,
-                           w_angle=w_angle, w_voltage=w_voltage, progress=not args.quiet)
+                           seed=args.seed, w_angle=w_angle, w_voltage=w_voltage, progress=not args.quiet,
+                           robust=robust)
     except KeyboardInterrupt:
         executor.abort()
         print("ipcosim tune: interrupted; nothing written", file=sys.stderr)

@@ -228,6 +228,17 @@ def phase_margins(loop: Loop, w: np.ndarray, Lw: np.ndarray) -> list[dict[str, f
     return out
 
 
+def loop_limits(loop: Loop, n: int = 1500) -> tuple[float, float] | None:
+    """``(peak |S|, delay margin [s])`` of a loop on an ``n``-point grid (what a tuner constrains, cheaper than
+    :func:`analyze_loop`), or None when the closed loop is unstable. No gain crossover: an infinite margin."""
+    if not is_stable(closed_loop_poles(loop)):
+        return None
+    w = frequency_grid(loop.T, n)
+    Lw = loop_response(loop, w)
+    pms = phase_margins(loop, w, Lw)
+    return peak(loop, w, np.abs(1.0 / (1.0 + Lw)))[0], min((d["delay_margin_s"] for d in pms), default=math.inf)
+
+
 def peak(loop: Loop, w: np.ndarray, values: np.ndarray) -> tuple[float, float]:
     """Largest value on the grid and its frequency."""
     i = int(np.argmax(values))

@@ -113,51 +113,143 @@ class TuneResult:
     message: str = ""
 
 
+@dataclass(frozen=True)
+class Robustness:
+    """What the robust objective asks of a candidate besides a low cost (``ipcosim tune --max-peak-sensitivity
+    --min-delay-margin --spread``).
+
+    The loop limits are those of ``ipcosim analyze`` (loop broken at the plant input,
+    ``ipcosim.harness.studies.analyze.loop_limits``), checked before any run on the nominal plant and
+    on every plant of the spread; a candidate that misses one is not run. The others run on the
+    nominal plant and on every plant of the spread, and count with their worst run.
+
+    Attributes
+    ----------
+    scenario : str
+        The scenario whose loop is analysed.
+    parameter_set : str, optional
+        Its parameter set.
+    fixed : mapping
+        The fixed ``--set`` values (``component.variable``).
+    max_peak_sensitivity : float, optional
+        Largest peak |S| at the plant input allowed.
+    min_delay_margin : float, optional
+        Smallest delay margin allowed [s].
+    spread : tuple of mapping
+        Plant variations (``plant.variable`` -> value), run besides the nominal plant.
+    """
+
+    scenario: str
+    parameter_set: str | None = None
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    max_peak_sensitivity: float | None = None
+    min_delay_margin: float | None = None
+    spread: tuple[Mapping[str, float], ...] = ()
+
+    def violation(self, values: Mapping[str, float]) -> tuple[float, dict[str, float]]:
+        """``(how far the loop limits are missed, 0 = met; {worst peak_sensitivity, delay_margin_s}})`` of the
+        candidate ``values`` over the nominal plant and the spread (inf when a loop is unstable)."""
+        from ipcosim.harness.studies.analyze import loop_limits, scenario_loop
+
+        if self.max_peak_sensitivity is None and self.min_delay_margin is None:
+            return 0.0, {}
+        worst = {"peak_sensitivity": 0.0, "delay_margin_s": math.inf}
+        for plant in ({}, *self.spread):
+            loop, _ = scenario_loop(self.scenario, self.parameter_set, {**self.fixed, **values, **plant})
+            limits = loop_limits(loop)
+            if limits is None:
+                return math.inf, {}
+            worst["peak_sensitivity"] = max(worst["peak_sensitivity"], limits[0])
+            worst["delay_margin_s"] = min(worst["delay_margin_s"], limits[1])
+        excess = 0.0
+        if self.max_peak_sensitivity is not None:
+            excess += max(0.0, worst["peak_sensitivity"] / self.max_peak_sensitivity - 1.0)
+        if self.min_delay_margin is not None:
+            excess += max(0.0, 1.0 - worst["delay_margin_s"] / self.min_delay_margin)
+        return excess, worst
+
+
+def spread_plants(parameters: Mapping[str, Any], names: Sequence[str], fraction: float) -> tuple[dict[str, float], ...]:
+    """The spread of a robust tuning: two corners, every one of ``names`` (``plant.variable``, those the
+    scenario has) scaled by ``1 - fraction`` and by ``1 + fraction``."""
+    present = [n for n in names if n in parameters]
+    return tuple({n: float(parameters[n]) * (1.0 + sign * fraction) for n in present} for sign in (-1.0, 1.0))
+
+
 class SweepMap:
     """The ``workers`` map handed to differential evolution: evaluates a generation through the
-    sweep engine and returns the (surrogate) costs."""
+    sweep engine and returns the (surrogate) costs. With a :class:`Robustness`, a candidate is
+    first checked against the loop limits, then run on the nominal plant and every plant of the
+    spread; its row is its worst run's (``runs`` of them)."""
 
     def __init__(self, spec: RunSpec, names: Sequence[str], executor: Any, seed: int,
                  w_angle: float, w_voltage: float, budget: int,
-                 on_row: Callable[[dict[str, Any]], None] | None = None) -> None:
+                 on_row: Callable[[dict[str, Any]], None] | None = None, robust: Robustness | None = None) -> None:
         from ipcosim.harness.studies.sweep import run_sweep
 
         self._run_sweep = run_sweep
         self.spec, self.names, self.executor, self.seed = spec, list(names), executor, seed
         self.w_angle, self.w_voltage, self.budget = w_angle, w_voltage, budget
+        self.robust = robust
         self.rows: list[dict[str, Any]] = []
         self.on_row = on_row
         self.generations = 0
+        self._runs = 0
 
     @property
     def remaining(self) -> int:
-        """Runs left in the budget."""
+        """Candidates left in the budget (runs, without a spread)."""
         return max(0, self.budget - len(self.rows))
 
     def evaluate(self, vectors: Sequence[Sequence[float]]) -> list[dict[str, Any]]:
-        """Run one case per parameter vector; return their rows (with ``cost``)."""
+        """Evaluate one candidate per parameter vector; return their rows (with ``cost``)."""
         start = len(self.rows)
-        if not vectors:
-            return []
-        cases = [SweepCase(index=start + i, params=dict(zip(self.names, map(float, v))),
-                      seed=case_seed(self.seed, start + i))
-                 for i, v in enumerate(vectors)]
-        result = self._run_sweep(self.spec, cases, executor=self.executor)
-        for row in result.rows:
+        candidates = [dict(zip(self.names, map(float, v))) for v in vectors]
+        plants = ({}, *self.robust.spread) if self.robust else ({},)
+        checks = [self.robust.violation(c) if self.robust else (0.0, {}) for c in candidates]
+        cases, owner = [], {}
+        for i, (values, (excess, _)) in enumerate(zip(candidates, checks)):
+            for plant in (plants if excess == 0.0 else ()):
+                cases.append(SweepCase(index=self._runs, params={**values, **plant},
+                                       seed=case_seed(self.seed, self._runs)))
+                owner[self._runs] = i
+                self._runs += 1
+        runs: dict[int, list[dict[str, Any]]] = {}
+        for row in (self._run_sweep(self.spec, cases, executor=self.executor).rows if cases else []):
             row["cost"] = costmod.cost(row, self.w_angle, self.w_voltage) if row["status"] != "error" else math.inf
+            runs.setdefault(owner[row["index"]], []).append(row)
+        out = []
+        for i, (values, (excess, worst)) in enumerate(zip(candidates, checks)):
+            if excess > 0.0:
+                row = {"index": start + i, **values, "status": "limits", "cost": math.inf, "violation": excess}
+            else:
+                row = dict(max(runs[i], key=lambda r: (r["status"] == "error", r["cost"])))
+                row.update(index=start + i, **values)
+                if self.robust:
+                    row["runs"] = len(runs[i])
+            row.update(worst)
+            out.append(row)
             self.rows.append(row)
             if self.on_row:
                 self.on_row(row)
-        return result.rows
+        return out
 
     def __call__(self, func: Callable, iterable: Iterable) -> list[float]:
         vectors = [np.asarray(x, dtype=float) for x in iterable]
         rows = self.evaluate(vectors[:self.remaining])  # the budget is a hard limit on runs
         self.generations += 1
         stop = self.spec.stop_time or 1.0
-        costs = [costmod.surrogate_cost(r, stop, self.w_angle, self.w_voltage) if r["status"] != "error"
-                 else 2.0 * costmod.FALL_PENALTY for r in rows]
+        costs = [self._surrogate(r, stop) for r in rows]
         return costs + [math.inf] * (len(vectors) - len(rows))  # members not run: never selected
+
+    def _surrogate(self, row: Mapping[str, Any], stop: float) -> float:
+        """The optimiser's finite cost: a fall ranks below any run, an error below any fall, missed loop limits
+        below any error (the further missed, the worse)."""
+        if row["status"] == "limits":
+            return 2.0 * costmod.FALL_PENALTY * (1.0 + min(float(row["violation"]), 1e6))
+        if row["status"] == "error":
+            return 2.0 * costmod.FALL_PENALTY
+        return costmod.surrogate_cost(row, stop, self.w_angle, self.w_voltage)
 
 
 def population_size(popsize: int, dims: int) -> int:
@@ -190,7 +282,7 @@ def plan_population(budget: int, dims: int) -> tuple[int, int]:
 def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, float]], budget: int = 200,
          executor: Any = None, seed: int = 0, w_angle: float = costmod.W_ANGLE,
          w_voltage: float = costmod.W_VOLTAGE, progress: bool = False,
-         on_row: Callable[[dict[str, Any]], None] | None = None) -> TuneResult:
+         on_row: Callable[[dict[str, Any]], None] | None = None, robust: Robustness | None = None) -> TuneResult:
     """Minimise the tuning cost over ``names`` within ``bounds`` by differential evolution.
 
     Parameters
@@ -211,6 +303,10 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
         Cost weights.
     progress : bool
         Print one line per generation on stderr.
+    on_row : callable, optional
+        Called with every candidate's row.
+    robust : Robustness, optional
+        Loop limits and a plant spread (the robust objective); ``budget`` then counts candidates.
     """
     from ipcosim.harness.studies.executors import open_executor
 
@@ -221,13 +317,13 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
     if own:
         executor = open_executor()
     try:
-        mapper = SweepMap(spec, names, executor, seed, w_angle, w_voltage, budget, on_row)
+        mapper = SweepMap(spec, names, executor, seed, w_angle, w_voltage, budget, on_row, robust)
         nominal_row = mapper.evaluate([np.array([nominal[n] for n in names])])[0]
         message = _evolve(mapper, bounds, x0, population, seed, progress, nominal_row["cost"])
     finally:
         if own:
             executor.close()
-    candidates = [r for r in mapper.rows if r["status"] != "error"]
+    candidates = [r for r in mapper.rows if r["status"] not in ("error", "limits")]
     best_row = min(candidates, key=lambda r: r["cost"]) if candidates else nominal_row
     if not (best_row["cost"] < nominal_row["cost"]):
         best_row = nominal_row
@@ -354,7 +450,8 @@ def write_evaluations(path: Path, rows: Sequence[Mapping[str, Any]], names: Sequ
     if not rows:
         return
     keys = ["index", "status", "cost", *names]
-    keys += [k for k in rows[0] if k not in keys and k not in ("seed", "success")]
+    for r in rows:
+        keys += [k for k in r if k not in keys and k not in ("seed", "success")]
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(keys)
