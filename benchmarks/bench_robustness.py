@@ -12,14 +12,7 @@ from __future__ import annotations
 
 import time
 
-try:  # the bench API of benchmarks.targets (figure keys recorded in benchmarks/last.json)
-    from benchmarks.targets import target
-except ImportError:  # the runner's own, before that API
-    from benchmarks.bench import target as _runner_target
-
-    def target(key: str, value: float, limit: float, unit: str = "", *, at_most: bool = True,  # type: ignore[misc]
-               what: str = "") -> str:
-        return _runner_target(what or key, value, limit, unit, at_most)
+from benchmarks.targets import target
 
 SCENARIO = "double-mass-lqr"
 RUNS = 200
@@ -57,7 +50,7 @@ def measure() -> dict[str, float]:
 def run() -> list[str]:
     """Lines for ``make bench``."""
     m = measure()
-    verdict = target("robustness.lab_200_runs_s", m["wall_s"], LIMIT_S, " s",
+    verdict = target("robustness.lab_200_runs_s", m["wall_s"], LIMIT_S, "s",
                      what=f"{RUNS}-run lab robustness row, native flavour, {WORKERS} workers")
     return [f"robustness row ({SCENARIO}, every factor, lab bench, {RUNS} runs x {STOP_TIME:g} s, native, "
             f"{WORKERS} workers):",
