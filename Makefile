@@ -42,7 +42,9 @@ lint: $(STAMP)
 test: fmus vdmcheck lint
 	$(BIN)/python -m pytest
 
+# Every benchmark, then benchmarks/last.json; `python -m benchmarks.docs --update` writes the docs' figures from it.
 bench: fmus
+	$(BIN)/ipcosim build --native
 	$(BIN)/python -m benchmarks.bench
 
 # The FMUs of both flavours with reference results in the FMI cross-check layout, checked by fmpy.cross_check.

@@ -1,58 +1,39 @@
 """``make bench`` (``python -m benchmarks.bench [NAME ...]``): run every ``benchmarks/bench_*.py``.
 
-Each bench module exposes ``run() -> list[str]``, the lines to print; its module docstring
-says what it measures. A module whose figures miss a target raises :class:`TargetMissed` with
-its lines and the targets missed (``benchmarks.targets``): they are printed and the run exits
-non-zero. Modules run one after the other, in name order, each in a fresh
-interpreter: FMUs loaded in-process put their resources on ``sys.path`` (pythonfmu's wrapper
-does), which would change what a later module imports. A module that fails prints one error
-line and the others still run (exit status 1).
+Each bench module exposes ``run() -> list[str]``, the lines to print; its module docstring says
+what it measures. It records its figures through ``benchmarks.targets`` (:func:`~benchmarks.targets.target`
+for the checked ones, :func:`~benchmarks.targets.figure` for the rest). Modules run one after
+the other, in name order, each in a fresh interpreter: FMUs loaded in-process put their resources
+on ``sys.path`` (pythonfmu's wrapper does), which would change what a later module imports.
 
-A bench states its targets through :func:`target`, which returns the verdict text for its
-line and records a miss. Every module runs and prints everything; then, if any target was
-missed (or a module failed), the run ends with one summary line per miss and exit status 1.
+After its lines, a module prints one ``TARGET MISSED`` line per missed target; a module that
+cannot run its subject prints one error line. Every module runs; the exit status is 1 when a
+target was missed or a module failed, else 0.
+
+The figures of the modules that ran replace theirs in ``benchmarks/last.json`` (with the date,
+the machine and its load average at the start and the end of each module), from which
+``python -m benchmarks.docs --update`` writes the figures of the docs.
 """
 from __future__ import annotations
 
+import datetime
 import importlib
+import json
+import os
 import pkgutil
+import platform
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
-from typing import Sequence
-
-from benchmarks.targets import TargetMissed
+from typing import Any, Sequence
 
 HERE = Path(__file__).resolve().parent
+#: Where the figures of the last run go (one entry per module).
+LAST_JSON = HERE / "last.json"
 #: Exit status of a bench module that ran but missed a target.
 MISSED_STATUS = 3
-#: Targets missed in this process: one description each.
-MISSED: list[str] = []
-
-
-def target(what: str, value: float, limit: float, unit: str = "", at_most: bool = True) -> str:
-    """Verdict text for a measured ``value`` against its target ``limit``; records a miss.
-
-    Parameters
-    ----------
-    what : str
-        What was measured (named in the summary of misses).
-    value, limit : float
-        Measurement and target, in ``unit``.
-    at_most : bool
-        True: the target is ``value <= limit``; False: ``value >= limit``.
-
-    Returns
-    -------
-    str
-        ``"target <= 1.15x: met"`` or ``"target <= 1.15x: MISSED"``.
-    """
-    met = value <= limit if at_most else value >= limit
-    text = f"target {'<=' if at_most else '>='} {limit:g}{unit}"
-    if not met:
-        MISSED.append(f"{what}: {value:.3g}{unit}, {text}")
-    return f"{text}: {'met' if met else 'MISSED'}"
 
 
 def bench_modules() -> list[str]:
@@ -61,52 +42,94 @@ def bench_modules() -> list[str]:
                   if m.name.startswith("bench_"))
 
 
-def run_one(name: str) -> int:
-    """Run one bench module in this process and print its lines (or one error line)."""
+def machine() -> str:
+    """The machine in one line: CPU model, cores, OS, Python."""
+    model = platform.processor() or platform.machine()
+    try:
+        model = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                     if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    system = f"{platform.system()} {platform.release()}"
+    return f"{model}, {os.cpu_count()} cores, {system}, Python {platform.python_version()}"
+
+
+def _load() -> float:
+    return round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else float("nan")
+
+
+def run_one(name: str, out: Path | None = None) -> int:
+    """Run one bench module in this process, print its lines, its misses or its one error line,
+    and write its entry for last.json to ``out``."""
+    from benchmarks import targets
+
+    entry: dict[str, Any] = {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+                             "machine": machine(), "load": [_load()]}
     start = time.perf_counter()
     try:
         lines = importlib.import_module(name).run()
-    except TargetMissed as exc:
-        for line in exc.lines:
-            print(f"   {line}", flush=True)
-        for line in exc.missed:
-            print(f"   TARGET MISSED: {line}", flush=True)
-        return MISSED_STATUS
+        status = "ok"
     except Exception as exc:  # noqa: BLE001 -- one line, the other benches still run
         text = str(exc).strip()
-        print(f"   error: {type(exc).__name__}: {text.splitlines()[0] if text else ''}", flush=True)
-        return 1
+        lines, status = [f"error: {type(exc).__name__}: {text.splitlines()[0] if text else ''}"], "failed"
     for line in lines:
         print(f"   {line}", flush=True)
-    print(f"   ({time.perf_counter() - start:.1f} s)", flush=True)
-    # the bench modules record misses in ``benchmarks.bench`` (this file may run as __main__)
-    missed = importlib.import_module("benchmarks.bench").MISSED
+    entry["seconds"] = round(time.perf_counter() - start, 1)
+    print(f"   ({entry['seconds']:.1f} s)", flush=True)
+    missed = targets.missed()
     for miss in missed:
         print(f"   TARGET MISSED: {miss}", flush=True)
-    return MISSED_STATUS if missed else 0
+    if status == "ok" and missed:
+        status = "missed"
+    entry.update(status=status, figures=targets.FIGURES)
+    entry["load"].append(_load())
+    if out is not None:
+        out.write_text(json.dumps(entry))
+    return {"ok": 0, "missed": MISSED_STATUS}.get(status, 1)
+
+
+def write_last(entries: dict[str, dict[str, Any]], path: Path = LAST_JSON) -> None:
+    """Replace the entries of the modules that ran in ``path`` (others are kept)."""
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        data = {}
+    modules = data.setdefault("modules", {})
+    modules.update(entries)
+    data["modules"] = dict(sorted(modules.items()))
+    path.write_text(json.dumps(data, indent=1, sort_keys=False) + "\n")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the bench modules (all, or those whose name contains one of ``argv``), each in its own process."""
     args = list(sys.argv[1:] if argv is None else argv)
-    if args[:1] == ["--one"] and len(args) == 2:
-        return run_one(args[1])
-    failed, missed = [], []
-    for name in bench_modules():
-        if args and not any(w in name for w in args):
-            continue
-        print(f"== {name}", flush=True)
-        rc = subprocess.run([sys.executable, "-m", "benchmarks.bench", "--one", name]).returncode
-        if rc == MISSED_STATUS:
-            missed.append(name)
-        elif rc != 0:
-            if rc < 0:
-                print(f"   error: the bench process ended by signal {-rc}", flush=True)
-            failed.append(name)
+    if args[:1] == ["--one"] and len(args) in (2, 3):
+        return run_one(args[1], Path(args[2]) if len(args) == 3 else None)
+    names = [n for n in bench_modules() if not args or any(w in n for w in args)]
+    if not names:
+        print(f"bench: no bench module matches {' '.join(args)} (known: "
+              f"{', '.join(n.split('.')[-1] for n in bench_modules())})", file=sys.stderr)
+        return 1
+    failed, missed, entries = [], [], {}
+    with tempfile.TemporaryDirectory(prefix="ipcosim-bench-") as tmp:
+        for name in names:
+            print(f"== {name}", flush=True)
+            out = Path(tmp) / f"{name}.json"
+            rc = subprocess.run([sys.executable, "-m", "benchmarks.bench", "--one", name, str(out)]).returncode
+            if out.exists():
+                entries[name.split(".")[-1]] = json.loads(out.read_text())
+            if rc == MISSED_STATUS:
+                missed.append(name)
+            elif rc != 0:
+                if rc < 0:
+                    print(f"   error: the bench process ended by signal {-rc}", flush=True)
+                failed.append(name)
+    write_last(entries)
     if missed:
         print(f"bench: targets missed in {', '.join(missed)} (see TARGET MISSED above)", flush=True)
     if failed:
         print(f"bench: failed: {', '.join(failed)}", flush=True)
+    print(f"bench: figures written to {LAST_JSON.relative_to(HERE.parent)}", flush=True)
     return 1 if (missed or failed) else 0
 
 

@@ -1,24 +1,29 @@
 """Cost of the control laws (``make bench``), measured side by side in one run.
 
-For every law and plant: the time of one ``step`` of the pure law (mean over a 10 s closed
+For every law and plant: the time of one ``step`` of the pure law (median over a 10 s closed
 loop at 1 ms), the whole pure closed loop of 10 s (plant + law, ``ipcosim.controllers.simulate``) and
 its real-time factor, and the LQR design itself with both back ends (python-control and the
-scipy path the FMUs run at initialization). Ratios are taken within this run.
+scipy path the FMUs run at initialization). Target: the sum of the ten laws' median step times.
 """
 from __future__ import annotations
 
+import statistics
 import time
 
+from benchmarks.targets import figure, target
 from ipcosim.controllers.catalog import KINDS, LAWS, default_preset, lqr_design_for, make_law
 from ipcosim.controllers.simulate import run_loop
 from ipcosim.fmus.params import preset
+
+#: Target: the ten median law steps together (measured 26-32 us).
+LAW_STEPS_US = 42.0
 
 
 class _Timed:
     """Wraps a law and accumulates the time spent in its ``step``."""
 
     def __init__(self, law) -> None:  # noqa: ANN001
-        self.law, self.elapsed, self.calls = law, 0.0, 0
+        self.law, self.elapsed, self.calls, self.times = law, 0.0, 0, []
         self.sample_period = law.sample_period
 
     def reset(self) -> None:
@@ -27,20 +32,24 @@ class _Timed:
     def step(self, y, r):  # noqa: ANN001, ANN201
         t = time.perf_counter()
         v = self.law.step(y, r)
-        self.elapsed += time.perf_counter() - t
+        dt = time.perf_counter() - t
+        self.elapsed += dt
+        self.times.append(dt)
         self.calls += 1
         return v
 
 
 def run() -> list[str]:
     lines = ["law           plant         law step us   loop 10 s [s]   real-time factor   law share"]
+    steps = []
     for law in LAWS:
         for kind in KINDS:
             timed = _Timed(make_law(kind, law))
             t = time.perf_counter()
             run_loop(timed, preset(default_preset(kind)))  # type: ignore[arg-type]
             total = time.perf_counter() - t
-            lines.append(f"{law:13s} {kind:13s} {1e6 * timed.elapsed / timed.calls:11.1f}   {total:13.3f}   "
+            steps.append(1e6 * statistics.median(timed.times))
+            lines.append(f"{law:13s} {kind:13s} {steps[-1]:11.1f}   {total:13.3f}   "
                          f"{10.0 / total:16.1f}   {timed.elapsed / total:8.0%}")
     for kind in KINDS:
         row = []
@@ -49,6 +58,11 @@ def run() -> list[str]:
             for _ in range(20):
                 lqr_design_for(kind, preset(default_preset(kind)), backend=backend)
             row.append((time.perf_counter() - t) / 20)
-        lines.append(f"LQR design {kind}: python-control {1e3 * row[0]:.2f} ms, scipy {1e3 * row[1]:.2f} ms "
+        lines.append(f"LQR design {kind}: python-control {1e3 * row[0]:.2f} ms, scipy "
+                     + figure(f"controllers.lqr_design_{kind.replace('-', '_')}_ms", 1e3 * row[1], "ms",
+                              what=f"LQR design, {kind}, scipy") + " "
                      f"(ratio {row[0] / row[1]:.2f})")
+    lines.append(f"sum of the {len(steps)} median law steps: {sum(steps):.1f} us ("
+                 + target("controllers.law_steps_us", sum(steps), LAW_STEPS_US, "us",
+                          what="sum of the median law step times") + ")")
     return lines

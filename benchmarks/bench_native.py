@@ -1,19 +1,24 @@
-"""Native FMUs (``make bench``), side by side in one run:
+"""Native FMUs (``make bench``), side by side in one run, on ``build/fmus-native`` and ``build/fmus``
+(``make bench`` builds both):
 
 * the plant cycle through fmpy -- ``fmi2SetReal(voltage)``, ``fmi2DoStep(1 ms)``, ``fmi2GetReal(outputs)`` -- of
   the native ``IP02SingleMass``, of the Python one, and of a trivial native FMU (``Setpoint``: the floor of
-  fmpy's ctypes calls), medians over alternating rounds;
-* the loop real-time factor of ``single-mass-lqr`` on native FMUs in the ipcosim master, on its compiled C
-  stepping loop (the default, target >= 200x) and on its Python loop (no target), and in libcosim
-  (``simulate_until`` of 10 s, target >= 2000x);
-* a robustness sweep (``plant.Mp`` and ``plant.Beq`` drawn +-20 %, 10 s runs, one worker) on both flavours:
-  wall time per run and their ratio (``IPCOSIM_BENCH_SWEEP_RUNS`` runs each, default 10).
+  fmpy's ctypes calls), the least disturbed of many short alternating rounds
+  (``benchmarks.targets.least_disturbed``); target on the native plant against that floor;
+* a robustness sweep (``plant.Mp`` and ``plant.Beq`` drawn +-20 %, 10 s runs, one worker) on both flavours,
+  runs alternating: CPU time per run, the least disturbed of the runs (target on the native one; CPU
+  time is the least changed by other load) and their ratio;
+* libcosim on the native FMUs (``simulate_until`` of 10 s): the scenario's folder, the scenario exported as
+  one FMU (``ipcosim export``) at 1 ms and 10 ms communication steps -- reference figures, read against
+  libcosim alone with one trivial native FMU (its own per-step cost, which caps them).
 
-FMUs are built into a temporary folder. A missed target ends the module with an error (exit status 1).
+The master's loops on native FMUs are measured in ``benchmarks.bench_master`` (against their floors), the
+whole native run in ``benchmarks.bench_runtime``.
 """
 from __future__ import annotations
 
 import os
+import random
 import shutil
 import statistics
 import tempfile
@@ -22,16 +27,15 @@ import warnings
 from pathlib import Path
 from typing import Callable
 
-ROUNDS = int(os.environ.get("IPCOSIM_BENCH_ROUNDS", "30"))
-CYCLES = int(os.environ.get("IPCOSIM_BENCH_CYCLES", "300"))
-MASTER_TARGET = 200.0
-LIBCOSIM_TARGET = 2000.0
+from benchmarks.targets import figure, least_disturbed, target
+
+ROUNDS = int(os.environ.get("IPCOSIM_BENCH_ROUNDS", "250"))
+CYCLES = int(os.environ.get("IPCOSIM_BENCH_CYCLES", "50"))
 SCENARIO = "single-mass-lqr"
 SWEEP_RUNS = int(os.environ.get("IPCOSIM_BENCH_SWEEP_RUNS", "10"))
-
-
-class TargetMissed(RuntimeError):
-    """A speed target of this module was missed."""
+#: Targets: the native plant cycle / the trivial native FMU's (measured 1.8-1.9x); the native sweep's
+#: CPU seconds per 10 s run, the least disturbed run (medians measured 0.011-0.015 s at load 2-14).
+PLANT_OVER_TRIVIAL, SWEEP_NATIVE_S = 2.4, 0.016
 
 
 def _cycle(fmu: Path, unzip: Path, inputs: dict[str, float], outputs: list[str]) -> Callable[[int], None]:
@@ -74,42 +78,27 @@ def _cycles(python: Path, native: Path, tmp: Path) -> dict[str, float]:
             t0 = time.perf_counter()
             fn(CYCLES)
             samples[name].append((time.perf_counter() - t0) / CYCLES * 1e6)
-    return {k: statistics.median(v) for k, v in samples.items()}
-
-
-def _master_rtf(native: Path) -> dict[str, float]:
-    """Best loop real-time factor of three runs on each of the master's stepping loops (the
-    compiled C loop, the default; the Python loop), alternating."""
-    import ipcosim
-
-    best = {"c": 0.0, "python": 0.0}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for _ in range(3):
-            for loop in best:
-                result = ipcosim.run(SCENARIO, fmu_dirs=[native], fmus="native", loop=loop)
-                meta = result.metadata
-                if not meta["loop"].startswith(loop):
-                    raise RuntimeError(f"{SCENARIO}: asked for the {loop} loop, ran {meta['loop']}")
-                best[loop] = max(best[loop], (meta["stop_time"] - meta["start_time"]) / meta["loop_wall_time_s"])
-    return best
+    return {k: least_disturbed(v) for k, v in samples.items()}
 
 
 def _libcosim_rtf(folder: Path, step_ns: int = 1_000_000) -> float:
-    """Best of three real-time factors of libcosim's ``simulate_until`` over 10 s (1 ms steps by default)."""
+    """Median of three real-time factors of libcosim's ``simulate_until`` over 10 s (1 ms steps by default)."""
+    from ipcosim.harness.extras import require
+
+    require("libcosimpy")
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
 
     log_output_level(CosimLogLevel.ERROR)
-    best = 0.0
+    rtfs = []
     for _ in range(3):
         execution = CosimExecution.from_ssp_file(str(folder), step_ns)
         t0 = time.perf_counter()
         if not execution.simulate_until(10_000_000_000):
-            raise RuntimeError("libcosim: simulation failed")
-        best = max(best, 10.0 / (time.perf_counter() - t0))
+            raise RuntimeError(f"libcosim: simulation of {folder} failed")
+        rtfs.append(10.0 / (time.perf_counter() - t0))
         execution.stop()
-    return best
+    return statistics.median(rtfs)
 
 
 def _one_fmu_folder(fmu: Path, dest: Path) -> Path:
@@ -127,101 +116,91 @@ def _one_fmu_folder(fmu: Path, dest: Path) -> Path:
     return dest
 
 
-def _sweep_ratio(python: Path, native: Path) -> tuple[float, float]:
-    """Seconds per run of the same robustness cases on the Python and on the native FMUs."""
-    import random
-
-    import ipcosim.harness.scenario.flavour as flavour
+def _sweep(runs: int = SWEEP_RUNS) -> dict[str, float]:
+    """CPU seconds per run (the least disturbed run) of the same robustness cases on the Python and the
+    native FMUs, alternating."""
     from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, make
     from ipcosim.harness.studies.specs import spec_for
 
     nominal = make("single-mass", **dict(PRESETS[DEFAULT_PRESET["single-mass"]][1]))
     rng = random.Random(0)
     cases = [{"plant.Mp": nominal.Mp * rng.uniform(0.8, 1.2), "plant.Beq": nominal.Beq * rng.uniform(0.8, 1.2)}
-             for _ in range(SWEEP_RUNS)]
-    per_run = []
-    saved_env, saved_dir = os.environ.get("IPCOSIM_FMU_PATH"), flavour.native_fmu_dir
-    os.environ["IPCOSIM_FMU_PATH"] = str(python)
-    flavour.native_fmu_dir = lambda: native  # type: ignore[assignment]
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            for fmus in ("python", "native"):
-                runner = spec_for(SCENARIO, fmus=fmus).build()
-                t0 = time.perf_counter()
-                for i, case in enumerate(cases):
-                    runner(case, i)
-                per_run.append((time.perf_counter() - t0) / len(cases))
-    finally:
-        flavour.native_fmu_dir = saved_dir  # type: ignore[assignment]
-        if saved_env is None:
-            os.environ.pop("IPCOSIM_FMU_PATH", None)
-        else:
-            os.environ["IPCOSIM_FMU_PATH"] = saved_env
-    return per_run[0], per_run[1]
+             for _ in range(runs)]
+    samples: dict[str, list[float]] = {"python": [], "native": []}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        runners = {fmus: spec_for(SCENARIO, fmus=fmus).build() for fmus in samples}
+        for i, case in enumerate(cases):
+            for fmus, runner in runners.items():
+                t0 = time.process_time()
+                row = runner(case, i)
+                samples[fmus].append(time.process_time() - t0)
+                if row.get("status", "ok") != "ok":
+                    raise RuntimeError(f"sweep run {i} on the {fmus} FMUs: {row.get('error')}")
+    return {k: least_disturbed(v) for k, v in samples.items()}
 
 
-def run() -> list[str]:
-    from ipcosim.fmus.pybuild import build_all
-    from ipcosim.harness.native.cbuild import build_native
-
-    with tempfile.TemporaryDirectory() as d:
-        tmp = Path(d)
-        build_all(tmp / "fmus")
-        build_native(tmp / "fmus", tmp / "fmus-native")
-        c = _cycles(tmp / "fmus", tmp / "fmus-native", tmp)
-        master = _master_rtf(tmp / "fmus-native")
-        try:
-            libcosim: dict[str, float] | None = _libcosim_rtf_native(tmp)
-        except ImportError:
-            libcosim = None
-        sweep_py, sweep_native = _sweep_ratio(tmp / "fmus", tmp / "fmus-native")
-    lines = [f"plant cycle (set, doStep 1 ms, get 5 outputs) through fmpy: native {c['native plant']:.2f} us, "
-             f"python {c['python plant']:.2f} us ({c['python plant'] / c['native plant']:.0f}x), trivial native "
-             f"FMU {c['trivial native FMU']:.2f} us; native plant model cost "
-             f"{c['native plant'] - c['trivial native FMU']:.2f} us",
-             f"{SCENARIO} on native FMUs, ipcosim master: loop real-time factor {master['c']:.0f}x on the C loop "
-             f"(the default; target >= {MASTER_TARGET:g}x: {'ok' if master['c'] >= MASTER_TARGET else 'MISSED'}), "
-             f"{master['python']:.0f}x on the Python loop"]
-    if libcosim is None:
-        lines.append("libcosim: libcosimpy not installed")
-    else:
-        rtf, floor = libcosim["scenario"], libcosim["floor"]
-        lines.append(f"{SCENARIO} on native FMUs, libcosim: real-time factor {rtf:.0f}x (target >= "
-                     f"{LIBCOSIM_TARGET:g}x: {'ok' if rtf >= LIBCOSIM_TARGET else 'MISSED'}); libcosim alone with one "
-                     f"trivial native FMU: {floor:.0f}x ({1e3 / floor:.1f} us per 1 ms step of its own)")
-        lines.append(f"{SCENARIO} exported as one FMU (ipcosim export), libcosim: {libcosim['export 1 ms']:.0f}x at "
-                     f"1 ms communication steps, {libcosim['export 10 ms']:.0f}x at 10 ms (ten 1 ms ticks inside "
-                     f"each step; the same results)")
-    lines.append(f"robustness sweep of {SCENARIO} ({SWEEP_RUNS} runs of 10 s each, one worker): python "
-                 f"{sweep_py:.2f} s/run, native {sweep_native:.3f} s/run, ratio {sweep_py / sweep_native:.1f}x "
-                 f"(a 1000-run sweep: {1000 * sweep_py / 60:.0f} min vs {1000 * sweep_native / 60:.1f} min)")
-    load = os.getloadavg()[0]
-    lines.append(f"machine: {os.cpu_count()} cores, load average {load:.1f} during the run (figures scale with it)")
-    missed = [line for line in lines if "MISSED" in line]
-    if missed:
-        for line in lines:
-            print(f"   {line}", flush=True)
-        raise TargetMissed("; ".join(m.split(":")[0] for m in missed) + ": target missed")
-    return lines
-
-
-def _libcosim_rtf_native(tmp: Path) -> dict[str, float]:
-    """libcosim's real-time factors: the scenario folder written for the native FMUs in ``tmp/fmus-native``
-    (1 ms steps); one trivial native FMU alone (the floor of libcosim's own per-step cost); the scenario
-    exported as one FMU (``ipcosim export``) at 1 ms and at 10 ms communication steps."""
-    import ipcosim.harness.scenario.flavour as flavour
+def _libcosim(tmp: Path, native: Path) -> dict[str, float]:
+    """libcosim's real-time factors on the native FMUs: the scenario's folder, one trivial FMU alone
+    (libcosim's own per-step cost), the scenario exported as one FMU at 1 ms and at 10 ms steps."""
     from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.scenario.flavour import write_native_folder
 
-    saved = flavour.native_fmu_dir
-    flavour.native_fmu_dir = lambda: tmp / "fmus-native"  # type: ignore[assignment]
-    try:
-        out = {"scenario": _libcosim_rtf(flavour.write_native_folder(SCENARIO, tmp / "ssp"))}
-        loop = export(ExportOptions(SCENARIO, tmp / "SingleMassLqrLoop.fmu"))
-    finally:
-        flavour.native_fmu_dir = saved  # type: ignore[assignment]
-    out["floor"] = _libcosim_rtf(_one_fmu_folder(tmp / "fmus-native" / "Setpoint.fmu", tmp / "floor"))
-    folder = _one_fmu_folder(loop, tmp / "one")
+    out = {"scenario": _libcosim_rtf(write_native_folder(SCENARIO, tmp / "ssp")),
+           "floor": _libcosim_rtf(_one_fmu_folder(native / "Setpoint.fmu", tmp / "floor"))}
+    folder = _one_fmu_folder(export(ExportOptions(SCENARIO, tmp / "SingleMassLqrLoop.fmu")), tmp / "one")
     out["export 1 ms"] = _libcosim_rtf(folder)
     out["export 10 ms"] = _libcosim_rtf(folder, 10_000_000)
     return out
+
+
+def run() -> list[str]:
+    """Lines for ``make bench``."""
+    from ipcosim.harness.paths import BUILD_DIR
+    from ipcosim.harness.scenario.flavour import native_fmu_dir
+
+    native, python = native_fmu_dir(), Path(BUILD_DIR) / "fmus"
+    for folder in (native, python):
+        if not (folder / "IP02SingleMass.fmu").is_file():
+            raise FileNotFoundError(f"{folder}/IP02SingleMass.fmu missing (run `ipcosim build --native`)")
+    with tempfile.TemporaryDirectory(prefix="ipcosim-bench-") as d:
+        c = _cycles(python, native, Path(d))
+        lib = _libcosim(Path(d), native)
+    sweep = _sweep()
+    plant, trivial = c["native plant"], c["trivial native FMU"]
+    anchor = f"libcosim alone with one trivial native FMU: {lib['floor']:.0f}x"
+    f = {"floor": figure("native.libcosim_floor_rtf", lib["floor"], "x", what="libcosim, one trivial native FMU"),
+         "native": figure("native.plant_cycle_us", plant, "us", what="native plant cycle through fmpy"),
+         "python": figure("native.python_plant_cycle_us", c["python plant"], "us",
+                          what="Python plant cycle through fmpy"),
+         "trivial": figure("native.trivial_cycle_us", trivial, "us", anchor="fmpy ctypes calls",
+                           what="trivial native FMU cycle"),
+         "over": target("native.plant_over_trivial", plant / trivial, PLANT_OVER_TRIVIAL, "x",
+                        what="native plant cycle / trivial native FMU cycle"),
+         "py/nat": figure("native.python_over_native_cycle", c["python plant"] / plant, "x",
+                          what="plant cycle: Python / native"),
+         "sweep py": figure("native.sweep_python_s", sweep["python"], "s", what="Python sweep, CPU s per run"),
+         "sweep nat": target("native.sweep_native_s", sweep["native"], SWEEP_NATIVE_S, "s",
+                             what="native sweep, CPU s per run"),
+         "sweep ratio": figure("native.sweep_ratio", sweep["python"] / sweep["native"], "x",
+                               what="sweep: Python / native"),
+         "lib": figure("native.libcosim_rtf", lib["scenario"], "x", anchor=anchor,
+                       what="libcosim, native FMUs, real-time factor"),
+         "lib 1": figure("native.libcosim_export_1ms_rtf", lib["export 1 ms"], "x", anchor=anchor,
+                         what="libcosim, exported loop, 1 ms steps"),
+         "lib 10": figure("native.libcosim_export_10ms_rtf", lib["export 10 ms"], "x", anchor=anchor,
+                          what="libcosim, exported loop, 10 ms steps")}
+    return [
+        f"plant cycle (set, doStep 1 ms, get 5 outputs) through fmpy, least disturbed of {ROUNDS} x {CYCLES}: native "
+        f"{f['native']}, python {f['python']}, trivial native FMU {f['trivial']}",
+        f"  native plant / trivial native FMU {plant / trivial:.2f}x ({f['over']}); python plant / native plant "
+        f"{f['py/nat']}",
+        f"robustness sweep of {SCENARIO} ({SWEEP_RUNS} runs of 10 s each, one worker, least disturbed CPU time): "
+        f"python {f['sweep py']}/run, native {sweep['native']:.4f} s/run ({f['sweep nat']}); "
+        f"python/native {f['sweep ratio']}",
+        f"libcosim on native FMUs (reference, capped by libcosim's own step cost: {f['floor']} real time, "
+        f"{1e3 / lib['floor']:.1f} us per 1 ms step of its own):",
+        f"  {SCENARIO} folder, 1 ms: {f['lib']} real time",
+        f"  exported as one FMU (ipcosim export): {f['lib 1']} at 1 ms steps, {f['lib 10']} at 10 ms "
+        "(ten 1 ms ticks inside each step; the same results)",
+    ]

@@ -12,7 +12,8 @@ Overhead = wall time per run with 1 worker / time of the run itself inside the w
 everything the engine adds (pickling, inter-process transfer, bookkeeping, the results file).
 The same ratio against the serial loop in this process is printed beside it (it also holds
 any speed difference between the two processes).
-Goals: scaling >= 1.7x on 2 cores, overhead < 5 %.
+Target: overhead < 5 %. The scaling (1.7x and more on an idle two-core machine) is a reference
+figure: it is bounded by the cores other load leaves free.
 """
 from __future__ import annotations
 
@@ -22,25 +23,23 @@ import tempfile
 import time
 from typing import Any
 
-from benchmarks.bench import target
+from benchmarks.targets import figure, target
 
 SCENARIO = os.environ.get("IPCOSIM_BENCH_SCENARIO", "single-mass-lqr")
 STOP_TIME = float(os.environ.get("IPCOSIM_BENCH_STOP_TIME", "2.0"))
 RUNS = int(os.environ.get("IPCOSIM_BENCH_RUNS", "8"))
 REPEATS = int(os.environ.get("IPCOSIM_BENCH_REPEATS", "2"))
+#: Target: what the engine adds to a run, in % of the run's own time.
+OVERHEAD_PCT = 5.0
 
 
-def _spec() -> tuple[Any, str]:
-    """The co-simulation of SCENARIO when it can be loaded, else the pure-Python plant loop."""
-    from ipcosim.harness.studies.runners import PurePlantSpec
+def _spec() -> Any:
+    """The co-simulation of SCENARIO, checked to run here (a bench that cannot run its subject fails)."""
     from ipcosim.harness.studies.specs import spec_for
 
-    try:
-        spec = spec_for(SCENARIO, stop_time=STOP_TIME)
-        spec.build()(dict(), 0)  # loadable and runnable here?
-        return spec, f"co-simulation {SCENARIO}"
-    except Exception as exc:  # noqa: BLE001 -- fall back, and say so
-        return PurePlantSpec(stop_time=STOP_TIME), f"pure plant loop (co-simulation unavailable: {exc})"
+    spec = spec_for(SCENARIO, stop_time=STOP_TIME)
+    spec.build()(dict(), 0)
+    return spec
 
 
 def measure(spec: Any, runs: int = RUNS, repeats: int = REPEATS) -> dict[str, float]:
@@ -54,7 +53,7 @@ def measure(spec: Any, runs: int = RUNS, repeats: int = REPEATS) -> dict[str, fl
     from ipcosim.harness.studies.executors import LocalExecutor
     from ipcosim.harness.studies.sweep import run_sweep
 
-    name = next(n for n in ("plant.Mp", "model.x") if n in spec.parameters)
+    name = "plant.Mp"
     varies = parse_all([f"{name}=uniform(0.9,1.1)*nominal"], spec.parameters)
     cases = make_cases(varies, spec.parameters, samples=2 * runs + 4, seed=1)
     warm, cases = cases[:4], cases[4:]
@@ -95,23 +94,23 @@ def measure(spec: Any, runs: int = RUNS, repeats: int = REPEATS) -> dict[str, fl
 
 def run() -> list[str]:
     """Lines for ``make bench``."""
-    spec, label = _spec()
-    m = measure(spec)
+    m = measure(_spec())
+    if m["w1_errors"] or m["w2_errors"]:
+        raise RuntimeError(f"sweep of {SCENARIO}: {m['w1_errors'] + m['w2_errors']} runs ended in an error")
+    load = os.getloadavg()[0]
     return [
-        f"sweep engine on {label}, {STOP_TIME:g} s per run, {RUNS} runs (2 workers: {2 * RUNS}), best of "
-        f"{REPEATS}, {os.cpu_count()} cores:",
+        f"sweep engine on co-simulation {SCENARIO}, {STOP_TIME:g} s per run, {RUNS} runs (2 workers: {2 * RUNS}), "
+        f"best of {REPEATS}, {os.cpu_count()} cores:",
         f"  serial (the run itself)  {m['serial_s_per_run'] * 1e3:8.1f} ms/run  "
         f"{60 / m['serial_s_per_run']:7.1f} runs/min",
         f"  sweep, 1 worker          {m['w1_s_per_run'] * 1e3:8.1f} ms/run  {m['w1_runs_per_min']:7.1f} runs/min",
         f"  sweep, 2 workers         {m['w2_s_per_run'] * 1e3:8.1f} ms/run  {m['w2_runs_per_min']:7.1f} runs/min",
-        f"  scaling 2 vs 1 worker    {m['scaling']:.2f}x  "
-        f"({target('sweep scaling 2 vs 1 worker', m['scaling'], 1.7, 'x', at_most=False)})",
+        "  scaling 2 vs 1 worker    "
+        + figure("sweep.scaling", m["scaling"], "x", what="sweep scaling, 2 vs 1 worker",
+                 anchor=f"free cores: {os.cpu_count()} cores, load average {load:.1f}")
+        + f" (reference: bounded by the cores the machine leaves free, load average {load:.1f})",
         f"  per-run overhead         {100 * m['overhead']:+.1f} % of the run in the worker "
         f"({(m['w1_s_per_run'] - m['w1_run_s']) * 1e3:+.2f} ms; "
-        f"{target('sweep per-run overhead', 100 * m['overhead'], 5.0, ' %')}); "
-        f"vs the serial loop {100 * m['overhead_vs_serial']:+.1f} %",
+        + target("sweep.overhead_pct", 100 * m["overhead"], OVERHEAD_PCT, "%", what="sweep per-run overhead")
+        + f"); vs the serial loop {100 * m['overhead_vs_serial']:+.1f} %",
     ]
-
-
-if __name__ == "__main__":
-    print("\n".join(run()))

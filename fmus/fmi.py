@@ -601,18 +601,20 @@ class FmuBase(Fmi2Slave):
         self._next_time = self.start_time
 
     def _step_order_error(self, t: float, h: float) -> str | None:
-        """Why ``fmi2DoStep(t, h)`` is refused in the current state, or None."""
+        """Why ``fmi2DoStep(t, h)`` is refused in the current state, or None (the message is built
+        only for a refusal: this runs on every step)."""
+        expected = self._next_time
+        if (self.fmi_state == "stepping" and math.isfinite(h) and h > 0 and math.isfinite(t)
+                and abs(t - expected) <= self.TIME_TOLERANCE * max(1.0, abs(expected), h)):
+            return None
         call = f"fmi2DoStep(currentCommunicationPoint = {t!r}, communicationStepSize = {h!r})"
         if self.fmi_state != "stepping":
             return (f"{call} in state {self.fmi_state}: allowed only after fmi2ExitInitializationMode and "
                     f"before fmi2Terminate")
         if not (math.isfinite(h) and h > 0):
             return f"{call} in state stepping: the step size must be a positive finite number"
-        expected = self._next_time
-        if not (math.isfinite(t) and abs(t - expected) <= self.TIME_TOLERANCE * max(1.0, abs(expected), h)):
-            return (f"{call} in state stepping: the communication point does not continue the last step, "
-                    f"which ended at t = {expected!r} (this FMU cannot go back or skip time)")
-        return None
+        return (f"{call} in state stepping: the communication point does not continue the last step, "
+                f"which ended at t = {expected!r} (this FMU cannot go back or skip time)")
 
     def _set_order_error(self, type_: type) -> str | None:
         """Why a set call is refused in the current state, or None."""

@@ -1,7 +1,9 @@
-"""``make bench`` is honest: every module runs and prints, and a missed target makes the exit
-status non-zero (``benchmarks.bench.target``)."""
+"""``make bench`` is honest: every module runs and prints, a missed target or a module that cannot run
+its subject makes the exit status 1, and the figures land in ``benchmarks/last.json``
+(``benchmarks.targets``)."""
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -14,26 +16,48 @@ def _bench(tmp_path: Path, body: str, name: str) -> subprocess.CompletedProcess:
     pkg = tmp_path / "benchmarks"
     pkg.mkdir(exist_ok=True)
     (pkg / "__init__.py").write_text("")
-    (pkg / "bench.py").write_text((ROOT / "benchmarks" / "bench.py").read_text())
-    (pkg / "targets.py").write_text((ROOT / "benchmarks" / "targets.py").read_text())
+    for module in ("bench.py", "targets.py"):
+        (pkg / module).write_text((ROOT / "benchmarks" / module).read_text())
     (pkg / f"bench_{name}.py").write_text(body)
     return subprocess.run([sys.executable, "-m", "benchmarks.bench"], cwd=tmp_path, capture_output=True, text=True,
                           timeout=60)
 
 
 def test_missed_target_fails_after_printing_everything(tmp_path):
-    _bench(tmp_path, "from benchmarks.bench import target\n"
-                     "def run():\n    return ['fast ' + target('speed', 2.0, 1.0, 'x'), 'last line']\n", "a_slow")
-    proc = _bench(tmp_path, "from benchmarks.bench import target\n"
-                            "def run():\n    return ['ok ' + target('ratio', 0.5, 1.0, 'x')]\n", "b_fine")
+    _bench(tmp_path, "from benchmarks.targets import target\n"
+                     "def run():\n    return ['fast ' + target('a.speed', 2.0, 1.0, 'x', what='a speed'),\n"
+                     "            'last line']\n", "a_slow")
+    proc = _bench(tmp_path, "from benchmarks.targets import figure, target\n"
+                            "def run():\n    return ['ok ' + target('b.ratio', 0.5, 1.0, 'x', what='b ratio'),\n"
+                            "            'ref ' + figure('b.lib', 3.0, 'us', anchor='their floor',\n"
+                            "                            what='b lib')]\n", "b_fine")
     assert proc.returncode == 1, proc.stdout
     out = proc.stdout
     assert "fast target <= 1x: MISSED" in out and "last line" in out and "ok target <= 1x: met" in out
-    assert "TARGET MISSED: speed: 2x, target <= 1x" in out
+    assert "TARGET MISSED: a speed (a.speed): 2x, target <= 1x" in out and "ref 3 us" in out
     assert out.index("== benchmarks.bench_b_fine") < out.rindex("bench: targets missed in benchmarks.bench_a_slow")
+    last = json.loads((tmp_path / "benchmarks" / "last.json").read_text())["modules"]
+    assert last["bench_a_slow"]["status"] == "missed" and last["bench_b_fine"]["status"] == "ok"
+    assert last["bench_a_slow"]["figures"]["a.speed"] == {"value": 2.0, "unit": "x", "what": "a speed",
+                                                         "limit": 1.0, "at_most": True, "met": False}
+    assert last["bench_b_fine"]["figures"]["b.lib"]["anchor"] == "their floor"
 
 
 def test_all_targets_met_exits_zero(tmp_path):
-    proc = _bench(tmp_path, "from benchmarks.bench import target\n"
-                            "def run():\n    return [target('rate', 30.0, 20.0, 'x', at_most=False)]\n", "ok")
+    proc = _bench(tmp_path, "from benchmarks.targets import target\n"
+                            "def run():\n    return [target('c.rate', 30.0, 20.0, 'x', at_most=False,\n"
+                            "                   what='c')]\n", "ok")
     assert proc.returncode == 0 and "target >= 20x: met" in proc.stdout, proc.stdout
+
+
+def test_a_bench_that_cannot_run_its_subject_fails(tmp_path):
+    proc = _bench(tmp_path, "def run():\n    raise FileNotFoundError('build/ssp/x.ssp missing')\n", "broken")
+    assert proc.returncode == 1
+    assert "error: FileNotFoundError: build/ssp/x.ssp missing" in proc.stdout
+    assert "bench: failed: benchmarks.bench_broken" in proc.stdout
+
+
+def test_a_target_not_measured_is_missed(tmp_path):
+    proc = _bench(tmp_path, "from benchmarks.targets import target\n"
+                            "def run():\n    return [target('d.p99', float('nan'), 1.0, 'us', what='d p99')]\n", "nan")
+    assert proc.returncode == 1 and "d p99 (d.p99): not measured, target <= 1 us" in proc.stdout

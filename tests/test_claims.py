@@ -42,8 +42,33 @@ def test_judge_gives_a_verdict_per_claim_on_both_plants() -> None:
 
     rows = judge(stop_time=3.0)
     assert [r["claim"] for r in rows] == [c.text for c in CLAIMS]
-    verdicts = {"confirmed", "not confirmed", "confirmed on the lab plant only", "confirmed on the ideal plant only"}
+    from ipcosim.harness.evidence.claims import verdict
+
+    fitted = {c.text: c.fitted for c in CLAIMS}
     for r in rows:
-        assert r["verdict"] in verdicts and r["ideal"]["evidence"] and r["lab"]["evidence"]
+        assert r["verdict"] == verdict(r["ideal"]["holds"], r["lab"]["holds"], fitted[r["claim"]])
+        assert r["ideal"]["evidence"] and r["lab"]["evidence"]
     pid = [r for r in rows if r["form"].startswith("thesis PID fails")]
     assert len(pid) == 2 and all(r["verdict"] == "confirmed" and "falls at" in r["lab"]["evidence"] for r in pid)
+
+
+def test_verdicts_never_confirm_by_a_fit_and_below_a_count_are_indistinguishable() -> None:
+    from ipcosim.harness.evidence.claims import verdict
+
+    assert verdict(True, True) == "confirmed" and verdict(False, False) == "not confirmed"
+    fitted = verdict(False, True, "friction fitted to it")
+    assert fitted.startswith("reproduced on the lab plant by construction") and "not confirmed on the ideal" in fitted
+    assert verdict(None, None) == "indistinguishable (below one encoder count)"
+    assert verdict(None, False) == "not confirmed on the lab plant; indistinguishable on the ideal plant"
+
+
+def test_equal_errors_within_one_count_are_a_tie_not_an_improvement() -> None:
+    from ipcosim.harness.evidence.claims import POSITION_TOLERANCE, Run, _adaptive_faster
+
+    def r(settle: float, err: float) -> Run:
+        return Run({"upright": True, "settling_time_s": settle, "steady_state_error_m": err}, 0.0, 0.0)
+
+    check = _adaptive_faster("double-mass", True)
+    assert not check({("AdaptiveHSMC", "double-mass"): r(4.9, 1e-6), ("HSMC", "double-mass"): r(8.0, 2e-6)})[0]
+    assert check({("AdaptiveHSMC", "double-mass"): r(4.9, 1e-6),
+                  ("HSMC", "double-mass"): r(8.0, 1e-6 + 2 * POSITION_TOLERANCE)})[0]

@@ -77,7 +77,8 @@ def fmu_env(tmp_path_factory: pytest.TempPathFactory) -> Path:
     ("single-mass-swing-up", lambda m: m["time_to_upright_s"] < 6 and m["track_used_m"] < 0.3),
     ("single-mass-lqr-tap", lambda m: m["upright"] and 0.01 < m["peak_angle_after_tap_rad"] < 0.1
      and m["recovery_time_s"] < 3),
-    ("double-mass-hsmc-lab", lambda m: m["upright"] and m["steady_state_error_m"] > 1e-3),
+    # its default binding is the robust tuned set: < 1 mm over 20 s on the lab bench (the thesis's set: 15 mm)
+    ("double-mass-hsmc-lab", lambda m: m["upright"] and m["steady_state_error_m"] < 1e-3),
 ])
 def test_extra_scenarios_through_the_master(scenario, check, fmu_env, tmp_path, monkeypatch) -> None:
     from ipcosim.harness.cli import main as cli_main

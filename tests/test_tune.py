@@ -133,3 +133,56 @@ def test_cli_tune_install_needs_a_scenario_folder(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 1 and "--install: scenario 'pure:single-mass-lqr' has no folder" in err[-1]
     assert not (tmp_path / "t").exists() or not any((tmp_path / "t").iterdir())
+
+
+def test_loop_limits_refuse_the_thesis_hsmc_and_measure_like_analyze():
+    """The robust objective's limits are ``ipcosim analyze``'s peak |S| and delay margin; the thesis's double-mass
+    HSMC (peak |S| 6.2, delay margin 0.4 ms) misses them, on the nominal plant and on the spread."""
+    from ipcosim.harness.studies.analyze import analyze
+    from ipcosim.harness.studies.tune import Robustness, spread_plants
+
+    full = analyze("double-mass-hsmc", parameter_set="thesis")
+    robust = Robustness("double-mass-hsmc", "thesis", max_peak_sensitivity=2.5, min_delay_margin=2e-3)
+    excess, worst = robust.violation({})
+    assert worst["peak_sensitivity"] == pytest.approx(full["peak_sensitivity"], rel=0.02)
+    assert worst["delay_margin_s"] == pytest.approx(full["delay_margin_s"], rel=0.02)
+    assert excess == pytest.approx(full["peak_sensitivity"] / 2.5 - 1 + 1 - full["delay_margin_s"] / 2e-3, rel=0.05)
+    assert Robustness("double-mass-hsmc", "thesis", max_peak_sensitivity=10.0).violation({})[0] == 0.0
+    nominal = {"plant.Mp": 0.2, "plant.K": 100.0, "controller.k": 8.0}
+    low, high = spread_plants(nominal, ["plant.Mp", "plant.K"], 0.1)
+    assert low == {"plant.Mp": pytest.approx(0.18), "plant.K": pytest.approx(90.0)}
+    assert high["plant.K"] == pytest.approx(110.0)
+
+
+class _Refuse:
+    """A robust objective that refuses every candidate with x > 1 and adds a spread of two plants."""
+
+    spread = ({"plant.Mp": 0.2}, {"plant.Mp": 0.25})
+
+    def violation(self, values):
+        x = values["controller.x"]
+        return (max(0.0, x - 1.0), {"peak_sensitivity": x})
+
+
+def test_a_candidate_that_misses_the_limits_is_not_run_and_ranks_last():
+    from ipcosim.harness.studies.tune import SweepMap
+
+    calls = []
+
+    def fake_sweep(spec, cases, executor=None):
+        calls.extend(cases)
+
+        class R:
+            rows = [{"index": c.index, "status": "ok", "itae_position": c.params.get("plant.Mp", 0.1),
+                     "itae_angle": 0.0, "ise_voltage": 0.0, "upright": True, "fall_time_s": None} for c in cases]
+        return R()
+
+    spec = PurePlantSpec(stop_time=1.0)
+    mapper = SweepMap(spec, ["controller.x"], None, 0, 0.1, 1e-4, budget=10, robust=_Refuse())
+    mapper._run_sweep = fake_sweep
+    costs = mapper(None, [np.array([0.5]), np.array([3.0])])
+    assert len(calls) == 3 and all(c.params["controller.x"] == 0.5 for c in calls)  # nominal + 2 spread plants
+    ran, refused = mapper.rows
+    assert ran["runs"] == 3 and ran["cost"] == pytest.approx(0.25)  # the worst plant's run
+    assert refused["status"] == "limits" and refused["violation"] == 2.0 and math.isinf(refused["cost"])
+    assert costs[1] > 2 * costmod.FALL_PENALTY > costs[0]

@@ -143,6 +143,7 @@ def main(args: argparse.Namespace) -> int:
     ssv_path = Path(args.ssv) if args.ssv else out / "autotuned.ssv"
     install = _install_path(args) if args.install else None
 
+    robust = _robustness(args, spec, overrides, pset)  # checks its options before starting workers
     executor = open_executor(args.workers, args.scheduler)
     print(f"tune {spec.name}: {', '.join(names)} within "
           f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in bounds)}, budget {args.budget} runs on "
@@ -150,7 +151,7 @@ def main(args: argparse.Namespace) -> int:
     try:
         res = tunemod.tune(for_executor(spec, executor), names, bounds, budget=args.budget, executor=executor,
                            seed=args.seed, w_angle=w_angle, w_voltage=w_voltage, progress=not args.quiet,
-                           robust=_robustness(args, spec, overrides, pset))
+                           robust=robust)
     except KeyboardInterrupt:
         executor.abort()
         print("ipcosim tune: interrupted; nothing written", file=sys.stderr)

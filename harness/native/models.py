@@ -184,7 +184,8 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
         step=list(zip(zkeys, stepped[:n])) + [(f"V:{s}", v) for s, v in zip(states, stepped[n:2 * n])]
         + list(zip(dkeys, stepped[2 * n:2 * n + len(dkeys)])) + list(zip(xkeys, stepped[2 * n + len(dkeys):])),
         checked=zkeys, meta={"role": "plant", "plant": kind, "integrator_step": repr(step), "instruments_off": off,
-                             "max_delay_steps": NATIVE_MAX_DELAY_STEPS, "stage_coefficients": sorted(coefficients)},
+                             "max_delay_steps": NATIVE_MAX_DELAY_STEPS, "stage_coefficients": sorted(coefficients),
+                             "design_values": {f: getattr(p0, f) for f in cls.__dataclass_fields__}},
         checks={**{f.name: ("positive" if f.metadata.get("positive") else
                             "nonnegative" if f.metadata.get("nonnegative") else "finite")
                    for f in cls.__dataclass_fields__.values()},
@@ -368,7 +369,7 @@ def law_model(kind: str, law: str, python_fmu: Path) -> NativeModel:
                        unit_definitions=units, states=states, initialize=step, step=step,
                        checked=["V:voltage"] + [f"L:{p}" for p in state_paths], python_only=python_only,
                        paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
-                       meta={"role": "law", "law": law, "plant": kind},
+                       meta={"role": "law", "law": law, "plant": kind, "design_values": dict(defaults)},
                        checks={**{p: "finite" for p in settable},
                                **{s.name: s.constraint for s in catalog.schema(kind, law)
                                   if s.constraint != "bool" and s.name in {v.name for v in native_vars}}})

@@ -57,11 +57,38 @@ def redesign(fmu: Path | str | Mapping[str, Any], python_values: Mapping[str, An
     if info is None:
         raise NativeParameterError(f"{fmu} is not a native ipcosim FMU")
     role = info["role"]
+    if role == "plant":
+        check_instruments(info, python_values)
+    if role not in ("law", "plant") or unchanged(info, python_values):
+        return {k: v for k, v in python_values.items() if k not in info.get("python_only", ())}
     if role == "law":
         return _law(info, python_values)
-    if role == "plant":
-        return _plant(info, python_values)
-    return {k: v for k, v in python_values.items()}
+    return _plant(info, python_values)
+
+
+def unchanged(info: Mapping[str, Any], python_values: Mapping[str, Any]) -> bool:
+    """Whether ``python_values`` leave every design parameter at the value the native FMU was built
+    with (``design_values`` of its ``native.json``): then its parameters' defaults are already the
+    design's numbers and nothing is redesigned (nor the design code imported)."""
+    built = info.get("design_values")
+    if built is None:
+        return False
+    step, python_only = info.get("integrator_step"), set(info.get("python_only", ()))
+    for name, value in python_values.items():
+        if name == "integrator_step" and step is not None:
+            reference = float(step)
+        elif name in built:
+            reference = built[name]
+        elif name in python_only:
+            return False  # a design input the build did not record: the redesign decides
+        else:
+            continue
+        try:
+            if float(value) != float(reference):
+                return False
+        except (TypeError, ValueError):
+            return False
+    return True
 
 
 def _law(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]:
@@ -88,7 +115,6 @@ def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, floa
     from ipcosim.fmus.plant import Plant
     from ipcosim.harness.native.models import stage_coefficients
 
-    check_instruments(info, values)
     kind = info["plant"]
     fields = set(PLANT_KINDS[kind].__dataclass_fields__)
     phys = dict(PRESETS[DEFAULT_PRESET[kind]][1])

@@ -1,0 +1,66 @@
+"""docs/results.md is what its generator writes: every table between the markers is the rendering of the
+committed data (docs/results.json), and the parts of that data that are cheap to recompute are recomputed
+(the margins, the verdicts from their measurements, the success rates and Wilson intervals from the counts,
+the factor that breaks each loop first)."""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from ipcosim.harness.evidence.claims import CLAIMS, verdict
+from ipcosim.harness.evidence.results_page import BEGIN, END, margin_rows, render
+from ipcosim.harness.studies.robustness import FACTORS, decisive_factor, wilson_interval
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGE = ROOT / "docs" / "results.md"
+DATA = ROOT / "docs" / "results.json"
+
+
+@pytest.fixture(scope="module")
+def data() -> dict:
+    return json.loads(DATA.read_text())
+
+
+def test_every_table_between_the_markers_is_the_rendering_of_the_committed_data(data: dict) -> None:
+    text = PAGE.read_text()
+    generated = re.search(re.escape(BEGIN) + r"\n(.*)\n" + re.escape(END), text, flags=re.S)
+    assert generated is not None, "docs/results.md: markers not found"
+    assert generated.group(1) == render(data)
+
+
+def test_the_margins_are_those_the_analysis_gives_now(data: dict) -> None:
+    now = margin_rows()
+    assert [(r["scenario"], r["set"]) for r in now] == [(r["scenario"], r["set"]) for r in data["margins"]]
+    for a, b in zip(now, data["margins"]):
+        for key, value in a.items():
+            if isinstance(value, float):
+                assert b[key] == pytest.approx(value, rel=1e-6), (a["scenario"], a["set"], key)
+            else:
+                assert b[key] == value, (a["scenario"], a["set"], key)
+
+
+def test_each_verdict_follows_from_its_measurements(data: dict) -> None:
+    """Never 'confirmed' by a fitted lab value; below the sensor's resolution, indistinguishable."""
+    fitted = {c.text: c.fitted for c in CLAIMS}
+    assert [r["claim"] for r in data["claims"]] == [c.text for c in CLAIMS]
+    for r in data["claims"]:
+        assert r["verdict"] == verdict(r["ideal"]["holds"], r["lab"]["holds"], fitted[r["claim"]])
+        if fitted[r["claim"]]:
+            assert not r["verdict"].startswith("confirmed")
+
+
+def test_robustness_rates_and_intervals_follow_from_the_counts(data: dict) -> None:
+    rob = data["robustness"]
+    assert rob["samples"] >= 200
+    for row in rob["rows"]:
+        assert set(row["factors"]) <= {*FACTORS, "all together"} and "all together" in row["factors"]
+        for factor, s in row["factors"].items():
+            ok = s["counts"].get("ok", 0)
+            assert sum(s["counts"].values()) == s["runs"] and s["success_rate"] == ok / s["runs"]
+            assert s["runs"] == (1 if factor == "delay" else rob["samples"]), (row["scenario"], factor)
+            assert s["success_ci95"] == pytest.approx(list(wilson_interval(ok, s["runs"])))
+        breaks = decisive_factor(row["factors"])
+        assert breaks == "none alone" or row["factors"][breaks]["success_rate"] < 0.95
