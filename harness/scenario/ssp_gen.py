@@ -279,7 +279,7 @@ def variant_files(name: str) -> dict[str, str]:
 
     plant, law = VARIANTS[name][:2]
     sets = {k: dict(v) for k, v in catalog_sets(plant, law).items() if v}
-    default = default_set(plant, law)
+    default = "tuned" if "tuned" in sets else ("thesis" if "thesis" in sets else default_set(plant, law))
     files = {f"{s}.ssv": _ssv(s, v, f"{name}: {s} controller parameters") for s, v in sets.items()}
     files["SystemStructure.ssd"] = ssd_text(plant, "", default, float(sets[default].get("sample_period", STEP)),
                                             variant=name)
