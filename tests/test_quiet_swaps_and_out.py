@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from ipcosim.harness.cli import main
+from ipcosim.harness.paths import SCENARIO_DIR
 from ipcosim.harness.scenario import ssp
 
 pytestmark = pytest.mark.integration
@@ -18,11 +19,23 @@ def _run(tmp_path: Path, *extra: str) -> list[str]:
     return ["run", "single-mass-lqr", "--swap", f"controller={PID}", "--stop-time", "0.05", "--quiet", *extra]
 
 
+def _set_but_missing(ssv: Path, fmu: Path) -> list[str]:
+    """The parameters a scenario's set gives the controller that ``fmu`` has no variable for."""
+    import xml.etree.ElementTree as ET
+
+    from fmpy import read_model_description
+    have = {v.name for v in read_model_description(str(fmu)).modelVariables}
+    names = [e.get("name") for e in ET.parse(ssv).iter() if e.tag.endswith("}Parameter")]
+    return [n for n in names if n not in have]
+
+
 def test_missing_parameters_of_a_swap_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(_run(tmp_path, "--out", str(tmp_path / "a"))) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
-    assert "sets 11 parameter(s) the FMU does not have: Q_cart_position," in err[0] and "ignored" in err[0]
+    missing = _set_but_missing(SCENARIO_DIR / "single-mass-lqr" / "thesis.ssv", PID)
+    assert f"sets {len(missing)} parameter(s) the FMU does not have: " in err[0] and "ignored" in err[0]
+    assert all(name in err[0] for name in missing) and "Q_cart_position" in missing
     assert main(_run(tmp_path, "--out", str(tmp_path / "b"), "--strict")) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("ipcosim run: error:") and "the FMU does not have" in err[0]
