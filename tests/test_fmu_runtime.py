@@ -61,7 +61,10 @@ def both(folder: Path, spec: dict, tmp: Path) -> tuple[dict, dict]:
 
 def test_every_fmu_runs_on_the_standard_library_alone(unzipped_fmus, tmp_path: Path) -> None:
     models = sorted(m for m in unzipped_fmus if not m.startswith("IP02HIL"))
-    assert len(models) == 16  # two plants, twelve controllers, the swing-up, the setpoint
+    from ipcosim.fmus.pybuild import model_scripts
+    # every model the build knows (plants, the controllers, the swing-up, the excitations, the setpoint)
+    assert models == sorted(m for m in model_scripts() if not m.startswith("IP02HIL"))
+    assert {"IP02SingleMass", "LQGDoubleMass", "ExcitationSingleMass", "Setpoint"} <= set(models)
     spec = {"steps": STEPS}
     with ThreadPoolExecutor(max_workers=2) as pool:
         results = dict(zip(models, pool.map(lambda m: both(unzipped_fmus[m], spec, tmp_path), models)))

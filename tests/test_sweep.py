@@ -181,12 +181,16 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
     calls1.mkdir()
     calls2.mkdir()
     script = textwrap.dedent(f"""
+        import signal
         import sys
         from ipcosim.harness.studies.sweep import run_sweep
         from ipcosim.harness.grammar import parse_all
         from ipcosim.harness.studies.cases import make_cases
         from ipcosim.harness.studies.runners import SyntheticSpec
         if __name__ == "__main__":
+            # Ctrl-C as a terminal delivers it, even when this test runs under a shell's background job
+            # (which starts its children with SIGINT ignored)
+            signal.signal(signal.SIGINT, signal.default_int_handler)
             spec = SyntheticSpec(delay_s=0.3, calls_dir={str(calls1)!r})
             cases = make_cases(parse_all(["model.x=uniform(0,2)"], spec.parameters), spec.parameters,
                                samples=24, seed=5)
