@@ -94,7 +94,8 @@ def run() -> list[str]:
                              f"95 %: {lo:.6g} .. {hi:.6g}  {'inside' if lo <= truth[name] <= hi else 'OUTSIDE'}")
             worst = min(r.nrmse.values())
             lines.append("  held-out NRMSE: " + ", ".join(f"{k} {v:.1%}" for k, v in r.nrmse.items()) + "  "
-                         + figure(f"identify.{key}_worst_nrmse", worst, "1", what="lowest held-out NRMSE"))
+                         + "(lowest " + figure(f"identify.{key}_worst_nrmse_pct", 100 * worst, "%",
+                                               what="lowest held-out NRMSE") + ")")
     return lines
 
 

@@ -40,6 +40,8 @@ BLOCKS: dict[str, tuple[str, ...]] = {
     "controllers": ("controllers.",),
     "sweep": ("sweep.",),
     "hil": ("hil.",),
+    "identify": ("identify.",),
+    "robustness": ("robustness.",),
 }
 BEGIN = re.compile(r"^<!-- bench:([\w-]+) -->$", re.M)
 #: A speed or memory figure written as prose: a time in us, a time per step / tick / run / cycle,
