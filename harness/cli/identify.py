@@ -31,12 +31,15 @@ def main(args: argparse.Namespace) -> int:
         print(json.dumps(result.to_json()))
         return 0
     print(f"{result.source}: {result.plant} plant, fitted to {result.held_out_from_s:g} s in {result.fit_time_s:.1f} s "
-          f"({result.iterations} iterations, computation delay {result.input_delay_s * 1e3:g} ms); others from "
+          f"({result.simulations} simulations of the log, computation delay {result.input_delay_s * 1e3:g} ms); "
+          f"others from "
           f"preset {result.preset}")
     for name, p in result.parameters.items():
         lo, hi = p["ci95"]
         print(f"  {name:4s} = {p['value']:.6g} {p['unit']}  (95 %: {lo:.6g} .. {hi:.6g})")
     print("  held-out NRMSE: " + ", ".join(f"{k} {v:.1%}" for k, v in result.nrmse.items()))
+    print("  largest fitted residual [encoder counts; <= 0.5: every reading explained]: "
+          + ", ".join(f"{k} {v:.2f}" for k, v in result.largest_residual_counts.items()))
     for path in result.written:
         print(f"wrote {path}")
     return 0
