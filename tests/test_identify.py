@@ -7,6 +7,7 @@ import math
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,11 @@ import pytest
 from ipcosim.controllers.catalog import make_law
 from ipcosim.controllers.excitation import ExcitationGains, multisine
 from ipcosim.controllers.laws import LawParameterError
-from ipcosim.harness.studies.identify import IdentifyError, IdentifyOptions, identify
+from ipcosim.fmus.instruments import realism
+from ipcosim.fmus.params import preset
+from ipcosim.fmus.physics import MEASURED, state_names
+from ipcosim.fmus.plant import replay
+from ipcosim.harness.studies.identify import IdentifyError, IdentifyOptions, identify, read_log
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Hidden truths, away from every preset (the estimator starts from thesis-ch3 / thesis-ch4).
@@ -87,6 +92,31 @@ def test_single_mass_hidden_parameters_from_the_plant_fmu(tmp_path):
     result = _identify_run("single-mass-identify", SINGLE_TRUTH, tmp_path / "run")
     check_targets(result, SINGLE_TRUTH)
     assert result.held_out_from_s == pytest.approx(0.75 * STOP_TIME, abs=2e-3)
+    assert set(result.largest_residual_counts) == {"cart_position", "pendulum_angle"}
+
+
+def test_the_true_parameters_explain_every_reading_to_half_a_count(tmp_path):
+    """What ``largest_residual_counts`` is read against: the replay of the true parameters on the lab bench
+    is the plant FMU's motion, so every encoder reading is its rounding (and a fit stuck in the stick-slip
+    roughness is told apart by a larger residual)."""
+    import ipcosim
+
+    truth = {"Mc": 0.87, "Beq": 13.1, "Bp": 0.0031, "b": 0.072}
+    ipcosim.run("single-mass-identify", stop_time=3.0, set={f"plant.{k}": v for k, v in truth.items()},
+                out=tmp_path / "run")
+    log = read_log(tmp_path / "run", "single-mass")
+    bench = realism("lab", "single-mass")[0]
+    names = state_names("single-mass")
+    x0 = [log.y[0, MEASURED["single-mass"].index(n)] if n in MEASURED["single-mass"] else 0.0 for n in names]
+
+    def largest_counts(**values):
+        sim = np.array(replay(replace(preset("thesis-ch3"), **values), log.voltage[:-1], log.step, x0, bench))
+        return np.abs(sim - log.y).max(axis=0) / [bench.cart_resolution, bench.pendulum_resolution]
+
+    assert np.all(largest_counts(**truth) <= 0.5 + 1e-6), largest_counts(**truth)
+    # one per cent off in the mass, and the readings are no longer all explained
+    off = largest_counts(**{**truth, "Mc": 0.99 * truth["Mc"]})
+    assert off[0] > 0.5, off
 
 
 @pytest.mark.integration
@@ -187,6 +217,7 @@ def test_command_line_json_ssv_and_parameter_file(tmp_path):
     doc = json.loads(p.stdout)
     assert set(doc["parameters"]) == {"Mc", "Beq"} and set(doc["nrmse"]) == {"cart_position", "pendulum_angle"}
     assert doc["parameters"]["Mc"]["unit"] == "kg" and len(doc["parameters"]["Mc"]["ci95"]) == 2
+    assert set(doc["largest_residual_counts"]) == set(doc["nrmse"]) and doc["simulations"] > 0
     ssv = tmp_path / "id" / "identified.ssv"
     assert ssv.is_file() and (tmp_path / "id" / "identified.png").is_file()
     # the file's values reach the plant (after the scenario's sets), and --set still wins over it
