@@ -33,10 +33,11 @@ from ipcosim.fmus.metrics import streamed_task_metrics, task_kinds
 from ipcosim.harness.grammar import strip_nominal
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
-from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
+from ipcosim.harness.master.execution import Execution, SlaveFactory, check_times
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress
 from ipcosim.harness.master.realtime import RealtimePacer
+from ipcosim.harness.master.recorder import TaskMetrics, timing_metrics
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
 from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.master.system import System
@@ -130,7 +131,7 @@ class Prepared:
         instantiating anew (:attr:`ipcosim.harness.master.slave.FMUSlave.reusable`): for studies
         of many runs, where each pythonfmu instantiation would keep a few kB alive.
     task_metrics : callable, optional
-        The task's metrics of a run's rows (``ipcosim.harness.master.execution.TaskMetrics``);
+        The task's metrics of a run's rows (``ipcosim.harness.master.recorder.TaskMetrics``);
         default the IP02 task's, :func:`ipcosim.fmus.metrics.streamed_task_metrics` (a scenario
         without the pendulum's columns gets none).
     """
@@ -284,7 +285,7 @@ class Prepared:
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
             observers.append(CardObserver())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
-                         algorithm=algorithm or self.algorithm, overrides=values, observers=observers,
+                         algorithm=algorithm or self.algorithm, set=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
                          unzip_dirs=self.unzip_dirs,
                          record_every=record_every, max_init_iterations=max_init_iterations,
@@ -426,7 +427,7 @@ def _start(execution: Execution, component: str, variable: str) -> Any:
         return None
     if variable not in inst.model.variables:
         return None
-    return execution.overrides.get((component, variable), inst.start_value(variable))
+    return execution.set.get((component, variable), inst.start_value(variable))
 
 
 def build_missing(scenario: Scenario) -> list[str]:
