@@ -176,7 +176,7 @@ class Prepared:
             if fmus == "native":
                 scenario, self._python_values = to_native(_with_fmus(scenario, archived))
             self.scenario = scenario
-            self.system = bind(scenario, swaps=swap, fmu_files=archived, strict_swaps=strict)
+            self.system = bind(scenario, swap=swap, fmu_files=archived, strict_swaps=strict)
             if warn:
                 warn_all(self.system)
             if slave_factory is None:

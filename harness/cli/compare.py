@@ -218,7 +218,7 @@ def _robustness(specs: dict[str, Any], executor: Any, args: argparse.Namespace, 
         if not args.quiet:
             print(f"compare: robustness of {name}, {len(cases)} runs", file=sys.stderr)
         res = run_sweep(for_executor(plain, executor), cases, executor=executor,
-                        out_dir=out / "robustness" / name,
+                        out=out / "robustness" / name,
                         progress=not args.quiet,
                         extra_metadata={"vary": [v.text for v in varies], "seed": args.seed})
         summaries[name] = rob.summarize(res.rows, plain.metric_names)

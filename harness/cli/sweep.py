@@ -80,7 +80,7 @@ def main(args: argparse.Namespace) -> int:
     executor = open_executor(args.workers, args.scheduler)
     print(f"sweep {spec.name}: {len(cases)} runs on {executor.description}, {flavour} -> {out}", file=sys.stderr)
     try:
-        result = run_sweep(for_executor(spec, executor), cases, out_dir=out, executor=executor,
+        result = run_sweep(for_executor(spec, executor), cases, out=out, executor=executor,
                            progress=not args.quiet,
                            extra_metadata={"vary": list(args.vary), "set": dict(overrides),
                                            "samples": args.samples, "seed": args.seed,

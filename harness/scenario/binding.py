@@ -235,7 +235,7 @@ def unit_conversion(src: str | None, dst: str | None, table: Mapping[str, Unit])
 
 
 # --------------------------------------------------------------------------- binding
-def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
+def bind(scenario: Scenario, swap: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
          fmu_files: Mapping[str, Path] | None = None, models: Mapping[str, Model] | None = None,
          strict_parameters: bool = True, strict_swaps: bool = False) -> System:
     """Check a scenario against its FMUs and resolve it into a :class:`System`.
@@ -243,7 +243,7 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
     Parameters
     ----------
     scenario : Scenario
-    swaps : mapping of component name to FMU path, alias or SwapTarget, optional
+    swap : mapping of component name to FMU path, alias or SwapTarget, optional
         Components to replace (``--swap``), each checked for compatible connectors.
     fmu_files : mapping of component name to Path, optional
         FMU files to use instead of the scenario's resolved ones (archive members extracted
@@ -262,14 +262,14 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
     FMUNotFoundError, BindingError
         Naming the file, component and variable.
     """
-    swaps = dict(swaps or {})
-    for comp in swaps:
+    swap = dict(swap or {})
+    for comp in swap:
         if comp not in {c.name for c in scenario.components}:
             raise BindingError(f"--swap {comp}=...: scenario {scenario.name!r} has no component {comp!r}; "
                                f"{closest(comp, (c.name for c in scenario.components))}")
     notes: list[str] = []   # warnings: what may be wrong (unconnected inputs, ignored parameters)
     infos: list[str] = []   # notes: what was done (swaps, connectors left out)
-    instances = [_bind_component(scenario, comp, swaps, dict(fmu_files or {}), dict(models or {}),
+    instances = [_bind_component(scenario, comp, swap, dict(fmu_files or {}), dict(models or {}),
                                  (strict_parameters, strict_swaps), notes, infos) for comp in scenario.components]
     by_name = {i.name: i for i in instances}
     fed: dict[str, str] = {}  # which output feeds each input: {"comp.input": "comp.output"}
@@ -299,16 +299,16 @@ def _component_model(scenario: Scenario, comp: Component, swapped: bool, fmu_fil
     return read_model(Path(fmu), f"{scenario.origin}: component {comp.name!r} ({comp.source})")
 
 
-def _bind_component(scenario: Scenario, comp: Component, swaps: Mapping[str, Any], fmu_files: Mapping[str, Path],
+def _bind_component(scenario: Scenario, comp: Component, swap: Mapping[str, Any], fmu_files: Mapping[str, Path],
                     models: Mapping[str, Model], strict: tuple[bool, bool], notes: list[str],
                     infos: list[str]) -> Instance:
     """One component as an :class:`Instance`: its FMU (or the one swapped in), connectors checked
     against the FMU's variables, and its parameter bindings converted (``strict``: for its own
     FMU, for one swapped in); appends to ``notes``/``infos``."""
-    model = _component_model(scenario, comp, comp.name in swaps, fmu_files, models)
+    model = _component_model(scenario, comp, comp.name in swap, fmu_files, models)
     swapped_from, realtime, extra = None, False, {}
-    if comp.name in swaps:
-        target = resolve_swap(scenario, comp.name, swaps[comp.name], model)
+    if comp.name in swap:
+        target = resolve_swap(scenario, comp.name, swap[comp.name], model)
         swapped_from = model.path.name if model is not None and model.path else comp.source
         realtime = target.realtime
         extra = dict(target.parameters)
