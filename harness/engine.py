@@ -357,11 +357,7 @@ class Prepared:
                 if out is not None:
                     partial.write(out, variables=variables, plot=plot, csv=False)
             raise
-        result.plotter = plot_run
-        result.metadata["voltage_limit_V"] = next(  # the limit the figure draws (ipcosim.harness.plot)
-            (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
-        result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
-        result.metadata["swaps"] = dict(self.swap)
+        self._describe(result, execution)
         if out is not None:
             result.metadata["files"] = {k: str(v) for k, v in
                                         result.write(out, variables=variables, plot=plot, csv=False).items()}
@@ -369,6 +365,15 @@ class Prepared:
         if result.error is not None and raise_on_error:
             raise SimulationError(result.error, result)
         return result
+
+    def _describe(self, result: Result, execution: Execution) -> None:
+        """What the run's figure and metadata say beyond the master's account: its plotter, the
+        voltage limit it draws (:mod:`ipcosim.harness.plot`), the parameter set and the swaps."""
+        result.plotter = plot_run
+        result.metadata["voltage_limit_V"] = next(
+            (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
+        result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
+        result.metadata["swaps"] = dict(self.swap)
 
     @staticmethod
     def _whole_run_timing(result: Result, wall: float, out: str | os.PathLike[str] | None) -> None:

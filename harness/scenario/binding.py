@@ -55,11 +55,24 @@ def read_model(path: Path, display: str | None = None) -> Model:
         If the file is not a readable FMI 2.0 co-simulation FMU.
     """
     path = Path(path)
-    display = display or os.fspath(path)
     stat = path.stat()
     key = (str(path.resolve()), stat.st_mtime, stat.st_size)
     if key in _MODEL_CACHE:
         return _MODEL_CACHE[key]
+    md = _model_description(path, display or os.fspath(path))
+    variables = _variables(md)
+    model = Model(name=md.modelName, variables=variables, feedthrough=_feedthrough(md, variables),
+                  path=path.resolve(), guid=md.guid, model_identifier=md.coSimulation.modelIdentifier,
+                  fmi_version=md.fmiVersion, units=_units(md),
+                  can_handle_variable_step=bool(md.coSimulation.canHandleVariableCommunicationStepSize),
+                  default_step=_positive_or_none(md.defaultExperiment, "stepSize"),
+                  default_stop=_positive_or_none(md.defaultExperiment, "stopTime"))
+    _MODEL_CACHE[key] = model
+    return model
+
+
+def _model_description(path: Path, display: str) -> Any:
+    """fmpy's model description of an FMI 2.0 or 3.0 co-simulation FMU; else one line naming ``display``."""
     from fmpy import read_model_description
 
     try:
@@ -71,6 +84,11 @@ def read_model(path: Path, display: str | None = None) -> Model:
         raise BindingError(f"{display}: FMI {md.fmiVersion} FMU; FMI 2.0 and 3.0 are supported")
     if md.coSimulation is None:
         raise BindingError(f"{display}: does not support co-simulation")
+    return md
+
+
+def _variables(md: Any) -> dict[str, Variable]:
+    """Every model variable by name, with its unit (its own or its declared type's) and start value."""
     variables = {}
     for v in md.modelVariables:
         unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
@@ -79,6 +97,12 @@ def read_model(path: Path, display: str | None = None) -> Model:
                                      causality=v.causality or "local", variability=v.variability or "continuous",
                                      initial=v.initial, unit=unit, start=_start_value(v.type, v.start),
                                      description=v.description or "")
+    return variables
+
+
+def _feedthrough(md: Any, variables: Mapping[str, Variable]) -> dict[str, frozenset[str]]:
+    """The inputs each output depends on directly (ModelStructure); every input where it says
+    nothing (an output without dependencies, or missing from it: assume the worst)."""
     inputs = frozenset(n for n, v in variables.items() if v.causality == "input")
     feedthrough = {}
     for u in md.outputs:
@@ -86,9 +110,14 @@ def read_model(path: Path, display: str | None = None) -> Model:
             feedthrough[u.variable.name] = inputs
         else:
             feedthrough[u.variable.name] = frozenset(d.name for d in u.dependencies if d.name in inputs)
-    for name, v in variables.items():  # outputs missing from ModelStructure: assume the worst
+    for name, v in variables.items():
         if v.causality == "output" and name not in feedthrough:
             feedthrough[name] = inputs
+    return feedthrough
+
+
+def _units(md: Any) -> dict[str, Unit]:
+    """The unit definitions by name (base-unit exponents, factor, offset)."""
     units = {}
     for u in md.unitDefinitions:
         b = u.baseUnit
@@ -97,14 +126,7 @@ def read_model(path: Path, display: str | None = None) -> Model:
         else:
             units[u.name] = Unit(u.name, tuple(int(getattr(b, k)) for k in BASE_UNITS), float(b.factor),
                                  float(b.offset))
-    model = Model(name=md.modelName, variables=variables, feedthrough=feedthrough, path=path.resolve(),
-                  guid=md.guid, model_identifier=md.coSimulation.modelIdentifier, fmi_version=md.fmiVersion,
-                  units=units,
-                  can_handle_variable_step=bool(md.coSimulation.canHandleVariableCommunicationStepSize),
-                  default_step=_positive_or_none(md.defaultExperiment, "stepSize"),
-                  default_stop=_positive_or_none(md.defaultExperiment, "stopTime"))
-    _MODEL_CACHE[key] = model
-    return model
+    return units
 
 
 def _positive_or_none(experiment: Any, name: str) -> float | None:
