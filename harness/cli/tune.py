@@ -171,6 +171,7 @@ def _write_tuned(args: argparse.Namespace, spec: Any, res: Any, pset: str | None
                  install: Path | None, w_angle: float, w_voltage: float) -> str:
     """Write the tuned parameter set (``ssv_path``, and ``install`` when given) and ``out/tune.md``;
     returns the report's before/after table."""
+    from ipcosim.harness.scenario.ssp_gen import ssv_text
     from ipcosim.harness.studies import tune as tunemod
 
     scenario_hash = getattr(spec, "scenario_hash", "") or spec.key
@@ -179,7 +180,7 @@ def _write_tuned(args: argparse.Namespace, spec: Any, res: Any, pset: str | None
                    f"w_angle {w_angle:g}, w_voltage {w_voltage:g}")
     values, component = tunemod.tuned_parameter_set(args.scenario, res.best, pset)
     ssv_path.parent.mkdir(parents=True, exist_ok=True)
-    text = tunemod.ssv_text(values, name="autotuned", description=description)
+    text = ssv_text(values, "autotuned", description)
     ssv_path.write_text(text)
     if install is not None:
         install.write_text(text)
