@@ -48,13 +48,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=main)
 
 
-def default_out(scenario: str, kind: str = "sweep") -> Path:
-    name = Path(scenario.rstrip("/")).name.replace(":", "-")
-    if name.endswith(".ssp"):
-        name = name[:-4]
-    return Path("out") / kind / name
-
-
 def main(args: argparse.Namespace) -> int:
     from ipcosim.errors import IpcosimError
     from ipcosim.harness.grammar import parse_all, parse_set
@@ -62,7 +55,7 @@ def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.studies import robustness
     from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.executors import open_executor
-    from ipcosim.harness.studies.specs import for_executor, study_spec
+    from ipcosim.harness.studies.specs import default_out, for_executor, study_spec
     from ipcosim.harness.studies.sweep import run_sweep
 
     overrides = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))
