@@ -106,18 +106,12 @@ def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, pla
     LoopError
         If ``law.sample_period`` is not an integer multiple of ``plant_step``, or ``observe`` is unknown.
     """
-    ratio = law.sample_period / plant_step
-    n_sub = int(round(ratio))
-    if n_sub < 1 or abs(ratio - n_sub) > 1e-9 * max(1.0, ratio):
-        raise LoopError(f"sample_period = {law.sample_period:g} s is not an integer multiple of the plant step "
-                        f"{plant_step:g} s")
-    if observe not in OBSERVE:
-        raise LoopError(f"observe = {observe!r}: expected one of {', '.join(OBSERVE)}")
+    n_sub = substeps(law.sample_period, plant_step)
     n_steps = int(round(stop_time / plant_step))
     ref = reference if callable(reference) else (lambda t, c=float(reference): c)
     plant = Plant(params, x0=x0) if instruments is None else InstrumentedPlant(params, x0=x0, instruments=instruments)
-    law.reset()
     sense = _sensor(plant, observe, quantize)
+    law.reset()
     states, refs, volts, failure = _step_loop(plant, law, ref, sense, n_steps, n_sub, plant_step, hold_beyond)
     time = np.arange(n_steps + 1) * plant_step
     names = plant.state_names
@@ -128,9 +122,27 @@ def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, pla
                       metrics=metrics, failure=failure)
 
 
+def substeps(sample_period: float, plant_step: float) -> int:
+    """Plant steps per sample of a law (``sample_period / plant_step``, a whole number).
+
+    Raises
+    ------
+    LoopError
+        If the sample period is not an integer multiple of the plant step.
+    """
+    ratio = sample_period / plant_step
+    n_sub = int(round(ratio))
+    if n_sub < 1 or abs(ratio - n_sub) > 1e-9 * max(1.0, ratio):
+        raise LoopError(f"sample_period = {sample_period:g} s is not an integer multiple of the plant step "
+                        f"{plant_step:g} s")
+    return n_sub
+
+
 def _sensor(plant: Plant, observe: str, quantize: bool) -> Callable[[], Sequence[float]]:
     """What the law reads at a sample instant: the true state, the instruments' readings, or the measured
     positions (rounded to whole encoder counts with ``quantize``)."""
+    if observe not in OBSERVE:
+        raise LoopError(f"observe = {observe!r}: expected one of {', '.join(OBSERVE)}")
     if observe == "state":
         return lambda: plant.x
     if isinstance(plant, InstrumentedPlant):

@@ -618,6 +618,23 @@ class TuneStudy:
                 f"the pendulum falls.\n\n{table}\n{same}\nTuned parameter set: `{self.ssv}`. {usage}\n")
 
 
+def _searched(params: str, bounds: Sequence[str], spec: RunSpec) -> tuple[list[str], list[tuple[float, float]]]:
+    """The parameters to tune and their search ranges, checked against the scenario's parameters."""
+    names = parse_params(params, spec.parameters)
+    return names, parse_bounds(bounds, names, spec.parameters)
+
+
+def _outputs(scenario: str, out: Path | str | None, ssv: Path | str | None,
+             install: bool) -> tuple[Path, Path, Path | None]:
+    """Where a tuning writes: its folder (created), the tuned set and, with ``install``, the copy beside the
+    scenario (checked before any run)."""
+    from ipcosim.harness.studies.specs import default_out
+
+    folder = Path(out) if out else default_out(scenario, "tune")
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder, Path(ssv) if ssv else folder / "autotuned.ssv", install_path(scenario) if install else None
+
+
 def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), overrides: Mapping[str, float] | None = None,
                budget: int = 200, seed: int = 0, stop_time: float | None = None, step: float | None = None,
                w_angle: float | None = None, w_voltage: float | None = None, fmus: str = "auto",
@@ -660,21 +677,16 @@ def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), overri
     UsageError
         Any option that does not fit the scenario, named (TuneError for parameters, bounds and budget).
     """
-    from ipcosim.harness.studies.specs import default_out, study_spec
+    from ipcosim.harness.studies.specs import study_spec
 
     overrides = dict(overrides or {})
     pset = starting_set(scenario, parameter_set)
-    spec, flavour = study_spec(scenario, fmus, names=list(overrides),
-                               check=lambda s: parse_bounds(bounds, parse_params(params, s.parameters), s.parameters),
+    spec, flavour = study_spec(scenario, fmus, names=list(overrides), check=lambda s: _searched(params, bounds, s),
                                stop_time=stop_time, step=step, overrides=overrides, parameter_set=pset)
-    names = parse_params(params, spec.parameters)
-    ranges = parse_bounds(bounds, names, spec.parameters)
+    names, ranges = _searched(params, bounds, spec)
     plan_population(budget, len(names))  # checks the budget before starting workers
-    folder = Path(out) if out else default_out(scenario, "tune")
-    folder.mkdir(parents=True, exist_ok=True)
-    return TuneStudy(scenario, spec, flavour, names, ranges, pset, folder,
-                     Path(ssv) if ssv else folder / "autotuned.ssv", install_path(scenario) if install else None,
-                     robustness_objective(scenario, spec, overrides, pset, max_peak_sensitivity, min_delay_margin,
-                                          spread),
-                     budget, seed, costmod.W_ANGLE if w_angle is None else w_angle,
-                     costmod.W_VOLTAGE if w_voltage is None else w_voltage)
+    folder, ssv_path, installed = _outputs(scenario, out, ssv, install)
+    robust = robustness_objective(scenario, spec, overrides, pset, max_peak_sensitivity, min_delay_margin, spread)
+    weights = (costmod.W_ANGLE if w_angle is None else w_angle, costmod.W_VOLTAGE if w_voltage is None else w_voltage)
+    return TuneStudy(scenario, spec, flavour, names, ranges, pset, folder, ssv_path, installed, robust, budget, seed,
+                     *weights)
