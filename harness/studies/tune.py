@@ -17,7 +17,6 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -358,27 +357,6 @@ def _evolve(mapper: SweepMap, bounds: Sequence[tuple[float, float]], x0: np.ndar
 
 # --------------------------------------------------------------------------- outputs
 
-SSV_NS = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
-
-
-def ssv_text(values: Mapping[str, Any], name: str = "autotuned", description: str = "") -> str:
-    """An SSP 1.0 parameter set (``.ssv``): bool -> Boolean, int -> Integer, else Real."""
-    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
-             f'<ssv:ParameterSet xmlns:ssv="{SSV_NS}" version="1.0" name={quoteattr(name)}'
-             + (f" description={quoteattr(description)}" if description else "") + ">",
-             "  <ssv:Parameters>"]
-    for key, value in values.items():
-        if isinstance(value, bool):
-            typed = f'<ssv:Boolean value="{str(value).lower()}"/>'
-        elif isinstance(value, int):
-            typed = f'<ssv:Integer value="{value}"/>'
-        else:
-            typed = f'<ssv:Real value="{float(value)!r}"/>'
-        lines.append(f"    <ssv:Parameter name={quoteattr(key)}>{typed}</ssv:Parameter>")
-    lines += ["  </ssv:Parameters>", "</ssv:ParameterSet>", ""]
-    return "\n".join(lines)
-
-
 def tuned_parameter_set(scenario: str, best: Mapping[str, float],
                         parameter_set: str | None = None) -> tuple[dict[str, Any], str | None]:
     """The complete parameter set to write for a tuned scenario.
@@ -414,19 +392,6 @@ def tuned_parameter_set(scenario: str, best: Mapping[str, float],
                 values.update({n.split(".", 1)[1]: float(v) for n, v in best.items()})
                 return values, component
     return {n: float(v) for n, v in best.items()}, None
-
-
-def read_ssv_values(path: Path) -> dict[str, float]:
-    """The Real values of an ``.ssv`` file (``name`` -> value)."""
-    from lxml import etree
-
-    root = etree.parse(str(path)).getroot()
-    out = {}
-    for p in root.iter(f"{{{SSV_NS}}}Parameter"):
-        real = p.find(f"{{{SSV_NS}}}Real")
-        if real is not None:
-            out[p.get("name")] = float(real.get("value"))
-    return out
 
 
 TABLE_METRICS = ("cost", "itae_position", "settling_time_s", "overshoot_m", "steady_state_error_m",
@@ -580,12 +545,14 @@ class TuneStudy:
     def write(self, res: TuneResult) -> TunedFiles:
         """Write every run (``evaluations.csv``), the tuned parameter set (``ssv``, and ``install`` when
         given; :func:`tuned_parameter_set`) and the report ``tune.md``."""
+        from ipcosim.harness.scenario.ssp_gen import ssv_text
+
         files = TunedFiles(self.ssv, self.install, self.out / "tune.md", self.out / "evaluations.csv",
                            before_after_markdown(res, f"{self.parameter_set} gains" if self.parameter_set
                                                  else "scenario gains"))
         write_evaluations(files.evaluations, res.evaluations, self.names)
         values, component = tuned_parameter_set(self.scenario, res.best, self.parameter_set)
-        text = ssv_text(values, name="autotuned", description=self._description(res))
+        text = ssv_text(values, "autotuned", self._description(res))
         self.ssv.parent.mkdir(parents=True, exist_ok=True)
         self.ssv.write_text(text)
         if self.install is not None:
