@@ -60,9 +60,9 @@ class LoopResult:
         return self.states[:, self.state_names.index(name)]
 
 
-#: Encoder resolutions of the IP02 (4096 counts/rev): cart 2.275e-5 m/count, pendulum 1.534e-3 rad/count.
-ENCODER_RESOLUTION = {"cart_position": CART_M_PER_COUNT, "active_cart_position": CART_M_PER_COUNT,
-                      "passive_cart_position": CART_M_PER_COUNT, "pendulum_angle": PENDULUM_RAD_PER_COUNT}
+#: The IP02's encoders alone (4096 counts/rev: cart 2.275e-5 m/count, pendulum 1.534e-3 rad/count), what
+#: ``run_loop(quantize=True)`` puts on the plant.
+ENCODERS = Instruments(cart_resolution=CART_M_PER_COUNT, pendulum_resolution=PENDULUM_RAD_PER_COUNT)
 #: What a law can be given at its sample instants: the measured positions (the instruments' readings when
 #: the plant has instruments), or the plant's whole true state (a state-feedback stand-in).
 OBSERVE = ("measured", "state")
@@ -90,8 +90,8 @@ def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, pla
     x0 : sequence of float, optional
         Initial plant state (``ipcosim.fmus.physics`` order); upright at rest at 0 by default.
     quantize : bool
-        Round the measurements to whole encoder counts (``ENCODER_RESOLUTION``) before the law,
-        as the rig's encoders do.
+        Read the positions in whole encoder counts, as the rig's encoders do: the instruments
+        ``ENCODERS`` (not with ``instruments``).
     instruments : Instruments, optional
         The bench's instruments on the plant (``ipcosim.fmus.plant.InstrumentedPlant``: encoder counts,
         noise, end stops, DAC, computation delay, taps); the law reads their readings.
@@ -104,13 +104,18 @@ def run_loop(law: DiscreteLaw, params: PlantParams, stop_time: float = 10.0, pla
     Raises
     ------
     LoopError
-        If ``law.sample_period`` is not an integer multiple of ``plant_step``, or ``observe`` is unknown.
+        If ``law.sample_period`` is not an integer multiple of ``plant_step``, ``observe`` is unknown, or
+        ``quantize`` comes with ``instruments``.
     """
     n_sub = substeps(law.sample_period, plant_step)
+    if quantize:
+        if instruments is not None:
+            raise LoopError("quantize: the encoders are instruments; give their resolutions in instruments")
+        instruments = ENCODERS
     n_steps = int(round(stop_time / plant_step))
     ref = reference if callable(reference) else (lambda t, c=float(reference): c)
     plant = Plant(params, x0=x0) if instruments is None else InstrumentedPlant(params, x0=x0, instruments=instruments)
-    sense = _sensor(plant, observe, quantize)
+    sense = _sensor(plant, observe)
     law.reset()
     states, refs, volts, failure = _step_loop(plant, law, ref, sense, n_steps, n_sub, plant_step, hold_beyond)
     time = np.arange(n_steps + 1) * plant_step
@@ -138,18 +143,15 @@ def substeps(sample_period: float, plant_step: float) -> int:
     return n_sub
 
 
-def _sensor(plant: Plant, observe: str, quantize: bool) -> Callable[[], Sequence[float]]:
+def _sensor(plant: Plant, observe: str) -> Callable[[], Sequence[float]]:
     """What the law reads at a sample instant: the true state, the instruments' readings, or the measured
-    positions (rounded to whole encoder counts with ``quantize``)."""
+    positions."""
     if observe not in OBSERVE:
         raise LoopError(f"observe = {observe!r}: expected one of {', '.join(OBSERVE)}")
     if observe == "state":
         return lambda: plant.x
     if isinstance(plant, InstrumentedPlant):
         return lambda: plant.readings
-    res = np.array([ENCODER_RESOLUTION[n] for n in MEASURED[plant.kind]])
-    if quantize:
-        return lambda: np.round(np.asarray(plant.measured()) / res) * res
     return lambda: np.asarray(plant.measured())
 
 
