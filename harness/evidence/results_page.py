@@ -134,8 +134,8 @@ def write_claims(out: Path) -> tuple[list[dict[str, Any]], dict[str, Path]]:
 def robustness_rows(samples: int = ROBUST_SAMPLES, workers: int = 2) -> list[dict[str, Any]]:
     """Every ``ROBUST_SCENARIOS`` loop under each robustness factor alone and all together
     (``ipcosim.harness.studies.robustness.factor_study``, on the native flavour where it is built)."""
+    from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.robustness import factor_study
-    from ipcosim.harness.studies.sweep import open_executor
 
     executor = open_executor(workers)
     rows = []
