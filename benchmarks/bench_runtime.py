@@ -40,13 +40,16 @@ from ipcosim.harness.threads import single_threaded
 COLD_RUNS = int(os.environ.get("IPCOSIM_BENCH_COLD_RUNS", "5"))
 INIT_RUNS = int(os.environ.get("IPCOSIM_BENCH_INIT_RUNS", "3"))
 LOOP_RUNS = int(os.environ.get("IPCOSIM_BENCH_LOOP_RUNS", "5"))
-#: Targets, CPU time. Measured at load 2-13 with one BLAS thread and the bytecode compiled: cold
-#: run 0.62-0.77 s (0.66 s at load 2; the same for the tree the issue was filed at, so 0.8 s was
-#: set too close), python/libcosim 0.44-0.56, native/fmpy 1.4-1.9, slowest initialization 28-41 ms,
-#: simulated seconds per CPU second on the C loop 46-51. The issue's goal for python/libcosim,
-#: 0.3x, is not reached: see ISSUE_LIBCOSIM_GOAL.
+#: Targets, CPU time. Measured at load 0.5-7 with one BLAS thread and the bytecode compiled: cold
+#: run 0.57-0.77 s (the tree the issue was filed at takes the same), python/libcosim 0.43-0.46,
+#: native/fmpy 1.4-1.9, slowest initialization 28-44 ms, simulated seconds per CPU second on the C
+#: loop 46-51. The CPU time of a process grows with the machine's load (0.57 s at load 4, 0.77 s at
+#: load 3 in another minute), so the absolute cold-run limit only catches a gross regression; the
+#: ratio to libcosim, measured in the same alternating rounds, is the fine one: 0.25 s of CPU added
+#: to the run (+40 %) took it from 0.43 to 0.62. The issue's goal for that ratio, 0.3x, is not
+#: reached: see ISSUE_LIBCOSIM_GOAL.
 COLD_TARGET_S = 0.9
-LIBCOSIM_RATIO = 0.65
+LIBCOSIM_RATIO = 0.58
 ISSUE_LIBCOSIM_GOAL = 0.3
 FMPY_RATIO = 2.0
 INIT_TARGET_MS = 50.0
