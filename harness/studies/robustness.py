@@ -116,6 +116,50 @@ def summary_markdown(summary: Mapping[str, Any], title: str = "Robustness") -> s
     return "\n".join(lines) + "\n"
 
 
+def write_summary(rows: Sequence[Mapping[str, Any]], spec: Any, varied: Sequence[str], out: Path,
+                  extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Write a robustness sweep's ``summary.json``, ``summary.md`` and ``figures/`` (the metric against each
+    varied parameter, then every metric's distribution) under ``out``; returns the summary
+    (:func:`summarize` with the scenario's name and ``extra``, e.g. the variations and the seed).
+
+    Parameters
+    ----------
+    rows : sequence of mapping
+        The sweep's rows.
+    spec : RunSpec
+        The scenario that ran (its ``name`` and ``metric_names``).
+    varied : sequence of str
+        The parameters the sweep varied (``component.variable``).
+    out : Path
+        The sweep's folder.
+    extra : mapping, optional
+        Recorded in the summary beside the scenario's name.
+    """
+    import json
+
+    summary = summarize(rows, spec.metric_names)
+    summary.update({"scenario": spec.name, **(extra or {})})
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    md = summary_markdown(summary, title=f"Robustness of {spec.name}")
+    figures = plot_distributions(rows, spec.metric_names, out / "figures", title=spec.name)
+    metric = "itae_position" if "itae_position" in spec.metric_names else spec.metric_names[0]
+    by_param = plot_parameters(rows, list(varied), metric, out / "figures",
+                               title=f"{spec.name}: {metric} against each varied parameter")
+    if by_param is not None:
+        figures.insert(0, by_param)
+    md += "\n" + "\n".join(f"![{p.stem}](figures/{p.name})" for p in figures) + "\n"
+    (out / "summary.md").write_text(md)
+    return summary
+
+
+def summary_line(summary: Mapping[str, Any]) -> str:
+    """The success rate with its 95 % interval and the counts per status, on one line."""
+    lo, hi = summary["success_ci95"]
+    counts = ", ".join(f"{k} {v}" for k, v in sorted(summary["counts"].items()))
+    return (f"success rate {100 * summary['success_rate']:.1f} % (95 % CI {100 * lo:.1f}-{100 * hi:.1f} %) "
+            f"of {summary['runs']} runs: {counts}")
+
+
 def plot_distributions(rows: Sequence[Mapping[str, Any]], metric_names: Sequence[str], out_dir: Path,
                        title: str = "") -> list[Path]:
     """One histogram per metric (successful and failed runs stacked), as PNG files.

@@ -95,6 +95,13 @@ class SweepResult:
     elapsed_s: float = 0.0
     counts: dict[str, int] = field(default_factory=dict)
 
+    def failure(self) -> str | None:
+        """The error when every run failed (None otherwise: some ran, or there were none)."""
+        errors = [r for r in self.rows if r["status"] == "error"]
+        if self.rows and len(errors) == len(self.rows):
+            return f"all {len(errors)} runs failed; first error: {errors[0]['error']}"
+        return None
+
     @property
     def success_rate(self) -> float:
         """Fraction of runs with status ``ok``."""
