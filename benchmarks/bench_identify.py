@@ -122,7 +122,8 @@ def coverage(kind: str, repetitions: int, rig: bool = False) -> list[str]:
         for seed in range(1, repetitions + 1):
             truth, r = one_run(kind, seed, Path(tmp), rig)
             print(f"{kind} seed {seed}{' (rig)' if rig else ''}: fit {r.fit_cpu_s:.1f} s CPU, delay "
-                  f"{r.input_delay_s * 1e3:g} ms, NRMSE {min(r.nrmse.values()):.2%}; " + ", ".join(
+                  f"{r.input_delay_s * 1e3:g} ms, NRMSE {min(r.nrmse.values()):.2%}, largest residual "
+                  f"{max(r.largest_residual_counts.values()):.2f} counts; " + ", ".join(
                       f"{n} {truth[n]:.5g} -> {p['value']:.5g} [{p['ci95'][0]:.5g}, {p['ci95'][1]:.5g}]"
                       for n, p in r.parameters.items()), flush=True)
             times.append(r.fit_cpu_s)
