@@ -28,6 +28,7 @@ from __future__ import annotations
 import cmath
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Mapping
 
 import control
@@ -108,8 +109,8 @@ def _binding_values(component) -> dict[str, Any]:
 
 
 def scenario_loop(scenario: str, parameter_set: str | None = None,
-                  overrides: Mapping[str, float] | None = None) -> tuple[Loop, dict[str, Any]]:
-    """The loop of a scenario's ``controller`` and ``plant`` components (``--set`` overrides).
+                  set: Mapping[str, float] | None = None) -> tuple[Loop, dict[str, Any]]:
+    """The loop of a scenario's ``controller`` and ``plant`` components (with the ``--set`` values ``set``).
 
     Returns
     -------
@@ -138,7 +139,7 @@ def scenario_loop(scenario: str, parameter_set: str | None = None,
                             f"({', '.join(PLANT_MODELS)})")
     law_name, kind = found[0]
     law_values, plant_values = _binding_values(ctrl), _binding_values(plant)
-    for key, value in (overrides or {}).items():
+    for key, value in (set or {}).items():
         comp, _, var = key.partition(".")
         if comp not in ("controller", "plant"):
             raise UsageError(f"--set {key}: analyze uses the controller's and plant's parameters only")
@@ -449,11 +450,9 @@ def statement(result: Mapping[str, Any]) -> str:
 
 
 # ----------------------------------------------------------------------------- figures
-def plot_loop(loop: Loop, result: Mapping[str, Any], out_dir: str, title: str) -> dict[str, str]:
+def plot_loop(loop: Loop, result: Mapping[str, Any], out: str | Path, title: str) -> dict[str, str]:
     """Write ``bode.png`` (|L|, |S|, |T| and the phase of L) and ``nyquist.png`` (L, and a zoom
-    on -1 with the modulus-margin circle) into ``out_dir``; returns their paths."""
-    from pathlib import Path
-
+    on -1 with the modulus-margin circle) into ``out``; returns their paths."""
     from ipcosim.harness.extras import require
 
     require("matplotlib")
@@ -462,7 +461,7 @@ def plot_loop(loop: Loop, result: Mapping[str, Any], out_dir: str, title: str) -
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = Path(out_dir)
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     w = frequency_grid(loop.T, 3000)
     Lw = loop_response(loop, w)
@@ -508,10 +507,10 @@ def plot_loop(loop: Loop, result: Mapping[str, Any], out_dir: str, title: str) -
     return {"bode": str(bode), "nyquist": str(nyq)}
 
 
-def analyze(scenario: str, *, parameter_set: str | None = None, overrides: Mapping[str, float] | None = None,
-            out_dir: str | None = None) -> dict[str, Any]:
-    """Analyse a scenario's loop (see the module docstring); with ``out_dir`` also write the
-    figures and ``analysis.json`` there.
+def analyze(scenario: str, *, parameter_set: str | None = None, set: Mapping[str, float] | None = None,
+            out: str | Path | None = None) -> dict[str, Any]:
+    """Analyse a scenario's loop (see the module docstring), with the ``--set`` values ``set``; with ``out``
+    also write the figures and ``analysis.json`` there.
 
     Examples
     --------
@@ -520,12 +519,11 @@ def analyze(scenario: str, *, parameter_set: str | None = None, overrides: Mappi
     (True, 0.0179)
     """
     import json
-    from pathlib import Path
 
-    loop, info = scenario_loop(scenario, parameter_set, overrides)
+    loop, info = scenario_loop(scenario, parameter_set, set)
     result = {**info, **analyze_loop(loop)}
-    if out_dir is not None:
-        result["figures"] = plot_loop(loop, result, out_dir, f"{info['scenario']} ({info['parameter_set']}): "
+    if out is not None:
+        result["figures"] = plot_loop(loop, result, out, f"{info['scenario']} ({info['parameter_set']}): "
                                                              "loop at the plant input")
-        (Path(out_dir) / "analysis.json").write_text(json.dumps(result, indent=2))
+        (Path(out) / "analysis.json").write_text(json.dumps(result, indent=2))
     return result
