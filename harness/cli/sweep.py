@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from ipcosim.harness.cli import add_parameter_file_option, add_study_fmus_option
 
@@ -47,50 +46,33 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """Run the sweep (``ipcosim.harness.studies.sweep.run_sweep``) and write its summary and figures
-    (``ipcosim.harness.studies.robustness.write_summary``)."""
+    """Run the sweep and write its summary and figures
+    (``ipcosim.harness.studies.robustness.sweep_study``)."""
     from ipcosim.errors import IpcosimError
-    from ipcosim.harness.grammar import parse_all, parse_set
+    from ipcosim.harness.grammar import parse_set
     from ipcosim.harness.options import with_parameter_file
-    from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.executors import open_executor
-    from ipcosim.harness.studies.robustness import summary_line, write_summary
-    from ipcosim.harness.studies.specs import default_out, for_executor, study_spec
-    from ipcosim.harness.studies.store import discard_results
-    from ipcosim.harness.studies.sweep import run_sweep
+    from ipcosim.harness.studies.robustness import summary_line, sweep_study
 
-    overrides = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))
-    spec, flavour = study_spec(args.scenario, args.fmus, names=[*overrides, *(v.partition("=")[0].strip()
-                                                                              for v in args.vary)],
-                               check=lambda s: parse_all(args.vary, s.parameters), stop_time=args.stop_time,
-                               step=args.step, overrides=overrides, parameter_set=args.parameter_set)
-    varies = parse_all(args.vary, spec.parameters)
-    cases = make_cases(varies, spec.parameters, samples=args.samples, seed=args.seed)
-    out = Path(args.out) if args.out else default_out(args.scenario)
-    if args.fresh and out.exists():
-        discard_results(out)
+    study = sweep_study(args.scenario, args.vary, samples=args.samples, seed=args.seed,
+                        set=with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True)),
+                        fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time, step=args.step,
+                        out=args.out, fresh=args.fresh, command="ipcosim " + " ".join(sys.argv[1:]))
     executor = open_executor(args.workers, args.scheduler)
-    print(f"sweep {spec.name}: {len(cases)} runs on {executor.description}, {flavour} -> {out}", file=sys.stderr)
+    print(study.describe(executor), file=sys.stderr)
     try:
-        result = run_sweep(for_executor(spec, executor), cases, out=out, executor=executor,
-                           progress=not args.quiet,
-                           extra_metadata={"vary": list(args.vary), "set": dict(overrides),
-                                           "samples": args.samples, "seed": args.seed,
-                                           "parameter_set": args.parameter_set,
-                                           "command": "ipcosim " + " ".join(sys.argv[1:])})
+        result = study.run(executor, progress=not args.quiet)
     except KeyboardInterrupt:
-        executor.abort()
-        print(f"ipcosim sweep: interrupted; finished runs are kept in {out / 'results.csv'}; "
+        print(f"ipcosim sweep: interrupted; finished runs are kept in {study.out / 'results.csv'}; "
               "run the same command again to resume", file=sys.stderr)
         return 130
     finally:
         executor.close()
     if result.resumed:
         print(f"resumed: {result.resumed} runs were already done", file=sys.stderr)
-    summary = write_summary(result.rows, spec, [v.name for v in varies], out,
-                            {"vary": list(args.vary), "seed": args.seed})
-    print(summary_line(summary))
-    print(f"results: {out / 'results.csv'}, summary: {out / 'summary.md'}, figures: {out / 'figures'}")
+    print(summary_line(study.write(result)))
+    print(f"results: {study.out / 'results.csv'}, summary: {study.out / 'summary.md'}, "
+          f"figures: {study.out / 'figures'}")
     if result.failure():
         raise IpcosimError(result.failure())
     return 0
