@@ -36,11 +36,10 @@ import numpy as np
 
 from ipcosim.controllers.catalog import LAWS, build_law, model_name
 from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.fmus.linearize import linearize
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, ParameterError, preset
 from ipcosim.harness.studies.loop import LinearLaw, linear_law
-
-PLANT_MODELS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}
 
 
 class AnalysisError(IpcosimError, ValueError):
