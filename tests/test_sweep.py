@@ -339,7 +339,7 @@ def test_sweep_study_checks_everything_before_it_touches_the_folder(tmp_path):
                     fresh=True)
     assert old.exists()                                     # a refused study discards nothing
     study = sweep_study("pure:single-mass-lqr", ["plant.Mp=uniform(0.8,1.2)*nominal", "plant.Lp=[0.3,0.4]"],
-                        samples=3, seed=4, set={"plant.Beq": 5.0}, out=tmp_path, fresh=True, command="ipcosim sweep x")
+                        samples=3, seed=4, set={"plant.Beq": 5.0}, out=tmp_path, fresh=True)
     assert not old.exists()
     nominal = study.spec.parameters["plant.Mp"]
     assert study.spec.parameters["plant.Beq"] == 5.0
@@ -348,6 +348,5 @@ def test_sweep_study_checks_everything_before_it_touches_the_folder(tmp_path):
     assert study.cases == make_cases(parse_all(["plant.Mp=uniform(0.8,1.2)*nominal", "plant.Lp=[0.3,0.4]"],
                                                study.spec.parameters), study.spec.parameters, samples=3, seed=4)
     assert study.metadata == {"vary": ["plant.Mp=uniform(0.8,1.2)*nominal", "plant.Lp=[0.3,0.4]"],
-                              "set": {"plant.Beq": 5.0}, "samples": 3, "seed": 4, "parameter_set": None,
-                              "command": "ipcosim sweep x"}
+                              "set": {"plant.Beq": 5.0}, "samples": 3, "seed": 4, "parameter_set": None}
     assert study.flavour == "no FMUs (a pure-Python stand-in)"

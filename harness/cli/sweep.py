@@ -46,22 +46,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """Run the sweep and write its summary and figures
-    (``ipcosim.harness.studies.robustness.sweep_study``)."""
+    """Run the sweep and write its summary and figures (``ipcosim.harness.studies.robustness.sweep_study``)."""
     from ipcosim.errors import IpcosimError
     from ipcosim.harness.grammar import parse_set
     from ipcosim.harness.options import with_parameter_file
     from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.robustness import summary_line, sweep_study
 
-    study = sweep_study(args.scenario, args.vary, samples=args.samples, seed=args.seed,
-                        set=with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True)),
+    values = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))
+    study = sweep_study(args.scenario, args.vary, set=values, samples=args.samples, seed=args.seed,
                         fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time, step=args.step,
-                        out=args.out, fresh=args.fresh, command="ipcosim " + " ".join(sys.argv[1:]))
+                        out=args.out, fresh=args.fresh)
     executor = open_executor(args.workers, args.scheduler)
     print(study.describe(executor), file=sys.stderr)
     try:
-        result = study.run(executor, progress=not args.quiet)
+        result = study.run(executor, progress=not args.quiet, extra={"command": "ipcosim " + " ".join(sys.argv[1:])})
     except KeyboardInterrupt:
         print(f"ipcosim sweep: interrupted; finished runs are kept in {study.out / 'results.csv'}; "
               "run the same command again to resume", file=sys.stderr)
@@ -70,9 +69,10 @@ def main(args: argparse.Namespace) -> int:
         executor.close()
     if result.resumed:
         print(f"resumed: {result.resumed} runs were already done", file=sys.stderr)
-    print(summary_line(study.write(result)))
-    print(f"results: {study.out / 'results.csv'}, summary: {study.out / 'summary.md'}, "
-          f"figures: {study.out / 'figures'}")
+    summary = study.write(result)
+    out = study.out
+    print(summary_line(summary))
+    print(f"results: {out / 'results.csv'}, summary: {out / 'summary.md'}, figures: {out / 'figures'}")
     if result.failure():
         raise IpcosimError(result.failure())
     return 0

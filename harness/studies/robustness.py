@@ -7,7 +7,7 @@ throughout) and the cart ended inside the +-2 % settling band of the step (the t
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -159,6 +159,106 @@ def summary_line(summary: Mapping[str, Any]) -> str:
     counts = ", ".join(f"{k} {v}" for k, v in sorted(summary["counts"].items()))
     return (f"success rate {100 * summary['success_rate']:.1f} % (95 % CI {100 * lo:.1f}-{100 * hi:.1f} %) "
             f"of {summary['runs']} runs: {counts}")
+
+
+@dataclass
+class SweepStudy:
+    """A robustness sweep of one scenario, checked and ready to run (:func:`sweep_study`, ``ipcosim sweep``):
+    :meth:`run` runs the cases into ``out`` (resuming finished ones), :meth:`write` writes the summary.
+
+    Attributes
+    ----------
+    spec : RunSpec
+        The scenario's run spec (fixed values applied).
+    flavour : str
+        Which FMUs run it, and why (``ipcosim.harness.studies.specs.study_spec``).
+    varies : list of Vary
+        The variations (``ipcosim.harness.grammar.parse_all``).
+    cases : list of SweepCase
+        The runs.
+    out : Path
+        The sweep's folder.
+    metadata : dict
+        What ``metadata.json`` records of the request (variations, fixed values, samples, seed, set).
+    """
+
+    spec: Any
+    flavour: str
+    varies: list
+    cases: list
+    out: Path
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def describe(self, executor: Any) -> str:
+        """One line: the scenario, the runs, where they run, the flavour and the folder."""
+        return (f"sweep {self.spec.name}: {len(self.cases)} runs on {executor.description}, {self.flavour} -> "
+                f"{self.out}")
+
+    def run(self, executor: Any, progress: bool = True, extra: Mapping[str, Any] | None = None) -> Any:
+        """The sweep on ``executor`` (``run_sweep``; ``extra`` joins the metadata). An interruption aborts
+        the executor; the finished runs stay in ``out`` and a second run resumes them."""
+        from ipcosim.harness.studies.specs import for_executor
+        from ipcosim.harness.studies.sweep import run_sweep
+
+        try:
+            return run_sweep(for_executor(self.spec, executor), self.cases, out=self.out, executor=executor,
+                             progress=progress, extra_metadata={**self.metadata, **(extra or {})})
+        except KeyboardInterrupt:
+            executor.abort()
+            raise
+
+    def write(self, result: Any) -> dict[str, Any]:
+        """The summary, its Markdown and its figures (:func:`write_summary`); returns the summary."""
+        return write_summary(result.rows, self.spec, [v.name for v in self.varies], self.out,
+                             {"vary": self.metadata["vary"], "seed": self.metadata["seed"]})
+
+
+def sweep_study(scenario: str, vary: Sequence[str], *, set: Mapping[str, float] | None = None,
+                samples: int | None = None, seed: int = 0, fmus: str = "auto", parameter_set: str | None = None,
+                stop_time: float | None = None, step: float | None = None, out: Path | str | None = None,
+                fresh: bool = False) -> SweepStudy:
+    """A robustness sweep of ``scenario``, every option checked before any run.
+
+    Parameters
+    ----------
+    scenario : str
+        Scenario name or path, or ``pure:single-mass-lqr``.
+    vary : sequence of str
+        ``COMP.VAR=FORM`` variations (``ipcosim.harness.grammar.FORMS_HELP``).
+    set : mapping, optional
+        Fixed ``component.variable`` values in every run (``--set``).
+    samples : int, optional
+        Runs per grid point (default 100 with a random form, else 1).
+    seed : int
+        Master seed.
+    fmus : {'auto', 'python', 'native'}
+        FMU flavour (``ipcosim.harness.studies.specs.study_spec``).
+    parameter_set : str, optional
+        The scenario's parameter set to bind.
+    stop_time, step : float, optional
+        The run's experiment [s] (default: the scenario's).
+    out : Path or str, optional
+        The sweep's folder (default ``out/sweep/<scenario>``).
+    fresh : bool
+        Discard results already there (``ipcosim.harness.studies.store.discard_results``).
+    """
+    from ipcosim.harness.grammar import parse_all
+    from ipcosim.harness.studies.cases import make_cases
+    from ipcosim.harness.studies.specs import default_out, study_spec
+    from ipcosim.harness.studies.store import discard_results
+
+    set = dict(set or {})
+    spec, flavour = study_spec(scenario, fmus, names=[*set, *(v.partition("=")[0].strip() for v in vary)],
+                               check=lambda s: parse_all(vary, s.parameters), stop_time=stop_time, step=step,
+                               set=set, parameter_set=parameter_set)
+    varies = parse_all(vary, spec.parameters)
+    cases = make_cases(varies, spec.parameters, samples=samples, seed=seed)
+    folder = Path(out) if out else default_out(scenario)
+    if fresh and folder.exists():
+        discard_results(folder)
+    return SweepStudy(spec, flavour, varies, cases, folder,
+                      {"vary": list(vary), "set": set, "samples": samples, "seed": seed,
+                       "parameter_set": parameter_set})
 
 
 def plot_distributions(rows: Sequence[Mapping[str, Any]], metric_names: Sequence[str], out_dir: Path,
@@ -373,111 +473,3 @@ def factor_cell(summary: Mapping[str, Any]) -> str:
         return "ok (1 run)" if status == "ok" else f"{status} (1 run)"
     lo, hi = summary["success_ci95"]
     return f"{100 * summary['success_rate']:.1f} % ({100 * lo:.1f}-{100 * hi:.1f})"
-
-
-@dataclass
-class SweepStudy:
-    """A robustness sweep of one scenario, checked and ready to run (:func:`sweep_study`): :meth:`run` runs
-    the cases (resuming a sweep already in ``out``), :meth:`write` writes its summary and figures.
-
-    Attributes
-    ----------
-    spec : RunSpec
-        What one run is.
-    flavour : str
-        Which FMU flavour runs, and why (``ipcosim.harness.studies.specs.study_spec``).
-    varies : list of Vary
-        The parsed ``--vary`` expressions.
-    cases : list of SweepCase
-        The runs.
-    out : Path
-        The sweep's folder.
-    metadata : dict
-        Recorded in ``metadata.json`` beside the engine's own entries.
-    """
-
-    spec: Any
-    flavour: str
-    varies: list[Any]
-    cases: list[Any]
-    out: Path
-    metadata: dict[str, Any]
-    seed: int = 0
-
-    def describe(self, executor: Any) -> str:
-        """One line: how many runs of which scenario, where they run, on which flavour, into which folder."""
-        return (f"sweep {self.spec.name}: {len(self.cases)} runs on {executor.description}, {self.flavour} "
-                f"-> {self.out}")
-
-    def run(self, executor: Any, progress: bool = True) -> Any:
-        """Run the cases on ``executor`` (``ipcosim.harness.studies.sweep.run_sweep``); returns its SweepResult.
-        An interruption aborts the executor; finished runs stay in ``out/results.csv``."""
-        from ipcosim.harness.studies.specs import for_executor
-        from ipcosim.harness.studies.sweep import run_sweep
-
-        try:
-            return run_sweep(for_executor(self.spec, executor), self.cases, out=self.out, executor=executor,
-                             progress=progress, extra_metadata=self.metadata)
-        except KeyboardInterrupt:
-            executor.abort()
-            raise
-
-    def write(self, result: Any) -> dict[str, Any]:
-        """Write the summary and figures of ``result``'s rows (:func:`write_summary`); returns the summary."""
-        return write_summary(result.rows, self.spec, [v.name for v in self.varies], self.out,
-                             {"vary": list(self.metadata["vary"]), "seed": self.seed})
-
-
-def sweep_study(scenario: str, vary: Sequence[str], *, samples: int | None = None, seed: int = 0,
-                set: Mapping[str, float] | None = None, fmus: str = "auto", parameter_set: str | None = None,
-                stop_time: float | None = None, step: float | None = None, out: Path | str | None = None,
-                fresh: bool = False, command: str | None = None) -> SweepStudy:
-    """The robustness sweep of a scenario (``ipcosim sweep``), every option checked before any run.
-
-    Parameters
-    ----------
-    scenario : str
-        Scenario name or path, or ``pure:single-mass-lqr``.
-    vary : sequence of str
-        ``COMP.VAR=FORM`` expressions (``ipcosim.harness.grammar.parse_all``).
-    samples : int, optional
-        Runs per grid point (default 100 with a random form, else 1).
-    seed : int
-        Master seed of the cases (``ipcosim.harness.studies.cases.make_cases``).
-    set : mapping, optional
-        Fixed ``component.variable`` values in every run.
-    fmus : {'auto', 'python', 'native'}
-        FMU flavour (``ipcosim.harness.studies.specs.study_spec``).
-    parameter_set : str, optional
-        Bind this parameter set of the scenario (default: its own binding).
-    stop_time, step : float, optional
-        The run's experiment [s] (default: the scenario's).
-    out : Path or str, optional
-        The sweep's folder (default ``out/sweep/<scenario>``); a sweep already there is resumed.
-    fresh : bool
-        Discard the results already in ``out`` (after every check passed).
-    command : str, optional
-        The command line, recorded in ``metadata.json``.
-
-    Raises
-    ------
-    UsageError
-        Any option that does not fit the scenario, named (VaryError for the variations and samples).
-    """
-    from ipcosim.harness.grammar import parse_all
-    from ipcosim.harness.studies.cases import make_cases
-    from ipcosim.harness.studies.specs import default_out, study_spec
-    from ipcosim.harness.studies.store import discard_results
-
-    set = dict(set or {})
-    spec, flavour = study_spec(scenario, fmus, names=[*set, *(v.partition("=")[0].strip() for v in vary)],
-                               check=lambda s: parse_all(vary, s.parameters), stop_time=stop_time, step=step,
-                               set=set, parameter_set=parameter_set)
-    varies = parse_all(vary, spec.parameters)
-    cases = make_cases(varies, spec.parameters, samples=samples, seed=seed)
-    folder = Path(out) if out else default_out(scenario)
-    if fresh and folder.exists():
-        discard_results(folder)
-    metadata = {"vary": list(vary), "set": set, "samples": samples, "seed": seed, "parameter_set": parameter_set,
-                "command": command}
-    return SweepStudy(spec, flavour, varies, cases, folder, metadata, seed)
