@@ -183,7 +183,8 @@ def test_coulomb_estimate_is_zero_at_rest_and_full_when_sliding() -> None:
 
     b, v0 = 0.1, 2e-3
     assert [coulomb_estimate(v, b, v0) for v in (0.0, 1e-3, -2e-3)] == [0.0, 0.0, 0.0]
-    assert coulomb_estimate(3e-3, b, v0) == pytest.approx(0.05) and coulomb_estimate(-3e-3, b, v0) == pytest.approx(-0.05)
+    assert coulomb_estimate(3e-3, b, v0) == pytest.approx(0.05)
+    assert coulomb_estimate(-3e-3, b, v0) == pytest.approx(-0.05)
     assert coulomb_estimate(4e-3, b, v0) == b and coulomb_estimate(-0.5, b, v0) == -b
 
 
@@ -191,8 +192,9 @@ def test_coulomb_estimate_is_zero_at_rest_and_full_when_sliding() -> None:
 def test_friction_model_is_what_the_plants_coulomb_force_does(kind: str) -> None:
     """Each cart's friction column is the sampled effect of the design plant's own Coulomb force of 1 N on a
     sliding cart (``physics.rhs_no_inductance``), and the passive cart's lead is the spring's 1/K."""
-    import scipy.linalg
     from dataclasses import replace
+
+    import scipy.linalg
 
     from ipcosim.controllers.catalog import coulomb_model, design_params_from
     from ipcosim.fmus.linearize import linear_matrices
