@@ -35,19 +35,31 @@ from pathlib import Path
 from typing import Sequence
 
 from benchmarks.targets import figure, least_disturbed, target
+from ipcosim.harness.threads import single_threaded
 
 COLD_RUNS = int(os.environ.get("IPCOSIM_BENCH_COLD_RUNS", "5"))
 INIT_RUNS = int(os.environ.get("IPCOSIM_BENCH_INIT_RUNS", "3"))
 LOOP_RUNS = int(os.environ.get("IPCOSIM_BENCH_LOOP_RUNS", "5"))
-#: Targets, CPU time (measured at load 2-13: cold run 0.56-0.66 s, python/libcosim 0.44-0.56,
-#: native/fmpy 1.6-1.8, slowest initialization 28-43 ms, simulated seconds per CPU second on the C
-#: loop 46-47). The issue's goal for python/libcosim, 0.3x, is not reached: see ISSUE_LIBCOSIM_GOAL.
-COLD_TARGET_S = 0.8
-LIBCOSIM_RATIO = 0.65
+#: Targets, CPU time. Measured at load 0.5-7 with one BLAS thread and the bytecode compiled: cold
+#: run 0.57-0.77 s (the tree the issue was filed at takes the same), python/libcosim 0.43-0.46,
+#: native/fmpy 1.4-1.9, slowest initialization 28-44 ms, simulated seconds per CPU second on the C
+#: loop 46-51. The CPU time of a process grows with the machine's load (0.57 s at load 4, 0.77 s at
+#: load 3 in another minute), so the absolute cold-run limit only catches a gross regression; the
+#: ratio to libcosim, measured in the same alternating rounds, is the fine one: 0.25 s of CPU added
+#: to the run (+40 %) took it from 0.43 to 0.62. The issue's goal for that ratio, 0.3x, is not
+#: reached: see ISSUE_LIBCOSIM_GOAL.
+COLD_TARGET_S = 0.9
+LIBCOSIM_RATIO = 0.58
 ISSUE_LIBCOSIM_GOAL = 0.3
 FMPY_RATIO = 2.0
 INIT_TARGET_MS = 50.0
 LOOP_TARGET_RTF = 32.0
+
+#: The environment of every timed process: one BLAS thread, as ``ipcosim`` asks for itself
+#: (:mod:`ipcosim.harness.threads`), so that neither side's CPU time counts an idle BLAS worker
+#: spinning beside the main thread (it doubled the CPU time of an FMU's initialization).
+CHILD_ENV = dict(os.environ)
+single_threaded(CHILD_ENV)
 
 #: libcosim on an archive, as a process of its own: ``python -c LIBCOSIM_SCRIPT ssp``.
 LIBCOSIM_SCRIPT = r'''
@@ -93,7 +105,7 @@ print(elapsed * 1e3, cpu * 1e3)
 def process(cmd: Sequence[str]) -> tuple[float, float, float]:
     """One fresh process: (wall s, CPU s, peak resident MB); raises with its last error line if it fails."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(list(cmd), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(list(cmd), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=CHILD_ENV)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     err = proc.stderr.read() if proc.stderr else ""
@@ -120,6 +132,7 @@ def whole_runs(tmp: Path) -> dict[str, dict[str, float]]:
             "native": ipc + ["run", "single-mass-lqr", "--fmus", "native", "--out", str(tmp / "nat"), "--quiet"],
             "fmpy": [sys.executable, "-c", FMPY_SCRIPT, str(loop)]}
     samples: dict[str, list[tuple[float, float, float]]] = {k: [] for k in cmds}
+    compile_package()
     for cmd in cmds.values():
         process(cmd)  # warm-up: the page cache, the C loop's library
     for _ in range(COLD_RUNS):
@@ -129,6 +142,23 @@ def whole_runs(tmp: Path) -> dict[str, dict[str, float]]:
                   "mb": max(x[2] for x in s)} for name, s in samples.items()}
     _, _, out["native"]["mb_600s"] = process(cmds["native"] + ["--stop-time", "600"])
     return out
+
+
+def compile_package() -> None:
+    """Write the bytecode of ipcosim's own modules, as pip does when it installs the wheel.
+
+    A checkout run with ``PYTHONDONTWRITEBYTECODE`` set (as on some machines) would otherwise
+    compile every module again in each timed process (about 0.16 s of CPU), and the cold run
+    would time the compiler instead of ipcosim.
+    """
+    import compileall
+
+    from ipcosim.fmus.pybuild import ROOT
+
+    ok = all(compileall.compile_file(str(f), quiet=1) for f in ROOT.glob("*.py"))
+    ok &= all(compileall.compile_dir(str(ROOT / pkg), quiet=1) for pkg in ("fmus", "controllers", "harness"))
+    if not ok:
+        raise RuntimeError(f"{ROOT}: some of ipcosim's modules do not compile")
 
 
 def init_times(fmu_dir: Path, work: Path) -> dict[str, tuple[float, float]]:
@@ -151,7 +181,7 @@ def _init_ms(fmu: Path, unzip: Path) -> tuple[float, float]:
         uri = f"q4:{server.uri}"
     try:
         proc = subprocess.run([sys.executable, "-c", INIT_SCRIPT, str(fmu), str(unzip), uri],
-                              capture_output=True, text=True, timeout=120)
+                              capture_output=True, text=True, timeout=120, env=CHILD_ENV)
     finally:
         if server is not None:
             server.close()

@@ -73,7 +73,7 @@ def measure(spec: Any, runs: int = RUNS, repeats: int = REPEATS) -> dict[str, fl
             for workers, n in ((1, runs), (2, 2 * runs)):
                 with tempfile.TemporaryDirectory() as tmp:
                     t0 = time.perf_counter()
-                    result = run_sweep(spec, cases[:n], executor=executors[workers], out_dir=tmp)
+                    result = run_sweep(spec, cases[:n], executor=executors[workers], out=tmp)
                     wall = (time.perf_counter() - t0) / n
                 inside = sum(r["run_time_s"] or 0.0 for r in result.rows) / n
                 if wall < best.get(f"w{workers}", math.inf):

@@ -33,10 +33,11 @@ from ipcosim.fmus.metrics import streamed_task_metrics, task_kinds
 from ipcosim.harness.grammar import strip_nominal
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
-from ipcosim.harness.master.execution import Execution, SlaveFactory, TaskMetrics, check_times, timing_metrics
+from ipcosim.harness.master.execution import Execution, SlaveFactory, check_times
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress
 from ipcosim.harness.master.realtime import RealtimePacer
+from ipcosim.harness.master.recorder import TaskMetrics, timing_metrics
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
 from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.master.system import System
@@ -130,7 +131,7 @@ class Prepared:
         instantiating anew (:attr:`ipcosim.harness.master.slave.FMUSlave.reusable`): for studies
         of many runs, where each pythonfmu instantiation would keep a few kB alive.
     task_metrics : callable, optional
-        The task's metrics of a run's rows (``ipcosim.harness.master.execution.TaskMetrics``);
+        The task's metrics of a run's rows (``ipcosim.harness.master.recorder.TaskMetrics``);
         default the IP02 task's, :func:`ipcosim.fmus.metrics.streamed_task_metrics` (a scenario
         without the pendulum's columns gets none).
     """
@@ -175,7 +176,7 @@ class Prepared:
             if fmus == "native":
                 scenario, self._python_values = to_native(_with_fmus(scenario, archived))
             self.scenario = scenario
-            self.system = bind(scenario, swaps=swap, fmu_files=archived, strict_swaps=strict)
+            self.system = bind(scenario, swap=swap, fmu_files=archived, strict_swaps=strict)
             if warn:
                 warn_all(self.system)
             if slave_factory is None:
@@ -284,7 +285,7 @@ class Prepared:
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
             observers.append(CardObserver())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
-                         algorithm=algorithm or self.algorithm, overrides=values, observers=observers,
+                         algorithm=algorithm or self.algorithm, set=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
                          unzip_dirs=self.unzip_dirs,
                          record_every=record_every, max_init_iterations=max_init_iterations,
@@ -356,11 +357,7 @@ class Prepared:
                 if out is not None:
                     partial.write(out, variables=variables, plot=plot, csv=False)
             raise
-        result.plotter = plot_run
-        result.metadata["voltage_limit_V"] = next(  # the limit the figure draws (ipcosim.harness.plot)
-            (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
-        result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
-        result.metadata["swaps"] = dict(self.swap)
+        self._describe(result, execution)
         if out is not None:
             result.metadata["files"] = {k: str(v) for k, v in
                                         result.write(out, variables=variables, plot=plot, csv=False).items()}
@@ -368,6 +365,15 @@ class Prepared:
         if result.error is not None and raise_on_error:
             raise SimulationError(result.error, result)
         return result
+
+    def _describe(self, result: Result, execution: Execution) -> None:
+        """What the run's figure and metadata say beyond the master's account: its plotter, the
+        voltage limit it draws (:mod:`ipcosim.harness.plot`), the parameter set and the swaps."""
+        result.plotter = plot_run
+        result.metadata["voltage_limit_V"] = next(
+            (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
+        result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
+        result.metadata["swaps"] = dict(self.swap)
 
     @staticmethod
     def _whole_run_timing(result: Result, wall: float, out: str | os.PathLike[str] | None) -> None:
@@ -426,7 +432,7 @@ def _start(execution: Execution, component: str, variable: str) -> Any:
         return None
     if variable not in inst.model.variables:
         return None
-    return execution.overrides.get((component, variable), inst.start_value(variable))
+    return execution.set.get((component, variable), inst.start_value(variable))
 
 
 def build_missing(scenario: Scenario) -> list[str]:

@@ -100,7 +100,7 @@ def loop_spec(options: ExportOptions) -> ContainerSpec:
         execution = prepared.execution(set=resolve_relative(prepared.system, options.set))
         spec = container_spec(prepared.system, [execution.instances[i].name for i in execution.order],
                               execution.multiples, execution.step_size,
-                              options.model_identifier or identifier(prepared.scenario.name), execution.overrides)
+                              options.model_identifier or identifier(prepared.scenario.name), execution.set)
         return dataclasses.replace(spec, start_time=execution.start_time, stop_time=execution.stop_time)
 
 

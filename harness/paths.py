@@ -9,7 +9,6 @@ that an installed wheel never writes into site-packages.
 from __future__ import annotations
 
 import os
-from importlib import metadata
 from pathlib import Path
 
 #: The ``ipcosim`` package folder (the source checkout in an editable install).
@@ -24,6 +23,8 @@ def in_checkout() -> bool:
 
 
 def _version() -> str:
+    from importlib import metadata  # 20-25 ms to import: only an installed wheel needs it
+
     try:
         return metadata.version("ipcosim")
     except metadata.PackageNotFoundError:

@@ -39,7 +39,7 @@ ROOMS: tuple[tuple[str, ...], ...] = (
     ("errors", "toolchain"),
     ("fmus",),
     ("controllers",),
-    ("harness.paths", "harness.extras"),
+    ("harness.paths", "harness.extras", "harness.threads"),
     ("harness.native",),
     ("harness.master",),
     ("harness.scenario",),

@@ -121,3 +121,26 @@ def test_default_uncertainty_names_only_physical_parameters():
     assert "plant.K" in DEFAULT_UNCERTAINTY["double-mass"]
     # a scenario lacking one of them simply does not vary it
     assert default_vary("double-mass", {"plant.K": 142.0}) == ["plant.K=uniform(0.8,1.2)*nominal"]
+
+
+def test_a_comparison_is_refused_before_any_run_without_scenarios_or_samples(tmp_path):
+    from ipcosim.errors import UsageError
+    from ipcosim.harness.studies.compare import comparison
+
+    with pytest.raises(UsageError, match="no scenarios found"):
+        comparison([], tmp_path / "a")
+    with pytest.raises(UsageError, match="--samples 0"):
+        comparison(["single-mass-lqr"], tmp_path / "b", samples=0)
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_a_scenario_that_does_not_load_is_an_error_row_and_the_only_one_fails_the_comparison(tmp_path):
+    from ipcosim.harness.studies.compare import comparison
+
+    lines: list[str] = []
+    study = comparison(["no-such-scenario"], tmp_path, log=lines.append)
+    assert not study.specs and study.results["no-such-scenario"]["status"] == "error"
+    assert "unknown scenario 'no-such-scenario'" in lines[0]
+    assert study.counts() == (0, 1)
+    assert study.failure().startswith("every scenario failed to run; no-such-scenario: unknown scenario")
+

@@ -212,6 +212,56 @@ def test_the_loop_rejects_a_sample_period_off_the_plant_grid() -> None:
         run_loop(make_law("single-mass", "LQR", sample_period=0.0015), plant("single-mass"), stop_time=0.1)
 
 
+def test_the_loop_holds_the_last_sample_once_the_pendulum_is_beyond_the_hold_angle() -> None:
+    """A law that pushes the cart one way: the pendulum falls, and past 0.5 rad the plant is no longer
+    stepped; state, reference and voltage stay those of the first sample beyond it."""
+
+    class Push:
+        sample_period = 1e-3
+
+        def reset(self) -> None:
+            pass
+
+        def step(self, y, r) -> float:
+            return 5.0
+
+    r = run_loop(Push(), plant("single-mass"), stop_time=3.0, hold_beyond=0.5)
+    angle = np.abs(r.signal("pendulum_angle"))
+    first = int(np.argmax(angle > 0.5))
+    assert 0 < first < len(angle) - 1
+    assert np.all(r.states[first:] == r.states[first]) and np.all(r.voltage[first:] == 5.0)
+    assert np.all(np.isfinite(r.states)) and r.failure is None
+
+
+def test_the_loop_gives_a_state_feedback_the_true_state_and_a_law_the_instruments_readings() -> None:
+    from ipcosim.controllers.simulate import ENCODERS
+
+    seen: dict[str, list] = {"state": [], "measured": []}
+
+    class Record:
+        sample_period = 1e-3
+
+        def __init__(self, what: str) -> None:
+            self.what = what
+
+        def reset(self) -> None:
+            pass
+
+        def step(self, y, r) -> float:
+            seen[self.what].append(list(y))
+            return 1.0
+
+    run_loop(Record("state"), plant("single-mass"), stop_time=0.05, observe="state")
+    run_loop(Record("measured"), plant("single-mass"), stop_time=0.05, quantize=True)
+    assert len(seen["state"][-1]) == 5  # positions, velocities and the motor current
+    counts = np.array(seen["measured"][-1]) / [ENCODERS.cart_resolution, ENCODERS.pendulum_resolution]
+    assert np.allclose(counts, np.round(counts), atol=1e-6) and abs(seen["measured"][-1][0]) > 0
+    with pytest.raises(LoopError, match="observe"):
+        run_loop(Record("state"), plant("single-mass"), stop_time=0.01, observe="velocity")
+    with pytest.raises(LoopError, match="quantize"):
+        run_loop(Record("state"), plant("single-mass"), stop_time=0.01, quantize=True, instruments=ENCODERS)
+
+
 # --- tuned sets: the documented constraints hold ---------------------------------------------------------
 
 @pytest.mark.parametrize("kind", KINDS)

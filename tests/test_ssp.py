@@ -60,7 +60,7 @@ def test_the_twelve_scenarios_exist_and_follow_the_contract():
 def test_scenario_files_are_what_the_generator_writes():
     """The committed files equal what ``python -m ipcosim.harness.scenario.ssp_gen`` writes from the controllers'
     catalog (so a changed parameter set cannot silently diverge from the scenarios)."""
-    from ipcosim.harness.scenario.ssp_gen import _ssv, parameter_sets
+    from ipcosim.harness.scenario.ssp_gen import parameter_sets, ssv_text
 
     for name in EXPECTED:
         plant = name[:11]
@@ -75,7 +75,7 @@ def test_scenario_files_are_what_the_generator_writes():
         assert (ROOT / "ssp" / name / "SystemStructure.ssd").read_text() == ssd_text(plant, law, default, period)
         for set_name, values in sets.items():
             assert (ROOT / "ssp" / name / f"{set_name}.ssv").read_text() == \
-                _ssv(set_name, values, f"{name}: {set_name} controller parameters")
+                ssv_text(values, set_name, f"{name}: {set_name} controller parameters")
 
 
 def test_libcosim_reads_the_literal_prefixes():

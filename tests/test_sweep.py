@@ -125,7 +125,7 @@ def test_samples_default_and_fixed_values():
 def test_local_sweep_rows_failures_recorded_and_file_written(tmp_path):
     spec = SyntheticSpec(fail_above=1.5)
     cases = make_cases(parse_all(["model.x=[0.5,1,2,1.25]", "model.y=[2,2.5]"], spec.parameters), spec.parameters)
-    result = run_sweep(spec, cases, out_dir=tmp_path, workers=2)
+    result = run_sweep(spec, cases, out=tmp_path, workers=2)
     assert len(result.rows) == 8
     for row in result.rows:
         x, y = row["model.x"], row["model.y"]
@@ -162,17 +162,17 @@ def test_finished_sweep_is_not_redone(tmp_path):
     calls.mkdir()
     spec = SyntheticSpec(calls_dir=str(calls))
     cases = make_cases(parse_all(["model.x=uniform(0,2)"], spec.parameters), spec.parameters, samples=6, seed=1)
-    first = run_sweep(spec, cases, out_dir=tmp_path / "out", workers=2)
+    first = run_sweep(spec, cases, out=tmp_path / "out", workers=2)
     assert len(list(calls.iterdir())) == 6
-    again = run_sweep(spec, cases, out_dir=tmp_path / "out", workers=2)
+    again = run_sweep(spec, cases, out=tmp_path / "out", workers=2)
     assert len(list(calls.iterdir())) == 6 and again.resumed == 6
     assert strip_time(again.rows) == strip_time(first.rows)
     # a different sweep in the same folder is refused ...
     other = make_cases(parse_all(["model.x=uniform(0,2)"], spec.parameters), spec.parameters, samples=6, seed=2)
     with pytest.raises(SweepMismatchError, match="different sweep"):
-        run_sweep(spec, other, out_dir=tmp_path / "out")
+        run_sweep(spec, other, out=tmp_path / "out")
     # ... unless asked to start afresh
-    fresh = run_sweep(spec, other, out_dir=tmp_path / "out", resume=False, workers=1)
+    fresh = run_sweep(spec, other, out=tmp_path / "out", resume=False, workers=1)
     assert fresh.resumed == 0 and len(list(calls.iterdir())) == 12
 
 
@@ -195,7 +195,7 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
             cases = make_cases(parse_all(["model.x=uniform(0,2)"], spec.parameters), spec.parameters,
                                samples=24, seed=5)
             try:
-                run_sweep(spec, cases, out_dir={str(out)!r}, workers=2)
+                run_sweep(spec, cases, out={str(out)!r}, workers=2)
             except KeyboardInterrupt:
                 sys.exit(130)
             sys.exit(0)
@@ -218,7 +218,7 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
 
     spec = SyntheticSpec(delay_s=0.3, calls_dir=str(calls2))  # the same sweep (calls_dir is no part of it)
     cases = make_cases(parse_all(["model.x=uniform(0,2)"], spec.parameters), spec.parameters, samples=24, seed=5)
-    result = run_sweep(spec, cases, out_dir=out, workers=2)
+    result = run_sweep(spec, cases, out=out, workers=2)
     rerun_seeds = {int(p.name.split(".")[0]) for p in calls2.iterdir()}
     assert result.resumed == len(saved)
     assert rerun_seeds.isdisjoint(saved_seeds)
@@ -243,7 +243,7 @@ def test_dask_local_cluster_gives_the_same_rows_as_the_process_pool(tmp_path):
         executor = DaskExecutor(cluster.scheduler_address)
         try:
             assert "2 workers" in executor.description
-            on_dask = run_sweep(spec, cases, executor=executor, out_dir=tmp_path)
+            on_dask = run_sweep(spec, cases, executor=executor, out=tmp_path)
         finally:
             executor.close()
     assert strip_time(on_dask.rows) == strip_time(local.rows)

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from ipcosim.harness.cli import main as cli_main
+from ipcosim.harness.scenario.ssp import read_ssv
+from ipcosim.harness.scenario.ssp_gen import ssv_text
 from ipcosim.harness.studies import cost as costmod
 from ipcosim.harness.studies.executors import LocalExecutor
 from ipcosim.harness.studies.runners import PurePlantSpec
@@ -16,8 +18,6 @@ from ipcosim.harness.studies.tune import (
     parse_bounds,
     parse_params,
     plan_population,
-    read_ssv_values,
-    ssv_text,
     tune,
 )
 
@@ -78,8 +78,8 @@ def test_params_and_bounds_errors():
 def test_ssv_round_trip(tmp_path):
     values = {"controller.c1": 4.730212345678901, "controller.lambda1": -1.0, "n": 3, "on": True}
     path = tmp_path / "autotuned.ssv"
-    path.write_text(ssv_text(values, description="a -- comment"))
-    assert read_ssv_values(path) == {"controller.c1": 4.730212345678901, "controller.lambda1": -1.0}
+    path.write_text(ssv_text(values, "autotuned", "a -- comment"))
+    assert read_ssv(path) == values  # every type back exactly, through the scenario loader's reader
     assert "<ssv:Integer value=\"3\"/>" in path.read_text() and "<ssv:Boolean value=\"true\"/>" in path.read_text()
 
 
@@ -106,7 +106,7 @@ def test_cli_tune_writes_ssv_and_table(tmp_path, capsys):
                      "--stop-time", "1.5", "--workers", "2", "--out", str(out), "--quiet"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    values = read_ssv_values(out / "autotuned.ssv")
+    values = read_ssv(out / "autotuned.ssv")
     assert list(values) == ["controller.q_position"] and 1000.0 <= values["controller.q_position"] <= 4000.0
     report = (out / "tune.md").read_text()
     assert "| controller.q_position | 2000 |" in report and "| cost |" in report

@@ -107,7 +107,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     the status is ``128 + signal number``.
     """
     from ipcosim.harness.master import signals
+    from ipcosim.harness.threads import single_threaded
 
+    single_threaded()  # before the command modules load numpy
     parser = build_parser()
     args = parser.parse_args(_negative_values(parser, sys.argv[1:] if argv is None else argv))
     try:

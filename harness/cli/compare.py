@@ -11,12 +11,8 @@ scenario under ``DIR/robustness/<scenario>/``.
 from __future__ import annotations
 
 import argparse
-import csv
-import json
-import math
 import sys
 from pathlib import Path
-from typing import Any
 
 from ipcosim.harness.cli import add_study_fmus_option
 
@@ -49,195 +45,44 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=main)
 
 
-def thesis_claims(out: Path) -> int:
-    """``--thesis-claims``: verdict, evidence and condition per claim (``ipcosim.harness.evidence.claims``)."""
-    from ipcosim.harness.evidence.claims import judge, search_lqr_fall
-    from ipcosim.harness.evidence.results_page import claims_table, fall_table
-
-    out.mkdir(parents=True, exist_ok=True)
-    rows, falls = judge(), search_lqr_fall()
-    (out / "claims.json").write_text(json.dumps({"claims": rows, "double_mass_lqr_falls": falls}, indent=2))
-    (out / "claims.md").write_text("# The thesis's claims, on its own terms\n\n" + claims_table(rows) +
-                                   "\n\n## When the double-mass LQR falls\n\n" + fall_table(falls) + "\n")
-    for r in rows:
-        print(f"{r['verdict']:34s} {r['form']}")
-    print(f"claims: {out / 'claims.md'}, {out / 'claims.json'}")
-    return 0
-
-
-def available_scenarios() -> list[str]:
-    """The plant x controller scenarios of the project, in report order, plus any other folder
-    that is not one of the generator's variants (swing-up, tap, lab: they pose other tasks)."""
-    from ipcosim.harness.paths import SCENARIO_DIR
-    from ipcosim.harness.scenario.ssp_gen import VARIANTS
-    from ipcosim.harness.studies.report import SCENARIOS
-
-    found = sorted(p.name for p in SCENARIO_DIR.iterdir() if (p / "SystemStructure.ssd").exists()) \
-        if SCENARIO_DIR.is_dir() else []
-    return [s for s in SCENARIOS if s in found] + [s for s in found if s not in SCENARIOS and s not in VARIANTS]
-
-
-def plant_kind(scenario: str, spec: Any) -> str:
-    """``single-mass`` or ``double-mass`` for a scenario (by name, else by its parameters)."""
-    for kind in ("double-mass", "single-mass"):
-        if kind in scenario:
-            return kind
-    return "double-mass" if "plant.K" in spec.parameters else "single-mass"
-
-
-def _pset(scenario: str, wanted: str | None) -> str | None:
-    """``wanted`` if the scenario has that parameter set, else None (its default binding)."""
-    if not wanted:
-        return None
-    try:
-        from ipcosim.harness.scenario.ssp import load_scenario
-
-        return wanted if wanted in load_scenario(scenario).parameter_sets else None
-    except Exception:  # noqa: BLE001 -- reported when the scenario itself is loaded
-        return None
-
-
 def main(args: argparse.Namespace) -> int:
     """Co-simulate every scenario once (one sweep over the scenarios), optionally a robustness
-    sweep of each, then write the report, ``metrics.csv`` and ``metrics.json``."""
+    sweep of each, then write the report, ``metrics.csv`` and ``metrics.json``
+    (``ipcosim.harness.studies.compare``)."""
+    from ipcosim.errors import IpcosimError
+    from ipcosim.harness.studies.compare import comparison
+    from ipcosim.harness.studies.executors import open_executor
+
     if args.thesis_claims:
         return thesis_claims(Path(args.out))
-    from ipcosim.errors import IpcosimError, UsageError
-    from ipcosim.harness.studies.executors import open_executor
-    from ipcosim.harness.studies.report import render
-    from ipcosim.harness.studies.store import package_versions
-
-    names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else available_scenarios()
-    if not names:
-        raise UsageError("no scenarios found (ssp/<plant>-<controller>/SystemStructure.ssd); "
-                         "pass --scenarios or run 'ipcosim build'")
-    if args.samples < 1:
-        raise UsageError(f"--samples {args.samples}: need at least 1")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-
-    results: dict[str, dict[str, Any]] = {}
-    specs = _specs(names, args, results)
+    names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else None
+    study = comparison(names, args.out, fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time,
+                       robustness=args.robustness, samples=args.samples, seed=args.seed, progress=not args.quiet)
     executor = open_executor(args.workers, args.scheduler)
-    print(f"compare: {len(specs)} scenarios on {executor.description}", file=sys.stderr)
-    summaries: dict[str, dict[str, Any]] = {}
+    print(f"compare: {len(study.specs)} scenarios on {executor.description}", file=sys.stderr)
     try:
-        results.update(_run_all(specs, executor, args))
-        if args.robustness:
-            summaries = _robustness(specs, executor, args, out)
+        study.run(executor, progress=not args.quiet)
     except KeyboardInterrupt:
-        executor.abort()
         print(f"ipcosim compare: interrupted; robustness runs finished so far are kept under "
-              f"{out / 'robustness'} and reused by the same command", file=sys.stderr)
+              f"{study.out / 'robustness'} and reused by the same command", file=sys.stderr)
         return 130
     finally:
         executor.close()
-
-    note = ""
-    if args.robustness:
-        note = (f"Robust success: share of {args.samples} runs per scenario (seed {args.seed}) that stay upright and "
-                f"settle in the +-2 % band when the masses, viscous friction and spring stiffness are each drawn "
-                f"uniformly within +-20 % of nominal (Wilson 95 % interval); per-run results under robustness/.")
-    meta = {"scenarios": len(names), "stop time": f"{args.stop_time:g} s" if args.stop_time else "scenario default",
-            "executor": executor.description, "packages": package_versions()}
-    files = render(results, out, robustness=summaries or None, robustness_note=note, meta=meta)
-    _write_metrics(out, results, summaries)
+    files = study.write()
     print(f"report: {files['markdown']}, {files['html']}")
-    ok = sum(1 for r in results.values() if r.get("status") == "ok")
-    print(f"{len(results)} scenarios: {ok} succeed, "
-          f"{sum(1 for r in results.values() if r.get('status') == 'error')} failed to run")
-    if results and all(r.get("status") == "error" for r in results.values()):
-        first = next(iter(results.items()))
-        raise IpcosimError(f"every scenario failed to run; {first[0]}: {first[1].get('error')}")
+    ok, failed = study.counts()
+    print(f"{len(study.results)} scenarios: {ok} succeed, {failed} failed to run")
+    if study.failure():
+        raise IpcosimError(study.failure())
     return 0
 
 
-def _specs(names: list[str], args: argparse.Namespace, results: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """The run spec of each scenario, by name; a scenario that cannot be loaded gets an error row
-    in ``results`` instead. Missing FMUs (a fresh checkout) are built once, as ``ipcosim build`` does."""
-    from ipcosim.errors import IpcosimError
-    from ipcosim.harness.studies.executors import one_line
-    from ipcosim.harness.studies.specs import study_spec
+def thesis_claims(out: Path) -> int:
+    """``--thesis-claims``: verdict, evidence and condition per claim (``ipcosim.harness.evidence.results_page``)."""
+    from ipcosim.harness.evidence.results_page import write_claims
 
-    specs: dict[str, Any] = {}
-    for name in names:
-        try:  # FMUs not built yet are built on first use (ipcosim.harness.engine.build_missing)
-            spec, flavour = study_spec(name, args.fmus, stop_time=args.stop_time, series=True,
-                                       parameter_set=_pset(name, args.parameter_set))
-            if not args.quiet:
-                print(f"compare: {name}: {flavour}", file=sys.stderr)
-            specs[name] = spec
-        except (IpcosimError, OSError, ValueError) as exc:
-            results[name] = {"status": "error", "error": one_line(exc).split(": ", 1)[-1]}
-            print(f"compare: {name}: {results[name]['error']}", file=sys.stderr)
-    return specs
-
-
-def _run_all(specs: dict[str, Any], executor: Any, args: argparse.Namespace) -> dict[str, dict[str, Any]]:
-    """One run of every scenario, as one sweep whose case parameter picks the scenario; each row
-    with its ``cost`` (inf for a run that failed) and the controller's ``gains``, by scenario."""
-    from ipcosim.harness.studies.cases import SweepCase, case_seed
-    from ipcosim.harness.studies.cost import cost
-    from ipcosim.harness.studies.runners import SCENARIO_PARAM, MultiSpec
-    from ipcosim.harness.studies.specs import for_executor
-    from ipcosim.harness.studies.sweep import run_sweep
-
-    if not specs:
-        return {}
-    names, spec_list = list(specs), list(specs.values())
-    multi = for_executor(MultiSpec(specs=spec_list), executor)
-    cases = [SweepCase(index=i, params={SCENARIO_PARAM: float(i)}, seed=case_seed(args.seed, i))
-             for i in range(len(spec_list))]
-    sweep = run_sweep(multi, cases, executor=executor, progress=not args.quiet)
-    results: dict[str, dict[str, Any]] = {}
-    for row in sweep.rows:
-        name = names[row["index"]]
-        row = {k: v for k, v in row.items() if k != SCENARIO_PARAM}
-        row["cost"] = cost(row) if row["status"] != "error" else math.inf
-        row["gains"] = getattr(spec_list[row["index"]], "gains", "") or ""
-        results[name] = row
-    return results
-
-
-def _robustness(specs: dict[str, Any], executor: Any, args: argparse.Namespace, out: Path
-                ) -> dict[str, dict[str, Any]]:
-    """A resumable robustness sweep of each scenario (masses, friction, stiffness within +-20 %) on the
-    flavour its comparison run took, under ``out/robustness/<scenario>/``, summarized by scenario."""
-    from ipcosim.harness.grammar import parse_all
-    from ipcosim.harness.studies import robustness as rob
-    from ipcosim.harness.studies.cases import make_cases
-    from ipcosim.harness.studies.specs import for_executor, spec_for
-    from ipcosim.harness.studies.sweep import run_sweep
-
-    summaries: dict[str, dict[str, Any]] = {}
-    for name, spec in specs.items():
-        plain = spec_for(name, stop_time=args.stop_time, parameter_set=_pset(name, args.parameter_set),
-                         fmus=getattr(spec, "fmus", "python"))
-        varies = parse_all(rob.default_vary(plant_kind(name, plain), plain.parameters), plain.parameters)
-        cases = make_cases(varies, plain.parameters, samples=args.samples, seed=args.seed)
-        if not args.quiet:
-            print(f"compare: robustness of {name}, {len(cases)} runs", file=sys.stderr)
-        res = run_sweep(for_executor(plain, executor), cases, executor=executor,
-                        out_dir=out / "robustness" / name,
-                        progress=not args.quiet,
-                        extra_metadata={"vary": [v.text for v in varies], "seed": args.seed})
-        summaries[name] = rob.summarize(res.rows, plain.metric_names)
-    return summaries
-
-
-def _write_metrics(out: Path, results: dict[str, dict[str, Any]], summaries: dict[str, dict[str, Any]]) -> None:
-    """``metrics.csv`` (one row per scenario, every key any row has) and ``metrics.json`` (non-finite
-    numbers as null, without the time series)."""
-    keys: dict[str, None] = {"scenario": None}
-    for row in results.values():
-        for k in row:
-            if k not in ("series", "params"):
-                keys.setdefault(k, None)
-    with open(out / "metrics.csv", "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(list(keys))
-        for name, row in results.items():
-            w.writerow([name if k == "scenario" else ("" if row.get(k) is None else row.get(k)) for k in keys])
-    clean = {n: {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-                 for k, v in r.items() if k != "series"} for n, r in results.items()}
-    (out / "metrics.json").write_text(json.dumps({"results": clean, "robustness": summaries}, indent=2) + "\n")
+    rows, files = write_claims(out)
+    for r in rows:
+        print(f"{r['verdict']:34s} {r['form']}")
+    print(f"claims: {files['markdown']}, {files['json']}")
+    return 0

@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import math
-import signal
 import sys
 
 
@@ -72,141 +70,43 @@ def _token_options(p: argparse.ArgumentParser) -> None:
                                    "--token-file or IPCOSIM_RIG_TOKEN)")
 
 
-def _token(args: argparse.Namespace) -> str | None:
-    """The access token from --token-file, --token or IPCOSIM_RIG_TOKEN (in that order), or None."""
-    import os
-
-    from ipcosim.errors import UsageError
-    from ipcosim.fmus.hil.protocol import MAX_TOKEN, TOKEN_ENV
-
-    if args.token_file:
-        try:
-            with open(args.token_file, encoding="utf-8") as fh:
-                token = fh.read().strip()
-        except (OSError, UnicodeDecodeError) as exc:
-            raise UsageError(f"--token-file {args.token_file}: cannot read it ({exc})") from None
-        if not token:
-            raise UsageError(f"--token-file {args.token_file}: the file is empty")
-    else:
-        token = (getattr(args, "token", None) or os.environ.get(TOKEN_ENV, "")).strip()
-    if len(token.encode("utf-8")) > MAX_TOKEN:
-        raise UsageError(f"access token: longer than {MAX_TOKEN} bytes")
-    return token or None
-
-
 def main(args: argparse.Namespace) -> int:
+    """``serve``, or the operator's ``reset``/``status`` of a running rig (``ipcosim.fmus.hil.service``)."""
+    from ipcosim.fmus.hil.service import operate, read_token
+
     if args.rig_command == "serve":
         return serve(args)
-    from ipcosim.fmus.hil.tcpip import TcpipCard
-
-    card = TcpipCard("q4", f"0@tcpip://{args.host}:{args.port}", args.host, args.port, role="monitor",
-                     name="ipcosim rig " + args.rig_command, token=_token(args) or "")
-    try:
-        if args.rig_command == "reset":
-            card.reset()
-            print(f"rig at {args.host}:{args.port}: reset (amplifier enabled, limit latch cleared)")
-        st = card.status()
-        print(f"rig at {args.host}:{args.port}: time {st.time:.3f} s, amplifier "
-              f"{'on' if st.amplifier_enabled else 'OFF'}, watchdog "
-              f"{'EXPIRED' if st.watchdog_expired else ('running' if st.watchdog_running else 'stopped')}, "
-              f"motor {st.motor_voltage:+.3f} V")
-        if st.limit_message:
-            print(f"  {st.limit_message}")
-        if args.rig_command == "status":
-            for k, v in sorted(st.counters.items()):
-                print(f"  {k}: {v}")
-    finally:
-        card.close()
+    operate(args.host, args.port, args.rig_command, read_token(args.token_file, args.token))
     return 0
 
 
-def _limit(text: str, option: str, hi: float) -> float | None:
-    """A software limit: a finite number in (0, hi], or None for the explicit word 'off'."""
-    from ipcosim.errors import UsageError
-
-    if text.strip().lower() == "off":
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (0 < value <= hi):   # NaN fails too
-        raise UsageError(f"{option} {text}: expected a number in (0, {hi:g}] or 'off'")
-    return value
-
-
-def _check_numbers(args: argparse.Namespace) -> None:
-    from ipcosim.errors import UsageError
-
-    if not 0 <= args.port <= 65535:
-        raise UsageError(f"--port {args.port}: expected 0..65535")
-    for option, value, lo, hi in (("--tick", args.tick, 1e-5, 0.01), ("--latency", args.latency, 0.0, 1.0),
-                                  ("--noise-counts", args.noise_counts, 0.0, 1000.0),
-                                  ("--duration", args.duration, 1e-3, 1e7),
-                                  ("--idle-timeout", args.idle_timeout, 0.05, 3600.0),
-                                  ("--io-timeout", args.io_timeout, 0.01, 60.0)):
-        if value is not None and not (lo <= value <= hi):   # NaN fails too
-            raise UsageError(f"{option} {value}: expected a number in [{lo:g}, {hi:g}]")
-    if not 1 <= args.max_connections <= 1024:
-        raise UsageError(f"--max-connections {args.max_connections}: expected 1..1024")
-    if args.rt_priority is not None and not 1 <= args.rt_priority <= 99:
-        raise UsageError(f"--rt-priority {args.rt_priority}: expected 1..99")
-    if args.cpu is not None and not 0 <= args.cpu <= 4095:
-        raise UsageError(f"--cpu {args.cpu}: expected a CPU number")
-
-
 def serve(args: argparse.Namespace) -> int:
-    from ipcosim.errors import UsageError
-    from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig, experiment_config
-    from ipcosim.fmus.hil.server import RigServer, escape
+    """Serve a virtual rig until Ctrl-C, SIGTERM or ``--duration``."""
+    from ipcosim.fmus.hil import service
     from ipcosim.harness.grammar import parse_numbers
+    from ipcosim.harness.master.realtime import apply_cpu_affinity, apply_sched_fifo
 
-    _check_numbers(args)
-    given: dict = {"initial_state": parse_numbers("--initial", args.initial, "NAME=NUMBER")}
-    if args.cart_limit is not None:
-        given["cart_limit"] = _limit(args.cart_limit, "--cart-limit", END_STOP_M)
-    if args.pendulum_limit_deg is not None:
-        limit = _limit(args.pendulum_limit_deg, "--pendulum-limit-deg", 180.0)
-        given["pendulum_limit"] = None if limit is None else math.radians(limit)
-    try:
-        config = RigConfig(plant=args.plant, preset=args.preset, params=parse_numbers("--set", args.set, "NAME=NUMBER"),
-                           clock=args.clock, tick=args.tick, noise_counts=args.noise_counts, latency=args.latency,
-                           seed=args.seed, **experiment_config(args.experiment, given)).checked()
-        rig = VirtualRig(config)
-    except (ValueError, KeyError) as exc:
-        raise UsageError(str(exc).strip("'\"")) from None
+    options = service.ServeOptions(
+        plant=args.plant, host=args.host, port=args.port, clock=args.clock, tick=args.tick, preset=args.preset,
+        initial=parse_numbers("--initial", args.initial, "NAME=NUMBER"),
+        params=parse_numbers("--set", args.set, "NAME=NUMBER"), cart_limit=args.cart_limit,
+        pendulum_limit_deg=args.pendulum_limit_deg, experiment=args.experiment, noise_counts=args.noise_counts,
+        latency=args.latency, seed=args.seed, duration=args.duration,
+        token=service.read_token(args.token_file, args.token),
+        idle_timeout=args.idle_timeout, io_timeout=args.io_timeout, max_connections=args.max_connections,
+        rt_priority=args.rt_priority, cpu=args.cpu, stall_after_steps=args.stall_after_steps)
+    rig = options.rig()
 
     def log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
-    sys.setswitchinterval(1e-4)   # hand the GIL over quickly between the connection and ticker threads
-    import gc
-    gc.collect()
-    gc.freeze()                   # start-up objects never again scanned by the collector
-    gc.disable()                  # no collection pauses while a controller steps; the server collects
-    #                               between sessions (RigServer._release)
-    from ipcosim.harness.master.realtime import apply_cpu_affinity, apply_sched_fifo
+    service.dedicate()
     undo: list = []
     setup = {"cpu": apply_cpu_affinity(args.cpu, undo), "sched_fifo": apply_sched_fifo(args.rt_priority, undo)}
     for what, outcome in setup.items():
         if not outcome.startswith("not requested"):
             log(f"ipcosim rig: {what}: {outcome}")
-    try:
-        server = RigServer(rig, args.host, args.port, stall_after_steps=args.stall_after_steps, log=log,
-                           token=_token(args), idle_timeout=args.idle_timeout, io_timeout=args.io_timeout,
-                           max_connections=args.max_connections).start()
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    previous = {sig: signal.signal(sig, lambda *_: server.request_stop()) for sig in (signal.SIGTERM, signal.SIGINT)}
-    access = "token required" if server.token else "loopback only, no token"
-    print(f"ipcosim rig: serving a {config.plant} rig ({config.clock} clock, tick {config.tick_s * 1e3:g} ms) on "
-          f"{server.host}:{server.port} ({access}) -- card id 0@tcpip://{server.host}:{server.port}", flush=True)
-    try:
-        server.serve(args.duration)
-    finally:
-        server.close()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-        counters = ", ".join(f"{escape(k)} {v}" for k, v in sorted(server.counters.items())) or "none"
-        log(f"ipcosim rig: stopped; motor at {rig.motor_voltage():+.3f} V; counters: {counters}")
+    server = options.server(rig, log)
+    print(service.announcement(server), flush=True)
+    service.serve_until_stopped(server, args.duration, log)
     return 0

@@ -10,10 +10,7 @@ command resumes an interrupted sweep), ``DIR/metadata.json``, ``DIR/summary.md``
 from __future__ import annotations
 
 import argparse
-import json
-import shutil
 import sys
-from pathlib import Path
 
 from ipcosim.harness.cli import add_parameter_file_option, add_study_fmus_option
 
@@ -48,71 +45,34 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=main)
 
 
-def default_out(scenario: str, kind: str = "sweep") -> Path:
-    name = Path(scenario.rstrip("/")).name.replace(":", "-")
-    if name.endswith(".ssp"):
-        name = name[:-4]
-    return Path("out") / kind / name
-
-
 def main(args: argparse.Namespace) -> int:
+    """Run the sweep and write its summary and figures (``ipcosim.harness.studies.robustness.sweep_study``)."""
     from ipcosim.errors import IpcosimError
-    from ipcosim.harness.grammar import parse_all, parse_set
+    from ipcosim.harness.grammar import parse_set
     from ipcosim.harness.options import with_parameter_file
-    from ipcosim.harness.studies import robustness
-    from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.executors import open_executor
-    from ipcosim.harness.studies.specs import for_executor, study_spec
-    from ipcosim.harness.studies.sweep import run_sweep
+    from ipcosim.harness.studies.robustness import summary_line, sweep_study
 
     overrides = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))
-    spec, flavour = study_spec(args.scenario, args.fmus, names=[*overrides, *(v.partition("=")[0].strip()
-                                                                              for v in args.vary)],
-                               check=lambda s: parse_all(args.vary, s.parameters), stop_time=args.stop_time,
-                               step=args.step, overrides=overrides, parameter_set=args.parameter_set)
-    varies = parse_all(args.vary, spec.parameters)
-    cases = make_cases(varies, spec.parameters, samples=args.samples, seed=args.seed)
-    out = Path(args.out) if args.out else default_out(args.scenario)
-    if args.fresh and out.exists():
-        for name in ("results.csv", "metadata.json", "summary.md", "summary.json"):
-            (out / name).unlink(missing_ok=True)
-        shutil.rmtree(out / "figures", ignore_errors=True)
+    study = sweep_study(args.scenario, args.vary, overrides=overrides, samples=args.samples, seed=args.seed,
+                        fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time, step=args.step,
+                        out=args.out, fresh=args.fresh)
     executor = open_executor(args.workers, args.scheduler)
-    print(f"sweep {spec.name}: {len(cases)} runs on {executor.description}, {flavour} -> {out}", file=sys.stderr)
+    print(study.describe(executor), file=sys.stderr)
     try:
-        result = run_sweep(for_executor(spec, executor), cases, out_dir=out, executor=executor,
-                           progress=not args.quiet,
-                           extra_metadata={"vary": list(args.vary), "set": dict(overrides),
-                                           "samples": args.samples, "seed": args.seed,
-                                           "parameter_set": args.parameter_set,
-                                           "command": "ipcosim " + " ".join(sys.argv[1:])})
+        result = study.run(executor, progress=not args.quiet, extra={"command": "ipcosim " + " ".join(sys.argv[1:])})
     except KeyboardInterrupt:
-        executor.abort()
-        print(f"ipcosim sweep: interrupted; finished runs are kept in {out / 'results.csv'}; "
+        print(f"ipcosim sweep: interrupted; finished runs are kept in {study.out / 'results.csv'}; "
               "run the same command again to resume", file=sys.stderr)
         return 130
     finally:
         executor.close()
     if result.resumed:
         print(f"resumed: {result.resumed} runs were already done", file=sys.stderr)
-    summary = robustness.summarize(result.rows, spec.metric_names)
-    summary.update({"scenario": spec.name, "vary": list(args.vary), "seed": args.seed})
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    md = robustness.summary_markdown(summary, title=f"Robustness of {spec.name}")
-    figures = robustness.plot_distributions(result.rows, spec.metric_names, out / "figures", title=spec.name)
-    metric = "itae_position" if "itae_position" in spec.metric_names else spec.metric_names[0]
-    by_param = robustness.plot_parameters(result.rows, [v.name for v in varies], metric, out / "figures",
-                                          title=f"{spec.name}: {metric} against each varied parameter")
-    if by_param is not None:
-        figures.insert(0, by_param)
-    md += "\n" + "\n".join(f"![{p.stem}](figures/{p.name})" for p in figures) + "\n"
-    (out / "summary.md").write_text(md)
-    lo, hi = summary["success_ci95"]
-    counts = ", ".join(f"{k} {v}" for k, v in sorted(summary["counts"].items()))
-    print(f"success rate {100 * summary['success_rate']:.1f} % (95 % CI {100 * lo:.1f}-{100 * hi:.1f} %) "
-          f"of {summary['runs']} runs: {counts}")
+    summary = study.write(result)
+    out = study.out
+    print(summary_line(summary))
     print(f"results: {out / 'results.csv'}, summary: {out / 'summary.md'}, figures: {out / 'figures'}")
-    errors = [r for r in result.rows if r["status"] == "error"]
-    if result.rows and len(errors) == len(result.rows):
-        raise IpcosimError(f"all {len(errors)} runs failed; first error: {errors[0]['error']}")
+    if result.failure():
+        raise IpcosimError(result.failure())
     return 0

@@ -13,10 +13,7 @@ set with the tuned values), ``tune.md`` (before/after table) and ``evaluations.c
 from __future__ import annotations
 
 import argparse
-import math
 import sys
-from pathlib import Path
-from typing import Any
 
 from ipcosim.harness.cli import add_study_fmus_option
 
@@ -63,141 +60,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=main)
 
 
-def _scenario_dir(scenario: str) -> Path | None:
-    """The scenario's folder (where its .ssv files live), or None."""
-    path = Path(scenario)
-    if path.is_dir():
-        return path
-    if path.suffix == ".ssp" and path.exists():
-        return path.parent
-    from ipcosim.harness.paths import SCENARIO_DIR
-
-    candidate = SCENARIO_DIR / scenario
-    return candidate if candidate.is_dir() else None
-
-
-def _install_path(args: argparse.Namespace) -> Path:
-    """Where ``--install`` puts the tuned set: ``autotuned.ssv`` in the scenario's folder."""
-    from ipcosim.errors import UsageError
-
-    folder = _scenario_dir(args.scenario)
-    if folder is None or Path(args.scenario).suffix == ".ssp":
-        raise UsageError(f"--install: scenario {args.scenario!r} has no folder to install a parameter set into")
-    return folder / "autotuned.ssv"
-
-
-def _parameter_set(args: argparse.Namespace) -> str | None:
-    """The parameter set to start from: ``--parameter-set``, else ``thesis`` where the scenario has it."""
-    from ipcosim.harness.studies.specs import PURE_SCENARIOS
-
-    if args.parameter_set is None and args.scenario not in PURE_SCENARIOS:
-        from ipcosim.harness.scenario.ssp import load_scenario
-
-        if "thesis" in load_scenario(args.scenario).parameter_sets:
-            return "thesis"
-    return args.parameter_set
-
-
-def _robustness(args: argparse.Namespace, spec: Any, overrides: dict[str, Any], pset: str | None) -> Any:
-    """The robust objective of ``--max-peak-sensitivity``, ``--min-delay-margin``, ``--spread`` (None without)."""
-    from ipcosim.errors import UsageError
-    from ipcosim.harness.studies import tune as tunemod
-    from ipcosim.harness.studies.robustness import DEFAULT_UNCERTAINTY
-
-    limits = (args.max_peak_sensitivity, args.min_delay_margin)
-    if all(v is None for v in limits) and args.spread is None:
-        return None
-    for flag, value in (("--max-peak-sensitivity", args.max_peak_sensitivity),
-                        ("--min-delay-margin", args.min_delay_margin), ("--spread", args.spread)):
-        if value is not None and not (math.isfinite(value) and value > 0 and (flag != "--spread" or value < 1)):
-            raise UsageError(f"{flag} {value}: expected a number > 0" + (" and < 1" if flag == "--spread" else ""))
-    names = [n for kind in DEFAULT_UNCERTAINTY.values() for n in kind]
-    spread = tunemod.spread_plants(spec.parameters, list(dict.fromkeys(names)), args.spread) if args.spread else ()
-    return tunemod.Robustness(args.scenario, pset, {k: float(v) for k, v in overrides.items()},
-                              args.max_peak_sensitivity, args.min_delay_margin, spread)
-
-
 def main(args: argparse.Namespace) -> int:
     """Tune the named parameters of a scenario (differential evolution on the cost J over a run
-    budget), then write the evaluations, the tuned parameter set and the report."""
-    from ipcosim.harness.cli.sweep import default_out
+    budget), then write the evaluations, the tuned parameter set and the report
+    (``ipcosim.harness.studies.tune.tune_study``)."""
     from ipcosim.harness.grammar import parse_set
-    from ipcosim.harness.studies import cost as costmod
-    from ipcosim.harness.studies import tune as tunemod
     from ipcosim.harness.studies.executors import open_executor
-    from ipcosim.harness.studies.specs import for_executor, study_spec
+    from ipcosim.harness.studies.tune import tune_study
 
-    overrides = parse_set(args.set, numbers=True)
-    pset = _parameter_set(args)
-    spec, flavour = study_spec(args.scenario, args.fmus, names=list(overrides),
-                               check=lambda s: tunemod.parse_bounds(
-                                   args.bounds, tunemod.parse_params(args.params, s.parameters), s.parameters),
-                               stop_time=args.stop_time, step=args.step, overrides=overrides, parameter_set=pset)
-    names = tunemod.parse_params(args.params, spec.parameters)
-    bounds = tunemod.parse_bounds(args.bounds, names, spec.parameters)
-    w_angle = costmod.W_ANGLE if args.w_angle is None else args.w_angle
-    w_voltage = costmod.W_VOLTAGE if args.w_voltage is None else args.w_voltage
-    tunemod.plan_population(args.budget, len(names))  # checks the budget before starting workers
-    out = Path(args.out) if args.out else default_out(args.scenario, "tune")
-    out.mkdir(parents=True, exist_ok=True)
-    ssv_path = Path(args.ssv) if args.ssv else out / "autotuned.ssv"
-    install = _install_path(args) if args.install else None
-
-    robust = _robustness(args, spec, overrides, pset)  # checks its options before starting workers
+    study = tune_study(args.scenario, args.params, bounds=args.bounds, overrides=parse_set(args.set, numbers=True),
+                       budget=args.budget, seed=args.seed, stop_time=args.stop_time, step=args.step,
+                       w_angle=args.w_angle, w_voltage=args.w_voltage, fmus=args.fmus,
+                       parameter_set=args.parameter_set, out=args.out, ssv=args.ssv, install=args.install,
+                       max_peak_sensitivity=args.max_peak_sensitivity, min_delay_margin=args.min_delay_margin,
+                       spread=args.spread)
     executor = open_executor(args.workers, args.scheduler)
-    print(f"tune {spec.name}: {', '.join(names)} within "
-          f"{', '.join(f'[{lo:g}, {hi:g}]' for lo, hi in bounds)}, budget {args.budget} runs on "
-          f"{executor.description}, {flavour}", file=sys.stderr)
+    print(study.describe(executor), file=sys.stderr)
     try:
-        res = tunemod.tune(for_executor(spec, executor), names, bounds, budget=args.budget, executor=executor,
-                           seed=args.seed, w_angle=w_angle, w_voltage=w_voltage, progress=not args.quiet,
-                           robust=robust)
+        result = study.run(executor, progress=not args.quiet)
     except KeyboardInterrupt:
-        executor.abort()
         print("ipcosim tune: interrupted; nothing written", file=sys.stderr)
         return 130
     finally:
         executor.close()
-
-    tunemod.write_evaluations(out / "evaluations.csv", res.evaluations, names)
-    table = _write_tuned(args, spec, res, pset, out, ssv_path, install, w_angle, w_voltage)
-    print(table, end="")
-    print(f"tuned parameter set: {ssv_path}" + (f" (installed: {install})" if install is not None else "")
-          + f"\nreport: {out / 'tune.md'}, runs: {out / 'evaluations.csv'}")
+    files = study.write(result)
+    print(files.table, end="")
+    print(f"tuned parameter set: {files.ssv}" + (f" (installed: {files.installed})" if files.installed else "")
+          + f"\nreport: {files.report}, runs: {files.evaluations}")
     return 0
-
-
-def _write_tuned(args: argparse.Namespace, spec: Any, res: Any, pset: str | None, out: Path, ssv_path: Path,
-                 install: Path | None, w_angle: float, w_voltage: float) -> str:
-    """Write the tuned parameter set (``ssv_path``, and ``install`` when given) and ``out/tune.md``;
-    returns the report's before/after table."""
-    from ipcosim.harness.studies import tune as tunemod
-
-    scenario_hash = getattr(spec, "scenario_hash", "") or spec.key
-    description = (f"ipcosim tune {spec.name} (scenario hash {scenario_hash}): J = {res.best_cost:.6g} "
-                   f"(scenario gains: {res.nominal_cost:.6g}), {len(res.evaluations)} runs, seed {args.seed}, "
-                   f"w_angle {w_angle:g}, w_voltage {w_voltage:g}")
-    values, component = tunemod.tuned_parameter_set(args.scenario, res.best, pset)
-    ssv_path.parent.mkdir(parents=True, exist_ok=True)
-    text = tunemod.ssv_text(values, name="autotuned", description=description)
-    ssv_path.write_text(text)
-    if install is not None:
-        install.write_text(text)
-    if component is not None:
-        usage = (f"It is the complete `{component}` parameter set ({pset or 'default'} with the tuned values)"
-                 + (f", installed as `{install}`: `ipcosim run {args.scenario} --parameter-set autotuned` runs it."
-                    if install is not None else
-                    "; copy it beside the scenario (or tune with --install) to run it with "
-                    "`--parameter-set autotuned`."))
-    else:
-        usage = "It holds the tuned values as component.variable (apply them with --set)."
-    table = tunemod.before_after_markdown(res, f"{pset} gains" if pset else "scenario gains")
-    improved = res.best_cost < res.nominal_cost
-    report = (f"# Tuning {spec.name}\n\n{description}.\n\n"
-              f"Cost J = ITAE(x - r) + {w_angle:g} ITAE(theta) + {w_voltage:g} ISE(u); infinite when the "
-              f"pendulum falls.\n\n{table}\n"
-              + ("" if improved else "The optimiser found nothing better than the scenario's gains; "
-                                     "the written set repeats them.\n")
-              + f"\nTuned parameter set: `{ssv_path}`. {usage}\n")
-    (out / "tune.md").write_text(report)
-    return table

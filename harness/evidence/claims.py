@@ -24,11 +24,11 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from ipcosim.controllers.catalog import make_law
+from ipcosim.controllers.simulate import run_loop
 from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT, Instruments, realism
 from ipcosim.fmus.metrics import UPRIGHT_LIMIT_RAD, compute_metrics
 from ipcosim.fmus.params import KINDS, preset
 from ipcosim.fmus.physics import MOTOR_CART
-from ipcosim.fmus.plant import InstrumentedPlant, PlantStepError
 
 STOP_TIME = 20.0
 PLANT_STEP = 1e-3
@@ -65,32 +65,18 @@ def oscillation(time: np.ndarray, angle: np.ndarray, cutoff_hz: float = OSCILLAT
 
 def run(law, kind: str, params, instruments: Instruments | None = None, stop_time: float = STOP_TIME,
         amplitude: float = 0.05) -> Run:
-    """Step 0 -> ``amplitude`` of the motor cart at t = 0; the law sees the plant's readings."""
-    plant = InstrumentedPlant(params, instruments=instruments)
-    n, every = round(stop_time / PLANT_STEP), round(law.sample_period / PLANT_STEP)
-    names = plant.state_names
-    ia, im = names.index("pendulum_angle"), MOTOR_CART[kind]
-    t = np.arange(n + 1) * PLANT_STEP
-    x, th, v = np.full(n + 1, np.nan), np.full(n + 1, np.nan), np.zeros(n + 1)
-    x[0], th[0] = plant.state[im], plant.state[ia]
-    u, fell = 0.0, None
-    for k in range(n):
-        if k % every == 0:
-            u = law.step(plant.readings, amplitude)
-        v[k] = u
-        try:
-            plant.do_step(k * PLANT_STEP, PLANT_STEP, u)
-        except PlantStepError:
-            break
-        s = plant.state
-        x[k + 1], th[k + 1] = s[im], s[ia]
-        if fell is None and abs(s[ia]) >= UPRIGHT_LIMIT_RAD:
-            fell = (k + 1) * PLANT_STEP
-    v[-1] = v[-2]
+    """Step 0 -> ``amplitude`` of the motor cart at t = 0 in the pure loop (``controllers.simulate.run_loop``);
+    the law sees the instruments' readings. Metrics are those of the run up to a plant failure (the finite
+    part; upright only if it ran to the end), with the last applied voltage held over the end instant."""
+    r = run_loop(law, params, stop_time, PLANT_STEP, amplitude, instruments=instruments or Instruments())
+    t, x, th = r.time, r.states[:, MOTOR_CART[kind]], r.signal("pendulum_angle")
+    v = np.append(r.voltage[:-1], r.voltage[-2])
     ok = np.isfinite(x)
-    m = compute_metrics(t[ok], x[ok], np.full(ok.sum(), amplitude), th[ok], v[ok])
+    m = compute_metrics(t[ok], x[ok], r.reference[ok], th[ok], v[ok])
     m["upright"] = bool(m["upright"] and ok.all())
     itae = float(np.trapezoid(t[ok] * np.abs(x[ok] - amplitude), t[ok]))
+    beyond = np.flatnonzero(np.abs(th[1:]) >= UPRIGHT_LIMIT_RAD)
+    fell = float(t[beyond[0] + 1]) if beyond.size else None
     return Run(m, oscillation(t[ok], th[ok]), itae, fell)
 
 

@@ -115,13 +115,30 @@ def fall_table(rows: list[dict[str, Any]] | None = None) -> str:
     return "\n".join(lines)
 
 
+def write_claims(out: Path) -> tuple[list[dict[str, Any]], dict[str, Path]]:
+    """Judge the thesis's claims and search the double-mass LQR's fall (``ipcosim compare --thesis-claims``);
+    write ``out/claims.md`` and ``out/claims.json``. Returns the claims' rows and the files
+    (``markdown``, ``json``)."""
+    import json
+
+    from ipcosim.harness.evidence.claims import judge, search_lqr_fall
+
+    out.mkdir(parents=True, exist_ok=True)
+    rows, falls = judge(), search_lqr_fall()
+    files = {"markdown": out / "claims.md", "json": out / "claims.json"}
+    files["json"].write_text(json.dumps({"claims": rows, "double_mass_lqr_falls": falls}, indent=2))
+    files["markdown"].write_text("# The thesis's claims, on its own terms\n\n" + claims_table(rows) +
+                                 "\n\n## When the double-mass LQR falls\n\n" + fall_table(falls) + "\n")
+    return rows, files
+
+
 def robustness_rows(samples: int = ROBUST_SAMPLES, workers: int = 2,
                     scenarios: Sequence[str] | None = None) -> list[dict[str, Any]]:
     """Every ``ROBUST_SCENARIOS`` loop (or only those named in ``scenarios``) under each robustness factor
     alone and all together (``ipcosim.harness.studies.robustness.factor_study``, on the native flavour where
     it is built)."""
+    from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.robustness import factor_study
-    from ipcosim.harness.studies.sweep import open_executor
 
     executor = open_executor(workers)
     rows = []

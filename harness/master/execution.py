@@ -1,20 +1,18 @@
 """The execution: owns the slaves, the algorithm, the observers and the manipulators of one
 run, and runs the FMI 2.0 lifecycle::
 
-    instantiate -> setupExperiment -> parameter bindings, overrides (start values)
+    instantiate -> setupExperiment -> parameter bindings, ``set`` values (start values)
     -> enterInitializationMode -> propagate outputs to inputs until a fixed point
     -> exitInitializationMode -> steps (manipulators, algorithm, observers)
     -> terminate -> freeInstance (every instance, also after a failure)
 
 Parameters are set before entering initialization mode, where SSP 1.0 puts parameter
 bindings and where libcosim sets start values, so FMUs that derive quantities on entering
-initialization see them. Runtime values live here (the value vector), never on the parsed
-scenario.
-
-Values: all Real connectors of all components share one ``ctypes`` double vector (per
-component its outputs, then its inputs); each component reads its outputs into and sets its
-inputs from its own slice of it with one call, and the vector is copied to the record after
-every step.
+initialization see them. Runtime values live in the run's
+:class:`~ipcosim.harness.master.layout.Layout` (the value vectors), never on the parsed
+scenario; its :class:`~ipcosim.harness.master.recorder.Recorder` keeps the rows and assembles
+the result; the stepping loop is planned by :mod:`ipcosim.harness.master.plan` and rendered
+in Python (:mod:`~ipcosim.harness.master.pyloop`) or C (:mod:`~ipcosim.harness.master.cloop`).
 """
 from __future__ import annotations
 
@@ -22,9 +20,7 @@ import ctypes
 import math
 import time as _time
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
-
-import numpy as np
+from typing import Any, Callable, Mapping, Sequence
 
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import (
@@ -38,20 +34,17 @@ from ipcosim.harness.master.algorithm import (
     step_multiples,
 )
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
+from ipcosim.harness.master.layout import Layout
 from ipcosim.harness.master.manipulators import Manipulator, Overrides
 from ipcosim.harness.master.observers import Observer
-from ipcosim.harness.master.plan import Block, Channel, TypedRecord
+from ipcosim.harness.master.plan import Block
 from ipcosim.harness.master.pyloop import compile_loop
-from ipcosim.harness.master.results import Result, RowWriter, SimulationError
+from ipcosim.harness.master.recorder import Recorder, TaskMetrics, TickFailure
+from ipcosim.harness.master.results import Result, RowWriter
 from ipcosim.harness.master.slave import DISCARD, TERMINATE, FMUSlave, Slave
-from ipcosim.harness.master.system import Instance, System, Variable, kind_of
+from ipcosim.harness.master.system import Instance, System, kind_of
 
 SlaveFactory = Callable[[Instance], Slave]
-#: The task's metrics of a run: ``task_metrics(chunks, names) -> dict``, where ``chunks()``
-#: iterates over the recorded rows (structured arrays, a chunk at a time; it may be called more
-#: than once) and ``names`` are the fields. Given by whoever knows the scenario (the master
-#: knows no task): ``ipcosim.harness.engine`` gives ``ipcosim.fmus.metrics.streamed_task_metrics``.
-TaskMetrics = Callable[[Callable[[], Iterable[np.ndarray]], Sequence[str]], Mapping[str, Any]]
 
 #: At most this many ticks run between two looks at the record for non-finite values, at
 #: pending signals, and two writes of the results.
@@ -100,10 +93,6 @@ def check_times(start: float, stop: Any, step: Any, record_every: Any = 1,
     return TimeBase.make(start, stop, step)  # a run that is not a whole number of steps ends with a short step
 
 
-class NonFiniteError(SimulationError, FloatingPointError):
-    """A component produced a NaN or infinite output."""
-
-
 class Execution:
     """One run of a bound system.
 
@@ -119,8 +108,8 @@ class Execution:
         Start [s]; default the scenario's DefaultExperiment startTime.
     algorithm : str
         ``gauss-seidel`` (default) or ``jacobi``.
-    overrides : mapping of (component, variable) to value
-        Start values applied after the bindings (already checked).
+    set : mapping of (component, variable) to value
+        Start values applied after the bindings (already checked), as ``ipcosim.run(set=...)``.
     observers, manipulators : sequences
         See :mod:`ipcosim.harness.master.observers`, :mod:`ipcosim.harness.master.manipulators`.
     slave_factory : callable, optional
@@ -135,7 +124,7 @@ class Execution:
         Where the rows go while the run proceeds (default: a spool file only); see
         :meth:`row_fields` for its fields.
     task_metrics : callable, optional
-        The task's metrics of the recorded rows (see :data:`TaskMetrics`), added to the
+        The task's metrics of the recorded rows (see :data:`~ipcosim.harness.master.recorder.TaskMetrics`), added to the
         result's metrics; None: only the run's own (timing, observers).
     loop : str
         The stepping loop: ``auto`` (default: the C loop of :mod:`ipcosim.harness.master.cloop`
@@ -146,7 +135,7 @@ class Execution:
     """
 
     def __init__(self, system: System, step: float, stop_time: float, start_time: float | None = None,
-                 algorithm: str = GAUSS_SEIDEL, overrides: Mapping[tuple[str, str], Any] | None = None,
+                 algorithm: str = GAUSS_SEIDEL, set: Mapping[tuple[str, str], Any] | None = None,
                  observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
                  slave_factory: SlaveFactory | None = None, unzip_dirs: Mapping[str, Path] | None = None,
                  record_every: int = 1, max_init_iterations: int = 20, writer: RowWriter | None = None,
@@ -166,9 +155,10 @@ class Execution:
             raise StepSizeError(f"record_every = {record_every!r} must be a positive integer")
         self.record_every = record_every
         self.max_init_iterations = max_init_iterations
-        self.overrides = dict(overrides or {})
+        #: The start values of the run by (component, variable), applied after the bindings.
+        self.set = dict(set or {})
         self.observers = list(observers)
-        self.manipulators = [Overrides(self.overrides)] + list(manipulators)
+        self.manipulators = [Overrides(self.set)] + list(manipulators)
         self.unzip_dirs = dict(unzip_dirs or {})
         self.slave_factory = slave_factory or self._fmu_slave
         self.instances = list(system.instances)
@@ -180,8 +170,12 @@ class Execution:
         else:
             self.order = list(range(len(self.instances)))
         self.init_order = self.order
-        self._layout()
+        self.layout = Layout(system, self._planned_value)
+        # the buffer holds at most a chunk of rows
+        self.recorder = Recorder(self.layout, self.timebase, record_every, self.order,
+                                 capacity=CHUNK // record_every + 2, flush_seconds=CHUNK_SECONDS)
         self.slaves: list[Slave] = []
+        self.blocks: list[Block] = []
         self.writer = writer
         self.task_metrics = task_metrics
         self.tick = 0
@@ -214,179 +208,13 @@ class Execution:
     def component_order(self) -> list[str]:
         return [self.instances[i].name for i in self.order]
 
-    # ------------------------------------------------------------------ setup
     def _planned_value(self, comp: str, var: str) -> Any:
-        if (comp, var) in self.overrides:
-            return self.overrides[(comp, var)]
+        if (comp, var) in self.set:
+            return self.set[(comp, var)]
         return self.system.instance(comp).start_value(var)
 
     def _fmu_slave(self, instance: Instance) -> Slave:
         return FMUSlave(instance, self.unzip_dirs[instance.name])
-
-    def _layout(self) -> None:
-        """Place every Real connector in the value vector; build the record columns."""
-        self._real_outputs: list[list[Variable]] = []
-        self._real_inputs: list[list[Variable]] = []
-        offsets = []
-        pos = 0
-        for inst in self.instances:
-            outs = [v for v in inst.outputs if kind_of(v.type) == "real"]
-            ins = [v for v in inst.inputs if kind_of(v.type) == "real"]
-            self._real_outputs.append(outs)
-            self._real_inputs.append(ins)
-            offsets.append((pos, pos + len(outs)))
-            pos += len(outs) + len(ins)
-        self.n_values = pos
-        self.values_c = (ctypes.c_double * (pos + 1))()  # +1: empty slices still map one element
-        self.values = np.ctypeslib.as_array(self.values_c)[:pos]
-        self._out_offset = [o for o, _ in offsets]
-        self._in_offset = [i for _, i in offsets]
-        self._slot: dict[tuple[str, str], int] = {}
-        for k, inst in enumerate(self.instances):
-            for j, v in enumerate(self._real_outputs[k]):
-                self._slot[(inst.name, v.name)] = self._out_offset[k] + j
-            for j, v in enumerate(self._real_inputs[k]):
-                self._slot[(inst.name, v.name)] = self._in_offset[k] + j
-                start = self._planned_value(inst.name, v.name)
-                self.values[self._in_offset[k] + j] = float(start) if start is not None else 0.0
-        self.output_slots = np.array([self._out_offset[k] + j for k in range(len(self.instances))
-                                      for j in range(len(self._real_outputs[k]))], dtype=int)
-        # record columns: every Real connector in SSD order; connected inputs are the
-        # transformed source values (what the connection delivers at that time)
-        self.columns: list[tuple[str, int, tuple[int, float, float] | None]] = []
-        for inst in self.instances:
-            for v in inst.connectors:
-                if kind_of(v.type) != "real":
-                    continue
-                name = f"{inst.name}.{v.name}"
-                link = self.system.link_into(inst.name, v.name)
-                if link is not None:
-                    src = self._slot[(link.src, link.src_var.name)]
-                    self.columns.append((name, self._slot[(inst.name, v.name)], (src, link.factor, link.offset)))
-                else:
-                    self.columns.append((name, self._slot[(inst.name, v.name)], None))
-        self._layout_typed()
-
-    def _layout_typed(self) -> None:
-        """Place the Integer and Boolean connectors in one ``c_int`` vector (per component:
-        integer outputs, inputs, boolean outputs, inputs) and the String connectors in lists
-        per component; describe every record column's kind in one place, ``column_kinds``
-        (``time``, then every connector in SSD order: ``real``, ``integer``, ``boolean``, ``string``)."""
-        self._typed: list[dict[str, tuple[list[Variable], list[Variable]]]] = []
-        self._int_offset: dict[tuple[int, str], int] = {}
-        self._strings: dict[int, tuple[list[bytes], list[bytes]]] = {}
-        self._tslot: dict[tuple[str, str], tuple[str, int]] = {}  # (kind, int slot or string index)
-        string_slots: list[tuple[list[bytes], int]] = []
-        pos = 0
-        for k, inst in enumerate(self.instances):
-            groups = {}
-            for kind in ("integer", "boolean", "string"):
-                outs = [v for v in inst.outputs if kind_of(v.type) == kind]
-                ins = [v for v in inst.inputs if kind_of(v.type) == kind]
-                if not (outs or ins):
-                    continue
-                groups[kind] = (outs, ins)
-                if kind == "string":
-                    lists = ([b""] * len(outs), [b""] * len(ins))
-                    self._strings[k] = lists
-                    for lst, vs in zip(lists, (outs, ins)):
-                        for j, v in enumerate(vs):
-                            self._tslot[(inst.name, v.name)] = ("string", len(string_slots))
-                            string_slots.append((lst, j))
-                else:
-                    self._int_offset[(k, kind)] = pos
-                    for j, v in enumerate(outs + ins):
-                        self._tslot[(inst.name, v.name)] = (kind, pos + j)
-                    pos += len(outs) + len(ins)
-            self._typed.append(groups)
-        self.n_ints = pos
-        self.ints_c = (ctypes.c_int * (pos + 1))()
-        self.ints = np.ctypeslib.as_array(self.ints_c)[:pos]
-        self._string_slots = string_slots
-        for (comp, var), (kind, slot) in self._tslot.items():
-            if self.instances[self.index[comp]].model.variables[var].causality == "input":
-                self._store(kind, slot, self._planned_value(comp, var))
-        self.column_kinds: dict[str, str] = {"time": "real"}
-        self.typed_columns: list[tuple[str, str, int, tuple[int, dict[int, int]] | None]] = []
-        for inst in self.instances:
-            for v in inst.connectors:
-                kind = kind_of(v.type)
-                if kind is None:
-                    continue
-                self.column_kinds[f"{inst.name}.{v.name}"] = kind
-                if kind == "real":
-                    continue
-                link = self.system.link_into(inst.name, v.name)
-                src = (self._tslot[(link.src, link.src_var.name)][1], dict(link.mapping)) if link else None
-                self.typed_columns.append((f"{inst.name}.{v.name}", kind, self._tslot[(inst.name, v.name)][1], src))
-
-    def _store(self, kind: str, slot: int, value: Any) -> None:
-        """Put a start value into the typed value store."""
-        if kind == "string":
-            lst, j = self._string_slots[slot]
-            lst[j] = b"" if value is None else (value if isinstance(value, bytes) else str(value).encode())
-        else:
-            self.ints[slot] = int(bool(value)) if kind == "boolean" else int(value or 0)
-
-    def _channels(self, k: int, slave: Slave) -> tuple[Channel, ...]:
-        """The component's Integer, Boolean and String channels (see :class:`Channel`)."""
-        out = []
-        for kind, (outs, ins) in self._typed[k].items():
-            if kind == "string":
-                o_vals, i_vals = self._strings[k]
-            else:
-                off = self._int_offset[(k, kind)]
-                o_vals = (ctypes.c_int * max(len(outs), 1)).from_buffer(self.ints_c, 4 * off)
-                i_vals = (ctypes.c_int * max(len(ins), 1)).from_buffer(self.ints_c, 4 * (off + len(outs)))
-            transfers = []
-            for j, v in enumerate(ins):
-                link = self.system.link_into(self.instances[k].name, v.name)
-                if link is not None:
-                    src = self.index[link.src]
-                    src_j = [x.name for x in self._typed[src][kind][0]].index(link.src_var.name)
-                    transfers.append((j, src, src_j, dict(link.mapping) or None))
-            private = None
-            if self.multiples[self.instances[k].name] > 1 and self.algorithm != GAUSS_SEIDEL and outs:
-                private = [b""] * len(outs) if kind == "string" else (ctypes.c_int * len(outs))()
-            get = slave.channel(kind, outs)[0] if outs else None
-            put = slave.channel(kind, ins)[1] if ins else None
-            out.append(Channel(kind, get, put, o_vals, i_vals, len(outs), len(ins), tuple(transfers), private))
-        return tuple(out)
-
-    def _typed_record(self) -> TypedRecord | None:
-        if not self.n_ints and not self._string_slots:
-            return None
-        slots = self._string_slots
-        return TypedRecord(int_row_bytes=4 * self.n_ints if self.n_ints else 0,
-                           int_vector=ctypes.addressof(self.ints_c),
-                           strings=self.record_s if slots else None,
-                           snapshot=(lambda: tuple(lst[j] for lst, j in slots)) if slots else None)
-
-    def _blocks(self) -> list[Block]:
-        blocks = []
-        for k, (inst, slave) in enumerate(zip(self.instances, self.slaves)):
-            handle, do_step, get_real, set_real = slave.raw()
-            outs, ins = self._real_outputs[k], self._real_inputs[k]
-            n_out, n_in = len(outs), len(ins)
-            out_values = (ctypes.c_double * max(n_out, 1)).from_buffer(self.values_c, 8 * self._out_offset[k])
-            in_values = (ctypes.c_double * max(n_in, 1)).from_buffer(self.values_c, 8 * self._in_offset[k])
-            transfers = []
-            for j, v in enumerate(ins):
-                link = self.system.link_into(inst.name, v.name)
-                if link is None:
-                    continue
-                src = self.index[link.src]
-                src_j = [x.name for x in self._real_outputs[src]].index(link.src_var.name)
-                transfers.append((j, src, src_j, float(link.factor), float(link.offset)))
-            m = self.multiples[inst.name]
-            private = (ctypes.c_double * max(n_out, 1))() if (m > 1 and self.algorithm != GAUSS_SEIDEL) else None
-            blocks.append(Block(index=k, name=inst.name, handle=handle, do_step=do_step, get_real=get_real,
-                                set_real=set_real, out_vrs=(ctypes.c_uint * max(n_out, 1))(*[v.vr for v in outs]),
-                                in_vrs=(ctypes.c_uint * max(n_in, 1))(*[v.vr for v in ins]),
-                                out_values=out_values, in_values=in_values, n_out=n_out, n_in=n_in,
-                                multiple=m, private_out=private, transfers=tuple(transfers),
-                                channels=self._channels(k, slave)))
-        return blocks
 
     # ------------------------------------------------------------------ manipulation API
     def set_start(self, component: str, variable: str, value: Any) -> None:
@@ -394,38 +222,31 @@ class Execution:
         slave = self.slaves[self.index[component]]
         var = self.instances[self.index[component]].model.variables[variable]
         slave.set_values([var], [value])
-        slot = self._slot.get((component, variable))
-        if slot is not None and var.causality == "input":
-            self.values[slot] = float(value)
-        typed = self._tslot.get((component, variable))
-        if typed is not None and var.causality == "input":
-            self._store(typed[0], typed[1], value)
+        if var.causality == "input":
+            self.layout.put(component, variable, value)
 
     def set_real(self, component: str, variable: str, value: float) -> None:
         """Set a Real variable now (manipulators' ``step``). For an input connector the value
         is also what the next batched set sends; a connected input is overwritten by its
         connection at the component's next step."""
-        slot = self._slot.get((component, variable))
         var = self.instances[self.index[component]].model.variables[variable]
-        if slot is not None and var.causality == "input":
-            self.values[slot] = float(value)
+        if var.causality == "input" and kind_of(var.type) == "real":
+            self.layout.put(component, variable, float(value))
         self.slaves[self.index[component]].set_values([var], [float(value)])
 
     def get(self, component: str, variable: str) -> Any:
         """Current value of a connector (from the value store): float, int, bool or str."""
-        if (component, variable) in self._slot:
-            return float(self.values[self._slot[(component, variable)]])
-        kind, slot = self._tslot[(component, variable)]
-        if kind == "string":
-            lst, j = self._string_slots[slot]
-            return lst[j].decode("utf-8", "replace")
-        return bool(self.ints[slot]) if kind == "boolean" else int(self.ints[slot])
+        return self.layout.get(component, variable)
 
     # ------------------------------------------------------------------ run
     def row_names(self) -> list[str]:
         """Field names of the recorded rows: ``time``, then ``component.variable`` (every
         connector of every type, in SSD order)."""
-        return list(self.column_kinds)
+        return list(self.layout.column_kinds)
+
+    def row_fields(self) -> list[tuple[str, str]]:
+        """Name and numpy type of every recorded field (see :meth:`Layout.row_fields`)."""
+        return self.layout.row_fields()
 
     def run(self) -> Result:
         """Run the lifecycle; always returns a Result (``result.error`` set on failure).
@@ -435,46 +256,22 @@ class Execution:
         KeyboardInterrupt or a signal deferred by :mod:`ipcosim.harness.master.signals`
         (re-raised after cleanup with ``.result`` set).
         """
-        self.writer = self.writer or RowWriter(self.row_fields())
-        rows = CHUNK // self.record_every + 2  # the record holds at most a chunk of rows
-        self.record = np.zeros((rows, max(self.n_values, 1)))
-        self.record_i = np.zeros((rows, max(self.n_ints, 1)), dtype=np.int32)
-        self.record_s: dict[int, tuple] = {}  # String rows by (absolute) row number
-        self._base_row = 0
-        self._last_emit = _time.monotonic()
-        self._write_seconds = 0.0  # spent handing rows to the writer (results.csv): not the loop's
+        self.recorder.open(self.writer)
         error: BaseException | None = None
         interrupted: BaseException | None = None
         wall0 = _time.perf_counter()
         wall_loop = 0.0
         try:
-            signals.check()
-            self._instantiate()
-            self._initialize()
-            self._record_start()
-            for obs in self.observers:
-                obs.start(self)
-            loop_t0, written0 = _time.perf_counter(), self._write_seconds
-            self._step_all()
-            wall_loop = _time.perf_counter() - loop_t0 - (self._write_seconds - written0)
+            wall_loop = self._start_and_step()
         except KeyboardInterrupt as exc:
             interrupted = error = exc
-            self._flush_pending()
+            self.recorder.flush_pending(self.tick)
         except Exception as exc:  # noqa: BLE001 -- reported in the Result, cleanup below
-            error = exc.cause if isinstance(exc, _TickFailure) and exc.cause is not None else exc
-            self._flush_pending()
+            error = exc.cause if isinstance(exc, TickFailure) and exc.cause is not None else exc
+            self.recorder.flush_pending(self.tick)
         finally:
-            cleanup_error = self._cleanup()
-            if error is None and cleanup_error is not None:
-                error = cleanup_error
-            for obs in self.observers:
-                try:
-                    obs.finish(self, error)
-                except Exception as exc:  # noqa: BLE001
-                    error = error or exc
-        wall = _time.perf_counter() - wall0
-        task = self._task_metrics()
-        result = self._result(self.writer.finish(), error, wall, wall_loop, task)
+            error = self._finish(error)
+        result = self.recorder.result(self, error, _time.perf_counter() - wall0, wall_loop, self.task_metrics)
         if interrupted is not None:
             what = getattr(interrupted, "message", "interrupted")
             result.error = f"{what} at t = {self.time_of(self.tick):.6g} s"
@@ -484,14 +281,31 @@ class Execution:
             raise interrupted
         return result
 
-    def _record_start(self) -> None:
-        """Row 0: the values at the start time, after initialization, checked and written."""
-        self.record[0, :self.n_values] = self.values
-        self.record_i[0, :self.n_ints] = self.ints
-        if self._string_slots:
-            self.record_s[0] = tuple(lst[j] for lst, j in self._string_slots)
-        self._check_finite(0, 1)
-        self._emit(1)
+    def _start_and_step(self) -> float:
+        """Instantiate, initialize, record row 0, start the observers and step every tick;
+        the stepping loop's wall-clock seconds (without the writer's)."""
+        signals.check()
+        self._instantiate()
+        self._initialize()
+        self.recorder.start()
+        for obs in self.observers:
+            obs.start(self)
+        loop_t0, written0 = _time.perf_counter(), self.recorder.write_seconds
+        self._step_all()
+        return _time.perf_counter() - loop_t0 - (self.recorder.write_seconds - written0)
+
+    def _finish(self, error: BaseException | None) -> BaseException | None:
+        """Free every instance and tell the observers the run ended; the run's error (the
+        first one: the run's own, else the cleanup's, else an observer's)."""
+        cleanup_error = self._cleanup()
+        if error is None and cleanup_error is not None:
+            error = cleanup_error
+        for obs in self.observers:
+            try:
+                obs.finish(self, error)
+            except Exception as exc:  # noqa: BLE001
+                error = error or exc
+        return error
 
     def _instantiate(self) -> None:
         for inst in self.instances:
@@ -512,7 +326,7 @@ class Execution:
         signals.check()
         for slave in self.slaves:
             slave.enter_initialization_mode()
-        self.blocks = self._blocks()
+        self.blocks = self.layout.blocks(self.slaves, self.multiples, self.algorithm)
         for b in self.blocks:  # every output as the FMUs compute it from their start values
             self._get_outputs(b, None)
         changed: list[str] = []
@@ -556,7 +370,7 @@ class Execution:
             else:
                 try:
                     cloop = CLoop(self.blocks, self.order, self.algorithm, self.timebase, self.record_every,
-                                  self.record.shape[1] * 8, ctypes.addressof(self.values_c))
+                                  self.recorder.row_bytes, ctypes.addressof(self.layout.values_c))
                     self.loop_used = "c"
                     return cloop.run, cloop.source
                 except LoopUnavailable as exc:
@@ -567,7 +381,7 @@ class Execution:
         else:
             self.loop_used = "python (forced)"
         return compile_loop(self.blocks, self.order, self.algorithm, self.timebase, self.record_every,
-                            self._typed_record())
+                            self.recorder.typed_record())
 
     def _sweep(self) -> list[str]:
         """One pass in step order: transfer, set inputs, read outputs; returns changed inputs."""
@@ -593,7 +407,7 @@ class Execution:
 
     def _transfer(self, b: Block, changed: list[str]) -> None:
         """Copy connected outputs into ``b``'s inputs; append the names of inputs that changed."""
-        inputs = self._real_inputs[b.index]
+        inputs = self.layout.real_inputs[b.index]
         for k, src, j, factor, offset in b.transfers:
             new = factor * self.blocks[src].out_values[j] + offset
             old = b.in_values[k]
@@ -601,7 +415,7 @@ class Execution:
                 b.in_values[k] = new
                 changed.append(f"{b.name}.{inputs[k].name}")
         for ch in b.channels:
-            ins = self._typed[b.index][ch.kind][1]
+            ins = self.layout.typed[b.index][ch.kind][1]
             for k, src, j, mapping in ch.transfers:
                 src_ch = next(c for c in self.blocks[src].channels if c.kind == ch.kind)
                 new = src_ch.out_values[j]
@@ -622,87 +436,70 @@ class Execution:
                     raise self.slaves[b.index].fail(f"fmi2Get{ch.kind.capitalize()}", status,
                                                     t if t is not None else self.start_time)
 
-    def _emit(self, rows: int) -> None:
-        """Hand the record rows ``_base_row .. rows-1`` (absolute numbers) to the writer."""
-        t0 = _time.perf_counter()
-        k = rows - self._base_row
-        if k > 0:
-            self.writer.append(self._rows(self._base_row, k))
-            if self.record_s:
-                for row in range(self._base_row, rows):
-                    self.record_s.pop(row, None)
-            self._base_row = rows
-        self._last_emit = _time.monotonic()
-        self._write_seconds += _time.perf_counter() - t0
-
-    def _flush_pending(self) -> None:
-        """After an interruption: write the rows of the completed chunks still in the buffer."""
-        if self._base_row > 0:  # stepping had started (row 0 written)
-            try:
-                self._emit(self.tick // self.record_every + 1)
-            except Exception:  # noqa: BLE001 -- the first error is the one reported
-                pass
-
     def _step_all(self) -> None:
         """Run every tick in chunks between observer/manipulator events, writing the rows of
         each chunk and looking at pending signals in between."""
-        N = self.n_ticks
-        row_bytes = self.record.shape[1] * 8
-        int_row_bytes = self.record_i.shape[1] * 4
-        va = ctypes.addressof(self.values_c)
-        run = self._run_loop
-        every = self.record_every
+        N, every = self.n_ticks, self.record_every
+        va = ctypes.addressof(self.layout.values_c)
         due_man = {id(m): m.next_tick(-1) for m in self.manipulators}
         due_obs = {id(o): o.next_tick(0) for o in self.observers}
         n, chunk = 0, min(CHUNK, 16)
         while n < N:
             signals.check()
-            for man in self.manipulators:
-                if due_man[id(man)] == n:
-                    man.step(self, n)
-                    due_man[id(man)] = man.next_tick(n)
-            target = min(N, n + chunk)
-            for k in (*due_man.values(), *due_obs.values()):
-                if k is not None and n < k < target:
-                    target = k
-            # the loop writes row r at rb + r * row_bytes: map this chunk's first row to record[0]
-            rb = self.record.ctypes.data - self._base_row * row_bytes
-            rbi = self.record_i.ctypes.data - self._base_row * int_row_bytes
-            marks = [s.errors_logged for s in self.slaves]
+            self._call_due(self.manipulators, due_man, n)
+            target = min(N, n + chunk, *(k for k in (*due_man.values(), *due_obs.values()) if k is not None and k > n))
             t0 = _time.perf_counter()
-            failure = run(n, target, rb, va, row_bytes, rbi)
-            if failure is not None:
-                fn, idx, function, status = failure
-                self.tick = fn
-                rows = fn // every + 1
-                self._check_finite(self._base_row, rows)
-                self._emit(rows)
-                slave = self.slaves[idx]
-                logged_error = slave.errors_logged > marks[idx]
-                if not logged_error and self._ended_by_fmu(idx, function, status):
-                    self._record_last_successful(slave)
-                    return
-                err = slave.fail(function, status, self.time_of(fn))
-                if status == DISCARD and function == "fmi2DoStep":
-                    ended, query = slave.terminated()
-                    why = ("but it logged an error in that step: a failure" if ended and logged_error
-                           else "the FMU did not end the simulation")
-                    err = type(err)(f"{err} ({query}, {why})", err.component, err.function, err.status, err.time)
-                raise _TickFailure(str(err), rows, err)
+            if not self._run_chunk(n, target, va):
+                return  # a component ended the simulation
             rows = target // every + 1
-            self._check_finite(n // every + 1, rows)
+            self.recorder.check_finite(n // every + 1, rows)
             chunk = _next_chunk(chunk, target - n, _time.perf_counter() - t0)
-            # write when the next chunk might not fit in the record buffer, and at least every
-            # CHUNK_SECONDS (observers that need every tick make chunks of one tick)
-            if (rows - self._base_row + chunk // every + 1 > len(self.record)
-                    or _time.monotonic() - self._last_emit >= CHUNK_SECONDS):
-                self._emit(rows)
+            # observers that need every tick make chunks of one tick
+            if self.recorder.due(rows, chunk):
+                self.recorder.emit(rows)
             n = self.tick = target
-            for obs in self.observers:
-                if due_obs[id(obs)] == n:
-                    obs.step(self, n)
-                    due_obs[id(obs)] = obs.next_tick(n)
-        self._emit(N // every + 1)
+            self._call_due(self.observers, due_obs, n)
+        self.recorder.emit(N // every + 1)
+
+    def _call_due(self, hooks: Sequence[Manipulator | Observer], due: dict[int, int | None], n: int) -> None:
+        """``step`` every manipulator or observer due at tick ``n``; note when each is due next."""
+        for hook in hooks:
+            if due[id(hook)] == n:
+                hook.step(self, n)
+                due[id(hook)] = hook.next_tick(n)
+
+    def _run_chunk(self, n: int, target: int, va: int) -> bool:
+        """Ticks ``n .. target-1`` in the stepping loop; False when a component ended the
+        simulation within them (the run then ends normally at ``self.tick``)."""
+        rb, rbi = self.recorder.addresses()
+        marks = [s.errors_logged for s in self.slaves]
+        failure = self._run_loop(n, target, rb, va, self.recorder.row_bytes, rbi)
+        if failure is None:
+            return True
+        self._loop_failed(failure, marks)
+        return False
+
+    def _loop_failed(self, failure: tuple[int, int, str, int], marks: Sequence[int]) -> None:
+        """After the loop stopped on a status > fmi2Warning at tick ``failure[0]``: write the
+        rows up to there, then return when the component ended the simulation (and logged no
+        error since ``marks``), else raise the component's failure."""
+        fn, idx, function, status = failure
+        self.tick = fn
+        rows = fn // self.record_every + 1
+        self.recorder.check_finite(self.recorder.base_row, rows)
+        self.recorder.emit(rows)
+        slave = self.slaves[idx]
+        logged_error = slave.errors_logged > marks[idx]
+        if not logged_error and self._ended_by_fmu(idx, function, status):
+            self._record_last_successful(slave)
+            return
+        err = slave.fail(function, status, self.time_of(fn))
+        if status == DISCARD and function == "fmi2DoStep":
+            ended, query = slave.terminated()
+            why = ("but it logged an error in that step: a failure" if ended and logged_error
+                   else "the FMU did not end the simulation")
+            err = type(err)(f"{err} ({query}, {why})", err.component, err.function, err.status, err.time)
+        raise TickFailure(str(err), rows, err)
 
     def _ended_by_fmu(self, idx: int, function: str, status: int) -> bool:
         """Whether a failed ``do_step`` is a component ending the simulation itself (FMI 2.0:
@@ -731,51 +528,10 @@ class Execution:
             return
         for b in self.blocks:
             self._get_outputs(b, t_last)
-        self.record[0, :self.n_values] = self.values
-        self.record_i[0, :self.n_ints] = self.ints
-        if self._string_slots:
-            self.record_s[self._base_row] = tuple(lst[j] for lst, j in self._string_slots)
-        row = self._rows(self._base_row, 1)
-        row["time"] = t_last
-        self._check_finite(self._base_row, self._base_row + 1)
-        self.writer.append(row)
-        self._base_row += 1
+        self.recorder.append_at(t_last)
         assert self.terminated_by is not None
         self.terminated_by.update(last_successful_time=t_last, note=self.terminated_by["note"].replace(
             f"the run ends at t = {t:.6g} s", f"recorded up to its last successful time t = {t_last:.6g} s"))
-
-    def _check_finite(self, row0: int, row1: int) -> None:
-        """Raise for the first non-finite output in record rows ``row0 .. row1-1`` (absolute
-        numbers, ``row0`` being the first row held in the record buffer); the rows before it
-        are handed to the writer first."""
-        if row1 <= row0 or not len(self.output_slots):
-            return
-        block = self.record[row0 - self._base_row:row1 - self._base_row][:, self.output_slots]
-        if np.isfinite(block).all():
-            return
-        bad = ~np.isfinite(block)
-        bad_row = int(np.argmax(bad.any(axis=1)))
-        row = row0 + bad_row
-        # of the outputs that went bad in that row, blame the one of the earliest component in
-        # step order (the others most likely computed theirs from it)
-        rank = {idx: pos for pos, idx in enumerate(self.order)}
-        slots = [int(self.output_slots[c]) for c in np.flatnonzero(bad[bad_row])]
-        slot = min(slots, key=lambda s: (rank[self._slot_owner(s)], s))
-        k = self._slot_owner(slot)
-        inst = self.instances[k]
-        var = self._real_outputs[k][slot - self._out_offset[k]].name
-        t = self.time_of(row * self.record_every)
-        msg = (f"component {inst.name} ({inst.model.name}): output {inst.name}.{var} = "
-               f"{float(self.record[row - self._base_row, slot])} at t = {t:.6g} s (non-finite value)")
-        self._emit(row + 1)  # the bad row too: it shows what went wrong
-        raise _TickFailure(msg, row + 1, NonFiniteError(msg))
-
-    def _slot_owner(self, slot: int) -> int:
-        """Index of the component whose outputs hold value-vector slot ``slot``."""
-        for k in range(len(self.instances)):
-            if self._out_offset[k] <= slot < self._in_offset[k]:
-                return k
-        raise KeyError(slot)
 
     def _cleanup(self) -> BaseException | None:
         """Terminate (where FMI allows) and free every instantiated slave; first error returned."""
@@ -793,126 +549,9 @@ class Execution:
                     first = first or exc
         return first
 
-    # ------------------------------------------------------------------ result
-    def row_fields(self) -> list[tuple[str, str]]:
-        """Name and numpy type of every recorded field: ``time``, then ``component.variable``
-        (see :data:`COLUMN_DTYPE`)."""
-        return [(n, COLUMN_DTYPE[k]) for n, k in self.column_kinds.items()]
-
-    def _rows(self, first_row: int, rows: int) -> np.ndarray:
-        """Record buffer rows ``0 .. rows-1`` (absolute ``first_row ..``) as a structured array
-        of the row fields."""
-        rec = self.record[:rows]
-        data = np.zeros(rows, dtype=self.row_fields())
-        ticks = (first_row + np.arange(rows)) * self.record_every
-        if self.timebase.step_ns is not None:
-            data["time"] = (self.timebase.start_ns + ticks * self.timebase.step_ns) / 1e9
-        else:
-            data["time"] = self.timebase.start + ticks * self.timebase.step
-        data["time"][ticks >= self.n_ticks] = self.timebase.time(self.n_ticks)
-        for name, slot, link in self.columns:
-            if link is None:
-                data[name] = rec[:, slot]
-            else:
-                src, factor, offset = link
-                data[name] = factor * rec[:, src] + offset
-        self._typed_rows(data, first_row)
-        return data
-
-    def _task_metrics(self) -> dict[str, Any]:
-        """The task metrics from the rows written (a chunk at a time: bounded memory)."""
-        if self.task_metrics is None:
-            return {}
-        try:
-            return dict(self.task_metrics(self.writer.chunks, self.row_names()))
-        except Exception as exc:  # noqa: BLE001 -- metrics must not hide the run's result
-            return {"metrics_error": str(exc)}
-
-    def _result(self, data: np.ndarray, error: BaseException | None, wall: float, wall_loop: float,
-                task: dict[str, Any]) -> Result:
-        rows = len(data)
-        simulated = float(data["time"][-1] - data["time"][0]) if rows else 0.0
-        metrics: dict[str, Any] = dict(task)
-        metrics.update(timing_metrics(simulated, wall, wall_loop))
-        for obs in self.observers:
-            try:
-                metrics.update(obs.metrics())
-            except Exception as exc:  # noqa: BLE001
-                metrics.setdefault("observer_errors", []).append(str(exc))
-        message = None
-        if error is not None:
-            message = _one_line(error)
-        sc = self.system.scenario
-        metadata: dict[str, Any] = {
-            "scenario": sc.name, "origin": sc.origin, "algorithm": self.algorithm,
-            "start_time": self.start_time, "stop_time": self.stop_time, "step": self.step_size,
-            "ticks": self.n_ticks,
-            "ticks_done": self.tick if error is not None or self.terminated_by else self.n_ticks,
-            "record_every": self.record_every, "loop": self.loop_used or None, "order": self.component_order,
-            "step_multiples": dict(self.multiples),
-            "initialization_iterations": self.init_iterations,
-            "components": {i.name: {"model": i.model.name, "guid": i.model.guid,
-                                    "fmu": str(i.model.path) if i.model.path else None,
-                                    "swapped_from": i.swapped_from} for i in self.instances},
-            "overrides": {f"{c}.{v}": x for (c, v), x in self.overrides.items()},
-            "warnings": list(self.system.warnings), "notes": list(self.system.notes),
-            "wall_time_s": wall, "loop_wall_time_s": wall_loop, "write_wall_time_s": self._write_seconds,
-            "simulated_s": simulated,
-            "status": "ok" if error is None else "failed", "error": message,
-            "end_time": float(data["time"][-1]) if rows else None, "terminated_by": self.terminated_by,
-            "fmu_messages": {s.name: s.messages()[-5:] for s in self.slaves if s.messages()},
-        }
-        if self.terminated_by:
-            metadata["notes"].append(self.terminated_by["note"])
-        return Result(data=data, metrics=metrics, metadata=metadata, error=message)
-
-    def _typed_rows(self, data: np.ndarray, first_row: int) -> None:
-        """Fill the Integer, Boolean and String columns of record buffer rows ``0 .. len(data)-1``
-        (absolute ``first_row ..``); a connected input: what its connection delivers, i.e. the
-        source's value through the mapping."""
-        rows = len(data)
-        ints = self.record_i[:rows]
-        strings = [self.record_s.get(first_row + r) for r in range(rows)] if self._string_slots else []
-        for name, kind, slot, link in self.typed_columns:
-            src, mapping = link if link is not None else (slot, {})
-            if kind == "string":
-                values = [row[src].decode("utf-8", "replace") if row is not None else ""
-                          for row in strings]
-                data[name] = np.array(values, dtype=object) if rows else values
-                continue
-            col = ints[:, src]
-            if mapping:
-                col = np.array([mapping.get(int(x), int(x)) for x in col], dtype=np.int64)
-            data[name] = col.astype(bool) if kind == "boolean" else col
-
-
-#: numpy type of a record column of each value kind.
-COLUMN_DTYPE = {"real": "f8", "integer": "i4", "boolean": "?", "string": "O"}
-
-
-def timing_metrics(simulated: float, wall: float, loop: float) -> dict[str, float | None]:
-    """``wall_time_s``, ``real_time_factor`` (simulated / wall) and ``loop_real_time_factor``
-    (simulated / stepping-loop seconds) of a run that simulated ``simulated`` seconds."""
-    return {"wall_time_s": wall, "real_time_factor": simulated / wall if wall > 0 else None,
-            "loop_real_time_factor": simulated / loop if loop > 0 else None}
-
 
 def _next_chunk(chunk: int, ticks: int, seconds: float) -> int:
     """Ticks for the next chunk so that it lasts about CHUNK_SECONDS (between 1 and CHUNK)."""
     if ticks < chunk or seconds <= 0:
         return chunk
     return int(max(1, min(CHUNK, ticks * CHUNK_SECONDS / seconds)))
-
-
-class _TickFailure(SimulationError):
-    """Internal: a failure inside the stepping loop, with the number of complete record rows."""
-
-    def __init__(self, message: str, rows: int, cause: BaseException | None = None) -> None:
-        super().__init__(message)
-        self.rows = rows
-        self.cause = cause
-
-
-def _one_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__

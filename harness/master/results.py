@@ -339,7 +339,7 @@ def csv_text(data: np.ndarray, columns: Sequence[str]) -> str:
 def write_csv(data: np.ndarray, path: Path, columns: Sequence[str]) -> None:
     """Write selected fields of a structured array as CSV, each column in its type: Real with
     full double precision, Integer as integers, Boolean as ``true``/``false``, String quoted
-    where CSV needs it (the field's numpy type says which, see ``execution.COLUMN_DTYPE``)."""
+    where CSV needs it (the field's numpy type says which, see ``layout.COLUMN_DTYPE``)."""
     with open(path, "w", newline="") as fh:
         fh.write(",".join(columns) + "\n" + csv_text(data, columns))
 

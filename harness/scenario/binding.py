@@ -55,11 +55,24 @@ def read_model(path: Path, display: str | None = None) -> Model:
         If the file is not a readable FMI 2.0 co-simulation FMU.
     """
     path = Path(path)
-    display = display or os.fspath(path)
     stat = path.stat()
     key = (str(path.resolve()), stat.st_mtime, stat.st_size)
     if key in _MODEL_CACHE:
         return _MODEL_CACHE[key]
+    md = _model_description(path, display or os.fspath(path))
+    variables = _variables(md)
+    model = Model(name=md.modelName, variables=variables, feedthrough=_feedthrough(md, variables),
+                  path=path.resolve(), guid=md.guid, model_identifier=md.coSimulation.modelIdentifier,
+                  fmi_version=md.fmiVersion, units=_units(md),
+                  can_handle_variable_step=bool(md.coSimulation.canHandleVariableCommunicationStepSize),
+                  default_step=_positive_or_none(md.defaultExperiment, "stepSize"),
+                  default_stop=_positive_or_none(md.defaultExperiment, "stopTime"))
+    _MODEL_CACHE[key] = model
+    return model
+
+
+def _model_description(path: Path, display: str) -> Any:
+    """fmpy's model description of an FMI 2.0 or 3.0 co-simulation FMU; else one line naming ``display``."""
     from fmpy import read_model_description
 
     try:
@@ -71,6 +84,11 @@ def read_model(path: Path, display: str | None = None) -> Model:
         raise BindingError(f"{display}: FMI {md.fmiVersion} FMU; FMI 2.0 and 3.0 are supported")
     if md.coSimulation is None:
         raise BindingError(f"{display}: does not support co-simulation")
+    return md
+
+
+def _variables(md: Any) -> dict[str, Variable]:
+    """Every model variable by name, with its unit (its own or its declared type's) and start value."""
     variables = {}
     for v in md.modelVariables:
         unit = v.unit or (v.declaredType.unit if v.declaredType is not None else None)
@@ -79,6 +97,12 @@ def read_model(path: Path, display: str | None = None) -> Model:
                                      causality=v.causality or "local", variability=v.variability or "continuous",
                                      initial=v.initial, unit=unit, start=_start_value(v.type, v.start),
                                      description=v.description or "")
+    return variables
+
+
+def _feedthrough(md: Any, variables: Mapping[str, Variable]) -> dict[str, frozenset[str]]:
+    """The inputs each output depends on directly (ModelStructure); every input where it says
+    nothing (an output without dependencies, or missing from it: assume the worst)."""
     inputs = frozenset(n for n, v in variables.items() if v.causality == "input")
     feedthrough = {}
     for u in md.outputs:
@@ -86,9 +110,14 @@ def read_model(path: Path, display: str | None = None) -> Model:
             feedthrough[u.variable.name] = inputs
         else:
             feedthrough[u.variable.name] = frozenset(d.name for d in u.dependencies if d.name in inputs)
-    for name, v in variables.items():  # outputs missing from ModelStructure: assume the worst
+    for name, v in variables.items():
         if v.causality == "output" and name not in feedthrough:
             feedthrough[name] = inputs
+    return feedthrough
+
+
+def _units(md: Any) -> dict[str, Unit]:
+    """The unit definitions by name (base-unit exponents, factor, offset)."""
     units = {}
     for u in md.unitDefinitions:
         b = u.baseUnit
@@ -97,14 +126,7 @@ def read_model(path: Path, display: str | None = None) -> Model:
         else:
             units[u.name] = Unit(u.name, tuple(int(getattr(b, k)) for k in BASE_UNITS), float(b.factor),
                                  float(b.offset))
-    model = Model(name=md.modelName, variables=variables, feedthrough=feedthrough, path=path.resolve(),
-                  guid=md.guid, model_identifier=md.coSimulation.modelIdentifier, fmi_version=md.fmiVersion,
-                  units=units,
-                  can_handle_variable_step=bool(md.coSimulation.canHandleVariableCommunicationStepSize),
-                  default_step=_positive_or_none(md.defaultExperiment, "stepSize"),
-                  default_stop=_positive_or_none(md.defaultExperiment, "stopTime"))
-    _MODEL_CACHE[key] = model
-    return model
+    return units
 
 
 def _positive_or_none(experiment: Any, name: str) -> float | None:
@@ -235,7 +257,7 @@ def unit_conversion(src: str | None, dst: str | None, table: Mapping[str, Unit])
 
 
 # --------------------------------------------------------------------------- binding
-def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
+def bind(scenario: Scenario, swap: Mapping[str, str | os.PathLike[str] | SwapTarget] | None = None,
          fmu_files: Mapping[str, Path] | None = None, models: Mapping[str, Model] | None = None,
          strict_parameters: bool = True, strict_swaps: bool = False) -> System:
     """Check a scenario against its FMUs and resolve it into a :class:`System`.
@@ -243,7 +265,7 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
     Parameters
     ----------
     scenario : Scenario
-    swaps : mapping of component name to FMU path, alias or SwapTarget, optional
+    swap : mapping of component name to FMU path, alias or SwapTarget, optional
         Components to replace (``--swap``), each checked for compatible connectors.
     fmu_files : mapping of component name to Path, optional
         FMU files to use instead of the scenario's resolved ones (archive members extracted
@@ -262,14 +284,14 @@ def bind(scenario: Scenario, swaps: Mapping[str, str | os.PathLike[str] | SwapTa
     FMUNotFoundError, BindingError
         Naming the file, component and variable.
     """
-    swaps = dict(swaps or {})
-    for comp in swaps:
+    swap = dict(swap or {})
+    for comp in swap:
         if comp not in {c.name for c in scenario.components}:
             raise BindingError(f"--swap {comp}=...: scenario {scenario.name!r} has no component {comp!r}; "
                                f"{closest(comp, (c.name for c in scenario.components))}")
     notes: list[str] = []   # warnings: what may be wrong (unconnected inputs, ignored parameters)
     infos: list[str] = []   # notes: what was done (swaps, connectors left out)
-    instances = [_bind_component(scenario, comp, swaps, dict(fmu_files or {}), dict(models or {}),
+    instances = [_bind_component(scenario, comp, swap, dict(fmu_files or {}), dict(models or {}),
                                  (strict_parameters, strict_swaps), notes, infos) for comp in scenario.components]
     by_name = {i.name: i for i in instances}
     fed: dict[str, str] = {}  # which output feeds each input: {"comp.input": "comp.output"}
@@ -299,16 +321,16 @@ def _component_model(scenario: Scenario, comp: Component, swapped: bool, fmu_fil
     return read_model(Path(fmu), f"{scenario.origin}: component {comp.name!r} ({comp.source})")
 
 
-def _bind_component(scenario: Scenario, comp: Component, swaps: Mapping[str, Any], fmu_files: Mapping[str, Path],
+def _bind_component(scenario: Scenario, comp: Component, swap: Mapping[str, Any], fmu_files: Mapping[str, Path],
                     models: Mapping[str, Model], strict: tuple[bool, bool], notes: list[str],
                     infos: list[str]) -> Instance:
     """One component as an :class:`Instance`: its FMU (or the one swapped in), connectors checked
     against the FMU's variables, and its parameter bindings converted (``strict``: for its own
     FMU, for one swapped in); appends to ``notes``/``infos``."""
-    model = _component_model(scenario, comp, comp.name in swaps, fmu_files, models)
+    model = _component_model(scenario, comp, comp.name in swap, fmu_files, models)
     swapped_from, realtime, extra = None, False, {}
-    if comp.name in swaps:
-        target = resolve_swap(scenario, comp.name, swaps[comp.name], model)
+    if comp.name in swap:
+        target = resolve_swap(scenario, comp.name, swap[comp.name], model)
         swapped_from = model.path.name if model is not None and model.path else comp.source
         realtime = target.realtime
         extra = dict(target.parameters)

@@ -680,6 +680,22 @@ def select_parameter_set(scenario: Scenario, name: str) -> Scenario:
     return replace(scenario, components=tuple(components))
 
 
+def read_ssv(path: str | os.PathLike[str], what: str = "parameter file") -> dict[str, Any]:
+    """``{name: value}`` of an SSV file, checked against the SSP schema (Real -> float, Integer ->
+    int, Boolean -> bool, String -> str).
+
+    Raises
+    ------
+    ScenarioError
+        A missing or invalid file, named with ``what`` (e.g. ``--parameter-file``).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ScenarioError(f"{what} {p}: no such file")
+    element = parse_xml(p.read_bytes(), str(p), "SystemStructureParameterValues.xsd")
+    return {param.name: param.value for param in _parameter_set(element, str(p), str(p)).parameters}
+
+
 def read_parameter_file(path: str | os.PathLike[str]) -> dict[str, Any]:
     """``{"component.variable": value}`` of an SSV file (``--parameter-file``): every parameter names
     the component it applies to (``plant.Mc``), as a system-level SSP binding does.
@@ -689,15 +705,10 @@ def read_parameter_file(path: str | os.PathLike[str]) -> dict[str, Any]:
     ScenarioError
         A missing or invalid file, or a parameter name without a component.
     """
-    p = Path(path)
-    if not p.is_file():
-        raise ScenarioError(f"--parameter-file {p}: no such file")
-    element = parse_xml(p.read_bytes(), str(p), "SystemStructureParameterValues.xsd")
-    values = {}
-    for param in _parameter_set(element, str(p), str(p)).parameters:
-        component, dot, variable = param.name.partition(".")
+    values = read_ssv(path, "--parameter-file")
+    for name in values:
+        component, dot, variable = name.partition(".")
         if not (dot and component and variable):
-            raise ScenarioError(f"--parameter-file {p}: parameter {param.name!r} names no component "
-                                f"(write it COMPONENT.VARIABLE, e.g. plant.{param.name})")
-        values[param.name] = param.value
+            raise ScenarioError(f"--parameter-file {path}: parameter {name!r} names no component "
+                                f"(write it COMPONENT.VARIABLE, e.g. plant.{name})")
     return values

@@ -90,7 +90,10 @@ def parameter_sets(plant: str, controller: str) -> dict[str, dict[str, Any]]:
     return {k: dict(v) for k, v in catalog_sets(plant, CONTROLLERS[controller][0]).items() if v}
 
 
-def _ssv(name: str, values: Mapping[str, Any], description: str) -> str:
+def ssv_text(values: Mapping[str, Any], name: str, description: str = "") -> str:
+    """An SSP 1.0 parameter set (``.ssv``) named ``name``: bool -> Boolean, int -> Integer, else Real
+    (written with ``repr``, so a value reads back exactly). The one SSV writer: the scenarios'
+    parameter sets, ``ipcosim tune``'s ``autotuned.ssv`` and ``ipcosim identify``'s ``identified.ssv``."""
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<ssv:ParameterSet xmlns:ssv="{NS["ssv"]}" version="1.0" name={quoteattr(name)}'
              + (f" description={quoteattr(description)}" if description else "") + ">",
@@ -255,7 +258,7 @@ def write_scenarios(root: Path = SCENARIO_DIR, names: list[str] | None = None) -
             default = "tuned" if "tuned" in sets else ("thesis" if "thesis" in sets else None)
             for set_name, values in sets.items():
                 path = folder / f"{set_name}.ssv"
-                path.write_text(_ssv(set_name, values, f"{name}: {set_name} controller parameters"))
+                path.write_text(ssv_text(values, set_name, f"{name}: {set_name} controller parameters"))
                 written.append(path)
             period = sets.get(default or "", {}).get("sample_period", STEP)
             path = folder / "SystemStructure.ssd"
@@ -280,7 +283,7 @@ def variant_files(name: str) -> dict[str, str]:
     plant, law = VARIANTS[name][:2]
     sets = {k: dict(v) for k, v in catalog_sets(plant, law).items() if v}
     default = "tuned" if "tuned" in sets else ("thesis" if "thesis" in sets else default_set(plant, law))
-    files = {f"{s}.ssv": _ssv(s, v, f"{name}: {s} controller parameters") for s, v in sets.items()}
+    files = {f"{s}.ssv": ssv_text(v, s, f"{name}: {s} controller parameters") for s, v in sets.items()}
     files["SystemStructure.ssd"] = ssd_text(plant, "", default, float(sets[default].get("sample_period", STEP)),
                                             variant=name)
     return files

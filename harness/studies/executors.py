@@ -27,10 +27,7 @@ from typing import Any, Iterator, Sequence
 from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.harness.studies.cases import SweepCase
 from ipcosim.harness.studies.runners import Runner, RunSpec
-
-#: Thread-count variables of the BLAS/OpenMP libraries, set to 1 for local worker processes.
-SINGLE_THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-
+from ipcosim.harness.threads import single_threaded
 
 #: Dask retries of a run whose worker died (the local pool re-runs such runs alone instead).
 MAX_WORKER_DEATHS = 2
@@ -181,8 +178,7 @@ class LocalExecutor:
         # oversubscribe the machine (measured: 2-worker scaling 1.4x instead of 1.85x). The
         # variables must be in the environment the workers are spawned with (this process has
         # loaded its BLAS already and is not affected); values the user set are kept.
-        for name in SINGLE_THREAD_ENV:
-            os.environ.setdefault(name, "1")
+        single_threaded()
         self._pool: cf.ProcessPoolExecutor | None = None
 
     @property

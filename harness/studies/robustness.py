@@ -7,6 +7,7 @@ throughout) and the cart ended inside the +-2 % settling band of the step (the t
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -114,6 +115,150 @@ def summary_markdown(summary: Mapping[str, Any], title: str = "Robustness") -> s
         lines.append(f"| {name} | {s['n']} | " + " | ".join(fmt(s[k]) for k in
                                                          ("mean", "std", "min", "p5", "median", "p95", "max")) + " |")
     return "\n".join(lines) + "\n"
+
+
+def write_summary(rows: Sequence[Mapping[str, Any]], spec: Any, varied: Sequence[str], out: Path,
+                  extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Write a robustness sweep's ``summary.json``, ``summary.md`` and ``figures/`` (the metric against each
+    varied parameter, then every metric's distribution) under ``out``; returns the summary
+    (:func:`summarize` with the scenario's name and ``extra``, e.g. the variations and the seed).
+
+    Parameters
+    ----------
+    rows : sequence of mapping
+        The sweep's rows.
+    spec : RunSpec
+        The scenario that ran (its ``name`` and ``metric_names``).
+    varied : sequence of str
+        The parameters the sweep varied (``component.variable``).
+    out : Path
+        The sweep's folder.
+    extra : mapping, optional
+        Recorded in the summary beside the scenario's name.
+    """
+    import json
+
+    summary = summarize(rows, spec.metric_names)
+    summary.update({"scenario": spec.name, **(extra or {})})
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    md = summary_markdown(summary, title=f"Robustness of {spec.name}")
+    figures = plot_distributions(rows, spec.metric_names, out / "figures", title=spec.name)
+    metric = "itae_position" if "itae_position" in spec.metric_names else spec.metric_names[0]
+    by_param = plot_parameters(rows, list(varied), metric, out / "figures",
+                               title=f"{spec.name}: {metric} against each varied parameter")
+    if by_param is not None:
+        figures.insert(0, by_param)
+    md += "\n" + "\n".join(f"![{p.stem}](figures/{p.name})" for p in figures) + "\n"
+    (out / "summary.md").write_text(md)
+    return summary
+
+
+def summary_line(summary: Mapping[str, Any]) -> str:
+    """The success rate with its 95 % interval and the counts per status, on one line."""
+    lo, hi = summary["success_ci95"]
+    counts = ", ".join(f"{k} {v}" for k, v in sorted(summary["counts"].items()))
+    return (f"success rate {100 * summary['success_rate']:.1f} % (95 % CI {100 * lo:.1f}-{100 * hi:.1f} %) "
+            f"of {summary['runs']} runs: {counts}")
+
+
+@dataclass
+class SweepStudy:
+    """A robustness sweep of one scenario, checked and ready to run (:func:`sweep_study`, ``ipcosim sweep``):
+    :meth:`run` runs the cases into ``out`` (resuming finished ones), :meth:`write` writes the summary.
+
+    Attributes
+    ----------
+    spec : RunSpec
+        The scenario's run spec (fixed values applied).
+    flavour : str
+        Which FMUs run it, and why (``ipcosim.harness.studies.specs.study_spec``).
+    varies : list of Vary
+        The variations (``ipcosim.harness.grammar.parse_all``).
+    cases : list of SweepCase
+        The runs.
+    out : Path
+        The sweep's folder.
+    metadata : dict
+        What ``metadata.json`` records of the request (variations, fixed values, samples, seed, set).
+    """
+
+    spec: Any
+    flavour: str
+    varies: list
+    cases: list
+    out: Path
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def describe(self, executor: Any) -> str:
+        """One line: the scenario, the runs, where they run, the flavour and the folder."""
+        return (f"sweep {self.spec.name}: {len(self.cases)} runs on {executor.description}, {self.flavour} -> "
+                f"{self.out}")
+
+    def run(self, executor: Any, progress: bool = True, extra: Mapping[str, Any] | None = None) -> Any:
+        """The sweep on ``executor`` (``run_sweep``; ``extra`` joins the metadata). An interruption aborts
+        the executor; the finished runs stay in ``out`` and a second run resumes them."""
+        from ipcosim.harness.studies.specs import for_executor
+        from ipcosim.harness.studies.sweep import run_sweep
+
+        try:
+            return run_sweep(for_executor(self.spec, executor), self.cases, out=self.out, executor=executor,
+                             progress=progress, extra_metadata={**self.metadata, **(extra or {})})
+        except KeyboardInterrupt:
+            executor.abort()
+            raise
+
+    def write(self, result: Any) -> dict[str, Any]:
+        """The summary, its Markdown and its figures (:func:`write_summary`); returns the summary."""
+        return write_summary(result.rows, self.spec, [v.name for v in self.varies], self.out,
+                             {"vary": self.metadata["vary"], "seed": self.metadata["seed"]})
+
+
+def sweep_study(scenario: str, vary: Sequence[str], *, overrides: Mapping[str, float] | None = None,
+                samples: int | None = None, seed: int = 0, fmus: str = "auto", parameter_set: str | None = None,
+                stop_time: float | None = None, step: float | None = None, out: Path | str | None = None,
+                fresh: bool = False) -> SweepStudy:
+    """A robustness sweep of ``scenario``, every option checked before any run.
+
+    Parameters
+    ----------
+    scenario : str
+        Scenario name or path, or ``pure:single-mass-lqr``.
+    vary : sequence of str
+        ``COMP.VAR=FORM`` variations (``ipcosim.harness.grammar.FORMS_HELP``).
+    overrides : mapping, optional
+        Fixed ``component.variable`` values in every run.
+    samples : int, optional
+        Runs per grid point (default 100 with a random form, else 1).
+    seed : int
+        Master seed.
+    fmus : {'auto', 'python', 'native'}
+        FMU flavour (``ipcosim.harness.studies.specs.study_spec``).
+    parameter_set : str, optional
+        The scenario's parameter set to bind.
+    stop_time, step : float, optional
+        The run's experiment [s] (default: the scenario's).
+    out : Path or str, optional
+        The sweep's folder (default ``out/sweep/<scenario>``).
+    fresh : bool
+        Discard results already there (``ipcosim.harness.studies.store.discard_results``).
+    """
+    from ipcosim.harness.grammar import parse_all
+    from ipcosim.harness.studies.cases import make_cases
+    from ipcosim.harness.studies.specs import default_out, study_spec
+    from ipcosim.harness.studies.store import discard_results
+
+    overrides = dict(overrides or {})
+    spec, flavour = study_spec(scenario, fmus, names=[*overrides, *(v.partition("=")[0].strip() for v in vary)],
+                               check=lambda s: parse_all(vary, s.parameters), stop_time=stop_time, step=step,
+                               overrides=overrides, parameter_set=parameter_set)
+    varies = parse_all(vary, spec.parameters)
+    cases = make_cases(varies, spec.parameters, samples=samples, seed=seed)
+    folder = Path(out) if out else default_out(scenario)
+    if fresh and folder.exists():
+        discard_results(folder)
+    return SweepStudy(spec, flavour, varies, cases, folder,
+                      {"vary": list(vary), "set": overrides, "samples": samples, "seed": seed,
+                       "parameter_set": parameter_set})
 
 
 def plot_distributions(rows: Sequence[Mapping[str, Any]], metric_names: Sequence[str], out_dir: Path,

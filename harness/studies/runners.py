@@ -189,9 +189,11 @@ class PurePlantSpec(RunSpec):
                 "with_series": self.with_series, "parameters": dict(self.parameters)}
 
     def build(self) -> Runner:
+        from ipcosim.controllers.design import lqr_gain
+        from ipcosim.controllers.simulate import LoopError, run_loop
         from ipcosim.fmus.linearize import linearize
         from ipcosim.fmus.params import preset, with_values
-        from ipcosim.fmus.plant import Plant
+        from ipcosim.fmus.plant import PlantStepError
         from ipcosim.harness.studies.cost import metrics_and_cost_terms, series
 
         nominal_plant = preset(self.preset)
@@ -201,9 +203,7 @@ class PurePlantSpec(RunSpec):
 
         def gain(q: tuple[float, ...], r: float) -> np.ndarray:
             if (q, r) not in gains:
-                import control
-                K, _, _ = control.lqr(design.A, design.B, np.diag(q), np.array([[r]]))
-                gains[(q, r)] = np.asarray(K, dtype=float).ravel()
+                gains[(q, r)] = lqr_gain(design.A, design.B, np.diag(q), np.array([[r]])).ravel()
             return gains[(q, r)]
 
         def run(params: Mapping[str, float], seed: int) -> dict:
@@ -211,41 +211,47 @@ class PurePlantSpec(RunSpec):
             if unknown:
                 raise RunFailure(f"{spec.name} has no parameter {sorted(unknown)[0]!r}")
             v = {**spec.parameters, **params}
-            plant_values = {k[6:]: val for k, val in v.items() if k.startswith("plant.")}
-            plant = Plant(with_values(nominal_plant, plant_values))
-            K = gain((v["controller.q_position"], v["controller.q_velocity"], v["controller.q_angle"],
-                      v["controller.q_angular_velocity"]), v["controller.r_voltage"])
-            h = spec.step
-            ratio = v["controller.sample_period"] / h
-            every = int(round(ratio))
-            if every < 1 or abs(ratio - every) > 1e-9 * max(1.0, ratio):
-                raise RunFailure(f"controller.sample_period = {v['controller.sample_period']:g} s is not an "
-                                 f"integer multiple of the step {h:g} s")
-            n = int(round(spec.stop_time / h))
-            limit = v["controller.voltage_limit"]
+            plant = with_values(nominal_plant, {k[6:]: val for k, val in v.items() if k.startswith("plant.")})
+            law = StateFeedback(gain((v["controller.q_position"], v["controller.q_velocity"], v["controller.q_angle"],
+                                      v["controller.q_angular_velocity"]), v["controller.r_voltage"]),
+                                v["controller.sample_period"], v["controller.voltage_limit"])
             amplitude, step_time = v["setpoint.amplitude"], v["setpoint.step_time"]
-            t = np.arange(n + 1) * h
-            pos, ang, ref, volt = (np.empty(n + 1) for _ in range(4))
-            u = 0.0
-            for k in range(n + 1):
-                x = plant.x
-                r = amplitude if t[k] >= step_time else 0.0
-                if k % every == 0:
-                    err = np.array([x[0] - r, x[1], x[2], x[3]])
-                    u = float(min(max(-K @ err, -limit), limit))
-                pos[k], ang[k], ref[k], volt[k] = x[0], x[2], r, u
-                if k == n:
-                    break
-                if abs(x[2]) > 1.5:  # fallen far beyond the upright limit: stop integrating
-                    pos[k + 1:], ang[k + 1:], ref[k + 1:], volt[k + 1:] = x[0], x[2], r, u
-                    break
-                plant.do_step(float(t[k]), h, u)
-            metrics = metrics_and_cost_terms(t, pos, ref, ang, volt)
+            try:
+                r = run_loop(law, plant, spec.stop_time, spec.step, lambda t: amplitude if t >= step_time else 0.0,
+                             observe="state", hold_beyond=FALLEN_FAR_RAD)
+            except LoopError as exc:
+                raise RunFailure(f"controller.{exc}") from None
+            if r.failure:
+                raise PlantStepError(r.failure)
+            cols = (r.time, r.states[:, 0], r.reference, r.signal("pendulum_angle"), r.voltage)
+            metrics = metrics_and_cost_terms(*cols)
             if spec.with_series:
-                metrics["series"] = series(t, pos, ref, ang, volt)
+                metrics["series"] = series(*cols)
             return metrics
 
         return run
+
+
+#: Past this pendulum angle [rad] the stand-in stops integrating (fallen far beyond the upright limit) and holds
+#: its last sample to the end of the run.
+FALLEN_FAR_RAD = 1.5
+
+
+class StateFeedback:
+    """The stand-in's controller: ``u = -K (x - [r, 0, 0, 0])`` on the plant's true state, clipped to
+    ``+-voltage_limit`` (``run_loop(observe="state")`` gives it the state at each sample)."""
+
+    def __init__(self, K: np.ndarray, sample_period: float, voltage_limit: float) -> None:
+        self.K, self.sample_period, self.voltage_limit = K, sample_period, voltage_limit
+
+    def reset(self) -> None:
+        """Nothing to reset: the law has no state."""
+
+    def step(self, x: np.ndarray, r: float) -> float:
+        """The voltage for the state ``x`` (``ipcosim.fmus.physics`` order) and the reference ``r`` [m]."""
+        from ipcosim.controllers.laws import saturate
+
+        return saturate(float(-self.K @ np.array([x[0] - r, x[1], x[2], x[3]])), self.voltage_limit)
 
 
 # --------------------------------------------------------------------------- several scenarios at once

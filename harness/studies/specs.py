@@ -1,6 +1,7 @@
 """Turn a scenario name or path (plus run settings) into a run specification."""
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
 from ipcosim.errors import UsageError
@@ -9,6 +10,14 @@ from ipcosim.harness.studies.runners import PurePlantSpec, RunSpec
 
 #: Scenario names served without FMUs (pure-Python stand-ins, see ``ipcosim.harness.studies.runners``).
 PURE_SCENARIOS = {"pure:single-mass-lqr": PurePlantSpec}
+
+
+def default_out(scenario: str, kind: str = "sweep") -> Path:
+    """A study's default output folder, ``out/<kind>/<scenario name>`` (``kind``: sweep, tune...)."""
+    name = Path(scenario.rstrip("/")).name.replace(":", "-")
+    if name.endswith(".ssp"):
+        name = name[:-4]
+    return Path("out") / kind / name
 
 
 def spec_for(scenario: str, stop_time: float | None = None, step: float | None = None,

@@ -137,3 +137,13 @@ def _package_versions() -> tuple[tuple[str, str], ...]:
         except importlib_metadata.PackageNotFoundError:
             versions[name] = "not installed"
     return tuple(versions.items())
+
+
+def discard_results(out: Path) -> None:
+    """Remove a sweep's results from ``out`` (``results.csv``, ``metadata.json``, the summary and its figures),
+    so that the sweep starts afresh; other files stay."""
+    import shutil
+
+    for name in (RESULTS_FILE, METADATA_FILE, "summary.md", "summary.json"):
+        (out / name).unlink(missing_ok=True)
+    shutil.rmtree(out / "figures", ignore_errors=True)

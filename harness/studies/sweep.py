@@ -95,6 +95,13 @@ class SweepResult:
     elapsed_s: float = 0.0
     counts: dict[str, int] = field(default_factory=dict)
 
+    def failure(self) -> str | None:
+        """The error when every run failed (None otherwise: some ran, or there were none)."""
+        errors = [r for r in self.rows if r["status"] == "error"]
+        if self.rows and len(errors) == len(self.rows):
+            return f"all {len(errors)} runs failed; first error: {errors[0]['error']}"
+        return None
+
     @property
     def success_rate(self) -> float:
         """Fraction of runs with status ``ok``."""
@@ -116,7 +123,7 @@ def plan_hash(spec: RunSpec, cases: Sequence[SweepCase]) -> str:
                         "cases": [[c.index, c.seed, sorted(c.params.items())] for c in cases]})
 
 
-def run_sweep(spec: RunSpec, cases: Sequence[SweepCase], *, out_dir: str | os.PathLike | None = None,
+def run_sweep(spec: RunSpec, cases: Sequence[SweepCase], *, out: str | os.PathLike | None = None,
               executor: Executor | None = None, workers: int | None = None, scheduler: Any = None,
               resume: bool = True, progress: bool | TextIO = False,
               extra_metadata: Mapping[str, Any] | None = None) -> SweepResult:
@@ -128,7 +135,7 @@ def run_sweep(spec: RunSpec, cases: Sequence[SweepCase], *, out_dir: str | os.Pa
         What one run is.
     cases : sequence of SweepCase
         The runs (unique indices).
-    out_dir : path, optional
+    out : path, optional
         Folder for ``results.csv`` and ``metadata.json``; rows are appended as runs finish.
         Without it the sweep is kept in memory only.
     executor : LocalExecutor or DaskExecutor, optional
@@ -139,7 +146,7 @@ def run_sweep(spec: RunSpec, cases: Sequence[SweepCase], *, out_dir: str | os.Pa
     scheduler : str or distributed.Client, optional
         Run on this Dask cluster instead of local processes.
     resume : bool
-        Reuse finished runs found in ``out_dir`` (an interrupted earlier run of the same sweep).
+        Reuse finished runs found in ``out`` (an interrupted earlier run of the same sweep).
         With False, existing results there are replaced.
     progress : bool or stream
         Show a progress bar (on stderr, or the given stream).
@@ -153,11 +160,11 @@ def run_sweep(spec: RunSpec, cases: Sequence[SweepCase], *, out_dir: str | os.Pa
     Raises
     ------
     SweepMismatchError
-        ``out_dir`` holds results of another sweep (different scenario, variations or seeds).
+        ``out`` holds results of another sweep (different scenario, variations or seeds).
     SchedulerError
         The Dask scheduler cannot be reached.
     KeyboardInterrupt
-        After stopping the workers; every finished run is in ``out_dir``.
+        After stopping the workers; every finished run is in ``out``.
     """
     t_start = time.monotonic()
     indices = [c.index for c in cases]
@@ -165,7 +172,7 @@ def run_sweep(spec: RunSpec, cases: Sequence[SweepCase], *, out_dir: str | os.Pa
         raise ValueError("sweep cases must have unique indices")
     columns = columns_for(spec, cases)
     meta = _start_metadata(spec, cases, extra_metadata)
-    path = Path(out_dir) / RESULTS_FILE if out_dir is not None else None
+    path = Path(out) / RESULTS_FILE if out is not None else None
     done, writer = (_open_results(path, meta, columns, set(indices) if resume else None) if path is not None
                     else ({}, None))
     resumed = len(done)

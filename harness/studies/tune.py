@@ -17,7 +17,6 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -358,27 +357,6 @@ def _evolve(mapper: SweepMap, bounds: Sequence[tuple[float, float]], x0: np.ndar
 
 # --------------------------------------------------------------------------- outputs
 
-SSV_NS = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
-
-
-def ssv_text(values: Mapping[str, Any], name: str = "autotuned", description: str = "") -> str:
-    """An SSP 1.0 parameter set (``.ssv``): bool -> Boolean, int -> Integer, else Real."""
-    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
-             f'<ssv:ParameterSet xmlns:ssv="{SSV_NS}" version="1.0" name={quoteattr(name)}'
-             + (f" description={quoteattr(description)}" if description else "") + ">",
-             "  <ssv:Parameters>"]
-    for key, value in values.items():
-        if isinstance(value, bool):
-            typed = f'<ssv:Boolean value="{str(value).lower()}"/>'
-        elif isinstance(value, int):
-            typed = f'<ssv:Integer value="{value}"/>'
-        else:
-            typed = f'<ssv:Real value="{float(value)!r}"/>'
-        lines.append(f"    <ssv:Parameter name={quoteattr(key)}>{typed}</ssv:Parameter>")
-    lines += ["  </ssv:Parameters>", "</ssv:ParameterSet>", ""]
-    return "\n".join(lines)
-
-
 def tuned_parameter_set(scenario: str, best: Mapping[str, float],
                         parameter_set: str | None = None) -> tuple[dict[str, Any], str | None]:
     """The complete parameter set to write for a tuned scenario.
@@ -416,19 +394,6 @@ def tuned_parameter_set(scenario: str, best: Mapping[str, float],
     return {n: float(v) for n, v in best.items()}, None
 
 
-def read_ssv_values(path: Path) -> dict[str, float]:
-    """The Real values of an ``.ssv`` file (``name`` -> value)."""
-    from lxml import etree
-
-    root = etree.parse(str(path)).getroot()
-    out = {}
-    for p in root.iter(f"{{{SSV_NS}}}Parameter"):
-        real = p.find(f"{{{SSV_NS}}}Real")
-        if real is not None:
-            out[p.get("name")] = float(real.get("value"))
-    return out
-
-
 TABLE_METRICS = ("cost", "itae_position", "settling_time_s", "overshoot_m", "steady_state_error_m",
                  "max_abs_angle_rad", "peak_voltage_V", "rms_voltage_V", "upright")
 
@@ -457,3 +422,238 @@ def write_evaluations(path: Path, rows: Sequence[Mapping[str, Any]], names: Sequ
         w.writerow(keys)
         for r in rows:
             w.writerow(["" if r.get(k) is None else r.get(k) for k in keys])
+
+
+# --------------------------------------------------------------------------- a scenario's tuning (ipcosim tune)
+
+
+def _scenario_dir(scenario: str) -> Path | None:
+    """The scenario's folder (where its .ssv files live), or None."""
+    path = Path(scenario)
+    if path.is_dir():
+        return path
+    if path.suffix == ".ssp" and path.exists():
+        return path.parent
+    from ipcosim.harness.paths import SCENARIO_DIR
+
+    candidate = SCENARIO_DIR / scenario
+    return candidate if candidate.is_dir() else None
+
+
+def install_path(scenario: str) -> Path:
+    """Where ``--install`` puts a tuned set: ``autotuned.ssv`` in the scenario's folder (beside its other sets).
+
+    Raises
+    ------
+    UsageError
+        If the scenario has no folder (an archive, a pure stand-in).
+    """
+    folder = _scenario_dir(scenario)
+    if folder is None or Path(scenario).suffix == ".ssp":
+        raise UsageError(f"--install: scenario {scenario!r} has no folder to install a parameter set into")
+    return folder / "autotuned.ssv"
+
+
+def starting_set(scenario: str, parameter_set: str | None = None) -> str | None:
+    """The parameter set a tuning starts from: ``parameter_set``, else ``thesis`` where the scenario has it."""
+    from ipcosim.harness.studies.specs import PURE_SCENARIOS
+
+    if parameter_set is None and scenario not in PURE_SCENARIOS:
+        from ipcosim.harness.scenario.ssp import load_scenario
+
+        if "thesis" in load_scenario(scenario).parameter_sets:
+            return "thesis"
+    return parameter_set
+
+
+def robustness_objective(scenario: str, spec: RunSpec, fixed: Mapping[str, Any], parameter_set: str | None,
+                         max_peak_sensitivity: float | None = None, min_delay_margin: float | None = None,
+                         spread: float | None = None) -> Robustness | None:
+    """The robust objective of ``--max-peak-sensitivity``, ``--min-delay-margin``, ``--spread`` (None without
+    any); the spread scales the plant parameters of ``robustness.DEFAULT_UNCERTAINTY``.
+
+    Raises
+    ------
+    UsageError
+        A limit that is not a number > 0, or a spread not in (0, 1).
+    """
+    from ipcosim.harness.studies.robustness import DEFAULT_UNCERTAINTY
+
+    if max_peak_sensitivity is None and min_delay_margin is None and spread is None:
+        return None
+    for flag, value in (("--max-peak-sensitivity", max_peak_sensitivity),
+                        ("--min-delay-margin", min_delay_margin), ("--spread", spread)):
+        if value is not None and not (math.isfinite(value) and value > 0 and (flag != "--spread" or value < 1)):
+            raise UsageError(f"{flag} {value}: expected a number > 0" + (" and < 1" if flag == "--spread" else ""))
+    names = list(dict.fromkeys(n for kind in DEFAULT_UNCERTAINTY.values() for n in kind))
+    plants = spread_plants(spec.parameters, names, spread) if spread else ()
+    return Robustness(scenario, parameter_set, {k: float(v) for k, v in fixed.items()},
+                      max_peak_sensitivity, min_delay_margin, plants)
+
+
+@dataclass
+class TunedFiles:
+    """What :meth:`TuneStudy.write` wrote: the tuned set (``ssv``, and ``installed`` beside the scenario with
+    ``--install``), the report ``tune.md`` and every run (``evaluations``); ``table`` is the report's
+    before/after table."""
+
+    ssv: Path
+    installed: Path | None
+    report: Path
+    evaluations: Path
+    table: str
+
+
+@dataclass
+class TuneStudy:
+    """The tuning of a scenario, checked and ready to run (:func:`tune_study`): :meth:`run` tunes,
+    :meth:`write` writes the tuned set, the report and the evaluations."""
+
+    scenario: str
+    spec: RunSpec
+    flavour: str
+    names: list[str]
+    bounds: list[tuple[float, float]]
+    parameter_set: str | None
+    out: Path
+    ssv: Path
+    install: Path | None = None
+    robust: Robustness | None = None
+    budget: int = 200
+    seed: int = 0
+    w_angle: float = costmod.W_ANGLE
+    w_voltage: float = costmod.W_VOLTAGE
+
+    def describe(self, executor: Any) -> str:
+        """One line: what is tuned within which bounds, the budget and where it runs."""
+        ranges = ", ".join(f"[{lo:g}, {hi:g}]" for lo, hi in self.bounds)
+        return (f"tune {self.spec.name}: {', '.join(self.names)} within {ranges}, budget {self.budget} runs on "
+                f"{executor.description}, {self.flavour}")
+
+    def run(self, executor: Any, progress: bool = True) -> TuneResult:
+        """Tune on ``executor`` (:func:`tune`); an interruption aborts the executor and writes nothing."""
+        from ipcosim.harness.studies.specs import for_executor
+
+        try:
+            return tune(for_executor(self.spec, executor), self.names, self.bounds, budget=self.budget,
+                        executor=executor, seed=self.seed, w_angle=self.w_angle, w_voltage=self.w_voltage,
+                        progress=progress, robust=self.robust)
+        except KeyboardInterrupt:
+            executor.abort()
+            raise
+
+    def write(self, res: TuneResult) -> TunedFiles:
+        """Write every run (``evaluations.csv``), the tuned parameter set (``ssv``, and ``install`` when
+        given; :func:`tuned_parameter_set`) and the report ``tune.md``."""
+        from ipcosim.harness.scenario.ssp_gen import ssv_text
+
+        files = TunedFiles(self.ssv, self.install, self.out / "tune.md", self.out / "evaluations.csv",
+                           before_after_markdown(res, f"{self.parameter_set} gains" if self.parameter_set
+                                                 else "scenario gains"))
+        write_evaluations(files.evaluations, res.evaluations, self.names)
+        values, component = tuned_parameter_set(self.scenario, res.best, self.parameter_set)
+        text = ssv_text(values, "autotuned", self._description(res))
+        self.ssv.parent.mkdir(parents=True, exist_ok=True)
+        self.ssv.write_text(text)
+        if self.install is not None:
+            self.install.write_text(text)
+        files.report.write_text(self._report(res, files.table, component))
+        return files
+
+    def _description(self, res: TuneResult) -> str:
+        scenario_hash = getattr(self.spec, "scenario_hash", "") or self.spec.key
+        return (f"ipcosim tune {self.spec.name} (scenario hash {scenario_hash}): J = {res.best_cost:.6g} "
+                f"(scenario gains: {res.nominal_cost:.6g}), {len(res.evaluations)} runs, seed {self.seed}, "
+                f"w_angle {self.w_angle:g}, w_voltage {self.w_voltage:g}")
+
+    def _report(self, res: TuneResult, table: str, component: str | None) -> str:
+        """``tune.md``: what was tuned, the cost, the before/after table and how to run the tuned set."""
+        if component is None:
+            usage = "It holds the tuned values as component.variable (apply them with --set)."
+        elif self.install is not None:
+            usage = (f"It is the complete `{component}` parameter set ({self.parameter_set or 'default'} with the "
+                     f"tuned values), installed as `{self.install}`: `ipcosim run {self.scenario} --parameter-set "
+                     f"autotuned` runs it.")
+        else:
+            usage = (f"It is the complete `{component}` parameter set ({self.parameter_set or 'default'} with the "
+                     f"tuned values); copy it beside the scenario (or tune with --install) to run it with "
+                     f"`--parameter-set autotuned`.")
+        same = "" if res.best_cost < res.nominal_cost else \
+            "The optimiser found nothing better than the scenario's gains; the written set repeats them.\n"
+        return (f"# Tuning {self.spec.name}\n\n{self._description(res)}.\n\n"
+                f"Cost J = ITAE(x - r) + {self.w_angle:g} ITAE(theta) + {self.w_voltage:g} ISE(u); infinite when "
+                f"the pendulum falls.\n\n{table}\n{same}\nTuned parameter set: `{self.ssv}`. {usage}\n")
+
+
+def _searched(params: str, bounds: Sequence[str], spec: RunSpec) -> tuple[list[str], list[tuple[float, float]]]:
+    """The parameters to tune and their search ranges, checked against the scenario's parameters."""
+    names = parse_params(params, spec.parameters)
+    return names, parse_bounds(bounds, names, spec.parameters)
+
+
+def _outputs(scenario: str, out: Path | str | None, ssv: Path | str | None,
+             install: bool) -> tuple[Path, Path, Path | None]:
+    """Where a tuning writes: its folder (created), the tuned set and, with ``install``, the copy beside the
+    scenario (checked before any run)."""
+    from ipcosim.harness.studies.specs import default_out
+
+    folder = Path(out) if out else default_out(scenario, "tune")
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder, Path(ssv) if ssv else folder / "autotuned.ssv", install_path(scenario) if install else None
+
+
+def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), overrides: Mapping[str, float] | None = None,
+               budget: int = 200, seed: int = 0, stop_time: float | None = None, step: float | None = None,
+               w_angle: float | None = None, w_voltage: float | None = None, fmus: str = "auto",
+               parameter_set: str | None = None, out: Path | str | None = None, ssv: Path | str | None = None,
+               install: bool = False, max_peak_sensitivity: float | None = None,
+               min_delay_margin: float | None = None, spread: float | None = None) -> TuneStudy:
+    """The tuning of ``params`` of a scenario, every option checked before any run (``ipcosim tune``).
+
+    Parameters
+    ----------
+    scenario : str
+        Scenario name or path, or ``pure:single-mass-lqr``.
+    params : str
+        The parameters to tune, ``component.variable`` comma-separated (:func:`parse_params`).
+    bounds : sequence of str
+        ``COMP.VAR=LOW:HIGH`` search ranges (:func:`parse_bounds`; default nominal/2 .. nominal*2).
+    overrides : mapping, optional
+        Fixed ``component.variable`` values in every run.
+    budget, seed : int
+        Runs, exactly (candidates with a spread), and the optimiser's seed.
+    stop_time, step : float, optional
+        The run's experiment [s] (default: the scenario's).
+    w_angle, w_voltage : float, optional
+        Cost weights (default ``cost.W_ANGLE``, ``cost.W_VOLTAGE``).
+    fmus : {'auto', 'python', 'native'}
+        FMU flavour (``ipcosim.harness.studies.specs.study_spec``).
+    parameter_set : str, optional
+        The set to start from (default: ``thesis`` where the scenario has it, :func:`starting_set`).
+    out : Path or str, optional
+        Output folder (created here; default ``out/tune/<scenario>``).
+    ssv : Path or str, optional
+        Where the tuned set goes (default ``OUT/autotuned.ssv``).
+    install : bool
+        Also put it beside the scenario (:func:`install_path`).
+    max_peak_sensitivity, min_delay_margin, spread : float, optional
+        The robust objective (:func:`robustness_objective`).
+
+    Raises
+    ------
+    UsageError
+        Any option that does not fit the scenario, named (TuneError for parameters, bounds and budget).
+    """
+    from ipcosim.harness.studies.specs import study_spec
+
+    overrides = dict(overrides or {})
+    pset = starting_set(scenario, parameter_set)
+    spec, flavour = study_spec(scenario, fmus, names=list(overrides), check=lambda s: _searched(params, bounds, s),
+                               stop_time=stop_time, step=step, overrides=overrides, parameter_set=pset)
+    names, ranges = _searched(params, bounds, spec)
+    plan_population(budget, len(names))  # checks the budget before starting workers
+    folder, ssv_path, installed = _outputs(scenario, out, ssv, install)
+    robust = robustness_objective(scenario, spec, overrides, pset, max_peak_sensitivity, min_delay_margin, spread)
+    weights = (costmod.W_ANGLE if w_angle is None else w_angle, costmod.W_VOLTAGE if w_voltage is None else w_voltage)
+    return TuneStudy(scenario, spec, flavour, names, ranges, pset, folder, ssv_path, installed, robust, budget, seed,
+                     *weights)

@@ -1,0 +1,246 @@
+"""The value layout of one run: where every connector's value lives while the run proceeds, and
+the arrays the stepping loops read and write.
+
+Real connectors of all components share one ``ctypes`` double vector (per component its
+outputs, then its inputs); each component reads its outputs into and sets its inputs from its
+own slice of it with one call, and the vector is copied to the record after every step.
+Integer and Boolean connectors share one ``c_int`` vector (per component: integer outputs,
+inputs, boolean outputs, inputs), String connectors live in lists per component. A
+:class:`~ipcosim.harness.master.plan.Block` is one component's view of these vectors with its
+raw FMI functions, a :class:`~ipcosim.harness.master.plan.Channel` its connectors of one
+non-Real kind. The layout also names the record's columns (:attr:`Layout.column_kinds`).
+"""
+from __future__ import annotations
+
+import ctypes
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from ipcosim.harness.master.algorithm import GAUSS_SEIDEL
+from ipcosim.harness.master.plan import Block, Channel
+from ipcosim.harness.master.slave import Slave
+from ipcosim.harness.master.system import System, Variable, kind_of
+
+#: numpy type of a record column of each value kind.
+COLUMN_DTYPE = {"real": "f8", "integer": "i4", "boolean": "?", "string": "O"}
+
+#: ``start_value(component, variable)``: the value a connector starts the run with.
+StartValue = Callable[[str, str], Any]
+
+
+class Layout:
+    """The value vectors of a system's connectors and the record columns they fill.
+
+    Parameters
+    ----------
+    system : System
+        The bound system.
+    start_value : callable
+        ``start_value(component, variable)``: an input's value before the run (its ``set``
+        value, else its bound start), put into the vectors here.
+    """
+
+    def __init__(self, system: System, start_value: StartValue) -> None:
+        self.system = system
+        self.instances = list(system.instances)
+        self.index = {inst.name: i for i, inst in enumerate(self.instances)}
+        self._place_reals(start_value)
+        self._place_typed(start_value)
+        self._name_columns()
+
+    def _place_reals(self, start_value: StartValue) -> None:
+        """Place every Real connector in the value vector, inputs at their start values."""
+        self.real_outputs: list[list[Variable]] = []
+        self.real_inputs: list[list[Variable]] = []
+        offsets = []
+        pos = 0
+        for inst in self.instances:
+            outs = [v for v in inst.outputs if kind_of(v.type) == "real"]
+            ins = [v for v in inst.inputs if kind_of(v.type) == "real"]
+            self.real_outputs.append(outs)
+            self.real_inputs.append(ins)
+            offsets.append((pos, pos + len(outs)))
+            pos += len(outs) + len(ins)
+        self.n_values = pos
+        self.values_c = (ctypes.c_double * (pos + 1))()  # +1: empty slices still map one element
+        self.values = np.ctypeslib.as_array(self.values_c)[:pos]
+        self.out_offset = [o for o, _ in offsets]
+        self.in_offset = [i for _, i in offsets]
+        self.slot: dict[tuple[str, str], int] = {}
+        for k, inst in enumerate(self.instances):
+            for j, v in enumerate(self.real_outputs[k]):
+                self.slot[(inst.name, v.name)] = self.out_offset[k] + j
+            for j, v in enumerate(self.real_inputs[k]):
+                self.slot[(inst.name, v.name)] = self.in_offset[k] + j
+                start = start_value(inst.name, v.name)
+                self.values[self.in_offset[k] + j] = float(start) if start is not None else 0.0
+        self.output_slots = np.array([self.out_offset[k] + j for k in range(len(self.instances))
+                                      for j in range(len(self.real_outputs[k]))], dtype=int)
+
+    def _place_typed(self, start_value: StartValue) -> None:
+        """Place the Integer and Boolean connectors in one ``c_int`` vector (per component:
+        integer outputs, inputs, boolean outputs, inputs) and the String connectors in lists
+        per component; inputs at their start values."""
+        self.typed: list[dict[str, tuple[list[Variable], list[Variable]]]] = []
+        self.int_offset: dict[tuple[int, str], int] = {}
+        self.strings: dict[int, tuple[list[bytes], list[bytes]]] = {}
+        self.tslot: dict[tuple[str, str], tuple[str, int]] = {}  # (kind, int slot or string index)
+        self.string_slots: list[tuple[list[bytes], int]] = []
+        pos = 0
+        for k, inst in enumerate(self.instances):
+            groups = {}
+            for kind in ("integer", "boolean", "string"):
+                outs = [v for v in inst.outputs if kind_of(v.type) == kind]
+                ins = [v for v in inst.inputs if kind_of(v.type) == kind]
+                if not (outs or ins):
+                    continue
+                groups[kind] = (outs, ins)
+                if kind == "string":
+                    self._place_strings(k, outs, ins)
+                else:
+                    self.int_offset[(k, kind)] = pos
+                    for j, v in enumerate(outs + ins):
+                        self.tslot[(inst.name, v.name)] = (kind, pos + j)
+                    pos += len(outs) + len(ins)
+            self.typed.append(groups)
+        self.n_ints = pos
+        self.ints_c = (ctypes.c_int * (pos + 1))()
+        self.ints = np.ctypeslib.as_array(self.ints_c)[:pos]
+        for (comp, var), (kind, slot) in self.tslot.items():
+            if self.instances[self.index[comp]].model.variables[var].causality == "input":
+                self.store(kind, slot, start_value(comp, var))
+
+    def _place_strings(self, k: int, outs: list[Variable], ins: list[Variable]) -> None:
+        """Component ``k``'s String outputs and inputs: one list each, numbered in ``string_slots``."""
+        lists: tuple[list[bytes], list[bytes]] = ([b""] * len(outs), [b""] * len(ins))
+        self.strings[k] = lists
+        for lst, vs in zip(lists, (outs, ins)):
+            for j, v in enumerate(vs):
+                self.tslot[(self.instances[k].name, v.name)] = ("string", len(self.string_slots))
+                self.string_slots.append((lst, j))
+
+    def _name_columns(self) -> None:
+        """The record columns: ``time``, then every connector in SSD order. A connected input's
+        column is the transformed source value (what the connection delivers at that time):
+        ``columns`` (Real: name, slot, (source slot, factor, offset) or None), ``typed_columns``
+        (name, kind, slot, (source slot, mapping) or None) and the kind of every column,
+        ``column_kinds`` (``real``, ``integer``, ``boolean``, ``string``)."""
+        self.columns: list[tuple[str, int, tuple[int, float, float] | None]] = []
+        self.typed_columns: list[tuple[str, str, int, tuple[int, dict[int, int]] | None]] = []
+        self.column_kinds: dict[str, str] = {"time": "real"}
+        for inst in self.instances:
+            for v in inst.connectors:
+                kind = kind_of(v.type)
+                if kind is None:
+                    continue
+                name = f"{inst.name}.{v.name}"
+                self.column_kinds[name] = kind
+                link = self.system.link_into(inst.name, v.name)
+                if kind == "real":
+                    src = (self.slot[(link.src, link.src_var.name)], link.factor, link.offset) if link else None
+                    self.columns.append((name, self.slot[(inst.name, v.name)], src))
+                else:
+                    typed = (self.tslot[(link.src, link.src_var.name)][1], dict(link.mapping)) if link else None
+                    self.typed_columns.append((name, kind, self.tslot[(inst.name, v.name)][1], typed))
+
+    def row_fields(self) -> list[tuple[str, str]]:
+        """Name and numpy type of every recorded field: ``time``, then ``component.variable``
+        (see :data:`COLUMN_DTYPE`)."""
+        return [(n, COLUMN_DTYPE[k]) for n, k in self.column_kinds.items()]
+
+    # ------------------------------------------------------------------ values
+    def store(self, kind: str, slot: int, value: Any) -> None:
+        """Put a start value into the typed value store."""
+        if kind == "string":
+            lst, j = self.string_slots[slot]
+            lst[j] = b"" if value is None else (value if isinstance(value, bytes) else str(value).encode())
+        else:
+            self.ints[slot] = int(bool(value)) if kind == "boolean" else int(value or 0)
+
+    def put(self, component: str, variable: str, value: Any) -> None:
+        """Put the value of an input connector into its vector (what the next batched set sends);
+        nothing for a variable that is not a connector."""
+        slot = self.slot.get((component, variable))
+        if slot is not None:
+            self.values[slot] = float(value)
+        typed = self.tslot.get((component, variable))
+        if typed is not None:
+            self.store(typed[0], typed[1], value)
+
+    def get(self, component: str, variable: str) -> Any:
+        """Current value of a connector: float, int, bool or str."""
+        if (component, variable) in self.slot:
+            return float(self.values[self.slot[(component, variable)]])
+        kind, slot = self.tslot[(component, variable)]
+        if kind == "string":
+            lst, j = self.string_slots[slot]
+            return lst[j].decode("utf-8", "replace")
+        return bool(self.ints[slot]) if kind == "boolean" else int(self.ints[slot])
+
+    def snapshot_strings(self) -> tuple:
+        """The String connectors' current values, in ``string_slots`` order."""
+        return tuple(lst[j] for lst, j in self.string_slots)
+
+    def output_at(self, slot: int) -> tuple[int, str]:
+        """The component (index) whose output holds value-vector slot ``slot``, and the output's name."""
+        for k in range(len(self.instances)):
+            if self.out_offset[k] <= slot < self.in_offset[k]:
+                return k, self.real_outputs[k][slot - self.out_offset[k]].name
+        raise KeyError(slot)
+
+    # ------------------------------------------------------------------ the loops' arrays
+    def blocks(self, slaves: list[Slave], multiples: Mapping[str, int], algorithm: str) -> list[Block]:
+        """Every component's :class:`Block`: its views of the value vector, value references,
+        transfers and raw FMI functions (from its instantiated ``slave``)."""
+        blocks = []
+        for k, (inst, slave) in enumerate(zip(self.instances, slaves)):
+            handle, do_step, get_real, set_real = slave.raw()
+            outs, ins = self.real_outputs[k], self.real_inputs[k]
+            n_out, n_in = len(outs), len(ins)
+            out_values = (ctypes.c_double * max(n_out, 1)).from_buffer(self.values_c, 8 * self.out_offset[k])
+            in_values = (ctypes.c_double * max(n_in, 1)).from_buffer(self.values_c, 8 * self.in_offset[k])
+            transfers = []
+            for j, v in enumerate(ins):
+                link = self.system.link_into(inst.name, v.name)
+                if link is None:
+                    continue
+                src = self.index[link.src]
+                src_j = [x.name for x in self.real_outputs[src]].index(link.src_var.name)
+                transfers.append((j, src, src_j, float(link.factor), float(link.offset)))
+            m = multiples[inst.name]
+            private = (ctypes.c_double * max(n_out, 1))() if (m > 1 and algorithm != GAUSS_SEIDEL) else None
+            blocks.append(Block(index=k, name=inst.name, handle=handle, do_step=do_step, get_real=get_real,
+                                set_real=set_real, out_vrs=(ctypes.c_uint * max(n_out, 1))(*[v.vr for v in outs]),
+                                in_vrs=(ctypes.c_uint * max(n_in, 1))(*[v.vr for v in ins]),
+                                out_values=out_values, in_values=in_values, n_out=n_out, n_in=n_in,
+                                multiple=m, private_out=private, transfers=tuple(transfers),
+                                channels=self._channels(k, slave, m > 1 and algorithm != GAUSS_SEIDEL)))
+        return blocks
+
+    def _channels(self, k: int, slave: Slave, private: bool) -> tuple[Channel, ...]:
+        """Component ``k``'s Integer, Boolean and String channels (see :class:`Channel`);
+        ``private``: its outputs are read into a private array and published later (Jacobi
+        multi-rate)."""
+        out = []
+        for kind, (outs, ins) in self.typed[k].items():
+            if kind == "string":
+                o_vals, i_vals = self.strings[k]
+            else:
+                off = self.int_offset[(k, kind)]
+                o_vals = (ctypes.c_int * max(len(outs), 1)).from_buffer(self.ints_c, 4 * off)
+                i_vals = (ctypes.c_int * max(len(ins), 1)).from_buffer(self.ints_c, 4 * (off + len(outs)))
+            transfers = []
+            for j, v in enumerate(ins):
+                link = self.system.link_into(self.instances[k].name, v.name)
+                if link is not None:
+                    src = self.index[link.src]
+                    src_j = [x.name for x in self.typed[src][kind][0]].index(link.src_var.name)
+                    transfers.append((j, src, src_j, dict(link.mapping) or None))
+            own = None
+            if private and outs:
+                own = [b""] * len(outs) if kind == "string" else (ctypes.c_int * len(outs))()
+            get = slave.channel(kind, outs)[0] if outs else None
+            put = slave.channel(kind, ins)[1] if ins else None
+            out.append(Channel(kind, get, put, o_vals, i_vals, len(outs), len(ins), tuple(transfers), own))
+        return tuple(out)
