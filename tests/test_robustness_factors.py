@@ -61,10 +61,10 @@ def test_a_sweep_on_the_lab_bench_sets_its_values_and_set_wins_over_them() -> No
     inst, plant = realism("lab", "double-mass")
     assert lab["plant.input_delay"] == inst.input_delay and lab["plant.b2"] == plant["b2"]
     study = sweep_study("double-mass-lqg", ["plant.K=uniform(0.8,1.2)*nominal"], samples=2, realism="lab",
-                        overrides={"plant.b2": 0.0}, fmus="python")
+                        set={"plant.b2": 0.0}, fmus="python")
     given = study.metadata["set"]
     assert given["plant.b1"] == plant["b1"] and given["plant.b2"] == 0.0
-    assert study.spec.overrides["plant.voltage_resolution"] == inst.voltage_resolution
+    assert study.spec.set["plant.voltage_resolution"] == inst.voltage_resolution
 
 
 def test_a_lab_sweep_of_a_scenario_whose_kind_its_name_does_not_say_is_refused_by_name() -> None:
