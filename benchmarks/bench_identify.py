@@ -106,8 +106,8 @@ def lqr_margin_gap(kind: str, truth: dict[str, float], estimate: dict[str, float
     from ipcosim.harness.studies.analyze import analyze
 
     design = {f"controller.model_{k}": v for k, v in estimate.items() if not k.startswith("b")}
-    predicted = analyze(f"{kind}-lqr", overrides={**design, **{f"plant.{k}": v for k, v in estimate.items()}})
-    actual = analyze(f"{kind}-lqr", overrides={**design, **{f"plant.{k}": v for k, v in truth.items()}})
+    predicted = analyze(f"{kind}-lqr", set={**design, **{f"plant.{k}": v for k, v in estimate.items()}})
+    actual = analyze(f"{kind}-lqr", set={**design, **{f"plant.{k}": v for k, v in truth.items()}})
     return float(predicted["phase_margin_deg"]), float(actual["phase_margin_deg"])
 
 

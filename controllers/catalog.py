@@ -248,11 +248,13 @@ TUNED_ADAPTIVE: dict[str, tuple[HSMCGains, AdaptiveSchedules]] = {
 #: LQG weights (``ipcosim.controllers.lqg``; docs/controllers.md, "LQG", says how they were chosen): the
 #: thesis's state weights, Q_integral on the integral of the motor-cart error, R on the voltage, and the
 #: Kalman filter's input-disturbance standard deviation process_noise [V].
+#: friction_velocity [m/s] is the threshold of the Coulomb friction compensation (``laws.coulomb_estimate``),
+#: chosen on the lab bench's robustness runs (docs/controllers.md, "Coulomb friction compensation").
 TUNED_LQG: dict[str, dict[str, Any]] = {
-    "single-mass": {"Q": THESIS_SINGLE_MASS_Q_DIAGONAL, "Q_integral": 3.0e7, "R": 30 * THESIS_SINGLE_MASS_R,
-                    "process_noise": 0.3, "acceleration_noise": 0.0},
+    "single-mass": {"Q": THESIS_SINGLE_MASS_Q_DIAGONAL, "Q_integral": 3.0e7, "R": 180 * THESIS_SINGLE_MASS_R,
+                    "process_noise": 0.3, "acceleration_noise": 0.0, "friction_velocity": 5e-4},
     "double-mass": {"Q": THESIS_DOUBLE_MASS_Q_DIAGONAL, "Q_integral": 1.0e4, "R": 0.4,
-                    "process_noise": 1.0, "acceleration_noise": 3.0},
+                    "process_noise": 1.0, "acceleration_noise": 3.0, "friction_velocity": 2e-3},
 }
 
 
@@ -455,7 +457,34 @@ def _lqg_specs(kind: str) -> list[ParamSpec]:
         specs.append(ParamSpec(f"resolution_{o}", res, "rad" if o == "pendulum_angle" else "m",
                                f"Kalman filter: encoder resolution of the {o}; noise variance resolution^2/12",
                                "positive"))
-    return specs
+    return specs + _lqg_friction_specs(kind)
+
+
+#: The LQG's Coulomb friction compensation, one force per cart (the plant's names b; b1, b2 after "friction_").
+LQG_FRICTION = {"single-mass": ("friction_b",), "double-mass": ("friction_b1", "friction_b2")}
+
+
+def _lqg_friction_specs(kind: str) -> list[ParamSpec]:
+    """The LQG parameters that act at run time only (no redesign): friction compensation, integrator dead band."""
+    from ipcosim.fmus.instruments import REALISM  # noqa: PLC0415
+
+    lab = REALISM["lab"][kind]
+    carts = ("cart",) if kind == "single-mass" else ("active cart", "passive cart")
+    specs = [ParamSpec(name, float(lab[name[len("friction_"):]]), "N",  # type: ignore[index]
+                       f"Coulomb force the law compensates on the {cart} (default: the lab bench's fitted value; "
+                       "0 = no compensation)", "nonnegative")
+             for name, cart in zip(LQG_FRICTION[kind], carts)]
+    return specs + [ParamSpec("friction_velocity", 2e-3, "m/s", "friction compensation: none below this estimated "
+                                                                "cart speed, full above twice it, linear between",
+                              "positive"),
+                    ParamSpec("integrator_dead_band", 0.0, "m", "the integral ignores this much of the motor-cart "
+                                                                "position error (0 = none)", "nonnegative")]
+
+
+#: LQG parameters that act at run time, not through the design.
+def lqg_runtime_parameters(kind: str) -> tuple[str, ...]:
+    """The LQG parameters a changed value of which needs no redesign."""
+    return ("reference_time_constant", *(s.name for s in _lqg_friction_specs(kind)))
 
 
 def _pid_specs() -> list[ParamSpec]:
@@ -563,7 +592,8 @@ def set_values(kind: str, law: str, parameter_set: str) -> dict[str, Any]:
     if law == "LQG":
         t = TUNED_LQG[kind]
         v: dict[str, Any] = {f"Q_{s}": float(q) for s, q in zip(design_states(kind), t["Q"])}
-        v.update({k: float(t[k]) for k in ("Q_integral", "R", "process_noise", "acceleration_noise")})
+        v.update({k: float(t[k]) for k in ("Q_integral", "R", "process_noise", "acceleration_noise",
+                                            "friction_velocity")})
         return v
     if law == "LQR":
         states = design_states(kind)
@@ -769,7 +799,40 @@ def lqg_from_gains(kind: str, values: Mapping[str, Any], gains: Mapping[str, flo
     m = _sampled_model(kind, values, gains)
     coef = LQGCoefficients(K=tuple(float(gains[f"K_{s}"]) for s in m["states"]), K_voltage=float(gains["K_voltage"]),
                            K_integral=float(gains["K_integral"]), reference_states=rest_state(m["states"]), **m)
-    return LQG(kind, coef, float(values["voltage_limit"]), float(values["reference_time_constant"]))
+    return _lqg_law(kind, coef, values)
+
+
+def coulomb_model(kind: str, values: Mapping[str, Any]) -> dict[str, Any]:
+    """The Coulomb friction model of the LQG (``LQGCoefficients.friction_*``, ``volts_per_newton``) for the
+    ``model_*`` values and ``sample_period``, in plain Python.
+
+    A force on the motor cart acts as the voltage ``force / (force_per_amp / Ra)`` does (the design model has
+    no inductance). The active cart's position enters the passive cart's and the pendulum's equations only
+    through the spring force ``K (x_a - x_p)``, so a force of 1 N on the passive cart acts there as the column
+    ``A[:, x_a] / K`` (without the active cart's own row), and the loop holds it with the motor cart leading
+    by ``1 / K`` per newton.
+    """
+    p = _design_params(kind, values)
+    A, B, states, _ = linear_matrices(p, inductance=False)
+    T = float(values["sample_period"])
+    per_newton = p.Ra / p.force_per_amp
+    carts = [i for i, s in enumerate(states) if s.endswith("cart_velocity")]
+    forces = [[b * per_newton for b in B]]
+    leads = [[0.0] * len(states)]
+    if kind == "double-mass":
+        ia = states.index("active_cart_position")
+        forces.append([0.0 if i == carts[0] else row[ia] / p.K for i, row in enumerate(A)])
+        leads.append([1.0 / p.K if i == ia else 0.0 for i in range(len(states))])
+    columns = tuple(tuple(zoh_lists(A, f, T)[1]) for f in forces)
+    return dict(friction_states=tuple(carts), friction_columns=columns, friction_leads=tuple(map(tuple, leads)),
+                volts_per_newton=per_newton)
+
+
+def _lqg_law(kind: str, coef: LQGCoefficients, values: Mapping[str, Any]) -> LQG:
+    """The LQG law of ``coef`` with its friction model and the run-time parameters of ``values``."""
+    return LQG(kind, replace(coef, **coulomb_model(kind, values)), float(values["voltage_limit"]),
+               float(values["reference_time_constant"]), [float(values[n]) for n in LQG_FRICTION[kind]],
+               float(values["friction_velocity"]), float(values["integrator_dead_band"]))
 
 
 # ============================================================ every law with designed gains
@@ -787,7 +850,7 @@ def gain_specs(kind: str, law: str) -> list[ParamSpec]:
 def weight_parameters(kind: str, law: str) -> tuple[str, ...]:
     """The parameters of a designed law that enter only through the design (weights, poles, noises)."""
     if law == "LQG":
-        return tuple(s.name for s in _lqg_specs(kind) if s.name != "reference_time_constant")
+        return tuple(s.name for s in _lqg_specs(kind) if s.name not in lqg_runtime_parameters(kind))
     return lqr_weight_parameters(kind)
 
 
@@ -852,8 +915,7 @@ def build_law(kind: str, law: str, values: Mapping[str, Any] | None = None, back
     if law == "Excitation":
         return Excitation(kind, ExcitationGains(**{f: float(v[f]) for f in ExcitationGains.UNITS}), T, vlim)
     if law == "LQG":
-        return LQG(kind, LQGCoefficients.from_design(lqg_design_from(kind, v, backend)), vlim,
-                   float(v["reference_time_constant"]))
+        return _lqg_law(kind, LQGCoefficients.from_design(lqg_design_from(kind, v, backend)), v)
     if law == "SwingUp":
         balance = LQR(kind, lqr_design_from(kind, v, backend), vlim,
                       output_filter_time_constant=float(v["output_filter_time_constant"]))

@@ -497,7 +497,11 @@ class LQGCoefficients:
     ``K`` (n), ``K_voltage``, ``K_integral``: the feedback ``u = -K (x^ - x_r r) - K_voltage v -
     K_integral q`` (``ipcosim.controllers.lqg``); ``M`` (n x p): the Kalman current-estimator gain;
     ``Ad`` (n x n), ``Bd`` (n): the zero-order-hold model; ``C`` (p x n): the measured rows;
-    ``reference_states`` (n): ``x_r``.
+    ``reference_states`` (n): ``x_r``. The Coulomb friction model of each cart (``coulomb_model``; empty:
+    none): ``friction_states`` the index of its velocity state, ``friction_columns`` (n) what a force of
+    1 N on it held over a sample adds to the state, ``friction_leads`` (n) the state offset per newton at
+    which the loop holds that force (the spring's deflection for the passive cart), ``volts_per_newton``
+    the motor voltage of 1 N at standstill.
     """
 
     states: tuple[str, ...]
@@ -511,6 +515,10 @@ class LQGCoefficients:
     Bd: tuple[float, ...]
     C: tuple[tuple[float, ...], ...]
     reference_states: tuple[float, ...]
+    friction_states: tuple[int, ...] = ()
+    friction_columns: tuple[tuple[float, ...], ...] = ()
+    friction_leads: tuple[tuple[float, ...], ...] = ()
+    volts_per_newton: float = 0.0
 
     @classmethod
     def from_design(cls, design: Any) -> LQGCoefficients:
@@ -525,6 +533,20 @@ class LQGCoefficients:
                    C=rows(design.model.C), reference_states=tuple(map(float, design.reference_states)))
 
 
+def coulomb_estimate(v: float, b: float, threshold: float) -> float:
+    """The Coulomb force [N] the LQG compensates on a cart of estimated velocity ``v`` [m/s]: 0 for
+    ``|v| <= threshold``, ``b sign(v)`` for ``|v| >= 2 threshold``, linear in between (no compensation of a
+    cart at rest, whose velocity estimate is noise, and no slope at small signals)."""
+    a = abs(v) / threshold - 1.0
+    w = 0.0 if a <= 0.0 else (1.0 if a >= 1.0 else a)
+    return b * w if v > 0.0 else -b * w
+
+
+def dead_zone(e: float, band: float) -> float:
+    """``e`` less the band ``+-band`` (0 inside it)."""
+    return e - band if e > band else (e + band if e < -band else 0.0)
+
+
 class LQG(CurrentEstimatorLaw):
     """Discrete LQG with integral action and a one-sample computation delay (``ipcosim.controllers.lqg``).
 
@@ -534,6 +556,12 @@ class LQG(CurrentEstimatorLaw):
     new voltage saturates in the direction the integral pushes. With ``reference_time_constant`` tau > 0
     the law follows the reference through a first-order lag ``1/(tau s + 1)`` (sampled exactly), started
     at the first measured motor-cart position: a step then does not wind the integrator up.
+
+    Coulomb friction compensation: from the estimated velocity of each cart the law estimates the
+    cart's Coulomb force (:func:`coulomb_estimate` with the magnitude ``friction[c]``), adds the voltage
+    that cancels it (the motor cart's directly, the passive cart's through the spring: the motor cart
+    then leads by the deflection that pushes the passive cart with that force) and predicts the next
+    state with it (the Kalman filter's model includes the friction it estimates).
 
     Parameters
     ----------
@@ -545,10 +573,17 @@ class LQG(CurrentEstimatorLaw):
         [V].
     reference_time_constant : float
         tau [s] of the reference lag; 0 = the reference as given.
+    friction : sequence of float
+        Coulomb force compensated on each cart of ``coefficients.friction_states`` [N] (0 = none).
+    friction_velocity : float
+        The compensation's threshold [m/s] (:func:`coulomb_estimate`), > 0.
+    integrator_dead_band : float
+        The integral ignores this much of the motor-cart position error [m] (:func:`dead_zone`); 0 = none.
     """
 
     def __init__(self, kind: str, coefficients: LQGCoefficients, voltage_limit: float = 10.0,
-                 reference_time_constant: float = 0.0) -> None:
+                 reference_time_constant: float = 0.0, friction: Sequence[float] = (),
+                 friction_velocity: float = 1e-3, integrator_dead_band: float = 0.0) -> None:
         super().__init__(kind, coefficients.sample_period, voltage_limit)
         if coefficients.outputs != tuple(self.measured):
             raise LawParameterError("design", f"LQG design is for outputs {coefficients.outputs}, the "
@@ -556,6 +591,12 @@ class LQG(CurrentEstimatorLaw):
         self.coefficients = coefficients
         tau = _check_nonneg("reference_time_constant", reference_time_constant)
         self.reference_pole = math.exp(-self.sample_period / tau) if tau > 0 else 0.0
+        self.friction = tuple(_check_nonneg("friction", b) for b in friction)
+        if self.friction and len(self.friction) != len(coefficients.friction_states):
+            raise LawParameterError("friction", f"need {len(coefficients.friction_states)} Coulomb forces (one per "
+                                                f"cart of the friction model), got {len(self.friction)}")
+        self.friction_velocity = _check_positive("friction_velocity", friction_velocity)
+        self.integrator_dead_band = _check_nonneg("integrator_dead_band", integrator_dead_band)
         self._Cpinv = _right_inverse(coefficients.C)
         self.reset()
 
@@ -571,15 +612,24 @@ class LQG(CurrentEstimatorLaw):
         rf = self._motor_cart(y) if self.reference_filtered is None else self.reference_filtered
         self.reference_filtered = r = a * rf + (1.0 - a) * r
         x_hat = self._correct(y)
+        v0 = self.friction_velocity
+        forces = [coulomb_estimate(x_hat[i], b, v0) for i, b in zip(d.friction_states, self.friction)]
+        target = [xr * r for xr in d.reference_states]
+        for f, lead in zip(forces, d.friction_leads):
+            target = [t + f * g for t, g in zip(target, lead)]
         applied = self.applied
-        feedback = d.K_voltage * applied + sum(k * (x - xr * r) for k, x, xr in zip(d.K, x_hat, d.reference_states))
-        u = -feedback - d.K_integral * self.integral
-        integral = self.integral + (r - self._motor_cart(y)) * d.sample_period  # the design's T (a gain)
+        feedback = d.K_voltage * applied + sum(k * (x - t) for k, x, t in zip(d.K, x_hat, target))
+        u = d.volts_per_newton * sum(forces) - feedback - d.K_integral * self.integral
+        error = dead_zone(r - self._motor_cart(y), self.integrator_dead_band)
+        integral = self.integral + error * d.sample_period  # the design's T (a gain)
         limit = self.voltage_limit
         if abs(u) <= limit or (u > 0) != (-d.K_integral * (integral - self.integral) > 0):
             self.integral = integral
         self.applied = limit if u > limit else (-limit if u < -limit else u)
-        self.x_pred = [sum(map(mul, row, x_hat)) + b * applied for row, b in zip(d.Ad, d.Bd)]
+        x_pred = [sum(map(mul, row, x_hat)) + b * applied for row, b in zip(d.Ad, d.Bd)]
+        for f, column in zip(forces, d.friction_columns):
+            x_pred = [x - f * c for x, c in zip(x_pred, column)]
+        self.x_pred = x_pred
         return applied
 
 

@@ -43,7 +43,7 @@ from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
-from ipcosim.harness.scenario.binding import SwapTarget, bind, default_step, default_stop_time, warn_all, with_overrides
+from ipcosim.harness.scenario.binding import SwapTarget, bind, default_step, default_stop_time, warn_all, with_set
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
 
 
@@ -274,9 +274,9 @@ class Prepared:
                                                         if self.scenario.experiment.step_size is not None
                                                         else why_step)})
         if self.fmus == "native" and set:
-            from ipcosim.harness.scenario.flavour import native_overrides
-            set = native_overrides(self.system, set, self._python_values)
-        _, values = with_overrides(self.system, set or {})
+            from ipcosim.harness.scenario.flavour import native_set
+            set = native_set(self.system, set, self._python_values)
+        _, values = with_set(self.system, set or {})
         observers = list(observers)
         if progress:
             observers.append(Progress())

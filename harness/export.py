@@ -117,17 +117,17 @@ def _check_out(out: Path) -> None:
 
 
 def container_spec(system: System, order: list[str], multiples: dict[str, int], step: float, name: str,
-                   overrides: Mapping[tuple[str, str], Any] | None = None) -> ContainerSpec:
+                   set: Mapping[tuple[str, str], Any] | None = None) -> ContainerSpec:
     """The :class:`ContainerSpec` of a bound native system, stepped as the master would
-    (``overrides``: parameter values by (component, parameter), as the execution holds them)."""
-    overrides = dict(overrides or {})
-    for (comp, var), value in overrides.items():
+    (``set``: parameter values by (component, parameter), as the execution holds them)."""
+    set = dict(set or {})
+    for (comp, var), value in set.items():
         if system.instance(comp).model.variables[var].causality != "parameter":
             raise ExportError(f"--set {comp}.{var}={value}: only parameters can be set for the export "
                               "(the FMU's inputs are set by its host)")
     setpoints = {i.name for i in system.instances if i.model.name == SETPOINT_MODEL}
     components = tuple(_component(inst, system, multiples[inst.name], setpoints,
-                                  {var: value for (comp, var), value in overrides.items() if comp == inst.name})
+                                  {var: value for (comp, var), value in set.items() if comp == inst.name})
                        for inst in system.instances)
     outputs = tuple((inst.name, v.name) for inst in system.instances if inst.name not in setpoints
                     for v in inst.outputs if v.type == "Real")
@@ -140,7 +140,7 @@ def container_spec(system: System, order: list[str], multiples: dict[str, int], 
 
 
 def _component(inst: Instance, system: System, multiple: int, setpoints: set[str],
-               overrides: dict[str, Any]) -> ComponentSpec:
+               values: dict[str, Any]) -> ComponentSpec:
     if inst.model.path is None:
         raise ExportError(f"component {inst.name}: no FMU file")
     for v in inst.connectors:
@@ -157,4 +157,4 @@ def _component(inst: Instance, system: System, multiple: int, setpoints: set[str
                                     add_reference=link.src in setpoints))
     return ComponentSpec(name=inst.name, fmu=Path(inst.model.path), multiple=multiple, inputs=tuple(inputs),
                          outputs=tuple(v.name for v in inst.outputs),
-                         parameters={**{var.name: value for var, value in inst.parameters}, **overrides})
+                         parameters={**{var.name: value for var, value in inst.parameters}, **values})

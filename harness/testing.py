@@ -34,14 +34,15 @@ class CheckFailed(IpcosimError, AssertionError):
 
 
 def describe(result: "Result") -> str:
-    """``scenario [swaps, overrides]``: which run a message is about."""
+    """``scenario [swaps, set values]``: which run a message is about."""
     meta = result.metadata
     items = [f"{k}={Path(str(v)).name}" for k, v in (meta.get("swaps") or {}).items()]
-    items += [f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in _overrides(meta).items()]
+    items += [f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in _set_values(meta).items()]
     return f"{meta.get('scenario', 'run')}" + (f" [{', '.join(items)}]" if items else "")
 
 
-def _overrides(meta: Mapping[str, Any]) -> dict[str, Any]:
+def _set_values(meta: Mapping[str, Any]) -> dict[str, Any]:
+    # the run's ``set``, stored under the metadata key "overrides" (a file format others read)
     raw = meta.get("overrides") or {}
     if isinstance(raw, Mapping):
         return {(".".join(k) if isinstance(k, tuple) else str(k)): v for k, v in raw.items()}

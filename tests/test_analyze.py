@@ -81,7 +81,7 @@ def _pendulum_zero(name: str) -> float:
 def test_position_only_limit(name: str, zero: float, pole: float) -> None:
     """The RHP zero of voltage -> cart position is the pendulum's; the bound is |(z + p)/(z - p)|."""
     law = make_law("single-mass", "PID")
-    loop = scenario_loop("single-mass-pid", overrides={"plant.Lp": preset(name).Lp})[0]
+    loop = scenario_loop("single-mass-pid", set={"plant.Lp": preset(name).Lp})[0]
     lim = position_only_limit(loop)
     (z,), (p,) = lim["rhp_zeros_rad_s"], lim["rhp_poles_rad_s"]
     assert z == pytest.approx(_pendulum_zero(name), rel=1e-6)

@@ -166,15 +166,25 @@ def test_inproc_creates_a_rig_from_the_query():
 
 
 def test_swap_alias_picks_the_adapter_by_plant_kind(tmp_path, monkeypatch):
-    from ipcosim.fmus.hil.swap import HilSwapError, card_clock, find_adapter, plant_kind
+    from types import SimpleNamespace
+
+    from ipcosim.fmus.hil.swap import HilSwapError, card_clock, find_adapter, resolve_hil
+    from ipcosim.fmus.kinds import plant_kind
     from ipcosim.harness.scenario.ssp import fmu_search_path
 
     assert plant_kind("x", "IP02SingleMass", set()) == "single-mass"
     assert plant_kind("x", "IP02DoubleMass", set()) == "double-mass"
     assert plant_kind("double-mass-lqr", None, set()) == "double-mass"
+    assert plant_kind("ssp/single-mass-pid", None, set()) == "single-mass"
     assert plant_kind("mine", None, {"voltage", "passive_cart_position"}) == "double-mass"
-    with pytest.raises(HilSwapError):
-        plant_kind("mine", "Other", {"voltage"})
+    assert plant_kind("mine", None, {"voltage", "cart_position"}) == "single-mass"
+    assert plant_kind("mine", parameters={"Mp", "K"}) == "double-mass"
+    assert plant_kind("mine", parameters={"Mp"}) == "single-mass"
+    assert plant_kind("mine", "Other", {"voltage"}) is None
+    unknown = SimpleNamespace(scenario=SimpleNamespace(name="mine"), component="plant",
+                              model=SimpleNamespace(name="Other", path=None), fmu_dirs=())
+    with pytest.raises(HilSwapError, match="cannot tell the plant kind of scenario 'mine'"):
+        resolve_hil(unknown)
     (tmp_path / "IP02HILSingleMass.fmu").write_bytes(b"")
     assert find_adapter("IP02HILSingleMass", [tmp_path]) == (tmp_path / "IP02HILSingleMass.fmu").resolve()
     monkeypatch.setenv("IPCOSIM_FMU_PATH", str(tmp_path))

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import ipcosim.harness
+from ipcosim.fmus.kinds import plant_kind
 from ipcosim.harness.evidence.crosscheck import run_libcosim
 from ipcosim.harness.scenario.ssp import load_scenario
 
@@ -42,10 +43,6 @@ def measured(kind: str) -> list[str]:
     from ipcosim.fmus.physics import MEASURED
 
     return list(MEASURED[kind])
-
-
-def plant_kind(name: str) -> str:
-    return "single-mass" if name.startswith("single-mass") else "double-mass"
 
 
 def test_every_scenario_is_packed_and_runs_in_libcosim_and_ours(built):

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from ipcosim.harness.evidence.claims import CLAIMS, verdict
-from ipcosim.harness.evidence.results_page import BEGIN, END, margin_rows, render
+from ipcosim.harness.evidence.results_page import BEGIN, END, margin_rows, remeasure, render
 from ipcosim.harness.studies.robustness import FACTORS, decisive_factor, wilson_interval
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,3 +64,8 @@ def test_robustness_rates_and_intervals_follow_from_the_counts(data: dict) -> No
             assert s["success_ci95"] == pytest.approx(list(wilson_interval(ok, s["runs"])))
         breaks = decisive_factor(row["factors"])
         assert breaks == "none alone" or row["factors"][breaks]["success_rate"] < 0.95
+
+
+def test_remeasuring_an_unknown_row_names_it_and_the_closest_before_running_anything(data: dict) -> None:
+    with pytest.raises(ValueError, match=r"--rows single-mass-lqq: not a row .*single-mass-lqg"):
+        remeasure(data, ["single-mass-lqq"])

@@ -52,3 +52,24 @@ def test_the_factor_that_breaks_a_loop_first_is_the_worst_alone_below_95_percent
     assert decisive_factor(rows) == "lab bench"
     assert factor_cell(_summary(150, 200)) == "75.0 % (68.6-80.5)"
     assert factor_cell(_summary(1, 1)) == "ok (1 run)" and factor_cell(_summary(0, 1)) == "fell (1 run)"
+
+
+def test_a_sweep_on_the_lab_bench_sets_its_values_and_set_wins_over_them() -> None:
+    from ipcosim.harness.studies.robustness import realism_values, sweep_study
+
+    lab = realism_values("lab", "double-mass")
+    inst, plant = realism("lab", "double-mass")
+    assert lab["plant.input_delay"] == inst.input_delay and lab["plant.b2"] == plant["b2"]
+    study = sweep_study("double-mass-lqg", ["plant.K=uniform(0.8,1.2)*nominal"], samples=2, realism="lab",
+                        set={"plant.b2": 0.0}, fmus="python")
+    given = study.metadata["set"]
+    assert given["plant.b1"] == plant["b1"] and given["plant.b2"] == 0.0
+    assert study.spec.set["plant.voltage_resolution"] == inst.voltage_resolution
+
+
+def test_a_lab_sweep_of_a_scenario_whose_kind_its_name_does_not_say_is_refused_by_name() -> None:
+    from ipcosim.errors import UsageError
+    from ipcosim.harness.studies.robustness import sweep_study
+
+    with pytest.raises(UsageError, match="--realism lab: cannot tell the plant kind of scenario 'my-loop'"):
+        sweep_study("my-loop", ["plant.K=uniform(0.8,1.2)*nominal"], realism="lab")

@@ -324,3 +324,29 @@ def test_parameter_figure(tmp_path):
     path = plot_parameters(rows, ["plant.K", "plant.absent"], "itae_position", tmp_path)
     assert path == tmp_path / "parameters.png" and path.stat().st_size > 5000
     assert plot_parameters(rows, ["plant.absent"], "itae_position", tmp_path / "none") is None
+
+
+def test_sweep_study_checks_everything_before_it_touches_the_folder(tmp_path):
+    from ipcosim.harness.studies.robustness import sweep_study
+    from ipcosim.harness.studies.store import RESULTS_FILE
+
+    old = tmp_path / RESULTS_FILE
+    old.write_text("index,seed,status\n0,1,ok\n")
+    with pytest.raises(VaryError, match="unknown parameter 'plant.Mq'"):
+        sweep_study("pure:single-mass-lqr", ["plant.Mq=[1,2]"], out=tmp_path, fresh=True)
+    with pytest.raises(VaryError, match="--samples 0"):
+        sweep_study("pure:single-mass-lqr", ["plant.Mp=uniform(0.8,1.2)*nominal"], samples=0, out=tmp_path,
+                    fresh=True)
+    assert old.exists()                                     # a refused study discards nothing
+    study = sweep_study("pure:single-mass-lqr", ["plant.Mp=uniform(0.8,1.2)*nominal", "plant.Lp=[0.3,0.4]"],
+                        samples=3, seed=4, set={"plant.Beq": 5.0}, out=tmp_path, fresh=True)
+    assert not old.exists()
+    nominal = study.spec.parameters["plant.Mp"]
+    assert study.spec.parameters["plant.Beq"] == 5.0
+    assert len(study.cases) == 6 and sorted({c.params["plant.Lp"] for c in study.cases}) == [0.3, 0.4]
+    assert all(0.8 * nominal <= c.params["plant.Mp"] <= 1.2 * nominal for c in study.cases)
+    assert study.cases == make_cases(parse_all(["plant.Mp=uniform(0.8,1.2)*nominal", "plant.Lp=[0.3,0.4]"],
+                                               study.spec.parameters), study.spec.parameters, samples=3, seed=4)
+    assert study.metadata == {"vary": ["plant.Mp=uniform(0.8,1.2)*nominal", "plant.Lp=[0.3,0.4]"],
+                              "set": {"plant.Beq": 5.0}, "samples": 3, "seed": 4, "parameter_set": None}
+    assert study.flavour == "no FMUs (a pure-Python stand-in)"

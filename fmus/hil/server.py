@@ -320,62 +320,85 @@ class RigServer:
             self._threads = [x for x in self._threads if x.is_alive()] + [t]
 
     def _serve_connection(self, conn: socket.socket, peer: str) -> None:
+        """One client: answer its frames until the connection ends (:meth:`_receive`), then count its
+        dropped input, release what it held and close (:meth:`_close_connection`)."""
         decoder = FrameDecoder()
         session = _Session(peer)
         seen = dict(decoder.counters)
         reason = "connection closed"
         conn.settimeout(_POLL)
-        last_request = partial_since = time.monotonic()
         try:
-            while not self._stopping.is_set():
-                now = time.monotonic()
-                if now - last_request > self.idle_timeout:
-                    reason = f"no request for {self.idle_timeout:g} s (lease lapsed)"
-                    self.counters["idle_closed"] += 1
-                    break
-                if decoder.partial and now - partial_since > self.io_timeout:
-                    decoder.discard_partial()       # read timeout: a frame begun was not completed
-                try:
-                    data = conn.recv(65536)
-                except socket.timeout:
-                    continue
-                except OSError as exc:
-                    reason = f"connection lost: {exc}"
-                    break
-                if not data:
-                    break
-                if not decoder.partial:
-                    partial_since = time.monotonic()
-                frames = decoder.feed(data)
-                self._count_decoder_drops(session, decoder, seen)
-                for frame in frames:
-                    if session.stalled:
-                        self.counters["stalled_requests"] += 1
-                        continue
-                    outcome = self._handle(conn, session, frame)
-                    if outcome is _CLOSE:
-                        reason = "session closed"
-                        return
-                    if outcome is not None:     # an accepted request renews the lease
-                        last_request = time.monotonic()
-            if self._stopping.is_set():
-                reason = "server stopped"
+            reason = self._receive(conn, session, decoder, seen)
         except _WriteTimeout:
             reason = f"client did not take a reply within {self.io_timeout:g} s"
             self.counters["write_timeouts"] += 1
         finally:
             self._count_decoder_drops(session, decoder, seen)
-            self._log_drops(session, force=True)
-            if session.role == "control":
-                self._release(session, f"{peer}: {reason}")
-            elif session.role is None:
-                self.log(f"rig: connection from {peer} closed before a session ({reason})")
-            with self._lock:
-                self._conns.discard(conn)
+            self._close_connection(conn, session, reason)
+
+    def _receive(self, conn: socket.socket, session: _Session, decoder: FrameDecoder, seen: dict[str, int]) -> str:
+        """Read frames and answer them until the client closes, its lease lapses, the line is lost, the
+        session is closed or the server stops; returns why the connection ended. A frame begun and not
+        completed within the I/O timeout is discarded."""
+        reason = "connection closed"
+        last_request = partial_since = time.monotonic()
+        while not self._stopping.is_set():
+            now = time.monotonic()
+            if now - last_request > self.idle_timeout:
+                reason = f"no request for {self.idle_timeout:g} s (lease lapsed)"
+                self.counters["idle_closed"] += 1
+                break
+            if decoder.partial and now - partial_since > self.io_timeout:
+                decoder.discard_partial()       # read timeout: a frame begun was not completed
             try:
-                conn.close()
-            except OSError:
-                pass
+                data = conn.recv(65536)
+            except socket.timeout:
+                continue
+            except OSError as exc:
+                reason = f"connection lost: {exc}"
+                break
+            if not data:
+                break
+            if not decoder.partial:
+                partial_since = time.monotonic()
+            frames = decoder.feed(data)
+            self._count_decoder_drops(session, decoder, seen)
+            answered = self._answer(conn, session, frames)
+            if answered is _CLOSE:
+                return "session closed"
+            if answered is not None:     # an accepted request renews the lease
+                last_request = answered
+        return "server stopped" if self._stopping.is_set() else reason
+
+    def _answer(self, conn: socket.socket, session: _Session, frames: list[Frame]) -> object:
+        """Answer each of ``frames`` (a stalled session's are counted, not answered); returns ``_CLOSE``
+        when one closes the session, else when the last request was accepted (None: none was)."""
+        accepted = None
+        for frame in frames:
+            if session.stalled:
+                self.counters["stalled_requests"] += 1
+                continue
+            outcome = self._handle(conn, session, frame)
+            if outcome is _CLOSE:
+                return _CLOSE
+            if outcome is not None:
+                accepted = time.monotonic()
+        return accepted
+
+    def _close_connection(self, conn: socket.socket, session: _Session, reason: str) -> None:
+        """Log the connection's dropped input, end its controlling session (or say it never had one) and
+        close it."""
+        self._log_drops(session, force=True)
+        if session.role == "control":
+            self._release(session, f"{session.peer}: {reason}")
+        elif session.role is None:
+            self.log(f"rig: connection from {session.peer} closed before a session ({reason})")
+        with self._lock:
+            self._conns.discard(conn)
+        try:
+            conn.close()
+        except OSError:
+            pass
 
     def _count_decoder_drops(self, session: _Session, decoder: FrameDecoder, seen: dict[str, int]) -> None:
         for key, value in decoder.counters.items():

@@ -16,28 +16,13 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from ipcosim.fmus.hil import DEFAULT_URI, HILError, parse_card_uri
+from ipcosim.fmus.kinds import plant_kind
 
 ADAPTERS = {"single-mass": "IP02HILSingleMass", "double-mass": "IP02HILDoubleMass"}
-PLANT_MODELS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}
 
 
 class HilSwapError(HILError):
     """The ``hil`` alias cannot be resolved (unknown plant kind, adapter FMU not built)."""
-
-
-def plant_kind(scenario_name: str, model_name: str | None, connectors: set[str]) -> str:
-    """Plant kind of the component being swapped, from its FMU, the scenario name or its connectors."""
-    if model_name in PLANT_MODELS:
-        return PLANT_MODELS[model_name]
-    for kind in ADAPTERS:
-        if scenario_name.startswith(kind):
-            return kind
-    if "active_cart_position" in connectors or "passive_cart_position" in connectors:
-        return "double-mass"
-    if "cart_position" in connectors:
-        return "single-mass"
-    raise HilSwapError(14, f"--swap ...=hil: cannot tell the plant kind of scenario {scenario_name!r} "
-                           f"(expected an IP02SingleMass/IP02DoubleMass component)")
 
 
 def find_adapter(model: str, dirs: Sequence[Path | str]) -> Path:
@@ -94,6 +79,9 @@ def resolve_hil(request: Any) -> dict[str, Any]:
     connectors = {c.name for c in request.scenario.component(request.component).connectors} \
         if hasattr(request.scenario, "component") else set()
     kind = plant_kind(request.scenario.name, model.name if model is not None else None, connectors)
+    if kind is None:
+        raise HilSwapError(14, f"--swap ...=hil: cannot tell the plant kind of scenario {request.scenario.name!r} "
+                               f"(expected an IP02SingleMass/IP02DoubleMass component)")
     near = model.path.parent if model is not None and getattr(model, "path", None) else None
     fmu = find_adapter(ADAPTERS[kind], ([near] if near is not None else []) + list(request.fmu_dirs))
     uri = os.environ.get("IPCOSIM_HIL_URI", DEFAULT_URI)

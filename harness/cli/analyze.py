@@ -33,8 +33,8 @@ def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.studies.analyze import analyze
 
     out = args.out or f"out/analyze/{args.scenario.rstrip('/').split('/')[-1]}"
-    overrides = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))
-    r = analyze(args.scenario, parameter_set=args.parameter_set, overrides=overrides, out_dir=out)
+    values = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))
+    r = analyze(args.scenario, parameter_set=args.parameter_set, set=values, out=out)
     if args.json:
         print(json.dumps(r))
         return 0

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ipcosim.fmus.instruments import REALISM
 from ipcosim.harness.cli import add_parameter_file_option, add_study_fmus_option
 
 
@@ -42,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", help="output folder (default out/sweep/<scenario>)")
     p.add_argument("--fresh", action="store_true", help="discard results already in the output folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--realism", choices=sorted(REALISM), help="run every case on this bench (lab: encoder counts, "
+                                                               "stick-slip friction, end stops, DAC, 1 ms delay; "
+                                                               "--set wins over its values)")
     p.set_defaults(func=main)
 
 
@@ -53,10 +57,10 @@ def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.robustness import summary_line, sweep_study
 
-    overrides = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))
-    study = sweep_study(args.scenario, args.vary, overrides=overrides, samples=args.samples, seed=args.seed,
+    values = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))
+    study = sweep_study(args.scenario, args.vary, set=values, samples=args.samples, seed=args.seed,
                         fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time, step=args.step,
-                        out=args.out, fresh=args.fresh)
+                        out=args.out, fresh=args.fresh, realism=args.realism)
     executor = open_executor(args.workers, args.scheduler)
     print(study.describe(executor), file=sys.stderr)
     try:

@@ -68,7 +68,7 @@ def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.tune import tune_study
 
-    study = tune_study(args.scenario, args.params, bounds=args.bounds, overrides=parse_set(args.set, numbers=True),
+    study = tune_study(args.scenario, args.params, bounds=args.bounds, set=parse_set(args.set, numbers=True),
                        budget=args.budget, seed=args.seed, stop_time=args.stop_time, step=args.step,
                        w_angle=args.w_angle, w_voltage=args.w_voltage, fmus=args.fmus,
                        parameter_set=args.parameter_set, out=args.out, ssv=args.ssv, install=args.install,

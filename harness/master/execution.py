@@ -35,7 +35,7 @@ from ipcosim.harness.master.algorithm import (
 )
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
 from ipcosim.harness.master.layout import Layout
-from ipcosim.harness.master.manipulators import Manipulator, Overrides
+from ipcosim.harness.master.manipulators import Manipulator, SetValues
 from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.plan import Block
 from ipcosim.harness.master.pyloop import compile_loop
@@ -158,7 +158,7 @@ class Execution:
         #: The start values of the run by (component, variable), applied after the bindings.
         self.set = dict(set or {})
         self.observers = list(observers)
-        self.manipulators = [Overrides(self.set)] + list(manipulators)
+        self.manipulators = [SetValues(self.set)] + list(manipulators)
         self.unzip_dirs = dict(unzip_dirs or {})
         self.slave_factory = slave_factory or self._fmu_slave
         self.instances = list(system.instances)

@@ -1,5 +1,5 @@
 """Manipulators: what changes an execution from outside its components (start-value
-overrides, scheduled changes, disturbances). Structural changes (``--swap``) happen before
+``--set`` values, scheduled changes, disturbances). Structural changes (``--swap``) happen before
 anything runs, in :func:`ipcosim.harness.scenario.binding.bind`.
 
 Interface (subclass :class:`Manipulator`)::
@@ -32,13 +32,13 @@ class Manipulator:
         """Called before tick ``n`` is stepped."""
 
 
-class Overrides(Manipulator):
-    """Start-value overrides (``--set comp.var=value``), applied after the bindings.
+class SetValues(Manipulator):
+    """The start values of ``--set comp.var=value`` (a run's ``set``), applied after the bindings.
 
     Parameters
     ----------
     values : mapping of (component, variable) to value
-        Already checked and converted (see :func:`ipcosim.harness.scenario.binding.with_overrides`).
+        Already checked and converted (see :func:`ipcosim.harness.scenario.binding.with_set`).
     """
 
     def __init__(self, values: Mapping[tuple[str, str], Any]) -> None:

@@ -275,6 +275,8 @@ class Recorder:
             "components": {i.name: {"model": i.model.name, "guid": i.model.guid,
                                     "fmu": str(i.model.path) if i.model.path else None,
                                     "swapped_from": i.swapped_from} for i in ex.instances},
+            # The run's ``set`` is stored under "overrides": a metadata.json key that tests, baselines and
+            # other tools read, so it keeps that name.
             "overrides": {f"{c}.{v}": x for (c, v), x in ex.set.items()},
             "warnings": list(ex.system.warnings), "notes": list(ex.system.notes),
             "wall_time_s": wall, "loop_wall_time_s": wall_loop, "write_wall_time_s": self.write_seconds,

@@ -43,8 +43,8 @@ class Result:
         run: load, instantiate, initialize, step, write), ``real_time_factor`` (simulated /
         wall_time_s) and ``loop_real_time_factor`` (simulated / stepping-loop seconds).
     metadata : dict
-        Scenario, algorithm, step, order, step multiples, FMUs, overrides, swaps, warnings,
-        status and error.
+        Scenario, algorithm, step, order, step multiples, FMUs, the ``--set`` values (key ``overrides``),
+        swaps, warnings, status and error.
     error : str or None
         One-line description of the failure, None for a complete run.
     plotter : callable, optional
@@ -99,17 +99,17 @@ class Result:
             raise UsageError("this result has no plotter (results of ipcosim.run and Prepared.run have one)")
         return self.plotter(self, Path(path) if path is not None else None)
 
-    def write(self, out_dir: str | Path, variables: Sequence[str] | None = None, plot: bool = False,
+    def write(self, out: str | Path, variables: Sequence[str] | None = None, plot: bool = False,
               csv: bool = True) -> dict[str, Path]:
         """Write ``results.csv`` (unless ``csv`` is false: already streamed there),
-        ``metrics.json`` (and ``plot.png``) into ``out_dir``.
+        ``metrics.json`` (and ``plot.png``) into ``out``.
 
         Returns
         -------
         dict
             File kind -> path written.
         """
-        out = Path(out_dir)
+        out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         files = {"results": out / "results.csv", "metrics": out / "metrics.json"}
         if csv:
@@ -146,8 +146,8 @@ class OutputFolderError(IpcosimError, OSError):
 RUN_FILES = ("results.csv", "metrics.json", "plot.png")
 
 
-def open_output(out_dir: str | Path, what: str = "--out") -> Path:
-    """Create ``out_dir`` and check that files can be written there (before a run starts).
+def open_output(out: str | Path, what: str = "--out") -> Path:
+    """Create ``out`` and check that files can be written there (before a run starts).
 
     A previous run's files there (:data:`RUN_FILES`) are removed first, so that no stale figure
     or metrics sit beside the new results; other files are left as they are. A ``results.csv``
@@ -158,7 +158,7 @@ def open_output(out_dir: str | Path, what: str = "--out") -> Path:
     OutputFolderError
         Naming the folder and the reason.
     """
-    out = Path(out_dir)
+    out = Path(out)
     _refuse_foreign_results(out / "results.csv", what)
     try:
         for name in RUN_FILES if out.is_dir() else ():

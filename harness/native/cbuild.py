@@ -23,6 +23,7 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.harness.native import cgen, fmi3, models
 from ipcosim.toolchain import find_compiler, find_cross_compiler
 
@@ -60,7 +61,6 @@ VARIANTS = {
 }
 #: Where ``ipcosim build --native --fmi N`` writes (below the build folder).
 OUT_DIRS = {"2": "fmus-native", "3": "fmus-native-fmi3"}
-PLANTS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}
 
 
 class NativeBuildError(RuntimeError):
@@ -79,7 +79,7 @@ class NativeResult:
 def model_names() -> list[str]:
     """Every model with a native flavour."""
     from ipcosim.controllers.catalog import model_name
-    return [*PLANTS, *(model_name(kind, law) for law, kind in _laws()), "Setpoint"]
+    return [*PLANT_MODELS, *(model_name(kind, law) for law, kind in _laws()), "Setpoint"]
 
 
 #: Controller FMUs without a native flavour: the identification excitation looks its multisine up in a
@@ -102,8 +102,8 @@ def native_model(name: str, python_dir: Path) -> models.NativeModel:
     fmu = Path(python_dir) / f"{name}.fmu"
     if not fmu.is_file():
         raise NativeBuildError(f"{name}: the Python flavour {fmu} is missing (run `ipcosim build` first)")
-    if name in PLANTS:
-        return models.plant_model(name, PLANTS[name], fmu)
+    if name in PLANT_MODELS:
+        return models.plant_model(name, PLANT_MODELS[name], fmu)
     if name == "Setpoint":
         return models.setpoint_model(fmu)
     for law, kind in _laws():

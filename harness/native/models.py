@@ -196,63 +196,86 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
 def _trace_plant(kind: str, cls: type, shapes: list[tuple[int, int]], nonzero: set[str]
                  ) -> tuple[list[Any], list[Any]]:
     """One traced plant step (the integrator state ``z`` after the step, then the outputs) and the traced
-    start (``z`` from the initial values), every parameter symbolic."""
-    from ipcosim.fmus import instruments, physics
-    from ipcosim.fmus import plant as plant_mod
+    start (``z`` from the initial values), every parameter symbolic (:class:`_PlantTrace`)."""
+    plant = _PlantTrace(kind, cls)
+    with tracer.math_hooks():
+        return tracer.trace(lambda: plant.step(shapes, nonzero)), tracer.trace(plant.start)
 
-    states = physics.state_names(kind)
-    single = kind == "single-mass"
-    rhs_factory = plant_mod.single_mass_internal_rhs if single else plant_mod.double_mass_internal_rhs
-    pnames = [f.name for f in cls.__dataclass_fields__.values()]
 
-    def sym_params() -> Any:
-        p = object.__new__(cls)
-        for pn in pnames:
-            object.__setattr__(p, pn, leaf("V:" + pn))
+class _PlantTrace:
+    """The Python plant's step, read with symbolic parameters and states: the input path (DAC codes,
+    delay line, voltage limit), the integrator's stages, the constraints (stiction, end stops) and the
+    encoders. Each traced value is laid out as the native state wants it: ``z`` (the integrator's
+    state), the outputs, then (a step only) the delay buffer and ``x`` (the constrained state)."""
+
+    def __init__(self, kind: str, cls: type) -> None:
+        from ipcosim.fmus import instruments, physics
+        from ipcosim.fmus import plant as plant_mod
+
+        self.kind, self.cls = kind, cls
+        self.states = physics.state_names(kind)
+        self.single = kind == "single-mass"
+        self.quantize = tracer.local(instruments.quantize)
+        self.resolutions = [leaf("V:pendulum_resolution" if s == "pendulum_angle" else "V:cart_resolution")
+                            for s in physics.MEASURED[kind]]
+        self._physics, self._instruments, self._plant = physics, instruments, plant_mod
+
+    def params(self) -> Any:
+        """The plant's parameter set with every field a symbolic value ``V:<field>``."""
+        p = object.__new__(self.cls)
+        for f in self.cls.__dataclass_fields__.values():
+            object.__setattr__(p, f.name, leaf("V:" + f.name))
         return p
 
-    n = len(states)
-    to_x = plant_mod.single_mass_output_map if single else (lambda p: list)
-    flat = lambda pair: [*pair[0], pair[1]]  # noqa: E731 -- (state, count) -> one flat list
-    quantize = tracer.local(instruments.quantize)
-    resolutions = [leaf("V:pendulum_resolution" if s == "pendulum_angle" else "V:cart_resolution")
-                   for s in physics.MEASURED[kind]]
+    def outputs(self, x: list[Any]) -> list[Any]:
+        """The plant's outputs of state ``x``: the measured states through their encoders."""
+        measured = self._physics.MEASURED[self.kind]
+        readings = dict(zip(measured, map(self.quantize, [x[self.states.index(m)] for m in measured],
+                                          self.resolutions)))
+        return [readings.get(s, v) for s, v in zip(self.states, x)]
 
-    def outputs(x: list[Any]) -> list[Any]:
-        readings = dict(zip(physics.MEASURED[kind], map(quantize, [x[states.index(m)] for m in physics.MEASURED[kind]],
-                                                        resolutions)))
-        return [readings.get(s, v) for s, v in zip(states, x)]
-
-    def step_fn() -> list[Any]:
-        p = sym_params()
-        f = tracer.local(rhs_factory(p))
-        buffer = [leaf(f"S:d{k}") for k in range(NATIVE_MAX_DELAY_STEPS)]
-        v = quantize(leaf("V:voltage"), leaf("V:voltage_resolution"))
-        steps = tracer.local(lambda d, h: min(instruments.delay_steps(d, h), float(NATIVE_MAX_DELAY_STEPS)))(
+    def voltage(self, p: Any, buffer: list[Any]) -> tuple[Any, Any]:
+        """(the DAC's voltage this step, the voltage applied after the delay line and the limit)."""
+        ins = self._instruments
+        v = self.quantize(leaf("V:voltage"), leaf("V:voltage_resolution"))
+        steps = tracer.local(lambda d, h: min(ins.delay_steps(d, h), float(NATIVE_MAX_DELAY_STEPS)))(
             leaf("V:input_delay"), leaf("V:integrator_step"))
-        delayed = tracer.local(lambda *a: instruments.delay_line(a[:-2], a[-2], a[-1])[0])(*buffer, v, steps)
-        vA = tracer.local(physics.clip_voltage)(delayed, p.voltage_limit)
-        z0 = [leaf(f"S:z{i}") for i in range(n)]
-        z = sym_stages(z0, f, (vA,), shapes, nonzero)
-        x = to_x(p)(z)
-        before = [leaf(f"S:x{i}") for i in range(n)]  # the state after the last step's constraints
-        # plant.constrain, in two traced calls (each merges its own branches)
+        delayed = tracer.local(lambda *a: ins.delay_line(a[:-2], a[-2], a[-1])[0])(*buffer, v, steps)
+        return v, tracer.local(self._physics.clip_voltage)(delayed, p.voltage_limit)
+
+    def constrain(self, p: Any, before: list[Any], x: list[Any]) -> tuple[list[Any], Any]:
+        """``plant.constrain`` in two traced calls (each merges its own branches): the state after stiction
+        and the end stops, and whether either held a cart."""
+        n, plant_mod = len(self.states), self._plant
+        flat = lambda pair: [*pair[0], pair[1]]  # noqa: E731 -- (state, count) -> one flat list
         *x, stuck = tracer.local(lambda *a: flat(plant_mod.stick(a[:n], a[n:], p)))(*before, *x)
-        *x, stopped = tracer.local(lambda *a: flat(instruments.stop_carts(a[:-1], plant_mod.CARTS[kind], a[-1])))(
-            *x, leaf("V:end_stop"))
-        if single:
-            zx = physics.single_mass_to_momentum(x, p)
-            z = [tracer.select(stuck + stopped > 0.0, a, b) for a, b in zip(zx, z)]
+        *x, stopped = tracer.local(lambda *a: flat(self._instruments.stop_carts(a[:-1], plant_mod.CARTS[self.kind],
+                                                                              a[-1])))(*x, leaf("V:end_stop"))
+        return x, stuck + stopped
+
+    def step(self, shapes: list[tuple[int, int]], nonzero: set[str]) -> list[Any]:
+        """One step: ``z`` after it, the outputs, the delay buffer shifted, the constrained state ``x``."""
+        n, plant_mod = len(self.states), self._plant
+        p = self.params()
+        f = tracer.local((plant_mod.single_mass_internal_rhs if self.single else plant_mod.double_mass_internal_rhs)(p))
+        buffer = [leaf(f"S:d{k}") for k in range(NATIVE_MAX_DELAY_STEPS)]
+        v, vA = self.voltage(p, buffer)
+        z = sym_stages([leaf(f"S:z{i}") for i in range(n)], f, (vA,), shapes, nonzero)
+        x = plant_mod.single_mass_output_map(p)(z) if self.single else list(z)
+        before = [leaf(f"S:x{i}") for i in range(n)]  # the state after the last step's constraints
+        x, held = self.constrain(p, before, x)
+        if self.single:
+            zx = self._physics.single_mass_to_momentum(x, p)
+            z = [tracer.select(held > 0.0, a, b) for a, b in zip(zx, z)]
         else:
             z = x
-        return list(z) + outputs(x) + [v, *buffer[:-1]] + list(x)
+        return list(z) + self.outputs(x) + [v, *buffer[:-1]] + list(x)
 
-    def init_fn() -> list[Any]:
-        x0 = [leaf(f"V:initial_{s}") for s in states]
-        return list(physics.single_mass_to_momentum(x0, sym_params()) if single else x0) + outputs(x0) + x0
-
-    with tracer.math_hooks():
-        return tracer.trace(step_fn), tracer.trace(init_fn)
+    def start(self) -> list[Any]:
+        """The start: ``z`` from the initial values, the outputs, the initial state."""
+        x0 = [leaf(f"V:initial_{s}") for s in self.states]
+        z0 = self._physics.single_mass_to_momentum(x0, self.params()) if self.single else x0
+        return list(z0) + self.outputs(x0) + x0
 
 
 def _plant_parameters(step: float, coefficients: dict[str, float]) -> list[Variable]:

@@ -517,10 +517,10 @@ def convert_value(var: Variable, value: Any, what: str) -> Any:
     raise BindingError(f"{what}: variables of type {t} cannot be set")
 
 
-def with_overrides(system: System, overrides: Mapping[str, Any]) -> tuple[System, dict[tuple[str, str], Any]]:
-    """Check ``--set comp.var=value`` overrides against the system.
+def with_set(system: System, set: Mapping[str, Any]) -> tuple[System, dict[tuple[str, str], Any]]:
+    """Check a run's ``set`` (``--set comp.var=value``) against the system.
 
-    Returns the system unchanged and the overrides keyed by (component, variable) with
+    Returns the system unchanged and the values keyed by (component, variable) with
     values converted to the variables' types.
 
     Raises
@@ -530,7 +530,7 @@ def with_overrides(system: System, overrides: Mapping[str, Any]) -> tuple[System
         constant), a connected input, or a value that does not parse.
     """
     out: dict[tuple[str, str], Any] = {}
-    for key, value in overrides.items():
+    for key, value in set.items():
         comp, sep, var = str(key).partition(".")
         if not sep or not comp or not var:
             raise BindingError(f"--set {key}={value}: expected COMPONENT.VARIABLE=VALUE")

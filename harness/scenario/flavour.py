@@ -80,9 +80,9 @@ def _type(comp: Any, name: str, value: Any) -> str:
     return "Integer" if isinstance(value, int) and not isinstance(value, bool) else "Real"
 
 
-def native_overrides(system: Any, overrides: Mapping[str, Any], python_values: Mapping[str, Mapping[str, Any]]
+def native_set(system: Any, set: Mapping[str, Any], python_values: Mapping[str, Mapping[str, Any]]
                      ) -> dict[str, Any]:
-    """``--set`` overrides for native FMUs: checked against the native variables, redesigned where needed.
+    """A run's ``set`` (``--set``) for native FMUs: checked against the native variables, redesigned where needed.
 
     Raises
     ------
@@ -92,15 +92,15 @@ def native_overrides(system: Any, overrides: Mapping[str, Any], python_values: M
     from ipcosim.harness.native.redesign import NativeParameterError, check_settable, native_info, redesign
 
     by_comp: dict[str, dict[str, Any]] = {}
-    for key, value in overrides.items():
+    for key, value in set.items():
         comp, _, var = str(key).partition(".")
         by_comp.setdefault(comp, {})[var] = value
-    out = dict(overrides)
+    out = dict(set)
     for comp, values in by_comp.items():
         try:
             inst = system.instance(comp)
         except KeyError:
-            continue  # with_overrides reports the unknown component
+            continue  # with_set reports the unknown component
         info = native_info(inst.model.path) if inst.model.path else None
         if info is None:
             continue

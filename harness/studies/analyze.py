@@ -28,6 +28,7 @@ from __future__ import annotations
 import cmath
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Mapping
 
 import control
@@ -35,11 +36,10 @@ import numpy as np
 
 from ipcosim.controllers.catalog import LAWS, build_law, model_name
 from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.fmus.linearize import linearize
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, ParameterError, preset
 from ipcosim.harness.studies.loop import LinearLaw, linear_law
-
-PLANT_MODELS = {"IP02SingleMass": "single-mass", "IP02DoubleMass": "double-mass"}
 
 
 class AnalysisError(IpcosimError, ValueError):
@@ -108,8 +108,8 @@ def _binding_values(component) -> dict[str, Any]:
 
 
 def scenario_loop(scenario: str, parameter_set: str | None = None,
-                  overrides: Mapping[str, float] | None = None) -> tuple[Loop, dict[str, Any]]:
-    """The loop of a scenario's ``controller`` and ``plant`` components (``--set`` overrides).
+                  set: Mapping[str, float] | None = None) -> tuple[Loop, dict[str, Any]]:
+    """The loop of a scenario's ``controller`` and ``plant`` components (with the ``--set`` values ``set``).
 
     Returns
     -------
@@ -138,7 +138,7 @@ def scenario_loop(scenario: str, parameter_set: str | None = None,
                             f"({', '.join(PLANT_MODELS)})")
     law_name, kind = found[0]
     law_values, plant_values = _binding_values(ctrl), _binding_values(plant)
-    for key, value in (overrides or {}).items():
+    for key, value in (set or {}).items():
         comp, _, var = key.partition(".")
         if comp not in ("controller", "plant"):
             raise UsageError(f"--set {key}: analyze uses the controller's and plant's parameters only")
@@ -449,11 +449,9 @@ def statement(result: Mapping[str, Any]) -> str:
 
 
 # ----------------------------------------------------------------------------- figures
-def plot_loop(loop: Loop, result: Mapping[str, Any], out_dir: str, title: str) -> dict[str, str]:
-    """Write ``bode.png`` (|L|, |S|, |T| and the phase of L) and ``nyquist.png`` (L, and a zoom
-    on -1 with the modulus-margin circle) into ``out_dir``; returns their paths."""
-    from pathlib import Path
-
+def plot_loop(loop: Loop, result: Mapping[str, Any], out: str | Path, title: str) -> dict[str, str]:
+    """Write ``bode.png`` (:func:`_plot_bode`) and ``nyquist.png`` (:func:`_plot_nyquist`) of the loop's
+    frequency response into ``out``; returns their paths."""
     from ipcosim.harness.extras import require
 
     require("matplotlib")
@@ -462,10 +460,24 @@ def plot_loop(loop: Loop, result: Mapping[str, Any], out_dir: str, title: str) -
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = Path(out_dir)
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     w = frequency_grid(loop.T, 3000)
     Lw = loop_response(loop, w)
+    bode = _save(plt, _plot_bode(plt, w, Lw, title), out / "bode.png")
+    nyquist = _save(plt, _plot_nyquist(plt, Lw, result.get("modulus_margin"), title), out / "nyquist.png")
+    return {"bode": bode, "nyquist": nyquist}
+
+
+def _save(plt: Any, fig: Any, path: Path) -> str:
+    """Write ``fig`` to ``path`` (PNG, 110 dpi) and close it; returns the path."""
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return str(path)
+
+
+def _plot_bode(plt: Any, w: np.ndarray, Lw: np.ndarray, title: str) -> Any:
+    """The Bode figure: |L|, |S| and |T| in dB above the phase of L, against frequency [rad/s]."""
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
     for vals, label in ((Lw, "|L|"), (1 / (1 + Lw), "|S|"), (Lw / (1 + Lw), "|T|")):
         ax1.semilogx(w, 20 * np.log10(np.abs(vals)), label=label)
@@ -479,19 +491,20 @@ def plot_loop(loop: Loop, result: Mapping[str, Any], out_dir: str, title: str) -
     for ax in (ax1, ax2):
         ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    bode = out / "bode.png"
-    fig.savefig(bode, dpi=110)
-    plt.close(fig)
+    return fig
 
+
+def _plot_nyquist(plt: Any, Lw: np.ndarray, modulus_margin: float | None, title: str) -> Any:
+    """The Nyquist figure: L for positive and negative frequencies, whole and zoomed on -1, with the
+    circle of radius ``modulus_margin`` (1/Ms) around -1 when there is one."""
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 5))
     for ax, lim in ((ax1, None), (ax2, 3.0)):
         ax.plot(Lw.real, Lw.imag, "b-", lw=1, label="L(e^{jwT}), w > 0")
         ax.plot(Lw.real, -Lw.imag, "b--", lw=0.7, label="w < 0")
         ax.plot([-1], [0], "r+", ms=12)
-        if result.get("modulus_margin"):
+        if modulus_margin:
             t = np.linspace(0, 2 * np.pi, 200)
-            r = result["modulus_margin"]
-            ax.plot(-1 + r * np.cos(t), r * np.sin(t), "r:", label="1/Ms around -1")
+            ax.plot(-1 + modulus_margin * np.cos(t), modulus_margin * np.sin(t), "r:", label="1/Ms around -1")
         if lim:
             ax.set_xlim(-1 - lim, -1 + lim)
             ax.set_ylim(-lim, lim)
@@ -502,16 +515,13 @@ def plot_loop(loop: Loop, result: Mapping[str, Any], out_dir: str, title: str) -
     ax1.set_title(title)
     ax1.legend(fontsize=8)
     fig.tight_layout()
-    nyq = out / "nyquist.png"
-    fig.savefig(nyq, dpi=110)
-    plt.close(fig)
-    return {"bode": str(bode), "nyquist": str(nyq)}
+    return fig
 
 
-def analyze(scenario: str, *, parameter_set: str | None = None, overrides: Mapping[str, float] | None = None,
-            out_dir: str | None = None) -> dict[str, Any]:
-    """Analyse a scenario's loop (see the module docstring); with ``out_dir`` also write the
-    figures and ``analysis.json`` there.
+def analyze(scenario: str, *, parameter_set: str | None = None, set: Mapping[str, float] | None = None,
+            out: str | Path | None = None) -> dict[str, Any]:
+    """Analyse a scenario's loop (see the module docstring), with the ``--set`` values ``set``; with ``out``
+    also write the figures and ``analysis.json`` there.
 
     Examples
     --------
@@ -520,12 +530,11 @@ def analyze(scenario: str, *, parameter_set: str | None = None, overrides: Mappi
     (True, 0.0179)
     """
     import json
-    from pathlib import Path
 
-    loop, info = scenario_loop(scenario, parameter_set, overrides)
+    loop, info = scenario_loop(scenario, parameter_set, set)
     result = {**info, **analyze_loop(loop)}
-    if out_dir is not None:
-        result["figures"] = plot_loop(loop, result, out_dir, f"{info['scenario']} ({info['parameter_set']}): "
+    if out is not None:
+        result["figures"] = plot_loop(loop, result, out, f"{info['scenario']} ({info['parameter_set']}): "
                                                              "loop at the plant input")
-        (Path(out_dir) / "analysis.json").write_text(json.dumps(result, indent=2))
+        (Path(out) / "analysis.json").write_text(json.dumps(result, indent=2))
     return result

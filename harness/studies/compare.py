@@ -31,14 +31,6 @@ def available_scenarios() -> list[str]:
     return [s for s in SCENARIOS if s in found] + [s for s in found if s not in SCENARIOS and s not in VARIANTS]
 
 
-def plant_kind(scenario: str, spec: Any) -> str:
-    """``single-mass`` or ``double-mass`` for a scenario (by name, else by its parameters)."""
-    for kind in ("double-mass", "single-mass"):
-        if kind in scenario:
-            return kind
-    return "double-mass" if "plant.K" in spec.parameters else "single-mass"
-
-
 def _pset(scenario: str, wanted: str | None) -> str | None:
     """``wanted`` if the scenario has that parameter set, else None (its default binding)."""
     if not wanted:
@@ -49,6 +41,14 @@ def _pset(scenario: str, wanted: str | None) -> str | None:
         return wanted if wanted in load_scenario(scenario).parameter_sets else None
     except Exception:  # noqa: BLE001 -- reported when the scenario itself is loaded
         return None
+
+
+def _plant_kind(scenario: str, spec: Any) -> str:
+    """The plant kind of a scenario (``ipcosim.fmus.kinds.plant_kind``: by name, else by its plant's parameters)."""
+    from ipcosim.fmus.kinds import plant_kind
+
+    plant = [n.partition(".")[2] for n in spec.parameters if n.partition(".")[0] == "plant"]
+    return plant_kind(scenario, parameters=plant)
 
 
 def _stderr(line: str) -> None:
@@ -133,7 +133,7 @@ class Comparison:
 
         plain = spec_for(name, stop_time=self.stop_time, parameter_set=_pset(name, self.parameter_set),
                          fmus=getattr(spec, "fmus", "python"))
-        varies = parse_all(rob.default_vary(plant_kind(name, plain), plain.parameters), plain.parameters)
+        varies = parse_all(rob.default_vary(_plant_kind(name, plain), plain.parameters), plain.parameters)
         cases = make_cases(varies, plain.parameters, samples=self.samples, seed=self.seed)
         if progress:
             self.log(f"compare: robustness of {name}, {len(cases)} runs")

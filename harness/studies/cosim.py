@@ -48,7 +48,7 @@ class CosimSpec(RunSpec):
         Absolute path of the scenario folder or ``.ssp`` archive (what workers load).
     stop_time, step : float or None
         Experiment overrides (None: the scenario's).
-    overrides : dict
+    set : dict
         ``component.variable`` start values applied in every run.
     with_series : bool
         Also return the run's signals (thinned) under ``series``.
@@ -59,7 +59,7 @@ class CosimSpec(RunSpec):
     location: str = ""
     stop_time: float | None = None
     step: float | None = None
-    overrides: dict = field(default_factory=dict)
+    set: dict = field(default_factory=dict)
     with_series: bool = False
     parameter_set: str | None = None
     gains: str = ""
@@ -73,7 +73,7 @@ class CosimSpec(RunSpec):
 
     @classmethod
     def from_scenario(cls, scenario: str, stop_time: float | None = None, step: float | None = None,
-                      overrides: Mapping[str, Any] | None = None, series: bool = False,
+                      set: Mapping[str, Any] | None = None, series: bool = False,
                       parameter_set: str | None = None, fmus: str = "python") -> "CosimSpec":
         """Parse and bind a scenario (FMUs are not extracted here) and describe its runs.
 
@@ -84,13 +84,13 @@ class CosimSpec(RunSpec):
         """
         from ipcosim.fmus.metrics import METRIC_KEYS
         from ipcosim.harness.engine import Prepared
-        from ipcosim.harness.scenario.binding import with_overrides
+        from ipcosim.harness.scenario.binding import with_set
         from ipcosim.harness.studies.cost import COST_TERMS
 
         prepared = Prepared(scenario, parameter_set=parameter_set, slave_factory=_no_slave, warn=False, fmus=fmus)
         system = prepared.system
-        overrides = dict(overrides or {})
-        with_overrides(system, overrides)  # unknown or unsettable names: one clear line
+        set = dict(set or {})
+        with_set(system, set)  # unknown or unsettable names: one clear line
         params: dict[str, Any] = {}
         files: list[Path] = [prepared.scenario.location]
         for inst in system.instances:
@@ -101,11 +101,11 @@ class CosimSpec(RunSpec):
                 files.append(inst.model.path)
         fmu_files = {c.source: str(system.instance(c.name).model.path) for c in prepared.scenario.components
                      if system.instance(c.name).model.path is not None}
-        params.update(overrides)
+        params.update(set)
         exp = prepared.scenario.experiment
         spec = cls(location=str(Path(prepared.scenario.location).resolve()),
                    stop_time=stop_time if stop_time is not None else exp.stop_time,
-                   step=step if step is not None else exp.step_size, overrides=overrides, with_series=series,
+                   step=step if step is not None else exp.step_size, set=set, with_series=series,
                    parameter_set=parameter_set,
                    gains=parameter_set or ",".join(prepared.scenario.bound_sets) or "FMU defaults",
                    name=prepared.scenario.name or Path(scenario).name,
@@ -138,8 +138,10 @@ class CosimSpec(RunSpec):
         return dataclasses.replace(self, archive=data)
 
     def describe(self) -> dict[str, Any]:
+        # "overrides" is the stored key of the --set values in a sweep's metadata.json (a file format that
+        # resumed sweeps and other tools read), kept under that name.
         out = {"name": self.name, "scenario_hash": self.scenario_hash, "location": self.location,
-               "stop_time": self.stop_time, "step": self.step, "overrides": self.overrides,
+               "stop_time": self.stop_time, "step": self.step, "overrides": self.set,
                "parameter_set": self.parameter_set, "with_series": self.with_series}
         if self.fmus != "python":
             out["fmus"] = self.fmus
@@ -179,7 +181,7 @@ class CosimSpec(RunSpec):
         def run(params: Mapping[str, float], seed: int) -> dict:
             if not holder:
                 raise RunFailure(f"{spec.name}: the runner was released")
-            values = {**spec.overrides, **params}
+            values = {**spec.set, **params}
             return spec.row_of(holder[0].run(spec.stop_time, spec.step, values, raise_on_error=False))
 
         return run

@@ -197,8 +197,14 @@ def _lqg(law: LQG, b: Builder) -> tuple[Lin, list[str]]:
         b.feed(xp[i], lsum([xh[j] * d.Ad[i][j] for j in range(n)]) + applied * d.Bd[i])
     b.feed(applied, u)
     b.feed(integral, integral - ys[0] * T)
-    return applied, ["output: the voltage computed a sample earlier (one-sample computation delay)",
-                     "reference lag left out (the reference is 0)"]
+    notes = ["output: the voltage computed a sample earlier (one-sample computation delay)",
+             "reference lag left out (the reference is 0)"]
+    if any(law.friction):
+        notes.append(f"Coulomb friction compensation left out (zero below {law.friction_velocity:g} m/s: "
+                     "no small-signal slope)")
+    if law.integrator_dead_band:
+        notes.append(f"integrator dead band of {law.integrator_dead_band:g} m left out")
+    return applied, notes
 
 
 def _hsmc(law: HSMC, b: Builder) -> tuple[Lin, list[str]]:

@@ -213,10 +213,10 @@ class SweepStudy:
                              {"vary": self.metadata["vary"], "seed": self.metadata["seed"]})
 
 
-def sweep_study(scenario: str, vary: Sequence[str], *, overrides: Mapping[str, float] | None = None,
+def sweep_study(scenario: str, vary: Sequence[str], *, set: Mapping[str, float] | None = None,
                 samples: int | None = None, seed: int = 0, fmus: str = "auto", parameter_set: str | None = None,
                 stop_time: float | None = None, step: float | None = None, out: Path | str | None = None,
-                fresh: bool = False) -> SweepStudy:
+                fresh: bool = False, realism: str | None = None) -> SweepStudy:
     """A robustness sweep of ``scenario``, every option checked before any run.
 
     Parameters
@@ -225,8 +225,8 @@ def sweep_study(scenario: str, vary: Sequence[str], *, overrides: Mapping[str, f
         Scenario name or path, or ``pure:single-mass-lqr``.
     vary : sequence of str
         ``COMP.VAR=FORM`` variations (``ipcosim.harness.grammar.FORMS_HELP``).
-    overrides : mapping, optional
-        Fixed ``component.variable`` values in every run.
+    set : mapping, optional
+        Fixed ``component.variable`` values in every run (``--set``).
     samples : int, optional
         Runs per grid point (default 100 with a random form, else 1).
     seed : int
@@ -241,24 +241,43 @@ def sweep_study(scenario: str, vary: Sequence[str], *, overrides: Mapping[str, f
         The sweep's folder (default ``out/sweep/<scenario>``).
     fresh : bool
         Discard results already there (``ipcosim.harness.studies.store.discard_results``).
+    realism : {'ideal', 'lab'}, optional
+        Run every case on this bench (:func:`realism_values`; ``set`` wins over its values); the plant
+        kind comes from the scenario's name.
     """
     from ipcosim.harness.grammar import parse_all
     from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.specs import default_out, study_spec
     from ipcosim.harness.studies.store import discard_results
 
-    overrides = dict(overrides or {})
-    spec, flavour = study_spec(scenario, fmus, names=[*overrides, *(v.partition("=")[0].strip() for v in vary)],
+    set = {**(_bench(scenario, realism) if realism else {}), **(set or {})}
+    spec, flavour = study_spec(scenario, fmus, names=[*set, *(v.partition("=")[0].strip() for v in vary)],
                                check=lambda s: parse_all(vary, s.parameters), stop_time=stop_time, step=step,
-                               overrides=overrides, parameter_set=parameter_set)
+                               set=set, parameter_set=parameter_set)
     varies = parse_all(vary, spec.parameters)
     cases = make_cases(varies, spec.parameters, samples=samples, seed=seed)
     folder = Path(out) if out else default_out(scenario)
     if fresh and folder.exists():
         discard_results(folder)
     return SweepStudy(spec, flavour, varies, cases, folder,
-                      {"vary": list(vary), "set": overrides, "samples": samples, "seed": seed,
+                      {"vary": list(vary), "set": set, "samples": samples, "seed": seed,
                        "parameter_set": parameter_set})
+
+
+def _bench(scenario: str, realism: str) -> dict[str, float]:
+    """:func:`realism_values` for the plant kind the scenario's name says."""
+    from ipcosim.errors import UsageError
+    from ipcosim.fmus.kinds import plant_kind
+    from ipcosim.fmus.params import KINDS
+
+    kind = plant_kind(str(scenario))
+    if kind is None:
+        raise UsageError(f"--realism {realism}: cannot tell the plant kind of scenario {scenario!r} from its name "
+                         f"({' or '.join(KINDS)}); give the bench's values with --set")
+    try:
+        return realism_values(realism, kind)
+    except ValueError as exc:
+        raise UsageError(f"--realism: {exc}") from None
 
 
 def plot_distributions(rows: Sequence[Mapping[str, Any]], metric_names: Sequence[str], out_dir: Path,
@@ -384,14 +403,23 @@ EXTRA_DELAY = 1e-3
 FRICTION_SPREAD = 0.2
 
 
+def realism_values(name: str, kind: str) -> dict[str, float]:
+    """The ``plant.*`` values of the bench ``name`` (``ipcosim.fmus.instruments.realism``: ``ideal``, ``lab``) for
+    plant ``kind``: every instrument option that is on, then the plant-parameter overrides."""
+    from ipcosim.fmus.instruments import realism
+
+    inst, plant = realism(name, kind)
+    out = {f"plant.{f}": float(getattr(inst, f)) for f in inst.__dataclass_fields__ if getattr(inst, f)}
+    out.update({f"plant.{k}": float(v) for k, v in plant.items()})
+    return out
+
+
 def factor_runs(kind: str, factors: Sequence[str]) -> tuple[list[str], dict[str, float]]:
     """``(--vary expressions, fixed values)`` of the runs with ``factors`` acting together on plant ``kind``.
 
-    The lab bench is ``ipcosim.fmus.instruments.realism("lab", kind)`` with each cart's Coulomb friction drawn
-    within +-``FRICTION_SPREAD`` of its fitted value; the delay adds ``EXTRA_DELAY`` to the voltage's.
+    The lab bench is :func:`realism_values` of ``lab`` with each cart's Coulomb friction drawn within
+    +-``FRICTION_SPREAD`` of its fitted value; the delay adds ``EXTRA_DELAY`` to the voltage's.
     """
-    from ipcosim.fmus.instruments import realism
-
     unknown = [f for f in factors if f not in FACTORS]
     if unknown:
         raise ValueError(f"unknown robustness factor {unknown[0]!r}; known: {', '.join(FACTORS)}")
@@ -401,14 +429,12 @@ def factor_runs(kind: str, factors: Sequence[str]) -> tuple[list[str], dict[str,
         spread = FACTOR_SPREAD.get(factor, DEFAULT_SPREAD)
         vary += [f"{n}=uniform({1 - spread:g},{1 + spread:g})*nominal" for n in FACTORS[factor].get(kind, ())]
     if "lab bench" in factors:
-        inst, plant = realism("lab", kind)
-        fixed.update({f"plant.{f}": float(getattr(inst, f)) for f in inst.__dataclass_fields__ if getattr(inst, f)})
-        for name, value in plant.items():
-            if name in ("b", "b1", "b2"):
+        for name, value in realism_values("lab", kind).items():
+            if name in ("plant.b", "plant.b1", "plant.b2"):
                 lo, hi = value * (1 - FRICTION_SPREAD), value * (1 + FRICTION_SPREAD)
-                vary.append(f"plant.{name}=uniform({lo:g},{hi:g})")
+                vary.append(f"{name}=uniform({lo:g},{hi:g})")
             else:
-                fixed[f"plant.{name}"] = float(value)
+                fixed[name] = value
     if "delay" in factors:
         fixed["plant.input_delay"] = fixed.get("plant.input_delay", 0.0) + EXTRA_DELAY
     return vary, fixed

@@ -21,7 +21,7 @@ def default_out(scenario: str, kind: str = "sweep") -> Path:
 
 
 def spec_for(scenario: str, stop_time: float | None = None, step: float | None = None,
-             overrides: Mapping[str, float] | None = None, series: bool = False,
+             set: Mapping[str, float] | None = None, series: bool = False,
              parameter_set: str | None = None, fmus: str = "python") -> RunSpec:
     """The run specification of a scenario.
 
@@ -32,7 +32,7 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
         pure-Python stand-in (``pure:single-mass-lqr``).
     stop_time, step : float, optional
         Override the scenario's experiment.
-    overrides : mapping, optional
+    set : mapping, optional
         ``component.variable`` values set in every run (``--set``).
     series : bool
         Return the run's signals (thinned) with its metrics, under ``series`` (for figures).
@@ -55,15 +55,15 @@ def spec_for(scenario: str, stop_time: float | None = None, step: float | None =
         if step is not None:
             kwargs["step"] = step
         spec = PURE_SCENARIOS[scenario](**kwargs)
-        if overrides:
-            unknown = [k for k in overrides if k not in spec.parameters]
+        if set:
+            unknown = [k for k in set if k not in spec.parameters]
             if unknown:
                 raise UsageError(f"--set {unknown[0]}: {scenario} has no parameter {unknown[0]!r}")
-            spec.parameters = {**spec.parameters, **overrides}
+            spec.parameters = {**spec.parameters, **set}
         return spec
     from ipcosim.harness.studies.cosim import CosimSpec
 
-    return CosimSpec.from_scenario(scenario, stop_time=stop_time, step=step, overrides=overrides, series=series,
+    return CosimSpec.from_scenario(scenario, stop_time=stop_time, step=step, set=set, series=series,
                                    parameter_set=parameter_set, fmus=fmus)
 
 

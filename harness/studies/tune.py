@@ -602,7 +602,7 @@ def _outputs(scenario: str, out: Path | str | None, ssv: Path | str | None,
     return folder, Path(ssv) if ssv else folder / "autotuned.ssv", install_path(scenario) if install else None
 
 
-def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), overrides: Mapping[str, float] | None = None,
+def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), set: Mapping[str, float] | None = None,
                budget: int = 200, seed: int = 0, stop_time: float | None = None, step: float | None = None,
                w_angle: float | None = None, w_voltage: float | None = None, fmus: str = "auto",
                parameter_set: str | None = None, out: Path | str | None = None, ssv: Path | str | None = None,
@@ -618,7 +618,7 @@ def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), overri
         The parameters to tune, ``component.variable`` comma-separated (:func:`parse_params`).
     bounds : sequence of str
         ``COMP.VAR=LOW:HIGH`` search ranges (:func:`parse_bounds`; default nominal/2 .. nominal*2).
-    overrides : mapping, optional
+    set : mapping, optional
         Fixed ``component.variable`` values in every run.
     budget, seed : int
         Runs, exactly (candidates with a spread), and the optimiser's seed.
@@ -646,14 +646,14 @@ def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), overri
     """
     from ipcosim.harness.studies.specs import study_spec
 
-    overrides = dict(overrides or {})
+    set = dict(set or {})
     pset = starting_set(scenario, parameter_set)
-    spec, flavour = study_spec(scenario, fmus, names=list(overrides), check=lambda s: _searched(params, bounds, s),
-                               stop_time=stop_time, step=step, overrides=overrides, parameter_set=pset)
+    spec, flavour = study_spec(scenario, fmus, names=list(set), check=lambda s: _searched(params, bounds, s),
+                               stop_time=stop_time, step=step, set=set, parameter_set=pset)
     names, ranges = _searched(params, bounds, spec)
     plan_population(budget, len(names))  # checks the budget before starting workers
     folder, ssv_path, installed = _outputs(scenario, out, ssv, install)
-    robust = robustness_objective(scenario, spec, overrides, pset, max_peak_sensitivity, min_delay_margin, spread)
+    robust = robustness_objective(scenario, spec, set, pset, max_peak_sensitivity, min_delay_margin, spread)
     weights = (costmod.W_ANGLE if w_angle is None else w_angle, costmod.W_VOLTAGE if w_voltage is None else w_voltage)
     return TuneStudy(scenario, spec, flavour, names, ranges, pset, folder, ssv_path, installed, robust, budget, seed,
                      *weights)
