@@ -67,7 +67,13 @@ def run_one(name: str, out: Path | None = None) -> int:
                              "machine": machine(), "load": [_load()]}
     start = time.perf_counter()
     try:
+        speed = targets.machine_speed()
         lines = importlib.import_module(name).run()
+        short = name.split(".")[-1].removeprefix("bench_")
+        lines.append("the machine's speed: a fixed pure-Python workload took "
+                     + targets.figure(f"{short}.machine_reference_ms", min(speed, targets.machine_speed()), "ms",
+                                      anchor="the sum of 2.5 million integers; the other CPU figures move with it",
+                                      what="machine speed: fixed pure-Python workload, CPU"))
         status = "ok"
     except Exception as exc:  # noqa: BLE001 -- one line, the other benches still run
         text = str(exc).strip()

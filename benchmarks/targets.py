@@ -97,6 +97,24 @@ def _space(unit: str) -> str:
     return unit if unit in ("", "x") else f" {unit}"
 
 
+def machine_speed(rounds: int = 15) -> float:
+    """Milliseconds of CPU a fixed pure-Python workload (the sum of 2.5 million integers) takes
+    now, the least disturbed of ``rounds``: how fast this machine is while a module runs.
+
+    The machines are shared: the same workload took 23 ms at one hour and 32-36 ms an hour later at
+    the same load, and every CPU-time figure of the project moved with it. Each module's entry in
+    last.json carries this figure so that its others can be read against it.
+    """
+    import time
+
+    samples = []
+    for _ in range(rounds):
+        c0 = time.process_time()
+        sum(range(2_500_000))
+        samples.append((time.process_time() - c0) * 1e3)
+    return least_disturbed(samples)
+
+
 def least_disturbed(samples: list[float], fraction: float = 0.1) -> float:
     """The ``fraction`` quantile of many short timed rounds: the rounds least disturbed by other load
     on a shared machine (a preempted round is slow, never fast), steadier than their median there."""
