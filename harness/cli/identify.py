@@ -6,13 +6,15 @@ import json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from ipcosim.fmus.params import KINDS
+
     p = sub.add_parser("identify", help="estimate the plant's parameters from a run's log (with 95 % intervals)",
                        description="Replay the logged voltage through the plant model, fit the named parameters to "
                                    "the logged encoder readings (output error, scipy least squares) and report each "
                                    "estimate with its 95 % interval and the NRMSE per output on the held-out last "
                                    "quarter of the log. Run `ipcosim run KIND-identify` for a log (docs/identify.md).")
     p.add_argument("source", metavar="RUN_DIR_OR_CSV", help="a run folder (holding results.csv) or a CSV file")
-    p.add_argument("--plant", required=True, choices=["single-mass", "double-mass"], help="plant kind of the log")
+    p.add_argument("--plant", required=True, choices=KINDS, help="plant kind of the log")
     p.add_argument("--fit", metavar="NAME[,NAME...]",
                    help="parameters to estimate (default: single mass Mc,Beq,Bp,b; double mass Ma,Mc,K,Ba,Bf,b1,b2)")
     p.add_argument("--preset", metavar="NAME", help="preset of the parameters held fixed and of the fit's start")
