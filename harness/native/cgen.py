@@ -205,19 +205,21 @@ def model_description(model: NativeModel, gid: str, sources: list[str]) -> bytes
 def _structure(root: ElementTree.Element, model: NativeModel) -> None:
     index = {v.name: i + 1 for i, v in enumerate(model.variables)}
     ms = ElementTree.SubElement(root, "ModelStructure")
-    outputs = [v for v in model.variables if v.causality == "output"]
     out_el = ElementTree.SubElement(ms, "Outputs")
-    for v in outputs:
-        attrs = {"index": str(index[v.name])}
-        if v.depends_on is not None:
-            attrs["dependencies"] = " ".join(str(index[d]) for d in v.depends_on if d in index)
-        ElementTree.SubElement(out_el, "Unknown", attrs)
+    for v in model.variables:
+        if v.causality == "output":
+            _unknown(out_el, index, v.name, v.depends_on)
     init = [v for v in model.variables if v.causality == "output" and v.initial in (None, "calculated", "approx")]
     init += [v for v in model.variables if v.causality == "calculatedParameter"]
     if init:
         iu = ElementTree.SubElement(ms, "InitialUnknowns")
         for v in init:
-            attrs = {"index": str(index[v.name])}
-            if v.initial_depends_on is not None:
-                attrs["dependencies"] = " ".join(str(index[d]) for d in v.initial_depends_on if d in index)
-            ElementTree.SubElement(iu, "Unknown", attrs)
+            _unknown(iu, index, v.name, v.initial_depends_on)
+
+
+def _unknown(parent: ElementTree.Element, index: dict[str, int], name: str, depends_on: Any) -> None:
+    """One ``Unknown`` of the model structure, with its dependencies (None: not declared)."""
+    attrs = {"index": str(index[name])}
+    if depends_on is not None:
+        attrs["dependencies"] = " ".join(str(index[d]) for d in depends_on if d in index)
+    ElementTree.SubElement(parent, "Unknown", attrs)
