@@ -44,3 +44,5 @@ BUILD_FMU_DIR = BUILD_DIR / "fmus"
 BUILD_SSP_DIR = BUILD_DIR / "ssp"
 #: Compiled stepping loops (``loops/<hash>.so``; see :mod:`ipcosim.harness.master.cloop`).
 LOOP_DIR = BUILD_DIR / "loops"
+#: Compiled identification replays (``replay/<plant>-<hash>.so``; see :mod:`ipcosim.harness.native.replay`).
+REPLAY_DIR = BUILD_DIR / "replay"

@@ -17,7 +17,7 @@ from ipcosim.controllers.catalog import make_law
 from ipcosim.controllers.excitation import ExcitationGains, multisine
 from ipcosim.controllers.laws import LawParameterError
 from ipcosim.fmus.instruments import realism
-from ipcosim.fmus.params import preset
+from ipcosim.fmus.params import DEFAULT_PRESET, preset
 from ipcosim.fmus.physics import MEASURED, state_names
 from ipcosim.fmus.plant import replay
 from ipcosim.harness.studies.identify import IdentifyError, IdentifyOptions, identify, read_log
@@ -117,6 +117,40 @@ def test_the_true_parameters_explain_every_reading_to_half_a_count(tmp_path):
     # one per cent off in the mass, and the readings are no longer all explained
     off = largest_counts(**{**truth, "Mc": 0.99 * truth["Mc"]})
     assert off[0] > 0.5, off
+
+
+@pytest.mark.parametrize("kind, truth", [("single-mass", SINGLE_TRUTH), ("double-mass", DOUBLE_TRUTH)])
+def test_the_native_replay_is_the_python_replay(kind, truth):
+    """The identification's simulation in C (``harness.native.replay``) moves as the Python replay on the lab
+    bench: DAC codes, the one-sample delay and the carts sticking and breaking loose."""
+    from ipcosim.harness.native.replay import native_replay
+
+    bench, overrides = realism("lab", kind)
+    assert bench.voltage_resolution > 0 and bench.input_delay > 0
+    params = replace(preset(DEFAULT_PRESET[kind]), **{**overrides, **truth})
+    t = np.arange(3000) * 1e-3
+    voltage = 1.5 * np.sin(2 * np.pi * 0.8 * t) * (t % 1.0 < 0.6)    # bursts and pauses
+    x0 = [math.pi if n == "pendulum_angle" else 0.0 for n in state_names(kind)]
+    python = np.array(replay(params, voltage, 1e-3, x0, bench))
+    native = native_replay(kind)(params, voltage, 1e-3, x0, bench)
+    assert native.shape == python.shape == (len(t) + 1, len(MEASURED[kind]))
+    assert np.abs(native - python).max() <= 1e-9
+    carts = python[:, [i for i, n in enumerate(MEASURED[kind]) if n != "pendulum_angle"]]
+    assert np.ptp(carts, axis=0).min() > 0.01                          # they move ...
+    assert (np.diff(carts, axis=0) == 0).sum(axis=0).min() > 50        # ... and stick (a stuck cart holds still)
+
+
+def test_without_a_c_compiler_the_log_is_replayed_in_python(monkeypatch):
+    from ipcosim.harness.native.replay import native_replay
+    from ipcosim.harness.studies.identify import simulator
+
+    monkeypatch.setenv("CC", "no-such-compiler")
+    native_replay.cache_clear()
+    try:
+        simulate, how = simulator("single-mass")
+    finally:
+        native_replay.cache_clear()
+    assert simulate is replay and how == "python (no C compiler found (set CC, or install gcc or clang))"
 
 
 @pytest.mark.integration
@@ -219,6 +253,7 @@ def test_command_line_json_ssv_and_parameter_file(tmp_path):
     assert set(doc["parameters"]) == {"Mc", "Beq"} and set(doc["nrmse"]) == {"cart_position", "pendulum_angle"}
     assert doc["parameters"]["Mc"]["unit"] == "kg" and len(doc["parameters"]["Mc"]["ci95"]) == 2
     assert set(doc["largest_residual_counts"]) == set(doc["nrmse"]) and doc["simulations"] > 0
+    assert doc["replay"] == "native" and p.stderr == ""
     ssv = tmp_path / "id" / "identified.ssv"
     assert ssv.is_file() and (tmp_path / "id" / "identified.png").is_file()
     # the file's values reach the plant (after the scenario's sets), and --set still wins over it

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,6 +30,9 @@ def main(args: argparse.Namespace) -> int:
 
     result = identify(IdentifyOptions.create(args.source, plant=args.plant, fit=args.fit, preset=args.preset,
                                              out=args.out))
+    if result.replay != "native":
+        print(f"ipcosim identify: the log was replayed in Python, about twenty times slower than the native replay: "
+              f"{result.replay}", file=sys.stderr)
     if args.json:
         print(json.dumps(result.to_json()))
         return 0

@@ -12,6 +12,7 @@ Python flavour on native FMUs, and how a user writes a native parameter set for 
 """
 from __future__ import annotations
 
+import functools
 import json
 import zipfile
 from pathlib import Path
@@ -109,8 +110,16 @@ def _law(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]
     return out
 
 
-def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]:
+@functools.lru_cache(maxsize=64)
+def _stages(L: tuple[tuple[float, ...], ...], step: float) -> list[Any]:
+    """``etdrk4_f_form(L, step)``, remembered: the stiff part moves only with the parameters of the armature
+    circuit and of the mass it drives, and an identification redesigns for thousands of parameter sets."""
     from ipcosim.fmus.integrator import etdrk4_f_form
+
+    return etdrk4_f_form(L, step)
+
+
+def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, float]:
     from ipcosim.fmus.params import DEFAULT_PRESET, PLANT_KINDS, PRESETS, make
     from ipcosim.fmus.plant import Plant
     from ipcosim.harness.native.models import stage_coefficients
@@ -123,7 +132,8 @@ def _plant(info: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, floa
     out: dict[str, float] = {k: v for k, v in values.items()}
     plant = Plant(make(kind, **phys))
     present = set(info["stage_coefficients"])
-    for name, value in stage_coefficients(etdrk4_f_form(plant._L, step), len(plant.state_names)).items():
+    L = tuple(tuple(row) for row in plant._L)
+    for name, value in stage_coefficients(_stages(L, step), len(plant.state_names)).items():
         if name in present:
             out[name] = value
         elif value != 0.0:
