@@ -218,6 +218,8 @@ def test_missing_columns_and_unknown_names_are_one_line_refusals(tmp_path):
         IdentifyOptions.create(csv, plant="single-mass", preset="thesis-ch4")
     with pytest.raises(IdentifyError, match="no such file"):
         identify(IdentifyOptions.create(tmp_path / "nothing", plant="single-mass"))
+    with pytest.raises(ValueError, match=r"--refits 1: give 0 \(the sandwich interval alone\) or a whole number >= 2"):
+        IdentifyOptions.create(csv, plant="single-mass", refits=1)
 
 
 @pytest.mark.integration
@@ -246,14 +248,14 @@ def test_command_line_json_ssv_and_parameter_file(tmp_path):
     ipcosim.run("single-mass-identify", stop_time=STOP_TIME, set={f"plant.{k}": v for k, v in SINGLE_TRUTH.items()},
                 out=run)
     # the final pass's simulations on a shared machine: a generous limit, the speed target is make bench's
-    p = cli("identify", str(run), "--plant", "single-mass", "--fit", "Mc,Beq", "--json", "--out",
+    p = cli("identify", str(run), "--plant", "single-mass", "--fit", "Mc,Beq", "--refits", "2", "--json", "--out",
             str(tmp_path / "id"), timeout=600)
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
     assert set(doc["parameters"]) == {"Mc", "Beq"} and set(doc["nrmse"]) == {"cart_position", "pendulum_angle"}
     assert doc["parameters"]["Mc"]["unit"] == "kg" and len(doc["parameters"]["Mc"]["ci95"]) == 2
     assert set(doc["largest_residual_counts"]) == set(doc["nrmse"]) and doc["simulations"] > 0
-    assert doc["replay"] == "native" and p.stderr == ""
+    assert doc["replay"] == "native" and doc["refits"] == 2 and p.stderr == ""
     ssv = tmp_path / "id" / "identified.ssv"
     assert ssv.is_file() and (tmp_path / "id" / "identified.png").is_file()
     # the file's values reach the plant (after the scenario's sets), and --set still wins over it

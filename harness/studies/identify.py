@@ -2,9 +2,11 @@
 
 The estimator is an output-error fit. It replays the logged voltage through the project's own plant
 model (:func:`ipcosim.fmus.plant.replay`: the same ``Plant`` the plant FMUs and the virtual rig
-step, on the lab bench's input path, ``ipcosim.fmus.instruments.REALISM["lab"]``), compares the
+step, on the lab bench's input path, ``ipcosim.fmus.instruments.REALISM["lab"]``; run in C by
+:mod:`ipcosim.harness.native.replay` where a compiler is found, :func:`simulator`), compares the
 simulated positions with the logged encoder readings, and minimizes the sum of squared
-differences (each output scaled by its spread in the log): scipy's trust-region least squares
+differences (each output scaled by its spread in the log, its mean -- the encoder's unknown zero
+offset -- taken out, :func:`unbiased`): scipy's trust-region least squares
 approaches the optimum, a final pass of small-step Gauss-Newton steps (:func:`_polish`) finishes it
 where the stick-slip friction makes the cost rough. Only the parameters named in ``fit`` move; every
 other constant (motor, gearbox, pendulum mass and length) stays at the preset's value. The bench's
@@ -15,15 +17,16 @@ lockstep rig behind the HIL adapter by none.
 Held-out check: the first ``1 - HELD_OUT`` of the log is fitted; the rest is simulated on from the
 start with the estimate and reported as NRMSE per output (``1 - ||y - y_sim|| / ||y - mean y||``).
 
-Intervals: the Gauss-Newton linearization ``theta - theta* ~ H^-1 J' r`` with ``H = J'J`` gives the
-covariance ``H^-1 S H^-1``; the residuals (encoder quantization, the input's D/A steps) are not
-white -- a cart that sticks holds the same count error for many samples -- so ``S`` is the
-Bartlett-weighted sum of the scores' autocovariances up to ``HAC_LAG`` samples (Newey-West), not
-``s^2 H``; ``J`` is taken at the finished estimate by central differences over ``COVARIANCE_STEP``.
-The interval is the estimate +- 1.96 standard errors (clipped at 0 for a Coulomb force). It covers
-the estimator's scatter from the measurement's own errors; it says nothing of a model that is wrong,
-nor of where in the stick-slip roughness the fit ended (docs/identify.md). ``largest_residual_counts``
-tells the latter apart: the true parameters explain every reading to within half a count.
+Intervals (:func:`_half_widths`): the wider of two. The sandwich: the Gauss-Newton linearization
+``theta - theta* ~ H^-1 J' r`` with ``H = J'J`` gives the covariance ``H^-1 S H^-1``, ``S`` the
+Bartlett-weighted sum of the scores' autocovariances up to ``HAC_LAG`` samples (Newey-West: a cart that
+sticks holds the same count error for many samples), ``J`` by central differences over
+``COVARIANCE_STEP``; +- 1.96 standard errors. It sees the measurement's errors but not where in the
+stick-slip roughness the fit stopped, which on the lab bench is the larger error. The refits
+(:func:`_bootstrap`, ``refits`` of them): synthetic logs of the estimate, read by encoders with a random
+sub-count zero offset, fitted as the log was; +- ``t(0.975, refits)`` times the refits' root-mean-square
+deviation from the estimate. They see both. Neither says anything of a model that is wrong (the
+held-out NRMSE is the check for that; docs/identify.md). Coulomb forces' intervals are clipped at 0.
 """
 from __future__ import annotations
 
@@ -37,7 +40,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ipcosim.errors import UsageError, closest
-from ipcosim.fmus.instruments import Instruments, realism
+from ipcosim.fmus.instruments import Instruments, quantize, realism
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, PRESETS, preset
 from ipcosim.fmus.physics import MEASURED, state_names
 from ipcosim.fmus.plant import replay
@@ -76,6 +79,10 @@ SIMULATION_BUDGET = 330
 #: decisions that flip inside it add little to a slope measured over many samples (a step of 1e-5 with one flip
 #: inside it made one column, and so the information on that parameter, tens of times too large).
 COVARIANCE_STEP = 1e-3
+#: Refits behind the interval (:func:`_bootstrap`): synthetic logs of the estimate, each read by encoders with
+#: their own sub-count zero offset, each fitted as the log was (from the preset, trust region and final pass).
+BOOTSTRAP_REFITS = 8
+BOOTSTRAP_SEED = 0
 #: Relative standard error (from the encoders' resolution alone) above which a parameter is refused.
 UNIDENTIFIABLE = 0.3
 VOLTAGE_COLUMNS = ("plant.voltage", "controller.voltage")
@@ -104,6 +111,9 @@ class IdentifyOptions:
         Preset of the parameters that are not fitted, and the start of the fit (default: the plant's).
     out : Path or None
         Folder for ``identified.ssv`` and ``identified.png``.
+    refits : int
+        Refits of synthetic logs behind the intervals (:func:`_bootstrap`); 0: the sandwich alone, which does
+        not cover where the fit stopped (docs/identify.md).
     """
 
     source: Path
@@ -111,17 +121,22 @@ class IdentifyOptions:
     fit: tuple[str, ...] = ()
     preset: str | None = None
     out: Path | None = None
+    refits: int = BOOTSTRAP_REFITS
 
     @classmethod
     def create(cls, source: Any, *, plant: str, fit: Sequence[str] | str | None = None, preset: str | None = None,
-               out: Any = None) -> "IdentifyOptions":
-        """Checked options (``fit`` as names or one comma-separated string).
+               out: Any = None, refits: int | None = None) -> "IdentifyOptions":
+        """Checked options (``fit`` as names or one comma-separated string; ``refits`` None: ``BOOTSTRAP_REFITS``).
 
         Raises
         ------
         UsageError
-            An unknown plant kind, preset or parameter name (with the closest known ones).
+            An unknown plant kind, preset or parameter name (with the closest known ones), or ``refits``
+            neither 0 nor a whole number >= 2.
         """
+        refits = BOOTSTRAP_REFITS if refits is None else refits
+        if isinstance(refits, bool) or not isinstance(refits, int) or refits == 1 or refits < 0:
+            raise UsageError(f"--refits {refits}: give 0 (the sandwich interval alone) or a whole number >= 2")
         if plant not in KINDS:
             raise UsageError(f"--plant {plant}: expected one of {', '.join(KINDS)}")
         if preset is not None and (preset not in PRESETS or PRESETS[preset][0] != plant):
@@ -134,7 +149,7 @@ class IdentifyOptions:
             if name not in known:
                 raise UsageError(f"--fit {name}: the {plant} plant has no parameter {name!r}; {closest(name, known)}")
         return cls(source=Path(source), plant=plant, fit=tuple(dict.fromkeys(names)) or DEFAULT_FIT[plant],
-                   preset=preset, out=Path(out) if out is not None else None)
+                   preset=preset, out=Path(out) if out is not None else None, refits=refits)
 
 
 @dataclass(frozen=True)
@@ -214,11 +229,13 @@ class Identification:
     input_delay_s: float = 0.0
     written: list[Path] = field(default_factory=list)   # the files ``options.out`` received
     fit_cpu_s: float = 0.0                                # CPU time of the fit (``fit_time_s``: wall)
-    #: per output, the largest |simulated - measured| over the fitted part in encoder counts (<= 0.5: the
-    #: estimate explains every reading to within the encoder's rounding, as the true parameters do)
+    #: per output, the largest |simulated - measured| over the fitted part in encoder counts, the zero offset
+    #: taken out (:func:`unbiased`; <= 0.5: the estimate explains every reading to within the encoder's
+    #: rounding, as the true parameters do)
     largest_residual_counts: dict[str, float] = field(default_factory=dict)
     #: how the log was simulated: ``native`` (:mod:`ipcosim.harness.native.replay`) or ``python (<why not>)``
     replay: str = "native"
+    refits: int = 0                 # synthetic refits behind the intervals (:func:`_bootstrap`)
 
     def to_json(self) -> dict[str, Any]:
         """``{"parameters": {NAME: {"value", "ci95", "unit"}}, "nrmse": {OUTPUT: fraction}, ...}``."""
@@ -226,7 +243,7 @@ class Identification:
                 "input_delay_s": self.input_delay_s,
                 "held_out_from_s": self.held_out_from_s, "fit_time_s": self.fit_time_s, "fit_cpu_s": self.fit_cpu_s,
                 "simulations": self.simulations, "largest_residual_counts": self.largest_residual_counts,
-                "replay": self.replay, "source": self.source}
+                "replay": self.replay, "refits": self.refits, "source": self.source}
 
 
 class _Problem:
@@ -257,7 +274,8 @@ class _Problem:
                                          self.instruments))
 
     def residuals(self, theta: np.ndarray) -> np.ndarray:
-        """Scaled differences simulated - measured over the fitted part (cached for the last ``theta``)."""
+        """Scaled differences simulated - measured over the fitted part, each output's zero offset profiled out
+        (:func:`unbiased`; cached for the last ``theta``)."""
         if self._last is not None and np.array_equal(self._last[0], theta):
             return self._last[1]
         r = self._residuals(theta)
@@ -271,7 +289,7 @@ class _Problem:
             sim = self.simulate(theta, self.n_fit)
         except (FloatingPointError, ValueError):
             return np.full(y.size, 1e3)
-        return ((sim - y) / self.spread).ravel()
+        return (unbiased(sim, y) / self.spread).ravel()
 
     def cost(self, theta: np.ndarray) -> float:
         """Half the sum of the squared scaled residuals."""
@@ -299,6 +317,18 @@ class _Problem:
             t[i] += d
             cols.append((self._residuals(t) - r0) / d)
         return np.column_stack(cols)
+
+
+def unbiased(sim: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``sim - y`` with each output's mean taken out: the least-squares estimate of the encoder's zero offset.
+
+    An encoder zeroed at the start reads every later position shifted by where the start lay within its count,
+    an unknown constant of up to half a count (0 only where the start sits at a count's centre, as on the
+    simulated benches). A model without it bends its parameters to explain a constant it cannot: on 20 s logs
+    that bias is a few times the estimator's scatter (measured with the refits of :func:`_bootstrap`).
+    """
+    d = sim - y
+    return d - d.mean(axis=0)
 
 
 def _resolutions(problem: _Problem) -> np.ndarray:
@@ -388,9 +418,9 @@ def identify(options: IdentifyOptions) -> Identification:
                 problem, sol = other, refit
     spent = sum(c.simulations for c in candidates)
     best = _polish(problem, sol.x, POLISH_ITERATIONS, SIMULATION_BUDGET - spent)
-    result = _result(best, name, _time.perf_counter() - t0, sum(c.simulations for c in candidates))
-    result.fit_cpu_s = _time.process_time() - c0
-    result.replay = how
+    result = _result(best, name, sum(c.simulations for c in candidates), options.refits)
+    result.fit_time_s, result.fit_cpu_s = _time.perf_counter() - t0, _time.process_time() - c0
+    result.replay, result.refits = how, options.refits
     if options.out is not None:
         result.written = write_identified(result, options.out)
     return result
@@ -412,10 +442,13 @@ class _Finished:
     problem: _Problem
     x: np.ndarray
     cost: float
-    jac: np.ndarray
+    jac: np.ndarray | None
+    budget: float = math.inf      # the simulations the final pass was given (a refit gets as many)
+    refit_simulations: int = 0    # what the interval's refits spent (:func:`_bootstrap`)
 
 
-def _polish(problem: _Problem, start: np.ndarray, iterations: int, budget: float = math.inf) -> _Finished:
+def _polish(problem: _Problem, start: np.ndarray, iterations: int, budget: float = math.inf,
+            covariance: bool = True) -> _Finished:
     """Finish the fit from ``start``: Gauss-Newton steps on small-step central differences, kept only when they
     lower the cost.
 
@@ -424,7 +457,7 @@ def _polish(problem: _Problem, start: np.ndarray, iterations: int, budget: float
     standard errors from the optimum. Between the flips the cost is smooth; central differences over a tenth of a
     standard error (``POLISH_STEPS``) see that slope, and a step is tried at the lengths ``POLISH_LENGTHS`` and
     taken only if it lowers the cost (no step is forced through a flip); at most ``iterations`` steps and about
-    ``budget`` simulations. The Jacobian at the end (``COVARIANCE_STEP``) is the one the interval uses.
+    ``budget`` simulations. The Jacobian at the end (``COVARIANCE_STEP``, with ``covariance``) is the sandwich's.
     """
     x, cost = np.asarray(start, float), problem.cost(start)
     # a Jacobian and its line search, plus the Jacobian for the interval, must fit in what is left of the budget
@@ -438,7 +471,7 @@ def _polish(problem: _Problem, start: np.ndarray, iterations: int, budget: float
                 break
         else:
             break
-    return _Finished(problem, x, cost, problem.central_jacobian(x, COVARIANCE_STEP))
+    return _Finished(problem, x, cost, problem.central_jacobian(x, COVARIANCE_STEP) if covariance else None, budget)
 
 
 def _bounded(problem: _Problem, x: np.ndarray) -> np.ndarray:
@@ -451,26 +484,65 @@ def _lower(problem: _Problem) -> np.ndarray:
     return np.array([0.0 if n in NONNEGATIVE else 1e-3 for n in problem.fit])
 
 
-def _result(finished: _Finished, preset_name: str, fit_time: float, simulations: int) -> Identification:
-    """Estimates with their intervals (:func:`_covariance`) and the held-out NRMSE of a finished fit."""
+def _bootstrap(finished: _Finished, sim: np.ndarray, refits: int) -> np.ndarray:
+    """The estimator's own scatter at the estimate: ``refits`` estimates (scaled) from synthetic logs.
+
+    Each synthetic log is the estimate's simulated motion ``sim`` read by the log's encoders zeroed at the start
+    with a sub-count zero offset drawn uniformly (``quantize`` with its phase moved; the same logged voltage,
+    the same computation delay), fitted as the log was: from the preset, the trust region, then the final pass
+    with the simulations the log's had. Its estimates scatter as the log's did -- from the encoders' rounding
+    and from where in the stick-slip roughness the fit stops, which no linearization at the estimate sees.
+    """
+    problem = finished.problem
+    log, res = problem.log, _resolutions(problem)
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    x0 = log.y[0]
+    draws = []
+    for _ in range(refits):
+        phase = 0.5 + rng.uniform(-0.5, 0.5, len(res))
+        y = np.array([[quantize(v - s, r, p) + s for v, s, r, p in zip(row, x0, res, phase)] for row in sim])
+        refit = _Problem(replace(log, y=y), problem.kind, problem.fit, problem.base, problem.instruments,
+                         problem.simulator)
+        sol = _fit(refit, refit.start)
+        draws.append(_polish(refit, sol.x, POLISH_ITERATIONS, finished.budget, covariance=False).x)
+        finished.refit_simulations += refit.simulations
+    return np.array(draws)
+
+
+def _half_widths(finished: _Finished, sim: np.ndarray, refits: int) -> np.ndarray:
+    """Half the width of each 95 % interval (scaled parameters): the wider of the sandwich's ``1.96 se``
+    (:func:`_covariance`) and ``t(0.975, refits) * rms`` of the refits' deviations from the estimate
+    (:func:`_bootstrap`; none without refits)."""
+    from scipy.stats import t as student
+
+    problem = finished.problem
+    cov = _covariance(finished.jac, problem.residuals(finished.x), len(problem.log.outputs))
+    half = 1.96 * np.sqrt(np.maximum(np.diag(cov), 0.0))
+    if refits:
+        rms = np.sqrt(np.mean((_bootstrap(finished, sim, refits) - finished.x) ** 2, axis=0))
+        half = np.maximum(half, student.ppf(0.975, refits) * rms)
+    return half
+
+
+def _result(finished: _Finished, preset_name: str, simulations: int, refits: int) -> Identification:
+    """Estimates with their intervals (:func:`_half_widths`) and the held-out NRMSE of a finished fit."""
     problem = finished.problem
     log = problem.log
-    cov = _covariance(finished.jac, problem.residuals(finished.x), len(log.outputs))
     sim = problem.simulate(finished.x, len(log.time))
+    half = _half_widths(finished, sim, refits) * problem.scale
     k = problem.n_fit
     params = problem.params(finished.x)
     units = {f.name: f.metadata["unit"] for f in fields(params)}
     out: dict[str, dict[str, Any]] = {}
     for i, n in enumerate(problem.fit):
-        se = math.sqrt(max(cov[i, i], 0.0)) * problem.scale[i]
         value = float(getattr(params, n))
-        lo = value - 1.96 * se
-        out[n] = {"value": value, "ci95": [max(lo, 0.0) if n in NONNEGATIVE else lo, value + 1.96 * se],
+        lo = value - half[i]
+        out[n] = {"value": value, "ci95": [max(lo, 0.0) if n in NONNEGATIVE else lo, value + half[i]],
                   "unit": units[n]}
-    counts = np.abs(sim[:k] - log.y[:k]).max(axis=0) / _resolutions(problem)
+    counts = np.abs(unbiased(sim[:k], log.y[:k])).max(axis=0) / _resolutions(problem)
     result = Identification(problem.kind, preset_name, out,
                           {o: nrmse(log.y[k:, j], sim[k:, j]) for j, o in enumerate(log.outputs)},
-                          float(log.time[k]), fit_time, simulations, log.display,
+                          float(log.time[k]), 0.0, simulations + finished.refit_simulations, log.display,
                           {f.name: float(getattr(params, f.name)) for f in fields(params)}, log.outputs,
                           log.time, log.y, sim, problem.instruments.input_delay)
     result.largest_residual_counts = {o: float(c) for o, c in zip(log.outputs, counts)}
