@@ -155,15 +155,15 @@ def lqr_margin_gap(kind: str, truth: dict[str, float], estimate: dict[str, float
     return float(predicted["phase_margin_deg"]), float(actual["phase_margin_deg"])
 
 
-def coverage(kind: str, repetitions: int, rig: bool = False) -> list[str]:
-    """How often each truth lies inside its 95 % interval, and within its accuracy target (one line per
-    repetition printed as it ends)."""
+def coverage(kind: str, repetitions: int, rig: bool = False, first: int = 1) -> list[str]:
+    """How often each truth lies inside its 95 % interval, and within its accuracy target, over the seeds
+    ``first .. first + repetitions - 1`` (one line per repetition printed as it ends)."""
     inside: dict[str, int] = {}
     accurate: dict[str, int] = {}
     worst: dict[str, float] = {}
     nrmse, times, gaps = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(1, repetitions + 1):
+        for seed in range(first, first + repetitions):
             truth, r = one_run(kind, seed, Path(tmp), rig)
             print(f"{kind} seed {seed}{' (rig)' if rig else ''}: fit {r.fit_cpu_s:.1f} s CPU, delay "
                   f"{r.input_delay_s * 1e3:g} ms, NRMSE {min(r.nrmse.values()):.2%}, largest residual "
@@ -193,6 +193,7 @@ if __name__ == "__main__":
     parser.add_argument("--coverage", type=int, metavar="N", help="N seeded repetitions per plant")
     parser.add_argument("--plant", choices=["single-mass", "double-mass"], action="append")
     parser.add_argument("--rig", action="store_true", help="log through --swap plant=hil (a lockstep rig process)")
+    parser.add_argument("--first", type=int, default=1, metavar="SEED", help="the first repetition's seed (default 1)")
     args = parser.parse_args()
     for kind in args.plant or ["single-mass", "double-mass"]:
-        print("\n".join(coverage(kind, args.coverage or 10, args.rig)), flush=True)
+        print("\n".join(coverage(kind, args.coverage or 10, args.rig, args.first)), flush=True)

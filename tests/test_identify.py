@@ -78,13 +78,13 @@ def test_weak_hold_pulls_the_cart_back():
 
 # ------------------------------------------------------------------------------------ from the plant FMU
 
-def _identify_run(scenario: str, truth: dict[str, float], out: Path, **run):
+def _identify_run(scenario: str, truth: dict[str, float], out: Path, refits: int | None = None, **run):
     import ipcosim
 
     values = {f"plant.{k}": v for k, v in truth.items()}
     result = ipcosim.run(scenario, stop_time=STOP_TIME, set={**values, **run.pop("set", {})}, out=out, **run)
     assert not result.error, result.error
-    return identify(IdentifyOptions.create(out, plant=scenario.rsplit("-", 1)[0]))
+    return identify(IdentifyOptions.create(out, plant=scenario.rsplit("-", 1)[0], refits=refits))
 
 
 @pytest.mark.integration
@@ -155,9 +155,9 @@ def test_without_a_c_compiler_the_log_is_replayed_in_python(monkeypatch):
 
 @pytest.mark.integration
 def test_double_mass_hidden_parameters_from_the_plant_fmu(tmp_path):
-    # the double mass keeps the targets; its intervals are narrower than the stick-slip fit's roughness
-    # (docs/identify.md, What an interval means), so they are not asserted
-    check_targets(_identify_run("double-mass-identify", DOUBLE_TRUTH, tmp_path / "run"), DOUBLE_TRUTH,
+    # the double mass keeps the targets; its intervals cover the truth in 7 to 9 of 10 seeded logs (docs/identify.md,
+    # Figures), so they are not asserted, nor paid for (no refits)
+    check_targets(_identify_run("double-mass-identify", DOUBLE_TRUTH, tmp_path / "run", refits=0), DOUBLE_TRUTH,
                   intervals=False)
 
 
@@ -193,9 +193,9 @@ def test_hidden_parameters_through_the_rig(tmp_path, rig, monkeypatch, plant, tr
     run = ipcosim.run(f"{plant}-identify", stop_time=STOP_TIME, swap={"plant": "hil"}, out=tmp_path / "run")
     assert not run.error, run.error
     assert run.metadata.get("realtime") in (False, None)       # lockstep: not paced
-    # through the rig the estimates keep the targets, but a bias of about 0.1 % (the Coulomb force) can lie
-    # outside intervals that narrow: docs/identify.md, Figures
-    check_targets(identify(IdentifyOptions.create(tmp_path / "run", plant=plant)), truth, intervals=False)
+    # through the rig the estimates keep the targets; how often the intervals cover is the bench's coverage
+    # figure (docs/identify.md, Figures), so the refits behind them are left out here
+    check_targets(identify(IdentifyOptions.create(tmp_path / "run", plant=plant, refits=0)), truth, intervals=False)
 
 
 # ------------------------------------------------------------------------------------ refusals

@@ -5,8 +5,7 @@ model (:func:`ipcosim.fmus.plant.replay`: the same ``Plant`` the plant FMUs and 
 step, on the lab bench's input path, ``ipcosim.fmus.instruments.REALISM["lab"]``; run in C by
 :mod:`ipcosim.harness.native.replay` where a compiler is found, :func:`simulator`), compares the
 simulated positions with the logged encoder readings, and minimizes the sum of squared
-differences (each output scaled by its spread in the log, its mean -- the encoder's unknown zero
-offset -- taken out, :func:`unbiased`): scipy's trust-region least squares
+differences (each output scaled by its spread in the log): scipy's trust-region least squares
 approaches the optimum, a final pass of small-step Gauss-Newton steps (:func:`_polish`) finishes it
 where the stick-slip friction makes the cost rough. Only the parameters named in ``fit`` move; every
 other constant (motor, gearbox, pendulum mass and length) stays at the preset's value. The bench's
@@ -229,9 +228,8 @@ class Identification:
     input_delay_s: float = 0.0
     written: list[Path] = field(default_factory=list)   # the files ``options.out`` received
     fit_cpu_s: float = 0.0                                # CPU time of the fit (``fit_time_s``: wall)
-    #: per output, the largest |simulated - measured| over the fitted part in encoder counts, the zero offset
-    #: taken out (:func:`unbiased`; <= 0.5: the estimate explains every reading to within the encoder's
-    #: rounding, as the true parameters do)
+    #: per output, the largest |simulated - measured| over the fitted part in encoder counts (<= 0.5: the
+    #: estimate explains every reading to within the encoder's rounding, as the true parameters do)
     largest_residual_counts: dict[str, float] = field(default_factory=dict)
     #: how the log was simulated: ``native`` (:mod:`ipcosim.harness.native.replay`) or ``python (<why not>)``
     replay: str = "native"
@@ -274,8 +272,7 @@ class _Problem:
                                          self.instruments))
 
     def residuals(self, theta: np.ndarray) -> np.ndarray:
-        """Scaled differences simulated - measured over the fitted part, each output's zero offset profiled out
-        (:func:`unbiased`; cached for the last ``theta``)."""
+        """Scaled differences simulated - measured over the fitted part (cached for the last ``theta``)."""
         if self._last is not None and np.array_equal(self._last[0], theta):
             return self._last[1]
         r = self._residuals(theta)
@@ -289,7 +286,7 @@ class _Problem:
             sim = self.simulate(theta, self.n_fit)
         except (FloatingPointError, ValueError):
             return np.full(y.size, 1e3)
-        return (unbiased(sim, y) / self.spread).ravel()
+        return ((sim - y) / self.spread).ravel()
 
     def cost(self, theta: np.ndarray) -> float:
         """Half the sum of the squared scaled residuals."""
@@ -317,18 +314,6 @@ class _Problem:
             t[i] += d
             cols.append((self._residuals(t) - r0) / d)
         return np.column_stack(cols)
-
-
-def unbiased(sim: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """``sim - y`` with each output's mean taken out: the least-squares estimate of the encoder's zero offset.
-
-    An encoder zeroed at the start reads every later position shifted by where the start lay within its count,
-    an unknown constant of up to half a count (0 only where the start sits at a count's centre, as on the
-    simulated benches). A model without it bends its parameters to explain a constant it cannot: on 20 s logs
-    that bias is a few times the estimator's scatter (measured with the refits of :func:`_bootstrap`).
-    """
-    d = sim - y
-    return d - d.mean(axis=0)
 
 
 def _resolutions(problem: _Problem) -> np.ndarray:
@@ -539,7 +524,7 @@ def _result(finished: _Finished, preset_name: str, simulations: int, refits: int
         lo = value - half[i]
         out[n] = {"value": value, "ci95": [max(lo, 0.0) if n in NONNEGATIVE else lo, value + half[i]],
                   "unit": units[n]}
-    counts = np.abs(unbiased(sim[:k], log.y[:k])).max(axis=0) / _resolutions(problem)
+    counts = np.abs(sim[:k] - log.y[:k]).max(axis=0) / _resolutions(problem)
     result = Identification(problem.kind, preset_name, out,
                           {o: nrmse(log.y[k:, j], sim[k:, j]) for j, o in enumerate(log.outputs)},
                           float(log.time[k]), 0.0, simulations + finished.refit_simulations, log.display,
