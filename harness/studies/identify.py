@@ -73,7 +73,7 @@ POLISH_ITERATIONS = 8
 DELAY_NFEV = 8
 #: Simulations of the log the fit may spend before its interval (the final pass ends early rather than exceed it);
 #: each refit's final pass gets what the log's had. A larger budget does not help: a fit stuck in the roughness
-#: stays stuck (a double-mass log at 1200: the final pass stopped at 583, still 2.3 counts off).
+#: stays stuck (a double-mass log given 1200: the final pass stopped at 389, still 2.5 counts off).
 SIMULATION_BUDGET = 330
 #: Central-difference step of the Jacobian behind the interval: ten standard errors, so that the few stick
 #: decisions that flip inside it add little to a slope measured over many samples (a step of 1e-5 with one flip
