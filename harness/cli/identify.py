@@ -34,7 +34,7 @@ def main(args: argparse.Namespace) -> int:
     result = identify(IdentifyOptions.create(args.source, plant=args.plant, fit=args.fit, preset=args.preset,
                                              out=args.out, refits=args.refits))
     if result.replay != "native":
-        print(f"ipcosim identify: the log was replayed in Python, about twenty times slower than the native replay: "
+        print(f"ipcosim identify: the log was replayed in Python, 30 to 40 times slower than the native replay: "
               f"{result.replay}", file=sys.stderr)
     if args.json:
         print(json.dumps(result.to_json()))

@@ -365,7 +365,7 @@ def nrmse(y: np.ndarray, y_sim: np.ndarray) -> float:
 
 def simulator(kind: str) -> tuple[Callable[..., Any], str]:
     """The simulation of the log and its name: the native replay (:mod:`ipcosim.harness.native.replay`, the same
-    numbers about twenty times faster) where a C compiler is found, else :func:`ipcosim.fmus.plant.replay`
+    numbers 30 to 40 times faster) where a C compiler is found, else :func:`ipcosim.fmus.plant.replay`
     (``python (<why>)``)."""
     from ipcosim.harness.native.replay import ReplayUnavailable, native_replay
 
