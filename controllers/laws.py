@@ -533,13 +533,20 @@ class LQGCoefficients:
                    C=rows(design.model.C), reference_states=tuple(map(float, design.reference_states)))
 
 
-def coulomb_estimate(v: float, b: float, threshold: float) -> float:
+def coulomb_estimate(v: float, b: float, threshold: float, demand: float = 0.0, gain: float = 0.0) -> float:
     """The Coulomb force [N] the LQG compensates on a cart of estimated velocity ``v`` [m/s]: 0 for
     ``|v| <= threshold``, ``b sign(v)`` for ``|v| >= 2 threshold``, linear in between (no compensation of a
-    cart at rest, whose velocity estimate is noise, and no slope at small signals)."""
+    cart at rest, whose velocity estimate is noise, and no slope at small signals).
+
+    With a breakaway ``gain`` g > 0, the share of ``b`` the velocity leaves uncompensated goes to a cart near
+    rest in the direction the loop pushes it: ``(1 - w) clip(g demand, -b, b)``, ``demand`` [N] the net force
+    the frictionless model puts on the cart, ``w`` the sliding share above (slope g at small signals; the
+    clip written with ``abs``, which has no branch)."""
     a = abs(v) / threshold - 1.0
     w = 0.0 if a <= 0.0 else (1.0 if a >= 1.0 else a)
-    return b * w if v > 0.0 else -b * w
+    sliding = b * w if v > 0.0 else -b * w
+    push = gain * demand
+    return sliding + (1.0 - w) * 0.5 * (abs(push + b) - abs(push - b))
 
 
 def dead_zone(e: float, band: float) -> float:
@@ -579,11 +586,15 @@ class LQG(CurrentEstimatorLaw):
         The compensation's threshold [m/s] (:func:`coulomb_estimate`), > 0.
     integrator_dead_band : float
         The integral ignores this much of the motor-cart position error [m] (:func:`dead_zone`); 0 = none.
+    friction_breakaway_gain : float
+        g of :func:`coulomb_estimate`: a cart near rest is compensated by g times the net force the
+        frictionless model puts on it (the loop's demand), up to its Coulomb force; 0 = none.
     """
 
     def __init__(self, kind: str, coefficients: LQGCoefficients, voltage_limit: float = 10.0,
                  reference_time_constant: float = 0.0, friction: Sequence[float] = (),
-                 friction_velocity: float = 1e-3, integrator_dead_band: float = 0.0) -> None:
+                 friction_velocity: float = 1e-3, integrator_dead_band: float = 0.0,
+                 friction_breakaway_gain: float = 0.0) -> None:
         super().__init__(kind, coefficients.sample_period, voltage_limit)
         if coefficients.outputs != tuple(self.measured):
             raise LawParameterError("design", f"LQG design is for outputs {coefficients.outputs}, the "
@@ -597,6 +608,7 @@ class LQG(CurrentEstimatorLaw):
                                                 f"cart of the friction model), got {len(self.friction)}")
         self.friction_velocity = _check_positive("friction_velocity", friction_velocity)
         self.integrator_dead_band = _check_nonneg("integrator_dead_band", integrator_dead_band)
+        self.friction_breakaway_gain = _check_nonneg("friction_breakaway_gain", friction_breakaway_gain)
         self._Cpinv = _right_inverse(coefficients.C)
         self.reset()
 
@@ -612,12 +624,14 @@ class LQG(CurrentEstimatorLaw):
         rf = self._motor_cart(y) if self.reference_filtered is None else self.reference_filtered
         self.reference_filtered = r = a * rf + (1.0 - a) * r
         x_hat = self._correct(y)
-        v0 = self.friction_velocity
-        forces = [coulomb_estimate(x_hat[i], b, v0) for i, b in zip(d.friction_states, self.friction)]
+        applied = self.applied
+        free = [sum(map(mul, row, x_hat)) + b * applied for row, b in zip(d.Ad, d.Bd)]  # the model, no friction
+        v0, g = self.friction_velocity, self.friction_breakaway_gain
+        forces = [coulomb_estimate(x_hat[i], b, v0, (free[i] - x_hat[i]) / column[i], g)
+                  for i, b, column in zip(d.friction_states, self.friction, d.friction_columns)]
         target = [xr * r for xr in d.reference_states]
         for f, lead in zip(forces, d.friction_leads):
-            target = [t + f * g for t, g in zip(target, lead)]
-        applied = self.applied
+            target = [t + f * c for t, c in zip(target, lead)]
         feedback = d.K_voltage * applied + sum(k * (x - t) for k, x, t in zip(d.K, x_hat, target))
         u = d.volts_per_newton * sum(forces) - feedback - d.K_integral * self.integral
         error = dead_zone(r - self._motor_cart(y), self.integrator_dead_band)
@@ -626,7 +640,7 @@ class LQG(CurrentEstimatorLaw):
         if abs(u) <= limit or (u > 0) != (-d.K_integral * (integral - self.integral) > 0):
             self.integral = integral
         self.applied = limit if u > limit else (-limit if u < -limit else u)
-        x_pred = [sum(map(mul, row, x_hat)) + b * applied for row, b in zip(d.Ad, d.Bd)]
+        x_pred = free
         for f, column in zip(forces, d.friction_columns):
             x_pred = [x - f * c for x, c in zip(x_pred, column)]
         self.x_pred = x_pred
