@@ -1049,5 +1049,5 @@ __all__ = ["LAWS", "KINDS", "PARAMETER_SETS", "ParamSpec", "schema", "set_values
            "thesis_subsystem_models", "thesis_hsmc_gains", "thesis_adaptive", "lqr_design_for",
            "design_params_from", "lqr_gain_specs", "lqr_design_parameters", "lqr_weight_parameters", "lqr_gains",
            "lqr_from_gains", "swing_up_around", "DESIGNED_LAWS", "gain_specs", "weight_parameters",
-           "design_parameters", "designed_gains", "law_from_gains", "lqg_design_from", "TUNED_LQG", "LAB_LQG", "TUNED_CASCADE",
-           "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]
+           "design_parameters", "designed_gains", "law_from_gains", "lqg_design_from", "TUNED_LQG", "LAB_LQG",
+           "TUNED_CASCADE", "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]

@@ -208,8 +208,9 @@ def test_lab_set_compensates_the_lab_benchs_friction_and_the_default_none(kind: 
     from ipcosim.fmus.instruments import REALISM
 
     lab, tuned = set_values(kind, "LQG", "lab"), {**defaults(kind, "LQG"), **set_values(kind, "LQG", "tuned")}
-    assert [lab[n] for n in LQG_FRICTION[kind]] == [REALISM["lab"][kind][n[len("friction_"):]] for n in LQG_FRICTION[kind]]
-    assert [tuned[n] for n in LQG_FRICTION[kind]] == [0.0] * len(LQG_FRICTION[kind])
+    names = LQG_FRICTION[kind]
+    assert [lab[n] for n in names] == [REALISM["lab"][kind][n[len("friction_"):]] for n in names]
+    assert [tuned[n] for n in names] == [0.0] * len(names)
 
 
 @pytest.mark.parametrize("kind", KINDS)
