@@ -154,6 +154,20 @@ def test_loop_limits_refuse_the_thesis_hsmc_and_measure_like_analyze():
     assert high["plant.K"] == pytest.approx(110.0)
 
 
+def test_tune_starts_from_a_value_clipped_onto_a_bound():
+    """A scenario value below the search range starts the search at its lower bound (scipy rescales the start to
+    [0, 1] and would otherwise reject the rounding of a bound)."""
+    spec = PurePlantSpec(stop_time=0.3)
+    lo, hi = 200.4, 1000.0  # q_angle 200 -> 200.4, which scipy's rescaling puts at -1.1e-16
+    assert float(spec.parameters["controller.q_angle"]) < lo
+    executor = LocalExecutor(1)
+    try:
+        res = tune(spec, ["controller.q_angle"], [(lo, hi)], budget=6, executor=executor, seed=1)
+    finally:
+        executor.close()
+    assert len(res.evaluations) == 6 and all(r["controller.q_angle"] >= lo for r in res.evaluations[1:])
+
+
 class _Refuse:
     """A robust objective that refuses every candidate with x > 1 and adds a spread of two plants."""
 

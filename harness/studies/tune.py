@@ -311,7 +311,10 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
 
     population = plan_population(budget, len(names))  # checks the budget before any run
     nominal = {n: float(spec.parameters[n]) for n in names}
-    x0 = np.array([min(max(nominal[n], lo), hi) for n, (lo, hi) in zip(names, bounds)])
+    # the start clipped to the bounds, a hair inside: scipy rescales it to [0, 1] and rejects a bound
+    # that rounds to just outside
+    x0 = np.array([min(max(nominal[n], lo + 1e-12 * (hi - lo)), hi - 1e-12 * (hi - lo))
+                   for n, (lo, hi) in zip(names, bounds)])
     own = executor is None
     if own:
         executor = open_executor()
