@@ -510,7 +510,8 @@ def _excitation_specs() -> list[ParamSpec]:
 
 def _cascade_specs() -> list[ParamSpec]:
     g = CascadeGains()
-    pos = {"theta_ref_limit": "positive", "derivative_time_constant": "nonnegative"}
+    pos = {"theta_ref_limit": "positive", "derivative_time_constant": "nonnegative",
+           "reference_time_constant": "nonnegative"}
     return [ParamSpec(f, getattr(g, f), CascadeGains.UNITS[f], CascadeGains.DOCS[f], pos.get(f, "finite"))
             for f in CascadeGains.UNITS]
 
