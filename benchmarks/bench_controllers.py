@@ -16,8 +16,10 @@ from ipcosim.controllers.simulate import run_loop
 from ipcosim.fmus.params import preset
 
 #: Target: the mean of the median law steps (ten laws measured 26-32 us together, so 2.6-3.2 us
-#: a law; twelve with the LQG laws 44.8 us, 3.7 us a law, on a quiet machine).
-LAW_STEP_US = 5.0
+#: a law; twelve with the LQG laws 44.8 us, 3.7 us a law, on a quiet machine). At the reference
+#: machine speed (``targets.REFERENCE_SPEED_MS``; scaled on a slower machine): 3.6 us measured
+#: (4.58 us at 29.2 ms), so the limit is 1.3 times that.
+LAW_STEP_US = 4.7
 
 
 class _Timed:
@@ -65,5 +67,6 @@ def run() -> list[str]:
                      f"(ratio {row[0] / row[1]:.2f})")
     lines.append(f"mean of the {len(steps)} median law steps: {sum(steps) / len(steps):.2f} us ("
                  + target("controllers.law_step_mean_us", sum(steps) / len(steps), LAW_STEP_US, "us",
-                          what="mean of the median law step times") + f"; together {sum(steps):.1f} us)")
+                          what="mean of the median law step times", per_speed=True)
+                 + f"; together {sum(steps):.1f} us)")
     return lines

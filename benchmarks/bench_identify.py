@@ -85,7 +85,8 @@ def run() -> list[str]:
             key = kind.replace("-", "_")
             lines.append(f"{kind}: 20 s log at 1 kHz fitted in {r.fit_cpu_s:.1f} s CPU ({r.fit_time_s:.1f} s wall) -- "
                          + target(f"identify.{key}_fit_cpu_s", r.fit_cpu_s, 60.0, "s",
-                                  what=f"identify a 20 s {kind} log at 1 kHz (one process: CPU time)") + "; "
+                                  what=f"identify a 20 s {kind} log at 1 kHz (one process: CPU time)",
+                                  per_speed=True) + "; "
                          + figure(f"identify.{key}_fit_wall_s", r.fit_time_s, "s", what="the same, wall time"))
             for name, p in r.parameters.items():
                 err = (p["value"] - truth[name]) / truth[name]

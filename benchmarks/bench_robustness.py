@@ -18,7 +18,10 @@ SCENARIO = "double-mass-lqr"
 RUNS = 200
 STOP_TIME = 15.0
 WORKERS = 2
-LIMIT_S = 30.0
+#: Target: wall time of the row on two workers, at the reference machine speed
+#: (``targets.REFERENCE_SPEED_MS``; scaled on a slower machine): 2.69 s there (3.29 s measured at
+#: 28.1 ms), the limit 1.3 times that; the issue's own limit, 30 s, is far above.
+LIMIT_S = 3.6
 
 
 def measure() -> dict[str, float]:
@@ -51,7 +54,7 @@ def run() -> list[str]:
     """Lines for ``make bench``."""
     m = measure()
     verdict = target("robustness.lab_200_runs_s", m["wall_s"], LIMIT_S, "s",
-                     what=f"{RUNS}-run lab robustness row, native flavour, {WORKERS} workers")
+                     what=f"{RUNS}-run lab robustness row, native flavour, {WORKERS} workers", per_speed=True)
     return [f"robustness row ({SCENARIO}, every factor, lab bench, {RUNS} runs x {STOP_TIME:g} s, native, "
             f"{WORKERS} workers):",
             f"  wall time {m['wall_s']:6.1f} s ({verdict}); the runs themselves {m['runs_s']:.1f} s of CPU; "

@@ -47,13 +47,16 @@ LOOP_RUNS = int(os.environ.get("IPCOSIM_BENCH_LOOP_RUNS", "5"))
 #: load 3 in another minute), so the absolute cold-run limit only catches a gross regression; the
 #: ratio to libcosim, measured in the same alternating rounds, is the fine one: 0.25 s of CPU added
 #: to the run (+40 %) took it from 0.43 to 0.62. The issue's goal for that ratio, 0.3x, is not
-#: reached: see ISSUE_LIBCOSIM_GOAL.
-COLD_TARGET_S = 0.9
+#: reached: see ISSUE_LIBCOSIM_GOAL. The absolute limits (cold run, initialization, C loop) hold at
+#: the reference machine speed (``targets.REFERENCE_SPEED_MS``) and scale on a slower machine; at
+#: that speed the last run measured cold run 0.59 s, slowest initialization 45 ms, C loop 54x (0.72 s,
+#: 55 ms, 44x at 28.1 ms), each limit about a third away.
+COLD_TARGET_S = 0.78
 LIBCOSIM_RATIO = 0.58
 ISSUE_LIBCOSIM_GOAL = 0.3
 FMPY_RATIO = 2.0
-INIT_TARGET_MS = 50.0
-LOOP_TARGET_RTF = 32.0
+INIT_TARGET_MS = 60.0
+LOOP_TARGET_RTF = 41.0
 
 #: The environment of every timed process: one BLAS thread, as ``ipcosim`` asks for itself
 #: (:mod:`ipcosim.harness.threads`), so that neither side's CPU time counts an idle BLAS worker
@@ -244,7 +247,8 @@ def run() -> list[str]:
         f"whole runs of single-mass-lqr (10 s at 1 ms), fresh processes, least disturbed of {COLD_RUNS} alternating "
         "rounds:",
         _row(w, "python", "ipcosim run of the .ssp (Python FMUs)") + "; "
-        + target("runtime.cold_run_cpu_s", w["python"]["cpu"], COLD_TARGET_S, "s", what="cold run, Python FMUs, CPU"),
+        + target("runtime.cold_run_cpu_s", w["python"]["cpu"], COLD_TARGET_S, "s", what="cold run, Python FMUs, CPU",
+                 per_speed=True),
         _row(w, "libcosim", "libcosim on the same .ssp") + f"; ours/libcosim {py_lib:.2f}x ("
         + target("runtime.python_over_libcosim", py_lib, LIBCOSIM_RATIO, "x",
                  what="whole run CPU: Python flavour / libcosim")
@@ -258,7 +262,8 @@ def run() -> list[str]:
                  what="whole run CPU: native / fmpy simulate_fmu of the exported loop") + ")",
         f"instantiate-to-initialized, slowest FMU: {slowest} CPU {inits[slowest][1]:.1f} ms ("
         + target("runtime.slowest_init_cpu_ms", inits[slowest][1], INIT_TARGET_MS, "ms",
-                 what=f"instantiate-to-initialized CPU, {slowest}") + f"; wall {inits[slowest][0]:.1f} ms)",
+                 what=f"instantiate-to-initialized CPU, {slowest}", per_speed=True)
+        + f"; wall {inits[slowest][0]:.1f} ms)",
         "    " + ", ".join(f"{k} {a:.1f}/{c:.1f}" for k, (a, c) in sorted(inits.items())) + " (wall/CPU ms)",
         *([f"    identification excitation {excitation}: CPU "
            + figure("runtime.excitation_init_cpu_ms", inits[excitation][1], "ms",
@@ -267,7 +272,7 @@ def run() -> list[str]:
         f"single-mass LQR on the Python FMUs, simulated seconds per CPU second of a run, medians of {LOOP_RUNS}: "
         f"C loop (the default) {rtfs['c']['cpu']:.1f}x ("
         + target("runtime.c_loop_cpu_rtf", rtfs["c"]["cpu"], LOOP_TARGET_RTF, "x", at_most=False,
-                 what="Python FMUs, C loop, simulated s per CPU s") + "), Python loop "
+                 what="Python FMUs, C loop, simulated s per CPU s", per_speed=True) + "), Python loop "
         + figure("runtime.python_loop_cpu_rtf", rtfs["python"]["cpu"], "x",
                  what="Python FMUs, Python loop, simulated s per CPU s")
         + f"; wall-clock loop_real_time_factor {rtfs['c']['wall']:.1f}x and {rtfs['python']['wall']:.1f}x",

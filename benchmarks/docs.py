@@ -102,6 +102,9 @@ def render(name: str, data: dict[str, Any]) -> str:
         if "limit" in f:
             op = "<=" if f["at_most"] else ">="
             against = f"{op} {_unit(f['limit'], f['unit'])} ({'met' if f['met'] else '**missed**'})"
+            if f.get("speed_factor", 1.0) > 1.0:
+                against += (f"; {_unit(f['limit_at_reference'], f['unit'])} at the reference speed,"
+                            f" x{f['speed_factor']:.2f} for this machine's")
         else:
             against = f["anchor"] if f.get("anchor") else ""
         lines.append(f"| {f['what']} | {_unit(f['value'], f['unit'])} | {against} |")

@@ -20,6 +20,12 @@ from typing import Any
 
 #: Figures recorded in this process: ``{key: {"value", "unit", "what", ...}}``, in recording order.
 FIGURES: dict[str, dict[str, Any]] = {}
+#: :func:`machine_speed` [ms] at which the absolute limits (``target(..., per_speed=True)``) were set:
+#: these machines at their fastest measured (22:27 UTC on 2026-12-01, load near 0).
+REFERENCE_SPEED_MS = 23.0
+#: This process's :func:`machine_speed` [ms], measured by ``benchmarks.bench`` before the module runs;
+#: None: not measured, every limit applies as written.
+SPEED_MS: float | None = None
 
 
 def _record(key: str, value: float, unit: str, what: str, **extra: Any) -> None:
@@ -29,7 +35,8 @@ def _record(key: str, value: float, unit: str, what: str, **extra: Any) -> None:
     FIGURES[key] = {"value": value if math.isfinite(value) else None, "unit": unit, "what": what or key, **extra}
 
 
-def target(key: str, value: float, limit: float, unit: str = "", *, at_most: bool = True, what: str) -> str:
+def target(key: str, value: float, limit: float, unit: str = "", *, at_most: bool = True, what: str,
+           per_speed: bool = False) -> str:
     """Record a checked figure; return its verdict text for the module's line.
 
     Parameters
@@ -44,15 +51,37 @@ def target(key: str, value: float, limit: float, unit: str = "", *, at_most: boo
         True: the target is ``value <= limit``; False: ``value >= limit``.
     what : str
         What was measured, in words (the docs' tables and the summary of misses show it).
+    per_speed : bool
+        For an absolute CPU figure (a time, a time per step, a real-time factor) that moves with the
+        machine: ``limit`` holds at :data:`REFERENCE_SPEED_MS` and is scaled by :func:`speed_factor`
+        on a machine that runs slower now (a ratio of two figures of the same run needs no scaling).
+        The limit applied and the factor are recorded (``limit``, ``limit_at_reference``, ``speed_factor``).
 
     Returns
     -------
     str
-        ``"target <= 1.3 s: met"`` or ``"target <= 1.3 s: MISSED"``.
+        ``"target <= 1.3 s: met"`` or ``"target <= 1.3 s: MISSED"``; a scaled limit is followed by
+        its factor (``"target <= 1.56 s (x1.2 for the machine's speed): met"``).
     """
+    extra: dict[str, Any] = {}
+    shown = f"{limit:g}{_space(unit)}"
+    if per_speed:
+        factor = speed_factor()
+        extra = {"limit_at_reference": float(limit), "speed_factor": factor}
+        limit = limit * factor if at_most else limit / factor
+        if factor > 1.0:
+            shown = f"{fmt(limit)}{_space(unit)} (x{factor:.2f} for the machine's speed)"
     met = math.isfinite(value) and (value <= limit if at_most else value >= limit)
-    _record(key, value, unit, what, limit=float(limit), at_most=at_most, met=met)
-    return f"target {'<=' if at_most else '>='} {limit:g}{_space(unit)}: {'met' if met else 'MISSED'}"
+    _record(key, value, unit, what, limit=float(limit), at_most=at_most, met=met, **extra)
+    return f"target {'<=' if at_most else '>='} {shown}: {'met' if met else 'MISSED'}"
+
+
+def speed_factor() -> float:
+    """How many times slower this machine runs now than at :data:`REFERENCE_SPEED_MS` (never below 1:
+    a faster machine does not tighten a limit); 1 when the speed was not measured."""
+    if SPEED_MS is None or not math.isfinite(SPEED_MS):
+        return 1.0
+    return max(1.0, SPEED_MS / REFERENCE_SPEED_MS)
 
 
 def figure(key: str, value: float, unit: str = "", *, anchor: str = "", what: str) -> str:

@@ -61,3 +61,20 @@ def test_a_target_not_measured_is_missed(tmp_path):
     proc = _bench(tmp_path, "from benchmarks.targets import target\n"
                             "def run():\n    return [target('d.p99', float('nan'), 1.0, 'us', what='d p99')]\n", "nan")
     assert proc.returncode == 1 and "d p99 (d.p99): not measured, target <= 1 us" in proc.stdout
+
+
+def test_an_absolute_limit_scales_with_a_slower_machine_only(monkeypatch):
+    sys.path.insert(0, str(ROOT))
+    from benchmarks import targets
+
+    monkeypatch.setattr(targets, "FIGURES", {})
+    monkeypatch.setattr(targets, "SPEED_MS", 1.5 * targets.REFERENCE_SPEED_MS)
+    verdict = targets.target("e.cpu", 14.0, 10.0, "s", what="e", per_speed=True)
+    assert verdict == "target <= 15 s (x1.50 for the machine's speed): met"
+    assert targets.target("e.rtf", 60.0, 100.0, "x", at_most=False, what="e", per_speed=True).endswith("MISSED")
+    assert targets.target("e.ratio", 14.0, 10.0, "x", what="e ratio").endswith("MISSED")  # a ratio is never scaled
+    recorded = targets.FIGURES["e.cpu"]
+    assert recorded["limit"] == 15.0 and recorded["limit_at_reference"] == 10.0 and recorded["speed_factor"] == 1.5
+    assert targets.FIGURES["e.rtf"]["limit"] == 100.0 / 1.5
+    monkeypatch.setattr(targets, "SPEED_MS", 0.5 * targets.REFERENCE_SPEED_MS)   # faster: the limit as written
+    assert targets.target("f.cpu", 11.0, 10.0, "s", what="f", per_speed=True) == "target <= 10 s: MISSED"
