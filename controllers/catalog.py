@@ -220,10 +220,14 @@ def thesis_adaptive(kind: str) -> tuple[HSMCGains, AdaptiveSchedules]:
                                 c=(None, Schedule(c[1], -0.5, 3.0), None))
 
 
-#: Tuned sets (``python -m ipcosim.controllers.tuning``; rounded to 3 significant digits).
+#: Tuned sets: single mass ``python -m ipcosim.controllers.tuning`` (rounded to 3 significant digits); double mass
+#: the robust search of docs/controllers.md (``ipcosim tune --max-peak-sensitivity 6 --min-delay-margin 0.003
+#: --min-phase-margin 30 --spread 0.1``, rounded to 4 digits): a slow, robust feedback, and a reference model
+#: that sets how fast the cart follows the step.
 TUNED_CASCADE: dict[str, CascadeGains] = {
     "single-mass": CascadeGains(Kp_th=79.2, Kd_th=12.9, Kp_x=10.9, Kd_x=6.74, Ki_x=6.37),
-    "double-mass": CascadeGains(Kp_th=21.99, Kd_th=3.015, Kp_x=1.255, Kd_x=6.134, Ki_x=0.4976, Kv_m=3.239),
+    "double-mass": CascadeGains(Kp_th=61.07, Kd_th=25.25, Ki_th=4.295, Kp_x=4.252, Kd_x=11.12, Ki_x=0.1017,
+                                Kv_m=30.91, derivative_time_constant=0.00598, reference_time_constant=0.4258),
 }
 TUNED_HSMC: dict[str, HSMCGains] = {
     # derivative filter 10 ms (not 2 ms): with 4096-count encoders the faster filter lets the
@@ -525,7 +529,8 @@ def _excitation_specs() -> list[ParamSpec]:
 
 def _cascade_specs() -> list[ParamSpec]:
     g = CascadeGains()
-    pos = {"theta_ref_limit": "positive", "derivative_time_constant": "nonnegative"}
+    pos = {"theta_ref_limit": "positive", "derivative_time_constant": "nonnegative",
+           "reference_time_constant": "nonnegative"}
     return [ParamSpec(f, getattr(g, f), CascadeGains.UNITS[f], CascadeGains.DOCS[f], pos.get(f, "finite"))
             for f in CascadeGains.UNITS]
 

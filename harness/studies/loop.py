@@ -155,7 +155,11 @@ def _cascade(law: CascadePID, b: Builder) -> tuple[Lin, list[str]]:
     u = eth * -g.Kp_th - vth * g.Kd_th - vxm * g.Kv_m
     if g.Ki_th:
         u = u - b.integral(eth, T) * g.Ki_th
-    return u, ["angle setpoint limit theta_ref_limit left out"]
+    notes = ["angle setpoint limit theta_ref_limit left out"]
+    if g.reference_time_constant:
+        notes.append(f"reference model (tau {g.reference_time_constant:g} s) and its feedforward act on the "
+                     "reference only: not in the loop")
+    return u, notes
 
 
 def _lqr(law: LQR, b: Builder) -> tuple[Lin, list[str]]:
