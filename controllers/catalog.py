@@ -14,7 +14,7 @@ CascadePID     tuned (no thesis set)        tuned (no thesis set)
 LQR            thesis; discrete             thesis; discrete
 HSMC           tuned; thesis (too slow)     thesis; tuned (robust: lab bench)
 AdaptiveHSMC   tuned; thesis (too slow)     thesis
-LQG            tuned (not in the thesis)    tuned (not in the thesis)
+LQG            tuned; lab (not in thesis)   tuned; lab (not in thesis)
 =============  ===========================  =========================================
 
 The first set listed is the default: the FMU parameter defaults are its values, and the SSP
@@ -87,8 +87,9 @@ PARAMETER_SETS: dict[str, dict[str, tuple[str, ...]]] = {
     "LQR": {"single-mass": ("thesis", "discrete"), "double-mass": ("thesis", "discrete")},
     "HSMC": {"single-mass": ("tuned", "thesis"), "double-mass": ("thesis", "tuned")},
     "AdaptiveHSMC": {"single-mass": ("tuned", "thesis"), "double-mass": ("thesis",)},
-    # not in the thesis: discrete LQG with integral action (ipcosim.controllers.lqg), weights TUNED_LQG
-    "LQG": {"single-mass": ("tuned",), "double-mass": ("tuned",)},
+    # not in the thesis: discrete LQG with integral action (ipcosim.controllers.lqg), weights TUNED_LQG;
+    # lab: the same design with the Coulomb friction compensation of LAB_LQG (for a plant with friction)
+    "LQG": {"single-mass": ("tuned", "lab"), "double-mass": ("tuned", "lab")},
     # not in the thesis, single mass only: energy swing-up from hanging, balanced by the thesis's LQR
     "SwingUp": {"single-mass": ("tuned",)},
     # not a control law: the identification experiments' multisine and weak hold (ipcosim.controllers.excitation)
@@ -219,10 +220,14 @@ def thesis_adaptive(kind: str) -> tuple[HSMCGains, AdaptiveSchedules]:
                                 c=(None, Schedule(c[1], -0.5, 3.0), None))
 
 
-#: Tuned sets (``python -m ipcosim.controllers.tuning``; rounded to 3 significant digits).
+#: Tuned sets: single mass ``python -m ipcosim.controllers.tuning`` (rounded to 3 significant digits); double mass
+#: the robust search of docs/controllers.md (``ipcosim tune --max-peak-sensitivity 6 --min-delay-margin 0.003
+#: --min-phase-margin 30 --spread 0.1``, rounded to 4 digits): a slow, robust feedback, and a reference model
+#: that sets how fast the cart follows the step.
 TUNED_CASCADE: dict[str, CascadeGains] = {
     "single-mass": CascadeGains(Kp_th=79.2, Kd_th=12.9, Kp_x=10.9, Kd_x=6.74, Ki_x=6.37),
-    "double-mass": CascadeGains(Kp_th=21.99, Kd_th=3.015, Kp_x=1.255, Kd_x=6.134, Ki_x=0.4976, Kv_m=3.239),
+    "double-mass": CascadeGains(Kp_th=61.07, Kd_th=25.25, Ki_th=4.295, Kp_x=4.252, Kd_x=11.12, Ki_x=0.1017,
+                                Kv_m=30.91, derivative_time_constant=0.00598, reference_time_constant=0.4258),
 }
 TUNED_HSMC: dict[str, HSMCGains] = {
     # derivative filter 10 ms (not 2 ms): with 4096-count encoders the faster filter lets the
@@ -248,13 +253,19 @@ TUNED_ADAPTIVE: dict[str, tuple[HSMCGains, AdaptiveSchedules]] = {
 #: LQG weights (``ipcosim.controllers.lqg``; docs/controllers.md, "LQG", says how they were chosen): the
 #: thesis's state weights, Q_integral on the integral of the motor-cart error, R on the voltage, and the
 #: Kalman filter's input-disturbance standard deviation process_noise [V].
-#: friction_velocity [m/s] is the threshold of the Coulomb friction compensation (``laws.coulomb_estimate``),
-#: chosen on the lab bench's robustness runs (docs/controllers.md, "Coulomb friction compensation").
 TUNED_LQG: dict[str, dict[str, Any]] = {
     "single-mass": {"Q": THESIS_SINGLE_MASS_Q_DIAGONAL, "Q_integral": 3.0e7, "R": 180 * THESIS_SINGLE_MASS_R,
-                    "process_noise": 0.3, "acceleration_noise": 0.0, "friction_velocity": 5e-4},
+                    "process_noise": 0.3, "acceleration_noise": 0.0},
     "double-mass": {"Q": THESIS_DOUBLE_MASS_Q_DIAGONAL, "Q_integral": 1.0e4, "R": 0.4,
-                    "process_noise": 1.0, "acceleration_noise": 3.0, "friction_velocity": 2e-3},
+                    "process_noise": 1.0, "acceleration_noise": 3.0},
+}
+#: The LQG's ``lab`` set: TUNED_LQG's design with the Coulomb friction compensation (``laws.coulomb_estimate``)
+#: of the lab bench's fitted forces (``fmus.instruments.REALISM["lab"]``, as ``friction_<b>``): its threshold
+#: friction_velocity [m/s] and the breakaway gain at rest (``friction_breakaway_gain``), chosen on the lab bench's
+#: robustness runs (docs/controllers.md, "Coulomb friction compensation").
+LAB_LQG: dict[str, dict[str, float]] = {
+    "single-mass": {"friction_velocity": 5e-4, "friction_breakaway_gain": 0.0},
+    "double-mass": {"friction_velocity": 2e-3, "friction_breakaway_gain": 1.0},
 }
 
 
@@ -464,19 +475,27 @@ def _lqg_specs(kind: str) -> list[ParamSpec]:
 LQG_FRICTION = {"single-mass": ("friction_b",), "double-mass": ("friction_b1", "friction_b2")}
 
 
-def _lqg_friction_specs(kind: str) -> list[ParamSpec]:
-    """The LQG parameters that act at run time only (no redesign): friction compensation, integrator dead band."""
+def _lab_lqg(kind: str) -> dict[str, float]:
+    """The values of the LQG's ``lab`` set beyond the design (``LAB_LQG`` and the lab bench's Coulomb forces)."""
     from ipcosim.fmus.instruments import REALISM  # noqa: PLC0415
 
     lab = REALISM["lab"][kind]
+    return {**{n: float(lab[n[len("friction_"):]]) for n in LQG_FRICTION[kind]}, **LAB_LQG[kind]}  # type: ignore[index]
+
+
+def _lqg_friction_specs(kind: str) -> list[ParamSpec]:
+    """The LQG parameters that act at run time only (no redesign): friction compensation, integrator dead band."""
     carts = ("cart",) if kind == "single-mass" else ("active cart", "passive cart")
-    specs = [ParamSpec(name, float(lab[name[len("friction_"):]]), "N",  # type: ignore[index]
-                       f"Coulomb force the law compensates on the {cart} (default: the lab bench's fitted value; "
-                       "0 = no compensation)", "nonnegative")
+    specs = [ParamSpec(name, 0.0, "N", f"Coulomb force the law compensates on the {cart} (0 = no compensation; "
+                                       "the lab set: the lab bench's fitted value)", "nonnegative")
              for name, cart in zip(LQG_FRICTION[kind], carts)]
     return specs + [ParamSpec("friction_velocity", 2e-3, "m/s", "friction compensation: none below this estimated "
                                                                 "cart speed, full above twice it, linear between",
                               "positive"),
+                    ParamSpec("friction_breakaway_gain", 0.0, "1", "friction compensation of a cart near rest: "
+                                                                   "this times the net force the loop's "
+                                                                   "frictionless model puts on it, up to its Coulomb "
+                                                                   "force (0 = none)", "nonnegative"),
                     ParamSpec("integrator_dead_band", 0.0, "m", "the integral ignores this much of the motor-cart "
                                                                 "position error (0 = none)", "nonnegative")]
 
@@ -510,7 +529,8 @@ def _excitation_specs() -> list[ParamSpec]:
 
 def _cascade_specs() -> list[ParamSpec]:
     g = CascadeGains()
-    pos = {"theta_ref_limit": "positive", "derivative_time_constant": "nonnegative"}
+    pos = {"theta_ref_limit": "positive", "derivative_time_constant": "nonnegative",
+           "reference_time_constant": "nonnegative"}
     return [ParamSpec(f, getattr(g, f), CascadeGains.UNITS[f], CascadeGains.DOCS[f], pos.get(f, "finite"))
             for f in CascadeGains.UNITS]
 
@@ -592,9 +612,8 @@ def set_values(kind: str, law: str, parameter_set: str) -> dict[str, Any]:
     if law == "LQG":
         t = TUNED_LQG[kind]
         v: dict[str, Any] = {f"Q_{s}": float(q) for s, q in zip(design_states(kind), t["Q"])}
-        v.update({k: float(t[k]) for k in ("Q_integral", "R", "process_noise", "acceleration_noise",
-                                            "friction_velocity")})
-        return v
+        v.update({k: float(t[k]) for k in ("Q_integral", "R", "process_noise", "acceleration_noise")})
+        return {**v, **(_lab_lqg(kind) if parameter_set == "lab" else {})}
     if law == "LQR":
         states = design_states(kind)
         if kind == "single-mass":
@@ -832,7 +851,8 @@ def _lqg_law(kind: str, coef: LQGCoefficients, values: Mapping[str, Any]) -> LQG
     """The LQG law of ``coef`` with its friction model and the run-time parameters of ``values``."""
     return LQG(kind, replace(coef, **coulomb_model(kind, values)), float(values["voltage_limit"]),
                float(values["reference_time_constant"]), [float(values[n]) for n in LQG_FRICTION[kind]],
-               float(values["friction_velocity"]), float(values["integrator_dead_band"]))
+               float(values["friction_velocity"]), float(values["integrator_dead_band"]),
+               float(values["friction_breakaway_gain"]))
 
 
 # ============================================================ every law with designed gains
@@ -1034,5 +1054,5 @@ __all__ = ["LAWS", "KINDS", "PARAMETER_SETS", "ParamSpec", "schema", "set_values
            "thesis_subsystem_models", "thesis_hsmc_gains", "thesis_adaptive", "lqr_design_for",
            "design_params_from", "lqr_gain_specs", "lqr_design_parameters", "lqr_weight_parameters", "lqr_gains",
            "lqr_from_gains", "swing_up_around", "DESIGNED_LAWS", "gain_specs", "weight_parameters",
-           "design_parameters", "designed_gains", "law_from_gains", "lqg_design_from", "TUNED_LQG", "TUNED_CASCADE",
-           "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]
+           "design_parameters", "designed_gains", "law_from_gains", "lqg_design_from", "TUNED_LQG", "LAB_LQG",
+           "TUNED_CASCADE", "TUNED_HSMC", "TUNED_ADAPTIVE", "CatalogError"]

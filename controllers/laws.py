@@ -284,17 +284,26 @@ class CascadeGains:
 
     Outer loop (cart position -> pendulum angle setpoint)::
 
-        theta_ref = -(Kp_x e + Ki_x int e_m dt - Kd_x x')/g,  clipped to +-theta_ref_limit
-        e = r - x_p      (x_p: the cart carrying the pendulum -- the passive cart for the double mass)
-        e_m = r - x_m    (x_m: the motor-driven cart)
+        theta_ref = -(Kp_x e + Ki_x int e_m dt - Kd_x (x_p' - v_f) + a_f)/g,  clipped to +-theta_ref_limit
+        e = r_f - x_p    (x_p: the cart carrying the pendulum -- the passive cart for the double mass)
+        e_m = r_f - x_m  (x_m: the motor-driven cart)
 
     Inner loop (angle -> voltage)::
 
-        u = -Kp_th (theta - theta_ref) - Ki_th int (theta - theta_ref) dt - Kd_th theta' - Kv_m x_m'
+        u = -Kp_th (theta - theta_ref) - Ki_th int (theta - theta_ref) dt - Kd_th theta' - Kv_m (x_m' - v_f)
 
     A pendulum balanced at a constant angle theta makes its cart accelerate at -g theta, so the
     outer loop is a PD on the cart position acting through the acceleration -g theta_ref; the
     inner loop must be much faster than the outer one. Velocities are filtered differences.
+
+    Reference model (the second degree of freedom): with ``reference_time_constant`` tau_r > 0 the
+    loops track ``r_f``, the reference through ``1/(tau_r s + 1)^3`` (exact zero-order hold, started
+    at rest at the measured position x_p), with its velocity ``v_f`` and acceleration ``a_f`` fed
+    forward; a step then asks for a continuous acceleration, starting at 0.
+    It acts on the reference only: the feedback from the measurements, hence every margin at the
+    plant input, is the same for any tau_r, so a slow robust feedback loop can still follow a step
+    at the reference model's speed. tau_r = 0 tracks the raw reference (``r_f = r``,
+    ``v_f = a_f = 0``).
     """
 
     Kp_th: float = 30.0     # V/rad
@@ -306,9 +315,11 @@ class CascadeGains:
     Kv_m: float = 0.0       # V s/m
     theta_ref_limit: float = 0.15   # rad
     derivative_time_constant: float = 0.005  # s
+    reference_time_constant: float = 0.0  # s
 
     UNITS = {"Kp_th": "V/rad", "Ki_th": "V/rad.s", "Kd_th": "V.s/rad", "Kp_x": "1/s2", "Ki_x": "1/s3",
-             "Kd_x": "1/s", "Kv_m": "V.s/m", "theta_ref_limit": "rad", "derivative_time_constant": "s"}
+             "Kd_x": "1/s", "Kv_m": "V.s/m", "theta_ref_limit": "rad", "derivative_time_constant": "s",
+             "reference_time_constant": "s"}
     DOCS = {"Kp_th": "inner loop: proportional gain on the angle error theta - theta_ref",
             "Ki_th": "inner loop: integral gain on the angle error",
             "Kd_th": "inner loop: derivative gain on the pendulum angle",
@@ -317,7 +328,9 @@ class CascadeGains:
             "Kd_x": "outer loop: derivative gain on the cart velocity",
             "Kv_m": "velocity damping of the motor-driven cart (voltage per velocity)",
             "theta_ref_limit": "limit of the angle setpoint produced by the outer loop",
-            "derivative_time_constant": "time constant of the derivative low-pass filters"}
+            "derivative_time_constant": "time constant of the derivative low-pass filters",
+            "reference_time_constant": "time constant of the reference model 1/(tau s + 1)^3 whose position, "
+                                       "velocity and acceleration the loops track (0: the raw reference)"}
 
 
 class CascadePID(DiscreteLaw):
@@ -330,6 +343,7 @@ class CascadePID(DiscreteLaw):
             _check_finite(f.name, getattr(gains, f.name))
         _check_positive("theta_ref_limit", gains.theta_ref_limit)
         _check_nonneg("derivative_time_constant", gains.derivative_time_constant)
+        _check_nonneg("reference_time_constant", gains.reference_time_constant)
         self.gains = gains
         tau = gains.derivative_time_constant
         self._dth = FilteredDerivative(self.sample_period, tau)
@@ -342,6 +356,7 @@ class CascadePID(DiscreteLaw):
         self.int_x = 0.0
         self.int_th = 0.0
         self.theta_ref = 0.0
+        self.ref_states = [0.0, 0.0, 0.0]
         for d in (self._dth, self._dxp, self._dxm):
             d.reset()
 
@@ -349,14 +364,15 @@ class CascadePID(DiscreteLaw):
         g, T = self.gains, self.sample_period
         xm, xp, th = self._motor_cart(y), self._pendulum_cart(y), self._angle(y)
         vth, vxp, vxm = self._dth.update(th), self._dxp.update(xp), self._dxm.update(xm)
-        e, em = r - xp, r - xm
+        rf, vf, af = self._reference_model(r, xp)
+        e, em = rf - xp, rf - xm
         int_x = self.int_x + em * T
-        a_unsat = g.Kp_x * e + g.Ki_x * int_x - g.Kd_x * vxp
+        a_unsat = g.Kp_x * e + g.Ki_x * int_x - g.Kd_x * (vxp - vf) + af
         th_ref = saturate(-a_unsat / G, g.theta_ref_limit)
         outer_sat = abs(-a_unsat / G) > g.theta_ref_limit
         eth = th - th_ref
         int_th = self.int_th + eth * T
-        u_unsat = -g.Kp_th * eth - g.Ki_th * int_th - g.Kd_th * vth - g.Kv_m * vxm
+        u_unsat = -g.Kp_th * eth - g.Ki_th * int_th - g.Kd_th * vth - g.Kv_m * (vxm - vf)
         inner_sat = abs(u_unsat) > self.voltage_limit
         # conditional integration: an integrator is frozen while its loop saturates
         if not (outer_sat or inner_sat):
@@ -365,6 +381,26 @@ class CascadePID(DiscreteLaw):
             self.int_th = int_th
         self.theta_ref = th_ref
         return u_unsat
+
+    def _reference_model(self, r: float, x0: float) -> tuple[float, float, float]:
+        """``(r_f, v_f, a_f)`` of this instant (see ``CascadeGains``), then the model advanced one sample
+        with ``r`` held; ``(r, 0, 0)`` when ``reference_time_constant`` is 0. The first sample starts
+        the model at rest at ``x0``.
+
+        The model is three first-order lags ``y1, y2, y3 = r_f`` of time constant tau in a row;
+        relative to ``r`` one sample h advances them as ``e_i <- a sum_m (h/tau)^m / m! e_(i-m)``,
+        ``a = exp(-h/tau)``."""
+        tau, h = self.gains.reference_time_constant, self.sample_period
+        if not tau > 0.0:
+            return r, 0.0, 0.0
+        if self.ticks == 0:
+            self.ref_states = [x0, x0, x0]
+        y1, y2, y3 = self.ref_states
+        vf, af = (y2 - y3) / tau, (y1 - 2.0 * y2 + y3) / (tau * tau)
+        a, q = math.exp(-h / tau), h / tau
+        e1, e2, e3 = y1 - r, y2 - r, y3 - r
+        self.ref_states = [r + a * e1, r + a * (e2 + q * e1), r + a * (e3 + q * e2 + 0.5 * q * q * e1)]
+        return y3, vf, af
 
 
 # ============================================================================================ LQR
@@ -533,13 +569,20 @@ class LQGCoefficients:
                    C=rows(design.model.C), reference_states=tuple(map(float, design.reference_states)))
 
 
-def coulomb_estimate(v: float, b: float, threshold: float) -> float:
+def coulomb_estimate(v: float, b: float, threshold: float, demand: float = 0.0, gain: float = 0.0) -> float:
     """The Coulomb force [N] the LQG compensates on a cart of estimated velocity ``v`` [m/s]: 0 for
     ``|v| <= threshold``, ``b sign(v)`` for ``|v| >= 2 threshold``, linear in between (no compensation of a
-    cart at rest, whose velocity estimate is noise, and no slope at small signals)."""
+    cart at rest, whose velocity estimate is noise, and no slope at small signals).
+
+    With a breakaway ``gain`` g > 0, the share of ``b`` the velocity leaves uncompensated goes to a cart near
+    rest in the direction the loop pushes it: ``(1 - w) clip(g demand, -b, b)``, ``demand`` [N] the net force
+    the frictionless model puts on the cart, ``w`` the sliding share above (slope g at small signals; the
+    clip written with ``abs``, which has no branch)."""
     a = abs(v) / threshold - 1.0
     w = 0.0 if a <= 0.0 else (1.0 if a >= 1.0 else a)
-    return b * w if v > 0.0 else -b * w
+    sliding = b * w if v > 0.0 else -b * w
+    push = gain * demand
+    return sliding + (1.0 - w) * 0.5 * (abs(push + b) - abs(push - b))
 
 
 def dead_zone(e: float, band: float) -> float:
@@ -579,11 +622,15 @@ class LQG(CurrentEstimatorLaw):
         The compensation's threshold [m/s] (:func:`coulomb_estimate`), > 0.
     integrator_dead_band : float
         The integral ignores this much of the motor-cart position error [m] (:func:`dead_zone`); 0 = none.
+    friction_breakaway_gain : float
+        g of :func:`coulomb_estimate`: a cart near rest is compensated by g times the net force the
+        frictionless model puts on it (the loop's demand), up to its Coulomb force; 0 = none.
     """
 
     def __init__(self, kind: str, coefficients: LQGCoefficients, voltage_limit: float = 10.0,
                  reference_time_constant: float = 0.0, friction: Sequence[float] = (),
-                 friction_velocity: float = 1e-3, integrator_dead_band: float = 0.0) -> None:
+                 friction_velocity: float = 1e-3, integrator_dead_band: float = 0.0,
+                 friction_breakaway_gain: float = 0.0) -> None:
         super().__init__(kind, coefficients.sample_period, voltage_limit)
         if coefficients.outputs != tuple(self.measured):
             raise LawParameterError("design", f"LQG design is for outputs {coefficients.outputs}, the "
@@ -597,6 +644,7 @@ class LQG(CurrentEstimatorLaw):
                                                 f"cart of the friction model), got {len(self.friction)}")
         self.friction_velocity = _check_positive("friction_velocity", friction_velocity)
         self.integrator_dead_band = _check_nonneg("integrator_dead_band", integrator_dead_band)
+        self.friction_breakaway_gain = _check_nonneg("friction_breakaway_gain", friction_breakaway_gain)
         self._Cpinv = _right_inverse(coefficients.C)
         self.reset()
 
@@ -612,12 +660,14 @@ class LQG(CurrentEstimatorLaw):
         rf = self._motor_cart(y) if self.reference_filtered is None else self.reference_filtered
         self.reference_filtered = r = a * rf + (1.0 - a) * r
         x_hat = self._correct(y)
-        v0 = self.friction_velocity
-        forces = [coulomb_estimate(x_hat[i], b, v0) for i, b in zip(d.friction_states, self.friction)]
+        applied = self.applied
+        free = [sum(map(mul, row, x_hat)) + b * applied for row, b in zip(d.Ad, d.Bd)]  # the model, no friction
+        v0, g = self.friction_velocity, self.friction_breakaway_gain
+        forces = [coulomb_estimate(x_hat[i], b, v0, (free[i] - x_hat[i]) / column[i], g)
+                  for i, b, column in zip(d.friction_states, self.friction, d.friction_columns)]
         target = [xr * r for xr in d.reference_states]
         for f, lead in zip(forces, d.friction_leads):
-            target = [t + f * g for t, g in zip(target, lead)]
-        applied = self.applied
+            target = [t + f * c for t, c in zip(target, lead)]
         feedback = d.K_voltage * applied + sum(k * (x - t) for k, x, t in zip(d.K, x_hat, target))
         u = d.volts_per_newton * sum(forces) - feedback - d.K_integral * self.integral
         error = dead_zone(r - self._motor_cart(y), self.integrator_dead_band)
@@ -626,7 +676,7 @@ class LQG(CurrentEstimatorLaw):
         if abs(u) <= limit or (u > 0) != (-d.K_integral * (integral - self.integral) > 0):
             self.integral = integral
         self.applied = limit if u > limit else (-limit if u < -limit else u)
-        x_pred = [sum(map(mul, row, x_hat)) + b * applied for row, b in zip(d.Ad, d.Bd)]
+        x_pred = free
         for f, column in zip(forces, d.friction_columns):
             x_pred = [x - f * c for x, c in zip(x_pred, column)]
         self.x_pred = x_pred

@@ -188,6 +188,31 @@ def test_coulomb_estimate_is_zero_at_rest_and_full_when_sliding() -> None:
     assert coulomb_estimate(4e-3, b, v0) == b and coulomb_estimate(-0.5, b, v0) == -b
 
 
+def test_breakaway_term_holds_a_cart_at_rest_up_to_its_coulomb_force() -> None:
+    """At rest the compensation is g times the model's force on the cart, clipped at b; sliding, it is b sign(v)."""
+    from ipcosim.controllers.laws import coulomb_estimate
+
+    b, v0 = 0.1, 2e-3
+    assert coulomb_estimate(0.0, b, v0, 0.04, 1.0) == pytest.approx(0.04)
+    assert coulomb_estimate(1e-3, b, v0, -0.03, 2.0) == pytest.approx(-0.06)
+    assert coulomb_estimate(0.0, b, v0, 0.5, 1.0) == pytest.approx(b)
+    assert coulomb_estimate(0.0, b, v0, -0.5, 1.0) == pytest.approx(-b)
+    assert coulomb_estimate(3e-3, b, v0, -0.5, 1.0) == pytest.approx(0.05 - 0.05)  # half sliding, half held
+    assert coulomb_estimate(4e-3, b, v0, -0.5, 1.0) == b
+    assert coulomb_estimate(0.0, b, v0, 0.04, 0.0) == 0.0
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_lab_set_compensates_the_lab_benchs_friction_and_the_default_none(kind: str) -> None:
+    from ipcosim.controllers.catalog import LQG_FRICTION, set_values
+    from ipcosim.fmus.instruments import REALISM
+
+    lab, tuned = set_values(kind, "LQG", "lab"), {**defaults(kind, "LQG"), **set_values(kind, "LQG", "tuned")}
+    names = LQG_FRICTION[kind]
+    assert [lab[n] for n in names] == [REALISM["lab"][kind][n[len("friction_"):]] for n in names]
+    assert [tuned[n] for n in names] == [0.0] * len(names)
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_friction_model_is_what_the_plants_coulomb_force_does(kind: str) -> None:
     """Each cart's friction column is the sampled effect of the design plant's own Coulomb force of 1 N on a
@@ -222,7 +247,8 @@ def test_friction_model_is_what_the_plants_coulomb_force_does(kind: str) -> None
 
 def test_friction_compensation_removes_the_passive_carts_limit_cycle_on_the_lab_bench() -> None:
     """Double mass on the lab bench (stick-slip 0.1047 N on both carts, encoder counts, DAC, 1 ms delay), 15 s:
-    without compensation the carts hunt in a limit cycle of several mm; with it the error is a fraction of a mm."""
+    without compensation (the default set) the carts hunt in a limit cycle of several mm; the lab set's sliding
+    compensation halves it, and its breakaway term at rest keeps the motor cart in the +-1 mm band longer."""
     from dataclasses import replace as with_
 
     from ipcosim.fmus.instruments import realism
@@ -233,7 +259,8 @@ def test_friction_compensation_removes_the_passive_carts_limit_cycle_on_the_lab_
     inst, lab = realism("lab", kind)
     p = with_values(preset(DEFAULT_PRESET[kind]), lab)
 
-    def late_swing(law) -> float:  # noqa: ANN001
+    def late(law) -> tuple[float, float]:  # noqa: ANN001
+        """Peak-to-peak of the motor cart over the last 5 s, and the share of them it spends within 1 mm of 0.05 m."""
         plant = InstrumentedPlant(p, instruments=with_(inst))
         xs = []
         for k in range(15000):
@@ -241,8 +268,10 @@ def test_friction_compensation_removes_the_passive_carts_limit_cycle_on_the_lab_
             plant.do_step(k * 1e-3, 1e-3, u)
             if k >= 10000:
                 xs.append(plant.state[0])
-        return max(xs) - min(xs)
+        return max(xs) - min(xs), sum(abs(x - 0.05) < 1e-3 for x in xs) / len(xs)
 
-    on = late_swing(make_law(kind, "LQG"))
-    off = late_swing(make_law(kind, "LQG", friction_b1=0.0, friction_b2=0.0))
-    assert off > 10e-3 and on < off / 2
+    on = late(make_law(kind, "LQG", "lab"))
+    sliding_only = late(make_law(kind, "LQG", "lab", friction_breakaway_gain=0.0))
+    off = late(make_law(kind, "LQG"))
+    assert off[0] > 10e-3 and sliding_only[0] < off[0] / 2
+    assert on[1] > sliding_only[1] + 0.15  # the breakaway term: more of the time in the band

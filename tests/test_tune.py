@@ -154,6 +154,37 @@ def test_loop_limits_refuse_the_thesis_hsmc_and_measure_like_analyze():
     assert high["plant.K"] == pytest.approx(110.0)
 
 
+def test_phase_margin_limit_measures_like_analyze_and_refuses_a_bad_limit():
+    """``--min-phase-margin`` constrains analyze's phase margin (its magnitude at the crossover nearest -180 deg):
+    the thesis's double-mass HSMC (9.9 deg) misses 20 deg by half and meets 5 deg; a limit of 180 deg or more is
+    refused in one line naming the flag."""
+    from ipcosim.errors import UsageError
+    from ipcosim.harness.studies.analyze import analyze
+    from ipcosim.harness.studies.tune import Robustness, robustness_objective
+
+    pm = abs(analyze("double-mass-hsmc", parameter_set="thesis")["phase_margin_deg"])
+    excess, worst = Robustness("double-mass-hsmc", "thesis", min_phase_margin=20.0).violation({})
+    assert worst["phase_margin_deg"] == pytest.approx(pm, rel=0.02)
+    assert excess == pytest.approx(1.0 - pm / 20.0, rel=0.05)
+    assert Robustness("double-mass-hsmc", "thesis", min_phase_margin=5.0).violation({})[0] == 0.0
+    with pytest.raises(UsageError, match="--min-phase-margin 180"):
+        robustness_objective("double-mass-hsmc", PurePlantSpec(), {}, "thesis", min_phase_margin=180.0)
+
+
+def test_tune_starts_from_a_value_clipped_onto_a_bound():
+    """A scenario value below the search range starts the search at its lower bound (scipy rescales the start to
+    [0, 1] and would otherwise reject the rounding of a bound)."""
+    spec = PurePlantSpec(stop_time=0.3)
+    lo, hi = 200.4, 1000.0  # q_angle 200 -> 200.4, which scipy's rescaling puts at -1.1e-16
+    assert float(spec.parameters["controller.q_angle"]) < lo
+    executor = LocalExecutor(1)
+    try:
+        res = tune(spec, ["controller.q_angle"], [(lo, hi)], budget=6, executor=executor, seed=1)
+    finally:
+        executor.close()
+    assert len(res.evaluations) == 6 and all(r["controller.q_angle"] >= lo for r in res.evaluations[1:])
+
+
 class _Refuse:
     """A robust objective that refuses every candidate with x > 1 and adds a spread of two plants."""
 

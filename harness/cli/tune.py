@@ -52,6 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "at most MS, on the nominal plant and the spread; others are not run")
     p.add_argument("--min-delay-margin", type=float, metavar="SECONDS",
                    help="robust objective: a candidate's delay margin (ipcosim analyze) must be at least this")
+    p.add_argument("--min-phase-margin", type=float, metavar="DEGREES",
+                   help="robust objective: a candidate's phase margin (ipcosim analyze; its magnitude at the "
+                        "crossover nearest -180 deg) must be at least this")
     p.add_argument("--spread", type=float, metavar="FRACTION",
                    help="robust objective: run every candidate also with the masses, dampings and spring all "
                         "scaled by 1 - FRACTION and by 1 + FRACTION, and count its worst run (the budget then "
@@ -73,7 +76,7 @@ def main(args: argparse.Namespace) -> int:
                        w_angle=args.w_angle, w_voltage=args.w_voltage, fmus=args.fmus,
                        parameter_set=args.parameter_set, out=args.out, ssv=args.ssv, install=args.install,
                        max_peak_sensitivity=args.max_peak_sensitivity, min_delay_margin=args.min_delay_margin,
-                       spread=args.spread)
+                       spread=args.spread, min_phase_margin=args.min_phase_margin)
     executor = open_executor(args.workers, args.scheduler)
     print(study.describe(executor), file=sys.stderr)
     try:

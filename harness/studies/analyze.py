@@ -29,7 +29,7 @@ import cmath
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import control
 import numpy as np
@@ -228,15 +228,25 @@ def phase_margins(loop: Loop, w: np.ndarray, Lw: np.ndarray) -> list[dict[str, f
     return out
 
 
-def loop_limits(loop: Loop, n: int = 1500) -> tuple[float, float] | None:
-    """``(peak |S|, delay margin [s])`` of a loop on an ``n``-point grid (what a tuner constrains, cheaper than
-    :func:`analyze_loop`), or None when the closed loop is unstable. No gain crossover: an infinite margin."""
+def worst_phase_margin(pms: Sequence[Mapping[str, float]]) -> float | None:
+    """The phase margin [deg] of the loop: at the gain crossover whose phase is nearest -180 deg (the smallest
+    ``|phase_margin_deg|`` of :func:`phase_margins`; a loop around an unstable plant crosses several times), or
+    None without a crossover."""
+    return min((d["phase_margin_deg"] for d in pms), key=abs, default=None)
+
+
+def loop_limits(loop: Loop, n: int = 1500) -> tuple[float, float, float] | None:
+    """``(peak |S|, delay margin [s], |phase margin| [deg])`` of a loop on an ``n``-point grid (what a tuner
+    constrains, cheaper than :func:`analyze_loop`), or None when the closed loop is unstable. No gain
+    crossover: infinite margins."""
     if not is_stable(closed_loop_poles(loop)):
         return None
     w = frequency_grid(loop.T, n)
     Lw = loop_response(loop, w)
     pms = phase_margins(loop, w, Lw)
-    return peak(loop, w, np.abs(1.0 / (1.0 + Lw)))[0], min((d["delay_margin_s"] for d in pms), default=math.inf)
+    pm = worst_phase_margin(pms)
+    return (peak(loop, w, np.abs(1.0 / (1.0 + Lw)))[0], min((d["delay_margin_s"] for d in pms), default=math.inf),
+            math.inf if pm is None else abs(pm))
 
 
 def peak(loop: Loop, w: np.ndarray, values: np.ndarray) -> tuple[float, float]:
@@ -384,8 +394,7 @@ def analyze_loop(loop: Loop, pid_search: bool | None = None) -> dict[str, Any]:
         gm["checked"] = _check_gain_limits(loop, gm)
         out["gain_margin"] = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in gm.items()}
         out["phase_margins"] = pms
-        worst = min(pms, key=lambda d: abs(d["phase_margin_deg"])) if pms else None
-        out["phase_margin_deg"] = worst["phase_margin_deg"] if worst else None
+        out["phase_margin_deg"] = worst_phase_margin(pms)
         out["delay_margin_s"] = min(d["delay_margin_s"] for d in pms) if pms else None
         out["delay_margin_samples"] = out["delay_margin_s"] / loop.T if pms else None
     else:  # no margins, and the frequency-domain peaks describe no stable loop

@@ -155,7 +155,11 @@ def _cascade(law: CascadePID, b: Builder) -> tuple[Lin, list[str]]:
     u = eth * -g.Kp_th - vth * g.Kd_th - vxm * g.Kv_m
     if g.Ki_th:
         u = u - b.integral(eth, T) * g.Ki_th
-    return u, ["angle setpoint limit theta_ref_limit left out"]
+    notes = ["angle setpoint limit theta_ref_limit left out"]
+    if g.reference_time_constant:
+        notes.append(f"reference model (tau {g.reference_time_constant:g} s) and its feedforward act on the "
+                     "reference only: not in the loop")
+    return u, notes
 
 
 def _lqr(law: LQR, b: Builder) -> tuple[Lin, list[str]]:
@@ -192,16 +196,23 @@ def _lqg(law: LQG, b: Builder) -> tuple[Lin, list[str]]:
     xp, applied, integral = [b.state() for _ in range(n)], b.state(), b.state()
     innov = [ys[j] - lsum([xp[i] * d.C[j][i] for i in range(n)]) for j in range(p)]
     xh = [xp[i] + lsum([innov[j] * d.M[i][j] for j in range(p)]) for i in range(n)]
+    free = [lsum([xh[j] * d.Ad[i][j] for j in range(n)]) + applied * d.Bd[i] for i in range(n)]
+    g = law.friction_breakaway_gain
+    forces = [((free[i] - xh[i]) * (g / col[i]), col, lead)  # the breakaway term's slope g at rest
+              for i, f, col, lead in zip(d.friction_states, law.friction, d.friction_columns, d.friction_leads)
+              if g and f > 0]
     u = lsum([xh[i] * -d.K[i] for i in range(n)]) - applied * d.K_voltage - integral * d.K_integral
+    u = lsum([u] + [f * (d.volts_per_newton + sum(k * g for k, g in zip(d.K, lead))) for f, _, lead in forces])
     for i in range(n):
-        b.feed(xp[i], lsum([xh[j] * d.Ad[i][j] for j in range(n)]) + applied * d.Bd[i])
+        b.feed(xp[i], lsum([free[i]] + [f * -col[i] for f, col, _ in forces]))
     b.feed(applied, u)
     b.feed(integral, integral - ys[0] * T)
     notes = ["output: the voltage computed a sample earlier (one-sample computation delay)",
              "reference lag left out (the reference is 0)"]
     if any(law.friction):
-        notes.append(f"Coulomb friction compensation left out (zero below {law.friction_velocity:g} m/s: "
-                     "no small-signal slope)")
+        notes.append(f"Coulomb friction compensation of a sliding cart left out (zero below "
+                     f"{law.friction_velocity:g} m/s: no small-signal slope)"
+                     + (f"; its breakaway term at rest kept (slope {g:g} on the demand)" if forces else ""))
     if law.integrator_dead_band:
         notes.append(f"integrator dead band of {law.integrator_dead_band:g} m left out")
     return applied, notes

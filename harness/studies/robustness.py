@@ -452,13 +452,15 @@ def factor_cases(spec: Any, kind: str, factors: Sequence[str], samples: int, see
 
 
 def factor_study(scenario: str, kind: str, parameter_set: str | None = None, samples: int = 200,
-                 stop_time: float = 15.0, seed: int = 0, executor: Any = None, fmus: str = "auto"
-                 ) -> dict[str, dict[str, Any]]:
+                 stop_time: float = 15.0, seed: int = 0, executor: Any = None, fmus: str = "auto",
+                 lab_parameter_set: str | None = None) -> dict[str, dict[str, Any]]:
     """Success of one scenario's loop under each factor of ``FACTORS`` alone, then all together.
 
     Returns ``{factor or "all together": summarize(...)}`` (a factor the plant kind lacks, such as the
-    single mass's spring, is left out). Runs go through the sweep engine on ``executor`` (default: a local
-    pool), on the native flavour where it can run them (``ipcosim.harness.studies.specs.study_spec``).
+    single mass's spring, is left out). The cells with the lab bench (it alone, all together) bind
+    ``lab_parameter_set`` (default: ``parameter_set``), the others ``parameter_set``. Runs go through the sweep
+    engine on ``executor`` (default: a local pool), on the native flavour where it can run them
+    (``ipcosim.harness.studies.specs.study_spec``).
     """
     from ipcosim.harness.studies.specs import for_executor, study_spec
     from ipcosim.harness.studies.sweep import open_executor, run_sweep
@@ -466,13 +468,15 @@ def factor_study(scenario: str, kind: str, parameter_set: str | None = None, sam
     rows = [(f,) for f in FACTORS if f in ("lab bench", "delay") or FACTORS[f].get(kind)] + [tuple(FACTORS)]
     vary, fixed = factor_runs(kind, tuple(FACTORS))
     names = [v.partition("=")[0] for v in vary] + list(fixed)
-    spec, _ = study_spec(scenario, fmus, names=names, stop_time=stop_time, parameter_set=parameter_set)
+    sets = {parameter_set, lab_parameter_set or parameter_set}
+    specs = {p: study_spec(scenario, fmus, names=names, stop_time=stop_time, parameter_set=p)[0] for p in sets}
     own = executor is None
     executor = open_executor() if own else executor
     out: dict[str, dict[str, Any]] = {}
     try:
-        spec = for_executor(spec, executor)
+        specs = {p: for_executor(spec, executor) for p, spec in specs.items()}
         for factors in rows:
+            spec = specs[lab_parameter_set or parameter_set if "lab bench" in factors else parameter_set]
             cases = factor_cases(spec, kind, factors, samples, seed)
             result = run_sweep(spec, cases, executor=executor)
             label = factors[0] if len(factors) == 1 else "all together"

@@ -134,6 +134,8 @@ class Robustness:
         Largest peak |S| at the plant input allowed.
     min_delay_margin : float, optional
         Smallest delay margin allowed [s].
+    min_phase_margin : float, optional
+        Smallest phase margin allowed [deg] (its magnitude, at the crossover nearest -180 deg).
     spread : tuple of mapping
         Plant variations (``plant.variable`` -> value), run besides the nominal plant.
     """
@@ -144,15 +146,17 @@ class Robustness:
     max_peak_sensitivity: float | None = None
     min_delay_margin: float | None = None
     spread: tuple[Mapping[str, float], ...] = ()
+    min_phase_margin: float | None = None
 
     def violation(self, values: Mapping[str, float]) -> tuple[float, dict[str, float]]:
-        """``(how far the loop limits are missed, 0 = met; {worst peak_sensitivity, delay_margin_s}})`` of the
-        candidate ``values`` over the nominal plant and the spread (inf when a loop is unstable)."""
+        """``(how far the loop limits are missed, 0 = met; {worst peak_sensitivity, delay_margin_s,
+        phase_margin_deg})`` of the candidate ``values`` over the nominal plant and the spread (inf when a loop
+        is unstable)."""
         from ipcosim.harness.studies.analyze import loop_limits, scenario_loop
 
-        if self.max_peak_sensitivity is None and self.min_delay_margin is None:
+        if self.max_peak_sensitivity is None and self.min_delay_margin is None and self.min_phase_margin is None:
             return 0.0, {}
-        worst = {"peak_sensitivity": 0.0, "delay_margin_s": math.inf}
+        worst = {"peak_sensitivity": 0.0, "delay_margin_s": math.inf, "phase_margin_deg": math.inf}
         for plant in ({}, *self.spread):
             loop, _ = scenario_loop(self.scenario, self.parameter_set, {**self.fixed, **values, **plant})
             limits = loop_limits(loop)
@@ -160,11 +164,14 @@ class Robustness:
                 return math.inf, {}
             worst["peak_sensitivity"] = max(worst["peak_sensitivity"], limits[0])
             worst["delay_margin_s"] = min(worst["delay_margin_s"], limits[1])
+            worst["phase_margin_deg"] = min(worst["phase_margin_deg"], limits[2])
         excess = 0.0
         if self.max_peak_sensitivity is not None:
             excess += max(0.0, worst["peak_sensitivity"] / self.max_peak_sensitivity - 1.0)
         if self.min_delay_margin is not None:
             excess += max(0.0, 1.0 - worst["delay_margin_s"] / self.min_delay_margin)
+        if self.min_phase_margin is not None:
+            excess += max(0.0, 1.0 - worst["phase_margin_deg"] / self.min_phase_margin)
         return excess, worst
 
 
@@ -311,7 +318,10 @@ def tune(spec: RunSpec, names: Sequence[str], bounds: Sequence[tuple[float, floa
 
     population = plan_population(budget, len(names))  # checks the budget before any run
     nominal = {n: float(spec.parameters[n]) for n in names}
-    x0 = np.array([min(max(nominal[n], lo), hi) for n, (lo, hi) in zip(names, bounds)])
+    # the start clipped to the bounds, a hair inside: scipy rescales it to [0, 1] and rejects a bound
+    # that rounds to just outside
+    x0 = np.array([min(max(nominal[n], lo + 1e-12 * (hi - lo)), hi - 1e-12 * (hi - lo))
+                   for n, (lo, hi) in zip(names, bounds)])
     own = executor is None
     if own:
         executor = open_executor()
@@ -468,27 +478,29 @@ def starting_set(scenario: str, parameter_set: str | None = None) -> str | None:
 
 def robustness_objective(scenario: str, spec: RunSpec, fixed: Mapping[str, Any], parameter_set: str | None,
                          max_peak_sensitivity: float | None = None, min_delay_margin: float | None = None,
-                         spread: float | None = None) -> Robustness | None:
-    """The robust objective of ``--max-peak-sensitivity``, ``--min-delay-margin``, ``--spread`` (None without
-    any); the spread scales the plant parameters of ``robustness.DEFAULT_UNCERTAINTY``.
+                         spread: float | None = None, min_phase_margin: float | None = None) -> Robustness | None:
+    """The robust objective of ``--max-peak-sensitivity``, ``--min-delay-margin``, ``--min-phase-margin``,
+    ``--spread`` (None without any); the spread scales the plant parameters of
+    ``robustness.DEFAULT_UNCERTAINTY``.
 
     Raises
     ------
     UsageError
-        A limit that is not a number > 0, or a spread not in (0, 1).
+        A limit that is not a number > 0, a spread not in (0, 1), or a phase margin not below 180 deg.
     """
     from ipcosim.harness.studies.robustness import DEFAULT_UNCERTAINTY
 
-    if max_peak_sensitivity is None and min_delay_margin is None and spread is None:
+    limits = (("--max-peak-sensitivity", max_peak_sensitivity, math.inf), ("--min-delay-margin", min_delay_margin,
+              math.inf), ("--min-phase-margin", min_phase_margin, 180.0), ("--spread", spread, 1.0))
+    if all(value is None for _, value, _ in limits):
         return None
-    for flag, value in (("--max-peak-sensitivity", max_peak_sensitivity),
-                        ("--min-delay-margin", min_delay_margin), ("--spread", spread)):
-        if value is not None and not (math.isfinite(value) and value > 0 and (flag != "--spread" or value < 1)):
-            raise UsageError(f"{flag} {value}: expected a number > 0" + (" and < 1" if flag == "--spread" else ""))
+    for flag, value, top in limits:
+        if value is not None and not (math.isfinite(value) and 0 < value < top):
+            raise UsageError(f"{flag} {value}: expected a number > 0" + (f" and < {top:g}" if top < math.inf else ""))
     names = list(dict.fromkeys(n for kind in DEFAULT_UNCERTAINTY.values() for n in kind))
     plants = spread_plants(spec.parameters, names, spread) if spread else ()
     return Robustness(scenario, parameter_set, {k: float(v) for k, v in fixed.items()},
-                      max_peak_sensitivity, min_delay_margin, plants)
+                      max_peak_sensitivity, min_delay_margin, plants, min_phase_margin)
 
 
 @dataclass
@@ -607,7 +619,8 @@ def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), set: M
                w_angle: float | None = None, w_voltage: float | None = None, fmus: str = "auto",
                parameter_set: str | None = None, out: Path | str | None = None, ssv: Path | str | None = None,
                install: bool = False, max_peak_sensitivity: float | None = None,
-               min_delay_margin: float | None = None, spread: float | None = None) -> TuneStudy:
+               min_delay_margin: float | None = None, spread: float | None = None,
+               min_phase_margin: float | None = None) -> TuneStudy:
     """The tuning of ``params`` of a scenario, every option checked before any run (``ipcosim tune``).
 
     Parameters
@@ -636,7 +649,7 @@ def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), set: M
         Where the tuned set goes (default ``OUT/autotuned.ssv``).
     install : bool
         Also put it beside the scenario (:func:`install_path`).
-    max_peak_sensitivity, min_delay_margin, spread : float, optional
+    max_peak_sensitivity, min_delay_margin, spread, min_phase_margin : float, optional
         The robust objective (:func:`robustness_objective`).
 
     Raises
@@ -653,7 +666,8 @@ def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), set: M
     names, ranges = _searched(params, bounds, spec)
     plan_population(budget, len(names))  # checks the budget before starting workers
     folder, ssv_path, installed = _outputs(scenario, out, ssv, install)
-    robust = robustness_objective(scenario, spec, set, pset, max_peak_sensitivity, min_delay_margin, spread)
+    robust = robustness_objective(scenario, spec, set, pset, max_peak_sensitivity, min_delay_margin, spread,
+                                  min_phase_margin)
     weights = (costmod.W_ANGLE if w_angle is None else w_angle, costmod.W_VOLTAGE if w_voltage is None else w_voltage)
     return TuneStudy(scenario, spec, flavour, names, ranges, pset, folder, ssv_path, installed, robust, budget, seed,
                      *weights)
