@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -43,18 +43,21 @@ def within_target(name: str, truth: float, value: float) -> bool:
     return abs(value - truth) <= TOLERANCE[name] * truth
 
 
-def one_run(kind: str, seed: int, folder: Path, rig: bool = False) -> tuple[dict[str, float], Any]:
-    """Run ``KIND-identify`` on a hidden truth (excitation seed ``seed``) and identify it; ``rig``: through
-    ``--swap plant=hil`` against a lockstep virtual rig process started with the truth as ``--set``."""
+def experiment(kind: str, seed: int, folder: Path, rig: bool = False) -> tuple[dict[str, float], Path]:
+    """Run ``KIND-identify`` on a hidden truth (excitation seed ``seed``) into ``folder``; ``rig``: through
+    ``--swap plant=hil`` against a lockstep virtual rig process started with the truth as ``--set``. A folder
+    that already holds the run's ``results.csv`` is used as it is (the log is a function of kind, seed and
+    source alone). Returns the truth and the run folder."""
     import os
     import subprocess
     import sys
 
     import ipcosim
-    from ipcosim.harness.studies.identify import IdentifyOptions, identify
 
     truth = hidden_truth(kind, seed)
-    out = folder / f"{kind}-{seed}"
+    out = folder / f"{kind}-{seed}{'-rig' if rig else ''}"
+    if (out / "results.csv").is_file():
+        return truth, out
     values = {"controller.seed": seed}
     proc = None
     if rig:
@@ -74,6 +77,14 @@ def one_run(kind: str, seed: int, folder: Path, rig: bool = False) -> tuple[dict
             proc.wait(timeout=30)
     if result.error:
         raise RuntimeError(f"{kind}-identify seed {seed}: {result.error}")
+    return truth, out
+
+
+def one_run(kind: str, seed: int, folder: Path, rig: bool = False) -> tuple[dict[str, float], Any]:
+    """The :func:`experiment` identified: its truth and the :class:`Identification` of its log."""
+    from ipcosim.harness.studies.identify import IdentifyOptions, identify
+
+    truth, out = experiment(kind, seed, folder, rig)
     return truth, identify(IdentifyOptions.create(out, plant=kind))
 
 
@@ -158,16 +169,18 @@ def lqr_margin_gap(kind: str, truth: dict[str, float], estimate: dict[str, float
     return float(predicted["phase_margin_deg"]), float(actual["phase_margin_deg"])
 
 
-def coverage(kind: str, repetitions: int, rig: bool = False, first: int = 1) -> list[str]:
-    """How often each truth lies inside its 95 % interval, and within its accuracy target, over the seeds
-    ``first .. first + repetitions - 1`` (one line per repetition printed as it ends)."""
+def coverage(kind: str, seeds: Sequence[int], rig: bool = False, logs: Path | None = None) -> list[str]:
+    """How often each truth lies inside its 95 % interval, and within its accuracy target, over the repetitions
+    ``seeds`` (one line per repetition printed as it ends); ``logs``: the folder that keeps the experiments'
+    logs (and reuses those already there, :func:`experiment`), else a temporary one."""
     inside: dict[str, int] = {}
     accurate: dict[str, int] = {}
     worst: dict[str, float] = {}
     nrmse, times, gaps = [], [], []
+    repetitions = len(seeds)
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(first, first + repetitions):
-            truth, r = one_run(kind, seed, Path(tmp), rig)
+        for seed in seeds:
+            truth, r = one_run(kind, seed, logs or Path(tmp), rig)
             print(f"{kind} seed {seed}{' (rig)' if rig else ''}: fit {r.fit_cpu_s:.1f} s CPU, delay "
                   f"{r.input_delay_s * 1e3:g} ms, NRMSE {min(r.nrmse.values()):.2%}, largest residual "
                   f"{max(r.largest_residual_counts.values()):.2f} counts; " + ", ".join(
@@ -191,12 +204,28 @@ def coverage(kind: str, repetitions: int, rig: bool = False, first: int = 1) -> 
     return lines
 
 
+def _seeds(text: str) -> list[int]:
+    """``--seeds 3,4,9``: the repetitions' seeds (whole numbers >= 1)."""
+    try:
+        seeds = [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        seeds = []
+    if not seeds or min(seeds) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: give the seeds as whole numbers >= 1, comma-separated")
+    return seeds
+
+
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--coverage", type=int, metavar="N", help="N seeded repetitions per plant")
     parser.add_argument("--plant", choices=["single-mass", "double-mass"], action="append")
     parser.add_argument("--rig", action="store_true", help="log through --swap plant=hil (a lockstep rig process)")
     parser.add_argument("--first", type=int, default=1, metavar="SEED", help="the first repetition's seed (default 1)")
+    parser.add_argument("--seeds", type=_seeds, metavar="S,S,...", help="only these repetitions (instead of "
+                        "--coverage/--first), e.g. the ones a full run missed")
+    parser.add_argument("--logs", type=Path, metavar="DIR", help="keep the experiments' logs in DIR and reuse the ones "
+                        "already there (to measure an estimator change on the same logs)")
     args = parser.parse_args()
+    seeds = args.seeds or range(args.first, args.first + (args.coverage or 10))
     for kind in args.plant or ["single-mass", "double-mass"]:
-        print("\n".join(coverage(kind, args.coverage or 10, args.rig, args.first)), flush=True)
+        print("\n".join(coverage(kind, seeds, args.rig, args.logs)), flush=True)
