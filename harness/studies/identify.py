@@ -7,7 +7,8 @@ step, on the lab bench's input path, ``ipcosim.fmus.instruments.REALISM["lab"]``
 simulated positions with the logged encoder readings, and minimizes the sum of squared
 differences (each output scaled by its spread in the log): scipy's trust-region least squares
 approaches the optimum, a final pass of small-step Gauss-Newton steps (:func:`_polish`) finishes it
-where the stick-slip friction makes the cost rough. Only the parameters named in ``fit`` move; every
+where the stick-slip friction makes the cost rough, restarted from nearby points where it stops with a
+reading a count or more off (:func:`_unstick`). Only the parameters named in ``fit`` move; every
 other constant (motor, gearbox, pendulum mass and length) stays at the preset's value. The bench's
 computation delay is chosen too, as the whole number of samples (``DELAY_SAMPLES``) whose trust-region
 fit leaves the smaller cost: a plant FMU on the lab bench delays the logged voltage by one sample, the
@@ -23,8 +24,8 @@ sticks holds the same count error for many samples), ``J`` by central difference
 ``COVARIANCE_STEP``; +- 1.96 standard errors. It sees the measurement's errors but not where in the
 stick-slip roughness the fit stopped, which on the lab bench is the larger error. The refits
 (:func:`_bootstrap`, ``refits`` of them): synthetic logs of the estimate, read by encoders with a random
-sub-count zero offset, fitted as the log was; +- ``t(0.975, refits)`` times the refits' root-mean-square
-deviation from the estimate. They see both. Neither says anything of a model that is wrong (the
+sub-count zero offset, fitted as the log was but without the restarts; +- ``t(0.975, refits)`` times the
+refits' root-mean-square deviation from the estimate. They see both. Neither says anything of a model that is wrong (the
 held-out NRMSE is the check for that; docs/identify.md). Coulomb forces' intervals are clipped at 0.
 """
 from __future__ import annotations
@@ -75,6 +76,20 @@ DELAY_NFEV = 8
 #: each refit's final pass gets what the log's had. A larger budget does not help: a fit stuck in the roughness
 #: stays stuck (a double-mass log given 1200: the final pass stopped at 389, still 2.5 counts off).
 SIMULATION_BUDGET = 330
+#: A fit is stuck when some reading of the fitted part lies farther than this from its simulation [encoder counts]:
+#: the true parameters explain every reading to within half a count, and every seeded fit that ended below one count
+#: had all its truths inside their intervals; above it, a stick-slip episode of the log ends a count or more away
+#: from where the estimate puts it.
+STUCK_COUNTS = 1.0
+#: Restarts of the final pass while the fit is stuck (:func:`_unstick`): from the best point so far moved by
+#: ``RESTART_SIZES`` (in turn) times a draw of the sandwich's covariance (seeded by ``RESTART_SEED``), each finished by
+#: ``RESTART_ITERATIONS`` Gauss-Newton steps, the lowest cost kept; at most ``RESTARTS`` of them and
+#: ``RESTART_BUDGET`` simulations of the log.
+RESTARTS = 24
+RESTART_SIZES = (10.0, 30.0)
+RESTART_ITERATIONS = 3
+RESTART_BUDGET = 600
+RESTART_SEED = 0
 #: Central-difference step of the Jacobian behind the interval: ten standard errors, so that the few stick
 #: decisions that flip inside it add little to a slope measured over many samples (a step of 1e-5 with one flip
 #: inside it made one column, and so the information on that parameter, tens of times too large).
@@ -403,7 +418,7 @@ def identify(options: IdentifyOptions) -> Identification:
             if refit.cost < sol.cost:
                 problem, sol = other, refit
     spent = sum(c.simulations for c in candidates)
-    best = _polish(problem, sol.x, POLISH_ITERATIONS, SIMULATION_BUDGET - spent)
+    best = _finish(problem, sol.x, SIMULATION_BUDGET - spent)
     result = _result(best, name, sum(c.simulations for c in candidates), options.refits)
     result.fit_time_s, result.fit_cpu_s = _time.perf_counter() - t0, _time.process_time() - c0
     result.replay, result.refits = how, options.refits
@@ -433,8 +448,7 @@ class _Finished:
     refit_simulations: int = 0    # what the interval's refits spent (:func:`_bootstrap`)
 
 
-def _polish(problem: _Problem, start: np.ndarray, iterations: int, budget: float = math.inf,
-            covariance: bool = True) -> _Finished:
+def _polish(problem: _Problem, start: np.ndarray, iterations: int, budget: float = math.inf) -> _Finished:
     """Finish the fit from ``start``: Gauss-Newton steps on small-step central differences, kept only when they
     lower the cost.
 
@@ -443,7 +457,7 @@ def _polish(problem: _Problem, start: np.ndarray, iterations: int, budget: float
     standard errors from the optimum. Between the flips the cost is smooth; central differences over a tenth of a
     standard error (``POLISH_STEPS``) see that slope, and a step is tried at the lengths ``POLISH_LENGTHS`` and
     taken only if it lowers the cost (no step is forced through a flip); at most ``iterations`` steps and about
-    ``budget`` simulations. The Jacobian at the end (``COVARIANCE_STEP``, with ``covariance``) is the sandwich's.
+    ``budget`` simulations (leaving what the sandwich's Jacobian at the end needs, :func:`_finish`).
     """
     x, cost = np.asarray(start, float), problem.cost(start)
     # a Jacobian and its line search, plus the Jacobian for the interval, must fit in what is left of the budget
@@ -457,7 +471,61 @@ def _polish(problem: _Problem, start: np.ndarray, iterations: int, budget: float
                 break
         else:
             break
-    return _Finished(problem, x, cost, problem.central_jacobian(x, COVARIANCE_STEP) if covariance else None, budget)
+    return _Finished(problem, x, cost, None, budget)
+
+
+def _finish(problem: _Problem, start: np.ndarray, budget: float, restarts: bool = True) -> _Finished:
+    """The final pass (:func:`_polish`, about ``budget`` simulations) and, with ``restarts`` where it leaves the
+    fit stuck, its restarts (:func:`_unstick`, ``RESTART_BUDGET`` more); with ``restarts`` (the log's own fit)
+    also the sandwich's Jacobian at the end (central differences over ``COVARIANCE_STEP``)."""
+    finished = _polish(problem, start, POLISH_ITERATIONS, budget)
+    if restarts:
+        finished = _unstick(finished, RESTART_BUDGET)
+        finished.jac = problem.central_jacobian(finished.x, COVARIANCE_STEP)
+    return finished
+
+
+def _unstick(finished: _Finished, budget: float) -> _Finished:
+    """Restart the final pass from points near a stuck estimate (:data:`STUCK_COUNTS`), keeping the lowest cost.
+
+    The cost is a smooth bowl plus a small positive step for each stick decision that flips away from the truth's:
+    the final pass stops where every Gauss-Newton step it tries from there crosses a flip that costs more than the
+    bowl saves, and more simulations from the same point do not help. From a point a few standard errors away
+    (the sandwich's covariance at the stuck estimate: moved mostly along the bowl's flat directions, where the
+    flips decide) the steps cross other flips; a restart is kept only where it ends lower than the best point so
+    far, and the next one starts from there. Deterministic (``RESTART_SEED``); at most ``RESTARTS`` restarts and
+    about ``budget`` simulations, ending early once no reading is a count off.
+    """
+    problem, best = finished.problem, finished
+    if not _stuck(problem, best.x):
+        return finished
+    end = problem.simulations + budget
+    jac = problem.central_jacobian(best.x, COVARIANCE_STEP)
+    w, v = np.linalg.eigh(_covariance(jac, problem.residuals(best.x), len(problem.log.outputs)))
+    root = v * np.sqrt(np.maximum(w, 0.0))
+    rng = np.random.default_rng(RESTART_SEED)
+    for k in range(RESTARTS):
+        left = end - problem.simulations
+        if left < 4 * len(best.x) + len(POLISH_LENGTHS) + 1:
+            break
+        start = _bounded(problem, best.x + RESTART_SIZES[k % len(RESTART_SIZES)] * root @ rng.standard_normal(len(w)))
+        trial = _polish(problem, start, RESTART_ITERATIONS, left)
+        if trial.cost < best.cost:
+            best = trial
+            if not _stuck(problem, best.x):
+                break
+    return _Finished(problem, best.x, best.cost, None, finished.budget)
+
+
+def _stuck(problem: _Problem, x: np.ndarray) -> bool:
+    """Whether some reading of the fitted part lies more than ``STUCK_COUNTS`` from the simulation of ``x``."""
+    return bool(_largest_counts(problem, x).max() > STUCK_COUNTS)
+
+
+def _largest_counts(problem: _Problem, x: np.ndarray) -> np.ndarray:
+    """Per output, the largest |simulated - measured| over the fitted part of the log, in encoder counts."""
+    r = problem.residuals(x).reshape(problem.n_fit, len(problem.log.outputs))
+    return np.abs(r).max(axis=0) * problem.spread / _resolutions(problem)
 
 
 def _bounded(problem: _Problem, x: np.ndarray) -> np.ndarray:
@@ -476,8 +544,11 @@ def _bootstrap(finished: _Finished, sim: np.ndarray, refits: int) -> np.ndarray:
     Each synthetic log is the estimate's simulated motion ``sim`` read by the log's encoders zeroed at the start
     with a sub-count zero offset drawn uniformly (``quantize`` with its phase moved; the same logged voltage,
     the same computation delay), fitted as the log was: from the preset, the trust region, then the final pass
-    with the simulations the log's had. Its estimates scatter as the log's did -- from the encoders' rounding
-    and from where in the stick-slip roughness the fit stops, which no linearization at the estimate sees.
+    with the simulations the log's had, but without its restarts (:func:`_unstick`: they would double the
+    identification's time). Its estimates scatter as a fit without restarts does -- from the encoders' rounding
+    and from where in the stick-slip roughness the fit stops, which no linearization at the estimate sees --
+    so the interval is wide enough for a fit stopped where the final pass stops; one the restarts finished lies
+    nearer the truth than that.
     """
     problem = finished.problem
     log, res = problem.log, _resolutions(problem)
@@ -490,7 +561,7 @@ def _bootstrap(finished: _Finished, sim: np.ndarray, refits: int) -> np.ndarray:
         refit = _Problem(replace(log, y=y), problem.kind, problem.fit, problem.base, problem.instruments,
                          problem.simulator)
         sol = _fit(refit, refit.start)
-        draws.append(_polish(refit, sol.x, POLISH_ITERATIONS, finished.budget, covariance=False).x)
+        draws.append(_finish(refit, sol.x, finished.budget, restarts=False).x)
         finished.refit_simulations += refit.simulations
     return np.array(draws)
 
@@ -525,7 +596,7 @@ def _result(finished: _Finished, preset_name: str, simulations: int, refits: int
         lo = value - half[i]
         out[n] = {"value": value, "ci95": [max(lo, 0.0) if n in NONNEGATIVE else lo, value + half[i]],
                   "unit": units[n]}
-    counts = np.abs(sim[:k] - log.y[:k]).max(axis=0) / _resolutions(problem)
+    counts = _largest_counts(problem, finished.x)
     result = Identification(problem.kind, preset_name, out,
                           {o: nrmse(log.y[k:, j], sim[k:, j]) for j, o in enumerate(log.outputs)},
                           float(log.time[k]), 0.0, simulations + finished.refit_simulations, log.display,
