@@ -19,9 +19,10 @@ RUNS = 200
 STOP_TIME = 15.0
 WORKERS = 2
 #: Target: wall time of the row on two workers, at the reference machine speed
-#: (``targets.REFERENCE_SPEED_MS``; scaled on a slower machine): 2.69 s there (3.29 s measured at
-#: 28.1 ms), the limit 1.3 times that; the issue's own limit, 30 s, is far above.
-LIMIT_S = 3.6
+#: (``targets.REFERENCE_SPEED_MS``; scaled on a slower machine): 2.69-3.32 s there in two runs
+#: (3.29 s at 28.1 ms, 3.85 s at 26.8 ms: a wall time over two processes moves more than the CPU
+#: figures), the limit a third above the slower; the issue's own limit, 30 s, is far above.
+LIMIT_S = 4.4
 
 
 def measure() -> dict[str, float]:
