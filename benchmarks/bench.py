@@ -68,6 +68,7 @@ def run_one(name: str, out: Path | None = None) -> int:
     start = time.perf_counter()
     try:
         speed = targets.SPEED_MS = targets.machine_speed()
+        targets.RESAMPLE = True
         lines = importlib.import_module(name).run()
         short = name.split(".")[-1].removeprefix("bench_")
         lines.append("the machine's speed: a fixed pure-Python workload took "
