@@ -262,9 +262,10 @@ TUNED_LQG: dict[str, dict[str, Any]] = {
 #: The LQG's ``lab`` set: TUNED_LQG's design with the Coulomb friction compensation (``laws.coulomb_estimate``)
 #: of the lab bench's fitted forces (``fmus.instruments.REALISM["lab"]``, as ``friction_<b>``): its threshold
 #: friction_velocity [m/s] and the breakaway gain at rest (``friction_breakaway_gain``), chosen on the lab bench's
-#: robustness runs (docs/controllers.md, "Coulomb friction compensation").
+#: robustness runs (docs/controllers.md, "Coulomb friction compensation"); the single mass's dither_amplitude [V]
+#: keeps its cart from sticking near rest (docs/controllers.md, "Dither").
 LAB_LQG: dict[str, dict[str, float]] = {
-    "single-mass": {"friction_velocity": 5e-4, "friction_breakaway_gain": 0.0},
+    "single-mass": {"friction_velocity": 5e-4, "friction_breakaway_gain": 0.0, "dither_amplitude": 0.4},
     "double-mass": {"friction_velocity": 2e-3, "friction_breakaway_gain": 1.0},
 }
 
@@ -497,7 +498,10 @@ def _lqg_friction_specs(kind: str) -> list[ParamSpec]:
                                                                    "frictionless model puts on it, up to its Coulomb "
                                                                    "force (0 = none)", "nonnegative"),
                     ParamSpec("integrator_dead_band", 0.0, "m", "the integral ignores this much of the motor-cart "
-                                                                "position error (0 = none)", "nonnegative")]
+                                                                "position error (0 = none)", "nonnegative"),
+                    ParamSpec("dither_amplitude", 0.0, "V", "square wave at half the sample rate added to the "
+                                                            "voltage, so a cart near rest does not stick (0 = none)",
+                              "nonnegative")]
 
 
 #: LQG parameters that act at run time, not through the design.
@@ -852,7 +856,7 @@ def _lqg_law(kind: str, coef: LQGCoefficients, values: Mapping[str, Any]) -> LQG
     return LQG(kind, replace(coef, **coulomb_model(kind, values)), float(values["voltage_limit"]),
                float(values["reference_time_constant"]), [float(values[n]) for n in LQG_FRICTION[kind]],
                float(values["friction_velocity"]), float(values["integrator_dead_band"]),
-               float(values["friction_breakaway_gain"]))
+               float(values["friction_breakaway_gain"]), float(values["dither_amplitude"]))
 
 
 # ============================================================ every law with designed gains

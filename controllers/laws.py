@@ -625,12 +625,17 @@ class LQG(CurrentEstimatorLaw):
     friction_breakaway_gain : float
         g of :func:`coulomb_estimate`: a cart near rest is compensated by g times the net force the
         frictionless model puts on it (the loop's demand), up to its Coulomb force; 0 = none.
+    dither_amplitude : float
+        [V] of a square wave at half the sample rate added to the computed voltage (its sign alternates every
+        sample; the filter's model is given the voltage with it). Larger than the cart's breakaway voltage, it
+        keeps a cart near rest from sticking, so stick-slip no longer turns the loop into a hunting cycle
+        (dither: Armstrong-Helouvry, Dupont & Canudas de Wit, *Automatica* 30, 1994); 0 = none.
     """
 
     def __init__(self, kind: str, coefficients: LQGCoefficients, voltage_limit: float = 10.0,
                  reference_time_constant: float = 0.0, friction: Sequence[float] = (),
                  friction_velocity: float = 1e-3, integrator_dead_band: float = 0.0,
-                 friction_breakaway_gain: float = 0.0) -> None:
+                 friction_breakaway_gain: float = 0.0, dither_amplitude: float = 0.0) -> None:
         super().__init__(kind, coefficients.sample_period, voltage_limit)
         if coefficients.outputs != tuple(self.measured):
             raise LawParameterError("design", f"LQG design is for outputs {coefficients.outputs}, the "
@@ -645,6 +650,7 @@ class LQG(CurrentEstimatorLaw):
         self.friction_velocity = _check_positive("friction_velocity", friction_velocity)
         self.integrator_dead_band = _check_nonneg("integrator_dead_band", integrator_dead_band)
         self.friction_breakaway_gain = _check_nonneg("friction_breakaway_gain", friction_breakaway_gain)
+        self.dither_amplitude = _check_nonneg("dither_amplitude", dither_amplitude)
         self._Cpinv = _right_inverse(coefficients.C)
         self.reset()
 
@@ -652,6 +658,7 @@ class LQG(CurrentEstimatorLaw):
         super().reset()
         self.applied = 0.0
         self.integral = 0.0
+        self.dither_sign = 1.0
         self.reference_filtered: float | None = None
 
     def _compute(self, y: Sequence[float], r: float) -> float:
@@ -670,6 +677,8 @@ class LQG(CurrentEstimatorLaw):
             target = [t + f * c for t, c in zip(target, lead)]
         feedback = d.K_voltage * applied + sum(k * (x - t) for k, x, t in zip(d.K, x_hat, target))
         u = d.volts_per_newton * sum(forces) - feedback - d.K_integral * self.integral
+        u = u + self.dither_amplitude * self.dither_sign
+        self.dither_sign = -self.dither_sign
         error = dead_zone(r - self._motor_cart(y), self.integrator_dead_band)
         integral = self.integral + error * d.sample_period  # the design's T (a gain)
         limit = self.voltage_limit

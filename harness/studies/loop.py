@@ -215,6 +215,8 @@ def _lqg(law: LQG, b: Builder) -> tuple[Lin, list[str]]:
                      + (f"; its breakaway term at rest kept (slope {g:g} on the demand)" if forces else ""))
     if law.integrator_dead_band:
         notes.append(f"integrator dead band of {law.integrator_dead_band:g} m left out")
+    if law.dither_amplitude:
+        notes.append(f"dither of {law.dither_amplitude:g} V at half the sample rate left out (an input, not feedback)")
     return applied, notes
 
 
