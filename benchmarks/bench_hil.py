@@ -189,17 +189,18 @@ def _targets(key: str, label: str, m: dict[str, Any]) -> str:
                    anchor="the host: a probe with no work at a higher SCHED_FIFO priority on each CPU"
                           + ("" if split["fifo"] else " (not under SCHED_FIFO: nothing attributed to the host)"),
                    what=f"{label}, time the host stalled the most stalled CPU during the run")
+    own, jitter, behind = split["own_overruns"] * pct, split["jitter_p99_own_s"] * US, split["behind_step_s"] * US
     return ("upright " + target(f"{key}_upright", float(bool(m.get("upright"))), 1.0, "", at_most=False,
                                 what=f"{label}, pendulum upright at the end (1 = yes)")
-            + "; own overruns " + target(f"{key}_own_overruns_pct", split["own_overruns"] * pct,
-                                         TARGET_1KHZ["own_overruns_pct"], "%",
-                                         what=f"{label}, overruns the host's stalls do not explain")
-            + f" ({split['own_episodes']} episodes); p99 jitter outside the host's stalls "
-            + target(f"{key}_jitter_p99_us", split["jitter_p99_own_s"] * US, TARGET_1KHZ["period_jitter_p99_us"],
+            + f"; own overruns {own:.2f} % ({split['own_episodes']} episodes) "
+            + target(f"{key}_own_overruns_pct", own, TARGET_1KHZ["own_overruns_pct"], "%",
+                     what=f"{label}, overruns the host's stalls do not explain")
+            + f"; p99 jitter outside the host's stalls {jitter:.0f} us "
+            + target(f"{key}_jitter_p99_us", jitter, TARGET_1KHZ["period_jitter_p99_us"],
                      "us", what=f"{label}, period jitter p99 outside the host's stalls")
-            + "; a step when behind " + target(f"{key}_behind_step_us", split["behind_step_s"] * US,
-                                               TARGET_1KHZ["behind_step_us"], "us", per_speed=True,
-                                               what=f"{label}, time a step takes when the loop runs behind")
+            + f"; a step when behind {behind:.0f} us "
+            + target(f"{key}_behind_step_us", behind, TARGET_1KHZ["behind_step_us"], "us", per_speed=True,
+                     what=f"{label}, time a step takes when the loop runs behind")
             + f"\n{'':32s}host stalls {stall}: all overruns "
             + figure(f"{key}_overruns_pct", split["overruns"] * pct, "%", anchor=f"{key}_host_stall_ms",
                      what=f"{label}, overruns (the host's and the loop's own)")
