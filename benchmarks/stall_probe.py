@@ -71,10 +71,14 @@ class StallProbe:
                        for c in self.cpus]
         for p in self._procs:
             p.start()
-        for _ in self._procs:   # every probe at its priority and probing before the block begins
-            if not ready.acquire(timeout=60):
+        started, end = 0, time.monotonic() + 60
+        while started < len(self._procs):   # every probe at its priority and probing before the block begins
+            if ready.acquire(timeout=0.1):
+                started += 1
+            elif time.monotonic() > end or any(p.exitcode is not None for p in self._procs):
                 self._stop.set()
-                raise RuntimeError("the host-stall probe did not start within 60 s")
+                codes = [p.exitcode for p in self._procs]
+                raise RuntimeError(f"the host-stall probe did not start (exit codes {codes}; within 60 s)")
         return self
 
     def __exit__(self, *exc: object) -> None:
