@@ -17,13 +17,17 @@ to the rate:
 
 Each line gives the period jitter (p50 / p99 / max of |actual period - h|), overruns (steps
 starting more than half a period late), the card's overruns (requests reaching the rig after
-their sample instant), the lateness distribution and whether the task was met. Targets, with
-the real-time options at 1 kHz: single-mass LQR upright at the end, period jitter p99 and
-overruns (``TARGET_1KHZ``); double-mass HSMC upright, overruns and RMS voltage within 20 % of the
-lockstep run (``TARGET_DOUBLE``); each from the run with the fewest overruns of ``RT_ATTEMPTS``.
-The maximum jitter is a reference figure, read against the pacer
-alone under SCHED_FIFO (what the machine's scheduler does to a process with no work). The load
-average at the start is printed: on a shared machine the figures are those of that load.
+their sample instant), the lateness distribution and whether the task was met.
+
+The two 1 kHz ``rt`` runs run beside a probe of the host's stalls (:mod:`benchmarks.stall_probe`:
+on each CPU a process with no work at a SCHED_FIFO priority above the loop's), and their overruns
+are split with its record into the host's and the loop's own. Targets (``TARGET_1KHZ``, ``BEHIND_STEP_US``),
+for the single-mass LQR and the double-mass HSMC: upright at the end, own overruns, period jitter p99
+outside the host's stalls, and the time a step takes when the loop runs behind (its own cost);
+for the HSMC also the RMS voltage within 20 % of the lockstep run (``TARGET_DOUBLE``). All
+overruns, the maximum jitter and the host's stall time are reference figures: they are what the
+host did in that minute (a 1 kHz run had 2 % overruns at one hour and 17 % at the next, the probe
+seeing stalls of up to 50 ms). The load average at the start is printed.
 """
 from __future__ import annotations
 
@@ -38,17 +42,22 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
+import numpy as np
+
+from benchmarks.stall_probe import StallProbe, attribute
 from benchmarks.targets import figure, target
 
 STOP_TIME = float(os.environ.get("IPCOSIM_BENCH_HIL_STOP_TIME", "10.0"))
 #: Watchdog of the bench's runs [s]: a stall of a shared machine is reported, not fatal.
 WATCHDOG = float(os.environ.get("IPCOSIM_BENCH_HIL_WATCHDOG", "0.5"))
 RT_PRIORITY = 50
-#: Targets (measured on the shared two-core machine at load 2-8: p99 650-800 us, overruns 0.7-3.3 %).
-TARGET_1KHZ = {"period_jitter_p99_us": 1000.0, "overruns_pct": 5.0}
-TARGET_DOUBLE = {"overruns_pct": 5.0, "rms_voltage_rel_pct": 20.0}
-#: Real-time runs behind each 1 kHz target (the one with the fewest overruns counts).
-RT_ATTEMPTS = int(os.environ.get("IPCOSIM_BENCH_HIL_ATTEMPTS", "2"))
+#: Targets of both 1 kHz rt runs: overruns outside the host's stalls within a paced run's default
+#: budget (1 %; measured 0.03-0.5 % at load 0.1-4) and jitter p99 outside them (measured 190-400 us).
+TARGET_1KHZ = {"own_overruns_pct": 1.0, "period_jitter_p99_us": 600.0}
+#: The time a step takes when the loop runs behind, at the reference speed (``per_speed``): measured
+#: 565 us (LQR) and 402 us (HSMC) at a machine speed of 27 ms, i.e. 480 / 342 us at the reference.
+BEHIND_STEP_US = {"hil.lqr_1khz": 620.0, "hil.hsmc_1khz": 450.0}
+TARGET_DOUBLE = {"rms_voltage_rel_pct": 20.0}
 US = 1e6
 
 
@@ -78,7 +87,8 @@ def rig(plant: str, rt: bool, tick: float = 2.5e-4, clock: str = "wallclock") ->
 
 def run_scenario(scenario: str, rate: int, *, hil_uri: str | None, rt: bool = False) -> dict[str, Any]:
     """metrics.json of one ``ipcosim run`` in its own process, as a user runs it (``error``: its
-    last stderr line if it failed); HIL when ``hil_uri`` is given, else simulated."""
+    last stderr line if it failed); HIL when ``hil_uri`` is given, else simulated. A paced run's
+    step timeline (``IPCOSIM_RT_TIMELINE``) comes with it under ``timeline``."""
     h = 1.0 / rate
     cmd = [sys.executable, "-m", "ipcosim.harness.cli", "run", scenario, "--stop-time", str(STOP_TIME),
            "--step", str(h), "--set", f"controller.sample_period={h}", "--quiet",
@@ -89,9 +99,13 @@ def run_scenario(scenario: str, rate: int, *, hil_uri: str | None, rt: bool = Fa
     env.update({"IPCOSIM_HIL_URI": hil_uri} if hil_uri else {})
     env.update({"IPCOSIM_RT_PRIORITY": str(RT_PRIORITY)} if rt else {})
     with tempfile.TemporaryDirectory(prefix="ipcosim-bench-hil-") as out:
+        env["IPCOSIM_RT_TIMELINE"] = str(Path(out) / "timeline.npz")
         run = subprocess.run(cmd + ["--out", out], capture_output=True, text=True, env=env, timeout=600)
         path = Path(out) / "metrics.json"
         metrics = json.loads(path.read_text()) if path.exists() else {}
+        if (Path(out) / "timeline.npz").exists():
+            with np.load(Path(out) / "timeline.npz") as tl:
+                metrics["timeline"] = {k: tl[k] for k in tl.files}
     lines = run.stderr.strip().splitlines()
     return {**metrics, "error": (lines[-1] if lines else f"exit status {run.returncode}") if run.returncode else None}
 
@@ -133,50 +147,67 @@ def pacer_floor(seconds: float = 3.0, period: float = 1e-3, rt: bool = False) ->
             f"of {st.steps}{'; ' + fifo.split(':')[0] if fifo else ''}")
 
 
-def least_disturbed_rt(plant: str, scenario: str, rate: int, attempts: int = RT_ATTEMPTS) -> dict[str, Any]:
-    """The run with the fewest overruns of ``attempts`` real-time (``rt``) runs, each against a fresh rig,
-    with ``attempts`` added to its metrics: a stall of a shared machine can spoil one 10 s run (one
-    measured run had 14 % overruns where the runs before and after had 2 %), as it spoils one timed round
-    of the other benches, whose figures are the least disturbed rounds too."""
-    runs = []
-    for _ in range(attempts):
-        with rig(plant, True) as (_, uri):
-            runs.append(run_scenario(scenario, rate, hil_uri=uri, rt=True))
-    return {**min(runs, key=lambda m: (bool(m.get("error")), m.get("overruns") or 0)), "attempts": attempts}
+def probed_rt(plant: str, scenario: str, rate: int) -> dict[str, Any]:
+    """One real-time (``rt``) run against a fresh rig, with the host's stalls probed on every CPU
+    while it runs (:mod:`benchmarks.stall_probe`) and its overruns split into the host's and its
+    own (``split``): on these shared machines even a process with no work under SCHED_FIFO is
+    stalled for milliseconds (10-110 ms in 10 s, measured), and those stalls, not the loop, made
+    the 1 kHz runs' overruns move between 2 % and 17 % from hour to hour."""
+    with rig(plant, True) as (_, uri), StallProbe() as probe:
+        m = run_scenario(scenario, rate, hil_uri=uri, rt=True)
+    tl = m.pop("timeline", None)
+    if tl is not None:
+        m["split"] = {**attribute(tl["starts_ns"], tl["lateness_ns"], int(tl["period_ns"]), probe.result),
+                      "fifo": probe.result.get("fifo", False)}
+    return m
 
 
 def single_mass(lines: list[str]) -> None:
     for rt in (False, True):
         for rate in (500, 1000):
             if rt and rate == 1000:
-                m = least_disturbed_rt("single-mass", "single-mass-lqr", rate)
+                m = probed_rt("single-mass", "single-mass-lqr", rate)
             else:
                 with rig("single-mass", rt) as (_, uri):
                     m = run_scenario("single-mass-lqr", rate, hil_uri=uri, rt=rt)
-            lines.append(describe(f"LQR single, {rate} Hz{', rt' if rt else ''}", m)
-                         + (f" (fewest overruns of {m['attempts']} runs)" if "attempts" in m else ""))
+            lines.append(describe(f"LQR single, {rate} Hz{', rt' if rt else ''}", m))
             print('   ' + lines[-1], flush=True)
             if rt and rate == 1000:
-                checks = _targets("hil.lqr_1khz", "LQR single 1 kHz rt", m, TARGET_1KHZ["overruns_pct"])
-                lines.append(f"{'':32s}" + checks + "; p99 "
-                             + target("hil.lqr_1khz_jitter_p99_us", m.get("period_jitter_p99_s", float("nan")) * US,
-                                      TARGET_1KHZ["period_jitter_p99_us"], "us",
-                                      what="LQR single 1 kHz rt, period jitter p99")
-                             + "; max " + figure("hil.lqr_1khz_jitter_max_us",
-                                                 m.get("period_jitter_max_s", float("nan")) * US, "us",
-                                                 anchor="pacer alone, rt: hil.pacer_rt_jitter_max_us",
-                                                 what="LQR single 1 kHz rt, period jitter max"))
+                lines.append(f"{'':32s}" + _targets("hil.lqr_1khz", "LQR single 1 kHz rt", m))
                 print('   ' + lines[-1], flush=True)
 
 
-def _targets(key: str, label: str, m: dict[str, Any], overruns_pct: float) -> str:
-    """The targets every rt run at 1 kHz has: it ran, the pendulum is upright, few overruns."""
+def _targets(key: str, label: str, m: dict[str, Any]) -> str:
+    """The targets every rt run at 1 kHz has: it ran, the pendulum is upright, its own overruns and
+    jitter are few and its steps cost what they did; the overruns the host's stalls explain, and the
+    largest jitter, are reference figures beside the stall time the probes measured."""
     if m.get("error"):
         raise RuntimeError(f"{label}: the HIL run failed: {m['error']}")
-    pct = 100 * (m.get("overruns") or 0) / max(1, m.get("realtime_steps") or 1)
+    split = m.get("split")
+    if not split:
+        raise RuntimeError(f"{label}: the HIL run wrote no step timeline (IPCOSIM_RT_TIMELINE)")
+    pct = 100 / max(1, split["steps"])
+    stall = figure(f"{key}_host_stall_ms", split["host_stall_s"] * 1e3, "ms",
+                   anchor="the host: a probe with no work at a higher SCHED_FIFO priority on each CPU"
+                          + ("" if split["fifo"] else " (not under SCHED_FIFO: nothing attributed to the host)"),
+                   what=f"{label}, time the host stalled the most stalled CPU during the run")
+    own, jitter, behind = split["own_overruns"] * pct, split["jitter_p99_own_s"] * US, split["behind_step_s"] * US
     return ("upright " + target(f"{key}_upright", float(bool(m.get("upright"))), 1.0, "", at_most=False,
                                 what=f"{label}, pendulum upright at the end (1 = yes)")
-            + "; overruns " + target(f"{key}_overruns_pct", pct, overruns_pct, "%", what=f"{label}, overruns"))
+            + f"; own overruns {own:.2f} % ({split['own_episodes']} episodes) "
+            + target(f"{key}_own_overruns_pct", own, TARGET_1KHZ["own_overruns_pct"], "%",
+                     what=f"{label}, overruns the host's stalls do not explain")
+            + f"; p99 jitter outside the host's stalls {jitter:.0f} us "
+            + target(f"{key}_jitter_p99_us", jitter, TARGET_1KHZ["period_jitter_p99_us"],
+                     "us", what=f"{label}, period jitter p99 outside the host's stalls")
+            + f"; a step when behind {behind:.0f} us "
+            + target(f"{key}_behind_step_us", behind, BEHIND_STEP_US[key], "us", per_speed=True,
+                     what=f"{label}, time a step takes when the loop runs behind")
+            + f"\n{'':32s}host stalls {stall}: all overruns "
+            + figure(f"{key}_overruns_pct", split["overruns"] * pct, "%", anchor=f"{key}_host_stall_ms",
+                     what=f"{label}, overruns (the host's and the loop's own)")
+            + ", max jitter " + figure(f"{key}_jitter_max_us", m.get("period_jitter_max_s", float("nan")) * US, "us",
+                                       anchor=f"{key}_host_stall_ms", what=f"{label}, period jitter max"))
 
 
 def double_mass(lines: list[str]) -> None:
@@ -187,17 +218,16 @@ def double_mass(lines: list[str]) -> None:
         with rig("double-mass", False, clock="lockstep") as (_, uri):
             lock = run_scenario("double-mass-hsmc", rate, hil_uri=uri)
         if rate == 1000:
-            m = least_disturbed_rt("double-mass", "double-mass-hsmc", rate)
+            m = probed_rt("double-mass", "double-mass-hsmc", rate)
         else:
             with rig("double-mass", True) as (_, uri):
                 m = run_scenario("double-mass-hsmc", rate, hil_uri=uri, rt=True)
         rel = abs(m.get("rms_voltage_V", float("nan")) - lock["rms_voltage_V"]) / lock["rms_voltage_V"]
         lines.append(describe(f"HSMC double, {rate} Hz, rt", m)
-                     + (f" (fewest overruns of {m['attempts']} runs)" if "attempts" in m else "")
                      + f"\n{'':32s}rms: lockstep rig {lock['rms_voltage_V']:.3f} V (HIL differs by {100 * rel:.0f} %), "
                        f"plant FMU {sim['rms_voltage_V']:.3f} V")
         if rate == 1000:
-            checks = _targets("hil.hsmc_1khz", "HSMC double 1 kHz rt", m, TARGET_DOUBLE["overruns_pct"])
+            checks = _targets("hil.hsmc_1khz", "HSMC double 1 kHz rt", m)
             lines[-1] += (f"\n{'':32s}" + checks + "; rms "
                           + target("hil.hsmc_1khz_rms_vs_lockstep_pct", 100 * rel, TARGET_DOUBLE["rms_voltage_rel_pct"],
                                    "%", what="HSMC double 1 kHz rt, RMS voltage against the lockstep rig"))

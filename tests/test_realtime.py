@@ -263,3 +263,42 @@ def test_realtime_setup_reports_each_option_as_applied_or_not(monkeypatch):
     monkeypatch.setenv("IPCOSIM_RT_PRIORITY", "nan")
     with pytest.raises(RealtimeSetupError, match="IPCOSIM_RT_PRIORITY=nan"):
         realtime_setup()
+
+
+@pytest.mark.integration
+def test_a_paced_run_writes_its_rows_a_few_at_a_time_and_its_timeline_when_asked(tmp_path, monkeypatch, capsys):
+    """results.csv costs about 10 us a row: a paced run hands rows to the writer every
+    ``PACED_WRITE_SECONDS``, not 0.2 s of them at once (which made the steps after them start late);
+    ``IPCOSIM_RT_TIMELINE`` writes each step's start and lateness, and an unwritable one is one line."""
+    from ipcosim.harness.cli import main
+    from ipcosim.harness.master import realtime
+    from ipcosim.harness.master.recorder import Recorder
+
+    emitted: list[int] = []
+    emit = Recorder.emit
+
+    def counting(self, rows):
+        emitted.append(rows - self.base_row)
+        return emit(self, rows)
+
+    monkeypatch.setattr(Recorder, "emit", counting)
+    timeline = tmp_path / "timeline.npz"
+    monkeypatch.setenv("IPCOSIM_RT_TIMELINE", str(timeline))
+    out = tmp_path / "rt"
+    assert main(["run", "single-mass-lqr", "--realtime", "--stop-time", "0.2", "--out", str(out), "--quiet",
+                 "--overrun-budget", "1"]) == 0
+    most = round(realtime.PACED_WRITE_SECONDS / 1e-3)
+    assert emitted and max(emitted) <= most + 1 and sum(emitted) == 201, emitted
+    with np.load(timeline) as tl:
+        starts, late = tl["starts_ns"], tl["lateness_ns"]
+        assert len(starts) == len(late) == 200 and int(tl["period_ns"]) == 1_000_000
+        assert np.all(np.diff(starts) > 0) and late.min() == 0
+    emitted.clear()
+    assert main(["run", "single-mass-lqr", "--stop-time", "0.2", "--out", str(out), "--quiet"]) == 0
+    assert max(emitted) > most + 1, "an unpaced run keeps writing in large pieces"
+    monkeypatch.setenv("IPCOSIM_RT_TIMELINE", str(tmp_path / "no" / "such" / "t.npz"))
+    capsys.readouterr()
+    assert main(["run", "single-mass-lqr", "--realtime", "--stop-time", "0.05", "--out", str(out), "--quiet",
+                 "--overrun-budget", "1"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "IPCOSIM_RT_TIMELINE=" in err[0] and "not written" in err[0], err

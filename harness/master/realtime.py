@@ -53,6 +53,11 @@ study) can ask for them without new arguments:
 ``IPCOSIM_RT_OVERRUN_BUDGET=F``
     Overruns allowed, as a fraction of the steps (e.g. ``0.005``), where the run is not given
     one (``ipcosim run --overrun-budget``); default :data:`DEFAULT_OVERRUN_BUDGET`.
+``IPCOSIM_RT_TIMELINE=FILE``
+    Write every step's start (host monotonic clock [ns], shared by the machine's processes)
+    and lateness [ns] to ``FILE`` (``.npz``: ``starts_ns``, ``lateness_ns``, ``period_ns``)
+    when the run ends, to lay the loop's timing beside another process's, e.g. a probe of the
+    host's stalls (``benchmarks/stall_probe.py``).
 
 What a run learns from a card it drives (its faults, its overruns) is recorded by the
 hardware-in-the-loop room's own observer, :mod:`ipcosim.fmus.hil.observer`.
@@ -62,6 +67,7 @@ from __future__ import annotations
 import gc
 import math
 import os
+import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -211,18 +217,24 @@ class Pacer:
         self._durations.append(d)
         return d
 
+    def starts_ns(self) -> np.ndarray:
+        """The clock readings at which the steps so far started [ns]."""
+        return np.asarray(self._starts, dtype=np.int64)
+
+    def lateness_ns(self) -> np.ndarray:
+        """How late each step so far started [ns], against the schedule anchored at the
+        earliest-running step (see the module doc); the first step starts when the pacer does
+        and says nothing about the schedule."""
+        starts = self.starts_ns()
+        if not len(starts):
+            return np.zeros(0, dtype=np.int64)
+        late = starts - np.arange(len(starts), dtype=np.int64) * self.period_ns
+        late -= late[1:].min() if len(late) > 1 else late[0]
+        return np.maximum(late, 0)
+
     def stats(self) -> RealtimeStats:
         """Statistics so far (jitter zero for fewer than three steps)."""
-        starts = np.asarray(self._starts, dtype=np.int64)
-        if len(starts):
-            schedule = np.arange(len(starts), dtype=np.int64) * self.period_ns
-            late = starts - schedule
-            # anchored at the earliest-running step (see the module doc); the first step starts
-            # when the pacer does and says nothing about the schedule
-            late -= late[1:].min() if len(late) > 1 else late[0]
-            np.maximum(late, 0, out=late)
-        else:
-            late = np.zeros(0, dtype=np.int64)
+        starts, late = self.starts_ns(), self.lateness_ns()
         dur = np.asarray(self._durations, dtype=np.int64)
         if len(starts) >= 3:
             jitter = np.abs(np.diff(starts[1:]) - self.period_ns) / NS
@@ -348,6 +360,11 @@ def apply_sched_fifo(priority: int | None, undo: list[Callable[[], None]]) -> st
     return f"applied: SCHED_FIFO priority {priority}"
 
 
+#: A paced run hands its rows to the writer this often [s] (wall clock = simulated time): at about
+#: 10 us a row of results.csv, 10 ms of rows at 1 kHz cost 0.1 ms, inside one step's slack.
+PACED_WRITE_SECONDS = 0.02
+
+
 class RealtimePacer(Observer):
     """Observer (``ipcosim.harness.master.observers``) pacing a co-simulation to the wall clock.
 
@@ -384,6 +401,8 @@ class RealtimePacer(Observer):
 
     def start(self, execution) -> None:  # noqa: ANN001 -- ipcosim.harness.master.execution.Execution
         self._setup, self._restore = realtime_setup()
+        rows_per_second = 1 / (execution.step_size * execution.record_every)
+        execution.recorder.max_pending_rows = max(1, int(PACED_WRITE_SECONDS * rows_per_second))
         self.pacer = Pacer(execution.step_size, spin=self.spin, tolerance=self.tolerance)
         self.pacer.start(0)
         self.pacer.begin(0)
@@ -411,6 +430,14 @@ class RealtimePacer(Observer):
         if self.pacer is not None:
             st = self.pacer.stats()
             self._over_budget = bool(st.steps) and st.overruns > self.overrun_budget * st.steps
+            timeline = os.environ.get("IPCOSIM_RT_TIMELINE", "").strip()
+            if timeline:
+                try:
+                    np.savez(timeline, starts_ns=self.pacer.starts_ns(), lateness_ns=self.pacer.lateness_ns(),
+                             period_ns=self.pacer.period_ns)
+                except OSError as exc:
+                    print(f"ipcosim run: IPCOSIM_RT_TIMELINE={timeline}: not written ({exc.strerror or exc})",
+                          file=sys.stderr)
 
     def metrics(self) -> dict[str, Any]:
         if self.pacer is None:
