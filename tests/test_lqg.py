@@ -245,6 +245,17 @@ def test_friction_model_is_what_the_plants_coulomb_force_does(kind: str) -> None
         assert max(m["friction_leads"][1]) == pytest.approx(1.0 / p.K) and not any(m["friction_leads"][0])
 
 
+def _cart_after(plant, law, stop_time: float, start: float) -> list[float]:  # noqa: ANN001
+    """The plant's first state (the motor cart) at each 1 ms step from ``start`` to ``stop_time`` [s] of a 0.05 m
+    step driven by ``law``."""
+    xs = []
+    for k in range(round(stop_time / 1e-3)):
+        plant.do_step(k * 1e-3, 1e-3, law.step(plant.readings, 0.05))
+        if k >= round(start / 1e-3):
+            xs.append(plant.state[0])
+    return xs
+
+
 def test_friction_compensation_removes_the_passive_carts_limit_cycle_on_the_lab_bench() -> None:
     """Double mass on the lab bench (stick-slip 0.1047 N on both carts, encoder counts, DAC, 1 ms delay), 15 s:
     without compensation (the default set) the carts hunt in a limit cycle of several mm; the lab set's sliding
@@ -261,13 +272,7 @@ def test_friction_compensation_removes_the_passive_carts_limit_cycle_on_the_lab_
 
     def late(law) -> tuple[float, float]:  # noqa: ANN001
         """Peak-to-peak of the motor cart over the last 5 s, and the share of them it spends within 1 mm of 0.05 m."""
-        plant = InstrumentedPlant(p, instruments=with_(inst))
-        xs = []
-        for k in range(15000):
-            u = law.step(plant.readings, 0.05)
-            plant.do_step(k * 1e-3, 1e-3, u)
-            if k >= 10000:
-                xs.append(plant.state[0])
+        xs = _cart_after(InstrumentedPlant(p, instruments=with_(inst)), law, 15.0, 10.0)
         return max(xs) - min(xs), sum(abs(x - 0.05) < 1e-3 for x in xs) / len(xs)
 
     on = late(make_law(kind, "LQG", "lab"))
@@ -294,13 +299,8 @@ def test_dither_keeps_the_single_mass_cart_from_hunting_on_the_lab_bench() -> No
 
     def swing(law) -> float:  # noqa: ANN001
         """Peak-to-peak of the cart over 5-10 s [m]."""
-        plant = InstrumentedPlant(p, instruments=with_(inst, input_delay=inst.input_delay + 1e-3))
-        xs = []
-        for k in range(10000):
-            u = law.step(plant.readings, 0.05)
-            plant.do_step(k * 1e-3, 1e-3, u)
-            if k >= 5000:
-                xs.append(plant.state[0])
+        xs = _cart_after(InstrumentedPlant(p, instruments=with_(inst, input_delay=inst.input_delay + 1e-3)), law,
+                         10.0, 5.0)
         return max(xs) - min(xs)
 
     dithered = make_law(kind, "LQG", "lab")
