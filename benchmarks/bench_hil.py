@@ -150,7 +150,7 @@ def probed_rt(plant: str, scenario: str, rate: int) -> dict[str, Any]:
     """One real-time (``rt``) run against a fresh rig, with the host's stalls probed on every CPU
     while it runs (:mod:`benchmarks.stall_probe`) and its overruns split into the host's and its
     own (``split``): on these shared machines even a process with no work under SCHED_FIFO is
-    stalled for milliseconds (10-110 ms in 10 s, measured), and those stalls, not the loop, made
+    stalled for milliseconds (10-180 ms in 10 s, measured), and those stalls, not the loop, made
     the 1 kHz runs' overruns move between 2 % and 17 % from hour to hour."""
     with rig(plant, True) as (_, uri), StallProbe() as probe:
         m = run_scenario(scenario, rate, hil_uri=uri, rt=True)
