@@ -101,6 +101,22 @@ def env(realtime_fmus: Path) -> dict[str, str]:
                 IPCOSIM_RT_OVERRUN_BUDGET="1")
 
 
+def pacing(timeline: Path, late: float = 5e-3) -> str:
+    """For a failure's message: the steps of a paced run that started more than ``late`` [s] late, from
+    its timeline (``IPCOSIM_RT_TIMELINE``), so a run that fell can be read against its own pacing."""
+    import numpy as np
+
+    try:
+        with np.load(timeline) as z:
+            lateness, period = z["lateness_ns"] * 1e-9, float(z["period_ns"]) * 1e-9
+    except (OSError, KeyError, ValueError) as exc:
+        return f"\npacing: no timeline ({exc})"
+    worst = np.flatnonzero(lateness > late)
+    steps = ", ".join(f"{k * period:.3f} s ({1e3 * lateness[k]:.1f} ms)" for k in worst[:20])
+    return (f"\npacing: {lateness.size} steps, latest {1e3 * lateness.max(initial=0.0):.1f} ms; "
+            f"{worst.size} steps more than {1e3 * late:g} ms late: {steps or 'none'}")
+
+
 def run_args(scenario: str, rig: Rig, out: Path, fmus: Path, *extra: str) -> list[str]:
     return (cli(WALKTHROUGH[scenario][1]) + ["--swap", f"controller={fmus / (SLOW_CONTROLLER[scenario] + '.fmu')}",
                                             "--set", f"plant.watchdog_timeout={WATCHDOG}", "--stop-time",
@@ -111,16 +127,18 @@ def run_args(scenario: str, rig: Rig, out: Path, fmus: Path, *extra: str) -> lis
 def test_swap_in_real_time_with_a_slow_controller_initialization_finishes_upright(scenario, env, realtime_fmus,
                                                                                   tmp_path):
     rig = Rig(WALKTHROUGH[scenario][0], env)
+    timeline = tmp_path / "timeline.npz"
     try:
         t0 = time.monotonic()
         run = subprocess.run(run_args(scenario, rig, tmp_path / "o", realtime_fmus), capture_output=True, text=True,
-                             cwd=ROOT, timeout=180, env=dict(env, IPCOSIM_HIL_URI=f"q4:{rig.card_id}"))
+                             cwd=ROOT, timeout=180, env=dict(env, IPCOSIM_HIL_URI=f"q4:{rig.card_id}",
+                                                             IPCOSIM_RT_TIMELINE=str(timeline)))
         elapsed = time.monotonic() - t0
     finally:
         log = rig.stop()
-    assert run.returncode == 0, run.stderr + log
+    assert run.returncode == 0, run.stderr + log + pacing(timeline)
     metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
-    assert metrics["upright"] is True and metrics["realtime_steps"] == round(STOP_TIME / 1e-3)
+    assert metrics["upright"] is True and metrics["realtime_steps"] == round(STOP_TIME / 1e-3), pacing(timeline)
     assert "rig_fault" not in metrics
     assert elapsed > 3.0 + STOP_TIME      # the initialization did take its 3 s, then the run its real time
     assert "watchdog expired" not in log

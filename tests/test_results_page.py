@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from ipcosim.harness.evidence.claims import CLAIMS, verdict
-from ipcosim.harness.evidence.results_page import BEGIN, END, margin_rows, remeasure, render
+from ipcosim.harness.evidence.results_page import BEGIN, BREAKAWAY_NOTE, END, margin_rows, remeasure, render
 from ipcosim.harness.studies.robustness import FACTORS, decisive_factor, wilson_interval
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,6 +40,21 @@ def test_the_margins_are_those_the_analysis_gives_now(data: dict) -> None:
                 assert b[key] == pytest.approx(value, rel=1e-6), (a["scenario"], a["set"], key)
             else:
                 assert b[key] == value, (a["scenario"], a["set"], key)
+
+
+def test_the_lab_lqg_is_unstable_in_the_linearization_by_its_breakaway_term_alone(data: dict) -> None:
+    """What BREAKAWAY_NOTE says of the double-mass LQG's lab row, measured."""
+    from ipcosim.controllers.catalog import LAB_LQG
+    from ipcosim.harness.studies.analyze import analyze_loop, scenario_loop
+
+    assert "(1)" in BREAKAWAY_NOTE and LAB_LQG["double-mass"]["friction_breakaway_gain"] == 1.0
+    rows = {r["set"]: r for r in data["margins"] if r["scenario"] == "double-mass-lqg"}
+    assert not rows["lab"]["stable"] and rows["tuned"]["stable"]
+    loop = scenario_loop("double-mass-lqg", parameter_set="lab", set={"controller.friction_breakaway_gain": 0.0})[0]
+    r = analyze_loop(loop, pid_search=False)
+    assert r["closed_loop_stable"]
+    assert r["phase_margin_deg"] == pytest.approx(rows["tuned"]["phase_margin_deg"], rel=1e-6)
+    assert r["delay_margin_s"] == pytest.approx(rows["tuned"]["delay_margin_s"], rel=1e-6)
 
 
 def test_each_verdict_follows_from_its_measurements(data: dict) -> None:

@@ -383,7 +383,7 @@ def _bind_parameters(comp: Component, model: Model, where: str, strict: bool,
             msg = (f"{where}: parameter set {pset.name!r} ({src}) sets {len(missing)} parameter(s) the FMU does "
                    f"not have: {', '.join(missing)}")
             if strict:
-                raise BindingError(msg)
+                raise BindingError(msg + _rebuild_hint(model))
             notes.append(msg + "; ignored (--strict: an error)")
         for p in pset.parameters:
             var = model.variables.get(p.name)
@@ -394,6 +394,20 @@ def _bind_parameters(comp: Component, model: Model, where: str, strict: bool,
                                    f"{var.causality}/{var.variability} and cannot be set")
             params.append((var, convert_value(var, p.value, f"{where}: {src}: {p.name}")))
     return params
+
+
+def _rebuild_hint(model: Model) -> str:
+    """How to rebuild an FMU of the project's own build folder, whose variables may be older than the
+    sources (a checkout updated since ``ipcosim build``); "" for an FMU from anywhere else."""
+    from ipcosim.harness.native.cbuild import OUT_DIRS
+    from ipcosim.harness.paths import BUILD_DIR
+
+    path = model.path.resolve() if model.path else None
+    if path is None or not path.is_relative_to(Path(BUILD_DIR).resolve()):
+        return ""
+    fmi = {d: v for v, d in OUT_DIRS.items()}.get(path.parent.name)
+    command = "ipcosim build" + ("" if fmi is None else " --native" + ("" if fmi == "2" else f" --fmi {fmi}"))
+    return f"; {path.parent} may be older than the sources: `{command}` rebuilds it"
 
 
 def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str, Instance],
