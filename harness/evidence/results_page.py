@@ -41,13 +41,17 @@ def _f(v: Any, spec: str = ".3g") -> str:
     return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, spec)
 
 
-#: Why the double-mass LQG's ``lab`` row is unstable (``tests/test_results_page.py`` checks it against the analysis).
-BREAKAWAY_NOTE = (
-    "The double-mass LQG's `lab` set is unstable here by its breakaway term alone: at rest the friction "
-    "compensation pushes each cart with `friction_breakaway_gain` (1) times the net force the law's frictionless "
-    "model puts on it (`ipcosim.controllers.laws.coulomb_estimate`). On the lab plant the stiction absorbs that "
-    "push until the cart breaks away; on the frictionless linear plant it is positive feedback. With "
-    "`--set controller.friction_breakaway_gain=0` the set has the margins of the `tuned` row.")
+def breakaway_note() -> str:
+    """Why the double-mass LQG's ``lab`` row is unstable (``tests/test_results_page.py`` checks it against the
+    analysis); the gain is the ``lab`` set's (``controllers.catalog.LAB_LQG``)."""
+    from ipcosim.controllers.catalog import LAB_LQG
+
+    gain = LAB_LQG["double-mass"]["friction_breakaway_gain"]
+    return ("The double-mass LQG's `lab` set is unstable here by its breakaway term alone: at rest the friction "
+            f"compensation pushes each cart with `friction_breakaway_gain` ({gain:g}) times the net force the law's "
+            "frictionless model puts on it (`ipcosim.controllers.laws.coulomb_estimate`). On the lab plant the "
+            "stiction absorbs that push until the cart breaks away; on the frictionless linear plant it is positive "
+            "feedback. With `--set controller.friction_breakaway_gain=0` the set has the margins of the `tuned` row.")
 
 
 def margin_rows() -> list[dict[str, Any]]:
@@ -219,7 +223,7 @@ def render(data: dict[str, Any]) -> str:
         "signals, adaptive schedules at t -> infinity). Gain margin: the factors on the loop gain at which it "
         "becomes unstable (a loop around an unstable plant has a lower one too). Last column: the lower bound "
         "|(z + p)/(z - p)| that the plant's RHP zero and pole put on the peak sensitivity of *any* controller that "
-        "measures the motor-cart position only.", margins_table(data["margins"]), BREAKAWAY_NOTE,
+        "measures the motor-cart position only.", margins_table(data["margins"]), breakaway_note(),
         "Why no controller on the cart position alone can do better (the thesis's PID):", pid_statement(data["pid"]),
         "### Robustness: what decides it",
         f"{rob['samples']} runs per cell, {rob['stop_time_s']:g} s each, through the FMUs "
