@@ -8,7 +8,7 @@ import pytest
 
 from ipcosim.harness import paths
 from ipcosim.harness.master.system import Model
-from ipcosim.harness.scenario.binding import _rebuild_hint
+from ipcosim.harness.scenario.binding import rebuild_hint
 
 
 def _model(path: Path) -> Model:
@@ -21,11 +21,51 @@ def _model(path: Path) -> Model:
 def test_an_fmu_of_the_build_folder_names_its_rebuild(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                        folder: str, command: str) -> None:
     monkeypatch.setattr(paths, "BUILD_DIR", tmp_path / "build")
-    hint = _rebuild_hint(_model(tmp_path / "build" / folder / "X.fmu"))
+    hint = rebuild_hint(_model(tmp_path / "build" / folder / "X.fmu"))
     assert hint.endswith(f"{command} rebuilds it") and str(tmp_path / "build" / folder) in hint
 
 
 def test_an_fmu_from_elsewhere_gets_no_hint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(paths, "BUILD_DIR", tmp_path / "build")
-    assert _rebuild_hint(_model(tmp_path / "mine" / "X.fmu")) == ""
-    assert _rebuild_hint(Model(name="X", variables={}, feedthrough={})) == ""
+    assert rebuild_hint(_model(tmp_path / "mine" / "X.fmu")) == ""
+    assert rebuild_hint(Model(name="X", variables={}, feedthrough={})) == ""
+
+
+def _run_error(capsys: pytest.CaptureFixture[str], out: Path, flavour: str, folder: Path, *sets: str) -> str:
+    from ipcosim.harness.cli import main
+
+    argv = ["run", "single-mass-lqr", "--fmus", flavour, "--fmu-dir", str(folder), "--out", str(out),
+            "--stop-time", "0.01", "--quiet"]
+    status = main([*argv, *(a for s in sets for a in ("--set", s))])
+    err = capsys.readouterr().err.strip()
+    assert status != 0 and len(err.splitlines()) == 1, err
+    return err
+
+
+def test_a_set_parameter_the_build_folder_lacks_names_its_rebuild(native_fmus: tuple[Path, Path], tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``--set`` of a parameter an FMU of the build folder lacks, on either flavour: the error ends with the
+    command that rebuilds the folder; a design parameter the native flavour never has gets no such hint."""
+    python_dir, native_dir = native_fmus
+    monkeypatch.setattr(paths, "BUILD_DIR", native_dir.parent)
+    for flavour, folder, command in (("python", python_dir, "`ipcosim build`"),
+                                     ("native", native_dir, "`ipcosim build --native`")):
+        err = _run_error(capsys, tmp_path / flavour, flavour, folder, "controller.no_such_gain=1")
+        assert "'no_such_gain'" in err, err
+        assert err.endswith(f"{folder} may be older than the sources: {command} rebuilds it"), err
+    err = _run_error(capsys, tmp_path / "design", "native", native_dir, "controller.Q_cart_position=1")
+    assert "design parameter of the python flavour only" in err and "rebuilds it" not in err
+    assert not any((tmp_path / d).exists() for d in ("python", "native", "design")), "nothing is written"
+
+
+def test_a_study_that_falls_back_says_the_native_folder_may_be_old(native_fmus: tuple[Path, Path],
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """A study's parameter the native FMUs lack: it runs on the Python flavour, and the line saying so names
+    the command that rebuilds the native folder, in case that folder is older than the sources."""
+    from ipcosim.harness.studies.specs import study_spec
+
+    monkeypatch.setattr(paths, "BUILD_DIR", native_fmus[1].parent)    # the fixture's fmus/ and fmus-native/
+    _, why = study_spec("single-mass-lqr", "auto", names=["controller.no_such_gain"])
+    assert why.startswith("python FMUs") and f"{native_fmus[1]} (a Python-flavour design parameter" in why, why
+    assert why.endswith("`ipcosim build --native` rebuilds them))"), why

@@ -383,7 +383,7 @@ def _bind_parameters(comp: Component, model: Model, where: str, strict: bool,
             msg = (f"{where}: parameter set {pset.name!r} ({src}) sets {len(missing)} parameter(s) the FMU does "
                    f"not have: {', '.join(missing)}")
             if strict:
-                raise BindingError(msg + _rebuild_hint(model))
+                raise BindingError(msg + rebuild_hint(model))
             notes.append(msg + "; ignored (--strict: an error)")
         for p in pset.parameters:
             var = model.variables.get(p.name)
@@ -396,18 +396,25 @@ def _bind_parameters(comp: Component, model: Model, where: str, strict: bool,
     return params
 
 
-def _rebuild_hint(model: Model) -> str:
-    """How to rebuild an FMU of the project's own build folder, whose variables may be older than the
-    sources (a checkout updated since ``ipcosim build``); "" for an FMU from anywhere else."""
+def rebuild_command(folder: Path) -> str | None:
+    """The command that rebuilds ``folder`` if it is one of the project's build folders, else None."""
     from ipcosim.harness.native.cbuild import OUT_DIRS
     from ipcosim.harness.paths import BUILD_DIR
 
-    path = model.path.resolve() if model.path else None
-    if path is None or not path.is_relative_to(Path(BUILD_DIR).resolve()):
+    folder = folder.resolve()
+    if not folder.is_relative_to(Path(BUILD_DIR).resolve()):
+        return None
+    fmi = {d: v for v, d in OUT_DIRS.items()}.get(folder.name)
+    return "ipcosim build" + ("" if fmi is None else " --native" + ("" if fmi == "2" else f" --fmi {fmi}"))
+
+
+def rebuild_hint(model: Model) -> str:
+    """How to rebuild an FMU of the project's own build folder, whose variables may be older than the
+    sources (a checkout updated since ``ipcosim build``); "" for an FMU from anywhere else."""
+    command = rebuild_command(model.path.parent) if model.path else None
+    if command is None:
         return ""
-    fmi = {d: v for v, d in OUT_DIRS.items()}.get(path.parent.name)
-    command = "ipcosim build" + ("" if fmi is None else " --native" + ("" if fmi == "2" else f" --fmi {fmi}"))
-    return f"; {path.parent} may be older than the sources: `{command}` rebuilds it"
+    return f"; {model.path.resolve().parent} may be older than the sources: `{command}` rebuilds it"
 
 
 def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str, Instance],
@@ -423,7 +430,8 @@ def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str,
         if v is None:
             raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: FMU of component "
                                f"{inst.name!r} ({inst.model.path.name if inst.model.path else inst.model.name}) "
-                               f"has no variable {cname!r}; {closest(cname, inst.model.variables)}")
+                               f"has no variable {cname!r}; {closest(cname, inst.model.variables)}"
+                               f"{rebuild_hint(inst.model)}")
     kinds = (va.causality, vb.causality)
     if kinds == ("input", "output"):
         a, b, va, vb = b, a, vb, va
@@ -559,7 +567,7 @@ def with_set(system: System, set: Mapping[str, Any]) -> tuple[System, dict[tuple
         if v is None:
             settable = (n for n, x in inst.model.variables.items() if x.settable)
             raise BindingError(f"{where} has no variable {var!r}; {closest(var, settable)} "
-                               f"(`ipcosim describe {system.scenario.name}` lists them)")
+                               f"(`ipcosim describe {system.scenario.name}` lists them){rebuild_hint(inst.model)}")
         if not v.settable:
             raise BindingError(f"{where}: {var!r} is {v.causality}/{v.variability} and cannot be set")
         link = system.link_into(comp, var)

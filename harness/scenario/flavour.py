@@ -90,6 +90,7 @@ def native_set(system: Any, set: Mapping[str, Any], python_values: Mapping[str, 
         Naming the component, the parameter and the flavour.
     """
     from ipcosim.harness.native.redesign import NativeParameterError, check_settable, native_info, redesign
+    from ipcosim.harness.scenario.binding import rebuild_hint
 
     by_comp: dict[str, dict[str, Any]] = {}
     for key, value in set.items():
@@ -108,7 +109,9 @@ def native_set(system: Any, set: Mapping[str, Any], python_values: Mapping[str, 
         try:
             check_settable(info, info["model"], sorted(values), known)
         except NativeParameterError as exc:
-            raise FlavourError(f"--set {comp}.{next(iter(values))}: component {comp!r}: {exc}") from None
+            name = next(n for n in sorted(values) if n not in known)
+            hint = "" if name in info.get("python_only", ()) else rebuild_hint(inst.model)
+            raise FlavourError(f"--set {comp}.{name}: component {comp!r}: {exc}{hint}") from None
         if info["role"] in ("law", "plant") and any(v.causality == "parameter"
                                                     for n, v in inst.model.variables.items() if n in values):
             merged = {**python_values.get(comp, {}), **{k: float(v) for k, v in values.items()}}

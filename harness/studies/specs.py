@@ -125,6 +125,7 @@ def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], 
     """The native spec of a study, or why the native flavour cannot run it (one line)."""
     from ipcosim.errors import IpcosimError
     from ipcosim.harness.native.models import NATIVE_INSTRUMENTS_OFF
+    from ipcosim.harness.scenario.binding import rebuild_command
     from ipcosim.harness.scenario.flavour import native_fmu_dir
 
     if not any(native_fmu_dir().glob("*.fmu")):
@@ -135,7 +136,10 @@ def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], 
         return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     for name in names:
         if name not in spec.parameters:
-            return f"{name} is not a parameter of the native FMUs (a Python-flavour design parameter)"
+            command = rebuild_command(native_fmu_dir())
+            older = f", or FMUs older than the sources: `{command}` rebuilds them" if command else ""
+            return (f"{name} is not a parameter of the native FMUs in {native_fmu_dir()} "
+                    f"(a Python-flavour design parameter{older})")
         if name.partition(".")[2] in NATIVE_INSTRUMENTS_OFF:
             return f"{name} is an instrument option the native plant lacks"
     if check is not None:
