@@ -69,3 +69,21 @@ def test_a_study_that_falls_back_says_the_native_folder_may_be_old(native_fmus: 
     _, why = study_spec("single-mass-lqr", "auto", names=["controller.no_such_gain"])
     assert why.startswith("python FMUs") and f"{native_fmus[1]} (a Python-flavour design parameter" in why, why
     assert why.endswith("`ipcosim build --native` rebuilds them))"), why
+
+
+def test_a_native_study_of_a_python_only_parameter_is_refused_in_one_line(native_fmus: tuple[Path, Path],
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--fmus native`` with a parameter only the Python flavour has: refused before any run, naming the
+    parameter, the native folder and the flavour that runs it; a name neither flavour has is left to the
+    study's own check (its closest-name answer)."""
+    from ipcosim.errors import UsageError
+    from ipcosim.harness.studies.specs import study_spec
+
+    monkeypatch.setattr(paths, "BUILD_DIR", native_fmus[1].parent)
+    with pytest.raises(UsageError) as info:
+        study_spec("single-mass-lqr", "native", names=["controller.Q_cart_position"])
+    msg = str(info.value)
+    assert msg.startswith("--fmus native: controller.Q_cart_position is not a parameter of the native FMUs in "
+                          f"{native_fmus[1]}") and msg.endswith("; --fmus python runs it"), msg
+    spec, why = study_spec("single-mass-lqr", "native", names=["controller.no_such_gain"])
+    assert why == "native FMUs" and "controller.no_such_gain" not in spec.parameters

@@ -106,6 +106,8 @@ def study_spec(scenario: str, fmus: str = "auto", names: Iterable[str] = (),
         raise UsageError(f"--fmus {fmus}: expected one of {', '.join(STUDY_FLAVOURS)}")
     if fmus != "auto" or scenario in PURE_SCENARIOS:
         spec = spec_for(scenario, fmus="python" if fmus == "auto" else fmus, **kwargs)
+        if fmus == "native" and scenario not in PURE_SCENARIOS:
+            _check_native_names(scenario, spec, list(names), kwargs)
         if check is not None:
             check(spec)
         if scenario in PURE_SCENARIOS:
@@ -120,12 +122,33 @@ def study_spec(scenario: str, fmus: str = "auto", names: Iterable[str] = (),
     return reason, "native FMUs (auto: built, and they run this study; --fmus python to compare)"
 
 
+def _not_native(name: str) -> str:
+    """Why ``name``, a parameter of the Python flavour, is missing from the native FMUs (one line)."""
+    from ipcosim.harness.scenario.binding import rebuild_command
+    from ipcosim.harness.scenario.flavour import native_fmu_dir
+
+    command = rebuild_command(native_fmu_dir())
+    older = f", or FMUs older than the sources: `{command}` rebuilds them" if command else ""
+    return (f"{name} is not a parameter of the native FMUs in {native_fmu_dir()} "
+            f"(a Python-flavour design parameter{older})")
+
+
+def _check_native_names(scenario: str, spec: RunSpec, names: list[str], kwargs: Mapping[str, Any]) -> None:
+    """UsageError for the first of ``names`` the native ``spec`` lacks but the Python flavour has (a name neither
+    has is left to the study's own check, which answers with the closest names)."""
+    missing = [n for n in names if n not in spec.parameters]
+    if missing:
+        python = spec_for(scenario, fmus="python", **kwargs).parameters
+        for name in missing:
+            if name in python:
+                raise UsageError(f"--fmus native: {_not_native(name)}; --fmus python runs it")
+
+
 def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], object] | None,
                     kwargs: Mapping[str, Any]) -> RunSpec | str:
     """The native spec of a study, or why the native flavour cannot run it (one line)."""
     from ipcosim.errors import IpcosimError
     from ipcosim.harness.native.models import NATIVE_INSTRUMENTS_OFF
-    from ipcosim.harness.scenario.binding import rebuild_command
     from ipcosim.harness.scenario.flavour import native_fmu_dir
 
     if not any(native_fmu_dir().glob("*.fmu")):
@@ -136,10 +159,7 @@ def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], 
         return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     for name in names:
         if name not in spec.parameters:
-            command = rebuild_command(native_fmu_dir())
-            older = f", or FMUs older than the sources: `{command}` rebuilds them" if command else ""
-            return (f"{name} is not a parameter of the native FMUs in {native_fmu_dir()} "
-                    f"(a Python-flavour design parameter{older})")
+            return _not_native(name)
         if name.partition(".")[2] in NATIVE_INSTRUMENTS_OFF:
             return f"{name} is an instrument option the native plant lacks"
     if check is not None:
