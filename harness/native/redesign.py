@@ -23,7 +23,16 @@ from ipcosim.fmus.instruments import delay_steps
 
 
 class NativeParameterError(KeyError):
-    """A parameter the native flavour does not have (names the model and the flavour)."""
+    """A parameter the native flavour does not have (names the model and the flavour).
+
+    ``parameter``: the name it lacks, where one parameter is meant (else None); ``design_only``: that name
+    is a design parameter of the Python flavour only (its native FMU takes the designed numbers instead).
+    """
+
+    def __init__(self, message: str, parameter: str | None = None, design_only: bool = False) -> None:
+        super().__init__(message)
+        self.parameter = parameter
+        self.design_only = design_only
 
     def __str__(self) -> str:
         return str(self.args[0]) if self.args else ""
@@ -173,4 +182,5 @@ def check_settable(info: Mapping[str, Any], fmu_name: str, names: list[str], kno
                     f"the design computes; {PYTHON_FLAVOUR}, or see docs/native.md to redesign)" \
                 if name in info.get("python_only", ()) else ""
             near = "" if extra else f"; {closest(name, known)}"
-            raise NativeParameterError(f"the native flavour of {fmu_name} has no parameter {name!r}{extra}{near}")
+            raise NativeParameterError(f"the native flavour of {fmu_name} has no parameter {name!r}{extra}{near}",
+                                       parameter=name, design_only=bool(extra))

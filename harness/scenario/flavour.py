@@ -109,9 +109,8 @@ def native_set(system: Any, set: Mapping[str, Any], python_values: Mapping[str, 
         try:
             check_settable(info, info["model"], sorted(values), known)
         except NativeParameterError as exc:
-            name = next(n for n in sorted(values) if n not in known)
-            hint = "" if name in info.get("python_only", ()) else rebuild_hint(inst.model)
-            raise FlavourError(f"--set {comp}.{name}: component {comp!r}: {exc}{hint}") from None
+            hint = "" if exc.design_only else rebuild_hint(inst.model)
+            raise FlavourError(f"--set {comp}.{exc.parameter}: component {comp!r}: {exc}{hint}") from None
         if info["role"] in ("law", "plant") and any(v.causality == "parameter"
                                                     for n, v in inst.model.variables.items() if n in values):
             merged = {**python_values.get(comp, {}), **{k: float(v) for k, v in values.items()}}
