@@ -50,13 +50,35 @@ def closest(name: str, known: Iterable[str], *, listing: int = 12) -> str:
     names = sorted(dict.fromkeys(str(k) for k in known))
     if not names:
         return "none known"
-    near = difflib.get_close_matches(name, names, n=3, cutoff=0.6)
-    if not near:  # case slips (mp for Mp) and prefixes (sample for sample_period) count too
-        near = [n for n in names if n.lower() == name.lower() or n.lower().startswith(name.lower())][:3]
+    near = close_names(name, names)
     quoted = [repr(n) for n in near]
     guess = f"did you mean {' or '.join(filter(None, [', '.join(quoted[:-1]), quoted[-1]]))}?" if near else ""
     every = f"known: {', '.join(names)}" if len(names) <= listing else f"none close among {len(names)} names"
     return guess or every
 
 
-__all__ = ["IpcosimError", "UsageError", "closest"]
+def close_names(name: str, known: Iterable[str]) -> list[str]:
+    """The (at most three) known names :func:`closest` suggests for ``name``, closest first. For a
+    ``component.variable`` name of a known component, the variable is compared with that component's.
+
+    >>> close_names("Mpp", ["Mp", "Lp", "Jm"])
+    ['Mp']
+    >>> close_names("controller.no_such_gain", ["controller.model_g", "plant.Mp"])
+    []
+    """
+    names = sorted(dict.fromkeys(str(k) for k in known))
+    owner, dot, rest = name.partition(".")
+    mine = [n[len(owner) + 1:] for n in names if n.startswith(owner + ".")] if dot and rest else []
+    if mine:  # "component.variable": the variable among that component's, so the shared prefix counts for nothing
+        return [f"{owner}.{n}" for n in close_names(rest, mine)]
+    case = [n for n in names if n.lower() == name.lower()]
+    if case:  # a case slip (mp for Mp) is the answer
+        return case[:3]
+    cutoff = 0.6 if len(name) > 3 else 0.5  # one wrong letter of two or three is a slip too (Mx for Mp)
+    near = difflib.get_close_matches(name, names, n=3, cutoff=cutoff)
+    if not near:  # prefixes (sample for sample_period) count too
+        near = [n for n in names if n.lower().startswith(name.lower())][:3]
+    return near
+
+
+__all__ = ["IpcosimError", "UsageError", "close_names", "closest"]

@@ -62,8 +62,7 @@ def test_params_and_bounds_errors():
     params = {"controller.c1": 4.7, "controller.lambda1": -1.0, "controller.ki": 0.0}
     assert parse_params("controller.c1, controller.lambda1", params) == ["controller.c1", "controller.lambda1"]
     with pytest.raises(TuneError,
-                       match=r"unknown parameter 'controller\.c9'; did you mean 'controller\.c1', 'controller\.ki' or "
-                             r"'controller\.lambda1'\?"):
+                       match=r"unknown parameter 'controller\.c9'; did you mean 'controller\.c1'\?"):
         parse_params("controller.c9", params)
     b = parse_bounds([], ["controller.c1", "controller.lambda1"], params)
     assert b == [(2.35, 9.4), (-2.0, -0.5)]
