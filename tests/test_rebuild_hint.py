@@ -87,3 +87,22 @@ def test_a_native_study_of_a_python_only_parameter_is_refused_in_one_line(native
                           f"{native_fmus[1]}") and msg.endswith("; --fmus python runs it"), msg
     spec, why = study_spec("single-mass-lqr", "native", names=["controller.no_such_gain"])
     assert why == "native FMUs" and "controller.no_such_gain" not in spec.parameters
+
+
+def test_a_native_study_of_a_slip_of_a_python_only_name_suggests_it(native_fmus: tuple[Path, Path],
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """A misspelt design weight on ``--fmus native``: the closest name is one only the Python FMUs have, so the
+    answer names it and the flavour that runs it, instead of the native names nearest the slip; a slip of a
+    native name is still the study's own closest-name answer."""
+    from ipcosim.errors import UsageError
+    from ipcosim.harness.studies.specs import study_spec
+
+    monkeypatch.setattr(paths, "BUILD_DIR", native_fmus[1].parent)
+    with pytest.raises(UsageError) as info:
+        study_spec("single-mass-lqr", "native", names=["controller.Q_cart_positon"])
+    msg = str(info.value)
+    assert msg.startswith("--fmus native: unknown parameter 'controller.Q_cart_positon'; did you mean "
+                          "'controller.Q_cart_position'"), msg
+    assert "'controller.Q_cart_position'" in msg.split("(", 1)[1] and msg.endswith("--fmus python runs them)"), msg
+    spec, why = study_spec("single-mass-lqr", "native", names=["controller.K_cart_positon"])
+    assert why == "native FMUs" and "controller.K_cart_position" in spec.parameters

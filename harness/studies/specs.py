@@ -134,9 +134,10 @@ def _not_native(name: str) -> str:
 
 
 def _check_native_names(scenario: str, spec: RunSpec, names: list[str], kwargs: Mapping[str, Any]) -> None:
-    """UsageError for the first of ``names`` the native ``spec`` lacks but the Python flavour has (a name neither
-    has is left to the study's own check, which answers with the closest names)."""
-    from ipcosim.errors import IpcosimError
+    """UsageError for the first of ``names`` the native ``spec`` lacks but the Python flavour has, or whose closest
+    name is the Python flavour's only (any other name neither has is left to the study's own check, which
+    answers with the closest names)."""
+    from ipcosim.errors import IpcosimError, close_names, closest
 
     missing = [n for n in names if n not in spec.parameters]
     if missing:
@@ -144,9 +145,15 @@ def _check_native_names(scenario: str, spec: RunSpec, names: list[str], kwargs: 
             python = spec_for(scenario, fmus="python", **kwargs).parameters
         except (IpcosimError, OSError):
             return   # no Python flavour to compare with: the study's own check answers
+        both = set(python) | set(spec.parameters)
         for name in missing:
             if name in python:
                 raise UsageError(f"--fmus native: {_not_native(name)}; --fmus python runs it")
+            near = close_names(name, both)
+            only = [n for n in near if n not in spec.parameters]
+            if near and near[0] in only:  # a slip of a Python-only name: the native names would suggest others
+                raise UsageError(f"--fmus native: unknown parameter {name!r}; {closest(name, both)} "
+                                 f"({', '.join(map(repr, only))}: of the Python FMUs only; --fmus python runs them)")
 
 
 def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], object] | None,
