@@ -9,7 +9,7 @@ import sys
 def register(sub: argparse._SubParsersAction) -> None:
     from ipcosim.fmus.params import KINDS
 
-    p = sub.add_parser("identify", help="estimate the plant's parameters from a run's log (with 95 % intervals)",
+    p = sub.add_parser("identify", help="estimate the plant's parameters from a run's log (with 95 %% intervals)",
                        description="Replay the logged voltage through the plant model, fit the named parameters to "
                                    "the logged encoder readings (output error, scipy least squares) and report each "
                                    "estimate with its 95 % interval and the NRMSE per output on the held-out last "
