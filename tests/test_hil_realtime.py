@@ -22,6 +22,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 from fmi_helpers import wait_for
@@ -42,6 +43,9 @@ WATCHDOG = 0.5
 #: SCHED_FIFO (applied where permitted, otherwise reported as not applied and ignored).
 RT_PRIORITY = "20"
 STOP_TIME = 5.0
+#: A run whose steps started this late [s] has fallen behind real time by more than the single-mass LQR's
+#: delay margin (17.9 ms): its pendulum may fall through the host's pacing alone.
+BEHIND = 0.02
 
 pytestmark = pytest.mark.integration
 
@@ -123,21 +127,52 @@ def run_args(scenario: str, rig: Rig, out: Path, fmus: Path, *extra: str) -> lis
                                             str(STOP_TIME), "--out", str(out), "--quiet", *extra])
 
 
-@pytest.mark.parametrize("scenario", list(WALKTHROUGH))
-def test_swap_in_real_time_with_a_slow_controller_initialization_finishes_upright(scenario, env, realtime_fmus,
-                                                                                  tmp_path):
+def fell_behind(timeline: Path) -> float:
+    """How late [s] the latest step of a paced run's timeline started (0 without a timeline)."""
+    import numpy as np
+
+    try:
+        with np.load(timeline) as z:
+            return float(z["lateness_ns"].max(initial=0)) * 1e-9
+    except (OSError, KeyError, ValueError):
+        return 0.0
+
+
+def walkthrough_run(scenario: str, env: dict[str, str], fmus: Path, where: Path) -> tuple[Any, float, str, Path]:
+    """One walk-through run against its own rig: (completed run, its wall time [s], the rig's log, timeline)."""
     rig = Rig(WALKTHROUGH[scenario][0], env)
-    timeline = tmp_path / "timeline.npz"
+    timeline = where / "timeline.npz"
     try:
         t0 = time.monotonic()
-        run = subprocess.run(run_args(scenario, rig, tmp_path / "o", realtime_fmus), capture_output=True, text=True,
+        run = subprocess.run(run_args(scenario, rig, where / "o", fmus), capture_output=True, text=True,
                              cwd=ROOT, timeout=180, env=dict(env, IPCOSIM_HIL_URI=f"q4:{rig.card_id}",
                                                              IPCOSIM_RT_TIMELINE=str(timeline)))
         elapsed = time.monotonic() - t0
     finally:
         log = rig.stop()
+    return run, elapsed, log, timeline
+
+
+@pytest.mark.parametrize("scenario", list(WALKTHROUGH))
+def test_swap_in_real_time_with_a_slow_controller_initialization_finishes_upright(scenario, env, realtime_fmus,
+                                                                                  tmp_path):
+    """A run that failed after falling more than BEHIND behind real time is the host's pacing, not the swap's
+    outcome (a rig drops a pendulum whose controller answers that late; the loop's speed is
+    benchmarks/bench_hil.py's): it is run once more, and skipped, with its pacing, if that run fell behind too.
+    A failure of a run that kept pace fails the test."""
+    for attempt in (1, 2):
+        where = tmp_path / f"attempt{attempt}"
+        where.mkdir()
+        run, elapsed, log, timeline = walkthrough_run(scenario, env, realtime_fmus, where)
+        if run.returncode == 0 or fell_behind(timeline) <= BEHIND:
+            break
+    else:
+        last = (run.stderr.strip().splitlines() or [f"exit status {run.returncode}"])[-1]
+        pytest.skip(f"the host did not pace either of two 1 kHz HIL runs (latest step "
+                    f"{1e3 * fell_behind(timeline):.0f} ms late, more than {1e3 * BEHIND:g} ms): {last}"
+                    f"{pacing(timeline)}")
     assert run.returncode == 0, run.stderr + log + pacing(timeline)
-    metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    metrics = json.loads((where / "o" / "metrics.json").read_text())
     assert metrics["upright"] is True and metrics["realtime_steps"] == round(STOP_TIME / 1e-3), pacing(timeline)
     assert "rig_fault" not in metrics
     assert elapsed > 3.0 + STOP_TIME      # the initialization did take its 3 s, then the run its real time
