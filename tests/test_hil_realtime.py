@@ -105,19 +105,27 @@ def env(realtime_fmus: Path) -> dict[str, str]:
                 IPCOSIM_RT_OVERRUN_BUDGET="1")
 
 
+def lateness(timeline: Path) -> tuple[Any, float]:
+    """(lateness [s] of each step, period [s]) of a paced run's timeline (``IPCOSIM_RT_TIMELINE``); raises
+    OSError, KeyError or ValueError for a missing or unreadable one."""
+    import numpy as np
+
+    with np.load(timeline) as z:
+        return z["lateness_ns"] * 1e-9, float(z["period_ns"]) * 1e-9
+
+
 def pacing(timeline: Path, late: float = 5e-3) -> str:
     """For a failure's message: the steps of a paced run that started more than ``late`` [s] late, from
-    its timeline (``IPCOSIM_RT_TIMELINE``), so a run that fell can be read against its own pacing."""
+    its timeline, so a run that fell can be read against its own pacing."""
     import numpy as np
 
     try:
-        with np.load(timeline) as z:
-            lateness, period = z["lateness_ns"] * 1e-9, float(z["period_ns"]) * 1e-9
+        steps_late, period = lateness(timeline)
     except (OSError, KeyError, ValueError) as exc:
         return f"\npacing: no timeline ({exc})"
-    worst = np.flatnonzero(lateness > late)
-    steps = ", ".join(f"{k * period:.3f} s ({1e3 * lateness[k]:.1f} ms)" for k in worst[:20])
-    return (f"\npacing: {lateness.size} steps, latest {1e3 * lateness.max(initial=0.0):.1f} ms; "
+    worst = np.flatnonzero(steps_late > late)
+    steps = ", ".join(f"{k * period:.3f} s ({1e3 * steps_late[k]:.1f} ms)" for k in worst[:20])
+    return (f"\npacing: {steps_late.size} steps, latest {1e3 * steps_late.max(initial=0.0):.1f} ms; "
             f"{worst.size} steps more than {1e3 * late:g} ms late: {steps or 'none'}")
 
 
@@ -128,12 +136,9 @@ def run_args(scenario: str, rig: Rig, out: Path, fmus: Path, *extra: str) -> lis
 
 
 def fell_behind(timeline: Path) -> float:
-    """How late [s] the latest step of a paced run's timeline started (0 without a timeline)."""
-    import numpy as np
-
+    """How late [s] the latest step of a paced run started (0 without a timeline)."""
     try:
-        with np.load(timeline) as z:
-            return float(z["lateness_ns"].max(initial=0)) * 1e-9
+        return float(lateness(timeline)[0].max(initial=0.0))
     except (OSError, KeyError, ValueError):
         return 0.0
 
