@@ -216,6 +216,19 @@ def build_cached(script: Path, fmu_dir: Path, key: str, digest: str, build: Call
     return BuildResult(script, fmu, built=True)
 
 
+def is_stale(fmu: Path, root: Path = ROOT) -> bool | None:
+    """Whether ``fmu`` is older than the sources it was built from: True or False when its folder's build
+    cache (:func:`build_cached`) names it, by the digest the sources give now (:func:`source_digest`; a
+    script that is gone is stale); None when the cache does not name it (an FMU from anywhere else)."""
+    for key, entry in read_stamps(Path(fmu).parent).items():
+        if entry.get("fmu") == Path(fmu).name:
+            script = root / key
+            if not script.is_file():
+                return True
+            return entry.get("sha256") != source_digest(script, runtime_modules(script, root), root)
+    return None
+
+
 def _ensure_binaries(fmu: Path) -> None:
     """Add pythonfmu's wrapper binaries to ``fmu`` when its builder left them out.
 

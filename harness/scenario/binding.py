@@ -409,12 +409,20 @@ def rebuild_command(folder: Path) -> str | None:
 
 
 def rebuild_hint(model: Model) -> str:
-    """How to rebuild an FMU of the project's own build folder, whose variables may be older than the
-    sources (a checkout updated since ``ipcosim build``); "" for an FMU from anywhere else."""
+    """How to rebuild an FMU of the project's own build folder that is older than the sources (a checkout
+    updated since ``ipcosim build``), from the folder's build cache (``ipcosim.fmus.pybuild.is_stale``); where
+    the cache does not say (the native folders), that it may be. "" for an FMU that is current or from
+    anywhere else."""
+    from ipcosim.fmus.pybuild import is_stale
+
     command = rebuild_command(model.path.parent) if model.path else None
     if command is None:
         return ""
-    return f"; {model.path.resolve().parent} may be older than the sources: `{command}` rebuilds it"
+    stale = is_stale(model.path)
+    if stale is False:
+        return ""
+    verb = "is" if stale else "may be"
+    return f"; {model.path.resolve().parent} {verb} older than the sources: `{command}` rebuilds it"
 
 
 def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str, Instance],

@@ -122,38 +122,68 @@ def study_spec(scenario: str, fmus: str = "auto", names: Iterable[str] = (),
     return reason, "native FMUs (auto: built, and they run this study; --fmus python to compare)"
 
 
-def _not_native(name: str) -> str:
-    """Why ``name``, a parameter of the Python flavour, is missing from the native FMUs (one line)."""
+def _not_native(name: str, native: RunSpec, python: Mapping[str, Any] | None) -> str:
+    """Why ``name`` is missing from the ``native`` spec's FMUs (one line), said from what the build recorded:
+    a design parameter its native FMU lists as the Python flavour's only (``python_only`` of its
+    ``native.json``), a parameter of the ``python`` flavour (its parameters; None: not known) that the native
+    FMU was built without (the native folder is older than the sources), or a name neither flavour has."""
     from ipcosim.harness.scenario.binding import rebuild_command
     from ipcosim.harness.scenario.flavour import native_fmu_dir
 
-    command = rebuild_command(native_fmu_dir())
-    older = f", or FMUs older than the sources: `{command}` rebuilds them" if command else ""
-    return (f"{name} is not a parameter of the native FMUs in {native_fmu_dir()} "
-            f"(a Python-flavour design parameter{older})")
+    where = f"{name} is not a parameter of the native FMUs in {native_fmu_dir()}"
+    if name.partition(".")[2] in _python_only(native, name.partition(".")[0]):
+        return f"{where} (a design parameter of the Python flavour: the native FMUs take the numbers it designs)"
+    if python is not None and name in python:
+        command = rebuild_command(native_fmu_dir())
+        return f"{where}: they are older than the sources" + (f" (`{command}` rebuilds them)" if command else "")
+    return f"{where}, nor of the Python ones" if python is not None else where
+
+
+def _python_only(native: RunSpec, component: str) -> tuple[str, ...]:
+    """The design parameters the native FMU of ``component`` was built without (``native.json``); () if unknown."""
+    from ipcosim.errors import IpcosimError
+    from ipcosim.harness.native.redesign import native_info
+    from ipcosim.harness.scenario.ssp import load_scenario
+
+    try:
+        sources = {c.name: c.source for c in load_scenario(native.location).components}
+    except (IpcosimError, OSError, AttributeError):
+        return ()
+    fmu = getattr(native, "fmu_files", {}).get(sources.get(component, ""))
+    info = native_info(fmu) if fmu else None
+    return tuple(info.get("python_only", ())) if info else ()
 
 
 def _check_native_names(scenario: str, spec: RunSpec, names: list[str], kwargs: Mapping[str, Any]) -> None:
     """UsageError for the first of ``names`` the native ``spec`` lacks but the Python flavour has, or whose closest
     name is the Python flavour's only (any other name neither has is left to the study's own check, which
     answers with the closest names)."""
-    from ipcosim.errors import IpcosimError, close_names, closest
+    from ipcosim.errors import close_names, closest
 
     missing = [n for n in names if n not in spec.parameters]
     if missing:
-        try:
-            python = spec_for(scenario, fmus="python", **kwargs).parameters
-        except (IpcosimError, OSError):
+        python = _python_parameters(scenario, kwargs)
+        if python is None:
             return   # no Python flavour to compare with: the study's own check answers
         both = set(python) | set(spec.parameters)
         for name in missing:
             if name in python:
-                raise UsageError(f"--fmus native: {_not_native(name)}; --fmus python runs it")
+                raise UsageError(f"--fmus native: {_not_native(name, spec, python)}; --fmus python runs it")
             near = close_names(name, both)
             only = [n for n in near if n not in spec.parameters]
             if near and near[0] in only:  # a slip of a Python-only name: the native names would suggest others
                 raise UsageError(f"--fmus native: unknown parameter {name!r}; {closest(name, both)} "
                                  f"({', '.join(map(repr, only))}: of the Python FMUs only; --fmus python runs them)")
+
+
+def _python_parameters(scenario: str, kwargs: Mapping[str, Any]) -> Mapping[str, Any] | None:
+    """The parameters of the scenario's Python-flavour spec, or None when it cannot be made."""
+    from ipcosim.errors import IpcosimError
+
+    try:
+        return spec_for(scenario, fmus="python", **kwargs).parameters
+    except (IpcosimError, OSError):
+        return None
 
 
 def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], object] | None,
@@ -171,7 +201,7 @@ def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], 
         return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     for name in names:
         if name not in spec.parameters:
-            return _not_native(name)
+            return _not_native(name, spec, _python_parameters(scenario, kwargs))
         if name.partition(".")[2] in NATIVE_INSTRUMENTS_OFF:
             return f"{name} is an instrument option the native plant lacks"
     if check is not None:
