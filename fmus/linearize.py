@@ -58,6 +58,32 @@ def _jacobian(f: Any, n: int, eps: float = 1e-6) -> tuple[list[list[float]], lis
     return [list(row) for row in zip(*cols)], B
 
 
+#: The Coulomb friction of each cart: (plant parameter, the cart's velocity state), per plant kind.
+COULOMB_CARTS = {"single-mass": (("b", "cart_velocity"),),
+                 "double-mass": (("b1", "active_cart_velocity"), ("b2", "passive_cart_velocity"))}
+
+
+def force_columns(params: PlantParams) -> list[tuple[str, list[float]]]:
+    """What a force of 1 N pushing each cart adds to the state derivative at the upright equilibrium:
+    ``[(friction parameter, column), ...]`` in :data:`COULOMB_CARTS` order.
+
+    Taken from the right-hand side's own Coulomb term: the derivative with the cart sliding forward
+    against a kinetic force of 1 N, less the same without friction (friction enters the equations
+    additively, so the difference is exact, whatever the velocity).
+    """
+    kind = kind_of(params)
+    names = state_names(kind)
+    rhs = rhs_for(params)
+    out = []
+    for name, velocity in COULOMB_CARTS[kind]:
+        x = [0.0] * len(names)
+        x[names.index(velocity)] = 2.0 * params.coulomb_velocity + 1e-3   # sliding: the kinetic force
+        free = replace(params, **{n: 0.0 for n, _ in COULOMB_CARTS[kind]})
+        rubbing = replace(free, **{name: 1.0})
+        out.append((name, [a - b for a, b in zip(rhs(tuple(x), 0.0, free), rhs(tuple(x), 0.0, rubbing))]))
+    return out
+
+
 def linear_matrices(params: PlantParams, inductance: bool = True
                     ) -> tuple[list[list[float]], list[float], tuple[str, ...], tuple[str, ...]]:
     """``(A, B, states, outputs)`` of :func:`linearize` as plain lists (no numpy: the FMU runtime uses it).

@@ -12,7 +12,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Break the scenario's loop at the plant input and report gain, phase and delay "
                                    "margins, the sensitivity peak, the sampled-data closed-loop poles and the limit "
                                    "that the plant's right-half-plane zero and pole put on a position-only "
-                                   "controller. Writes DIR/bode.png, DIR/nyquist.png and DIR/analysis.json.")
+                                   "controller, and the limit cycles Coulomb friction would drive (describing "
+                                   "function). Writes DIR/bode.png, DIR/nyquist.png and DIR/analysis.json.")
     p.add_argument("scenario", help="scenario name (see `ipcosim list`) or folder")
     p.add_argument("--parameter-set", metavar="NAME", help="bind this parameter set (thesis, tuned...)")
     p.add_argument("--set", action="append", default=[], metavar="COMP.VAR=VALUE",
@@ -25,6 +26,23 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _fmt(v: float | None, spec: str, unit: str = "") -> str:
     return "-" if v is None else f"{format(v, spec)}{unit}"
+
+
+def _cycle_lines(report: dict | None) -> list[str]:
+    """The describing function's friction limit cycles, one line each."""
+    if report is None:
+        return []
+    if report["cycles"] is None:
+        return ["friction limit cycles: not predicted (the linear loop is unstable)"]
+    forces = ", ".join(f"{k} = {v:g} N" for k, v in report["coulomb_forces_N"].items())
+    lines = [f"friction limit cycles ({report['method']}; {forces}, {report['forces_from']}):"]
+    for c in report["cycles"]:
+        amps = ", ".join(f"{k} +-{v * 1e3:.3g} {'mrad' if k.endswith('angle') else 'mm'}"
+                         for k, v in c["amplitudes"].items())
+        lines.append(f"  {c['parameter']}: {c['frequency_Hz']:.3g} Hz, {amps}")
+    if not report["cycles"]:
+        lines.append("  none (no crossing of the negative real axis)")
+    return lines
 
 
 def main(args: argparse.Namespace) -> int:
@@ -48,5 +66,7 @@ def main(args: argparse.Namespace) -> int:
           f"delay margin {_fmt(r['delay_margin_s'] and r['delay_margin_s'] * 1e3, '.3g', ' ms')}")
     print(f"  peak sensitivity {_fmt(r['peak_sensitivity'], '.4g')}")
     print(f"  {r['statement']}")
+    for line in _cycle_lines(r["friction_limit_cycles"]):
+        print(f"  {line}")
     print(f"  figures: {r['figures']['bode']}, {r['figures']['nyquist']}")
     return 0

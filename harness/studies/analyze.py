@@ -15,6 +15,8 @@ Reported (``analyze``):
   crossovers, each limit checked by the closed-loop poles just inside and outside it;
 * phase margin at every gain crossover and the delay margin ``min (PM_i mod 2 pi) / w_i``;
 * peak of the sensitivity ``S = 1/(1 + L)`` and of ``T = L/(1 + L)`` over frequency;
+* the limit cycle each cart's Coulomb friction would drive, by the describing function
+  (``ipcosim.harness.studies.limit_cycle``): its frequency and the amplitude of every measured signal;
 * the plant's right-half-plane zeros and poles from the voltage to the motor-cart position and
   the lower bound they put on ``||S||inf`` and ``||T||inf`` of *every* stabilizing controller
   that measures that position only (Skogestad & Postlethwaite, *Multivariable Feedback
@@ -39,6 +41,7 @@ from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.fmus.linearize import linearize
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, ParameterError, preset
+from ipcosim.harness.studies import limit_cycle
 from ipcosim.harness.studies.loop import LinearLaw, linear_law
 
 
@@ -402,6 +405,7 @@ def analyze_loop(loop: Loop, pid_search: bool | None = None) -> dict[str, Any]:
                    delay_margin_samples=None, peak_sensitivity=None, peak_sensitivity_dB=None,
                    peak_sensitivity_frequency_rad_s=None, peak_complementary_sensitivity=None,
                    peak_complementary_sensitivity_frequency_rad_s=None, modulus_margin=None)
+    out["friction_limit_cycles"] = limit_cycle.report(loop, stable)
     if pid_search if pid_search is not None else loop.law == "PID":
         out["pid_gain_search"] = pid_gain_search(loop)
     out["statement"] = statement(out)
