@@ -74,11 +74,11 @@ def force_columns(params: PlantParams) -> list[tuple[str, list[float]]]:
     kind = kind_of(params)
     names = state_names(kind)
     rhs = rhs_for(params)
+    free = replace(params, **{n: 0.0 for n, _ in COULOMB_CARTS[kind]})
     out = []
     for name, velocity in COULOMB_CARTS[kind]:
         x = [0.0] * len(names)
         x[names.index(velocity)] = 2.0 * params.coulomb_velocity + 1e-3   # sliding: the kinetic force
-        free = replace(params, **{n: 0.0 for n, _ in COULOMB_CARTS[kind]})
         rubbing = replace(free, **{name: 1.0})
         out.append((name, [a - b for a, b in zip(rhs(tuple(x), 0.0, free), rhs(tuple(x), 0.0, rubbing))]))
     return out

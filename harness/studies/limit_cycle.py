@@ -105,11 +105,11 @@ def predict(loop: Any, forces: Mapping[str, float] | None = None) -> list[dict[s
     measured = [states.index(s) for s in MEASURED[loop.kind]]
     eye = np.eye(phi.shape[0])
     w = np.logspace(math.log10(LOWEST_RAD_S), math.log10(math.pi / loop.T), GRID_POINTS)[:-1]
+    responses = np.array([np.linalg.solve(cmath.exp(1j * wi * loop.T) * eye - phi, gamma) for wi in w])
     cycles = []
     for j, (name, velocity_state) in enumerate(COULOMB_CARTS[loop.kind]):
-        velocity = states.index(velocity_state)
-        H = np.array([np.linalg.solve(cmath.exp(1j * wi * loop.T) * eye - phi, gamma[:, j]) for wi in w])
-        G = H[:, velocity]
+        H = responses[:, :, j]
+        G = H[:, states.index(velocity_state)]
         for i in np.nonzero((G.imag[:-1] * G.imag[1:] < 0))[0]:
             f = G.imag[i] / (G.imag[i] - G.imag[i + 1])
             g = G[i] + f * (G[i + 1] - G[i])
