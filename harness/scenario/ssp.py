@@ -629,7 +629,8 @@ def _parameter_files(src: _Source, root: etree._Element, ssv_files: Sequence[str
                                     f"supported (SSP's own formats only)")
             if source is not None and source not in set_elements:
                 if not src.exists(source):
-                    raise ScenarioError(f"{ssd_display}:{b.sourceline}: {tag} source {source!r} does not exist")
+                    what = "parameter binding" if tag == "ParameterBinding" else "parameter mapping"
+                    raise ScenarioError(f"{ssd_display}:{b.sourceline}: {what} source {source!r} does not exist")
                 set_elements[source] = parse_xml(src.read(source), src.display(source), schema)
     return set_elements
 
@@ -671,7 +672,8 @@ class _Flattener:
             tag = etree.QName(el).localname
             name = el.get("name")
             if name in seen:
-                raise ScenarioError(f"{self.where(el)}: duplicate element name {name!r}")
+                what = "component" if tag == "Component" else "element"
+                raise ScenarioError(f"{self.where(el)}: duplicate {what} name {name!r}")
             seen.add(name)
             full = f"{path}.{name}" if path else name
             if tag == "System":
@@ -792,9 +794,12 @@ class _Flattener:
         for a, b, xml, line in self.edges:
             ra, rb = self._role(a, b), self._role(b, a)
             if ra == rb:
-                raise ScenarioError(f"{line}: connection {a} -> {b} joins two {ra}s of data (kinds "
-                                    f"{self.kinds[a][2].kind} and {self.kinds[b][2].kind}); SSP's table of "
-                                    f"allowed connections has no such pair")
+                ka, kb = self.kinds[a][2].kind, self.kinds[b][2].kind
+                if ka == kb and ka in ("input", "output"):
+                    raise ScenarioError(f"{line}: connection {a} -> {b} connects two {ka}s; a connection must "
+                                        f"join one output to one input")
+                raise ScenarioError(f"{line}: connection {a} -> {b} joins two {ra}s of data (kinds {ka} and "
+                                    f"{kb}); SSP's table of allowed connections has no such pair")
             src, dst = (a, b) if ra == "source" else (b, a)
             if dst in feeds:
                 raise ScenarioError(f"{line}: {dst} is fed twice (from {feeds[dst][0]} and {src})")
