@@ -445,6 +445,9 @@ def _parameter_value(scenario: Scenario, comp: Component, model: Model, var: Var
     """The value of parameter ``p`` for ``var``: converted from the value's unit to the variable's
     (through the parameter set's, the SSD's and the FMU's unit definitions), then transformed
     (a parameter mapping's or a connection's transformation), then as the variable's type."""
+    if var.causality == "structuralParameter":
+        raise BindingError(f"{what}: sets {var.name!r}, a structural parameter (FMI 3.0 configuration mode); "
+                           f"structural parameters are not supported")
     if not var.settable:
         raise BindingError(f"{what}: sets {var.name!r}, which is {var.causality}/{var.variability} and cannot be set")
     if p.type in ("Enumeration", "Binary"):
@@ -615,10 +618,22 @@ def _check_connector(c: Connector, var: Variable, where: str, units: Mapping[str
     if var.causality not in kind_ok.get(c.kind, ()):
         raise BindingError(f"{where}: connector {c.name!r} is declared {c.kind} "
                            f"but the FMU variable is {var.causality}")
-    if c.type is not None and c.type != SSP_TYPE.get(var.type, var.type):
+    if var.causality == "structuralParameter":
+        raise BindingError(f"{where}: connector {c.name!r} is a structural parameter (FMI 3.0 configuration mode); "
+                           f"structural parameters are not supported")
+    if c.type is not None and not _same_type(c.type, var.type):
         raise BindingError(f"{where}: connector {c.name!r} is declared {c.type} but the FMU variable is {var.type}")
     if c.unit and var.unit and unit_conversion(c.unit, var.unit, units) != (1.0, 0.0):
         raise BindingError(f"{where}: connector {c.name!r} has unit {c.unit!r} but the FMU variable has {var.unit!r}")
+
+
+def _same_type(declared: str, fmu_type: str) -> bool:
+    """Whether a connector's SSP type fits an FMU variable's type: SSP 1.0's generic types (Real,
+    Integer...) fit every FMI type of that kind; SSP 2.0's sized types fit only themselves (and
+    Float64 FMI 2.0's Real, both IEEE doubles)."""
+    if declared in ("Real", "Integer", "Boolean", "String", "Enumeration"):
+        return declared == SSP_TYPE.get(fmu_type, fmu_type)
+    return declared == fmu_type or {declared, fmu_type} == {"Float64", "Real"}
 
 
 def convert_value(var: Variable, value: Any, what: str) -> Any:
@@ -672,7 +687,7 @@ def with_set(system: System, set: Mapping[str, Any]) -> tuple[System, dict[tuple
     """
     out: dict[tuple[str, str], Any] = {}
     for key, value in set.items():
-        comp, sep, var = str(key).partition(".")
+        comp, sep, var = _split_name(system, str(key))
         if not sep or not comp or not var:
             raise BindingError(f"--set {key}={value}: expected COMPONENT.VARIABLE=VALUE")
         try:
@@ -694,6 +709,15 @@ def with_set(system: System, set: Mapping[str, Any]) -> tuple[System, dict[tuple
             raise BindingError(f"{where}: input {var!r} is connected to {link.src_name}; set the source instead")
         out[(comp, var)] = convert_value(v, value, f"--set {key}")
     return system, out
+
+
+def _split_name(system: System, key: str) -> tuple[str, str, str]:
+    """``component``, ``.``, ``variable`` of ``component.variable``: the longest component name that
+    ``key`` starts with (a nested system's component is ``sub.component``), else split at the first dot."""
+    names = sorted((i.name for i in system.instances if key.startswith(i.name + ".")), key=len, reverse=True)
+    if names:
+        return names[0], ".", key[len(names[0]) + 1:]
+    return key.partition(".")
 
 
 def default_step(system: System) -> tuple[float | None, str]:
