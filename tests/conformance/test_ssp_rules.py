@@ -400,3 +400,23 @@ def test_omsimulator_style_ssp2_runs_with_the_standards_values(fmus, tmp_path):
     values = run(folder)
     assert values["addP.y"] == pytest.approx(addp_y, abs=1e-12)
     assert values["addI.y"] == pytest.approx(addi_y, abs=1e-12)
+
+
+# ------------------------------------------------------------------ writing SSP 2.0 (ipcosim build --ssp-version)
+def test_packed_archive_declares_the_asked_version_and_runs_the_same(fmus, tmp_path):
+    """An archive packed as SSP 2.0 declares it in its SSD and parameter files, passes the 2.0 schema and
+    gives the values of the 1.0 folder it was packed from; the default stays 1.0."""
+    from ipcosim.harness.scenario.ssp import load_scenario
+    from ipcosim.harness.scenario.ssp_pack import archive_version, pack
+
+    ssd = t.document(t.system("root", [t.component("A", "Adder", t.adder_connectors("1.0", True),
+                                                   t.bindings(t.from_file("set.ssv")))]), "1.0")
+    folder = t.write(tmp_path / "s", ssd, {"Adder": fmus["1.0"]["Adder"]},
+                     {"set.ssv": t.parameter_set({"k1": 6.0}, "1.0", standalone=True)})
+    v2 = pack(folder, tmp_path, tmp_path / "v2.ssp", ssp_version="2.0")
+    v1 = pack(folder, tmp_path, tmp_path / "v1.ssp")
+    assert (archive_version(v2), archive_version(v1)) == ("2.0", "1.0")
+    assert load_scenario(v2).version == "2.0"
+    assert run(v2)["A.y"] == run(folder)["A.y"] == pytest.approx(6.0 * U1 + K2 * U2, abs=1e-12)
+    args = cli.build_parser().parse_args(["build", "--ssp-version", "2.0"])
+    assert args.ssp_version == "2.0"
