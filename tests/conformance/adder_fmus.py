@@ -1,5 +1,5 @@
 """The conformance suite's test FMUs: the adder ``y = k1*u1 + k2*u2`` (``tests/data/cfmu/adder.c``,
-with the calculated parameter ``k_sum = k1 + k2``) as an FMI 2.0 and an FMI 3.0 FMU, optionally with
+with the calculated parameter ``k_sum = k1 + k2`` and the local ``twice_y = 2 y``) as an FMI 2.0 and an FMI 3.0 FMU, optionally with
 units on its variables (FMI ``UnitDefinitions``), and PassThrough for the Integer and Boolean rules."""
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ def adder(name: str, fmi: str) -> cfmu.Spec:
         cfmu.Var("k1", real, "parameter", "r", 3, "1.0", "fixed", "exact"),
         cfmu.Var("k2", real, "parameter", "r", 4, "1.0", "fixed", "exact"),
         cfmu.Var("k_sum", real, "calculatedParameter", "r", 5, None, "fixed", "calculated"),
+        cfmu.Var("twice_y", real, "local", "r", 6, None, "continuous", "calculated"),
     ), step=0.1, stop=1.0)
 
 

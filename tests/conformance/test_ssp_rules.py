@@ -420,3 +420,29 @@ def test_packed_archive_declares_the_asked_version_and_runs_the_same(fmus, tmp_p
     assert run(v2)["A.y"] == run(folder)["A.y"] == pytest.approx(6.0 * U1 + K2 * U2, abs=1e-12)
     args = cli.build_parser().parse_args(["build", "--ssp-version", "2.0"])
     assert args.ssp_version == "2.0"
+
+
+def test_ssp2_local_connector_is_checked_and_refused_when_connected(fmus, tmp_path, capsys):
+    """SSP 2.0's ``kind="local"``: declared on the FMU's local variable it binds and the run goes through;
+    connected (SSP: "the semantics are same as for an output") the master, which carries outputs only,
+    refuses in one line naming the connection."""
+    v = "2.0"
+    conns = t.adder_connectors(v).replace("</ssd:Connectors>", t.connector("twice_y", "local", v) + "</ssd:Connectors>")
+    folder = t.write(tmp_path / "ok", t.document(t.system("root", [t.component("A", "Adder", conns)]), v),
+                     {"Adder": fmus[v]["Adder"]})
+    assert run(folder)["A.y"] == pytest.approx(K1 * U1 + K2 * U2, abs=1e-12)
+    msg = _refusal(v, t.system("root", [t.component("A", "Adder", conns), t.component("B", "Adder", conns)],
+                               [t.connection("A.twice_y", "B.u1")]), fmus, tmp_path, capsys)
+    assert "A.twice_y -> B.u1" in msg and "local" in msg
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_enumeration_value_by_item_name_is_refused_by_name(version, fmus, tmp_path, capsys):
+    """An ``ssv:Enumeration`` value is an item name, mapped through the variable's enumeration type; the
+    master does not map item names and says so, naming the value."""
+    enum = ('<ssd:ParameterBinding><ssd:ParameterValues><ssv:ParameterSet version="{v}" name="e"><ssv:Parameters>'
+            '<ssv:Parameter name="k1"><ssv:Enumeration value="Fast"/></ssv:Parameter></ssv:Parameters>'
+            '</ssv:ParameterSet></ssd:ParameterValues></ssd:ParameterBinding>').format(v=version)
+    msg = _refusal(version, t.system("root", [t.component("A", "Adder", t.adder_connectors(version),
+                                                          t.bindings(enum))]), fmus, tmp_path, capsys)
+    assert "k1 = 'Fast'" in msg and "ssv:Enumeration" in msg
