@@ -1,6 +1,6 @@
 """The conformance suite's test FMUs: the adder ``y = k1*u1 + k2*u2`` (``tests/data/cfmu/adder.c``,
-with the calculated parameter ``k_sum = k1 + k2`` and the local ``twice_y = 2 y``) as an FMI 2.0 and an FMI 3.0 FMU, optionally with
-units on its variables (FMI ``UnitDefinitions``), and PassThrough for the Integer and Boolean rules."""
+with the calculated parameter ``k_sum = k1 + k2`` and the local ``twice_y = 2 y``) as an FMI 2.0 and
+an FMI 3.0 FMU, optionally with units on its variables (FMI ``UnitDefinitions``)."""
 from __future__ import annotations
 
 import zipfile
