@@ -1,13 +1,17 @@
 """Loading SSP scenarios: ``SystemStructure.ssd`` and ``.ssv`` parameter sets, from a scenario
 folder or an ``.ssp`` archive, into an immutable :class:`Scenario`.
 
-Parse first, then run: this module only reads and checks files; nothing is instantiated. The
-object model and the SSV reader come from :mod:`fmpy.ssp.ssd` (``read_ssd``); this module
-extends it with what a master needs and FMPy leaves out -- schema validation that names the
-file and line of every problem, folders as well as archives, connector types and units, the
-``ssc:LinearTransformation`` of connections, ``suppressUnitConversion``, unit definitions, the
+Parse first, then run: this module only reads and checks files; nothing is instantiated. Every
+file is validated against the schema of the SSP version it declares (1.0: FMPy's copy of the
+standard's XSD files; 2.0: the copy in ``schema/ssp2``), naming the file and line of a problem;
+folders are read as well as archives. It reads connector kinds, types and units, the
+transformations of connections and ``suppressUnitConversion``, unit definitions, the
 ``DefaultExperiment`` (start, stop and the OSP ``FixedStepAlgorithm`` step used by libcosim),
-component step-size hints and the scenario's named parameter sets.
+component step-size hints, parameter bindings at every level (inline, ``.ssv``, ``prefix``,
+parameter mappings from ``.ssm`` or inline) and the scenario's named parameter sets. Nested
+systems are flattened into hierarchical component names. What the master does not run (signal
+dictionaries, an SSP as a component, arrays, clocks...) is refused here in one line naming the
+file, the element and the feature.
 
 Scenario names resolve to ``ssp/<name>/`` of the project (the committed sources); FMUs that a
 folder's SSD references as ``resources/<Model>.fmu`` are looked up in the folder's
@@ -15,13 +19,12 @@ folder's SSD references as ``resources/<Model>.fmu`` are looked up in the folder
 """
 from __future__ import annotations
 
-import io
 import math
 import os
 import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePosixPath
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 from lxml import etree
 
@@ -308,18 +311,6 @@ class _Source:
         if self._zip is not None:
             return sorted(n for n in self._zip.namelist() if "/" not in n and n.endswith(suffix))
         return sorted(p.name for p in self.location.iterdir() if p.is_file() and p.name.endswith(suffix))
-
-    def as_zip(self, names: Iterable[str]) -> io.BytesIO | Path:
-        """The scenario as a zip (what fmpy's ``read_ssd`` reads): the archive itself, or an
-        in-memory archive of the given files of a folder."""
-        if self.is_archive:
-            return self.location
-        buf = io.BytesIO()
-        with zipfile.ZipFile(buf, "w") as zf:
-            for name in names:
-                zf.writestr(name, self.read(name))
-        buf.seek(0)
-        return buf
 
 
 def _display(path: Path) -> str:
