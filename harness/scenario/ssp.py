@@ -478,9 +478,10 @@ def _parse_value(type_: str, text: str | None, display: str, name: str) -> Any:
 def _parameter_set(element: etree._Element, display: str, source: str | None,
                    mapping: Sequence[tuple[str, str, Transform | None, bool]] | None = None,
                    prefix: str = "") -> ParameterSet:
-    """Immutable copy of an ``ssv:ParameterSet`` with its unit definitions; a parameter mapping
-    (``mapping``: source name, target name, transformation, suppressUnitConversion) renames and
-    selects its values (only mapped values are applied), then ``prefix`` is prepended."""
+    """Immutable copy of an ``ssv:ParameterSet`` with its unit definitions: ``prefix`` prepended to
+    every name, then a parameter mapping (``mapping``: source name, target name, transformation,
+    suppressUnitConversion) renames and selects its values (only mapped values are applied), as
+    SSP 1.0 section 5.2.3 orders them."""
     params = []
     for xml in element.findall("ssv:Parameters/ssv:Parameter", NS):
         name = xml.get("name")
@@ -491,12 +492,12 @@ def _parameter_set(element: etree._Element, display: str, source: str | None,
         text = value.get("value")
         params.append(Parameter(name, type_, _parse_value(type_, text, f"{display}:{xml.sourceline}", name),
                                 value.get("unit") if type_ in REAL_TYPES else None))
+    if prefix:  # "prepended to all names in the parameter source prior to ... name mapping"
+        params = [replace(p, name=prefix + p.name) for p in params]
     if mapping is not None:
         by_name = {p.name: p for p in params}
         params = [replace(by_name[src], name=target, transform=transform, suppress_unit_conversion=suppress)
                   for src, target, transform, suppress in mapping if src in by_name]
-    if prefix:
-        params = [replace(p, name=prefix + p.name) for p in params]
     units = {u.get("name"): _unit(u) for u in element.findall("ssv:Units/ssc:Unit", NS)}
     return ParameterSet(name=element.get("name") or "", parameters=tuple(params), source=source, units=units)
 

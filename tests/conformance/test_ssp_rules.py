@@ -446,3 +446,18 @@ def test_enumeration_value_by_item_name_is_refused_by_name(version, fmus, tmp_pa
     msg = _refusal(version, t.system("root", [t.component("A", "Adder", t.adder_connectors(version),
                                                           t.bindings(enum))]), fmus, tmp_path, capsys)
     assert "k1 = 'Fast'" in msg and "ssv:Enumeration" in msg
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_prefix_comes_before_the_mapping(version, fmus, tmp_path):
+    """"the specified prefix is prepended to all names in the parameter source prior to processing the
+    normal name resolution or name mapping rules": a system-level binding with ``prefix="A."`` and a
+    mapping maps the prefixed name ``A.gain_a``."""
+    gain_a = 3.0
+    mapping = ('<ssd:ParameterMapping><ssm:ParameterMapping version="{v}"><ssm:MappingEntry source="A.gain_a" '
+               'target="A.k2"/></ssm:ParameterMapping></ssd:ParameterMapping>').format(v=version)
+    ssd = t.document(t.system("root", [t.component("A", "Adder", t.adder_connectors(version))],
+                              binding=t.bindings(t.inline({"gain_a": gain_a}, version, prefix="A.", mapping=mapping))),
+                     version)
+    folder = t.write(tmp_path / "s", ssd, {"Adder": fmus[version]["Adder"]})
+    assert run(folder)["A.y"] == pytest.approx(K1 * U1 + gain_a * U2, abs=1e-12)
