@@ -384,7 +384,7 @@ def _bind_connectors(scenario: Scenario, comp: Component, model: Model, where: s
             raise BindingError(f"{where}: connector {c.name!r} is not a variable of the FMU"
                                + (" (swapped-in FMU lacks a connected connector)" if swapped_from else ""))
         _check_connector(c, var, where, _unit_table(scenario, model))
-        if c.kind in SIGNAL_KINDS:
+        if var.causality in SIGNAL_KINDS:  # an input or output (also under SSP 2.0's kind "unspecified")
             connectors.append(var)
     return connectors
 

@@ -447,7 +447,7 @@ def _resolve_fmu(source: str, src: _Source, fmu_dirs: Sequence[Path]) -> Path | 
 REAL_TYPES = ("Real", "Float64", "Float32")
 INTEGER_TYPES = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")
 CONNECTOR_TYPES = REAL_TYPES + INTEGER_TYPES + ("Boolean", "String", "Enumeration", "Binary", "Clock")
-#: Connector kinds whose values flow through the run (recorded); the others are set before it.
+#: FMU causalities whose values flow through the run (recorded); parameters are set before it.
 SIGNAL_KINDS = ("input", "output", "inout")
 
 
@@ -774,7 +774,7 @@ class _Flattener:
         owner, path, conn = self.kinds[node]
         inside = owner == "system" and (other == path or other.startswith(path + ".") if path else True)
         kind = conn.kind
-        if kind == "inout":
+        if kind in ("inout", "unspecified"):  # the direction the other end gives
             return "source" if self.kinds[other][2].kind in ("input", "parameter") else "destination"
         feeding = kind in ("input", "parameter", "structuralParameter")
         return ("source" if feeding else "destination") if inside else ("destination" if feeding else "source")

@@ -461,3 +461,16 @@ def test_prefix_comes_before_the_mapping(version, fmus, tmp_path):
                      version)
     folder = t.write(tmp_path / "s", ssd, {"Adder": fmus[version]["Adder"]})
     assert run(folder)["A.y"] == pytest.approx(K1 * U1 + gain_a * U2, abs=1e-12)
+
+
+def test_ssp2_unspecified_connectors_take_the_direction_of_the_fmu(fmus, tmp_path):
+    """SSP 2.0's ``kind="unspecified"`` "can be connected to any other connector": its direction is the
+    FMU variable's, so A.y (an output) feeds B.u1."""
+    v = "2.0"
+    a = "<ssd:Connectors>" + t.connector("y", "unspecified", v) + "</ssd:Connectors>"
+    b = "<ssd:Connectors>" + t.connector("u1", "input", v) + t.connector("y", "output", v) + "</ssd:Connectors>"
+    ssd = t.document(t.system("root", [t.component("A", "Adder", a, t.bindings(t.inline({"u1": 4.0}, v))),
+                                       t.component("B", "Adder", b)], [t.connection("A.y", "B.u1")]), v)
+    folder = t.write(tmp_path / "s", ssd, {"Adder": fmus[v]["Adder"]})
+    a_y = K1 * 4.0 + K2 * U2
+    assert run(folder)["B.y"] == pytest.approx(K1 * a_y + K2 * U2, abs=1e-12)
