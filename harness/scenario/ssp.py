@@ -802,6 +802,9 @@ class _Flattener:
                 continue
             chain = [(src, xml, line)]
             while self.kinds[chain[-1][0]][0] == "system" and chain[-1][0] in feeds:
+                if len(chain) > len(feeds):
+                    raise ScenarioError(f"{line}: the connections into {dst} loop through system connectors "
+                                        f"({' <- '.join(n for n, _, _ in chain[:4])} ...)")
                 chain.append(feeds[chain[-1][0]])
             origin, first_line = chain[-1][0], chain[-1][2]
             owner, path, conn = self.kinds[dst]
