@@ -163,6 +163,9 @@ class System:
     scenario: Scenario
     instances: tuple[Instance, ...]
     links: tuple[Link, ...]
+    #: Connections from a calculated parameter into a parameter or input: carried once, in
+    #: initialization mode, before the fixed point of the links (SSP 1.0 section 5.3.2.1).
+    parameter_links: tuple[Link, ...] = ()
     warnings: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()  # informational (swaps), not warnings
 

@@ -311,14 +311,21 @@ def bind(scenario: Scenario, swap: Mapping[str, str | os.PathLike[str] | SwapTar
         notes.append(line + "; ignored")
     by_name = {i.name: i for i in instances}
     fed: dict[str, str] = {}  # which output feeds each input: {"comp.input": "comp.output"}
-    links = [_bind_connection(scenario, conn, by_name, fed) for conn in scenario.connections]
+    every = [_bind_connection(scenario, conn, by_name, fed) for conn in scenario.connections]
+    links = [k for k in every if k.src_var.causality != "calculatedParameter"]
+    carried = tuple(k for k in every if k.src_var.causality == "calculatedParameter")
+    for k in carried:
+        if not k.dst_var.settable:
+            raise BindingError(f"{scenario.origin}: connection {k.src_name} -> {k.dst_name}: {k.dst_name} is "
+                               f"{k.dst_var.causality}/{k.dst_var.variability} and cannot be set")
     for inst in instances:
         for v in inst.inputs:
             if f"{inst.name}.{v.name}" not in fed:
                 start = inst.start_value(v.name)
                 notes.append(f"{scenario.origin}: input {inst.name}.{v.name} is not connected; it keeps its start "
                              f"value {start!r}")
-    return System(scenario=scenario, instances=tuple(instances), links=tuple(links), warnings=tuple(notes),
+    return System(scenario=scenario, instances=tuple(instances), links=tuple(links), parameter_links=carried,
+                  warnings=tuple(notes),
                   notes=tuple(infos))
 
 
@@ -548,19 +555,18 @@ def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str,
                                f"has no variable {cname!r}; {closest(cname, inst.model.variables)}"
                                f"{rebuild_hint(inst.model)}")
     kinds = (va.causality, vb.causality)
-    if kinds == ("input", "output"):
+    if kinds in (("input", "output"), ("parameter", "calculatedParameter"), ("input", "calculatedParameter")):
         a, b, va, vb = b, a, vb, va
         src_name, dst_name = conn.end, conn.start
-    elif kinds == ("output", "input"):
+    elif kinds in (("output", "input"), ("calculatedParameter", "parameter"), ("calculatedParameter", "input")):
         src_name, dst_name = conn.start, conn.end
     elif kinds[0] == kinds[1] and kinds[0] in ("output", "input"):
         raise BindingError(f"{origin}: connection {conn.start} -> {conn.end} connects two {kinds[0]}s; "
                            f"a connection must join one output to one input")
     else:
         raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: {conn.start} is {kinds[0]}, "
-                           f"{conn.end} is {kinds[1]}; the master carries output -> input connections between "
-                           f"components (bind a parameter with a parameter binding or from a system parameter "
-                           f"connector)")
+                           f"{conn.end} is {kinds[1]}; the master carries output -> input and calculatedParameter "
+                           f"-> parameter or input connections between components (SSP 1.0 section 5.3.2.1)")
     _check_types(conn, va, vb, f"{origin}: connection {src_name} -> {dst_name}")
     if dst_name in fed:
         raise BindingError(f"{origin}: input {dst_name} is connected twice (from {fed[dst_name]} and {src_name})")
@@ -704,9 +710,11 @@ def with_set(system: System, set: Mapping[str, Any]) -> tuple[System, dict[tuple
                                f"(`ipcosim describe {system.scenario.name}` lists them){rebuild_hint(inst.model)}")
         if not v.settable:
             raise BindingError(f"{where}: {var!r} is {v.causality}/{v.variability} and cannot be set")
-        link = system.link_into(comp, var)
+        link = system.link_into(comp, var) or next((k for k in system.parameter_links
+                                                     if k.dst == comp and k.dst_var.name == var), None)
         if link is not None:
-            raise BindingError(f"{where}: input {var!r} is connected to {link.src_name}; set the source instead")
+            raise BindingError(f"{where}: {v.causality} {var!r} is connected to {link.src_name}; set the source "
+                               f"instead")
         out[(comp, var)] = convert_value(v, value, f"--set {key}")
     return system, out
 

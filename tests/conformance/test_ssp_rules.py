@@ -325,13 +325,36 @@ def test_model_exchange_component_is_refused_by_name(version, fmus, tmp_path, ca
 
 
 @pytest.mark.parametrize("version", VERSIONS)
-def test_connection_from_calculated_parameter_is_refused_by_name(version, fmus, tmp_path, capsys):
-    """Element calculatedParameter -> element parameter is an allowed SSP connection; the master does
-    not carry values computed in initialization mode into another FMU's parameters, and says so."""
+def test_calculated_parameter_feeds_a_parameter_and_an_input(version, fmus, tmp_path):
+    """Element calculatedParameter -> element parameter and -> element input are allowed SSP connections
+    (5.3.2.1); A's k_sum = k1 + k2 (computed in initialization) becomes B's k1 through a linear
+    transformation, and C's u2 as it is."""
+    a_k1, a_k2, factor, offset = 2.0, 3.0, 2.0, 1.0
+    k_sum = a_k1 + a_k2
+    b_k1 = factor * k_sum + offset
+    ssd = t.document(t.system("root", [
+        t.component("A", "Adder", t.adder_connectors(version, True),
+                    t.bindings(t.inline({"k1": a_k1, "k2": a_k2}, version))),
+        t.component("B", "Adder", t.adder_connectors(version, True)),
+        t.component("C", "Adder", t.adder_connectors(version, True))],
+        [t.connection("A.k_sum", "B.k1", f'<ssc:LinearTransformation factor="{factor}" offset="{offset}"/>'),
+         t.connection("C.u2", "A.k_sum")]), version)
+    folder = t.write(tmp_path / "s", ssd, {"Adder": fmus[version]["Adder"]})
+    values = run(folder)
+    assert values["B.y"] == pytest.approx(b_k1 * U1 + K2 * U2, abs=1e-12)
+    assert values["C.u2"] == pytest.approx(k_sum, abs=1e-12)
+    assert values["C.y"] == pytest.approx(K1 * U1 + K2 * k_sum, abs=1e-12)
+    with pytest.raises(BindingError, match="'k1' is connected to A.k_sum"):
+        ipcosim.run(folder, stop_time=0.2, set={"B.k1": 9.0})
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_output_into_a_parameter_is_refused_by_name(version, fmus, tmp_path, capsys):
+    """Element output -> element parameter is not in SSP's table of allowed connections."""
     msg = _refusal(version, t.system("root", [t.component("A", "Adder", t.adder_connectors(version, True)),
                                               t.component("B", "Adder", t.adder_connectors(version, True))],
-                                     [t.connection("A.k_sum", "B.k1")]), fmus, tmp_path, capsys)
-    assert "A.k_sum -> B.k1" in msg and "calculatedParameter" in msg
+                                     [t.connection("A.y", "B.k1")]), fmus, tmp_path, capsys)
+    assert "A.y -> B.k1" in msg and "parameter" in msg
 
 
 # ------------------------------------------------------------------ SSP 2.0 only
