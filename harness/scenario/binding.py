@@ -78,7 +78,9 @@ def read_model(path: Path, display: str | None = None) -> Model:
                   fmi_version=md.fmiVersion, units=_units(md),
                   can_handle_variable_step=bool(md.coSimulation.canHandleVariableCommunicationStepSize),
                   default_step=_positive_or_none(md.defaultExperiment, "stepSize"),
-                  default_stop=_positive_or_none(md.defaultExperiment, "stopTime"))
+                  default_stop=_positive_or_none(md.defaultExperiment, "stopTime"),
+                  enumerations={v.name: {i.name: int(i.value) for i in v.declaredType.items}
+                                for v in md.modelVariables if v.type == "Enumeration" and v.declaredType})
     _MODEL_CACHE[key] = model
     return model
 
@@ -457,11 +459,11 @@ def _parameter_value(scenario: Scenario, comp: Component, model: Model, var: Var
                            f"structural parameters are not supported")
     if not var.settable:
         raise BindingError(f"{what}: sets {var.name!r}, which is {var.causality}/{var.variability} and cannot be set")
-    if p.type in ("Enumeration", "Binary"):
-        raise BindingError(f"{what}: {p.name} = {p.value!r}: ssv:{p.type} values are not supported (give the "
-                           f"enumeration's integer value as ssv:Integer)" if p.type == "Enumeration" else
-                           f"{what}: {p.name}: ssv:Binary values are not supported")
+    if p.type == "Binary":
+        raise BindingError(f"{what}: {p.name}: ssv:Binary values are not supported")
     value = p.value
+    if p.type == "Enumeration":
+        return _enumeration_value(model, var, p, what)
     if p.unit is not None and kind_of(var.type) == "real" and not p.suppress_unit_conversion:
         connector = comp.connector(var.name)
         target = var.unit or (connector.unit if connector is not None else None)
@@ -486,6 +488,25 @@ def _parameter_value(scenario: Scenario, comp: Component, model: Model, var: Var
             mapped = table_map.get(key, key)
             value = bool(mapped) if t.kind == "BooleanMappingTransformation" else mapped
     return convert_value(var, value, f"{what}: {p.name}")
+
+
+def _enumeration_value(model: Model, var: Variable, p: Parameter, what: str) -> int:
+    """An ``ssv:Enumeration`` value (an item name, through an ``EnumerationMappingTransformation``
+    where a mapping gives one) as the value of that item in the variable's enumeration type."""
+    items = model.enumerations.get(var.name)
+    if items is None:
+        raise BindingError(f"{what}: {p.name} = {p.value!r} is an enumeration item, but {var.name} is {var.type}, "
+                           f"not an Enumeration")
+    name = p.value
+    if p.transform is not None:
+        if p.transform.kind != "EnumerationMappingTransformation":
+            raise BindingError(f"{what}: ssc:{p.transform.kind} on the enumeration value {p.name}; SSP maps "
+                               f"enumeration items with ssc:EnumerationMappingTransformation")
+        name = dict(p.transform.mapping).get(name, name)
+    if name not in items:
+        raise BindingError(f"{what}: {p.name} = {name!r} is not an item of {var.name}'s enumeration "
+                           f"({', '.join(items)})")
+    return items[name]
 
 
 def _unmatched(scenario: System | Scenario, instances: list[Instance]) -> list[str]:
@@ -571,6 +592,10 @@ def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str,
     if dst_name in fed:
         raise BindingError(f"{origin}: input {dst_name} is connected twice (from {fed[dst_name]} and {src_name})")
     fed[dst_name] = src_name
+    if conn.transformation == "EnumerationMappingTransformation":
+        return Link(a.name, va, b.name, vb, mapping=_enumeration_mapping(conn, a.model, va, b.model, vb,
+                                                                         f"{origin}: connection {src_name} -> "
+                                                                         f"{dst_name}"))
     if SSP_TYPE[va.type] != "Real":
         return Link(a.name, va, b.name, vb, mapping=tuple(conn.mapping))
     factor, offset = conn.factor, conn.offset
@@ -585,6 +610,21 @@ def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str,
         # factor * (c0 * x + c1) + offset
         factor, offset = factor * conv[0], factor * conv[1] + offset
     return Link(a.name, va, b.name, vb, factor, offset)
+
+
+def _enumeration_mapping(conn: Connection, ma: Model, va: Variable, mb: Model, vb: Variable,
+                         where: str) -> tuple[tuple[int, int], ...]:
+    """An ``ssc:EnumerationMappingTransformation`` (pairs of item names) as pairs of the items' values
+    in the source's and the target's enumeration types."""
+    ia, ib = ma.enumerations.get(va.name, {}), mb.enumerations.get(vb.name, {})
+    pairs = []
+    for source, target in conn.mapping:
+        for name, items, v in ((source, ia, va), (target, ib, vb)):
+            if name not in items:
+                raise BindingError(f"{where}: ssc:EnumerationMappingTransformation names {name!r}, which is not an "
+                                   f"item of {v.name}'s enumeration ({', '.join(items)})")
+        pairs.append((ia[source], ib[target]))
+    return tuple(pairs)
 
 
 def _check_types(conn: Any, va: Variable, vb: Variable, where: str) -> None:

@@ -839,9 +839,12 @@ def _transform(xml: etree._Element, line: str) -> Transform | None:
         mt = xml.find(f"ssc:{other}", NS)
         if mt is not None:
             return Transform(other, mapping=_map_entries(mt, other, line))
-    if xml.find("ssc:EnumerationMappingTransformation", NS) is not None:
-        raise ScenarioError(f"{line}: ssc:EnumerationMappingTransformation is not supported (it maps "
-                            f"enumeration item names; map the values with ssc:IntegerMappingTransformation)")
+    em = xml.find("ssc:EnumerationMappingTransformation", NS)
+    if em is not None:  # item names, resolved against the FMUs' enumeration types when bound
+        entries = tuple((e.get("source"), e.get("target")) for e in em.findall("ssc:MapEntry", NS))
+        if len({a for a, _ in entries}) != len(entries):
+            raise ScenarioError(f"{line}: ssc:EnumerationMappingTransformation maps a source item twice")
+        return Transform("EnumerationMappingTransformation", mapping=entries)
     return None
 
 

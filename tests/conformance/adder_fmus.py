@@ -55,3 +55,29 @@ def with_units(fmu: Path, units: Mapping[str, str], out: Path) -> Path:
         for n, data in members.items():
             zf.writestr(n, data)
     return out
+
+
+#: The enumeration type the Enumeration rules use: item name -> value.
+MODE = {"Off": 0, "Slow": 1, "Fast": 2}
+
+
+def with_enumeration(fmu: Path, variables: tuple[str, ...], out: Path) -> Path:
+    """A copy of an FMI 2.0 ``fmu`` at ``out`` whose Integer ``variables`` are of the Enumeration type
+    ``Mode`` (:data:`MODE`), declared in its ``TypeDefinitions``."""
+    with zipfile.ZipFile(fmu) as zf:
+        members = {n: zf.read(n) for n in zf.namelist()}
+    root = etree.fromstring(members["modelDescription.xml"])
+    types = etree.Element("TypeDefinitions")
+    enum = etree.SubElement(etree.SubElement(types, "SimpleType", name="Mode"), "Enumeration")
+    for name, value in MODE.items():
+        etree.SubElement(enum, "Item", name=name, value=str(value))
+    root.insert(list(root).index(root.find("CoSimulation")) + 1, types)
+    for var in root.find("ModelVariables"):
+        if var.get("name") in variables:
+            var[0].tag = "Enumeration"
+            var[0].set("declaredType", "Mode")
+    members["modelDescription.xml"] = etree.tostring(root, xml_declaration=True, encoding="UTF-8")
+    with zipfile.ZipFile(out, "w") as zf:
+        for n, data in members.items():
+            zf.writestr(n, data)
+    return out

@@ -34,13 +34,16 @@ K1, K2, U1, U2 = adder_fmus.K1, adder_fmus.K2, adder_fmus.U1, adder_fmus.U2
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
     """The adder for each SSP version (FMI 2.0 for 1.0, FMI 3.0 for 2.0), its copy with units
-    (k1 and u1 in m/s2, y in m) and PassThrough for the Integer and Boolean rules."""
+    (k1 and u1 in m/s2, y in m), PassThrough for the Integer and Boolean rules and its copy whose
+    int_in, int_out and offset are of the Enumeration type Mode (Off 0, Slow 1, Fast 2)."""
     out = tmp_path_factory.mktemp("conformance-fmus")
     a2 = cfmu.build(adder_fmus.adder("Adder", "2.0"), out)
     a3 = cfmu.build(adder_fmus.adder("Adder3", "3.0"), out)
     units = {"k1": "m/s2", "u1": "m", "y": "m"}
+    passthrough = cfmu.build(cfmu.PASSTHROUGH, out)
+    modes = adder_fmus.with_enumeration(passthrough, ("int_in", "int_out", "offset"), out / "Modes.fmu")
     return {"1.0": {"Adder": a2, "AdderU": adder_fmus.with_units(a2, units, out / "AdderU.fmu"),
-                    "PassThrough": cfmu.build(cfmu.PASSTHROUGH, out)},
+                    "PassThrough": passthrough, "Modes": modes},
             "2.0": {"Adder": a3, "AdderU": adder_fmus.with_units(a3, units, out / "AdderU3.fmu")}}
 
 
@@ -459,16 +462,56 @@ def test_ssp2_local_connector_is_checked_and_refused_when_connected(fmus, tmp_pa
     assert "A.twice_y -> B.u1" in msg and "local" in msg
 
 
-@pytest.mark.parametrize("version", VERSIONS)
-def test_enumeration_value_by_item_name_is_refused_by_name(version, fmus, tmp_path, capsys):
-    """An ``ssv:Enumeration`` value is an item name, mapped through the variable's enumeration type; the
-    master does not map item names and says so, naming the value."""
-    enum = ('<ssd:ParameterBinding><ssd:ParameterValues><ssv:ParameterSet version="{v}" name="e"><ssv:Parameters>'
-            '<ssv:Parameter name="k1"><ssv:Enumeration value="Fast"/></ssv:Parameter></ssv:Parameters>'
-            '</ssv:ParameterSet></ssd:ParameterValues></ssd:ParameterBinding>').format(v=version)
-    msg = _refusal(version, t.system("root", [t.component("A", "Adder", t.adder_connectors(version),
-                                                          t.bindings(enum))]), fmus, tmp_path, capsys)
-    assert "k1 = 'Fast'" in msg and "ssv:Enumeration" in msg
+#: The SSD's declaration of the enumeration type Mode (connectors of type Enumeration name it).
+ENUMS = ("<ssd:Enumerations><ssc:Enumeration name=\"Mode\">"
+         + "".join(f'<ssc:Item name="{k}" value="{v}"/>' for k, v in adder_fmus.MODE.items())
+         + "</ssc:Enumeration></ssd:Enumerations>")
+
+
+def test_enumeration_value_by_item_name(fmus, tmp_path):
+    """An ``ssv:Enumeration`` value is an item name, applied as that item's value in the variable's
+    enumeration type ("the actual numeric value ... will depend on the item mapping of the enumeration type
+    of the variables being parameterized"); PassThrough gives int_out = int_in + offset."""
+    conns = ("<ssd:Connectors>" + t.connector("int_out", "output", "1.0", type_='Enumeration name="Mode"')
+             + "</ssd:Connectors>")
+    enum = ('<ssd:ParameterBinding><ssd:ParameterValues><ssv:ParameterSet version="1.0" name="e"><ssv:Parameters>'
+            '<ssv:Parameter name="offset"><ssv:Enumeration value="Fast"/></ssv:Parameter></ssv:Parameters>'
+            '</ssv:ParameterSet></ssd:ParameterValues></ssd:ParameterBinding>')
+    folder = t.write(tmp_path / "s", t.document(t.system("root", [t.component("p", "Modes", conns, t.bindings(enum))]),
+                                                "1.0", units=ENUMS), {"Modes": fmus["1.0"]["Modes"]})
+    assert run(folder)["p.int_out"] == 0 + adder_fmus.MODE["Fast"]
+    bad = tmp_path / "bad"
+    t.write(bad, (folder / "SystemStructure.ssd").read_text().replace('value="Fast"', 'value="Fastest"'),
+            {"Modes": fmus["1.0"]["Modes"]})
+    with pytest.raises(BindingError, match="'Fastest' is not an item of offset's enumeration"):
+        ipcosim.run(bad, stop_time=0.2)
+
+
+def test_enumeration_mapping_on_a_mapping_entry_and_a_connection(fmus, tmp_path):
+    """``ssc:EnumerationMappingTransformation`` maps item names, in a parameter mapping (Slow -> Fast for
+    A's offset) and on a connection (A.int_out Fast -> B.int_in Slow); items it does not name pass."""
+    def conns(*names):
+        kinds = {"int_in": "input", "int_out": "output"}
+        return "<ssd:Connectors>" + "".join(t.connector(n, kinds[n], "1.0", type_='Enumeration name="Mode"')
+                                            for n in names) + "</ssd:Connectors>"
+    emap = ('<ssc:EnumerationMappingTransformation><ssc:MapEntry source="{a}" target="{b}"/>'
+            '</ssc:EnumerationMappingTransformation>')
+    mapping = ('<ssd:ParameterMapping><ssm:ParameterMapping version="1.0"><ssm:MappingEntry source="offset" '
+               f'target="offset">{emap.format(a="Slow", b="Fast")}</ssm:MappingEntry></ssm:ParameterMapping>'
+               '</ssd:ParameterMapping>')
+    enum = ('<ssd:ParameterBinding><ssd:ParameterValues><ssv:ParameterSet version="1.0" name="e"><ssv:Parameters>'
+            '<ssv:Parameter name="offset"><ssv:Enumeration value="Slow"/></ssv:Parameter></ssv:Parameters>'
+            f'</ssv:ParameterSet></ssd:ParameterValues>{mapping}</ssd:ParameterBinding>')
+    ssd = t.document(t.system("root", [t.component("A", "Modes", conns("int_out"), t.bindings(enum)),
+                                       t.component("B", "Modes", conns("int_in", "int_out"))],
+                              [t.connection("A.int_out", "B.int_in", emap.format(a="Fast", b="Slow"))]), "1.0",
+                     units=ENUMS)
+    folder = t.write(tmp_path / "s", ssd, {"Modes": fmus["1.0"]["Modes"]})
+    values = run(folder)
+    mode = adder_fmus.MODE
+    assert values["A.int_out"] == 0 + mode["Fast"]           # offset Slow, mapped to Fast
+    assert values["B.int_in"] == mode["Slow"]                # Fast on the wire, mapped to Slow
+    assert values["B.int_out"] == mode["Slow"] + mode["Off"]  # B's offset keeps its start 0 (Off)
 
 
 @pytest.mark.parametrize("version", VERSIONS)
