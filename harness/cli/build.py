@@ -19,7 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --native: the FMI version of the native FMUs, 2 (into OUT/fmus-native/, default) or 3 "
                         "(FMI 3.0, into OUT/fmus-native-fmi3/)")
     p.add_argument("--force", action="store_true", help="rebuild every FMU even if its sources are unchanged")
-    p.add_argument("--ssp-version", choices=("1.0", "2.0"), default="1.0",
+    from ipcosim.harness.scenario.ssp_pack import SSP_VERSIONS
+
+    p.add_argument("--ssp-version", choices=SSP_VERSIONS, default="1.0",
                    help="the SSP version the archives in OUT/ssp/ declare: 1.0 (default) or 2.0 (checked against "
                         "the SSP 2.0 schema; OMSimulator 3 writes 2.0)")
     p.set_defaults(func=main)
