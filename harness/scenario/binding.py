@@ -676,10 +676,10 @@ def _check_connector(c: Connector, var: Variable, where: str, units: Mapping[str
 def _same_type(declared: str, fmu_type: str) -> bool:
     """Whether a connector's SSP type fits an FMU variable's type: SSP 1.0's generic types (Real,
     Integer...) fit every FMI type of that kind; SSP 2.0's sized types fit only themselves (and
-    Float64 FMI 2.0's Real, both IEEE doubles)."""
+    FMI 2.0's Real and Integer the Float64 and Int32 they are)."""
     if declared in ("Real", "Integer", "Boolean", "String", "Enumeration"):
         return declared == SSP_TYPE.get(fmu_type, fmu_type)
-    return declared == fmu_type or {declared, fmu_type} == {"Float64", "Real"}
+    return declared == fmu_type or {declared, fmu_type} in ({"Float64", "Real"}, {"Int32", "Integer"})
 
 
 def convert_value(var: Variable, value: Any, what: str) -> Any:
