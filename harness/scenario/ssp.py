@@ -9,9 +9,9 @@ transformations of connections and ``suppressUnitConversion``, unit definitions,
 ``DefaultExperiment`` (start, stop and the OSP ``FixedStepAlgorithm`` step used by libcosim),
 component step-size hints, parameter bindings at every level (inline, ``.ssv``, ``prefix``,
 parameter mappings from ``.ssm`` or inline) and the scenario's named parameter sets. Nested
-systems are flattened into hierarchical component names. What the master does not run (signal
-dictionaries, an SSP as a component, arrays, clocks...) is refused here in one line naming the
-file, the element and the feature.
+systems are flattened into hierarchical component names, and connections through system connectors
+and signal dictionaries joined end to end. What the master does not run (an SSP as a component,
+arrays, clocks...) is refused here in one line naming the file, the element and the feature.
 
 Scenario names resolve to ``ssp/<name>/`` of the project (the committed sources); FMUs that a
 folder's SSD references as ``resources/<Model>.fmu`` are looked up in the folder's
@@ -629,10 +629,10 @@ def _parameter_files(src: _Source, root: etree._Element, ssv_files: Sequence[str
 
 class _Flattener:
     """Nested systems flattened into one level: a component ``C`` of a system ``B`` becomes the
-    component ``B.C`` (its hierarchical name); system connectors become junctions that a
-    connection through them joins end to end; system-level parameter bindings are kept with
-    their system's name and level; connections from a system's parameter or input connector
-    become :class:`ParameterLink` s."""
+    component ``B.C`` (its hierarchical name); system connectors and the signals of a signal
+    dictionary become junctions that a connection through them joins end to end; system-level
+    parameter bindings are kept with their system's name and level; connections from a system's
+    parameter or input connector become :class:`ParameterLink` s."""
 
     def __init__(self, src: _Source, set_elements: Mapping[str, etree._Element], fmu_dirs: Sequence[Path],
                  display: str) -> None:
@@ -641,17 +641,19 @@ class _Flattener:
         self.system_bindings: list[SystemBinding] = []
         self.system_connectors: list[str] = []
         self.parameter_links: list[ParameterLink] = []
-        self.kinds: dict[str, tuple[str, str, Connector]] = {}  # node -> (owner "system"|"component", path, connector)
-        self.edges: list[tuple[str, str, etree._Element, str]] = []  # (node a, node b, xml, line)
+        #: node -> (owner "system" | "component" | "signal", path, connector)
+        self.kinds: dict[str, tuple[str, str, Connector]] = {}
+        self.edges: list[tuple[str, str, etree._Element, str, str]] = []  # (node a, node b, xml, line, system)
+        self.aliases: dict[str, str] = {}  # a signal dictionary reference's connector -> its signal's node
+        self.dictionaries: list[dict[str, tuple[str, dict[str, Connector]]]] = []  # per enclosing system
 
     def where(self, xml: etree._Element) -> str:
         return f"{self.display}:{xml.sourceline}"
 
     def system(self, xml: etree._Element, path: str, depth: int) -> None:
         """Read system ``xml`` (hierarchical name ``path``) and, recursively, its sub-systems."""
-        if xml.find("ssd:SignalDictionaries", NS) is not None:
-            raise ScenarioError(f"{self.where(xml)}: system {xml.get('name')!r} defines ssd:SignalDictionaries; "
-                                f"signal dictionaries are not supported")
+        self.dictionaries.append({d.get("name"): (f"#{path}/{d.get('name')}", self.dictionary(d))
+                                  for d in xml.findall("ssd:SignalDictionaries/ssd:SignalDictionary", NS)})
         for c in xml.findall("ssd:Connectors/ssd:Connector", NS):
             conn = _connector(c, self.display)
             node = f"{path}.{conn.name}" if path else conn.name
@@ -673,8 +675,7 @@ class _Flattener:
             elif tag == "Component":
                 self.component(el, full, depth)
             else:
-                raise ScenarioError(f"{self.where(el)}: ssd:{tag} {name!r}: signal dictionary references are not "
-                                    f"supported")
+                self.reference(el, full)
         for cxml in xml.findall("ssd:Connections/ssd:Connection", NS):
             ends = []
             for side in ("start", "end"):
@@ -684,6 +685,7 @@ class _Flattener:
                                         f"(SSP 2.0) are not supported")
                 scope = f"{path}.{element}" if (path and element) else (element or path)
                 node = f"{scope}.{connector}" if scope else connector
+                node = self.aliases.get(node, node)
                 if node not in self.kinds:
                     owner = f"component {element!r}" if element else f"system {xml.get('name')!r}"
                     if element and element not in seen:
@@ -692,7 +694,42 @@ class _Flattener:
                     raise ScenarioError(f"{self.where(cxml)}: connection names {element + '.' if element else ''}"
                                         f"{connector}, but {owner} declares no connector {connector!r}")
                 ends.append(node)
-            self.edges.append((ends[0], ends[1], cxml, self.where(cxml)))
+            self.edges.append((ends[0], ends[1], cxml, self.where(cxml), path))
+        self.dictionaries.pop()
+
+    def dictionary(self, xml: etree._Element) -> dict[str, Connector]:
+        """The entries of an ``ssd:SignalDictionary`` (inline ``ssb:SignalDictionary`` or an ``.ssb`` file,
+        validated) as connectors by name."""
+        source = xml.get("source")
+        if source is not None:
+            root = parse_xml(self.src.read(source), self.src.display(source), "SystemStructureSignalDictionary.xsd")
+        else:
+            root = xml.find("ssb:SignalDictionary", NS)
+        entries = {}
+        for e in (root.findall("ssb:DictionaryEntry", NS) if root is not None else ()):
+            c = _connector(e, self.display)
+            entries[e.get("name")] = Connector(e.get("name"), "inout", c.type, c.unit)
+        return entries
+
+    def reference(self, xml: etree._Element, full: str) -> None:
+        """A signal dictionary reference: each of its connectors stands for its dictionary's signal of
+        that name, one node for every reference to the dictionary (SSP 5.5: looked up from the
+        innermost system outwards)."""
+        name = xml.get("dictionary")
+        found = next((d[name] for d in reversed(self.dictionaries) if name in d), None)
+        if found is None:
+            raise ScenarioError(f"{self.where(xml)}: ssd:SignalDictionaryReference {full!r} references signal "
+                                f"dictionary {name!r}, which no enclosing system defines")
+        key, entries = found
+        for c in xml.findall("ssd:Connectors/ssd:Connector", NS):
+            conn = _connector(c, self.display)
+            if conn.name not in entries:
+                raise ScenarioError(f"{self.where(c)}: ssd:SignalDictionaryReference {full!r}: connector "
+                                    f"{conn.name!r} is not an entry of signal dictionary {name!r}")
+            node = f"{key}.{conn.name}"
+            self.kinds[node] = ("signal", key, entries[conn.name])
+            self.aliases[f"{full}.{conn.name}"] = node
+            self.kinds[f"{full}.{conn.name}"] = self.kinds[node]
 
     def bindings(self, xml: etree._Element, display: str) -> list[ParameterSet]:
         """The parameter sets of an element's ``ssd:ParameterBindings`` in element order (files and
@@ -767,24 +804,29 @@ class _Flattener:
                                          step_size_hint=hint, depth=depth))
 
     # ------------------------------------------------------------------ connections
-    def _role(self, node: str, other: str) -> str:
+    def _role(self, node: str, other: str, scope: str, line: str) -> str:
         """``source`` or ``destination``: which way data flows through ``node`` on an edge to
-        ``other`` (SSP's table of allowed connections: a system's own input or parameter connector
-        is a source inside it; an element's is a destination)."""
+        ``other`` declared in system ``scope`` (SSP's table of allowed connections: a system's own
+        input or parameter connector is a source inside it, a destination seen from its parent; an
+        element's is a destination; an inout, unspecified or signal dictionary connector takes the
+        direction the other end gives)."""
         owner, path, conn = self.kinds[node]
-        inside = owner == "system" and (other == path or other.startswith(path + ".") if path else True)
         kind = conn.kind
-        if kind in ("inout", "unspecified"):  # the direction the other end gives
-            return "source" if self.kinds[other][2].kind in ("input", "parameter") else "destination"
+        if kind in ("inout", "unspecified"):
+            if self.kinds[other][2].kind in ("inout", "unspecified"):
+                raise ScenarioError(f"{line}: connection {node} -> {other}: neither end gives the direction "
+                                    f"(kinds {kind} and {self.kinds[other][2].kind})")
+            return "destination" if self._role(other, node, scope, line) == "source" else "source"
         feeding = kind in ("input", "parameter", "structuralParameter")
+        inside = owner == "system" and path == scope
         return ("source" if feeding else "destination") if inside else ("destination" if feeding else "source")
 
     def connections(self) -> list[Connection]:
         """The component-to-component connections, with chains through system connectors joined
         (at most one transformation on a chain), and the parameter links."""
         feeds: dict[str, tuple[str, etree._Element, str]] = {}  # destination node -> (source node, xml, line)
-        for a, b, xml, line in self.edges:
-            ra, rb = self._role(a, b), self._role(b, a)
+        for a, b, xml, line, scope in self.edges:
+            ra, rb = self._role(a, b, scope, line), self._role(b, a, scope, line)
             if ra == rb:
                 ka, kb = self.kinds[a][2].kind, self.kinds[b][2].kind
                 if ka == kb and ka in ("input", "output"):
@@ -801,7 +843,7 @@ class _Flattener:
             if self.kinds[dst][0] != "component":
                 continue
             chain = [(src, xml, line)]
-            while self.kinds[chain[-1][0]][0] == "system" and chain[-1][0] in feeds:
+            while self.kinds[chain[-1][0]][0] in ("system", "signal") and chain[-1][0] in feeds:
                 if len(chain) > len(feeds):
                     raise ScenarioError(f"{line}: the connections into {dst} loop through system connectors "
                                         f"({' <- '.join(n for n, _, _ in chain[:4])} ...)")
@@ -813,6 +855,8 @@ class _Flattener:
                 raise ScenarioError(f"{line}: the connection to {dst} passes {len(transforms)} transformations "
                                     f"through system connectors; at most one per chain is supported")
             cxml = transforms[0] if transforms else xml
+            if self.kinds[origin][0] == "signal":
+                continue  # a signal nothing writes: the input stays unconnected (bind warns)
             if self.kinds[origin][0] == "system":
                 if len(chain) > 1 and transforms and any(self.kinds[n][2].unit for n, _, _ in chain[:-1]):
                     raise ScenarioError(f"{line}: a transformed connection through system connectors with units")

@@ -9,7 +9,8 @@ from typing import Iterable, Mapping
 NS = ('xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
       'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
       'xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" '
-      'xmlns:ssm="http://ssp-standard.org/SSP1/SystemStructureParameterMapping"')
+      'xmlns:ssm="http://ssp-standard.org/SSP1/SystemStructureParameterMapping" '
+      'xmlns:ssb="http://ssp-standard.org/SSP1/SystemStructureSignalDictionary"')
 
 
 def real(version: str) -> str:

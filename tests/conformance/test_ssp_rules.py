@@ -304,12 +304,48 @@ def _refusal(version, system_xml, fmus, tmp_path, capsys, units=""):
 
 
 @pytest.mark.parametrize("version", VERSIONS)
-def test_signal_dictionary_reference_is_refused_by_name(version, fmus, tmp_path, capsys):
+def test_signal_dictionary_carries_a_signal_between_its_references(version, fmus, tmp_path):
+    """A signal dictionary (SSP 1.0: inline ``ssb:SignalDictionary``; SSP 2.0: an ``.ssb`` file) is one
+    signal bus: A.y written into reference ``writer``'s ``speed`` reaches B.u1 through reference ``reader``
+    and S.C.u1 through a reference inside sub-system S (the dictionary is looked up outwards, 5.5)."""
+    a_u1 = 3.0
+    entry = f'<ssb:DictionaryEntry name="speed"><ssc:{t.real(version)}/></ssb:DictionaryEntry>'
+    ssb = f'<ssb:SignalDictionary version="{version}">{entry}</ssb:SignalDictionary>'
+    if version == "1.0":
+        dictionary = f'<ssd:SignalDictionary name="bus">{ssb}</ssd:SignalDictionary>'
+        files = {}
+    else:
+        dictionary = '<ssd:SignalDictionary name="bus" source="resources/bus.ssb"/>'
+        standalone = ssb.replace("<ssb:SignalDictionary ", f"<ssb:SignalDictionary {t.NS} ")
+        files = {"resources/bus.ssb": f'<?xml version="1.0" encoding="UTF-8"?>\n{standalone}'}
+
+    def ref(name):
+        return (f'<ssd:SignalDictionaryReference name="{name}" dictionary="bus"><ssd:Connectors>'
+                + t.connector("speed", "inout", version) + "</ssd:Connectors></ssd:SignalDictionaryReference>")
+
+    inner = t.system("S", [t.component("C", "Adder", t.adder_connectors(version)), ref("inner")],
+                     [t.connection("inner.speed", "C.u1")])
+    root = t.system("root", [t.component("A", "Adder", t.adder_connectors(version),
+                                         t.bindings(t.inline({"u1": a_u1, "k2": 0.0}, version))),
+                             ref("writer"), ref("reader"), t.component("B", "Adder", t.adder_connectors(version)),
+                             inner],
+                    [t.connection("A.y", "writer.speed"), t.connection("reader.speed", "B.u1")])
+    head, _, tail = root.rpartition("</ssd:System>")  # the top level's end: the dictionary is defined there
+    root = f"{head}<ssd:SignalDictionaries>{dictionary}</ssd:SignalDictionaries></ssd:System>{tail}"
+    folder = t.write(tmp_path / "s", t.document(root, version), {"Adder": fmus[version]["Adder"]}, files)
+    values = run(folder)
+    speed = K1 * a_u1
+    assert values["B.u1"] == pytest.approx(speed, abs=1e-12)
+    assert values["S.C.y"] == pytest.approx(K1 * speed + K2 * U2, abs=1e-12)
+
+
+@pytest.mark.parametrize("version", VERSIONS)
+def test_signal_dictionary_reference_to_no_dictionary_is_refused_by_name(version, fmus, tmp_path, capsys):
     sd = ('<ssd:SignalDictionaryReference name="bus" dictionary="d"><ssd:Connectors>'
           + t.connector("s", "inout", version) + "</ssd:Connectors></ssd:SignalDictionaryReference>")
     msg = _refusal(version, t.system("root", [t.component("A", "Adder", t.adder_connectors(version)), sd]),
                    fmus, tmp_path, capsys)
-    assert "ssd:SignalDictionaryReference 'bus'" in msg and "signal dictionar" in msg
+    assert "ssd:SignalDictionaryReference 'bus'" in msg and "signal dictionary 'd'" in msg
 
 
 @pytest.mark.parametrize("version", VERSIONS)
