@@ -139,7 +139,7 @@ def scenarios() -> list[ScenarioInfo]:
     return out
 
 
-def build(out: str | os.PathLike[str] | None = None, *, force: bool = False) -> list[Path]:
+def build(out: str | os.PathLike[str] | None = None, *, force: bool = False, ssp_version: str = "1.0") -> list[Path]:
     """Build the project's FMUs (and SSP archives) as ``ipcosim build`` does; unchanged ones are kept.
 
     Parameters
@@ -149,6 +149,9 @@ def build(out: str | os.PathLike[str] | None = None, *, force: bool = False) -> 
         the per-user cache ``~/.cache/ipcosim/<version>``, where scenarios look for them.
     force : bool
         Rebuild every FMU.
+    ssp_version : str
+        The SSP version the archives in ``out/ssp`` declare, ``1.0`` (default) or ``2.0``
+        (``ipcosim build --ssp-version``).
 
     Returns
     -------
@@ -163,11 +166,15 @@ def build(out: str | os.PathLike[str] | None = None, *, force: bool = False) -> 
     """
     from ipcosim.fmus.pybuild import build_all
     from ipcosim.harness.paths import BUILD_DIR
-    from ipcosim.harness.scenario.ssp_pack import pack_all
+    from ipcosim.harness.scenario.ssp_pack import SSP_VERSIONS, pack_all
 
     root = Path(out) if out is not None else BUILD_DIR
+    if ssp_version not in SSP_VERSIONS:
+        from ipcosim.errors import UsageError
+
+        raise UsageError(f"ssp_version {ssp_version!r}: expected one of {', '.join(SSP_VERSIONS)}")
     fmus = [r.fmu for r in build_all(root / "fmus", force=force)]
-    pack_all(root)
+    pack_all(root, ssp_version=ssp_version)
     return fmus
 
 

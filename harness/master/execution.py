@@ -2,7 +2,8 @@
 run, and runs the FMI 2.0 lifecycle::
 
     instantiate -> setupExperiment -> parameter bindings, ``set`` values (start values)
-    -> enterInitializationMode -> propagate outputs to inputs until a fixed point
+    -> enterInitializationMode -> calculated parameters into their connected parameters
+    -> propagate outputs to inputs until a fixed point
     -> exitInitializationMode -> steps (manipulators, algorithm, observers)
     -> terminate -> freeInstance (every instance, also after a failure)
 
@@ -326,6 +327,7 @@ class Execution:
         signals.check()
         for slave in self.slaves:
             slave.enter_initialization_mode()
+        self._carry_parameters()
         self.blocks = self.layout.blocks(self.slaves, self.multiples, self.algorithm)
         for b in self.blocks:  # every output as the FMUs compute it from their start values
             self._get_outputs(b, None)
@@ -358,6 +360,28 @@ class Execution:
             for b in self.blocks:
                 self._get_outputs(b, self.start_time)
         self._run_loop, self._loop_source = self._compile_loop()
+
+    def _carry_parameters(self) -> None:
+        """Calculated parameters into the parameters and inputs they are connected to (initialization
+        mode: the calculated values exist, the targets may still be set), pass after pass until no
+        value changes (a chain of them settles in as many passes as it is long)."""
+        links = self.system.parameter_links
+        last: dict[int, Any] = {}
+        for _ in range(len(links) + 1):
+            changed = False
+            for k, link in enumerate(links):
+                value = self.slaves[self.index[link.src]].get_values([link.src_var])[0]
+                if link.kind == "real":
+                    value = link.factor * float(value) + link.offset
+                elif link.mapping:
+                    value = dict(link.mapping).get(int(value), int(value))
+                if last.get(k) != value:
+                    changed, last[k] = True, value
+                    self.slaves[self.index[link.dst]].set_values([link.dst_var], [value])
+                    if link.dst_var.causality == "input":
+                        self.layout.put(link.dst, link.dst_var.name, value)
+            if not changed:
+                return
 
     def _compile_loop(self) -> tuple[Callable[..., Any], str]:
         """The stepping loop this run uses (see the ``loop`` parameter) and its source;
