@@ -405,8 +405,10 @@ def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str
 
 
 INTRO = ("Each scenario moves the motor-driven cart from 0 to 0.05 m with the pendulum upright (the thesis's "
-         "task). Success (status ok) = the pendulum stays within 0.35 rad and the cart ends inside the +-2 % "
-         "band; 'fell' = the pendulum left 0.35 rad; 'unsettled' = upright but not inside the band at the end. "
+         "task). Success (status ok, docs/metrics.md) = the pendulum stays within 0.35 rad, the cart's mean error "
+         "over the final window is within 1 mm and its residual peak-to-peak within its bound; 'fell' = the "
+         "pendulum left 0.35 rad; 'unsettled' = upright, mean error beyond 1 mm; 'hunting' = upright, residual "
+         "amplitude beyond the bound. "
          "Cost J = ITAE(x - r) + 0.1 ITAE(angle) + 1e-4 ISE(voltage), infinite when the pendulum falls. "
          "Angle reversals count swings of the pendulum larger than 0.005 rad (an oscillation measure). "
          "Gains: the controller parameter set each scenario ran with (thesis = the thesis's values, tuned = "
