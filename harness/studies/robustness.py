@@ -62,7 +62,7 @@ def summarize(rows: Sequence[Mapping[str, Any]], metric_names: Sequence[str]) ->
     dict
         ``runs``, ``counts`` (per status), ``success_rate``, ``success_ci95`` and ``metrics``:
         per metric ``n`` (runs with a value), ``mean``, ``std``, ``min``, ``p5``, ``median``,
-        ``p95``, ``max``.
+        ``p90``, ``p95``, ``max``.
     """
     n = len(rows)
     counts: dict[str, int] = {}
@@ -78,7 +78,8 @@ def summarize(rows: Sequence[Mapping[str, Any]], metric_names: Sequence[str]) ->
             continue
         metrics[name] = {"n": int(x.size), "mean": float(np.mean(x)), "std": float(np.std(x)),
                          "min": float(np.min(x)), "p5": float(np.percentile(x, 5)),
-                         "median": float(np.median(x)), "p95": float(np.percentile(x, 95)),
+                         "median": float(np.median(x)), "p90": float(np.percentile(x, 90)),
+                         "p95": float(np.percentile(x, 95)),
                          "max": float(np.max(x))}
     lo, hi = wilson_interval(ok, n)
     return {"runs": n, "counts": counts, "success_rate": ok / n if n else math.nan,
