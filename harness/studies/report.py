@@ -37,6 +37,9 @@ TABLE_COLUMNS = (("status", "status", None), ("settling_time_s", "settling time 
                  ("overshoot_m", "overshoot [m]", 3), ("steady_state_error_m", "steady-state error [m]", 3),
                  ("max_abs_angle_rad", "max abs angle [rad]", 3), ("peak_voltage_V", "peak voltage [V]", 3),
                  ("rms_voltage_V", "RMS voltage [V]", 3), ("upright", "upright", None),
+                 ("cart_mean_error_m", "mean error, final 5 s [m]", 3),
+                 ("cart_peak_to_peak_m", "residual peak-to-peak [m]", 3),
+                 ("cart_frequency_Hz", "residual frequency [Hz]", 3), ("limit_cycle", "limit cycle", None),
                  ("angle_reversals", "angle reversals", None), ("cost", "cost J", 3))
 
 
