@@ -107,7 +107,8 @@ def summary_markdown(summary: Mapping[str, Any], title: str = "Robustness") -> s
     counts = ", ".join(f"{k} {v}" for k, v in sorted(summary["counts"].items()))
     lines = [f"## {title}", "",
              f"Success rate: **{100 * summary['success_rate']:.1f} %** of {summary['runs']} runs "
-             f"(95 % CI {100 * lo:.1f}-{100 * hi:.1f} %); {counts}.", "",
+             f"(95 % CI {100 * lo:.1f}-{100 * hi:.1f} %); {counts}." + (f" The {amplitude_note(summary)}."
+                                                                if amplitude_note(summary) else ""), "",
              "| metric | runs | mean | std | min | p5 | median | p95 | max |",
              "|---|---|---|---|---|---|---|---|---|"]
     for name, s in summary["metrics"].items():
@@ -160,7 +161,18 @@ def summary_line(summary: Mapping[str, Any]) -> str:
     lo, hi = summary["success_ci95"]
     counts = ", ".join(f"{k} {v}" for k, v in sorted(summary["counts"].items()))
     return (f"success rate {100 * summary['success_rate']:.1f} % (95 % CI {100 * lo:.1f}-{100 * hi:.1f} %) "
-            f"of {summary['runs']} runs: {counts}")
+            f"of {summary['runs']} runs: {counts}"
+            + (f"; {amplitude_note(summary)}" if amplitude_note(summary) else ""))
+
+
+def amplitude_note(summary: Mapping[str, Any]) -> str:
+    """The motor cart's residual peak-to-peak over the runs (median, 90th percentile), which the success criterion
+    bounds (``docs/metrics.md``); empty when the runs did not measure it."""
+    amp = summary["metrics"].get("cart_peak_to_peak_m") or {}
+    if not amp.get("n"):
+        return ""
+    return (f"motor-cart residual peak-to-peak median {1e3 * amp['median']:.3g} mm, 90th percentile "
+            f"{1e3 * amp['p90']:.3g} mm")
 
 
 @dataclass
