@@ -318,9 +318,11 @@ def render(data: dict[str, Any]) -> str:
         "plant per comparison), 20 s, pure loop, every run to its end; *ideal* = no friction, exact readings; "
         "*lab* = encoder counts, stick-slip Coulomb friction of 0.1047 N on every cart (fitted), end stops, DAC "
         "codes, one-sample computation delay, +-10 V (`ipcosim.fmus.instruments.REALISM`). Oscillation = RMS of "
-        "the angle above 1 Hz (Butterworth high-pass) after the first second; oscillations below one pendulum "
-        "encoder count (1.53 mrad) are indistinguishable, and steady-state errors within one cart count "
-        "(0.023 mm) of each other are a tie. ITAE = integral of t |x - r| dt.", claims_table(data["claims"]),
+        "the angle above 1 Hz (Butterworth high-pass) after the first second; a claim about oscillations compares "
+        "it, the same RMS of the motor cart's position and of the voltage, each where its encoder resolves it "
+        "(below one count in both runs, one pendulum count 1.53 mrad or one cart count 0.023 mm, a signal is "
+        "left out; all left out: indistinguishable); steady-state errors within one cart count of each other "
+        "are a tie. ITAE = integral of t |x - r| dt.", claims_table(data["claims"]),
         "### When does the thesis's double-mass LQR let the pendulum fall?",
         "One condition at a time on the nominal double-mass loop (`ipcosim.harness.evidence.claims.search_lqr_fall`), "
         "20 s:", fall_table(data["falls"]),
