@@ -29,7 +29,7 @@ from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import UsageError
 from ipcosim.fmus.hil.observer import CardObserver
-from ipcosim.fmus.metrics import streamed_task_metrics, task_kinds
+from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, task_kinds
 from ipcosim.harness.grammar import strip_nominal
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
@@ -374,6 +374,8 @@ class Prepared:
             (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
         result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
         result.metadata["swaps"] = dict(self.swap)
+        b2, K = (_start(execution, "plant", n) for n in ("b2", "K"))  # the success criterion's amplitude bound
+        result.metadata["amplitude_bound_m"] = amplitude_bound(float(b2 or 0.0), float(K or 0.0))
 
     @staticmethod
     def _whole_run_timing(result: Result, wall: float, out: str | os.PathLike[str] | None) -> None:
