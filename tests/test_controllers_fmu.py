@@ -273,8 +273,8 @@ def test_bad_parameter_is_an_fmi_error_naming_it(controller_fmus, model: str, pa
 
 def test_hsmc_denominator_case_is_really_degenerate() -> None:
     """The HSMCSingleMass case above: lambda1 b1 + lambda2 b2 ~ 0 for the default design model."""
-    from ipcosim.controllers.catalog import subsystem_models
     from ipcosim.controllers.design import design_model
+    from ipcosim.controllers.laws.hsmc import subsystem_models
 
     b = [m.b for m in subsystem_models(design_model(preset("thesis-ch3")))]
     assert abs(-0.22473333333333334 * b[0] + b[1]) < 1e-3

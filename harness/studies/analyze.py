@@ -323,7 +323,7 @@ def pid_gain_search(loop: Loop) -> dict[str, Any]:
     Evidence beside the parity-interlacing argument, not a proof: the grid spans Kp 0.1..1e7 V/m,
     Ki 0.1..1e9 V/(m s), Kd 0.01..1e4 V s/m, each with both signs and zero.
     """
-    from ipcosim.controllers.laws import PID, PIDGains
+    from ipcosim.controllers.laws.pid import PID, PIDGains
 
     tau = float(loop.law_object.gains.derivative_time_constant) if loop.law == "PID" else 1e-3
 
