@@ -76,6 +76,8 @@ import struct
 from dataclasses import dataclass
 from typing import Sequence
 
+from ipcosim.errors import IpcosimError
+
 PROTOCOL_VERSION = 1
 MAGIC = b"IPRG"
 HEADER = struct.Struct("!4sBBHII")
@@ -139,7 +141,7 @@ class Msg(enum.IntEnum):
     BYE = 0x10
 
 
-class DecodeError(ValueError):
+class DecodeError(IpcosimError, ValueError):
     """A payload that does not decode for its message type."""
 
 

@@ -34,6 +34,7 @@ import threading
 import time
 from typing import Callable
 
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.hil.api import ErrorCode, HILError
 from ipcosim.fmus.hil.protocol import (
     ADVANCE_REQUEST,
@@ -137,7 +138,7 @@ class RateLimitedLog:
         self._log(line)
 
 
-class _WriteTimeout(Exception):
+class _WriteTimeout(IpcosimError, Exception):
     """Internal: a client did not take a reply within the write timeout."""
 
 

@@ -23,6 +23,7 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.harness.native import cgen, fmi3, models
 from ipcosim.toolchain import find_compiler, find_cross_compiler
@@ -63,7 +64,7 @@ VARIANTS = {
 OUT_DIRS = {"2": "fmus-native", "3": "fmus-native-fmi3"}
 
 
-class NativeBuildError(RuntimeError):
+class NativeBuildError(IpcosimError, RuntimeError):
     """A native FMU could not be generated or compiled (names the model)."""
 
 

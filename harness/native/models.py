@@ -27,12 +27,13 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 from xml.etree import ElementTree
 
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.native import tracer
 from ipcosim.harness.native.leaves import c_name, numbers
 from ipcosim.harness.native.tracer import Node, leaf, select
 
 
-class NativeModelError(RuntimeError):
+class NativeModelError(IpcosimError, RuntimeError):
     """A model cannot be generated (names the model and the reason)."""
 
 
