@@ -420,6 +420,9 @@ class LawEntry:
     linear : callable or None
         ``linear(law, builder) -> (voltage, notes)``: its per-sample arithmetic transcribed into the linear
         expressions of ``ipcosim.controllers.linear`` (None: no linear model).
+    pid_gain_search : bool
+        ``ipcosim analyze`` also counts, on a log grid, the PID gains that stabilise its loop (the PID's:
+        whether any gains of its form would do).
     """
 
     name: str
@@ -433,6 +436,7 @@ class LawEntry:
     native: bool = True
     designed: Designed | None = None
     linear: Callable[[Any, Any], tuple[Any, list[str]]] | None = None
+    pid_gain_search: bool = False
 
     def model_name(self, kind: str) -> str:
         """FMU model name ``<Law><Plant>``, e.g. ``LQRSingleMass``."""

@@ -279,6 +279,6 @@ def linear_cascade(law: CascadePID, b: Builder) -> tuple[Lin, list[str]]:
 
 
 PID_LAW = LawEntry("PID", {"single-mass": ("thesis",), "double-mass": ("thesis",)}, _pid_specs, _pid_values,
-                   _build_pid, classes=(PID,), linear=linear_pid)
+                   _build_pid, classes=(PID,), linear=linear_pid, pid_gain_search=True)
 CASCADE_PID_LAW = LawEntry("CascadePID", {"single-mass": ("tuned",), "double-mass": ("tuned",)}, _cascade_specs,
                            _cascade_values, _build_cascade, classes=(CascadePID,), linear=linear_cascade)
