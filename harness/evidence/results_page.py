@@ -49,7 +49,7 @@ def breakaway_note() -> str:
     gain = LAB_LQG["double-mass"]["friction_breakaway_gain"]
     return ("The double-mass LQG's `lab` set is unstable here by its breakaway term alone: at rest the friction "
             f"compensation pushes each cart with `friction_breakaway_gain` ({gain:g}) times the net force the law's "
-            "frictionless model puts on it (`ipcosim.controllers.laws.coulomb_estimate`). On the lab plant the "
+            "frictionless model puts on it (`ipcosim.controllers.laws.lqg.coulomb_estimate`). On the lab plant the "
             "stiction absorbs that push until the cart breaks away; on the frictionless linear plant it is positive "
             "feedback. With `--set controller.friction_breakaway_gain=0` the set has the margins of the `tuned` row.")
 
