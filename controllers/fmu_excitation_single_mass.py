@@ -1,5 +1,5 @@
 """FMU ``ExcitationSingleMass``: the identification experiment's multisine voltage with a weak position hold,
-for the IP02 single-mass cart (``ipcosim.controllers.excitation``)."""
+for the IP02 single-mass cart (``ipcosim.controllers.laws.excitation``)."""
 from ipcosim.controllers.controller_fmu import ControllerFmu
 from ipcosim.controllers.laws.excitation import EXCITATION_LAW
 
