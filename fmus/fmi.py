@@ -106,6 +106,8 @@ from xml.etree.ElementTree import Element, SubElement
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
+from ipcosim.errors import IpcosimError
+
 __all__ = ["FmuBase", "FmuError", "StepFailure", "VariableInfo", "parse_unit", "positive", "nonnegative"]
 
 
@@ -123,7 +125,7 @@ _py_incref.argtypes = [ctypes.py_object]
 _py_incref.restype = None
 
 
-class FmuError(RuntimeError):
+class FmuError(IpcosimError, RuntimeError):
     """An FMU cannot continue (bad parameter, call in the wrong state); reported as fmi2Fatal.
 
     Its ``repr`` is the bare message: pythonfmu's wrapper logs ``repr(exception)``.
@@ -133,7 +135,7 @@ class FmuError(RuntimeError):
         return str(self)
 
 
-class StepFailure(ArithmeticError):
+class StepFailure(IpcosimError, ArithmeticError):
     """A communication step that cannot be completed; reported as fmi2Discard, state kept at ``t``."""
 
 

@@ -31,7 +31,7 @@ import random
 from dataclasses import dataclass, fields
 from typing import Sequence
 
-from ipcosim.errors import closest
+from ipcosim.errors import IpcosimError, closest
 
 #: IP02 encoders: 4096 counts/rev; cart through the 1.48 cm position pinion, pendulum direct.
 CART_M_PER_COUNT = 2.275e-5
@@ -46,7 +46,7 @@ DAC_V_PER_CODE = 2 * DAC_RANGE_V / (1 << DAC_BITS)
 LAB_SAMPLE_PERIOD = 1e-3
 
 
-class InstrumentError(ValueError):
+class InstrumentError(IpcosimError, ValueError):
     """An instrument option that is not finite or out of range (names the option)."""
 
 

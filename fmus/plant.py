@@ -5,6 +5,7 @@ import math
 from dataclasses import replace
 from typing import Any, Callable, Sequence
 
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.instruments import (
     Instruments,
     Readout,
@@ -28,7 +29,7 @@ from ipcosim.fmus.physics import (
 )
 
 
-class PlantStepError(FloatingPointError):
+class PlantStepError(IpcosimError, FloatingPointError):
     """The plant state became non-finite during a step (reported with time and state)."""
 
 

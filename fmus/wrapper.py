@@ -58,6 +58,8 @@ from pathlib import Path
 
 import pythonfmu
 
+from ipcosim.errors import IpcosimError
+
 __all__ = ["PINNED_VERSION", "PATCH_ID", "WrapperError", "check_pythonfmu", "patch_binary", "patch_fmu"]
 
 #: The pythonfmu release whose wrapper binary the patch and the glue in ``ipcosim.fmus.fmi`` answer.
@@ -89,7 +91,7 @@ _SITES = (
 )
 
 
-class WrapperError(RuntimeError):
+class WrapperError(IpcosimError, RuntimeError):
     """pythonfmu or its wrapper binary is not the pinned one the FMU runtime relies on."""
 
 

@@ -44,7 +44,7 @@ def test_the_margins_are_those_the_analysis_gives_now(data: dict) -> None:
 
 def test_the_lab_lqg_is_unstable_in_the_linearization_by_its_breakaway_term_alone(data: dict) -> None:
     """What breakaway_note() says of the double-mass LQG's lab row, measured."""
-    from ipcosim.controllers.catalog import LAB_LQG
+    from ipcosim.controllers.laws.lqg import LAB_LQG
     from ipcosim.harness.studies.analyze import analyze_loop, scenario_loop
 
     gain = LAB_LQG["double-mass"]["friction_breakaway_gain"]

@@ -44,13 +44,13 @@ def _f(v: Any, spec: str = ".3g") -> str:
 
 def breakaway_note() -> str:
     """Why the double-mass LQG's ``lab`` row is unstable (``tests/test_results_page.py`` checks it against the
-    analysis); the gain is the ``lab`` set's (``controllers.catalog.LAB_LQG``)."""
-    from ipcosim.controllers.catalog import LAB_LQG
+    analysis); the gain is the ``lab`` set's (``controllers.laws.lqg.LAB_LQG``)."""
+    from ipcosim.controllers.laws.lqg import LAB_LQG
 
     gain = LAB_LQG["double-mass"]["friction_breakaway_gain"]
     return ("The double-mass LQG's `lab` set is unstable here by its breakaway term alone: at rest the friction "
             f"compensation pushes each cart with `friction_breakaway_gain` ({gain:g}) times the net force the law's "
-            "frictionless model puts on it (`ipcosim.controllers.laws.coulomb_estimate`). On the lab plant the "
+            "frictionless model puts on it (`ipcosim.controllers.laws.lqg.coulomb_estimate`). On the lab plant the "
             "stiction absorbs that push until the cart breaks away; on the frictionless linear plant it is positive "
             "feedback. With `--set controller.friction_breakaway_gain=0` the set has the margins of the `tuned` row.")
 

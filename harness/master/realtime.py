@@ -74,6 +74,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.observers import Observer
 
 NS = 1_000_000_000
@@ -290,7 +291,7 @@ def _env_number(name: str, kind: type, lo: float, hi: float) -> Any:
     return value
 
 
-class RealtimeSetupError(ValueError):
+class RealtimeSetupError(IpcosimError, ValueError):
     """A real-time option (environment variable) with a bad value."""
 
 

@@ -27,12 +27,13 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 from xml.etree import ElementTree
 
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.native import tracer
 from ipcosim.harness.native.leaves import c_name, numbers
 from ipcosim.harness.native.tracer import Node, leaf, select
 
 
-class NativeModelError(RuntimeError):
+class NativeModelError(IpcosimError, RuntimeError):
     """A model cannot be generated (names the model and the reason)."""
 
 
@@ -339,15 +340,21 @@ def _trace_step(base: Any, measured: tuple[str, ...]) -> tuple[Any, dict[str, An
             raise NativeModelError("a law's state layout depends on a branch")
         return [u] + [after[k] for k in keys]
 
-    from ipcosim.controllers import laws
-    saturate, schedule = laws.saturate, laws.Schedule.__call__
-    laws.saturate = tracer.local(saturate)  # pure functions: their branches merged where they return
-    laws.Schedule.__call__ = tracer.local(schedule)  # type: ignore[method-assign]
+    from ipcosim.controllers.catalog import law_modules
+    from ipcosim.controllers.laws.hsmc import Schedule
+    modules = law_modules()
+    saturates = {m: m.saturate for m in modules if hasattr(m, "saturate")}
+    schedule = Schedule.__call__
+    for m, saturate in saturates.items():
+        m.saturate = tracer.local(saturate)  # pure functions: their branches merged where they return
+    Schedule.__call__ = tracer.local(schedule)  # type: ignore[method-assign]
     try:
-        with tracer.math_hooks(laws):
+        with tracer.math_hooks(*modules):
             out = tracer.trace(fn)
     finally:
-        laws.saturate, laws.Schedule.__call__ = saturate, schedule  # type: ignore[method-assign]
+        for m, saturate in saturates.items():
+            m.saturate = saturate
+        Schedule.__call__ = schedule  # type: ignore[method-assign]
     return out[0], dict(zip(keys, out[1:])), before
 
 

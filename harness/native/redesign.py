@@ -18,11 +18,11 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping
 
-from ipcosim.errors import closest
+from ipcosim.errors import IpcosimError, closest
 from ipcosim.fmus.instruments import delay_steps
 
 
-class NativeParameterError(KeyError):
+class NativeParameterError(IpcosimError, KeyError):
     """A parameter the native flavour does not have (names the model and the flavour).
 
     ``parameter``: the name it lacks, where one parameter is meant (else None); ``design_only``: that name

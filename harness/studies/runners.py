@@ -252,7 +252,7 @@ class StateFeedback:
 
     def step(self, x: np.ndarray, r: float) -> float:
         """The voltage for the state ``x`` (``ipcosim.fmus.physics`` order) and the reference ``r`` [m]."""
-        from ipcosim.controllers.laws import saturate
+        from ipcosim.controllers.laws.base import saturate
 
         return saturate(float(-self.K @ np.array([x[0] - r, x[1], x[2], x[3]])), self.voltage_limit)
 

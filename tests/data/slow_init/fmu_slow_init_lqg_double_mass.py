@@ -4,6 +4,7 @@ Used by the real-time HIL swap test: the watchdog of the HIL adapter must not ru
 import time
 
 from ipcosim.controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.laws.lqg import LQG_LAW
 
 INIT_DELAY = 3.0   # [s]
 
@@ -11,7 +12,7 @@ INIT_DELAY = 3.0   # [s]
 class SlowInitLQGDoubleMass(ControllerFmu):
     """LQG of the IP02 double mass whose initialization sleeps INIT_DELAY seconds (test only)."""
 
-    law = "LQG"
+    law = LQG_LAW
     kind = "double-mass"
 
     def setup(self) -> None:
