@@ -100,7 +100,7 @@ class RigMonitor:
         try:
             if self._card is None:
                 self._card = TcpipCard(self.card_type, self.card_id, self.host, self.port, role="monitor",
-                                       name="ipcosim live view", token=self.token or "", timeout=0.5)
+                                       name="ipcosim live view", token=self.token or "", timeout=2.0)
             st = self._card.status()
         except HILError:
             self.close()

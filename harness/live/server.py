@@ -5,6 +5,7 @@ Endpoints (every one needs the token when the server has one: ``?token=T`` or th
 ``X-Ipcosim-Token``)::
 
     GET  /                 the page
+    GET  /boot.js          the scene and the first samples as a script (the page draws them before its load ends)
     GET  /scene            {"scene": what to draw (ipcosim.harness.live.scene), "names": sampled columns}
     GET  /samples?since=N  {"rows": [[time, values...]], "next": M, "more": bool, "state": ..., "pacing": ...,
                             "rig": ..., "metrics": ..., "message": ..., "info": ...}
@@ -34,6 +35,8 @@ from ipcosim.errors import UsageError
 MAX_ROWS = 5000
 #: The page asks for new samples this often [ms] (about 30 updates a second).
 POLL_MS = 33
+#: How long the page's first request waits for a run to start [s].
+BOOT_WAIT_S = 5.0
 LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
 
 
@@ -86,11 +89,14 @@ def check_address(host: str, port: Any, token: str | None, option: str = "--live
     return number
 
 
-def page(live: bool) -> str:
-    """The page, told whether it shows a live run (a stop button, polling until the run ends)."""
+def page(live: bool, token: str | None = None) -> str:
+    """The page, told whether it shows a live run (a stop button, polling until the run ends); its first
+    data come from ``boot.js`` (with the token the page was asked for with), loaded before the page counts
+    as loaded."""
     text = resources.files("ipcosim.harness.live").joinpath("page.html").read_text(encoding="utf-8")
     boot = json.dumps({"live": live, "interval_ms": POLL_MS})
-    return text.replace("/*BOOT*/{}/*END*/", boot)
+    return (text.replace("/*BOOT*/{}/*END*/", boot)
+            .replace("/*BOOTJS*/boot.js", "boot.js" + (f"?token={quote(token)}" if token else "")))
 
 
 def finite_rows(rows: Any) -> list[list[float | None]]:
@@ -148,8 +154,11 @@ class _Handler(BaseHTTPRequestHandler):
         url = urlsplit(self.path)
         try:
             if url.path in ("/", "/index.html"):
-                html = self.server.html if self.server.html is not None else page(self.server.source.live)
+                html = (self.server.html if self.server.html is not None
+                        else page(self.server.source.live, self.server.token))
                 self._send(200, "text/html; charset=utf-8", html.encode())
+            elif url.path == "/boot.js":
+                self._send(200, "text/javascript; charset=utf-8", self._boot().encode())
             elif url.path == "/scene":
                 self._json(self.server.source.scene() or {"scene": None})
             elif url.path == "/samples":
@@ -163,6 +172,20 @@ class _Handler(BaseHTTPRequestHandler):
                 self._send(404, "text/plain", b"not found\n")
         except ValueError as exc:
             self._send(400, "text/plain", f"bad request: {exc}\n".encode())
+
+    def _boot(self) -> str:
+        """``window.BOOT_DATA``: the scene and the first samples (waiting up to :data:`BOOT_WAIT_S` for a
+        run to start), so that the page draws before it counts as loaded."""
+        source, end = self.server.source, time.monotonic() + BOOT_WAIT_S
+        first = source.scene()
+        while first is None and source.live and time.monotonic() < end:
+            time.sleep(0.05)
+            first = source.scene()
+        if first is None or first.get("scene") is None:
+            return "window.BOOT_DATA = null;\n"
+        data = {**first, "samples": source.samples(0)}
+        self.server.viewers += 1
+        return f"window.BOOT_DATA = {json.dumps(data, allow_nan=False)};\n"
 
     def do_POST(self) -> None:  # noqa: N802
         if not self._allowed():
@@ -218,12 +241,3 @@ class LiveServer:
         self.httpd.server_close()
         self.thread.join(timeout=5)
 
-
-def wait_for(predicate: Any, timeout: float, interval: float = 0.01) -> bool:
-    """Poll ``predicate()`` until it is true or ``timeout`` seconds passed; whether it became true."""
-    end = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > end:
-            return False
-        time.sleep(interval)
-    return True

@@ -17,8 +17,11 @@ from typing import Any, Callable, Sequence
 from ipcosim.harness.live.feed import LiveFeed
 from ipcosim.harness.live.server import MAX_ROWS, LiveServer, finite_rows
 
-#: The rig is asked for its status at most this often [s].
+#: The rig is asked for its status this often [s] while a page watches (asked in the last WATCHED_S).
 RIG_POLL_S = 0.2
+WATCHED_S = 2.0
+#: A page's first answer waits this long for the rig's first status [s].
+RIG_FIRST_S = 2.0
 #: After the run, a watching page has this long to fetch its end [s].
 LINGER_S = 3.0
 
@@ -47,7 +50,10 @@ class LiveSource:
         self.metrics: dict[str, Any] | None = None
         self._scene: dict[str, Any] | None = None
         self._rig: dict[str, Any] | None = None
-        self._rig_at = 0.0
+        self._asked = 0.0
+        self._poller: threading.Thread | None = None
+        self._first = threading.Event()
+        self._closed = threading.Event()
         self._lock = threading.Lock()
 
     def scene(self) -> dict[str, Any] | None:
@@ -68,17 +74,34 @@ class LiveSource:
                 "pacing": feed.pacing(), "rig": self._poll_rig(), "metrics": self.metrics}
 
     def _poll_rig(self) -> dict[str, Any] | None:
-        """The rig's status, asked again when the last answer is older than :data:`RIG_POLL_S`."""
+        """The rig's last status. A thread of its own asks the rig every :data:`RIG_POLL_S` while a page
+        watches (a slow rig never holds up a page's answer); the first answer is waited for up to
+        :data:`RIG_FIRST_S`."""
         if self.rig_status is None:
             return None
-        with self._lock:  # one page or several: one question to the rig at a time
-            if time.monotonic() - self._rig_at >= RIG_POLL_S:
+        self._asked = time.monotonic()
+        with self._lock:
+            if self._poller is None:
+                self._poller = threading.Thread(target=self._poll_loop, name="ipcosim-live-rig", daemon=True)
+                self._poller.start()
+        self._first.wait(RIG_FIRST_S)
+        return self._rig
+
+    def _poll_loop(self) -> None:
+        while not self._closed.is_set():
+            if time.monotonic() - self._asked < WATCHED_S:
                 try:
                     self._rig = self.rig_status()
                 except Exception as exc:  # noqa: BLE001 -- the page says what went wrong, the run goes on
                     self._rig = {"error": str(exc).splitlines()[0] if str(exc) else type(exc).__name__}
-                self._rig_at = time.monotonic()
-            return self._rig
+                self._first.set()
+            self._closed.wait(RIG_POLL_S)
+
+    def close(self) -> None:
+        """Stop asking the rig."""
+        self._closed.set()
+        if self._poller is not None:
+            self._poller.join(timeout=5)
 
     def stop(self) -> bool:
         if self.feed.state not in ("waiting", "running"):
@@ -104,6 +127,7 @@ class LiveSession:
         try:
             self.server.close(linger)
         finally:
+            self.source.close()
             if self._close_rig is not None:
                 self._close_rig()
 
