@@ -534,8 +534,8 @@ def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers
 
 def open_live_view(options: RunOptions, prepared: Prepared, values: Mapping[str, Any]) -> Any:
     """The live view of a run (``--live``): its page served, its address printed; the scene after the
-    plant kind, the rig's status from a monitor session when a HIL adapter drives a virtual rig
-    (:func:`ipcosim.fmus.hil.observer.rig_monitor`). Returns the
+    plant kind, the rig's status from a monitor session (opened by the page's serving process) when a HIL
+    adapter drives a virtual rig (:func:`ipcosim.fmus.hil.observer.rig_monitor`). Returns the
     :class:`~ipcosim.harness.live.session.LiveSession` whose ``feed`` the run observes with."""
     from ipcosim.fmus.hil.observer import rig_monitor
     from ipcosim.harness.live.scene import scene
@@ -552,8 +552,11 @@ def open_live_view(options: RunOptions, prepared: Prepared, values: Mapping[str,
 
     swaps = ", ".join(f"{k}={v}" for k, v in prepared.swap.items())
     title = scenario_label(options.scenario) + (f" ({swaps})" if swaps else "")
+    monitor = rig_monitor(prepared.system.instances, start)
+    rig = (None if monitor is None else
+           {"card_type": monitor.card_type, "card_id": monitor.card_id, "host": monitor.host, "port": monitor.port})
     return open_live(lambda names: scene(names, title, start), host=options.live_host, port=options.live_port,
-                     token=options.live_token, rig_status=rig_monitor(prepared.system.instances, start))
+                     token=options.live_token, rig=rig, rig_token=monitor.token if monitor else None)
 
 
 def resolve_relative(system: System, values: Mapping[str, Any]) -> dict[str, Any]:

@@ -20,8 +20,7 @@ from __future__ import annotations
 
 import math
 import signal
-import threading
-import time
+import sys
 from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
@@ -37,6 +36,10 @@ if TYPE_CHECKING:  # pragma: no cover
 LIVE_RATE_HZ = 30.0
 #: Rows the ring holds: at 30 samples a second, over half an hour of a run.
 RING_ROWS = 1 << 16
+#: The interpreter's thread switch interval during a paced run with a live view [s]: the server's thread
+#: holds the GIL for at most this long when the loop's thread wants it (the default, 5 ms, made one step in
+#: five late at 1 kHz with a viewer watching).
+PACED_SWITCH_INTERVAL = 1e-4
 #: What the page is told when its stop button ended the run.
 STOP_MESSAGE = "stopped from the live view"
 
@@ -56,17 +59,29 @@ class SampleRing:
         Rows kept (the oldest are overwritten).
     """
 
-    def __init__(self, width: int, capacity: int = RING_ROWS) -> None:
+    def __init__(self, width: int, capacity: int = RING_ROWS, buffer: Any = None, counter: Any = None) -> None:
         if capacity < 1 or width < 1:
             raise ValueError(f"a ring of {capacity} rows of {width} values")
-        self.rows = np.zeros((capacity, width))
+        self.rows = (np.zeros((capacity, width)) if buffer is None
+                     else np.ndarray((capacity, width), dtype=np.float64, buffer=buffer))
         self.capacity = capacity
-        self.count = 0
+        self._count = np.zeros(1, dtype=np.int64) if counter is None else counter
+
+    @staticmethod
+    def nbytes(width: int, capacity: int = RING_ROWS) -> int:
+        """Bytes of the rows of a ring (for a buffer of its own)."""
+        return 8 * width * capacity
+
+    @property
+    def count(self) -> int:
+        """Rows written so far."""
+        return int(self._count[0])
 
     def append(self, row: Sequence[float] | np.ndarray) -> None:
         """Write one row (the writer's thread only)."""
-        self.rows[self.count % self.capacity] = row
-        self.count += 1  # published after the row is complete
+        n = int(self._count[0])
+        self.rows[n % self.capacity] = row
+        self._count[0] = n + 1  # published after the row is complete
 
     def read(self, since: int, limit: int | None = None) -> tuple[np.ndarray, int, int]:
         """The rows written from number ``since`` on.
@@ -92,6 +107,63 @@ class SampleRing:
         return out, end, start - max(since, 0)
 
 
+#: A feed's states, by their number on the :class:`Board`.
+STATES = ("waiting", "running", "finished", "failed", "stopped")
+
+
+class Board:
+    """What a feed says besides its rows, in a buffer another process can share: the rows written, the
+    state, the pacing counts, the page's stop request, whether the run's end is published, the message.
+
+    Parameters
+    ----------
+    buffer : writable buffer, optional
+        :data:`Board.SIZE` bytes (default: its own).
+    """
+
+    FIELDS = ("count", "state", "steps", "late_steps", "stop", "closed", "message_bytes")
+    SIZE = 8 * 8 + 1024
+
+    def __init__(self, buffer: Any = None) -> None:
+        buffer = bytearray(self.SIZE) if buffer is None else buffer
+        self.ints = np.ndarray((8,), dtype=np.int64, buffer=buffer)
+        self.text = np.ndarray((self.SIZE - 64,), dtype=np.uint8, buffer=buffer, offset=64)
+
+    def __getitem__(self, name: str) -> int:
+        return int(self.ints[self.FIELDS.index(name)])
+
+    def __setitem__(self, name: str, value: int) -> None:
+        self.ints[self.FIELDS.index(name)] = value
+
+    @property
+    def counter(self) -> np.ndarray:
+        """The ring's row count, in place."""
+        return self.ints[0:1]
+
+    @property
+    def state(self) -> str:
+        return STATES[self["state"]]
+
+    @state.setter
+    def state(self, value: str) -> None:
+        self["state"] = STATES.index(value)
+
+    @property
+    def message(self) -> str:
+        return bytes(self.text[:self["message_bytes"]]).decode("utf-8", "replace")
+
+    @message.setter
+    def message(self, value: str) -> None:
+        data = value.encode("utf-8")[:len(self.text)]
+        self.text[:len(data)] = np.frombuffer(data, dtype=np.uint8)
+        self["message_bytes"] = len(data)
+
+
+#: ``allocate(names, info, nbytes) -> buffer``: a writable buffer of ``nbytes`` for a feed's board and ring
+#: (shared with the process that serves the page), called once the sampled columns are known.
+Allocate = Any
+
+
 class LiveFeed(Observer):
     """Observer sampling a run's columns into a :class:`SampleRing` for the live view.
 
@@ -99,56 +171,53 @@ class LiveFeed(Observer):
     ----------
     rate : float
         Samples per simulated second (at least one per communication step at most).
+    allocate : callable, optional
+        :data:`Allocate`: where the board and the ring live (default: this process's memory).
 
     Attributes
     ----------
     names : list of str
         The sampled columns: ``time``, then ``component.variable`` (Real, Integer, Boolean).
+    board : Board
+        The state (``waiting``, ``running``, ``finished``, ``failed``, ``stopped``), the message
+        (the run's error, or :data:`STOP_MESSAGE`), the pacing counts and the page's stop request.
     ring : SampleRing or None
         The samples (from :meth:`start` on).
-    state : str
-        ``waiting``, ``running``, ``finished``, ``failed`` or ``stopped``.
-    message : str
-        How the run ended (its error, or :data:`STOP_MESSAGE`).
+    info : dict
+        ``step``, ``start_time``, ``stop_time``, ``paced`` and, for a paced run, ``overrun_budget``
+        and ``tolerance_s`` (what counts as a late step).
     """
 
-    def __init__(self, rate: float = LIVE_RATE_HZ) -> None:
+    def __init__(self, rate: float = LIVE_RATE_HZ, allocate: Allocate = None) -> None:
         if not (math.isfinite(rate) and rate > 0):
             raise ValueError(f"live feed rate {rate}: must be a positive number of samples per second")
         self.rate = rate
+        self.allocate = allocate
         self.names: list[str] = []
+        self.board = Board()
         self.ring: SampleRing | None = None
-        self.state = "waiting"
-        self.message = ""
         self.info: dict[str, Any] = {}
         self._every = 1
-        self._stop = threading.Event()
         self._pacer: RealtimePacer | None = None
         self._late_seen = 0
-        self._late_steps = 0
-        self._steps = 0
         self._earliest = 1 << 62
+        self._switch_interval: float | None = None
         self._tolerance_ns = 0
         self._real: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._ints = np.zeros(0, dtype=int)
         self._row = np.zeros(1)
-        self.started = threading.Event()
-
-    # ------------------------------------------------------------------ the server's side
-    def request_stop(self) -> None:
-        """Ask the run to stop at the feed's next tick (any thread)."""
-        self._stop.set()
 
     @property
-    def stop_requested(self) -> bool:
-        return self._stop.is_set()
+    def state(self) -> str:
+        return self.board.state
 
-    def pacing(self) -> dict[str, Any] | None:
-        """Steps, late steps and the overrun budget of a paced run so far (None: not paced)."""
-        if self._pacer is None or self._pacer.pacer is None:
-            return None
-        return {"steps": self._steps, "late_steps": self._late_steps, "overrun_budget": self._pacer.overrun_budget,
-                "tolerance_s": self._tolerance_ns / 1e9}
+    @property
+    def message(self) -> str:
+        return self.board.message
+
+    def request_stop(self) -> None:
+        """Ask the run to stop at the feed's next tick (any thread; the serving process writes the board)."""
+        self.board["stop"] = 1
 
     # ------------------------------------------------------------------ the loop's side
     def start(self, execution: "Execution") -> None:
@@ -164,18 +233,28 @@ class LiveFeed(Observer):
         self._ints = np.array([slot for _, slot in ints], dtype=int)
         self._layout_ints = layout.ints
         self._row = np.zeros(len(self.names))
-        self.ring = SampleRing(len(self.names))
         self._time = execution.time_of
         self._every = max(1, int(round(1.0 / (self.rate * execution.step_size))))
         self._pacer = next((o for o in execution.observers if isinstance(o, RealtimePacer)), None)
-        if self._pacer is not None:
-            self._tolerance_ns = int(round((self._pacer.tolerance if self._pacer.tolerance is not None
-                                            else execution.step_size / 2) * 1e9))
         self.info = {"step": execution.step_size, "start_time": execution.start_time,
                      "stop_time": execution.stop_time, "paced": self._pacer is not None}
-        self.state = "running"
+        if self._pacer is not None:
+            tolerance = self._pacer.tolerance if self._pacer.tolerance is not None else execution.step_size / 2
+            self._tolerance_ns = int(round(tolerance * 1e9))
+            self.info.update(overrun_budget=self._pacer.overrun_budget, tolerance_s=tolerance)
+            self._switch_interval = sys.getswitchinterval()
+            sys.setswitchinterval(min(self._switch_interval, PACED_SWITCH_INTERVAL))
+        width = len(self.names)
+        if self.allocate is not None:
+            buffer = self.allocate(self.names, self.info, Board.SIZE + SampleRing.nbytes(width))
+            stop = self.board["stop"]
+            self.board = Board(buffer[:Board.SIZE])
+            self.board["stop"] = stop
+            self.ring = SampleRing(width, buffer=buffer[Board.SIZE:], counter=self.board.counter)
+        else:
+            self.ring = SampleRing(width, counter=self.board.counter)
+        self.board.state = "running"
         self._sample(0)
-        self.started.set()
 
     def next_tick(self, n: int) -> int | None:
         return (n // self._every + 1) * self._every
@@ -184,7 +263,7 @@ class LiveFeed(Observer):
         self._sample(n)
         if self._pacer is not None:
             self._count_late()
-        if self._stop.is_set():
+        if self.board["stop"]:
             raise Interrupted(signal.SIGINT, STOP_MESSAGE)
 
     def _sample(self, n: int) -> None:
@@ -209,27 +288,32 @@ class LiveFeed(Observer):
         if not new.size:
             return
         self._late_seen = max(self._late_seen, 1) + new.size
-        self._steps = self._late_seen
+        late = self.board["late_steps"]
         if new.min() < self._earliest:
             self._earliest = int(new.min())
             new = np.asarray(pacer.lateness_since(1), dtype=np.int64)
-            self._late_steps = 0
-        self._late_steps += int(np.count_nonzero(new - self._earliest > self._tolerance_ns))
+            late = 0
+        self.board["late_steps"] = late + int(np.count_nonzero(new - self._earliest > self._tolerance_ns))
+        self.board["steps"] = self._late_seen
 
     def finish(self, execution: "Execution", error: BaseException | None) -> None:
-        if self.ring is not None and execution.tick and self.state == "running":
+        if self._switch_interval is not None:
+            sys.setswitchinterval(self._switch_interval)
+            self._switch_interval = None
+        board = self.board
+        if self.ring is not None and execution.tick and board.state == "running":
             try:
                 self._sample(execution.tick)
             except Exception:  # noqa: BLE001 -- the last row is a courtesy, never a failure
                 pass
         if self._pacer is not None and self._pacer.pacer is not None:
             st = self._pacer.pacer.stats()
-            self._steps, self._late_steps = st.steps, st.overruns
+            board["steps"], board["late_steps"] = st.steps, st.overruns
         if error is None:
-            self.state = "finished"
+            board.state = "finished"
         elif isinstance(error, Interrupted) and error.message == STOP_MESSAGE:
-            self.state, self.message = "stopped", STOP_MESSAGE
+            board.message, board.state = STOP_MESSAGE, "stopped"
         else:
             text = str(error).strip()
-            self.state, self.message = "failed", (text.splitlines()[0] if text else type(error).__name__)
-        self.finished_at = time.monotonic()
+            board.message = text.splitlines()[0] if text else type(error).__name__
+            board.state = "failed"

@@ -1,20 +1,36 @@
-"""A run's live view: its feed (an observer of the run), its server and what the page is told.
+"""A run's live view: its feed (an observer of the run) in the run's process, its page served by a
+process of its own.
 
-:func:`open_live` is what ``ipcosim run --live`` and ``ipcosim.run(..., live=True)`` do before the
-run: it makes the :class:`~ipcosim.harness.live.feed.LiveFeed` the run observes with, serves the
-page (:class:`~ipcosim.harness.live.server.LiveServer`) and prints its address. The rig's own
-status comes from ``rig_status``, a poll the caller hands in (the HIL room's
-:func:`ipcosim.fmus.hil.observer.rig_monitor`); it is called from the server's thread, never from
-the run's, and at most every :data:`RIG_POLL_S`.
+The page is served from another process, not a thread of the run's: a thread would share the run's
+interpreter lock, and a server thread preempted while it holds it stops the paced loop for as long
+as the host gives other work (measured: a viewer made 9-18 % of a 1 kHz HIL run's steps late that
+way). So the feed writes its rows and its :class:`~ipcosim.harness.live.feed.Board` into shared
+memory, and the serving process (``python -m ipcosim.harness.live.session FOLDER``) reads them, asks
+the rig for its status and talks to the browsers; the run's process pays one row copy per sample.
+
+:func:`open_live` starts the serving process and prints the page's address; the feed's first tick
+publishes the scene and the shared memory (``FOLDER/config.json``); :meth:`LiveSession.finished`
+publishes the run's metrics (``FOLDER/metrics.json``) and :meth:`LiveSession.close` lets a watching
+page fetch the end, then ends the serving process.
 """
 from __future__ import annotations
 
+import json
+import os
+import shutil
+import subprocess
 import sys
+import tempfile
 import threading
 import time
+from multiprocessing import shared_memory
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ipcosim.harness.live.feed import LiveFeed
+import numpy as np
+
+from ipcosim.errors import IpcosimError
+from ipcosim.harness.live.feed import Board, LiveFeed, SampleRing
 from ipcosim.harness.live.server import MAX_ROWS, LiveServer, finite_rows
 
 #: The rig is asked for its status this often [s] while a page watches (asked in the last WATCHED_S).
@@ -24,117 +40,195 @@ WATCHED_S = 2.0
 RIG_FIRST_S = 2.0
 #: After the run, a watching page has this long to fetch its end [s].
 LINGER_S = 3.0
+#: Environment variables that hand the serving process its page token and the rig's token.
+TOKEN_VARIABLE, RIG_TOKEN_VARIABLE = "IPCOSIM_LIVE_TOKEN", "IPCOSIM_RIG_TOKEN"
 
 
-class LiveSource:
-    """A run as it happens (the :class:`~ipcosim.harness.live.server.Source` of a live run).
+class LiveViewError(IpcosimError, RuntimeError):
+    """The live view's serving process did not start (its message says why)."""
 
-    Parameters
-    ----------
-    feed : LiveFeed
-        The run's observer.
-    make_scene : callable
-        ``make_scene(names) -> dict``: the scene for the sampled columns.
-    rig_status : callable, optional
-        ``rig_status() -> dict``: the rig's status (``watchdog_running``, ``amplifier_enabled``,
-        ``limit_tripped``, ``limit_message``, ``motor_voltage``...; ``error`` when it cannot be read).
-    """
 
-    live = True
+class RigPoller:
+    """Asks ``rig_status()`` every :data:`RIG_POLL_S` from a thread of its own while a page watches."""
 
-    def __init__(self, feed: LiveFeed, make_scene: Callable[[Sequence[str]], dict[str, Any]],
-                 rig_status: Callable[[], dict[str, Any]] | None = None) -> None:
-        self.feed = feed
-        self.make_scene = make_scene
+    def __init__(self, rig_status: Callable[[], dict[str, Any]]) -> None:
         self.rig_status = rig_status
-        self.metrics: dict[str, Any] | None = None
-        self._scene: dict[str, Any] | None = None
-        self._rig: dict[str, Any] | None = None
+        self.last: dict[str, Any] | None = None
         self._asked = 0.0
-        self._poller: threading.Thread | None = None
-        self._first = threading.Event()
-        self._closed = threading.Event()
-        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._first, self._closed, self._lock = threading.Event(), threading.Event(), threading.Lock()
 
-    def scene(self) -> dict[str, Any] | None:
-        if not self.feed.started.is_set():
-            return None
-        if self._scene is None:
-            self._scene = {"scene": self.make_scene(self.feed.names), "names": list(self.feed.names)}
-        return self._scene
-
-    def samples(self, since: int) -> dict[str, Any]:
-        feed = self.feed
-        state = feed.state  # read first: a terminal state means every row is already in the ring
-        if feed.ring is None:
-            return {"rows": [], "next": 0, "more": False, "state": state, "info": {}}
-        rows, nxt, lost = feed.ring.read(since, MAX_ROWS)
-        return {"rows": finite_rows(rows), "next": nxt, "more": nxt < feed.ring.count, "lost": lost, "state": state,
-                "message": feed.message, "stop_requested": feed.stop_requested, "info": feed.info,
-                "pacing": feed.pacing(), "rig": self._poll_rig(), "metrics": self.metrics}
-
-    def _poll_rig(self) -> dict[str, Any] | None:
-        """The rig's last status. A thread of its own asks the rig every :data:`RIG_POLL_S` while a page
-        watches (a slow rig never holds up a page's answer); the first answer is waited for up to
-        :data:`RIG_FIRST_S`."""
-        if self.rig_status is None:
-            return None
+    def get(self) -> dict[str, Any] | None:
+        """The last status (the first one waited for up to :data:`RIG_FIRST_S`)."""
         self._asked = time.monotonic()
         with self._lock:
-            if self._poller is None:
-                self._poller = threading.Thread(target=self._poll_loop, name="ipcosim-live-rig", daemon=True)
-                self._poller.start()
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._loop, name="ipcosim-live-rig", daemon=True)
+                self._thread.start()
         self._first.wait(RIG_FIRST_S)
-        return self._rig
+        return self.last
 
-    def _poll_loop(self) -> None:
+    def _loop(self) -> None:
         while not self._closed.is_set():
             if time.monotonic() - self._asked < WATCHED_S:
                 try:
-                    self._rig = self.rig_status()
+                    self.last = self.rig_status()
                 except Exception as exc:  # noqa: BLE001 -- the page says what went wrong, the run goes on
-                    self._rig = {"error": str(exc).splitlines()[0] if str(exc) else type(exc).__name__}
+                    self.last = {"error": str(exc).splitlines()[0] if str(exc) else type(exc).__name__}
                 self._first.set()
             self._closed.wait(RIG_POLL_S)
 
     def close(self) -> None:
-        """Stop asking the rig."""
         self._closed.set()
-        if self._poller is not None:
-            self._poller.join(timeout=5)
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        getattr(self.rig_status, "close", lambda: None)()
+
+
+class SharedSource:
+    """The page's :class:`~ipcosim.harness.live.server.Source` in the serving process: the feed's board and
+    rows from shared memory, the scene and the metrics from the session's folder."""
+
+    live = True
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self.config: dict[str, Any] | None = None
+        self.board: Board | None = None
+        self.ring: SampleRing | None = None
+        self.rig: RigPoller | None = None
+        self._shm: Any = None
+
+    def _attach(self) -> bool:
+        if self.board is not None:
+            return True
+        try:
+            self.config = json.loads((self.folder / "config.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return False
+        self._shm = shared_memory.SharedMemory(self.config["shm"])
+        from multiprocessing import resource_tracker  # the run's process owns it: never unlinked from here
+
+        resource_tracker.unregister(self._shm._name, "shared_memory")  # noqa: SLF001 -- its registered name
+        buffer = self._shm.buf
+        self.board = Board(buffer[:Board.SIZE])
+        self.ring = SampleRing(len(self.config["names"]), buffer=buffer[Board.SIZE:], counter=self.board.counter)
+        rig = self.config.get("rig")
+        if rig:
+            from ipcosim.fmus.hil.observer import RigMonitor
+
+            self.rig = RigPoller(RigMonitor(rig["card_type"], rig["card_id"], rig["host"], rig["port"],
+                                            os.environ.get(RIG_TOKEN_VARIABLE) or None))
+        return True
+
+    def scene(self) -> dict[str, Any] | None:
+        if not self._attach():
+            return None
+        assert self.config is not None
+        return {"scene": self.config["scene"], "names": self.config["names"]}
+
+    @property
+    def closed(self) -> bool:
+        """Whether the run's process published the run's end (its metrics), or ended the session."""
+        return (self.board is not None and bool(self.board["closed"])) or (self.folder / "closed").exists()
+
+    def samples(self, since: int) -> dict[str, Any]:
+        if not self._attach():
+            return {"rows": [], "next": 0, "more": True, "state": "waiting", "info": {}}
+        assert self.board is not None and self.ring is not None and self.config is not None
+        board = self.board
+        closed, state = bool(board["closed"]), board.state  # first: after them, every row is in the ring
+        rows, nxt, lost = self.ring.read(since, MAX_ROWS)
+        info = self.config["info"]
+        pacing = ({"steps": board["steps"], "late_steps": board["late_steps"],
+                   "overrun_budget": info["overrun_budget"], "tolerance_s": info["tolerance_s"]}
+                  if info.get("paced") else None)
+        metrics = None
+        if closed:
+            try:
+                metrics = json.loads((self.folder / "metrics.json").read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                metrics = None
+        return {"rows": finite_rows(rows), "next": nxt, "more": nxt < self.ring.count or not closed, "lost": lost,
+                "state": state, "message": board.message, "stop_requested": bool(board["stop"]), "info": info,
+                "pacing": pacing, "rig": self.rig.get() if self.rig is not None and not closed else None,
+                "metrics": metrics}
 
     def stop(self) -> bool:
-        if self.feed.state not in ("waiting", "running"):
+        if not self._attach() or self.board is None or self.board.state not in ("waiting", "running"):
             return False
-        self.feed.request_stop()
+        self.board["stop"] = 1
         return True
+
+    def close(self) -> None:
+        if self.rig is not None:
+            self.rig.close()
+        self.board = self.ring = None
+        if self._shm is not None:
+            try:
+                self._shm.close()
+            except BufferError:  # a page's answer still holds a view: the process ends anyway
+                pass
 
 
 class LiveSession:
-    """The feed and the server of one live run; :meth:`close` after the run."""
+    """The feed of one live run and the process serving its page; :meth:`close` after the run."""
 
-    def __init__(self, source: LiveSource, server: LiveServer, close_rig: Callable[[], None] | None) -> None:
-        self.source, self.server, self._close_rig = source, server, close_rig
-        self.feed = source.feed
-        self.url = server.url
+    def __init__(self, folder: Path, proc: subprocess.Popen, url: str,
+                 make_scene: Callable[[Sequence[str]], dict[str, Any]], rig: dict[str, Any] | None) -> None:
+        self.folder, self.proc, self.url = folder, proc, url
+        self.make_scene, self.rig = make_scene, rig
+        self._shm: Any = None
+        self.feed = LiveFeed(allocate=self._allocate)
+
+    def _allocate(self, names: Sequence[str], info: dict[str, Any], nbytes: int) -> Any:
+        """The shared memory of the feed's board and rows, and ``config.json`` saying where it is."""
+        self._shm = shared_memory.SharedMemory(create=True, size=nbytes)
+        np.frombuffer(self._shm.buf, dtype=np.uint8)[:Board.SIZE] = 0
+        config = {"shm": self._shm.name, "names": list(names), "info": info, "scene": self.make_scene(names),
+                  "rig": self.rig}
+        tmp = self.folder / "config.json.tmp"
+        tmp.write_text(json.dumps(config, allow_nan=False), encoding="utf-8")
+        tmp.replace(self.folder / "config.json")
+        return self._shm.buf
 
     def finished(self, metrics: dict[str, Any] | None) -> None:
-        """The run's metrics, for the page's last look."""
-        self.source.metrics = metrics
+        """Publish the run's metrics: the page's last look."""
+        (self.folder / "metrics.json").write_text(json.dumps(metrics, allow_nan=False), encoding="utf-8")
+        board = self.feed.board
+        if board.state == "running":  # the run ended before its feed could say how (an error at its start)
+            board.state = "failed"
+        board["closed"] = 1
 
     def close(self, linger: float = LINGER_S) -> None:
-        """Let a watching page fetch the end (up to ``linger`` seconds), then stop serving."""
+        """Let a watching page fetch the end (up to ``linger`` seconds), then end the serving process."""
+        self.feed.board["closed"] = 1
+        (self.folder / "closed").touch()
         try:
-            self.server.close(linger)
+            self.proc.wait(timeout=linger + 5)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
         finally:
-            self.source.close()
-            if self._close_rig is not None:
-                self._close_rig()
+            self.feed.board = Board()  # off the shared memory before it goes
+            self.feed.ring = None
+            if self._shm is not None:
+                try:
+                    self._shm.close()
+                except BufferError:
+                    pass
+                try:
+                    self._shm.unlink()
+                except FileNotFoundError:
+                    pass
+            shutil.rmtree(self.folder, ignore_errors=True)
 
 
 def open_live(make_scene: Callable[[Sequence[str]], dict[str, Any]], *, host: str = "127.0.0.1", port: int = 0,
-              token: str | None = None, rig_status: Any = None, announce: str = "ipcosim run") -> LiveSession:
-    """Serve a live view of the run that will observe with the returned session's ``feed``.
+              token: str | None = None, rig: dict[str, Any] | None = None, rig_token: str | None = None,
+              announce: str = "ipcosim run") -> LiveSession:
+    """Start the process serving a live view and print the page's address; the returned session's ``feed``
+    is the observer the run hands its samples to.
 
     Parameters
     ----------
@@ -142,13 +236,70 @@ def open_live(make_scene: Callable[[Sequence[str]], dict[str, Any]], *, host: st
         ``make_scene(names) -> dict``.
     host, port, token
         Where to serve and the access token (``--live-host``, ``--live-port``, ``--live-token``).
-    rig_status : callable, optional
-        The rig's status poll; its ``close()`` (when it has one) is called at the end.
+    rig : dict, optional
+        ``card_type``, ``card_id``, ``host``, ``port`` of the virtual rig whose status the page shows
+        (:func:`ipcosim.fmus.hil.observer.rig_monitor`); ``rig_token`` its access token.
     announce : str
         The prefix of the line printed on stderr with the page's address.
+
+    Raises
+    ------
+    LiveViewError
+        The serving process did not start (its first line of error, e.g. a port in use).
     """
-    feed = LiveFeed()
-    source = LiveSource(feed, make_scene, rig_status)
-    server = LiveServer(source, host, port, token)
-    print(f"{announce}: live view at {server.url}", file=sys.stderr, flush=True)
-    return LiveSession(source, server, getattr(rig_status, "close", None))
+    folder = Path(tempfile.mkdtemp(prefix="ipcosim-live-"))
+    env = {k: v for k, v in os.environ.items() if k not in (TOKEN_VARIABLE, RIG_TOKEN_VARIABLE)}
+    env.update({TOKEN_VARIABLE: token} if token else {})
+    env.update({RIG_TOKEN_VARIABLE: rig_token} if rig_token else {})
+    proc = subprocess.Popen([sys.executable, "-m", "ipcosim.harness.live.session", str(folder), host, str(port),
+                             str(os.getpid())], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    assert proc.stdout is not None and proc.stderr is not None
+    line = proc.stdout.readline().strip()
+    if not line.startswith("http"):
+        proc.wait(timeout=10)
+        shutil.rmtree(folder, ignore_errors=True)
+        why = proc.stderr.read().strip().splitlines()
+        raise LiveViewError(f"live view: {why[-1] if why else 'its server did not start'}")
+    print(f"{announce}: live view at {line}", file=sys.stderr, flush=True)
+    return LiveSession(folder, proc, line, make_scene, rig)
+
+
+def serve(folder: Path, host: str, port: int, parent: int, linger: float = LINGER_S) -> None:
+    """The serving process: the page of the run whose feed publishes into ``folder``, until the run's end
+    is published (and a watching page has fetched it, or ``linger`` seconds passed) or the run's process
+    ``parent`` is gone."""
+    source = SharedSource(folder)
+    server = LiveServer(source, host, port, os.environ.get(TOKEN_VARIABLE) or None)
+    print(server.url, flush=True)
+    closed_at = None
+    try:
+        while True:
+            time.sleep(0.05)
+            if not source.closed and not _alive(parent):
+                break
+            if source.closed:
+                closed_at = closed_at or time.monotonic()
+                if not server.httpd.viewers or server.httpd.served_end.is_set() or \
+                        time.monotonic() - closed_at > linger:
+                    break
+    finally:
+        server.close()
+        source.close()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+if __name__ == "__main__":
+    try:
+        serve(Path(sys.argv[1]), sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))
+    except IpcosimError as exc:
+        print(str(exc), file=sys.stderr)
+        sys.exit(1)
