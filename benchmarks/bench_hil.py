@@ -151,7 +151,7 @@ def _watched(cmd: list[str], env: dict[str, str], watched: dict[str, Any]) -> su
                     answer = json.loads(r.read())
                 since = answer["next"]
                 watched.update(answers=watched["answers"] + 1, rows=watched["rows"] + len(answer["rows"]),
-                               rig=answer.get("rig"))
+                               rig=answer.get("rig") or watched["rig"])
                 if answer["state"] not in ("running", "waiting") and not answer["more"]:
                     return
                 time.sleep(POLL_MS / 1000)
