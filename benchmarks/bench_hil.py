@@ -371,10 +371,18 @@ def viewer(lines: list[str]) -> None:
         lines.append(describe(f"LQR single 1 kHz rt, {label}", m)
                      + f"\n{'':32s}own overruns {own[watched]}, all {split.get('overruns')} of {split.get('steps')}; "
                        f"host stalls {1e3 * split.get('host_stall_s', float('nan')):.0f} ms"
-                     + (f"; the viewer got {seen.get('answers')} answers, {seen.get('rows')} rows, rig watchdog "
-                        f"{'armed' if (seen.get('rig') or {}).get('watchdog_running') else 'not seen armed'}"
-                        if watched else ""))
+                     + (f"; the viewer got {seen.get('answers')} answers, {seen.get('rows')} rows, the rig's "
+                        f"status {_rig_seen(seen.get('rig'))}" if watched else ""))
         print('   ' + lines[-1], flush=True)
+
+
+def _rig_seen(rig: dict[str, Any] | None) -> str:
+    """The last rig status a viewer saw, in a few words."""
+    if not rig:
+        return "never seen"
+    if rig.get("error"):
+        return f"not read: {rig['error']}"
+    return "watchdog " + ("armed" if rig.get("watchdog_running") else "not armed")
 
 
 def run() -> list[str]:

@@ -1,12 +1,13 @@
-"""The live feed: an observer that hands a run's values to the live view's server thread.
+"""The live feed: an observer that hands a run's values to the process serving the live view.
 
 The stepping loop must not pay for a viewer. :class:`LiveFeed` asks the master for a tick only
 every ``1 / rate`` simulated seconds (:data:`LIVE_RATE_HZ`, about the page's refresh rate), and
 at such a tick it copies the recorded columns' current values into one row of a
-:class:`SampleRing` -- a preallocated array written by the loop's thread alone and read by the
-server's thread without a lock (the write counter is published after the row is written; a
-reader that fell a whole ring behind skips ahead and counts what it lost). Nothing else happens
-on the loop's thread: the server turns rows into JSON, polls a rig, talks to browsers.
+:class:`SampleRing` -- a preallocated array (in shared memory, :mod:`ipcosim.harness.live.session`)
+written by the loop's thread alone and read by the serving process without a lock (the row count
+is published after the row is written; a reader that fell a whole ring behind skips ahead and
+counts what it lost). Nothing else happens in the run's process: the serving process turns rows
+into JSON, polls a rig, talks to browsers.
 
 The feed knows no plant: it samples every Real, Integer and Boolean column of the run's
 :class:`~ipcosim.harness.master.layout.Layout` by name (what the page draws is the scene's
@@ -20,7 +21,6 @@ from __future__ import annotations
 
 import math
 import signal
-import sys
 from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
@@ -36,10 +36,6 @@ if TYPE_CHECKING:  # pragma: no cover
 LIVE_RATE_HZ = 30.0
 #: Rows the ring holds: at 30 samples a second, over half an hour of a run.
 RING_ROWS = 1 << 16
-#: The interpreter's thread switch interval during a paced run with a live view [s]: the server's thread
-#: holds the GIL for at most this long when the loop's thread wants it (the default, 5 ms, made one step in
-#: five late at 1 kHz with a viewer watching).
-PACED_SWITCH_INTERVAL = 1e-4
 #: What the page is told when its stop button ended the run.
 STOP_MESSAGE = "stopped from the live view"
 
@@ -201,7 +197,6 @@ class LiveFeed(Observer):
         self._pacer: RealtimePacer | None = None
         self._late_seen = 0
         self._earliest = 1 << 62
-        self._switch_interval: float | None = None
         self._tolerance_ns = 0
         self._real: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._ints = np.zeros(0, dtype=int)
@@ -242,8 +237,6 @@ class LiveFeed(Observer):
             tolerance = self._pacer.tolerance if self._pacer.tolerance is not None else execution.step_size / 2
             self._tolerance_ns = int(round(tolerance * 1e9))
             self.info.update(overrun_budget=self._pacer.overrun_budget, tolerance_s=tolerance)
-            self._switch_interval = sys.getswitchinterval()
-            sys.setswitchinterval(min(self._switch_interval, PACED_SWITCH_INTERVAL))
         width = len(self.names)
         if self.allocate is not None:
             buffer = self.allocate(self.names, self.info, Board.SIZE + SampleRing.nbytes(width))
@@ -297,9 +290,6 @@ class LiveFeed(Observer):
         self.board["steps"] = self._late_seen
 
     def finish(self, execution: "Execution", error: BaseException | None) -> None:
-        if self._switch_interval is not None:
-            sys.setswitchinterval(self._switch_interval)
-            self._switch_interval = None
         board = self.board
         if self.ring is not None and execution.tick and board.state == "running":
             try:

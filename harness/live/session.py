@@ -151,7 +151,7 @@ class SharedSource:
                 metrics = None
         return {"rows": finite_rows(rows), "next": nxt, "more": nxt < self.ring.count or not closed, "lost": lost,
                 "state": state, "message": board.message, "stop_requested": bool(board["stop"]), "info": info,
-                "pacing": pacing, "rig": self.rig.get() if self.rig is not None and not closed else None,
+                "pacing": pacing, "rig": None if self.rig is None else (self.rig.last if closed else self.rig.get()),
                 "metrics": metrics}
 
     def stop(self) -> bool:
