@@ -155,8 +155,11 @@ class Board:
         self["message_bytes"] = len(data)
 
 
-#: ``allocate(names, info, nbytes) -> buffer``: a writable buffer of ``nbytes`` for a feed's board and ring
-#: (shared with the process that serves the page), called once the sampled columns are known.
+#: ``allocate(names, info, nbytes) -> (buffer, publish)``: a writable buffer of ``nbytes`` for a feed's board
+#: and ring (shared with the process that serves the page), called once the sampled columns are known, and
+#: ``publish()``, called at the feed's first tick after the start (never inside the run's start-up step,
+#: when real-time components anchor their clocks: a page's first requests then made a HIL adapter's
+#: sample instants start late), which tells the serving process where the buffer is.
 Allocate = Any
 
 
@@ -201,6 +204,7 @@ class LiveFeed(Observer):
         self._real: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._ints = np.zeros(0, dtype=int)
         self._row = np.zeros(1)
+        self._publish: Any = None
 
     @property
     def state(self) -> str:
@@ -239,7 +243,7 @@ class LiveFeed(Observer):
             self.info.update(overrun_budget=self._pacer.overrun_budget, tolerance_s=tolerance)
         width = len(self.names)
         if self.allocate is not None:
-            buffer = self.allocate(self.names, self.info, Board.SIZE + SampleRing.nbytes(width))
+            buffer, self._publish = self.allocate(self.names, self.info, Board.SIZE + SampleRing.nbytes(width))
             stop = self.board["stop"]
             self.board = Board(buffer[:Board.SIZE])
             self.board["stop"] = stop
@@ -253,6 +257,9 @@ class LiveFeed(Observer):
         return (n // self._every + 1) * self._every
 
     def step(self, execution: "Execution", n: int) -> None:
+        if self._publish is not None:
+            self._publish, publish = None, self._publish
+            publish()
         self._sample(n)
         if self._pacer is not None:
             self._count_late()

@@ -179,21 +179,30 @@ class LiveSession:
         self.folder, self.proc, self.url = folder, proc, url
         self.make_scene, self.rig = make_scene, rig
         self._shm: Any = None
+        self._config: dict[str, Any] | None = None
         self.feed = LiveFeed(allocate=self._allocate)
 
-    def _allocate(self, names: Sequence[str], info: dict[str, Any], nbytes: int) -> Any:
-        """The shared memory of the feed's board and rows, and ``config.json`` saying where it is."""
+    def _allocate(self, names: Sequence[str], info: dict[str, Any], nbytes: int) -> tuple[Any, Callable[[], None]]:
+        """The shared memory of the feed's board and rows, and the publication of ``config.json`` saying
+        where it is (the feed calls it at its first tick)."""
         self._shm = shared_memory.SharedMemory(create=True, size=nbytes)
         np.frombuffer(self._shm.buf, dtype=np.uint8)[:Board.SIZE] = 0
         config = {"shm": self._shm.name, "names": list(names), "info": info, "scene": self.make_scene(names),
                   "rig": self.rig}
+        self._config = config
+        return self._shm.buf, self.publish
+
+    def publish(self) -> None:
+        """Write ``config.json`` (once): from then on the serving process answers with the run's rows."""
+        if self._config is None or (self.folder / "config.json").exists():
+            return
         tmp = self.folder / "config.json.tmp"
-        tmp.write_text(json.dumps(config, allow_nan=False), encoding="utf-8")
+        tmp.write_text(json.dumps(self._config, allow_nan=False), encoding="utf-8")
         tmp.replace(self.folder / "config.json")
-        return self._shm.buf
 
     def finished(self, metrics: dict[str, Any] | None) -> None:
         """Publish the run's metrics: the page's last look."""
+        self.publish()  # a run that ended before the feed's first tick
         (self.folder / "metrics.json").write_text(json.dumps(metrics, allow_nan=False), encoding="utf-8")
         board = self.feed.board
         if board.state == "running":  # the run ended before its feed could say how (an error at its start)
