@@ -231,6 +231,10 @@ def test_view_shows_a_sweep_folder_as_its_table(tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     with pytest.raises(ipcosim.IpcosimError, match="no results.csv"):
         view_server(tmp_path / "empty")
+    run = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "view", str(tmp_path / "missing")],
+                         capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert run.returncode == 1 and run.stderr.strip().splitlines() == [
+        f"ipcosim view: error: {tmp_path / 'missing'}: not a folder (expected a run's or a sweep's output folder)"]
 
 
 # ---------------------------------------------------------------------------------------- in chromium
