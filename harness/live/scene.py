@@ -22,6 +22,8 @@ REFERENCES = ("setpoint.reference", "controller.reference")
 VOLTAGES = ("controller.voltage", "plant.voltage")
 #: A card's status outputs (the HIL adapter's) shown beside the rig's own status.
 STATUS_OUTPUTS = ("watchdog_expired", "limit_tripped", "overruns")
+#: Distance at which two carts are drawn apart at rest [m] (a drawing's choice: each measures from its start).
+CART_SPACING_M = 0.16
 #: Pendulum length drawn when the plant does not say (the IP02's medium pendulum, full length) [m].
 DEFAULT_PENDULUM_M = 0.337
 
@@ -45,7 +47,7 @@ def scene(columns: Sequence[str], title: str, start: Callable[[str, str], Any] =
     Returns
     -------
     dict
-        ``title``, ``kind``, ``reference``, ``carts`` (``[{"column", "label"}]``), ``pendulum``
+        ``title``, ``kind``, ``reference``, ``carts`` (``[{"column", "label", "drawn_at_m"}]``), ``pendulum``
         (``{"column", "cart", "length_m"}`` or None), ``voltage``, ``limits``, ``status`` and
         ``others`` (the columns plotted when the kind is unknown).
     """
@@ -53,6 +55,8 @@ def scene(columns: Sequence[str], title: str, start: Callable[[str, str], Any] =
     connectors = [c.split(".", 1)[1] for c in columns if c.startswith("plant.")]
     kind = plant_kind(title, connectors=connectors) if connectors else None
     carts = [{"column": c, "label": label} for c, label in POSITIONS if c in cols]
+    for k, cart in enumerate(carts):  # each cart's position is from its own start: drawn at a rest spacing
+        cart["drawn_at_m"] = (k - (len(carts) - 1) / 2) * CART_SPACING_M
     angle = "plant.pendulum_angle" if "plant.pendulum_angle" in cols else None
     pendulum = None
     if angle and kind in PENDULUM_CART and f"plant.{PENDULUM_CART[kind]}" in cols:
