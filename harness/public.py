@@ -54,8 +54,9 @@ def run(scenario: str | os.PathLike[str], *, swap: Mapping[str, Any] | None = No
         :mod:`ipcosim.harness.master.manipulators`, e.g. ``ScheduledValues``).
     **more
         The other options of ``ipcosim run``: ``plot``, ``record``, ``algorithm``,
-        ``fmu_dirs``, ``save_baseline``, ``timeout``, ``loop``, ``parameter_file`` (see
-        :class:`~ipcosim.harness.options.RunOptions`).
+        ``fmu_dirs``, ``save_baseline``, ``timeout``, ``loop``, ``parameter_file``, ``live``
+        (and ``live_host``, ``live_port``, ``live_token``: the run in the browser as it happens,
+        docs/live.md) (see :class:`~ipcosim.harness.options.RunOptions`).
         SIGINT and SIGTERM during the run, and ``timeout``, stop it between FMU calls with its
         results so far written: :class:`ipcosim.harness.master.signals.Interrupted` (a
         KeyboardInterrupt) is raised after every FMU is freed.

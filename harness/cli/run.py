@@ -70,6 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a real-time run's allowed late steps, as a fraction of its steps (default: "
                         "IPCOSIM_RT_OVERRUN_BUDGET, else 0.01); a run beyond it warns and exits with status "
                         f"{EXIT_REALTIME_DEGRADED}")
+    p.add_argument("--live", action="store_true",
+                   help="serve a page showing the run as it happens, with a stop button (its address is printed)")
+    p.add_argument("--live-host", metavar="ADDRESS", default="127.0.0.1",
+                   help="where the live page listens (default 127.0.0.1; another address needs --live-token)")
+    p.add_argument("--live-port", metavar="N", default=0, help="the live page's port (default 0: any free port)")
+    p.add_argument("--live-token", metavar="TOKEN", help="access token the live page asks every request for")
     p.add_argument("--timeout", metavar="S",
                    help="wall-clock limit [s]: stop the run there with its results so far (exit status 124)")
     p.set_defaults(func=main)

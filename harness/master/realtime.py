@@ -218,6 +218,11 @@ class Pacer:
         self._durations.append(d)
         return d
 
+    def lateness_since(self, k: int) -> list[int]:
+        """How late steps ``k``, ``k + 1``, ... started [ns] against the deadlines they waited for (a
+        running count for a live view; :meth:`lateness_ns` is the run's own account)."""
+        return self._lateness[k:]
+
     def starts_ns(self) -> np.ndarray:
         """The clock readings at which the steps so far started [ns]."""
         return np.asarray(self._starts, dtype=np.int64)
