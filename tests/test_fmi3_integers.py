@@ -145,3 +145,18 @@ def test_a_set_value_out_of_the_type_is_refused_naming_it(tmp_path, ints3, capsy
     rc = cli.main(["run", str(folder), "--out", str(tmp_path / "out"), "--quiet", "--set", assignment])
     err = error_lines(capsys)
     assert rc != 0 and len(err) == 1 and message in err[0] and assignment.split("=")[0] in err[0], err
+
+
+def test_jacobi_records_no_value_its_connection_cannot_deliver(tmp_path, ints3):
+    """Jacobi delivers the count of row r in the step after it: the count 128 is recorded at
+    t = 12.8 s as what the connection would deliver into the Int8 input, which it cannot; the
+    rows before it are written (a.i8_in = the count r, a.i8_out one step behind), none after."""
+    source = cfmu.build(cfmu.SOURCE3, tmp_path / "src-fmu")
+    folder = scenario(tmp_path, ints3, [("src.count", "a.i8_in")], stop=20.0, source=source)
+    rc = cli.main(["run", str(folder), "--out", str(tmp_path / "out"), "--quiet", "--algorithm", "jacobi"])
+    assert rc != 0
+    col = read_csv(tmp_path / "out" / "results.csv")
+    assert col["a.i8_in"] == [str(n) for n in range(128)]
+    assert col["a.i8_out"] == ["0"] + [str(n) for n in range(127)]
+    with pytest.raises(IpcosimError, match=r"src.count -> a.i8_in cannot carry 128: Int8 holds -128 .. 127.*12\.8 s"):
+        ipcosim.run(folder, algorithm="jacobi")

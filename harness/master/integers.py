@@ -105,11 +105,12 @@ def narrowing(src: str, dst: str) -> bool:
 
 class CarryError(IntegerRangeError):
     """A connection that cannot deliver its source's value: the destination's type cannot hold
-    it. ``tick``: the communication step in which it had to (None: initialization)."""
+    it. ``tick``: the communication step in which it had to (None: initialization, or not known);
+    ``row``: the record row that holds the value (when the record found it)."""
 
-    def __init__(self, message: str, tick: int | None = None) -> None:
+    def __init__(self, message: str, tick: int | None = None, row: int | None = None) -> None:
         super().__init__(message)
-        self.tick = tick
+        self.tick, self.row = tick, row
 
 
 class Carrier:

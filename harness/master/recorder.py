@@ -155,12 +155,27 @@ class Recorder:
                 or _time.monotonic() - self._last_emit >= self.flush_seconds)
 
     def emit(self, rows: int) -> None:
-        """Hand the buffer rows ``base_row .. rows-1`` (absolute numbers) to the writer."""
+        """Hand the buffer rows ``base_row .. rows-1`` (absolute numbers) to the writer.
+
+        Raises
+        ------
+        TickFailure
+            A row holds a value a connection cannot deliver (:meth:`_integer_column`): the rows
+            before it are written, it and the rest are not.
+        """
         t0 = _time.perf_counter()
         k = rows - self.base_row
         if k > 0:
             assert self.writer is not None
-            self.writer.append(self.rows(self.base_row, k))
+            try:
+                block = self.rows(self.base_row, k)
+            except integers.CarryError as exc:
+                bad = exc.row if exc.row is not None else self.base_row
+                if bad > self.base_row:
+                    self.writer.append(self.rows(self.base_row, bad - self.base_row))
+                self.base_row = rows  # the rest is never written
+                raise TickFailure(str(exc), bad, exc) from None
+            self.writer.append(block)
             if self.record_s:
                 for row in range(self.base_row, rows):
                     self.record_s.pop(row, None)
@@ -263,7 +278,7 @@ class Recorder:
                 out.append(carrier.deliver(x))
             except integers.CarryError as exc:
                 t = self.timebase.time((first_row + r) * self.record_every)
-                raise integers.CarryError(f"{exc} (at t = {t:.6g} s)") from None
+                raise integers.CarryError(f"{exc} (at t = {t:.6g} s)", row=first_row + r) from None
         return np.array(out, dtype=integers.DTYPE[dst_t])
 
     # ------------------------------------------------------------------ result
