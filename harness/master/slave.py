@@ -705,12 +705,14 @@ class PySlave(Slave):
 
     def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
         vrs = [v.vr for v in variables]
-        convert: Callable[[Any], Any] = {"integer": int, "boolean": lambda x: 1 if x else 0,
-                                         "string": lambda x: x if isinstance(x, bytes) else str(x).encode()}[kind]
+        types = [v.type for v in variables]
+        convert: Callable[[Any, str], Any] = {
+            "integer": lambda x, t: integers.stored(int(x), t), "boolean": lambda x, t: 1 if x else 0,
+            "string": lambda x, t: x if isinstance(x, bytes) else str(x).encode()}[kind]
 
         def get(buf: Any) -> int:
             self.on_get()
-            values = [convert(self.values[vr]) for vr in vrs]
+            values = [convert(self.values[vr], t) for vr, t in zip(vrs, types)]
             if isinstance(buf, list):
                 buf[:] = values
             else:
@@ -721,6 +723,8 @@ class PySlave(Slave):
         def put(buf: Any) -> int:
             for i, vr in enumerate(vrs):
                 x = buf[i]
+                if kind == "integer":
+                    x = integers.value(int(x), types[i])
                 self.values[vr] = bool(x) if kind == "boolean" else (x.decode() if isinstance(x, bytes) else x)
             return OK
 
