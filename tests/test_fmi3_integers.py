@@ -160,3 +160,19 @@ def test_jacobi_records_no_value_its_connection_cannot_deliver(tmp_path, ints3):
     assert col["a.i8_out"] == ["0"] + [str(n) for n in range(127)]
     with pytest.raises(IpcosimError, match=r"src.count -> a.i8_in cannot carry 128: Int8 holds -128 .. 127.*12\.8 s"):
         ipcosim.run(folder, algorithm="jacobi")
+
+
+def test_integer_values_parse_exactly_and_hold_their_types_ranges():
+    from ipcosim.harness.master import integers
+
+    assert integers.exact_integer("5e9") == 5 * 10 ** 9 and integers.exact_integer(5e9) == 5 * 10 ** 9
+    assert integers.exact_integer("18446744073709551615") == 2 ** 64 - 1  # no detour through a double
+    for bad in ("1.5", 1.5, True, float("inf"), "nan", "x"):
+        with pytest.raises(ValueError):
+            integers.exact_integer(bad)
+    # UInt64 in the int64 vector: the same 64 bits, and back
+    assert integers.stored(2 ** 64 - 1, "UInt64") == -1 and integers.value(-1, "UInt64") == 2 ** 64 - 1
+    assert integers.stored(2 ** 63, "UInt64") == -2 ** 63 and integers.value(-2 ** 63, "Int64") == -2 ** 63
+    assert not integers.narrowing("Int32", "Int64") and not integers.narrowing("UInt8", "Int16")
+    assert integers.narrowing("UInt32", "Int32") and integers.narrowing("Int8", "UInt64")
+    assert integers.integer_type("Enumeration", "3.0") == "Int64" and integers.integer_type("Enumeration") == "Integer"
