@@ -35,6 +35,7 @@ from ipcosim.harness.master.algorithm import (
     step_multiples,
 )
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
+from ipcosim.harness.master.integers import CarryError
 from ipcosim.harness.master.layout import Layout
 from ipcosim.harness.master.manipulators import Manipulator, SetValues
 from ipcosim.harness.master.observers import Observer
@@ -440,10 +441,13 @@ class Execution:
                 changed.append(f"{b.name}.{inputs[k].name}")
         for ch in b.channels:
             ins = self.layout.typed[b.index][ch.kind][1]
-            for k, src, j, mapping in ch.transfers:
+            for k, src, j, mapping, carrier in ch.transfers:
                 src_ch = next(c for c in self.blocks[src].channels if c.kind == ch.kind)
                 new = src_ch.out_values[j]
-                new = mapping.get(new, new) if mapping else new
+                if carrier is not None:
+                    new = carrier(new)
+                elif mapping:
+                    new = mapping.get(new, new)
                 if ch.in_values[k] != new:
                     ch.in_values[k] = new
                     changed.append(f"{b.name}.{ins[k].name}")
@@ -497,11 +501,25 @@ class Execution:
         simulation within them (the run then ends normally at ``self.tick``)."""
         rb, rbi = self.recorder.addresses()
         marks = [s.errors_logged for s in self.slaves]
-        failure = self._run_loop(n, target, rb, va, self.recorder.row_bytes, rbi)
+        try:
+            failure = self._run_loop(n, target, rb, va, self.recorder.row_bytes, rbi)
+        except CarryError as exc:
+            self._carry_failed(exc)
         if failure is None:
             return True
         self._loop_failed(failure, marks)
         return False
+
+    def _carry_failed(self, exc: CarryError) -> None:
+        """After a connection could not deliver a value in tick ``exc.tick``: write the rows up
+        to there and raise the failure, naming the connection, the value and the time."""
+        fn = int(exc.tick or 0)
+        self.tick = fn
+        rows = fn // self.record_every + 1
+        self.recorder.check_finite(self.recorder.base_row, rows)
+        self.recorder.emit(rows)
+        err = CarryError(f"{exc} (in the step from t = {self.time_of(fn):.6g} s)", fn)
+        raise TickFailure(str(err), rows, err)
 
     def _loop_failed(self, failure: tuple[int, int, str, int], marks: Sequence[int]) -> None:
         """After the loop stopped on a status > fmi2Warning at tick ``failure[0]``: write the

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from ipcosim.errors import IpcosimError, closest
+from ipcosim.harness.master import integers
 from ipcosim.harness.master.system import (
     SSP_TYPE,
     TRANSFORMATION_TYPES,
@@ -697,12 +698,10 @@ def convert_value(var: Variable, value: Any, what: str) -> Any:
             if isinstance(value, bool):
                 raise ValueError
             return float(value)
-        if kind == "integer":
-            if isinstance(value, float) and value.is_integer():
-                return int(value)
-            if isinstance(value, bool):
-                raise ValueError
-            return int(value)
+        if kind == "integer":  # exactly (FMI 3.0: Int8 .. UInt64), in the type's range below
+            x = integers.exact_integer(value)
+            if t not in integers.RANGE or integers.in_range(x, t):
+                return x
         if t == "Boolean":
             if isinstance(value, bool):
                 return value
@@ -716,6 +715,9 @@ def convert_value(var: Variable, value: Any, what: str) -> Any:
             return str(value)
     except (TypeError, ValueError):
         raise BindingError(f"{what}: {value!r} is not a valid {t} value") from None
+    if kind == "integer":
+        lo, hi = integers.RANGE[t]
+        raise BindingError(f"{what}: {value!r} is out of the range of {t} ({lo} .. {hi})")
     raise BindingError(f"{what}: variables of type {t} cannot be set")
 
 
