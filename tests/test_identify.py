@@ -127,7 +127,7 @@ def test_the_native_replay_is_the_python_replay(kind, truth):
 
     bench, overrides = realism("lab", kind)
     assert bench.voltage_resolution > 0 and bench.input_delay > 0
-    params = replace(preset(DEFAULT_PRESET[kind]), **{**overrides, **truth})
+    params = replace(preset(DEFAULT_PRESET[kind]), **{**overrides, **truth, "amplifier_gain": 0.93})
     t = np.arange(3000) * 1e-3
     voltage = 1.5 * np.sin(2 * np.pi * 0.8 * t) * (t % 1.0 < 0.6)    # bursts and pauses
     x0 = [math.pi if n == "pendulum_angle" else 0.0 for n in state_names(kind)]
