@@ -130,3 +130,18 @@ def test_sensor_gain_limits_hold_in_the_nonlinear_loop(double_mass, sensor, j, e
     inside, outside = (limit * 1.02, limit * 0.98) if end == "gain_lower" else (limit * 0.98, limit * 1.02)
     assert _growth(j, inside) < 0.9
     assert _growth(j, outside) > 1.1
+
+
+def test_without_matplotlib_analyze_keeps_its_margins(tmp_path, monkeypatch, capsys) -> None:
+    """No plotting library: the figures are skipped with one line, every number (the margins too) is reported."""
+    import importlib.util
+
+    from ipcosim.harness.cli import main as cli_main
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "matplotlib" else real(name, *a))
+    assert cli_main(["analyze", "single-mass-lqr", "--out", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert sum("figures skipped: matplotlib is not installed" in line for line in text.splitlines()) == 1
+    assert "disk margin (balanced)" in text and "cart_position: gain x" in text
+    assert (tmp_path / "analysis.json").is_file() and not (tmp_path / "margins.png").exists()

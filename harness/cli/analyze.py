@@ -88,5 +88,8 @@ def main(args: argparse.Namespace) -> int:
     print(f"  {r['statement']}")
     for line in _cycle_lines(r["friction_limit_cycles"]):
         print(f"  {line}")
-    print(f"  figures: {', '.join(r['figures'].values())}")
+    if r.get("figures_skipped"):
+        print(f"  figures skipped: {r['figures_skipped']}")
+    else:
+        print(f"  figures: {', '.join(r['figures'].values())}")
     return 0
