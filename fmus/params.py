@@ -56,6 +56,8 @@ class MotorParams:
     coulomb_velocity: float = _p(1e-3, "m/s",
                                  "stick band of the stick-slip Coulomb friction: |v| below it sticks (Karnopp)",
                                  "assumed", positive=True)
+    amplifier_gain: float = _p(1.0, "1", "power amplifier's voltage gain: the motor sees amplifier_gain times the "
+                                    "clipped command", "IP02 (UPM amplifier, gain 1)", positive=True)
 
     @property
     def reflected_inertia(self) -> float:

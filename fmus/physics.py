@@ -19,7 +19,7 @@ Double mass, state ``x = [xa, xa_dot, xc, xc_dot, theta, theta_dot, i]``::
                     - K (xa - xc) + fc(xc') = 0
     (Mp Lp^2/3) th'' - (Mp Lp/2) cos(th) xc'' + Bp th' - Mp g (Lp/2) sin(th) = 0
 
-``vA`` is the commanded voltage clipped to ``+-voltage_limit`` (the amplifier).
+``vA`` is the commanded voltage clipped to ``+-voltage_limit`` (the D/A range) times ``amplifier_gain`` (the amplifier).
 
 Coulomb friction is stick-slip, after D. Karnopp, "Computer simulation of stick-slip friction in
 mechanical dynamic systems", ASME J. Dyn. Syst. Meas. Control 107(1), 100-103 (1985)
@@ -59,7 +59,8 @@ def state_names(kind: str) -> tuple[str, ...]:
 
 
 def clip_voltage(v: float, limit: float) -> float:
-    """The amplifier: the command clipped to +-limit."""
+    """The D/A converter's range: the command clipped to +-limit (the amplifier then multiplies it by
+    ``amplifier_gain``)."""
     return limit if v > limit else (-limit if v < -limit else v)
 
 
@@ -90,7 +91,7 @@ def single_mass_applied_force(x: Sequence[float], p: SingleMassParams) -> float:
 def single_mass_rhs(x: Sequence[float], v: float, p: SingleMassParams) -> tuple[float, ...]:
     """Time derivative of the single-mass state ``[xc, xc', th, th', i]`` for voltage ``v`` [V]."""
     _, xd, th, thd, i = x
-    vA = clip_voltage(v, p.voltage_limit)
+    vA = p.amplifier_gain * clip_voltage(v, p.voltage_limit)
     ml = 0.5 * p.Mp * p.Lp
     s, c = math.sin(th), math.cos(th)
     m11 = p.Meq + p.Mp
@@ -109,7 +110,7 @@ def single_mass_rhs(x: Sequence[float], v: float, p: SingleMassParams) -> tuple[
 def double_mass_rhs(x: Sequence[float], v: float, p: DoubleMassParams) -> tuple[float, ...]:
     """Time derivative of the double-mass state ``[xa, xa', xc, xc', th, th', i]`` for voltage ``v`` [V]."""
     xa, xad, xc, xcd, th, thd, i = x
-    vA = clip_voltage(v, p.voltage_limit)
+    vA = p.amplifier_gain * clip_voltage(v, p.voltage_limit)
     spring = p.K * (xa - xc)
     fa = fc = 0.0
     if p.b1 or p.b2:
@@ -152,7 +153,7 @@ def rhs_for(params: PlantParams) -> Callable[[Sequence[float], float, PlantParam
 
 def quasi_static_current(x_mech: Sequence[float], v: float, params: PlantParams) -> float:
     """Armature current with the inductance neglected (La -> 0): (vA - emf * motor cart velocity) / Ra."""
-    vA = clip_voltage(v, params.voltage_limit)
+    vA = params.amplifier_gain * clip_voltage(v, params.voltage_limit)
     return (vA - params.emf_per_velocity * x_mech[1]) / params.Ra
 
 
@@ -194,7 +195,7 @@ def single_mass_from_momentum(z: Sequence[float], p: SingleMassParams) -> tuple[
 def single_mass_momentum_rhs(z: Sequence[float], v: float, p: SingleMassParams) -> tuple[float, ...]:
     """Time derivative of the momentum-form state ``[xc, p1, th, p2, i]``."""
     _, xd, th, thd, i = single_mass_from_momentum(z, p)
-    vA = clip_voltage(v, p.voltage_limit)
+    vA = p.amplifier_gain * clip_voltage(v, p.voltage_limit)
     ml = 0.5 * p.Mp * p.Lp
     s = math.sin(th)
     fric = karnopp(xd, single_mass_applied_force((0.0, xd, th, thd, i), p), p.b, p.coulomb_velocity) if p.b else 0.0

@@ -185,6 +185,7 @@ class Plant:
         self._L = self._circuit_part(self._internal_jacobian())
         self._steppers: dict[float, FastETDRK4] = {}
         self._limit = params.voltage_limit
+        self._amplifier_gain = params.amplifier_gain
         #: track end stops [m] (0 = none; set by ``InstrumentedPlant``)
         self.end_stop = 0.0
         self._friction = any(coulomb_forces(params))
@@ -237,7 +238,7 @@ class Plant:
         if not math.isfinite(voltage):
             raise ValueError(f"input voltage = {voltage} V at t = {t} s is not finite")
         limit = self._limit
-        vA = limit if voltage > limit else (-limit if voltage < -limit else voltage)
+        vA = self._amplifier_gain * (limit if voltage > limit else (-limit if voltage < -limit else voltage))
         try:
             z = stepper.step(self._z, self._f, vA)
             x = z if self._out is None else self._out(z)

@@ -125,8 +125,10 @@ def test_cli_json_and_figures(tmp_path, capsys) -> None:
     assert cli_main(["analyze", "double-mass-lqr", "--json", "--out", str(tmp_path)]) == 0
     r = json.loads(capsys.readouterr().out)
     assert r["law"] == "LQR" and r["kind"] == "double-mass" and r["closed_loop_stable"]
-    for name in ("bode.png", "nyquist.png", "analysis.json"):
+    for name in ("bode.png", "nyquist.png", "margins.png", "analysis.json"):
         assert (tmp_path / name).stat().st_size > 1000
+    assert set(r["sensor_margins"]) == {"active_cart_position", "passive_cart_position", "pendulum_angle"}
+    assert 0 < r["disk_margin"]["gain_lower"] < 1 < r["disk_margin"]["gain_upper"]
     assert json.loads((tmp_path / "analysis.json").read_text())["delay_margin_s"] == r["delay_margin_s"]
 
 

@@ -45,6 +45,24 @@ def _cycle_lines(report: dict | None) -> list[str]:
     return lines
 
 
+def _margin_lines(r: dict) -> list[str]:
+    """The disk margin at the plant input and each sensor's gain range and delay margin, one line each."""
+    dm = r.get("disk_margin")
+    if not dm:
+        return []
+    upper = _fmt(dm["gain_upper"], ".4g")
+    lines = [f"disk margin (balanced) {dm['alpha']:.4g}: simultaneous gain x{dm['gain_lower']:.4g} .. x{upper} "
+             f"and phase +-{dm['phase_deg']:.3g} deg (at {dm['frequency_rad_s']:.3g} rad/s)",
+             "sensor margins (loop at a time: one reading scaled or delayed, the others exact):"]
+    for name, m in r["sensor_margins"].items():
+        delay = m["delay_margin_s"]
+        lines.append(f"  {name}: gain x{m['gain_lower']:.4g} .. x{_fmt(m['gain_upper'], '.4g')}, "
+                     f"phase margin {_fmt(m['phase_margin_deg'], '.3g', ' deg')}, "
+                     f"delay margin {_fmt(delay and delay * 1e3, '.3g', ' ms')}, "
+                     f"disk margin {m['disk_margin']['alpha']:.3g}")
+    return lines
+
+
 def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.grammar import parse_set
     from ipcosim.harness.options import with_parameter_file
@@ -65,8 +83,13 @@ def main(args: argparse.Namespace) -> int:
           f"phase margin {_fmt(r['phase_margin_deg'], '.3g', ' deg')}; "
           f"delay margin {_fmt(r['delay_margin_s'] and r['delay_margin_s'] * 1e3, '.3g', ' ms')}")
     print(f"  peak sensitivity {_fmt(r['peak_sensitivity'], '.4g')}")
+    for line in _margin_lines(r):
+        print(f"  {line}")
     print(f"  {r['statement']}")
     for line in _cycle_lines(r["friction_limit_cycles"]):
         print(f"  {line}")
-    print(f"  figures: {r['figures']['bode']}, {r['figures']['nyquist']}")
+    if r.get("figures_skipped"):
+        print(f"  figures skipped: {r['figures_skipped']}")
+    else:
+        print(f"  figures: {', '.join(r['figures'].values())}")
     return 0

@@ -245,7 +245,7 @@ class _PlantTrace:
         steps = tracer.local(lambda d, h: min(ins.delay_steps(d, h), float(NATIVE_MAX_DELAY_STEPS)))(
             leaf("V:input_delay"), leaf("V:integrator_step"))
         delayed = tracer.local(lambda *a: ins.delay_line(a[:-2], a[-2], a[-1])[0])(*buffer, v, steps)
-        return v, tracer.local(self._physics.clip_voltage)(delayed, p.voltage_limit)
+        return v, p.amplifier_gain * tracer.local(self._physics.clip_voltage)(delayed, p.voltage_limit)
 
     def constrain(self, p: Any, before: list[Any], x: list[Any]) -> tuple[list[Any], Any]:
         """``plant.constrain`` in two traced calls (each merges its own branches): the state after stiction

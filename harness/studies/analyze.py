@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import cmath
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -41,6 +41,7 @@ from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.fmus.linearize import linearize
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, ParameterError, preset
+from ipcosim.fmus.physics import MEASURED
 from ipcosim.harness.studies import limit_cycle
 from ipcosim.harness.studies.loop import LinearLaw, linear_law
 
@@ -212,11 +213,23 @@ def gain_margins(loop: Loop, w: np.ndarray, Lw: np.ndarray) -> dict[str, Any]:
     L_nyq = loop_response(loop, np.array([math.pi / loop.T]))[0]  # z = -1: L is real there
     if L_nyq.real < 0:
         candidates.append((-1.0 / L_nyq.real, math.pi / loop.T))
+    L_dc = _dc_response(loop)  # z = 1: L is real there too (a loop without integrator can lose it at rest)
+    if L_dc is not None and L_dc < 0:
+        candidates.append((-1.0 / L_dc, 0.0))
     upper = [(k, wc) for k, wc in candidates if k > 1.0]
     lower = [(k, wc) for k, wc in candidates if 0 < k < 1.0]
     up = min(upper) if upper else (math.inf, None)
     lo = max(lower) if lower else (0.0, None)
     return {"upper": up[0], "upper_frequency_rad_s": up[1], "lower": lo[0], "lower_frequency_rad_s": lo[1]}
+
+
+def _dc_response(loop: Loop) -> float | None:
+    """``L(1)``, the loop's gain at rest (z = 1), or None where ``L`` has a pole there (an integrator)."""
+    A, B, C, D = (np.asarray(m) for m in (loop.L.A, loop.L.B, loop.L.C, loop.L.D))
+    M = np.eye(A.shape[0]) - A
+    if A.shape[0] and np.linalg.cond(M) > 1e12:
+        return None
+    return float((C @ np.linalg.solve(M, B) + D)[0, 0].real) if A.shape[0] else float(D[0, 0])
 
 
 def phase_margins(loop: Loop, w: np.ndarray, Lw: np.ndarray) -> list[dict[str, float]]:
@@ -250,6 +263,67 @@ def loop_limits(loop: Loop, n: int = 1500) -> tuple[float, float, float] | None:
     pm = worst_phase_margin(pms)
     return (peak(loop, w, np.abs(1.0 / (1.0 + Lw)))[0], min((d["delay_margin_s"] for d in pms), default=math.inf),
             math.inf if pm is None else abs(pm))
+
+
+# ----------------------------------------------------------------------------- disk and sensor margins
+def disk_margin(loop: Loop, w: np.ndarray, Lw: np.ndarray) -> dict[str, float]:
+    """The balanced (skew 0) disk margin of the loop: ``control.disk_margins`` on a fine grid between the neighbours
+    of the point of ``w`` where ``|S - 1/2|`` (from the loop's response ``Lw``) peaks.
+
+    ``alpha = 1 / max_w |S - 1/2|`` (Seiler, Packard and Gahinet, "An introduction to disk margins", 2020): the
+    loop stays stable for every complex gain ``(1 + alpha/2 d) / (1 - alpha/2 d)``, ``|d| <= 1``, in front of it,
+    i.e. for simultaneous gain factors in ``[(1 - alpha/2)/(1 + alpha/2), (1 + alpha/2)/(1 - alpha/2)]`` and
+    phase changes of ``+-2 atan(alpha/2)``.
+    """
+    dev = np.abs(1.0 / (1.0 + Lw) - 0.5)
+    i = int(np.argmax(dev))
+    grid = np.linspace(w[max(i - 1, 0)], w[min(i + 1, len(w) - 1)], 401)
+    alphas = control.disk_margins(loop.L, grid, skew=0.0, returnall=True)[0]
+    k = int(np.argmin(alphas))
+    alpha = float(alphas[k])
+    g = (1 + alpha / 2) / (1 - alpha / 2) if alpha < 2 else math.inf
+    return {"alpha": alpha, "frequency_rad_s": float(grid[k]), "gain_lower": 1 / g if math.isfinite(g) else 0.0,
+            "gain_upper": g if math.isfinite(g) else None,
+            "gain_dB": 20 * math.log10(g) if math.isfinite(g) else None,
+            "phase_deg": math.degrees(2 * math.atan(alpha / 2))}
+
+
+def sensor_loop(loop: Loop, j: int) -> Loop:
+    """The loop broken at the controller's ``j``-th measurement, every other loop closed (loop at a time).
+
+    ``L_j`` is minus the response from the ``j``-th input of the controller to the ``j``-th output of the plant, so
+    ``closed_loop_poles(sensor_loop(loop, j), k)`` are the poles with the reading multiplied by ``k``, and the
+    margins of ``L_j`` are those of a gain or a delay on that sensor alone.
+    """
+    pd, c = loop.plant, loop.controller
+    Ap, Bp, Cp, Dp = (np.asarray(m) for m in (pd.A, pd.B, pd.C, pd.D))
+    if not np.allclose(Dp, 0):
+        raise AnalysisError("the sampled plant has a direct feedthrough: no sensor loop is built for it")
+    E = np.eye(Cp.shape[0])
+    E[j, j] = 0.0                  # the controller reads every output but the j-th from the plant
+    A = np.block([[Ap + Bp @ c.D @ E @ Cp, Bp @ c.C], [c.B @ E @ Cp, c.A]])
+    B = np.vstack([Bp @ c.D[:, [j]], c.B[:, [j]]])
+    C = np.hstack([Cp[[j]], np.zeros((1, c.A.shape[0]))])
+    return replace(loop, L=-control.ss(A, B, C, np.zeros((1, 1)), loop.T))
+
+
+def break_point_margins(loop: Loop, w: np.ndarray, Lw: np.ndarray | None = None) -> dict[str, Any]:
+    """Gain range (checked by the closed-loop poles), phase and delay margins and disk margin of one broken loop."""
+    Lw = loop_response(loop, w) if Lw is None else Lw
+    gm = gain_margins(loop, w, Lw)
+    gm["checked"] = _check_gain_limits(loop, gm)
+    pms = phase_margins(loop, w, Lw)
+    return {"gain_lower": gm["lower"], "gain_upper": gm["upper"] if math.isfinite(gm["upper"]) else None,
+            "gain_lower_frequency_rad_s": gm["lower_frequency_rad_s"],
+            "gain_upper_frequency_rad_s": gm["upper_frequency_rad_s"], "gain_checked": gm["checked"],
+            "phase_margin_deg": worst_phase_margin(pms),
+            "delay_margin_s": min((d["delay_margin_s"] for d in pms), default=None),
+            "disk_margin": disk_margin(loop, w, Lw)}
+
+
+def sensor_margins(loop: Loop, outputs: Sequence[str], w: np.ndarray) -> dict[str, dict[str, Any]]:
+    """:func:`break_point_margins` of the loop broken at each measurement (``outputs``: the plant's measured names)."""
+    return {name: break_point_margins(sensor_loop(loop, j), w) for j, name in enumerate(outputs)}
 
 
 def peak(loop: Loop, w: np.ndarray, values: np.ndarray) -> tuple[float, float]:
@@ -401,11 +475,14 @@ def analyze_loop(loop: Loop, pid_search: bool | None = None) -> dict[str, Any]:
         out["phase_margin_deg"] = worst_phase_margin(pms)
         out["delay_margin_s"] = min(d["delay_margin_s"] for d in pms) if pms else None
         out["delay_margin_samples"] = out["delay_margin_s"] / loop.T if pms else None
+        out["disk_margin"] = disk_margin(loop, w, Lw)
+        out["sensor_margins"] = sensor_margins(loop, MEASURED[loop.kind] if loop.kind else (), w)
     else:  # no margins, and the frequency-domain peaks describe no stable loop
         out.update(gain_margin=None, phase_margins=[], phase_margin_deg=None, delay_margin_s=None,
                    delay_margin_samples=None, peak_sensitivity=None, peak_sensitivity_dB=None,
                    peak_sensitivity_frequency_rad_s=None, peak_complementary_sensitivity=None,
-                   peak_complementary_sensitivity_frequency_rad_s=None, modulus_margin=None)
+                   peak_complementary_sensitivity_frequency_rad_s=None, modulus_margin=None,
+                   disk_margin=None, sensor_margins={})
     out["friction_limit_cycles"] = limit_cycle.report(loop, stable)
     if pid_search if pid_search is not None else entry(loop.law).pid_gain_search:
         out["pid_gain_search"] = pid_gain_search(loop)
@@ -480,7 +557,13 @@ def plot_loop(loop: Loop, result: Mapping[str, Any], out: str | Path, title: str
     Lw = loop_response(loop, w)
     bode = _save(plt, _plot_bode(plt, w, Lw, title), out / "bode.png")
     nyquist = _save(plt, _plot_nyquist(plt, Lw, result.get("modulus_margin"), title), out / "nyquist.png")
-    return {"bode": bode, "nyquist": nyquist}
+    figures = {"bode": bode, "nyquist": nyquist}
+    if result.get("sensor_margins"):
+        breaks = {"plant input (voltage)": loop, **{name: sensor_loop(loop, j) for j, name in
+                                                    enumerate(result["sensor_margins"])}}
+        responses = {name: loop_response(lp, w) for name, lp in breaks.items()}
+        figures["margins"] = _save(plt, _plot_margins(plt, result, responses, title), out / "margins.png")
+    return figures
 
 
 def _save(plt: Any, fig: Any, path: Path) -> str:
@@ -532,6 +615,50 @@ def _plot_nyquist(plt: Any, Lw: np.ndarray, modulus_margin: float | None, title:
     return fig
 
 
+def _plot_margins(plt: Any, result: Mapping[str, Any], responses: Mapping[str, np.ndarray], title: str) -> Any:
+    """The margins figure: left, the range of gain each break point tolerates (the plant input's and, loop at a
+    time, each sensor's; the disk margin's simultaneous gain range beside the input's), with the delay margin in the
+    label; right, each broken loop's Nyquist curve around -1 with the disk the disk margin keeps it out of."""
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.8))
+    gm, dm = result["gain_margin"], result["disk_margin"]
+    rows = [("plant input (voltage)", gm["lower"], gm["upper"], result["delay_margin_s"]),
+            ("plant input, disk", dm["gain_lower"], dm["gain_upper"], None)]
+    rows += [(name, m["gain_lower"], m["gain_upper"], m["delay_margin_s"])
+             for name, m in result["sensor_margins"].items()]
+    for y, (_name, lo, hi, delay) in enumerate(rows):
+        lo_plot, hi_plot = max(lo or 0.0, 0.05), min(hi or 20.0, 20.0)
+        ax1.plot([lo_plot, hi_plot], [y, y], lw=8, solid_capstyle="butt", color="C0" if delay is not None else "C1")
+        span = f"x{lo:.3g} .. x{hi:.3g}" if hi else f"x{lo:.3g} .. inf"
+        text = span + ("" if delay is None else f", delay {delay * 1e3:.3g} ms")
+        ax1.annotate(text, (hi_plot, y), xytext=(4, 6), textcoords="offset points", fontsize=8)
+    ax1.axvline(1.0, color="k", lw=0.8)
+    ax1.set_xscale("log")
+    ax1.set_xlim(0.05, 60)
+    ax1.set_yticks(range(len(rows)), [r[0] for r in rows], fontsize=8)
+    ax1.invert_yaxis()
+    ax1.set_xlabel("gain factor on the signal [1] (stable inside the bar)")
+    ax1.set_title(f"{title}\ngain ranges (loop at a time) and delay margins", fontsize=9)
+    ax1.grid(True, which="both", axis="x", alpha=0.3)
+    for name, Lw in responses.items():
+        ax2.plot(Lw.real, Lw.imag, lw=1, label=name)
+    a = dm["alpha"]
+    if a < 2:   # the points -1/k of the disk's gains: a disk through -(1 - a/2)/(1 + a/2) and -(1 + a/2)/(1 - a/2)
+        left, right = -(1 + a / 2) / (1 - a / 2), -(1 - a / 2) / (1 + a / 2)
+        t = np.linspace(0, 2 * np.pi, 200)
+        c, r = (left + right) / 2, (right - left) / 2
+        ax2.plot(c + r * np.cos(t), r * np.sin(t), "r:", label=f"disk margin {a:.3g} (+-{dm['phase_deg']:.3g} deg)")
+    ax2.plot([-1], [0], "r+", ms=12)
+    ax2.set_xlim(-3, 1)
+    ax2.set_ylim(-2, 2)
+    ax2.set_xlabel("Re L [1]")
+    ax2.set_ylabel("Im L [1]")
+    ax2.set_title("each loop broken alone, around -1", fontsize=9)
+    ax2.legend(fontsize=7, loc="lower right")
+    ax2.grid(True, alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
 def analyze(scenario: str, *, parameter_set: str | None = None, set: Mapping[str, float] | None = None,
             out: str | Path | None = None) -> dict[str, Any]:
     """Analyse a scenario's loop (see the module docstring), with the ``--set`` values ``set``; with ``out``
@@ -546,9 +673,15 @@ def analyze(scenario: str, *, parameter_set: str | None = None, set: Mapping[str
     import json
 
     loop, info = scenario_loop(scenario, parameter_set, set)
+    from ipcosim.harness.extras import MissingExtraError
+
     result = {**info, **analyze_loop(loop)}
     if out is not None:
-        result["figures"] = plot_loop(loop, result, out, f"{info['scenario']} ({info['parameter_set']}): "
-                                                             "loop at the plant input")
+        try:
+            result["figures"] = plot_loop(loop, result, out, f"{info['scenario']} ({info['parameter_set']}): "
+                                                                 "loop at the plant input")
+        except MissingExtraError as exc:   # the numbers do not need the figures
+            result["figures"], result["figures_skipped"] = {}, str(exc)
+        Path(out).mkdir(parents=True, exist_ok=True)
         (Path(out) / "analysis.json").write_text(json.dumps(result, indent=2))
     return result

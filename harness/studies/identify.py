@@ -45,9 +45,25 @@ from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, PRESETS, pre
 from ipcosim.fmus.physics import MEASURED, state_names
 from ipcosim.fmus.plant import replay
 
-#: What the excitation makes identifiable, per plant kind (the default of ``fit``).
-DEFAULT_FIT = {"single-mass": ("Mc", "Beq", "Bp", "b"),
-               "double-mass": ("Ma", "Mc", "K", "Ba", "Bf", "b1", "b2")}
+#: What the excitation makes identifiable, per plant kind (the default of ``fit``; docs/identify.md, "Parameters"):
+#: the carts' masses, dampings and Coulomb forces, the pivot's damping and the motor's torque constant ``Kt``, which
+#: stands for the force per volt ``amplifier_gain N Kt / (rg Ra)`` (Kt and Ra are not separable at all: they enter
+#: as Kt / Ra and as the armature's time constant La / Ra, 0.07 ms; the amplifier gain and Kb only through that
+#: time constant, so they are options).
+DEFAULT_FIT = {"single-mass": ("Mc", "Beq", "Bp", "b", "Kt"),
+               "double-mass": ("Ma", "Mc", "K", "Ba", "Bf", "b1", "b2", "Kt")}
+#: The motor and amplifier constants that enter the motion (about) only through the force per volt; a fit of one of
+#: them with the others at the preset makes it carry the others' errors (``Identification.parameters[...]["note"]``).
+FORCE_PER_VOLT = ("Kt", "Ra", "amplifier_gain")
+#: A fit is not valid when some reading of the fitted part lies farther than this from its simulation [encoder
+#: counts]: the true model explains every reading to within half a count, a finished fit of it leaves at most 1.11
+#: (docs/identify.md, Figures: 40 seeded fits) and 1.50 with a hidden motor error the default fit carries (Under
+#: model error: 14 valid fits); a model that lacks what moved the plant (a constant off that is not fitted) leaves
+#: its error in the readings: 141 to 176 counts for 10 % of Lp, 14 for 10 % of Kt held at the preset.
+INVALID_COUNTS = 3.0
+#: The excitation must run through the whole log: each tenth of it holds at least this share of the log's voltage
+#: RMS (a step response spends its voltage in its first second; the identify experiments' multisine 0.84 to 1.24).
+EXCITED_SHARE = 0.25
 #: Parameters whose nominal may be 0: their fit scale [their unit] and start value.
 ZERO_NOMINAL = {"b": (0.1, 0.05), "b1": (0.1, 0.05), "b2": (0.1, 0.05), "Bc": (0.01, 0.005)}
 #: Parameters that can only be estimated >= 0 (the rest: > 0).
@@ -100,6 +116,12 @@ BOOTSTRAP_REFITS = 8
 BOOTSTRAP_SEED = 0
 #: Relative standard error (from the encoders' resolution alone) above which a parameter is refused.
 UNIDENTIFIABLE = 0.3
+#: Variance inflation (the information on a parameter alone over what is left of it after the other fitted
+#: parameters, from central differences over ``COVARIANCE_STEP`` at the start) above which a parameter is refused as
+#: not separable from them. On the identify experiments' 20 s logs: Kt beside Ra 1.6e8 (they enter as Kt / Ra but
+#: for the armature's 0.07 ms time constant); the default fit at most 26 (single mass) and 77 (double mass); the
+#: amplifier gain beside Kt 290 to 1100 and Kb beside Kt and the damping 230 to 840 (docs/identify.md, Parameters).
+INFLATION = 1e4
 VOLTAGE_COLUMNS = ("plant.voltage", "controller.voltage")
 #: How far from hanging (pi, or 0 on an encoder zeroed there) the log's first angle may be [rad].
 HANGING_TOLERANCE = 0.05
@@ -125,7 +147,7 @@ class IdentifyOptions:
     preset : str or None
         Preset of the parameters that are not fitted, and the start of the fit (default: the plant's).
     out : Path or None
-        Folder for ``identified.ssv`` and ``identified.png``.
+        Folder for ``identified.ssv`` and ``identified.png`` (checked writable before the fit).
     refits : int
         Refits of synthetic logs behind the intervals (:func:`_bootstrap`); 0: the sandwich alone, which does
         not cover where the fit stopped (docs/identify.md).
@@ -146,8 +168,8 @@ class IdentifyOptions:
         Raises
         ------
         UsageError
-            An unknown plant kind, preset or parameter name (with the closest known ones), or ``refits``
-            neither 0 nor a whole number >= 2.
+            An unknown plant kind, preset or parameter name (with the closest known ones), ``refits``
+            neither 0 nor a whole number >= 2, or an ``out`` that is a file or cannot be written.
         """
         refits = BOOTSTRAP_REFITS if refits is None else refits
         if isinstance(refits, bool) or not isinstance(refits, int) or refits == 1 or refits < 0:
@@ -163,8 +185,28 @@ class IdentifyOptions:
         for name in names:
             if name not in known:
                 raise UsageError(f"--fit {name}: the {plant} plant has no parameter {name!r}; {closest(name, known)}")
+        if out is not None:
+            _check_out(Path(out))
         return cls(source=Path(source), plant=plant, fit=tuple(dict.fromkeys(names)) or DEFAULT_FIT[plant],
                    preset=preset, out=Path(out) if out is not None else None, refits=refits)
+
+
+def _check_out(out: Path) -> None:
+    """Refuse an ``--out`` that is not a folder, or whose nearest existing folder cannot be written (tried with a
+    temporary file, removed at once)."""
+    import tempfile
+
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: not a folder (a file of that name exists)")
+    existing = next(p for p in (out, *out.parents) if p.exists())
+    try:
+        if not existing.is_dir():
+            raise NotADirectoryError(existing)
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as exc:
+        raise UsageError(f"--out {out}: cannot write there ({existing} is not a writable folder: "
+                         f"{exc.strerror or 'a file'})") from None
 
 
 @dataclass(frozen=True)
@@ -200,6 +242,11 @@ def read_log(source: Path, kind: str) -> Log:
     voltage = next((c for c in VOLTAGE_COLUMNS if c in header), None)
     missing = [c for c in ("time", *wanted) if c not in header] + ([] if voltage else ["plant.voltage"])
     if missing:
+        other = [k for k in KINDS if k != kind and all(f"plant.{n}" in header for n in MEASURED[k])]
+        if other and voltage:
+            raise IdentifyError(f"{path}: the log is a {other[0]} plant's (columns "
+                                f"{', '.join(f'plant.{n}' for n in MEASURED[other[0]])}), not a {kind}'s: give "
+                                f"--plant {other[0]}")
         raise IdentifyError(f"{path}: no column {missing[0]} (a {kind} log needs time, plant.voltage and "
                             f"{', '.join(wanted)})")
     data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=[header.index(c) for c in ("time", voltage, *wanted)],
@@ -211,7 +258,23 @@ def read_log(source: Path, kind: str) -> Log:
         raise IdentifyError(f"{path}: the time column is not evenly spaced (or a value is not finite)")
     y = data[:, 2:].copy()
     y[:, -1] += _hanging_offset(float(y[0, -1]), path)
+    _check_excitation(data[:, 0], data[:, 1], path)
     return Log(str(path), data[:, 0], data[:, 1], y, tuple(MEASURED[kind]))
+
+
+def _check_excitation(time: np.ndarray, voltage: np.ndarray, path: Path) -> None:
+    """Refuse a log whose voltage does not excite the plant through the whole log (``EXCITED_SHARE``): a closed-loop
+    step response, whose voltage dies out after its first second, says nothing of the parameters in the rest of the
+    fit or in the held-out quarter, and its fit would be confidently wrong."""
+    rms = float(np.sqrt(np.mean(voltage ** 2)))
+    parts = np.array_split(np.arange(len(voltage)), 10)
+    shares = [float(np.sqrt(np.mean(voltage[i] ** 2))) / rms if rms > 0 else 0.0 for i in parts]
+    k = int(np.argmin(shares))
+    if shares[k] < EXCITED_SHARE:
+        start, end = time[parts[k][0]], time[parts[k][-1]]
+        raise IdentifyError(f"{path}: the voltage does not excite the plant through the log (from {start:.3g} s to "
+                            f"{end:.3g} s its RMS is {shares[k]:.0%} of the log's): identification needs an "
+                            "excitation experiment's log (ipcosim run KIND-identify), not a step response")
 
 
 def _hanging_offset(angle0: float, path: Path) -> float:
@@ -250,10 +313,36 @@ class Identification:
     #: how the log was simulated: ``native`` (:mod:`ipcosim.harness.native.replay`) or ``python (<why not>)``
     replay: str = "native"
     refits: int = 0                 # synthetic refits behind the intervals (:func:`_bootstrap`)
+    #: per output, the encoder's resolution [m or rad per count] (the unit of ``largest_residual_counts``)
+    resolutions: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def valid(self) -> bool:
+        """Whether the fit explains the log to within ``INVALID_COUNTS`` encoder counts: otherwise the model lacks
+        something that moved the plant, and the intervals (which assume the model) claim nothing."""
+        return max(self.largest_residual_counts.values(), default=0.0) <= INVALID_COUNTS
+
+    @property
+    def invalid_reason(self) -> str | None:
+        """One line on why the fit is not valid (None when it is)."""
+        if self.valid:
+            return None
+        name, counts = max(self.largest_residual_counts.items(), key=lambda kv: kv[1])
+        return (f"the fit is not valid: {name} is {counts:.1f} encoder counts from its simulation (a fit of the right "
+                f"model leaves at most {INVALID_COUNTS:g}): the model lacks something that moved the plant (fit more "
+                "parameters, e.g. --fit with Lp, Mp or the motor constants); the intervals claim nothing")
+
+    @property
+    def fit(self) -> dict[str, float]:
+        """Per output, the held-out fit ``1 - NRMSE`` (1 = perfect, 0 = no better than the mean)."""
+        return {k: 1.0 - v for k, v in self.nrmse.items()}
 
     def to_json(self) -> dict[str, Any]:
-        """``{"parameters": {NAME: {"value", "ci95", "unit"}}, "nrmse": {OUTPUT: fraction}, ...}``."""
-        return {"parameters": self.parameters, "nrmse": self.nrmse, "plant": self.plant, "preset": self.preset,
+        """``{"parameters": {NAME: {"value", "ci95", "unit", "valid"}}, "nrmse": {OUTPUT: fraction}, "fit": {OUTPUT:
+        1 - nrmse}, "valid": bool, ...}``."""
+        parameters = {n: {**p, "valid": self.valid} for n, p in self.parameters.items()}
+        return {"parameters": parameters, "nrmse": self.nrmse, "fit": self.fit, "valid": self.valid,
+                "invalid_reason": self.invalid_reason, "plant": self.plant, "preset": self.preset,
                 "input_delay_s": self.input_delay_s,
                 "held_out_from_s": self.held_out_from_s, "fit_time_s": self.fit_time_s, "fit_cpu_s": self.fit_cpu_s,
                 "simulations": self.simulations, "largest_residual_counts": self.largest_residual_counts,
@@ -340,7 +429,9 @@ def _resolutions(problem: _Problem) -> np.ndarray:
 
 
 def _check_identifiable(problem: _Problem, J: np.ndarray) -> None:
-    """Refuse a parameter whose standard error from the encoders' resolution alone exceeds ``UNIDENTIFIABLE``."""
+    """Refuse a parameter whose standard error from the encoders' resolution alone exceeds ``UNIDENTIFIABLE``, or
+    exceeds ``sqrt(INFLATION)`` times what it would be were the other parameters known (told apart from them only by
+    an effect a hundred times smaller than its own: Kt beside Ra, through the armature's 0.07 ms time constant)."""
     sigma = np.tile(_resolutions(problem) / math.sqrt(12) / problem.spread, problem.n_fit)
     Jw = J / sigma[:, None]
     H = Jw.T @ Jw
@@ -349,7 +440,13 @@ def _check_identifiable(problem: _Problem, J: np.ndarray) -> None:
         # the information on parameter i left after the others explain what they can (Schur complement)
         info = H[i, i] - (H[i, rest] @ np.linalg.pinv(H[np.ix_(rest, rest)]) @ H[rest, i] if rest else 0.0)
         start = problem.start[i]
-        if not info > 0 or 1 / math.sqrt(info) > UNIDENTIFIABLE * max(start, 1.0):
+        limit = UNIDENTIFIABLE * max(start, 1.0)
+        if not info > 0 or 1 / math.sqrt(info) > limit or info < H[i, i] / INFLATION:
+            if H[i, i] > 0 and 1 / math.sqrt(H[i, i]) <= limit:   # moved alone, but as another fitted one moves
+                partner = max(rest, key=lambda j: abs(H[i, j]) / math.sqrt(H[i, i] * H[j, j]))
+                raise IdentifyError(f"{problem.log.display}: cannot identify {name} apart from "
+                                    f"{problem.fit[partner]}: the log moves as much when one changes as when the "
+                                    "other does (fit one of them; docs/identify.md, Parameters)")
             raise IdentifyError(f"{problem.log.display}: cannot identify {name}: the excitation did not move it "
                                 f"(the outputs change by less than the encoders resolve when {name} changes)")
 
@@ -373,9 +470,9 @@ def _covariance(J: np.ndarray, r: np.ndarray, m: int, lag: int = HAC_LAG) -> np.
 
 
 def nrmse(y: np.ndarray, y_sim: np.ndarray) -> float:
-    """``1 - ||y - y_sim|| / ||y - mean(y)||`` (1 = perfect fit, 0 = no better than the mean)."""
+    """``||y - y_sim|| / ||y - mean(y)||`` (0 = perfect fit, 1 = no better than the mean; the fit is 1 - NRMSE)."""
     spread = np.linalg.norm(y - y.mean())
-    return float(1 - np.linalg.norm(y - y_sim) / spread) if spread > 0 else float("nan")
+    return float(np.linalg.norm(y - y_sim) / spread) if spread > 0 else float("nan")
 
 
 def simulator(kind: str) -> tuple[Callable[..., Any], str]:
@@ -406,7 +503,7 @@ def identify(options: IdentifyOptions) -> Identification:
     t0, c0 = _time.perf_counter(), _time.process_time()
     simulate, how = simulator(kind)
     problem = _Problem(log, kind, options.fit, preset(name), bench, simulate)
-    _check_identifiable(problem, problem.jacobian(problem.start))
+    _check_identifiable(problem, problem.central_jacobian(problem.start, COVARIANCE_STEP))
     sol = _fit(problem, problem.start)
     candidates = [problem]
     for samples in DELAY_SAMPLES:   # the computation delay: whole samples, the one that fits best
@@ -603,12 +700,18 @@ def _result(finished: _Finished, preset_name: str, simulations: int, refits: int
                           {f.name: float(getattr(params, f.name)) for f in fields(params)}, log.outputs,
                           log.time, log.y, sim, problem.instruments.input_delay)
     result.largest_residual_counts = {o: float(c) for o, c in zip(log.outputs, counts)}
+    result.resolutions = {o: float(r) for o, r in zip(log.outputs, _resolutions(problem))}
+    lumped = [n for n in FORCE_PER_VOLT if n in problem.fit]
+    if len(lumped) == 1:
+        held = " and ".join(n for n in FORCE_PER_VOLT if n not in problem.fit)
+        out[lumped[0]]["note"] = (f"with {held} at the preset, {lumped[0]} carries every error of the force per volt "
+                                  "amplifier_gain N Kt / (rg Ra)")
     return result
 
 
 def write_identified(result: Identification, out: Path) -> list[Path]:
-    """``out/identified.ssv`` (the identified constants as ``plant.<name>``, for ``--parameter-file``)
-    and ``out/identified.png`` (measured vs simulated outputs, the held-out part shaded).
+    """``out/identified.ssv`` (the identified constants as ``plant.<name>``, for ``--parameter-file``; only for a
+    valid fit, :attr:`Identification.valid`) and ``out/identified.png`` (:func:`identified_figure`).
 
     Returns
     -------
@@ -618,11 +721,13 @@ def write_identified(result: Identification, out: Path) -> list[Path]:
     from ipcosim.harness.scenario.ssp_gen import ssv_text
 
     out.mkdir(parents=True, exist_ok=True)
-    ssv = out / "identified.ssv"
-    values = {f"plant.{n}": v["value"] for n, v in result.parameters.items()}
-    ssv.write_text(ssv_text(values, name="identified", description=f"{result.plant} plant identified from "
-                                                                   f"{result.source}"))
-    written = [ssv]
+    written = []
+    if result.valid:
+        ssv = out / "identified.ssv"
+        values = {f"plant.{n}": v["value"] for n, v in result.parameters.items()}
+        ssv.write_text(ssv_text(values, name="identified", description=f"{result.plant} plant identified from "
+                                                                       f"{result.source}"))
+        written.append(ssv)
     try:
         import matplotlib
     except ImportError:
@@ -630,15 +735,52 @@ def write_identified(result: Identification, out: Path) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(len(result.outputs), 1, sharex=True, figsize=(9, 2.4 * len(result.outputs)))
-    for j, (ax, name) in enumerate(zip(np.atleast_1d(axes), result.outputs)):
-        ax.plot(result.time, result.measured[:, j], lw=0.8, label="measured")
-        ax.plot(result.time, result.simulated[:, j], lw=0.8, ls="--", label="simulated (identified)")
-        ax.axvspan(result.held_out_from_s, result.time[-1], color="0.9", zorder=-1)
-        ax.set_ylabel(f"{name}\nNRMSE {result.nrmse[name]:.1%}")
-    np.atleast_1d(axes)[0].legend(loc="upper right", fontsize=8)
-    np.atleast_1d(axes)[-1].set_xlabel("time [s] (shaded: held out of the fit)")
-    fig.tight_layout()
+    fig = identified_figure(result)
     fig.savefig(out / "identified.png", dpi=110)
     plt.close(fig)
     return written + [out / "identified.png"]
+
+
+#: How the plot shows each kind of output: (factor from SI, unit).
+_PLOT_UNITS = {"pendulum_angle": (1e3, "mrad")}
+
+
+def identified_figure(result: Identification) -> Any:
+    """The identification's figure: per output, the measured and the simulated reading [mm or mrad] above their
+    difference in encoder counts (the fitted part's largest difference in the label, +-0.5 count marked: what the
+    true model leaves), the held-out quarter shaded; a fit that is not valid says so in the title."""
+    import matplotlib.pyplot as plt
+
+    n = len(result.outputs)
+    fig, axes = plt.subplots(2 * n, 1, sharex=True, figsize=(9, 2.1 * 2 * n),
+                             gridspec_kw={"height_ratios": [2, 1] * n})
+    for j, name in enumerate(result.outputs):
+        ax, res = axes[2 * j], axes[2 * j + 1]
+        factor, unit = _PLOT_UNITS.get(name, (1e3, "mm"))
+        offset = math.pi if name == "pendulum_angle" and abs(result.measured[0, j] - math.pi) < 1 else 0.0
+        ax.plot(result.time, (result.measured[:, j] - offset) * factor, lw=0.8, label="measured")
+        ax.plot(result.time, (result.simulated[:, j] - offset) * factor, lw=0.8, ls="--",
+                label="simulated (identified)")
+        ax.set_ylabel(f"{name}{' - pi' if offset else ''}\n[{unit}]", fontsize=8)
+        ax.set_title(f"{name}: held-out fit {result.fit[name]:.1%} (1 - NRMSE)", fontsize=8, loc="left")
+        counts = (result.measured[:, j] - result.simulated[:, j]) / result.resolutions.get(name, 1.0)
+        res.plot(result.time, counts, lw=0.6, color="C3")
+        for level in (-0.5, 0.5):
+            res.axhline(level, color="k", lw=0.5, ls=":")
+        res.set_ylabel("residual\n[counts]", fontsize=8)
+        res.set_title(f"measured - simulated; largest over the fitted part "
+                      f"{result.largest_residual_counts.get(name, float('nan')):.2f} counts (dotted: +-0.5)",
+                      fontsize=8, loc="left")
+        for a in (ax, res):
+            a.axvspan(result.held_out_from_s, result.time[-1], color="0.9", zorder=-1)
+            a.grid(True, alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time [s] (shaded: held out of the fit)")
+    head = f"{result.plant} identified from {Path(result.source).parent.name or result.source}"
+    if not result.valid:
+        fig.suptitle(f"{head}: NOT VALID, residual {max(result.largest_residual_counts.values()):.1f} counts "
+                     f"(> {INVALID_COUNTS:g}): the intervals claim nothing", color="C3", fontsize=10)
+    else:
+        fig.suptitle(head, fontsize=10)
+    fig.tight_layout()
+    return fig
