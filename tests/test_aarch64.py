@@ -38,7 +38,9 @@ pytestmark = [
     pytest.mark.skipif(QEMU is None, reason="qemu-user is not installed (install qemu-user)"),
 ]
 SCENARIOS = ("single-mass-lqr", "double-mass-lqr")
-TOLERANCE = 0.0  # identical
+#: Identical. With contraction on (``-ffp-contract=fast``) the ARM libraries of these loops differ from the
+#: x86-64 ones by up to 7e-13 in the voltage within 3 s: this test fails if the flag is lost.
+TOLERANCE = 0.0
 EM_AARCH64 = 183  # ELF e_machine of 64-bit ARM
 
 
