@@ -99,3 +99,22 @@ def test_exported_loop_aarch64_library_equals_linux64(fmi: str, hosts, native_fm
         results[platform] = run_host(hosts, platform, plan)
     compare(f"double-mass-lqr exported, FMI {fmi}.0", results, names, TOLERANCE)
     assert np.abs(results["aarch64"][:, names.index("plant.passive_cart_position")]).max() > 1e-3
+
+
+def test_the_master_loads_an_fmi2_arm_library_from_its_platform_tuple(monkeypatch: pytest.MonkeyPatch,
+                                                                      native_fmus, tmp_path: Path) -> None:
+    """On 64-bit ARM Linux fmpy looks for an FMI 2.0 library in ``binaries/linux64/`` (the x86-64 one here);
+    the master gives it the FMU's ``binaries/aarch64-linux/`` library instead (FMI 2.0.4, section 2.3)."""
+    import fmpy
+
+    from ipcosim.harness.master.slave import fmi2_tuple_library
+
+    with zipfile.ZipFile(native_fmus[1] / "Setpoint.fmu") as z:
+        z.extractall(tmp_path)
+    assert fmi2_tuple_library(tmp_path, "Setpoint") is None  # x86-64: fmpy's own linux64
+    monkeypatch.setattr(fmpy, "architecture", "aarch64")
+    monkeypatch.setattr(fmpy, "platform_tuple", "aarch64-linux")
+    library = fmi2_tuple_library(tmp_path, "Setpoint")
+    assert library == str(tmp_path / "binaries" / "aarch64-linux" / "Setpoint.so")
+    assert _machine(Path(library).read_bytes()) == EM_AARCH64
+    assert fmi2_tuple_library(tmp_path, "NoSuchModel") is None
