@@ -35,6 +35,7 @@ _EXPORTS = {
     "IpcosimError": "ipcosim.errors", "UsageError": "ipcosim.errors",
     "assert_upright": "ipcosim.harness.testing", "assert_settles": "ipcosim.harness.testing",
     "assert_steady_state": "ipcosim.harness.testing", "assert_close_to": "ipcosim.harness.testing",
+    "assert_succeeds": "ipcosim.harness.testing",
     "settling_time": "ipcosim.harness.testing", "cases": "ipcosim.harness.testing", "Case": "ipcosim.harness.testing",
     "CheckFailed": "ipcosim.harness.testing", "save_baseline": "ipcosim.harness.baseline",
     "load_baseline": "ipcosim.harness.baseline",

@@ -11,7 +11,8 @@ import statistics
 import time
 
 from benchmarks.targets import figure, target
-from ipcosim.controllers.catalog import KINDS, LAWS, default_preset, lqr_design_for, make_law
+from ipcosim.controllers.catalog import KINDS, LAWS, default_preset, make_law
+from ipcosim.controllers.laws.lqr import lqr_design_for
 from ipcosim.controllers.simulate import run_loop
 from ipcosim.fmus.params import preset
 

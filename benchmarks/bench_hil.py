@@ -13,7 +13,11 @@ to the rate:
   and, for reference, on the plant FMU (exact measurements: the HSMC chatters on encoder counts
   at 1 kHz, in lockstep too);
 * faults: the master killed mid-run (time until the rig's motor is at 0 V) and the rig killed
-  mid-run (time until the master has exited, results written).
+  mid-run (time until the master has exited, results written);
+* the live view (``ipcosim run --live``): the single-mass LQR at 1 kHz ``rt``, once without and once
+  with a viewer connected (a client asking for the page's data as the page does, ~30 times a
+  second, the rig's status polled from the run's process), side by side, each beside the probe of
+  the host's stalls: the loop's own overruns with and without a viewer (reference figures).
 
 Each line gives the period jitter (p50 / p99 / max of |actual period - h|), overruns (steps
 starting more than half a period late), the card's overruns (requests reaching the rig after
@@ -84,12 +88,14 @@ def rig(plant: str, rt: bool, tick: float = 2.5e-4, clock: str = "wallclock") ->
                 proc.communicate()
 
 
-def run_scenario(scenario: str, rate: int, *, hil_uri: str | None, rt: bool = False) -> dict[str, Any]:
+def run_scenario(scenario: str, rate: int, *, hil_uri: str | None, rt: bool = False, viewer: bool = False,
+                 stop_time: float = STOP_TIME) -> dict[str, Any]:
     """metrics.json of one ``ipcosim run`` in its own process, as a user runs it (``error``: its
     last stderr line if it failed); HIL when ``hil_uri`` is given, else simulated. A paced run's
-    step timeline (``IPCOSIM_RT_TIMELINE``) comes with it under ``timeline``."""
+    step timeline (``IPCOSIM_RT_TIMELINE``) comes with it under ``timeline``. With ``viewer``, the
+    run serves its live view and a viewer watches it from start to end (``viewer``: what it got)."""
     h = 1.0 / rate
-    cmd = [sys.executable, "-m", "ipcosim.harness.cli", "run", scenario, "--stop-time", str(STOP_TIME),
+    cmd = [sys.executable, "-m", "ipcosim.harness.cli", "run", scenario, "--stop-time", str(stop_time),
            "--step", str(h), "--set", f"controller.sample_period={h}", "--quiet",
            "--overrun-budget", "1"]  # overruns are judged by this bench's own targets, not the run's budget
     if hil_uri:
@@ -99,14 +105,65 @@ def run_scenario(scenario: str, rate: int, *, hil_uri: str | None, rt: bool = Fa
     env.update({"IPCOSIM_RT_PRIORITY": str(RT_PRIORITY)} if rt else {})
     with tempfile.TemporaryDirectory(prefix="ipcosim-bench-hil-") as out:
         env["IPCOSIM_RT_TIMELINE"] = str(Path(out) / "timeline.npz")
-        run = subprocess.run(cmd + ["--out", out], capture_output=True, text=True, env=env, timeout=600)
+        watched: dict[str, Any] = {}
+        if viewer:
+            run = _watched(cmd + ["--out", out, "--live"], env, watched)
+        else:
+            run = subprocess.run(cmd + ["--out", out], capture_output=True, text=True, env=env, timeout=600)
         path = Path(out) / "metrics.json"
         metrics = json.loads(path.read_text()) if path.exists() else {}
         if (Path(out) / "timeline.npz").exists():
             with np.load(Path(out) / "timeline.npz") as tl:
                 metrics["timeline"] = {k: tl[k] for k in tl.files}
     lines = run.stderr.strip().splitlines()
-    return {**metrics, "error": (lines[-1] if lines else f"exit status {run.returncode}") if run.returncode else None}
+    return {**metrics, **({"viewer": watched} if viewer else {}),
+            "error": (lines[-1] if lines else f"exit status {run.returncode}") if run.returncode else None}
+
+
+def _watched(cmd: list[str], env: dict[str, str], watched: dict[str, Any]) -> subprocess.CompletedProcess:
+    """Run ``cmd`` (an ``ipcosim run --live``) with a viewer on its page from the address it prints to
+    its end: the page's first request (``boot.js``), then ``/samples`` as often as the page asks. What the
+    viewer got goes to ``watched`` (answers, rows, the last rig status)."""
+    import re
+    import threading
+    import urllib.request
+
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
+    assert proc.stderr is not None
+    first = proc.stderr.readline()
+    match = re.search(r"live view at (http://\S+)", first)
+    if not match:
+        proc.kill()
+        _, err = proc.communicate()
+        return subprocess.CompletedProcess(cmd, 1, "", first + err)
+    url, done = match.group(1), threading.Event()
+    watched.update(answers=0, rows=0, rig=None)
+
+    def view() -> None:
+        from ipcosim.harness.live.server import POLL_MS
+
+        since = 0
+        try:
+            with urllib.request.urlopen(url + "boot.js", timeout=10) as r:
+                r.read()
+            while not done.is_set():
+                with urllib.request.urlopen(f"{url}samples?since={since}", timeout=10) as r:
+                    answer = json.loads(r.read())
+                since = answer["next"]
+                watched.update(answers=watched["answers"] + 1, rows=watched["rows"] + len(answer["rows"]),
+                               rig=answer.get("rig") or watched["rig"])
+                if answer["state"] not in ("running", "waiting") and not answer["more"]:
+                    return
+                time.sleep(POLL_MS / 1000)
+        except OSError as exc:  # the run ended and took its server with it
+            watched.setdefault("ended", str(exc))
+
+    thread = threading.Thread(target=view, daemon=True)
+    thread.start()
+    _, err = proc.communicate(timeout=600)
+    done.set()
+    thread.join(10)
+    return subprocess.CompletedProcess(cmd, proc.returncode, "", first + err)
 
 
 def describe(label: str, m: dict[str, Any]) -> str:
@@ -146,14 +203,15 @@ def pacer_floor(seconds: float = 3.0, period: float = 1e-3, rt: bool = False) ->
             f"of {st.steps}{'; ' + fifo.split(':')[0] if fifo else ''}")
 
 
-def probed_rt(plant: str, scenario: str, rate: int) -> dict[str, Any]:
+def probed_rt(plant: str, scenario: str, rate: int, viewer: bool = False, stop_time: float = STOP_TIME
+              ) -> dict[str, Any]:
     """One real-time (``rt``) run against a fresh rig, with the host's stalls probed on every CPU
     while it runs (:mod:`benchmarks.stall_probe`) and its overruns split into the host's and its
     own (``split``): on these shared machines even a process with no work under SCHED_FIFO is
     stalled for milliseconds (10-180 ms in 10 s, measured), and those stalls, not the loop, made
     the 1 kHz runs' overruns move between 2 % and 17 % from hour to hour."""
     with rig(plant, True) as (_, uri), StallProbe() as probe:
-        m = run_scenario(scenario, rate, hil_uri=uri, rt=True)
+        m = run_scenario(scenario, rate, hil_uri=uri, rt=True, viewer=viewer, stop_time=stop_time)
     tl = m.pop("timeline", None)
     if tl is not None:
         m["split"] = {**attribute(tl["starts_ns"], tl["lateness_ns"], int(tl["period_ns"]), probe.result),
@@ -289,6 +347,44 @@ def _kill_and_measure(victim: str, rig_proc: subprocess.Popen, master: subproces
         master.wait(timeout=30)
 
 
+#: Simulated time of each of the two live-view runs [s] (short: the figure is the loop's own overruns).
+VIEWER_STOP_TIME = min(STOP_TIME, 5.0)
+
+
+def viewer(lines: list[str]) -> None:
+    """The single-mass LQR at 1 kHz rt without and with a viewer on its live page, side by side: the
+    loop's own overruns (outside the host's stalls) are the figure; the viewer costs the run's process a
+    server thread, the JSON of ~30 answers a second and a monitor session polling the rig."""
+    own = {}
+    for watched in (False, True):
+        m = probed_rt("single-mass", "single-mass-lqr", 1000, viewer=watched, stop_time=VIEWER_STOP_TIME)
+        if m.get("error"):
+            raise RuntimeError(f"live view bench, viewer {watched}: the HIL run failed: {m['error']}")
+        split = m.get("split") or {}
+        pct = 100 / max(1, split.get("steps", 1))
+        label = "with a viewer" if watched else "no viewer"
+        own[watched] = figure(f"hil.live_{'viewer' if watched else 'alone'}_own_overruns_pct",
+                              split.get("own_overruns", float("nan")) * pct, "%", anchor="hil.lqr_1khz_host_stall_ms",
+                              what=f"LQR single 1 kHz rt, {VIEWER_STOP_TIME:g} s, {label}: overruns the host's "
+                                   f"stalls do not explain")
+        seen = m.get("viewer") or {}
+        lines.append(describe(f"LQR single 1 kHz rt, {label}", m)
+                     + f"\n{'':32s}own overruns {own[watched]}, all {split.get('overruns')} of {split.get('steps')}; "
+                       f"host stalls {1e3 * split.get('host_stall_s', float('nan')):.0f} ms"
+                     + (f"; the viewer got {seen.get('answers')} answers, {seen.get('rows')} rows, the rig's "
+                        f"status {_rig_seen(seen.get('rig'))}" if watched else ""))
+        print('   ' + lines[-1], flush=True)
+
+
+def _rig_seen(rig: dict[str, Any] | None) -> str:
+    """The last rig status a viewer saw, in a few words."""
+    if not rig:
+        return "never seen"
+    if rig.get("error"):
+        return f"not read: {rig['error']}"
+    return "watchdog " + ("armed" if rig.get("watchdog_running") else "not armed")
+
+
 def run() -> list[str]:
     """Lines for ``make bench`` (printed as they come, as the runs take a while)."""
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
@@ -299,4 +395,5 @@ def run() -> list[str]:
     single_mass(lines)
     double_mass(lines)
     faults(lines)
+    viewer(lines)
     return []

@@ -1,19 +1,20 @@
 """FMI face of the control laws, shared by the ``controllers/fmu_<law>_<plant>.py`` scripts.
 
 Variables (DESIGN.md contract): inputs ``reference`` [m] and the plant's measured positions
-(``ipcosim.fmus.physics.MEASURED``); output ``voltage`` [V]; parameters = ``ipcosim.controllers.catalog.schema``
-(every gain and weight with its unit; ``sample_period``, ``voltage_limit``; the model-based laws'
-``model_*`` design-model constants). The LQR and LQG FMUs also have the gains as parameters
-(``ipcosim.controllers.catalog.gain_specs``): ``K_<state>``, ``N`` (LQR) or ``K_voltage``,
+(``ipcosim.fmus.physics.MEASURED``); output ``voltage`` [V]; parameters = the law's schema
+(``ipcosim.controllers.laws.base.LawEntry.schema``: every gain and weight with its unit; ``sample_period``,
+``voltage_limit``; the model-based laws' ``model_*`` design-model constants). The LQR and LQG FMUs also have
+the gains as parameters (their entry's ``designed.gain_specs``): ``K_<state>``, ``N`` (LQR) or ``K_voltage``,
 ``K_integral`` (LQG), and the estimator gain ``M_<state>_<output>``.
 
 Runtime: on its default path an FMU imports only the Python standard library. The laws run on
-plain floats (``ipcosim.controllers.laws``); the HSMC laws' design model is a plain-Python
+plain floats (the law's module of ``ipcosim.controllers.laws``, the only one the FMU carries: the script
+names its law's registry entry); the HSMC laws' design model is a plain-Python
 linearization. The LQR's and LQG's gains for the parameter values an FMU ships with are designed when the
 FMU is built and stored in it (``shipped_<Model>.json`` in its private package, start values of
 the gain parameters). On leaving initialization mode:
 
-* no design parameter changed (``catalog.design_parameters``: weights, observer poles, noises,
+* no design parameter changed (``LawEntry.design_parameters``: weights, observer poles, noises,
   ``model_*``, ``sample_period``) -> the gain parameters as set (the shipped ones, or the user's);
 * a design parameter changed and no gain was set -> the gains are redesigned with the ``scipy``
   back end, importing numpy and scipy only then; if they are missing, initialization fails
@@ -40,20 +41,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ipcosim.controllers.catalog import (
-    DESIGNED_LAWS,
-    build_law,
-    defaults,
-    design_parameters,
-    designed_gains,
-    gain_specs,
-    law_from_gains,
-    model_name,
-    schema,
-    weight_parameters,
-)
 from ipcosim.controllers.errors import ControllerParameterError
-from ipcosim.controllers.laws import DiscreteLaw, LawInputError
+from ipcosim.controllers.laws.base import DiscreteLaw, LawEntry, LawInputError
 from ipcosim.fmus.fmi import FmuBase, FmuError, StepFailure
 from ipcosim.fmus.physics import MEASURED, STATE_UNITS
 
@@ -73,8 +62,8 @@ TICK_TOLERANCE = 1e-6
 class ControllerFmu(FmuBase):
     """A discrete control law sampled at ``sample_period`` (``ipcosim.controllers.laws``)."""
 
-    #: Law name (``ipcosim.controllers.catalog.LAWS``) and plant kind, set by the FMU classes.
-    law: str = ""
+    #: The law's registry entry (its module's ``LawEntry``) and the plant kind, set by the FMU classes.
+    law: LawEntry
     kind: str = ""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -82,7 +71,7 @@ class ControllerFmu(FmuBase):
         kind = self.kind
         self._measured = MEASURED[kind]
         self._controller: DiscreteLaw | None = None
-        self._specs = schema(kind, self.law)
+        self._specs = self.law.schema(kind)
         self.add_input("reference", start=0.0, unit="m",
                        description="reference position of the motor-driven cart")
         for name in self._measured:
@@ -96,7 +85,7 @@ class ControllerFmu(FmuBase):
             self.add_parameter(spec.name, start=bool(spec.default) if is_bool else float(spec.default),
                                type_=bool if is_bool else float, unit=None if is_bool else spec.unit,
                                description=spec.description, check=None if is_bool else spec.check)
-        self._gain_specs = gain_specs(kind, self.law) if self.law in DESIGNED_LAWS else []
+        self._gain_specs = self.law.designed.gain_specs(kind) if self.law.designed else []
         if self._gain_specs:
             shipped = type(self).shipped_design(self.resources)["gains"]
             for spec in self._gain_specs:
@@ -110,7 +99,7 @@ class ControllerFmu(FmuBase):
     @classmethod
     def shipped_name(cls) -> str:
         """File name of the shipped design inside the FMU's private package."""
-        return f"shipped_{model_name(cls.kind, cls.law)}.json"
+        return f"shipped_{cls.law.model_name(cls.kind)}.json"
 
     @classmethod
     def shipped_design(cls, resources: str | None = None) -> dict[str, Any]:
@@ -133,42 +122,45 @@ class ControllerFmu(FmuBase):
     @classmethod
     def design_record(cls) -> dict[str, Any]:
         """Design the gains for the default parameters (imports numpy and scipy): the shipped design."""
-        values = defaults(cls.kind, cls.law)
-        law = build_law(cls.kind, cls.law, values, backend="scipy")
-        design = {name: values[name] for name in design_parameters(cls.kind, cls.law)}
-        return {"model": model_name(cls.kind, cls.law), "design": design, "gains": designed_gains(law)}
+        entry = cls.law
+        assert entry.designed is not None
+        values = entry.defaults(cls.kind)
+        law = entry.make(cls.kind, values, backend="scipy")
+        design = {name: values[name] for name in entry.design_parameters(cls.kind)}
+        return {"model": entry.model_name(cls.kind), "design": design, "gains": entry.designed.gains(law)}
 
     @classmethod
     def build_files(cls) -> dict[str, str]:
         """Files the build adds to the FMU's private package: the shipped design of a designed law."""
-        if cls.law not in DESIGNED_LAWS:
+        if cls.law.designed is None:
             return {}
         return {cls.shipped_name(): json.dumps(cls.design_record(), indent=1, sort_keys=True)}
 
     # --- initialization ----------------------------------------------------------------------------
 
     def _build_law(self) -> DiscreteLaw:
+        entry, kind = self.law, self.kind
         values = {s.name: getattr(self, s.name) for s in self._specs}
-        name = model_name(self.kind, self.law)
-        if self.law not in DESIGNED_LAWS:
-            return build_law(self.kind, self.law, values)
+        name = entry.model_name(kind)
+        if entry.designed is None:
+            return entry.make(kind, values)
         shipped = type(self).shipped_design(self.resources)
         gains = {s.name: float(getattr(self, s.name)) for s in self._gain_specs}
-        changed = [n for n in design_parameters(self.kind, self.law) if float(values[n]) != shipped["design"][n]]
+        changed = [n for n in entry.design_parameters(kind) if float(values[n]) != shipped["design"][n]]
         set_gains = [n for n, v in gains.items() if v != shipped["gains"][n]]
-        weights = [n for n in changed if n in weight_parameters(self.kind, self.law)]
+        weights = [n for n in changed if n in entry.designed.weight_parameters(kind)]
         if set_gains and weights:
             raise FmuError(f"{name}: parameters {weights[0]} and {set_gains[0]} were both set: give either the "
                            "design (weights, observer poles) or the gains K_*, N, M_*, not both")
         if not changed or set_gains:
-            return law_from_gains(self.kind, self.law, values, gains)
+            return entry.designed.from_gains(kind, values, gains)
         try:
-            law = build_law(self.kind, self.law, values, backend="scipy")
+            law = entry.make(kind, values, backend="scipy")
         except ImportError as exc:
             raise FmuError(f"{name}: parameter {changed[0]} = {values[changed[0]]:g} differs from the shipped "
                            f"design, and redesigning the gains needs numpy and scipy ({exc}); install them in "
                            "this Python, or keep the design parameters and set the gains K_*, N, M_* instead") from None
-        for gain, value in designed_gains(law).items():
+        for gain, value in entry.designed.gains(law).items():
             setattr(self, gain, value)
         return law
 
@@ -176,7 +168,7 @@ class ControllerFmu(FmuBase):
         try:
             law = self._build_law()
         except ControllerParameterError as exc:
-            raise FmuError(f"{model_name(self.kind, self.law)}: {exc}") from None
+            raise FmuError(f"{self.law.model_name(self.kind)}: {exc}") from None
         self._controller = law
         self._tick = 0
         self.voltage = self._sample()

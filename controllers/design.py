@@ -56,7 +56,7 @@ import scipy.linalg
 # DesignError, check_sample_period and the thesis's numbers live in numpy-free modules (the FMU runtime
 # reads them).
 from ipcosim.controllers.errors import DesignError
-from ipcosim.controllers.laws import check_sample_period
+from ipcosim.controllers.laws.base import check_sample_period
 from ipcosim.controllers.thesis import (
     THESIS_DOUBLE_MASS_Q_DIAGONAL,
     THESIS_SINGLE_MASS_Q_DIAGONAL,

@@ -1,10 +1,11 @@
 """FMU ``LQRDoubleMass``: LQR state feedback on a discrete Luenberger (current) estimator, designed at
 initialization, for the IP02 double-mass carts."""
 from ipcosim.controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.laws.lqr import LQR_LAW
 
 
 class LQRDoubleMass(ControllerFmu):
     """LQR state feedback on a discrete Luenberger (current) estimator, designed at initialization (IP02 double-mass carts); output the motor voltage, sampled at sample_period."""  # noqa: E501 -- this one line is the FMU's modelDescription description
 
-    law = "LQR"
+    law = LQR_LAW
     kind = "double-mass"

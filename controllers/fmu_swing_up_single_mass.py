@@ -1,5 +1,6 @@
 """FMU ``SwingUpSingleMass``: energy swing-up from hanging with a hand-over to the thesis's LQR, IP02 single mass."""
 from ipcosim.controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.laws.swing_up import SWING_UP_LAW
 
 
 class SwingUpSingleMass(ControllerFmu):
@@ -9,5 +10,5 @@ class SwingUpSingleMass(ControllerFmu):
     sampled at sample_period.
     """
 
-    law = "SwingUp"
+    law = SWING_UP_LAW
     kind = "single-mass"

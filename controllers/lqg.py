@@ -56,7 +56,7 @@ import scipy.linalg
 
 from ipcosim.controllers.design import BACKENDS, check_observable, check_weights, design_inputs, lqr_gain, zoh
 from ipcosim.controllers.errors import DesignError
-from ipcosim.controllers.laws import rest_state
+from ipcosim.controllers.laws.base import rest_state
 from ipcosim.fmus.linearize import LinearModel
 
 

@@ -18,7 +18,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ipcosim.controllers.laws import DiscreteLaw
+from ipcosim.controllers.laws.base import DiscreteLaw
 from ipcosim.errors import IpcosimError
 from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT, Instruments
 from ipcosim.fmus.metrics import compute_metrics

@@ -29,7 +29,9 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import minimize
 
-from ipcosim.controllers.laws import CascadeGains, G, HSMCGains, SubsystemModel
+from ipcosim.controllers.laws.base import G
+from ipcosim.controllers.laws.hsmc import HSMCGains, SubsystemModel
+from ipcosim.controllers.laws.pid import CascadeGains
 from ipcosim.fmus.linearize import LinearModel
 from ipcosim.fmus.params import KINDS
 
@@ -221,8 +223,9 @@ def tune_hsmc(model: LinearModel, base: HSMCGains, models: Sequence[SubsystemMod
 
 
 def main() -> None:  # pragma: no cover - documentation aid
-    from ipcosim.controllers.catalog import default_preset, subsystem_models, thesis_hsmc_gains
+    from ipcosim.controllers.catalog import default_preset
     from ipcosim.controllers.design import design_model
+    from ipcosim.controllers.laws.hsmc import subsystem_models, thesis_hsmc_gains
     from ipcosim.fmus.params import preset
     for kind in KINDS:
         model = design_model(preset(default_preset(kind)))

@@ -14,6 +14,8 @@ import math
 from operator import mul
 from typing import Sequence
 
+from ipcosim.errors import IpcosimError
+
 Matrix = list[list[float]]
 
 #: Pade-13 numerator coefficients b_0..b_13 and the 1-norm bound theta_13 (Higham 2005, Table 2.3).
@@ -22,7 +24,7 @@ _B13 = (64764752532480000.0, 32382376266240000.0, 7771770303897600.0, 1187353796
 _THETA13 = 5.371920351148152
 
 
-class SingularMatrixError(ArithmeticError):
+class SingularMatrixError(IpcosimError, ArithmeticError):
     """A linear system without a unique solution (a zero pivot)."""
 
 

@@ -107,6 +107,8 @@ from xml.etree.ElementTree import Element, SubElement
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
+from ipcosim.errors import IpcosimError
+
 __all__ = ["FmuBase", "FmuError", "StepFailure", "VariableInfo", "parse_unit", "positive", "nonnegative"]
 
 
@@ -129,7 +131,7 @@ _py_decref.restype = None
 _released_entry = [0]
 
 
-class FmuError(RuntimeError):
+class FmuError(IpcosimError, RuntimeError):
     """An FMU cannot continue (bad parameter, call in the wrong state); reported as fmi2Fatal.
 
     Its ``repr`` is the bare message: pythonfmu's wrapper logs ``repr(exception)``.
@@ -139,7 +141,7 @@ class FmuError(RuntimeError):
         return str(self)
 
 
-class StepFailure(ArithmeticError):
+class StepFailure(IpcosimError, ArithmeticError):
     """A communication step that cannot be completed; reported as fmi2Discard, state kept at ``t``."""
 
 

@@ -31,13 +31,17 @@ import random
 from dataclasses import dataclass, fields
 from typing import Sequence
 
-from ipcosim.errors import closest
+from ipcosim.errors import IpcosimError, closest
 
 #: IP02 encoders: 4096 counts/rev; cart through the 1.48 cm position pinion, pendulum direct.
 CART_M_PER_COUNT = 2.275e-5
 PENDULUM_RAD_PER_COUNT = 2 * math.pi / 4096
 #: Half the 0.814 m track: where a cart hits the end of the rack.
 END_STOP_M = 0.407
+#: The lab's software limits on the encoder readings (the virtual rig's defaults, ``ipcosim rig serve
+#: --cart-limit``, ``--pendulum-limit-deg``): each cart +-0.30 m, the pendulum +-20 deg from upright.
+CART_LIMIT_M = 0.30
+PENDULUM_LIMIT_RAD = math.radians(20.0)
 #: Q4 analog output: 12-bit DAC over +-10 V (thesis-data.md section 1; ``ipcosim.fmus.hil.rig``).
 DAC_BITS = 12
 DAC_RANGE_V = 10.0
@@ -46,7 +50,7 @@ DAC_V_PER_CODE = 2 * DAC_RANGE_V / (1 << DAC_BITS)
 LAB_SAMPLE_PERIOD = 1e-3
 
 
-class InstrumentError(ValueError):
+class InstrumentError(IpcosimError, ValueError):
     """An instrument option that is not finite or out of range (names the option)."""
 
 

@@ -14,6 +14,9 @@ PLANT_MODELS: dict[str, str] = {"IP02SingleMass": "single-mass", "IP02DoubleMass
 #: Connectors that only the double-mass plant has, and the single-mass plant's cart position.
 DOUBLE_MASS_CONNECTORS = ("active_cart_position", "passive_cart_position")
 SINGLE_MASS_CONNECTORS = ("cart_position",)
+#: The connector of the cart that carries the pendulum, by plant kind (the double mass's pendulum sits on
+#: its passive cart, the one the spring couples to the motor-driven cart).
+PENDULUM_CART: dict[str, str] = {"single-mass": "cart_position", "double-mass": "passive_cart_position"}
 
 
 def plant_kind(name: str = "", model: str | None = None, connectors: Iterable[str] = (),

@@ -41,7 +41,7 @@ lose their meaning, never an exception: failed runs must still produce their met
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -61,11 +61,29 @@ SETTLING_BAND = 0.02
 #: Fraction of the run (at its end) over which the steady-state error is averaged.
 STEADY_STATE_FRACTION = 0.10
 
+#: The residual oscillation over the final window (:func:`residual_metrics`): each measured signal's mean
+#: error, peak-to-peak amplitude and dominant frequency, the motor cart's time in the band, and the verdict.
+RESIDUAL_KEYS = ("residual_window_s", "cart_mean_error_m", "cart_peak_to_peak_m", "cart_frequency_Hz",
+                 "cart_time_in_band", "angle_mean_rad", "angle_peak_to_peak_rad", "angle_frequency_Hz",
+                 "limit_cycle")
+#: The passive cart's residual keys, present only with a double-mass plant (its ``passive_cart_position``).
+PASSIVE_RESIDUAL_KEYS = ("passive_cart_mean_error_m", "passive_cart_peak_to_peak_m", "passive_cart_frequency_Hz")
 METRIC_KEYS = ("settling_time_s", "overshoot_m", "steady_state_error_m", "max_abs_angle_rad",
-               "peak_voltage_V", "rms_voltage_V", "upright")
+               "peak_voltage_V", "rms_voltage_V", "upright") + RESIDUAL_KEYS
 #: The metrics of each scenario kind (:func:`task_kinds`), present only in runs of that kind.
 KIND_METRICS = {"swing-up": ("time_to_upright_s", "track_used_m"),
                 "tap": ("peak_angle_after_tap_rad", "recovery_time_s")}
+#: The passive cart's reading (double mass): its residual oscillation is measured too.
+PASSIVE_COLUMNS = ("plant.passive_cart_position",)
+#: Longest final window the residual oscillation is measured over [s]; a run shorter than twice it uses its
+#: final half.
+RESIDUAL_WINDOW_S = 5.0
+#: A signal hunts when its residual peak-to-peak amplitude exceeds this many counts of its encoder
+#: (``ipcosim.fmus.instruments``: 2.275e-5 m of a cart, 1.534e-3 rad of the pendulum) -- what a lab's
+#: encoders resolve, on the ideal plant as on the lab one.
+LIMIT_CYCLE_COUNTS = 4
+#: Zero-padding factor of the window's spectrum (the dominant frequency's grid is 1 / (this x window)).
+SPECTRUM_PADDING = 8
 #: Plant parameters whose non-zero value makes a run a tap run.
 TAP_PARAMETERS = ("tap_force_impulse", "tap_torque_impulse")
 
@@ -217,6 +235,146 @@ def tap_metrics(time: Any, angle: Any) -> dict[str, Any]:
     return {k: m[k] for k in ("peak_angle_after_tap_rad", "recovery_time_s")}
 
 
+def residual_window(t0: float, t_end: float) -> float:
+    """Length of the final window of a run from ``t0`` to ``t_end`` [s]: ``RESIDUAL_WINDOW_S``, at most half the run."""
+    return min(RESIDUAL_WINDOW_S, 0.5 * (t_end - t0))
+
+
+def _hunting_threshold(what: str) -> float:
+    from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT
+
+    return LIMIT_CYCLE_COUNTS * (PENDULUM_RAD_PER_COUNT if what == "angle" else CART_M_PER_COUNT)
+
+
+def oscillation(time: Any, signal: Any) -> tuple[float, float | None, bool]:
+    """The residual oscillation of one signal over a window: ``(peak-to-peak, dominant frequency, persists)``.
+
+    The peak-to-peak amplitude is ``max - min`` over the window; the dominant frequency is the highest peak
+    above 0 Hz of the Hann-windowed spectrum of the signal minus its mean (None for a constant signal; a slow
+    drift shows as a peak below two periods per window); it *persists* when the second half of the window
+    still swings at least half as far as the first half (a decaying transient does not).
+    """
+    t, y = np.asarray(time, float), np.asarray(signal, float)
+    if t.size < 4 or t[-1] <= t[0]:
+        return 0.0, None, False
+    residual = y - np.mean(y)
+    p2p = float(np.max(residual) - np.min(residual))
+    half = t.size // 2
+    persists = bool(np.ptp(residual[half:]) >= 0.5 * np.ptp(residual[:half]))
+    if p2p <= 0.0:
+        return 0.0, None, False
+    dt = float(t[-1] - t[0]) / (t.size - 1)
+    n = SPECTRUM_PADDING * t.size
+    power = np.abs(np.fft.rfft(residual * np.hanning(t.size), n)) ** 2
+    return p2p, float((np.argmax(power[1:]) + 1) / (n * dt)), persists
+
+
+def _hunts(what: str, p2p: float, freq: float | None, persists: bool, window: float) -> bool:
+    """A limit cycle of one signal: amplitude above ``LIMIT_CYCLE_COUNTS`` encoder counts, at least two periods
+    of its dominant frequency in the window, and not dying out within it."""
+    return bool(persists and freq is not None and freq * window >= 2.0 and p2p > _hunting_threshold(what))
+
+
+def residual_metrics(time: Any, position: Any, reference: Any, angle: Any, passive_position: Any = None,
+                     x0: float | None = None) -> dict[str, Any]:
+    """The residual oscillation at the end of a run (``docs/metrics.md``, "The residual oscillation").
+
+    Over the final window (:func:`residual_window`): for the motor-driven cart, the passive cart (double
+    mass) and the pendulum, the mean error (position minus reference, or the angle), the peak-to-peak amplitude
+    and the dominant frequency of :func:`oscillation`; the fraction of the window the motor cart spends in the
+    +-2 % settling band; and ``limit_cycle``: True when any of the three hunts (:func:`_hunts`).
+
+    Parameters
+    ----------
+    time, position, reference, angle : array_like, shape (n,)
+        The whole run (the readings as the encoders give them).
+    passive_position : array_like, optional
+        The passive cart's position (double mass).
+    x0 : float, optional
+        The initial motor-cart position (default ``position[0]``): the step is ``reference[-1] - x0``.
+    """
+    t = _as_1d("time", time, None)
+    cols = {"time": t, "x": _as_1d("position", position, t.size), "r": _as_1d("reference", reference, t.size),
+            "th": _as_1d("angle", angle, t.size)}
+    if passive_position is not None:
+        cols["x2"] = _as_1d("passive_position", passive_position, t.size)
+    ends = {"t0": float(t[0]), "t_end": float(t[-1]), "r_final": float(cols["r"][-1]),
+            "x0": float(cols["x"][0] if x0 is None else x0)}
+    return _residual_pass(_one_chunk(**cols), ends, "x", "th", "r", "x2" if passive_position is not None else None)
+
+
+def _residual_pass(chunks: Callable[[], Iterable[np.ndarray]], a: Mapping[str, Any], pos: str, ang: str, ref: str,
+                   passive: str | None) -> dict[str, Any]:
+    """:func:`residual_metrics` from the rows, once their ends ``a`` are known (one pass, keeping the window)."""
+    window = residual_window(a["t0"], a["t_end"])
+    names = [("cart", pos), ("angle", ang)] + ([("passive_cart", passive)] if passive else [])
+    kept: dict[str, list[np.ndarray]] = {k: [] for k in ("time", pos, ang, ref, *([passive] if passive else []))}
+    for c in chunks():
+        if not len(c):
+            continue
+        tail = np.asarray(c["time"], float) >= a["t_end"] - window
+        for k in kept:
+            kept[k].append(np.asarray(c[k], float)[tail])
+    w = {k: np.concatenate(v) if v else np.zeros(0) for k, v in kept.items()}
+    out: dict[str, Any] = {"residual_window_s": window}
+    hunting = False
+    for what, col in names:
+        err = w[col] if what == "angle" else w[col] - w[ref]
+        p2p, freq, persists = oscillation(w["time"], w[col])
+        unit = "rad" if what == "angle" else "m"
+        out[f"{what}_mean_{'rad' if what == 'angle' else 'error_m'}"] = float(np.mean(err)) if err.size else None
+        out[f"{what}_peak_to_peak_{unit}"] = p2p
+        out[f"{what}_frequency_Hz"] = freq
+        hunting |= _hunts(what, p2p, freq, persists, window)
+    step = a["r_final"] - a["x0"]
+    inside = np.abs(w[pos] - a["r_final"]) <= SETTLING_BAND * abs(step)
+    out["cart_time_in_band"] = float(np.mean(inside)) if step != 0.0 and inside.size else None
+    out["limit_cycle"] = hunting
+    return out
+
+
+#: |mean error| of the motor cart over the final window that a successful run stays within [m] (the +-2 %
+#: band of the thesis's 50 mm step).
+MEAN_ERROR_LIMIT_M = 1e-3
+#: The residual peak-to-peak a successful run's motor cart may swing beyond what the plant forces [m]: the
+#: width of the +-1 mm band, so a loop with no forced cycle may hunt within the band and no further.
+AMPLITUDE_TOLERANCE_M = 2 * MEAN_ERROR_LIMIT_M
+#: Outcomes of :func:`success_status`; ``ok`` is a success.
+SUCCESS_STATUSES = ("ok", "fell", "unsettled", "hunting")
+
+
+def amplitude_bound(b2: float = 0.0, K: float = 0.0) -> float:
+    """The motor cart's residual peak-to-peak a lab signs as a success [m]: ``AMPLITUDE_TOLERANCE_M`` plus the
+    cycle the plant forces on any law, ``2 b2 / K`` where a spring ``K`` [N/m] couples a passive cart with
+    Coulomb friction ``b2`` [N] (to reverse that cart the spring swings through twice its friction force,
+    moving the motor cart by ``2 b2 / K``); no forced cycle without them (the single mass, the ideal plant)."""
+    return AMPLITUDE_TOLERANCE_M + (2.0 * b2 / K if b2 > 0.0 and K > 0.0 else 0.0)
+
+
+def success_status(metrics: Mapping[str, Any], bound: float | None = None) -> str:
+    """The one success criterion of a run of the task (sweeps, robustness tables, pytest helpers).
+
+    ``fell`` unless the pendulum stayed upright; ``unsettled`` when ``|cart_mean_error_m|`` over the final
+    window exceeds ``MEAN_ERROR_LIMIT_M``; ``hunting`` when the motor cart's ``cart_peak_to_peak_m`` exceeds
+    ``bound`` (the run's :func:`amplitude_bound`; default: that of a plant with no forced cycle); else ``ok``.
+
+    Examples
+    --------
+    >>> m = {"upright": True, "cart_mean_error_m": 3e-4, "cart_peak_to_peak_m": 3.0e-3}
+    >>> success_status(m, amplitude_bound(b2=0.1047, K=142.185)), success_status(m)
+    ('ok', 'hunting')
+    """
+    bound = amplitude_bound() if bound is None else bound
+    if metrics.get("upright") is not True:
+        return "fell"
+    mean, p2p = metrics.get("cart_mean_error_m"), metrics.get("cart_peak_to_peak_m")
+    if mean is None or not abs(float(mean)) <= MEAN_ERROR_LIMIT_M:
+        return "unsettled"
+    if p2p is None or not float(p2p) <= bound:
+        return "hunting"
+    return "ok"
+
+
 def first_column(columns: Sequence[str], candidates: Sequence[str]) -> str | None:
     for c in candidates:
         if c in columns:
@@ -256,14 +414,15 @@ def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: S
     ref, volt = first_column(columns, REFERENCE_COLUMNS), first_column(columns, VOLTAGE_COLUMNS)
     if None in (pos, ang, ref, volt):
         return {}
-    result = _step_task(chunks, pos, ang, ref, volt)
+    result = _step_task(chunks, pos, ang, ref, volt, first_column(columns, PASSIVE_COLUMNS))
     kinds = set(kinds)
     if result and kinds:  # the kind metrics' pass only where they are reported
         result.update(_upright_pass(chunks, pos, ang))
     return _of_kinds(result, kinds)
 
 
-def _step_task(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, ref: str, volt: str) -> dict[str, Any]:
+def _step_task(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, ref: str, volt: str,
+               passive: str | None = None) -> dict[str, Any]:
     """The :data:`METRIC_KEYS` from the rows (empty for fewer than two rows); the one implementation
     behind :func:`compute_metrics`, :func:`task_metrics` and :func:`streamed_task_metrics`."""
     a = _first_pass(chunks, pos, ang, ref, volt)
@@ -281,6 +440,10 @@ def _step_task(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, r
         result.update(_step_metrics(chunks, a, pos, ref, SETTLING_BAND, STEADY_STATE_FRACTION))
     if not result["upright"]:  # a pendulum that fell has not settled, wherever its cart came to rest
         result["settling_time_s"] = None
+    if a["finite"] and result["upright"]:
+        result.update(_residual_pass(chunks, a, pos, ang, ref, passive))
+    else:  # a fallen or diverged loop has no residual oscillation to speak of
+        result.update({k: None for k in RESIDUAL_KEYS + (PASSIVE_RESIDUAL_KEYS if passive else ())})
     return result
 
 

@@ -19,14 +19,14 @@ import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, Mapping
 
-from ipcosim.errors import closest
+from ipcosim.errors import IpcosimError, closest
 
 
-class ParameterError(ValueError):
+class ParameterError(IpcosimError, ValueError):
     """A plant parameter is missing, non-finite or physically impossible."""
 
 
-class UnknownPresetError(KeyError):
+class UnknownPresetError(IpcosimError, KeyError):
     """A preset name that does not exist."""
 
     def __str__(self) -> str:  # KeyError quotes its argument; we want a plain line

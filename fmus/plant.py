@@ -5,6 +5,7 @@ import math
 from dataclasses import replace
 from typing import Any, Callable, Sequence
 
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.instruments import (
     Instruments,
     Readout,
@@ -28,7 +29,7 @@ from ipcosim.fmus.physics import (
 )
 
 
-class PlantStepError(FloatingPointError):
+class PlantStepError(IpcosimError, FloatingPointError):
     """The plant state became non-finite during a step (reported with time and state)."""
 
 
@@ -299,6 +300,23 @@ class Plant:
         return tuple(v[n] for n in MEASURED[self.kind])
 
 
+def tapped_state(kind: str, x: Sequence[Any], p: PlantParams, force_impulse: Any, torque_impulse: Any) -> list[Any]:
+    """State ``x`` after the taps: an impulse ``force_impulse`` [N s] on the cart carrying the pendulum (the
+    double mass's passive cart) and ``torque_impulse`` [N m s] on the pendulum, as velocity jumps of the
+    cart-pendulum mass matrix at the current angle (``ipcosim.fmus.instruments.tap_velocity_change``).
+    Pure arithmetic: the native plant traces it too."""
+    names = state_names(kind)
+    cart = "cart" if kind == "single-mass" else "passive_cart"
+    th = x[names.index("pendulum_angle")]
+    ml = 0.5 * p.Mp * p.Lp
+    m11 = (p.Meq if kind == "single-mass" else p.Mc) + p.Mp  # type: ignore[union-attr]
+    dv, dw = tap_velocity_change((m11, -ml * math.cos(th), p.Mp * p.Lp * p.Lp / 3.0), force_impulse, torque_impulse)
+    out = list(x)
+    out[names.index(f"{cart}_velocity")] += dv
+    out[names.index("pendulum_velocity")] += dw
+    return out
+
+
 class InstrumentedPlant(Plant):
     """``Plant`` with the bench's instruments (``ipcosim.fmus.instruments``): encoder quantization and
     seeded noise on the measured positions (``readings``), track end stops applied after each step, the
@@ -325,18 +343,7 @@ class InstrumentedPlant(Plant):
         if self.tapped or not (inst.tap_force_impulse or inst.tap_torque_impulse) or t + h <= inst.tap_time:
             return
         self.tapped = True
-        p = self.params
-        names = self.state_names
-        cart = "cart" if self.kind == "single-mass" else "passive_cart"
-        th = self._xl[names.index("pendulum_angle")]
-        ml = 0.5 * p.Mp * p.Lp
-        m11 = (p.Meq if self.kind == "single-mass" else p.Mc) + p.Mp
-        dv, dw = tap_velocity_change((m11, -ml * math.cos(th), p.Mp * p.Lp * p.Lp / 3.0),
-                                     inst.tap_force_impulse, inst.tap_torque_impulse)
-        x = list(self._xl)
-        x[names.index(f"{cart}_velocity")] += dv
-        x[names.index("pendulum_velocity")] += dw
-        self.set_state(x)
+        self.set_state(tapped_state(self.kind, self._xl, self.params, inst.tap_force_impulse, inst.tap_torque_impulse))
 
     def _delay(self, h: float, voltage: float) -> float:
         """The DAC's code of ``voltage``, delayed by the computation delay (``delay_line``)."""

@@ -33,6 +33,7 @@ from xml.etree import ElementTree
 
 import pythonfmu
 
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus import wrapper
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -45,7 +46,7 @@ PACKABLE = ("fmus", "controllers", "harness", "errors")
 _IMPORT_RE = re.compile(r"\bipcosim\.(" + "|".join(PACKABLE) + r")\b")
 
 
-class BuildError(RuntimeError):
+class BuildError(IpcosimError, RuntimeError):
     """An FMU script could not be built into a valid FMU."""
 
 

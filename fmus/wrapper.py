@@ -74,6 +74,8 @@ from pathlib import Path
 
 import pythonfmu
 
+from ipcosim.errors import IpcosimError
+
 __all__ = ["PINNED_VERSION", "PATCH_ID", "WrapperError", "check_pythonfmu", "module_stub", "patch_binary",
            "patch_fmu", "stub_fmu"]
 
@@ -106,7 +108,7 @@ _SITES = (
 )
 
 
-class WrapperError(RuntimeError):
+class WrapperError(IpcosimError, RuntimeError):
     """pythonfmu or its wrapper binary is not the pinned one the FMU runtime relies on."""
 
 

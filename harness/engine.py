@@ -29,7 +29,7 @@ from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import UsageError
 from ipcosim.fmus.hil.observer import CardObserver
-from ipcosim.fmus.metrics import streamed_task_metrics, task_kinds
+from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, task_kinds
 from ipcosim.harness.grammar import strip_nominal
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
@@ -38,7 +38,14 @@ from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress
 from ipcosim.harness.master.realtime import RealtimePacer
 from ipcosim.harness.master.recorder import TaskMetrics, timing_metrics
-from ipcosim.harness.master.results import Result, RowWriter, SimulationError, open_output, select_columns
+from ipcosim.harness.master.results import (
+    Result,
+    RowWriter,
+    SimulationError,
+    json_safe,
+    open_output,
+    select_columns,
+)
 from ipcosim.harness.master.slave import FMUSlave, load_library
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
@@ -374,6 +381,8 @@ class Prepared:
             (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
         result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
         result.metadata["swaps"] = dict(self.swap)
+        b2, K = (_start(execution, "plant", n) for n in ("b2", "K"))  # the success criterion's amplitude bound
+        result.metadata["amplitude_bound_m"] = amplitude_bound(float(b2 or 0.0), float(K or 0.0))
 
     @staticmethod
     def _whole_run_timing(result: Result, wall: float, out: str | os.PathLike[str] | None) -> None:
@@ -497,18 +506,59 @@ def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers
             return run_with(options, own, observers=observers, manipulators=manipulators,
                             raise_on_error=raise_on_error)
     values = resolve_relative(prepared.system, options.set)
-    with signals.deferred(timeout=options.timeout):  # a no-op inside the command line's own
-        result = prepared.run(options.stop_time, options.step, values, out=options.out,
-                              variables=list(options.record) or None, plot=options.plot, realtime=options.realtime,
-                              progress=options.progress, loop=options.loop, observers=observers,
-                              overrun_budget=options.overrun_budget,
-                              manipulators=manipulators, raise_on_error=raise_on_error)
+    live = open_live_view(options, prepared, values) if options.live else None
+    if live is not None:
+        observers = [*observers, live.feed]
+    try:
+        with signals.deferred(timeout=options.timeout):  # a no-op inside the command line's own
+            result = prepared.run(options.stop_time, options.step, values, out=options.out,
+                                  variables=list(options.record) or None, plot=options.plot,
+                                  realtime=options.realtime, progress=options.progress, loop=options.loop,
+                                  observers=observers, overrun_budget=options.overrun_budget,
+                                  manipulators=manipulators, raise_on_error=raise_on_error)
+    except BaseException as exc:
+        if live is not None:
+            partial = getattr(exc, "result", None)
+            live.finished(json_safe(partial.metrics) if partial is not None else None)
+            live.close()
+        raise
+    if live is not None:
+        result.metadata["live_url"] = live.url
+        live.finished(json_safe(result.metrics))
+        live.close()
     if options.save_baseline is not None:
         from ipcosim.harness.baseline import save_baseline
 
         result.metadata.setdefault("files", {})["baseline"] = str(
             save_baseline(result, options.save_baseline, list(options.record) or None))
     return result
+
+
+def open_live_view(options: RunOptions, prepared: Prepared, values: Mapping[str, Any]) -> Any:
+    """The live view of a run (``--live``): its page served, its address printed; the scene after the
+    plant kind, the rig's status from a monitor session (opened by the page's serving process) when a HIL
+    adapter drives a virtual rig (:func:`ipcosim.fmus.hil.observer.rig_monitor`). Returns the
+    :class:`~ipcosim.harness.live.session.LiveSession` whose ``feed`` the run observes with."""
+    from ipcosim.fmus.hil.observer import rig_monitor
+    from ipcosim.harness.live.scene import scene
+    from ipcosim.harness.live.session import open_live
+    from ipcosim.harness.options import scenario_label
+
+    def start(component: str, variable: str) -> Any:
+        if f"{component}.{variable}" in values:
+            return values[f"{component}.{variable}"]
+        try:
+            return prepared.system.instance(component).start_value(variable)
+        except KeyError:
+            return None
+
+    swaps = ", ".join(f"{k}={v}" for k, v in prepared.swap.items())
+    title = scenario_label(options.scenario) + (f" ({swaps})" if swaps else "")
+    monitor = rig_monitor(prepared.system.instances, start)
+    rig = (None if monitor is None else
+           {"card_type": monitor.card_type, "card_id": monitor.card_id, "host": monitor.host, "port": monitor.port})
+    return open_live(lambda names: scene(names, title, start), host=options.live_host, port=options.live_port,
+                     token=options.live_token, rig=rig, rig_token=monitor.token if monitor else None)
 
 
 def resolve_relative(system: System, values: Mapping[str, Any]) -> dict[str, Any]:

@@ -112,6 +112,12 @@ class RunOptions:
     strict : bool
         Parameters of the scenario that a swapped-in FMU does not have are an error (default:
         ignored, named in one warning line per component).
+    live : bool
+        Serve a page that shows the run as it happens, with a stop button (docs/live.md); its
+        address is printed on stderr when the run starts.
+    live_host, live_port, live_token : str, int, str or None
+        Where the live page is served (default 127.0.0.1, any free port) and its access token: an
+        address other than loopback needs one (``--live-host 0.0.0.0 --live-token T``).
     """
 
     scenario: str | os.PathLike[str]
@@ -134,6 +140,10 @@ class RunOptions:
     parameter_file: Path | None = None
     overrun_budget: float | None = None
     strict: bool = False
+    live: bool = False
+    live_host: str = "127.0.0.1"
+    live_port: int = 0
+    live_token: str | None = None
 
     def __post_init__(self) -> None:
         if self.loop not in LOOPS:
@@ -144,6 +154,12 @@ class RunOptions:
             raise UsageError(f"--algorithm {self.algorithm}: expected one of {', '.join(ALGORITHMS)}")
         if not os.fspath(self.scenario):
             raise UsageError("scenario: empty name")
+        if self.live:
+            from ipcosim.harness.live.server import check_address
+
+            check_address(self.live_host, self.live_port, self.live_token)
+        elif self.live_token is not None or self.live_port or self.live_host != "127.0.0.1":
+            raise UsageError("--live-host, --live-port and --live-token: only with --live")
 
     @classmethod
     def create(cls, scenario: str | os.PathLike[str], *, stop_time: Any = None, step: Any = None,
@@ -155,7 +171,8 @@ class RunOptions:
                save_baseline: str | os.PathLike[str] | None = None, progress: bool = False,
                fmus: str = "python", timeout: Any = None, loop: str = "auto",
                overrun_budget: Any = None, strict: bool = False,
-               parameter_file: str | os.PathLike[str] | None = None) -> "RunOptions":
+               parameter_file: str | os.PathLike[str] | None = None, live: bool = False,
+               live_host: str = "127.0.0.1", live_port: Any = 0, live_token: str | None = None) -> "RunOptions":
         """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
 
         Raises
@@ -176,7 +193,9 @@ class RunOptions:
                    save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,
                    fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop,
                    overrun_budget=fraction_option("--overrun-budget", overrun_budget), strict=strict,
-                   parameter_file=Path(parameter_file) if parameter_file is not None else None)
+                   parameter_file=Path(parameter_file) if parameter_file is not None else None,
+                   live=bool(live), live_host=live_host, live_port=_port_option("--live-port", live_port),
+                   live_token=live_token)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "RunOptions":
@@ -189,7 +208,20 @@ class RunOptions:
                           fmus=getattr(args, "fmus", "python"), timeout=getattr(args, "timeout", None),
                           loop=getattr(args, "loop", "auto"), overrun_budget=getattr(args, "overrun_budget", None),
                           strict=getattr(args, "strict", False),
-                          parameter_file=getattr(args, "parameter_file", None))
+                          parameter_file=getattr(args, "parameter_file", None),
+                          live=getattr(args, "live", False), live_host=getattr(args, "live_host", "127.0.0.1"),
+                          live_port=getattr(args, "live_port", 0), live_token=getattr(args, "live_token", None))
+
+
+def _port_option(option: str, value: Any) -> int:
+    """A TCP port number 0..65535 (text or number; 0: any free port)."""
+    try:
+        number = int(value)
+    except (TypeError, ValueError):
+        raise UsageError(f"{option} {value!r}: expected a port number 0..65535") from None
+    if not 0 <= number <= 65535:
+        raise UsageError(f"{option} {value}: expected a port number 0..65535 (0: any free port)")
+    return number
 
 
 def with_parameter_file(path: str | os.PathLike[str] | None, values: Mapping[str, Any]) -> dict[str, Any]:

@@ -54,8 +54,9 @@ def run(scenario: str | os.PathLike[str], *, swap: Mapping[str, Any] | None = No
         :mod:`ipcosim.harness.master.manipulators`, e.g. ``ScheduledValues``).
     **more
         The other options of ``ipcosim run``: ``plot``, ``record``, ``algorithm``,
-        ``fmu_dirs``, ``save_baseline``, ``timeout``, ``loop``, ``parameter_file`` (see
-        :class:`~ipcosim.harness.options.RunOptions`).
+        ``fmu_dirs``, ``save_baseline``, ``timeout``, ``loop``, ``parameter_file``, ``live``
+        (and ``live_host``, ``live_port``, ``live_token``: the run in the browser as it happens,
+        docs/live.md) (see :class:`~ipcosim.harness.options.RunOptions`).
         SIGINT and SIGTERM during the run, and ``timeout``, stop it between FMU calls with its
         results so far written: :class:`ipcosim.harness.master.signals.Interrupted` (a
         KeyboardInterrupt) is raised after every FMU is freed.
@@ -139,7 +140,7 @@ def scenarios() -> list[ScenarioInfo]:
     return out
 
 
-def build(out: str | os.PathLike[str] | None = None, *, force: bool = False) -> list[Path]:
+def build(out: str | os.PathLike[str] | None = None, *, force: bool = False, ssp_version: str = "1.0") -> list[Path]:
     """Build the project's FMUs (and SSP archives) as ``ipcosim build`` does; unchanged ones are kept.
 
     Parameters
@@ -149,6 +150,9 @@ def build(out: str | os.PathLike[str] | None = None, *, force: bool = False) -> 
         the per-user cache ``~/.cache/ipcosim/<version>``, where scenarios look for them.
     force : bool
         Rebuild every FMU.
+    ssp_version : str
+        The SSP version the archives in ``out/ssp`` declare, ``1.0`` (default) or ``2.0``
+        (``ipcosim build --ssp-version``).
 
     Returns
     -------
@@ -163,11 +167,15 @@ def build(out: str | os.PathLike[str] | None = None, *, force: bool = False) -> 
     """
     from ipcosim.fmus.pybuild import build_all
     from ipcosim.harness.paths import BUILD_DIR
-    from ipcosim.harness.scenario.ssp_pack import pack_all
+    from ipcosim.harness.scenario.ssp_pack import SSP_VERSIONS, pack_all
 
     root = Path(out) if out is not None else BUILD_DIR
+    if ssp_version not in SSP_VERSIONS:
+        from ipcosim.errors import UsageError
+
+        raise UsageError(f"ssp_version {ssp_version!r}: expected one of {', '.join(SSP_VERSIONS)}")
     fmus = [r.fmu for r in build_all(root / "fmus", force=force)]
-    pack_all(root)
+    pack_all(root, ssp_version=ssp_version)
     return fmus
 
 

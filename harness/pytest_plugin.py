@@ -79,9 +79,14 @@ class Cosim:
                 lines.append(f"{out}: no result (the run raised)")
                 continue
             m = result.metrics
-            keys = ("upright", "settling_time_s", "steady_state_error_m", "max_abs_angle_rad", "peak_voltage_V")
+            keys = ("upright", "settling_time_s", "steady_state_error_m", "max_abs_angle_rad", "peak_voltage_V",
+                    "cart_mean_error_m", "cart_peak_to_peak_m", "limit_cycle")
             text = ", ".join(f"{k}={m.get(k)!r}" if not isinstance(m.get(k), float) else f"{k}={m[k]:.4g}"
                              for k in keys if k in m)
+            if "cart_mean_error_m" in m:  # the sweeps' success criterion (docs/metrics.md)
+                from ipcosim.fmus.metrics import success_status
+
+                text += f", task={success_status(m, result.metadata.get('amplitude_bound_m'))}"
             lines.append(f"{out}: {text}" + ("" if result.ok else f" FAILED: {result.error}"))
         return "\n".join(lines)
 

@@ -126,6 +126,35 @@ def assert_settles(result: "Result", within_s: float, band: float = metrics.SETT
         _fail(result, f"the cart settled after {ts:.3f} s, not within {within_s:g} s (last entry into {where})")
 
 
+def assert_succeeds(result: "Result") -> None:
+    """Check the run meets the task's success criterion (:func:`ipcosim.fmus.metrics.success_status`, the one
+    the sweeps and robustness tables count): upright, ``|mean error|`` of the motor cart over the final window
+    at most 1 mm, and its residual peak-to-peak within the run's bound (2 mm, plus ``2 b2 / K`` where the
+    passive cart's friction and the spring force a cycle; ``docs/metrics.md``).
+
+    Examples
+    --------
+    >>> import ipcosim
+    >>> ipcosim.assert_succeeds(ipcosim.run("single-mass-lqr", stop_time=6.0))
+    """
+    __tracebackhide__ = True
+    if result.error:
+        _fail(result, f"the run failed: {result.error}")
+    m = result.metrics
+    bound = float(result.metadata.get("amplitude_bound_m") or metrics.amplitude_bound())
+    status = metrics.success_status(m, bound)
+    if status == "fell":
+        _fail(result, f"the pendulum fell (|angle| reached {m.get('max_abs_angle_rad') or float('nan'):.3g} rad)")
+    window = f"over the final {m.get('residual_window_s') or 0:g} s"
+    if status == "unsettled":
+        _fail(result, f"mean error {1e3 * float(m['cart_mean_error_m'] or float('nan')):.3g} mm {window} exceeds "
+                      f"{1e3 * metrics.MEAN_ERROR_LIMIT_M:g} mm")
+    if status == "hunting":
+        freq = m.get("cart_frequency_Hz")
+        _fail(result, f"the cart hunts {1e3 * float(m['cart_peak_to_peak_m']):.3g} mm peak to peak"
+                      f"{f' at {freq:.2f} Hz' if freq else ''} {window}, beyond its bound {1e3 * bound:.3g} mm")
+
+
 def assert_steady_state(result: "Result", error_m: float, fraction: float = metrics.STEADY_STATE_FRACTION) -> None:
     """Check ``|mean(position - reference)|`` over the last ``fraction`` of the run is at most ``error_m``.
 

@@ -6,7 +6,8 @@ a model description written here from one variable table per model.
 Models (see each C file): ``Stair`` (Integer counter that ends the simulation itself),
 ``PassThrough`` (Real, Integer, Boolean and String in and out through a parameter of each
 type), ``BouncingBall`` (events inside the step), ``Counter`` (multi-rate: counts its steps,
-integrates its input), ``PassThrough3`` and ``Source3`` (FMI 3.0 with the sized types).
+integrates its input), ``PassThrough3`` and ``Source3`` (FMI 3.0 with the sized types), ``Ints3``
+(FMI 3.0: every integer type from Int8 to UInt64, in and out, and 64-bit parameters).
 """
 from __future__ import annotations
 
@@ -119,6 +120,18 @@ SOURCE3 = Spec("Source3", "source3.c", "3.0", (
     _out("on", "Boolean", "b", 0, (), variability="discrete"),
     _out("label", "String", "s", 0, (), variability="discrete"),
 ), step=0.1, stop=1.0)
+
+#: The FMI 3.0 integer types and the short names of Ints3's connectors of each.
+INT_TYPES = (("i8", "Int8"), ("u8", "UInt8"), ("i16", "Int16"), ("u16", "UInt16"), ("i32", "Int32"),
+             ("u32", "UInt32"), ("i64", "Int64"), ("u64", "UInt64"))
+
+INTS3 = Spec("Ints3", "ints3.c", "3.0", tuple(
+    v for k, (short, t) in enumerate(INT_TYPES)
+    for v in (_in(f"{short}_in", t, "i", 2 * k, "0"),
+              _out(f"{short}_out", t, "i", 2 * k + 1, (f"{short}_in",), variability="discrete"))
+) + (_par("p64", "Int64", "i", 16, "0"), _par("pu64", "UInt64", "i", 17, "0"),
+     _out("p64_out", "Int64", "i", 18, (), variability="discrete"),
+     _out("pu64_out", "UInt64", "i", 19, (), variability="discrete")), step=0.1, stop=0.3)
 
 STAIR3 = Spec("Stair3", "stair.c", "3.0", (
     _out("counter", "Int32", "i", 0, (), variability="discrete"),

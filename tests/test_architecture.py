@@ -14,7 +14,8 @@ below it, never one above:
     harness.master                             the generic master (knows no plant, law or generator)
     harness.scenario                           SSP read, validate, bind, pack, flavours
     ipcosim, harness (the facade)              the lazy public names, options, grammar, engine, public,
-                                               export, testing helpers, baselines, plots, pytest plugin
+                                               export, testing helpers, baselines, plots, pytest plugin,
+                                               the live view
     harness.studies                            the generic study engine
     harness.evidence                           the thesis's own evidence
     harness.cli                                the command line
@@ -44,7 +45,8 @@ ROOMS: tuple[tuple[str, ...], ...] = (
     ("harness.master",),
     ("harness.scenario",),
     ("", "harness", "harness.options", "harness.grammar", "harness.engine", "harness.public", "harness.export",
-     "harness.testing", "harness.baseline", "harness.plot", "harness.pytest_plugin", "harness.describe"),
+     "harness.testing", "harness.baseline", "harness.plot", "harness.pytest_plugin", "harness.describe",
+     "harness.live"),
     ("harness.studies",),
     ("harness.evidence",),
     ("harness.cli",),

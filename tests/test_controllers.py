@@ -12,35 +12,30 @@ import pytest
 from ipcosim.controllers.catalog import (
     LAWS,
     PARAMETER_SETS,
-    TUNED_CASCADE,
-    TUNED_HSMC,
     build_law,
     default_preset,
     make_law,
     parameter_sets,
     schema,
     set_values,
+)
+from ipcosim.controllers.design import design_model
+from ipcosim.controllers.errors import ControllerParameterError
+from ipcosim.controllers.laws.base import FilteredDerivative, LawInputError, LawParameterError, saturate
+from ipcosim.controllers.laws.hsmc import (
+    HSMC,
+    TUNED_HSMC,
+    AdaptiveHSMC,
+    AdaptiveSchedules,
+    HSMCGains,
+    Schedule,
+    SubsystemModel,
     subsystem_models,
     thesis_adaptive,
     thesis_hsmc_gains,
     thesis_subsystem_models,
 )
-from ipcosim.controllers.design import design_model
-from ipcosim.controllers.errors import ControllerParameterError
-from ipcosim.controllers.laws import (
-    HSMC,
-    PID,
-    AdaptiveHSMC,
-    AdaptiveSchedules,
-    FilteredDerivative,
-    HSMCGains,
-    LawInputError,
-    LawParameterError,
-    PIDGains,
-    Schedule,
-    SubsystemModel,
-    saturate,
-)
+from ipcosim.controllers.laws.pid import PID, TUNED_CASCADE, PIDGains
 from ipcosim.controllers.reference import RAMP, SQUARE, STEP, reference_at
 from ipcosim.controllers.simulate import LoopError, run_loop
 from ipcosim.controllers.tuning import MIN_DAMPING, MIN_DECAY, cascade_feedback, hsmc_feedback, step_cost

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from ipcosim.controllers.catalog import build_law, lqr_design_for, make_law, schema
+from ipcosim.controllers.catalog import build_law, make_law, schema
 from ipcosim.controllers.design import (
     THESIS_DOUBLE_MASS_Q,
     check_weights,
@@ -21,6 +21,7 @@ from ipcosim.controllers.design import (
     zoh,
 )
 from ipcosim.controllers.errors import ControllerParameterError, DesignError
+from ipcosim.controllers.laws.lqr import lqr_design_for
 from ipcosim.controllers.thesis import (
     THESIS_DOUBLE_MASS_K,
     THESIS_DOUBLE_MASS_R,

@@ -4,7 +4,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from ipcosim.controllers.catalog import TUNED_CASCADE, TUNED_HSMC
+from ipcosim.controllers.laws.hsmc import TUNED_HSMC
+from ipcosim.controllers.laws.pid import TUNED_CASCADE
 from ipcosim.harness.evidence.controllers_table import BEGIN, END, document
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "controllers.md"

@@ -273,8 +273,8 @@ def test_bad_parameter_is_an_fmi_error_naming_it(controller_fmus, model: str, pa
 
 def test_hsmc_denominator_case_is_really_degenerate() -> None:
     """The HSMCSingleMass case above: lambda1 b1 + lambda2 b2 ~ 0 for the default design model."""
-    from ipcosim.controllers.catalog import subsystem_models
     from ipcosim.controllers.design import design_model
+    from ipcosim.controllers.laws.hsmc import subsystem_models
 
     b = [m.b for m in subsystem_models(design_model(preset("thesis-ch3")))]
     assert abs(-0.22473333333333334 * b[0] + b[1]) < 1e-3
@@ -289,3 +289,34 @@ def test_bad_setpoint_parameter(controller_fmus) -> None:
     with pytest.raises(FMICallException):
         f.slave.exitInitializationMode()
     assert "ramp_rate" in f.text()
+
+
+def test_a_controller_fmu_packs_only_its_own_law() -> None:
+    """The project files a controller FMU carries (``pybuild.runtime_modules``, the closure of its script's
+    imports) hold one law module, its own -- the swing-up's also the LQR it balances with -- and never the
+    registry that knows every law."""
+    import importlib.util
+    import sys
+
+    from ipcosim.controllers.catalog import REGISTRY
+    from ipcosim.controllers.controller_fmu import ControllerFmu
+    from ipcosim.fmus.pybuild import ROOT, discover, runtime_modules
+
+    laws = ROOT / "controllers" / "laws"
+    seen = set()
+    for script in discover():
+        spec = importlib.util.spec_from_file_location(f"_script_{script.stem}", script)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        cls = next((c for c in vars(module).values() if isinstance(c, type) and issubclass(c, ControllerFmu)
+                    and c is not ControllerFmu), None)
+        if cls is None:
+            continue  # a plant or the setpoint
+        own = Path(sys.modules[cls.law.build.__module__].__file__).resolve()
+        files = {f.resolve() for f in runtime_modules(script)}
+        packed = {f for f in files if f.parent == laws and f.name not in ("__init__.py", "base.py")}
+        expected = {own, laws / "lqr.py"} if cls.law.name == "SwingUp" else {own}
+        assert packed == expected, f"{script.name} packs {sorted(p.name for p in packed)}"
+        assert ROOT / "controllers" / "catalog.py" not in files, f"{script.name} packs the registry"
+        seen.add(cls.law.name)
+    assert seen == set(REGISTRY), f"laws without an FMU script: {set(REGISTRY) - seen}"

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ipcosim.controllers.catalog import make_law, set_values
-from ipcosim.controllers.laws import HSMC
+from ipcosim.controllers.laws.hsmc import HSMC
 from ipcosim.fmus.params import preset
 
 

@@ -34,9 +34,9 @@ SLOW = ROOT / "tests" / "data" / "slow_init"
 #: The walk-through of docs/hil.md: (rig command, run command), copied there verbatim.
 WALKTHROUGH = {
     "single-mass-lqr": ("ipcosim rig serve", "ipcosim run single-mass-lqr --swap plant=hil"),
-    "double-mass-hsmc": ("ipcosim rig serve --plant double-mass", "ipcosim run double-mass-hsmc --swap plant=hil"),
+    "double-mass-lqg": ("ipcosim rig serve --plant double-mass", "ipcosim run double-mass-lqg --swap plant=hil"),
 }
-SLOW_CONTROLLER = {"single-mass-lqr": "SlowInitLQRSingleMass", "double-mass-hsmc": "SlowInitHSMCDoubleMass"}
+SLOW_CONTROLLER = {"single-mass-lqr": "SlowInitLQRSingleMass", "double-mass-lqg": "SlowInitLQGDoubleMass"}
 #: Generous for a shared machine, and still far shorter than the controllers' 3 s initialization.
 WATCHDOG = 0.5
 #: The shared test machine stalls processes for tens of milliseconds: master and rig ask for
@@ -61,7 +61,7 @@ def realtime_fmus(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("realtime-fmus")
     names = ["fmus/fmu_ip02_single_mass.py", "fmus/fmu_ip02_double_mass.py", "fmus/fmu_ip02_hil_single_mass.py",
              "fmus/fmu_ip02_hil_double_mass.py", "controllers/fmu_setpoint.py", "controllers/fmu_lqr_single_mass.py",
-             "controllers/fmu_hsmc_double_mass.py"]
+             "controllers/fmu_lqg_double_mass.py"]
     build_all(out, scripts=[ROOT / n for n in names] + sorted(SLOW.glob("fmu_*.py")))
     return out
 

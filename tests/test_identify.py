@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from ipcosim.controllers.catalog import make_law
-from ipcosim.controllers.excitation import ExcitationGains, multisine
-from ipcosim.controllers.laws import LawParameterError
+from ipcosim.controllers.laws.base import LawParameterError
+from ipcosim.controllers.laws.excitation import ExcitationGains, multisine
 from ipcosim.fmus.instruments import realism
 from ipcosim.fmus.params import DEFAULT_PRESET, preset
 from ipcosim.fmus.physics import MEASURED, state_names

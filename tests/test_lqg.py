@@ -13,7 +13,8 @@ import control
 import numpy as np
 import pytest
 
-from ipcosim.controllers.catalog import build_law, defaults, lqg_design_from, make_law
+from ipcosim.controllers.catalog import build_law, defaults, make_law
+from ipcosim.controllers.laws.lqg import lqg_design_from
 from ipcosim.controllers.simulate import run_loop
 from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT
 from ipcosim.fmus.params import DEFAULT_PRESET, preset
@@ -201,7 +202,7 @@ def test_bad_lqg_parameter_names_it(values: dict, name: str) -> None:
 
 
 def test_coulomb_estimate_is_zero_at_rest_and_full_when_sliding() -> None:
-    from ipcosim.controllers.laws import coulomb_estimate
+    from ipcosim.controllers.laws.lqg import coulomb_estimate
 
     b, v0 = 0.1, 2e-3
     assert [coulomb_estimate(v, b, v0) for v in (0.0, 1e-3, -2e-3)] == [0.0, 0.0, 0.0]
@@ -212,7 +213,7 @@ def test_coulomb_estimate_is_zero_at_rest_and_full_when_sliding() -> None:
 
 def test_breakaway_term_holds_a_cart_at_rest_up_to_its_coulomb_force() -> None:
     """At rest the compensation is g times the model's force on the cart, clipped at b; sliding, it is b sign(v)."""
-    from ipcosim.controllers.laws import coulomb_estimate
+    from ipcosim.controllers.laws.lqg import coulomb_estimate
 
     b, v0 = 0.1, 2e-3
     assert coulomb_estimate(0.0, b, v0, 0.04, 1.0) == pytest.approx(0.04)
@@ -226,7 +227,8 @@ def test_breakaway_term_holds_a_cart_at_rest_up_to_its_coulomb_force() -> None:
 
 @pytest.mark.parametrize("kind", KINDS)
 def test_lab_set_compensates_the_lab_benchs_friction_and_the_default_none(kind: str) -> None:
-    from ipcosim.controllers.catalog import LQG_FRICTION, set_values
+    from ipcosim.controllers.catalog import set_values
+    from ipcosim.controllers.laws.lqg import LQG_FRICTION
     from ipcosim.fmus.instruments import REALISM
 
     lab, tuned = set_values(kind, "LQG", "lab"), {**defaults(kind, "LQG"), **set_values(kind, "LQG", "tuned")}
@@ -243,7 +245,8 @@ def test_friction_model_is_what_the_plants_coulomb_force_does(kind: str) -> None
 
     import scipy.linalg
 
-    from ipcosim.controllers.catalog import coulomb_model, design_params_from
+    from ipcosim.controllers.laws.base import design_params_from
+    from ipcosim.controllers.laws.lqg import coulomb_model
     from ipcosim.fmus.linearize import linear_matrices
     from ipcosim.fmus.physics import rhs_no_inductance
 

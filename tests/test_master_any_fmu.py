@@ -135,9 +135,11 @@ def test_every_type_through_fmi3_and_fmi2_with_set_and_typed_csv(tmp_path, fmus,
 
 def test_typed_columns_stream_over_many_chunks(tmp_path, fmus):
     """3000 ticks recorded every third one: the rows reach results.csv and the spool in many
-    chunks; every typed column keeps its values and type across the chunk boundaries."""
+    chunks; every typed column keeps its values and type across the chunk boundaries. (Counts
+    above 255 cannot reach a UInt8 input: that connection is left out here.)"""
+    chain = [c for c in CHAIN if "u8_in" not in c]
     folder = scenario(tmp_path, fmus, [comp("src", "Source3"), comp("pt", "PassThrough"), comp("pt3", "PassThrough3")],
-                      CHAIN, stop=3.0, step=0.001)
+                      chain, stop=3.0, step=0.001)
     with ipcosim.prepare(folder) as prepared:
         r = prepared.run(out=tmp_path / "out", set={"pt.offset": 5, "pt.prefix": "x-", "pt.invert": True,
                                                                "src.step_time": 1.2}, record_every=3)

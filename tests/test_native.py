@@ -195,11 +195,10 @@ def test_generated_laws_agree_with_python(native_fmus: tuple[Path, Path], tmp_pa
         print(f"{name}: worst relative difference (1 V floor) {worst:.2e} over 10 x 200 samples")
 
 
-#: Scenarios the native flavour refuses, with what the refusal must name: the tap is an instrument option
-#: the native plant lacks (the lab bench's it has: double-mass-hsmc-lab runs on both flavours); the
-#: identification excitation is Python only.
-NATIVE_UNSUPPORTED = {"single-mass-lqr-tap": "parameter tap_torque_impulse = 0.005 must be 0",
-                      "single-mass-identify": "ExcitationSingleMass has no native flavour",
+#: Scenarios the native flavour refuses, with what the refusal must name: the identification excitation is
+#: Python only (the lab bench and the taps the native plant has: double-mass-hsmc-lab and single-mass-lqr-tap
+#: run on both flavours).
+NATIVE_UNSUPPORTED = {"single-mass-identify": "ExcitationSingleMass has no native flavour",
                       "double-mass-identify": "ExcitationDoubleMass has no native flavour"}
 
 
@@ -426,10 +425,30 @@ def test_native_fmu_rejects_a_bad_parameter_by_name(native_fmus: tuple[Path, Pat
 
 @needs_cc
 @pytest.mark.integration
+def test_a_push_on_the_passive_cart_and_a_tap_on_the_pendulum_agree_between_flavours(
+        native_fmus: tuple[Path, Path]) -> None:
+    """The taps act once, in the step that ends after tap_time, on the cart carrying the pendulum (the double
+    mass's passive cart) and on the pendulum: the same jump in both flavours, bit for bit."""
+    import ipcosim
+
+    python, native = native_fmus
+    push = {"plant.tap_time": 1.0005, "plant.tap_force_impulse": 0.05, "plant.tap_torque_impulse": 0.002}
+    a = ipcosim.run("double-mass-lqg", fmu_dirs=[python], stop_time=2.0, set=push).data
+    b = ipcosim.run("double-mass-lqg", fmu_dirs=[native], fmus="native", stop_time=2.0, set=push).data
+    calm = ipcosim.run("double-mass-lqg", fmu_dirs=[native], fmus="native", stop_time=2.0).data
+    for col in a.dtype.names:
+        np.testing.assert_array_equal(a[col], b[col], err_msg=col)
+    moved = np.abs(b["plant.pendulum_angle"] - calm["plant.pendulum_angle"]) > 1e-9
+    # nothing before the step that ends after 1.0005 s (1.000-1.001 s), a jump from then on
+    assert not moved[b["time"] <= 1.0].any() and moved[b["time"] > 1.0].any()
+
+
+@needs_cc
+@pytest.mark.integration
 def test_native_plant_refuses_instrument_options_by_name(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
-    """The native plant has no measurement noise or taps: the Python plant's options are there (same value
-    references) but must stay 0, in the FMU itself and through ``--set``; 0 is accepted. A computation delay
-    longer than its delay line is refused by name."""
+    """The native plant has no measurement noise: the Python plant's option is there (same value reference)
+    but must stay 0, in the FMU itself and through ``--set``; 0 is accepted. A computation delay longer than
+    its delay line is refused by name."""
     from fmi_helpers import instantiate
     from fmpy.fmi1 import FMICallException
 
@@ -445,9 +464,9 @@ def test_native_plant_refuses_instrument_options_by_name(native_fmus: tuple[Path
         inst.slave.exitInitializationMode()
     assert "IP02DoubleMass: parameter noise_counts = 0.5 must be 0 in the native flavour" in inst.text()
     inst.slave.freeInstance()
-    with pytest.raises(FlavourError, match="native flavour of IP02SingleMass has no tap_torque_impulse: parameter "
-                                           "tap_torque_impulse = 0.002 must be 0"):
-        ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"plant.tap_torque_impulse": 0.002},
+    with pytest.raises(FlavourError, match="native flavour of IP02SingleMass has no noise_counts: parameter "
+                                           "noise_counts = 0.5 must be 0"):
+        ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"plant.noise_counts": 0.5},
                     stop_time=0.01)
     with pytest.raises(FlavourError, match="at most 32 steps of 0.001 s: parameter input_delay = 0.05"):
         ipcosim.run("single-mass-lqr", fmu_dirs=[native], fmus="native", set={"plant.input_delay": 0.05},

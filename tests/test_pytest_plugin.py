@@ -68,3 +68,17 @@ def test_plugin_is_inert_in_a_session_that_does_not_use_it(pytester):
                                    "    assert 'ipcosim.harness.engine' not in sys.modules\n")
     result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--strict-markers")
     result.assert_outcomes(passed=1)
+
+
+@pytest.mark.integration
+def test_assert_succeeds_is_the_sweeps_criterion_and_says_why_in_millimetres() -> None:
+    import ipcosim
+    from ipcosim.fmus.metrics import success_status
+
+    done = ipcosim.run("single-mass-lqr", stop_time=6.0)
+    assert done.metadata["amplitude_bound_m"] == pytest.approx(0.002)  # no spring, no friction: 2 mm
+    assert success_status(done.metrics, done.metadata["amplitude_bound_m"]) == "ok"
+    ipcosim.assert_succeeds(done)
+    early = ipcosim.run("single-mass-lqr", stop_time=1.0)  # the final half second is mid-step: far from 50 mm
+    with pytest.raises(ipcosim.CheckFailed, match=r"mean error -?\d+(\.\d+)? mm over the final 0.5 s exceeds 1 mm"):
+        ipcosim.assert_succeeds(early)

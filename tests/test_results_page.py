@@ -44,7 +44,7 @@ def test_the_margins_are_those_the_analysis_gives_now(data: dict) -> None:
 
 def test_the_lab_lqg_is_unstable_in_the_linearization_by_its_breakaway_term_alone(data: dict) -> None:
     """What breakaway_note() says of the double-mass LQG's lab row, measured."""
-    from ipcosim.controllers.catalog import LAB_LQG
+    from ipcosim.controllers.laws.lqg import LAB_LQG
     from ipcosim.harness.studies.analyze import analyze_loop, scenario_loop
 
     gain = LAB_LQG["double-mass"]["friction_breakaway_gain"]
@@ -85,3 +85,38 @@ def test_robustness_rates_and_intervals_follow_from_the_counts(data: dict) -> No
 def test_remeasuring_an_unknown_row_names_it_and_the_closest_before_running_anything(data: dict) -> None:
     with pytest.raises(ValueError, match=r"--rows single-mass-lqq: not a row .*single-mass-lqg"):
         remeasure(data, ["single-mass-lqq"])
+
+
+def test_the_success_table_rates_follow_from_the_counts_and_the_target_law_has_two_seeds(data: dict) -> None:
+    from ipcosim.harness.evidence.results_page import ROBUST_SCENARIOS, VERDICT_SEEDS
+
+    rows = data["verdict"]
+    assert {r["scenario"] for r in rows} == {name for name, _ in ROBUST_SCENARIOS}
+    seeds = sorted(r["seed"] for r in rows if r["scenario"] == "double-mass-lqg")
+    assert seeds == list(VERDICT_SEEDS["double-mass-lqg"])
+    for r in rows:
+        ok = r["counts"].get("ok", 0)
+        assert r["runs"] >= 200 and sum(r["counts"].values()) == r["runs"] and r["success_rate"] == ok / r["runs"]
+        assert r["success_ci95"] == pytest.approx(list(wilson_interval(ok, r["runs"])))
+        # a success is upright with the mean error in 1 mm: neither fraction can be below the success rate
+        assert r["success_rate"] <= r["mean_error_ok"] <= r["upright"]
+        assert r["upright"] == pytest.approx(1 - r["counts"].get("fell", 0) / r["runs"])
+        amp = r["distributions"]["cart_peak_to_peak_m"]
+        assert amp["median"] <= amp["p90"]
+
+
+def test_each_comparison_verdict_is_the_success_criterion_of_its_measurements(data: dict) -> None:
+    from ipcosim.fmus.metrics import amplitude_bound, success_status
+    from ipcosim.harness.evidence.comparison import BENCHES, LAWS
+
+    rows = data["comparison"]
+    assert [(r["scenario"], r["bench"]) for r in rows] == [
+        (f"{kind}-{law}", bench) for kind, laws in LAWS.items() for law, _, _ in laws for bench in BENCHES]
+    for r in rows:
+        s = r["step"]
+        assert s["status"] == success_status(s, s["amplitude_bound_m"]), (r["scenario"], r["bench"])
+        # the lab bench's friction on the double mass's passive cart forces a cycle: 2 b2 / K beyond 2 mm
+        forced = r["kind"] == "double-mass" and r["bench"] == "lab"
+        assert s["amplitude_bound_m"] == pytest.approx(amplitude_bound(0.1047, 142.185) if forced else 0.002)
+        for what in ("push", "tap"):
+            assert r[what]["upright"] in (True, False)

@@ -248,7 +248,7 @@ def test_dask_local_cluster_gives_the_same_rows_as_the_process_pool(tmp_path):
             executor.close()
     assert strip_time(on_dask.rows) == strip_time(local.rows)
     assert on_dask.rows[-1]["status"] == "error" and "Mp" in on_dask.rows[-1]["error"]
-    assert sum(r["status"] == "ok" for r in on_dask.rows) >= 1
+    assert sum(r["status"] != "error" for r in on_dask.rows) >= 1  # runs completed (2 s: too short to succeed)
     _, on_disk = read_results(tmp_path / "results.csv")
     assert strip_time(on_disk) == strip_time(local.rows)
 
@@ -350,3 +350,15 @@ def test_sweep_study_checks_everything_before_it_touches_the_folder(tmp_path):
     assert study.metadata == {"vary": ["plant.Mp=uniform(0.8,1.2)*nominal", "plant.Lp=[0.3,0.4]"],
                               "set": {"plant.Beq": 5.0}, "samples": 3, "seed": 4, "parameter_set": None}
     assert study.flavour == "no FMUs (a pure-Python stand-in)"
+
+
+def test_the_summary_gives_the_residual_amplitude_beside_the_success_rate():
+    from ipcosim.harness.studies.robustness import summarize, summary_line, summary_markdown
+
+    # 1, 2, ..., 10 mm: median 5.5 mm, 90th percentile (linear) 1 + 0.9 x 9 = 9.1 mm
+    rows = [{"status": "ok" if i <= 3 else "hunting", "cart_peak_to_peak_m": 1e-3 * i} for i in range(1, 11)]
+    s = summarize(rows, ["cart_peak_to_peak_m"])
+    assert s["metrics"]["cart_peak_to_peak_m"]["p90"] == pytest.approx(9.1e-3)
+    for text in (summary_line(s), summary_markdown(s)):
+        assert "30.0 %" in text
+        assert "median 5.5 mm, 90th percentile 9.1 mm" in text

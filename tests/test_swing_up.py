@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from ipcosim.controllers.catalog import CatalogError, make_law
-from ipcosim.controllers.laws import LawParameterError, wrap_angle
+from ipcosim.controllers.laws.base import LawParameterError
+from ipcosim.controllers.laws.swing_up import wrap_angle
 from ipcosim.fmus.instruments import realism
 from ipcosim.fmus.metrics import upright_metrics
 from ipcosim.fmus.params import preset

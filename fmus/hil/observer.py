@@ -78,3 +78,83 @@ def card_fault(execution: Any, error: BaseException | None) -> str | None:
         if "limit_tripped" in names and "last_error" in names and f"component {inst.name} " in first:
             return first
     return None
+
+
+class RigMonitor:
+    """The status of the virtual rig a run drives, asked over a monitor session of its own (the
+    session ``ipcosim rig status`` opens): for a live view, from the view's thread, never the run's.
+
+    Calling it returns ``watchdog_running``, ``watchdog_expired``, ``amplifier_enabled``,
+    ``limit_tripped``, ``limit_message``, ``motor_voltage`` [V] and ``time`` (the rig's clock [s]);
+    a failed question closes the session (the next call opens another) and raises HILError.
+    """
+
+    def __init__(self, card_type: str, card_id: str, host: str, port: int, token: str | None) -> None:
+        self.card_type, self.card_id, self.host, self.port, self.token = card_type, card_id, host, port, token
+        self._card: Any = None
+
+    def __call__(self) -> dict[str, Any]:
+        from ipcosim.fmus.hil.api import HILError
+        from ipcosim.fmus.hil.tcpip import TcpipCard
+
+        try:
+            if self._card is None:
+                self._card = TcpipCard(self.card_type, self.card_id, self.host, self.port, role="monitor",
+                                       name="ipcosim live view", token=self.token or "", timeout=2.0)
+            st = self._card.status()
+        except HILError:
+            self.close()
+            raise
+        return {"watchdog_running": st.watchdog_running, "watchdog_expired": st.watchdog_expired,
+                "amplifier_enabled": st.amplifier_enabled, "limit_tripped": st.limit_tripped,
+                "limit_message": st.limit_message, "motor_voltage": st.motor_voltage, "time": st.time}
+
+    def close(self) -> None:
+        """End the monitor session (idempotent)."""
+        card, self._card = self._card, None
+        if card is not None:
+            try:
+                card.close()
+            except Exception:  # noqa: BLE001 -- a monitor's goodbye must not fail anything
+                pass
+
+
+def rig_monitor(instances: Any, start: Any) -> RigMonitor | None:
+    """A :class:`RigMonitor` of the virtual rig (``N@tcpip://HOST:PORT``) the run's first card-driving
+    component (a HIL adapter: ``limit_tripped``, ``last_error``, ``card_uri``) is given, or None (no
+    adapter, a real card, an in-process rig).
+
+    Parameters
+    ----------
+    instances : iterable
+        The run's component instances (``name``, ``model.variables``).
+    start : callable
+        ``start(component, variable)``: the value the run gives a parameter.
+    """
+    import os
+    import urllib.parse
+
+    from ipcosim.fmus.hil import HILError, parse_card_uri
+    from ipcosim.fmus.hil.protocol import TOKEN_ENV
+
+    for inst in instances:
+        names = inst.model.variables
+        if not all(n in names for n in ("limit_tripped", "last_error", "card_uri")):
+            continue
+        try:
+            card_type, card_id = parse_card_uri(str(start(inst.name, "card_uri") or ""))
+        except HILError:
+            return None
+        _, _, rest = card_id.partition("@")
+        if not rest.startswith("tcpip://"):
+            return None
+        where = urllib.parse.urlsplit(f"tcp://{rest[len('tcpip://'):]}")
+        try:
+            port = where.port
+        except ValueError:
+            return None
+        if not where.hostname or port is None:
+            return None
+        token = str(start(inst.name, "card_token") or "") or os.environ.get(TOKEN_ENV) or None
+        return RigMonitor(card_type, card_id, where.hostname, port, token)
+    return None

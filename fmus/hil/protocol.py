@@ -76,6 +76,8 @@ import struct
 from dataclasses import dataclass
 from typing import Sequence
 
+from ipcosim.errors import IpcosimError
+
 PROTOCOL_VERSION = 1
 MAGIC = b"IPRG"
 HEADER = struct.Struct("!4sBBHII")
@@ -86,6 +88,31 @@ TOKEN_ENV = "IPCOSIM_RIG_TOKEN"
 MAX_SKIP = 1 << 20          # oversized frames up to this size are skipped exactly; beyond: resync
 REPLY_BIT = 0x80
 REPLY_PREFIX = struct.Struct("!iIq")
+
+# The fixed parts of the messages, one named struct each (the table above; counts, channel lists,
+# values and texts follow them as ``!H`` n + n items). Both ends pack and unpack with these.
+#: HELLO request: role u8 (1 control, 0 monitor); then the name and the optional token (texts).
+HELLO_REQUEST = struct.Struct("!B")
+#: HELLO reply: plant, clock, n_ao, n_enc, dac_bits (u8), counts/rev (u32), ao min, ao max (d), tick [ns] (q),
+#: protocol version (u16).
+HELLO_REPLY = struct.Struct("!BBBBBIddqH")
+#: WD_START request: the watchdog timeout [s].
+WD_START_REQUEST = struct.Struct("!d")
+#: WD_RELOAD and WD_IS_EXPIRED reply: reloaded / expired u8.
+FLAG_REPLY = struct.Struct("!B")
+#: STEP request: until [ns], reload u8; then the output channels and volts, the encoder channels.
+STEP_REQUEST = struct.Struct("!qB")
+#: STEP reply: reloaded u8, lateness [ns], count n; then n encoder counts.
+STEP_REPLY = struct.Struct("!BqH")
+#: ADVANCE request: dt [ns] (lockstep).
+ADVANCE_REQUEST = struct.Struct("!q")
+#: STATUS reply: motor volts, last reload [ns], expired at [ns] (-1 = none); then the limit message, the
+#: counter count k and k x (name, COUNTER_VALUE).
+STATUS_REPLY = struct.Struct("!dqq")
+#: One counter's value in the STATUS reply.
+COUNTER_VALUE = struct.Struct("!q")
+#: A count n (of channels, encoder counts or counters) before the n items.
+COUNT = struct.Struct("!H")
 
 FLAG_AMPLIFIER = 1
 FLAG_LIMIT = 2
@@ -114,7 +141,7 @@ class Msg(enum.IntEnum):
     BYE = 0x10
 
 
-class DecodeError(ValueError):
+class DecodeError(IpcosimError, ValueError):
     """A payload that does not decode for its message type."""
 
 
@@ -222,19 +249,21 @@ class Reader:
         self.data = payload
         self.pos = 0
 
-    def take(self, fmt: str) -> tuple:
-        s = struct.Struct("!" + fmt)
+    def take(self, fmt: str | struct.Struct) -> tuple:
+        """The next values: of a message's named struct, or of a format (network order implied)."""
+        s = fmt if isinstance(fmt, struct.Struct) else struct.Struct("!" + fmt)
+        fmt = s.format.removeprefix("!")
         if self.pos + s.size > len(self.data):
             raise DecodeError(f"payload too short for {fmt!r} at byte {self.pos}")
         out = s.unpack_from(self.data, self.pos)
         self.pos += s.size
         return out
 
-    def one(self, fmt: str):  # noqa: ANN201 -- any scalar
+    def one(self, fmt: str | struct.Struct):  # noqa: ANN201 -- any scalar
         return self.take(fmt)[0]
 
     def text(self) -> str:
-        n = self.one("H")
+        n = self.one(COUNT)
         if self.pos + n > len(self.data):
             raise DecodeError("string runs past the payload")
         raw = self.data[self.pos:self.pos + n]
@@ -245,7 +274,7 @@ class Reader:
             raise DecodeError(f"string is not UTF-8: {exc}") from None
 
     def channels(self, limit: int = 64) -> list[int]:
-        n = self.one("H")
+        n = self.one(COUNT)
         if n > limit:
             raise DecodeError(f"{n} channels (at most {limit})")
         return list(self.take(f"{n}I")) if n else []
@@ -263,7 +292,7 @@ class Reader:
 
 def pack_text(text: str, limit: int = 1024) -> bytes:
     raw = text.encode("utf-8")[:limit]
-    return struct.pack("!H", len(raw)) + raw
+    return COUNT.pack(len(raw)) + raw
 
 
 def pack_channels(channels: Sequence[int]) -> bytes:

@@ -30,19 +30,29 @@ import gc
 import hmac
 import ipaddress
 import socket
-import struct
 import threading
 import time
 from typing import Callable
 
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.hil.api import ErrorCode, HILError
 from ipcosim.fmus.hil.protocol import (
+    ADVANCE_REQUEST,
+    COUNT,
+    COUNTER_VALUE,
     FLAG_AMPLIFIER,
     FLAG_LIMIT,
+    FLAG_REPLY,
     FLAG_WD_EXPIRED,
     FLAG_WD_RUNNING,
+    HELLO_REPLY,
+    HELLO_REQUEST,
     PROTOCOL_VERSION,
     REPLY_BIT,
+    STATUS_REPLY,
+    STEP_REPLY,
+    STEP_REQUEST,
+    WD_START_REQUEST,
     DecodeError,
     Frame,
     FrameDecoder,
@@ -128,7 +138,7 @@ class RateLimitedLog:
         self._log(line)
 
 
-class _WriteTimeout(Exception):
+class _WriteTimeout(IpcosimError, Exception):
     """Internal: a client did not take a reply within the write timeout."""
 
 
@@ -484,7 +494,7 @@ class RigServer:
                 self._send(conn, frame, ErrorCode.NOT_CONTROLLER,
                            message=f"{msg.name} needs the controlling session; this is a monitor session")
                 return None
-            body = self._dispatch(msg, reader, session, frame, conn)
+            body = self._dispatch(msg, reader, session)
         except DecodeError as exc:
             self._drop("malformed", session, frame, str(exc))
             return None
@@ -508,7 +518,7 @@ class RigServer:
         return _ANSWERED
 
     def _hello(self, conn: socket.socket, session: _Session, frame: Frame, reader: Reader) -> object:
-        role_code = reader.one("B")
+        role_code = reader.one(HELLO_REQUEST)
         name = escape(reader.text())
         token = reader.text() if reader.pos < len(reader.data) else ""
         reader.end()
@@ -539,99 +549,110 @@ class RigServer:
             self.log(f"rig: controlling session opened by {name} at {session.peer}")
         session.role = role
         info = self.rig.info()
-        body = struct.pack("!BBBBBIddqH", 0 if info.plant == "single-mass" else 1,
-                           0 if info.clock == "lockstep" else 1, info.analog_outputs, info.encoder_inputs,
-                           info.dac_bits, info.counts_per_rev, info.analog_min, info.analog_max,
-                           int(round(info.tick * NS)), PROTOCOL_VERSION)
+        body = HELLO_REPLY.pack(0 if info.plant == "single-mass" else 1, 0 if info.clock == "lockstep" else 1,
+                                info.analog_outputs, info.encoder_inputs, info.dac_bits, info.counts_per_rev,
+                                info.analog_min, info.analog_max, int(round(info.tick * NS)), PROTOCOL_VERSION)
         self._send(conn, frame, ErrorCode.OK, body)
         return _ANSWERED
 
-    def _dispatch(self, msg: Msg, r: Reader, session: _Session, frame: Frame, conn: socket.socket) -> object:
-        """Decode one request's body, call the rig and encode the reply body (None: do not answer).
+    def _dispatch(self, msg: Msg, r: Reader, session: _Session) -> object:
+        """Decode one request's body, call the rig and encode the reply body (None: do not answer), by
+        the handler of its message type (``_HANDLERS``: the protocol's requests in one table, docs/hil.md)."""
+        handler = _HANDLERS.get(msg)
+        if handler is None:
+            raise DecodeError(f"unhandled message {msg.name}")
+        return handler(self, r, session)
 
-        Long on purpose (about 80 lines): a flat table, one short branch per message of the
-        protocol (docs/hil.md), so that the protocol reads in one place; the longer answers
-        (STEP, STATUS) are their own methods.
-        """
-        rig = self.rig
-        if msg == Msg.WRITE_ANALOG:
-            ch = r.channels()
-            v = r.doubles(len(ch))
-            r.end()
-            rig.write_analog(ch, v)
-            return b""
-        if msg == Msg.READ_ENCODER:
-            ch = r.channels()
-            r.end()
-            counts = rig.read_encoder(ch)
-            return struct.pack("!H", len(counts)) + pack_ints([int(c) for c in counts])
-        if msg == Msg.SET_ENCODER_COUNTS:
-            ch = r.channels()
-            n = r.ints(len(ch))
-            r.end()
-            rig.set_encoder_counts(ch, n)
-            return b""
-        if msg == Msg.WD_SET_EXPIRATION:
-            ch = r.channels()
-            v = r.doubles(len(ch))
-            r.end()
-            rig.watchdog_set_analog_expiration_state(ch, v)
-            return b""
-        if msg == Msg.WD_START:
-            timeout = r.one("d")
-            r.end()
-            rig.watchdog_start(timeout)
-            return b""
-        if msg == Msg.WD_RELOAD:
-            r.end()
-            return struct.pack("!B", 1 if rig.watchdog_reload() else 0)
-        if msg == Msg.WD_IS_EXPIRED:
-            r.end()
-            return struct.pack("!B", 1 if rig.watchdog_is_expired() else 0)
-        if msg == Msg.WD_CLEAR:
-            r.end()
-            rig.watchdog_clear()
-            return b""
-        if msg == Msg.WD_STOP:
-            r.end()
-            rig.watchdog_stop()
-            return b""
-        if msg == Msg.STEP:
-            until = r.one("q")
-            reload = bool(r.one("B"))
-            ao = r.channels()
-            volts = r.doubles(len(ao))
-            enc = r.channels()
-            r.end()
-            return self._step(session, ao, volts, enc, until, reload)
-        if msg == Msg.ADVANCE:
-            dt = r.one("q")
-            r.end()
-            if dt < 0:
-                raise HILError(ErrorCode.INVALID_ARGUMENT, f"advance: dt = {dt} ns must be >= 0")
-            rig.advance(dt / NS)
-            return b""
-        if msg == Msg.STATUS:
-            r.end()
-            return self._status_body()
-        if msg == Msg.RESET:
-            r.end()
-            with self._lock:
-                holder = self._controller
-            if holder is not None and holder is not session:
-                raise HILError(ErrorCode.BUSY, f"reset refused: the rig is controlled by {holder.peer}")
-            rig.reset()
-            self.log(f"rig: operator reset by {session.peer}")
-            return b""
-        if msg == Msg.TIME:
-            r.end()
-            return b""
-        if msg == Msg.BYE:
-            r.end()
-            if session.role == "control":   # release before replying: the client may reconnect at once
-                self._release(session, f"{session.peer}: BYE")
-            return b""
-        raise DecodeError(f"unhandled message {msg.name}")
+    def _write_analog(self, r: Reader, session: _Session) -> bytes:
+        ch = r.channels()
+        v = r.doubles(len(ch))
+        r.end()
+        self.rig.write_analog(ch, v)
+        return b""
+
+    def _read_encoder(self, r: Reader, session: _Session) -> bytes:
+        ch = r.channels()
+        r.end()
+        counts = self.rig.read_encoder(ch)
+        return COUNT.pack(len(counts)) + pack_ints([int(c) for c in counts])
+
+    def _set_encoder_counts(self, r: Reader, session: _Session) -> bytes:
+        ch = r.channels()
+        n = r.ints(len(ch))
+        r.end()
+        self.rig.set_encoder_counts(ch, n)
+        return b""
+
+    def _wd_set_expiration(self, r: Reader, session: _Session) -> bytes:
+        ch = r.channels()
+        v = r.doubles(len(ch))
+        r.end()
+        self.rig.watchdog_set_analog_expiration_state(ch, v)
+        return b""
+
+    def _wd_start(self, r: Reader, session: _Session) -> bytes:
+        (timeout,) = r.take(WD_START_REQUEST)
+        r.end()
+        self.rig.watchdog_start(timeout)
+        return b""
+
+    def _wd_reload(self, r: Reader, session: _Session) -> bytes:
+        r.end()
+        return FLAG_REPLY.pack(1 if self.rig.watchdog_reload() else 0)
+
+    def _wd_is_expired(self, r: Reader, session: _Session) -> bytes:
+        r.end()
+        return FLAG_REPLY.pack(1 if self.rig.watchdog_is_expired() else 0)
+
+    def _wd_clear(self, r: Reader, session: _Session) -> bytes:
+        r.end()
+        self.rig.watchdog_clear()
+        return b""
+
+    def _wd_stop(self, r: Reader, session: _Session) -> bytes:
+        r.end()
+        self.rig.watchdog_stop()
+        return b""
+
+    def _step_request(self, r: Reader, session: _Session) -> bytes | None:
+        until, reload = r.take(STEP_REQUEST)
+        ao = r.channels()
+        volts = r.doubles(len(ao))
+        enc = r.channels()
+        r.end()
+        return self._step(session, ao, volts, enc, until, bool(reload))
+
+    def _advance(self, r: Reader, session: _Session) -> bytes:
+        (dt,) = r.take(ADVANCE_REQUEST)
+        r.end()
+        if dt < 0:
+            raise HILError(ErrorCode.INVALID_ARGUMENT, f"advance: dt = {dt} ns must be >= 0")
+        self.rig.advance(dt / NS)
+        return b""
+
+    def _status(self, r: Reader, session: _Session) -> bytes:
+        r.end()
+        return self._status_body()
+
+    def _reset(self, r: Reader, session: _Session) -> bytes:
+        r.end()
+        with self._lock:
+            holder = self._controller
+        if holder is not None and holder is not session:
+            raise HILError(ErrorCode.BUSY, f"reset refused: the rig is controlled by {holder.peer}")
+        self.rig.reset()
+        self.log(f"rig: operator reset by {session.peer}")
+        return b""
+
+    def _time(self, r: Reader, session: _Session) -> bytes:
+        r.end()
+        return b""
+
+    def _bye(self, r: Reader, session: _Session) -> bytes:
+        r.end()
+        if session.role == "control":   # release before replying: the client may reconnect at once
+            self._release(session, f"{session.peer}: BYE")
+        return b""
 
     def _step(self, session: _Session, ao: list[int], volts: list[float], enc: list[int], until: int,
               reload: bool) -> bytes | None:
@@ -646,7 +667,7 @@ class RigServer:
                      f"(after {self.stall_after_steps} steps)")
             return None
         res = self.rig.step(ao, volts, enc, until, reload)
-        return (struct.pack("!BqH", 1 if res.reloaded else 0, int(round(res.late * NS)), len(res.counts))
+        return (STEP_REPLY.pack(1 if res.reloaded else 0, int(round(res.late * NS)), len(res.counts))
                 + pack_ints([int(c) for c in res.counts]))
 
     def _status_body(self) -> bytes:
@@ -659,8 +680,29 @@ class RigServer:
             expired_at = rig.wd_expired_at_ns if rig.wd_expired_at_ns is not None else -1
         counters = {**{f"rig.{k}": v for k, v in st.counters.items()},
                     **{f"server.{k}": v for k, v in self.counters.items()}}
-        body = struct.pack("!dqq", st.motor_voltage, last, expired_at) + pack_text(st.limit_message)
-        body += struct.pack("!H", len(counters))
+        body = STATUS_REPLY.pack(st.motor_voltage, last, expired_at) + pack_text(st.limit_message)
+        body += COUNT.pack(len(counters))
         for k, v in sorted(counters.items()):
-            body += pack_text(k, 200) + struct.pack("!q", int(v))
+            body += pack_text(k, 200) + COUNTER_VALUE.pack(int(v))
         return body
+
+
+#: The handler of each request type but HELLO (``RigServer._hello``, which opens the session): it decodes
+#: the request's body, calls the rig and returns the reply body (None: no reply).
+_HANDLERS: dict[Msg, Callable[[RigServer, Reader, _Session], object]] = {
+    Msg.WRITE_ANALOG: RigServer._write_analog,
+    Msg.READ_ENCODER: RigServer._read_encoder,
+    Msg.SET_ENCODER_COUNTS: RigServer._set_encoder_counts,
+    Msg.WD_SET_EXPIRATION: RigServer._wd_set_expiration,
+    Msg.WD_START: RigServer._wd_start,
+    Msg.WD_RELOAD: RigServer._wd_reload,
+    Msg.WD_IS_EXPIRED: RigServer._wd_is_expired,
+    Msg.WD_CLEAR: RigServer._wd_clear,
+    Msg.WD_STOP: RigServer._wd_stop,
+    Msg.STEP: RigServer._step_request,
+    Msg.ADVANCE: RigServer._advance,
+    Msg.STATUS: RigServer._status,
+    Msg.RESET: RigServer._reset,
+    Msg.TIME: RigServer._time,
+    Msg.BYE: RigServer._bye,
+}

@@ -17,15 +17,25 @@ from typing import Sequence
 
 from ipcosim.fmus.hil.api import Card, CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite
 from ipcosim.fmus.hil.protocol import (
+    ADVANCE_REQUEST,
+    COUNT,
+    COUNTER_VALUE,
     FLAG_AMPLIFIER,
     FLAG_LIMIT,
+    FLAG_REPLY,
     FLAG_WD_EXPIRED,
     FLAG_WD_RUNNING,
+    HELLO_REPLY,
+    HELLO_REQUEST,
     MAX_TOKEN,
     PROTOCOL_VERSION,
     REPLY_BIT,
     REPLY_PREFIX,
+    STATUS_REPLY,
+    STEP_REPLY,
+    STEP_REQUEST,
     TOKEN_ENV,
+    WD_START_REQUEST,
     DecodeError,
     FrameDecoder,
     Msg,
@@ -89,9 +99,9 @@ class TcpipCard(Card):
         try:
             if token is None:
                 token = os.environ.get(TOKEN_ENV, "")
-            r = self._request(Msg.HELLO, struct.pack("!B", 1 if role == "control" else 0) + pack_text(name, 200)
+            r = self._request(Msg.HELLO, HELLO_REQUEST.pack(1 if role == "control" else 0) + pack_text(name, 200)
                               + pack_text(token.strip(), MAX_TOKEN), timeout=max(self.timeout, 2.0))
-            plant, clock, n_ao, n_enc, bits, cpr, lo, hi, tick_ns, version = r.take("BBBBBIddqH")
+            plant, clock, n_ao, n_enc, bits, cpr, lo, hi, tick_ns, version = r.take(HELLO_REPLY)
         except HILError:
             self._abort()
             raise
@@ -174,7 +184,7 @@ class TcpipCard(Card):
     def _parse_reply(self, msg: Msg, payload: bytes) -> Reader:
         r = Reader(payload)
         try:
-            code, flags, t_ns = r.take(REPLY_PREFIX.format.lstrip("!"))
+            code, flags, t_ns = r.take(REPLY_PREFIX)
             self.last_flags = flags
             self._last_rig_ns, self._last_host_ns = t_ns, time.monotonic_ns()
             if code != 0:
@@ -186,7 +196,7 @@ class TcpipCard(Card):
             raise HILError(ErrorCode.PROTOCOL, f"malformed {msg.name} reply from {self.where}: {exc}") from exc
         return r
 
-    def _body(self, r: Reader, fmt: str, msg: str) -> tuple:
+    def _body(self, r: Reader, fmt: str | struct.Struct, msg: str) -> tuple:
         try:
             return r.take(fmt)
         except DecodeError as exc:
@@ -201,7 +211,7 @@ class TcpipCard(Card):
     def read_encoder(self, channels: Sequence[int]) -> list[int]:
         ch = as_channels(channels, "encoder")
         r = self._request(Msg.READ_ENCODER, pack_channels(ch))
-        (n,) = self._body(r, "H", "READ_ENCODER")
+        (n,) = self._body(r, COUNT, "READ_ENCODER")
         return list(self._body(r, f"{n}i", "READ_ENCODER"))  # int32 on the wire
 
     def set_encoder_counts(self, channels: Sequence[int], counts: Sequence[int]) -> None:
@@ -220,13 +230,13 @@ class TcpipCard(Card):
                       pack_channels(ch) + pack_doubles(as_finite(volts, len(ch), "expiration state")))
 
     def watchdog_start(self, timeout: float) -> None:
-        self._request(Msg.WD_START, struct.pack("!d", float(timeout)))
+        self._request(Msg.WD_START, WD_START_REQUEST.pack(float(timeout)))
 
     def watchdog_reload(self) -> bool:
-        return bool(self._body(self._request(Msg.WD_RELOAD), "B", "WD_RELOAD")[0])
+        return bool(self._body(self._request(Msg.WD_RELOAD), FLAG_REPLY, "WD_RELOAD")[0])
 
     def watchdog_is_expired(self) -> bool:
-        return bool(self._body(self._request(Msg.WD_IS_EXPIRED), "B", "WD_IS_EXPIRED")[0])
+        return bool(self._body(self._request(Msg.WD_IS_EXPIRED), FLAG_REPLY, "WD_IS_EXPIRED")[0])
 
     def watchdog_clear(self) -> None:
         self._request(Msg.WD_CLEAR)
@@ -240,14 +250,14 @@ class TcpipCard(Card):
 
     def advance(self, dt: float) -> None:
         """Lockstep rig: advance by ``dt`` seconds."""
-        self._request(Msg.ADVANCE, struct.pack("!q", int(round(dt * NS))))
+        self._request(Msg.ADVANCE, ADVANCE_REQUEST.pack(int(round(dt * NS))))
 
     def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
              until: float, reload: bool = True) -> StepResult:
         ao = as_channels(analog_channels, "analog output")
         enc = as_channels(encoder_channels, "encoder")
         until_ns = int(round(until * NS))
-        payload = (struct.pack("!qB", until_ns, 1 if reload else 0) + pack_channels(ao)
+        payload = (STEP_REQUEST.pack(until_ns, 1 if reload else 0) + pack_channels(ao)
                    + pack_doubles(as_finite(volts, len(ao), "step")) + pack_channels(enc))
         wait = 0.0
         if self.info.clock == "wallclock":
@@ -255,7 +265,7 @@ class TcpipCard(Card):
             wait = max(0.0, (until_ns - est_now) / NS)
         r = self._request(Msg.STEP, payload, timeout=self.timeout + wait,
                           after="of its sample instant" if self.info.clock == "wallclock" else "")
-        reloaded, late_ns, n = self._body(r, "BqH", "STEP")
+        reloaded, late_ns, n = self._body(r, STEP_REPLY, "STEP")
         counts = list(self._body(r, f"{n}i", "STEP"))  # int32 on the wire
         return StepResult(counts=counts, reloaded=bool(reloaded), time=self._last_rig_ns / NS, late=late_ns / NS,
                           status=self._flags_status())
@@ -269,13 +279,13 @@ class TcpipCard(Card):
     def status(self) -> RigStatus:
         r = self._request(Msg.STATUS)
         try:
-            volts, last, expired_at = r.take("dqq")
+            volts, last, expired_at = r.take(STATUS_REPLY)
             message = r.text()
-            (k,) = r.take("H")
+            (k,) = r.take(COUNT)
             counters = {}
             for _ in range(k):
                 name = r.text()
-                counters[name] = r.one("q")
+                counters[name] = r.one(COUNTER_VALUE)
         except DecodeError as exc:
             raise HILError(ErrorCode.PROTOCOL, f"malformed STATUS reply from {self.where}: {exc}") from exc
         st = self._flags_status()

@@ -14,7 +14,7 @@ from typing import Sequence
 
 #: Sub-command modules, in the order ``ipcosim --help`` lists them.
 COMMAND_MODULES = ("build", "list_", "describe", "run", "export", "linearize", "analyze", "rig", "compare", "sweep",
-                   "tune", "identify")
+                   "tune", "identify", "view")
 
 
 def add_study_fmus_option(p: argparse.ArgumentParser) -> None:

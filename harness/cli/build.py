@@ -19,6 +19,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --native: the FMI version of the native FMUs, 2 (into OUT/fmus-native/, default) or 3 "
                         "(FMI 3.0, into OUT/fmus-native-fmi3/)")
     p.add_argument("--force", action="store_true", help="rebuild every FMU even if its sources are unchanged")
+    from ipcosim.harness.scenario.ssp_pack import SSP_VERSIONS
+
+    p.add_argument("--ssp-version", choices=SSP_VERSIONS, default="1.0",
+                   help="the SSP version the archives in OUT/ssp/ declare: 1.0 (default) or 2.0 (checked against "
+                        "the SSP 2.0 schema; OMSimulator 3 writes 2.0)")
     p.set_defaults(func=main)
 
 
@@ -32,7 +37,7 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError(f"--fmi {args.fmi}: only the native FMUs have an FMI {args.fmi}.0 variant (add --native)")
     for result in build_all(out / "fmus", force=args.force):
         print(f"{'built' if result.built else 'up to date'}: {result.fmu}")
-    for archive in pack_all(out):
+    for archive in pack_all(out, ssp_version=args.ssp_version):
         print(f"packed: {archive}")
     if getattr(args, "native", False):
         from ipcosim.harness.native.cbuild import OUT_DIRS, build_native

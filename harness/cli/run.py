@@ -13,6 +13,19 @@ NOT_REACHED = {"settling_time_s": "not settled", "recovery_time_s": "not recover
 EXIT_REALTIME_DEGRADED = 3
 
 
+def task_verdict(m: dict, bound: float | None) -> str:
+    """One line: the success criterion's status of a run and, for a hunting loop, its cycle (docs/metrics.md)."""
+    from ipcosim.fmus.metrics import success_status
+
+    status = success_status(m, bound)
+    cycle = ""
+    if m.get("limit_cycle"):
+        freq = m.get("cart_frequency_Hz") or m.get("angle_frequency_Hz") or 0.0
+        cycle = (f"; limit cycle at {freq:.2f} Hz: cart {1e3 * (m.get('cart_peak_to_peak_m') or 0):.3g} mm, "
+                 f"pendulum {1e3 * (m.get('angle_peak_to_peak_rad') or 0):.3g} mrad peak to peak")
+    return status + (f" (amplitude bound {1e3 * bound:.3g} mm)" if bound else "") + cycle
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL
     from ipcosim.harness.master.cloop import LOOPS
@@ -57,6 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a real-time run's allowed late steps, as a fraction of its steps (default: "
                         "IPCOSIM_RT_OVERRUN_BUDGET, else 0.01); a run beyond it warns and exits with status "
                         f"{EXIT_REALTIME_DEGRADED}")
+    p.add_argument("--live", action="store_true",
+                   help="serve a page showing the run as it happens, with a stop button (its address is printed)")
+    p.add_argument("--live-host", metavar="ADDRESS", default="127.0.0.1",
+                   help="where the live page listens (default 127.0.0.1; another address needs --live-token)")
+    p.add_argument("--live-port", metavar="N", default=0, help="the live page's port (default 0: any free port)")
+    p.add_argument("--live-token", metavar="TOKEN", help="access token the live page asks every request for")
     p.add_argument("--timeout", metavar="S",
                    help="wall-clock limit [s]: stop the run there with its results so far (exit status 124)")
     p.set_defaults(func=main)
@@ -94,6 +113,8 @@ def main(args: argparse.Namespace) -> int:
                 continue
             shown = f"{value:.6g}" if isinstance(value, float) else value
             print(f"  {key:24s} {NOT_REACHED.get(key, 'none') if value is None else shown}")
+        if "cart_mean_error_m" in m:
+            print(f"  {'task':24s} {task_verdict(m, meta.get('amplitude_bound_m'))}")
         print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if args.plot else "")
               + (f", baseline {options.save_baseline}" if options.save_baseline else ""))
     degraded = budget_warning(result.metrics)

@@ -2,7 +2,8 @@
 run, and runs the FMI 2.0 lifecycle::
 
     instantiate -> setupExperiment -> parameter bindings, ``set`` values (start values)
-    -> enterInitializationMode -> propagate outputs to inputs until a fixed point
+    -> enterInitializationMode -> calculated parameters into their connected parameters
+    -> propagate outputs to inputs until a fixed point
     -> exitInitializationMode -> steps (manipulators, algorithm, observers)
     -> terminate -> freeInstance (every instance, also after a failure)
 
@@ -34,6 +35,7 @@ from ipcosim.harness.master.algorithm import (
     step_multiples,
 )
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
+from ipcosim.harness.master.integers import CarryError
 from ipcosim.harness.master.layout import Layout
 from ipcosim.harness.master.manipulators import Manipulator, SetValues
 from ipcosim.harness.master.observers import Observer
@@ -326,6 +328,7 @@ class Execution:
         signals.check()
         for slave in self.slaves:
             slave.enter_initialization_mode()
+        self._carry_parameters()
         self.blocks = self.layout.blocks(self.slaves, self.multiples, self.algorithm)
         for b in self.blocks:  # every output as the FMUs compute it from their start values
             self._get_outputs(b, None)
@@ -358,6 +361,28 @@ class Execution:
             for b in self.blocks:
                 self._get_outputs(b, self.start_time)
         self._run_loop, self._loop_source = self._compile_loop()
+
+    def _carry_parameters(self) -> None:
+        """Calculated parameters into the parameters and inputs they are connected to (initialization
+        mode: the calculated values exist, the targets may still be set), pass after pass until no
+        value changes (a chain of them settles in as many passes as it is long)."""
+        links = self.system.parameter_links
+        last: dict[int, Any] = {}
+        for _ in range(len(links) + 1):
+            changed = False
+            for k, link in enumerate(links):
+                value = self.slaves[self.index[link.src]].get_values([link.src_var])[0]
+                if link.kind == "real":
+                    value = link.factor * float(value) + link.offset
+                elif link.mapping:
+                    value = dict(link.mapping).get(int(value), int(value))
+                if last.get(k) != value:
+                    changed, last[k] = True, value
+                    self.slaves[self.index[link.dst]].set_values([link.dst_var], [value])
+                    if link.dst_var.causality == "input":
+                        self.layout.put(link.dst, link.dst_var.name, value)
+            if not changed:
+                return
 
     def _compile_loop(self) -> tuple[Callable[..., Any], str]:
         """The stepping loop this run uses (see the ``loop`` parameter) and its source;
@@ -416,10 +441,13 @@ class Execution:
                 changed.append(f"{b.name}.{inputs[k].name}")
         for ch in b.channels:
             ins = self.layout.typed[b.index][ch.kind][1]
-            for k, src, j, mapping in ch.transfers:
+            for k, src, j, mapping, carrier in ch.transfers:
                 src_ch = next(c for c in self.blocks[src].channels if c.kind == ch.kind)
                 new = src_ch.out_values[j]
-                new = mapping.get(new, new) if mapping else new
+                if carrier is not None:
+                    new = carrier(new)
+                elif mapping:
+                    new = mapping.get(new, new)
                 if ch.in_values[k] != new:
                     ch.in_values[k] = new
                     changed.append(f"{b.name}.{ins[k].name}")
@@ -473,11 +501,25 @@ class Execution:
         simulation within them (the run then ends normally at ``self.tick``)."""
         rb, rbi = self.recorder.addresses()
         marks = [s.errors_logged for s in self.slaves]
-        failure = self._run_loop(n, target, rb, va, self.recorder.row_bytes, rbi)
+        try:
+            failure = self._run_loop(n, target, rb, va, self.recorder.row_bytes, rbi)
+        except CarryError as exc:
+            self._carry_failed(exc)
         if failure is None:
             return True
         self._loop_failed(failure, marks)
         return False
+
+    def _carry_failed(self, exc: CarryError) -> None:
+        """After a connection could not deliver a value in tick ``exc.tick``: write the rows up
+        to there and raise the failure, naming the connection, the value and the time."""
+        fn = int(exc.tick or 0)
+        self.tick = fn
+        rows = fn // self.record_every + 1
+        self.recorder.check_finite(self.recorder.base_row, rows)
+        self.recorder.emit(rows)
+        err = CarryError(f"{exc} (in the step from t = {self.time_of(fn):.6g} s)", fn)
+        raise TickFailure(str(err), rows, err)
 
     def _loop_failed(self, failure: tuple[int, int, str, int], marks: Sequence[int]) -> None:
         """After the loop stopped on a status > fmi2Warning at tick ``failure[0]``: write the

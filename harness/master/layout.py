@@ -4,8 +4,9 @@ the arrays the stepping loops read and write.
 Real connectors of all components share one ``ctypes`` double vector (per component its
 outputs, then its inputs); each component reads its outputs into and sets its inputs from its
 own slice of it with one call, and the vector is copied to the record after every step.
-Integer and Boolean connectors share one ``c_int`` vector (per component: integer outputs,
-inputs, boolean outputs, inputs), String connectors live in lists per component. A
+Integer and Boolean connectors share one ``c_int64`` vector (per component: integer outputs,
+inputs, boolean outputs, inputs), which holds every FMI integer type exactly
+(:mod:`~ipcosim.harness.master.integers`); String connectors live in lists per component. A
 :class:`~ipcosim.harness.master.plan.Block` is one component's view of these vectors with its
 raw FMI functions, a :class:`~ipcosim.harness.master.plan.Channel` its connectors of one
 non-Real kind. The layout also names the record's columns (:attr:`Layout.column_kinds`).
@@ -17,12 +18,13 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from ipcosim.harness.master import integers
 from ipcosim.harness.master.algorithm import GAUSS_SEIDEL
 from ipcosim.harness.master.plan import Block, Channel
 from ipcosim.harness.master.slave import Slave
 from ipcosim.harness.master.system import System, Variable, kind_of
 
-#: numpy type of a record column of each value kind.
+#: numpy type of a record column of each value kind (an Integer column: of its type, ``integers.DTYPE``).
 COLUMN_DTYPE = {"real": "f8", "integer": "i4", "boolean": "?", "string": "O"}
 
 #: ``start_value(component, variable)``: the value a connector starts the run with.
@@ -79,13 +81,15 @@ class Layout:
                                       for j in range(len(self.real_outputs[k]))], dtype=int)
 
     def _place_typed(self, start_value: StartValue) -> None:
-        """Place the Integer and Boolean connectors in one ``c_int`` vector (per component:
+        """Place the Integer and Boolean connectors in one ``c_int64`` vector (per component:
         integer outputs, inputs, boolean outputs, inputs) and the String connectors in lists
         per component; inputs at their start values."""
         self.typed: list[dict[str, tuple[list[Variable], list[Variable]]]] = []
         self.int_offset: dict[tuple[int, str], int] = {}
         self.strings: dict[int, tuple[list[bytes], list[bytes]]] = {}
         self.tslot: dict[tuple[str, str], tuple[str, int]] = {}  # (kind, int slot or string index)
+        #: The sized type (``integers.RANGE``) and ``component.variable`` of each Integer slot.
+        self.int_types: dict[int, tuple[str, str]] = {}
         self.string_slots: list[tuple[list[bytes], int]] = []
         pos = 0
         for k, inst in enumerate(self.instances):
@@ -102,10 +106,13 @@ class Layout:
                     self.int_offset[(k, kind)] = pos
                     for j, v in enumerate(outs + ins):
                         self.tslot[(inst.name, v.name)] = (kind, pos + j)
+                        if kind == "integer":
+                            self.int_types[pos + j] = (integers.integer_type(v.type, inst.model.fmi_version),
+                                                       f"{inst.name}.{v.name}")
                     pos += len(outs) + len(ins)
             self.typed.append(groups)
         self.n_ints = pos
-        self.ints_c = (ctypes.c_int * (pos + 1))()
+        self.ints_c = (ctypes.c_int64 * (pos + 1))()
         self.ints = np.ctypeslib.as_array(self.ints_c)[:pos]
         for (comp, var), (kind, slot) in self.tslot.items():
             if self.instances[self.index[comp]].model.variables[var].causality == "input":
@@ -125,10 +132,12 @@ class Layout:
         column is the transformed source value (what the connection delivers at that time):
         ``columns`` (Real: name, slot, (source slot, factor, offset) or None), ``typed_columns``
         (name, kind, slot, (source slot, mapping) or None) and the kind of every column,
-        ``column_kinds`` (``real``, ``integer``, ``boolean``, ``string``)."""
+        ``column_kinds`` (``real``, ``integer``, ``boolean``, ``string``), and its numpy type,
+        ``column_dtypes`` (an Integer column: its FMI type's, ``integers.DTYPE``)."""
         self.columns: list[tuple[str, int, tuple[int, float, float] | None]] = []
         self.typed_columns: list[tuple[str, str, int, tuple[int, dict[int, int]] | None]] = []
         self.column_kinds: dict[str, str] = {"time": "real"}
+        self.column_dtypes: dict[str, str] = {"time": COLUMN_DTYPE["real"]}
         for inst in self.instances:
             for v in inst.connectors:
                 kind = kind_of(v.type)
@@ -136,27 +145,44 @@ class Layout:
                     continue
                 name = f"{inst.name}.{v.name}"
                 self.column_kinds[name] = kind
+                self.column_dtypes[name] = COLUMN_DTYPE[kind]
                 link = self.system.link_into(inst.name, v.name)
                 if kind == "real":
                     src = (self.slot[(link.src, link.src_var.name)], link.factor, link.offset) if link else None
                     self.columns.append((name, self.slot[(inst.name, v.name)], src))
                 else:
+                    slot = self.tslot[(inst.name, v.name)][1]
+                    if kind == "integer":
+                        self.column_dtypes[name] = integers.DTYPE[self.int_types[slot][0]]
                     typed = (self.tslot[(link.src, link.src_var.name)][1], dict(link.mapping)) if link else None
-                    self.typed_columns.append((name, kind, self.tslot[(inst.name, v.name)][1], typed))
+                    self.typed_columns.append((name, kind, slot, typed))
 
     def row_fields(self) -> list[tuple[str, str]]:
         """Name and numpy type of every recorded field: ``time``, then ``component.variable``
-        (see :data:`COLUMN_DTYPE`)."""
-        return [(n, COLUMN_DTYPE[k]) for n, k in self.column_kinds.items()]
+        (see :data:`COLUMN_DTYPE`; an Integer field has its FMI type's, ``integers.DTYPE``)."""
+        return list(self.column_dtypes.items())
 
     # ------------------------------------------------------------------ values
     def store(self, kind: str, slot: int, value: Any) -> None:
-        """Put a start value into the typed value store."""
+        """Put a start value into the typed value store.
+
+        Raises
+        ------
+        IntegerRangeError
+            An Integer value that is not an integer, or that the variable's type cannot hold.
+        """
         if kind == "string":
             lst, j = self.string_slots[slot]
             lst[j] = b"" if value is None else (value if isinstance(value, bytes) else str(value).encode())
+        elif kind == "boolean":
+            self.ints[slot] = int(bool(value))
         else:
-            self.ints[slot] = int(bool(value)) if kind == "boolean" else int(value or 0)
+            type_, name = self.int_types[slot]
+            try:
+                x = integers.exact_integer(value or 0)
+            except ValueError:
+                raise integers.IntegerRangeError(f"{name}: {value!r} is not an integer") from None
+            self.ints[slot] = integers.stored(integers.check(x, type_, name), type_)
 
     def put(self, component: str, variable: str, value: Any) -> None:
         """Put the value of an input connector into its vector (what the next batched set sends);
@@ -176,7 +202,9 @@ class Layout:
         if kind == "string":
             lst, j = self.string_slots[slot]
             return lst[j].decode("utf-8", "replace")
-        return bool(self.ints[slot]) if kind == "boolean" else int(self.ints[slot])
+        if kind == "boolean":
+            return bool(self.ints[slot])
+        return integers.value(int(self.ints[slot]), self.int_types[slot][0])
 
     def snapshot_strings(self) -> tuple:
         """The String connectors' current values, in ``string_slots`` order."""
@@ -228,19 +256,31 @@ class Layout:
                 o_vals, i_vals = self.strings[k]
             else:
                 off = self.int_offset[(k, kind)]
-                o_vals = (ctypes.c_int * max(len(outs), 1)).from_buffer(self.ints_c, 4 * off)
-                i_vals = (ctypes.c_int * max(len(ins), 1)).from_buffer(self.ints_c, 4 * (off + len(outs)))
+                o_vals = (ctypes.c_int64 * max(len(outs), 1)).from_buffer(self.ints_c, 8 * off)
+                i_vals = (ctypes.c_int64 * max(len(ins), 1)).from_buffer(self.ints_c, 8 * (off + len(outs)))
             transfers = []
             for j, v in enumerate(ins):
                 link = self.system.link_into(self.instances[k].name, v.name)
                 if link is not None:
                     src = self.index[link.src]
                     src_j = [x.name for x in self.typed[src][kind][0]].index(link.src_var.name)
-                    transfers.append((j, src, src_j, dict(link.mapping) or None))
+                    transfers.append((j, src, src_j, dict(link.mapping) or None, self._carrier(kind, link)))
             own = None
             if private and outs:
-                own = [b""] * len(outs) if kind == "string" else (ctypes.c_int * len(outs))()
+                own = [b""] * len(outs) if kind == "string" else (ctypes.c_int64 * len(outs))()
             get = slave.channel(kind, outs)[0] if outs else None
             put = slave.channel(kind, ins)[1] if ins else None
             out.append(Channel(kind, get, put, o_vals, i_vals, len(outs), len(ins), tuple(transfers), own))
         return tuple(out)
+
+    def _carrier(self, kind: str, link: Any) -> integers.Carrier | None:
+        """What an Integer connection does with a value when it is not a plain copy (see
+        :class:`integers.Carrier`): when the destination's type cannot hold every value of the
+        source's, or a mapping applies; None otherwise (a Boolean or String one: always)."""
+        if kind != "integer":
+            return None
+        src_t = self.int_types[self.tslot[(link.src, link.src_var.name)][1]][0]
+        dst_t = self.int_types[self.tslot[(link.dst, link.dst_var.name)][1]][0]
+        if not link.mapping and not integers.narrowing(src_t, dst_t):
+            return None
+        return integers.Carrier(src_t, dst_t, dict(link.mapping), f"{link.src_name} -> {link.dst_name}")

@@ -23,9 +23,11 @@ FMI_NAME = {"integer": "Integer", "boolean": "Boolean", "string": "String"}
 class Channel:
     """One component's connectors of one non-Real value kind and their bound get/set.
 
-    ``out_values``/``in_values`` are ``c_int`` array views (Integer, Boolean) or lists of bytes
-    (String); ``transfers`` are ``(input index, source block, source output index, mapping)``
-    with ``mapping`` a dict of an SSP mapping transformation or None.
+    ``out_values``/``in_values`` are ``c_int64`` array views (Integer, Boolean) or lists of bytes
+    (String); ``transfers`` are ``(input index, source block, source output index, mapping,
+    carrier)`` with ``mapping`` a dict of an SSP mapping transformation or None, and ``carrier``
+    None (a copy) or the :class:`~ipcosim.harness.master.integers.Carrier` an Integer connection
+    delivers its value through (range checked, mapped).
     """
 
     kind: str
@@ -35,7 +37,7 @@ class Channel:
     in_values: Any
     n_out: int
     n_in: int
-    transfers: tuple[tuple[int, int, int, dict[int, int] | None], ...] = ()
+    transfers: tuple[tuple[int, int, int, dict[int, int] | None, Any], ...] = ()
     private_out: Any = None  # Jacobi multi-rate: outputs are read here and published later
 
 
@@ -81,7 +83,8 @@ class TypedRecord:
 #: - ``("transfer", b, k, src, j, factor, offset)``: Real input ``k`` of block ``b`` from output
 #:   ``j`` of block ``src``: ``factor * x + offset``, the product only when ``factor != 1``, the
 #:   sum only when ``offset != 0`` (``x + 0.0`` would turn -0.0 into 0.0);
-#: - ``("ctransfer", b, c, k, src, j, mapping)``: the same for channel ``c`` (through ``mapping``);
+#: - ``("ctransfer", b, c, k, src, j, mapping, carrier)``: the same for channel ``c`` (through
+#:   ``mapping``, or through ``carrier`` when it is not None: see :class:`Channel`);
 #: - ``("set", b)``, ``("cset", b, c)``: the batched set of the Real inputs / of channel ``c``;
 #: - ``("step", b, multiple, last, partial)``: ``do_step`` from ``t`` (``multiple`` None) or from
 #:   the start of the period ``(n // m) * m``, with step ``h_b``, or ``hl_b`` on the tick ``last``
@@ -112,7 +115,7 @@ def _inputs(b: Block) -> list[Op]:
     """Transfers into the component's inputs, then its batched sets."""
     ops: list[Op] = [("transfer", b.index, k, src, j, factor, offset) for k, src, j, factor, offset in b.transfers]
     for c, ch in enumerate(b.channels):
-        ops += [("ctransfer", b.index, c, k, src, j, mapping) for k, src, j, mapping in ch.transfers]
+        ops += [("ctransfer", b.index, c, k, src, j, mapping, carrier) for k, src, j, mapping, carrier in ch.transfers]
     if b.n_in:
         ops.append(("set", b.index))
     return ops + [("cset", b.index, c) for c, ch in enumerate(b.channels) if ch.n_in]

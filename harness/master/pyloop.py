@@ -58,6 +58,7 @@ class _Emitter:
                 self.ns.update({f"G{i}_{k}": ch.get, f"S{i}_{k}": ch.set, f"O{i}_{k}": ch.out_values,
                                 f"I{i}_{k}": ch.in_values, f"P{i}_{k}": ch.private_out})
                 self.ns.update({f"M{i}_{k}_{t[0]}": t[3] for t in ch.transfers if t[3]})
+                self.ns.update({f"C{i}_{k}_{t[0]}": t[4] for t in ch.transfers if t[4] is not None})
 
     def render(self, plan: Sequence[Op], indent: str) -> None:
         for op in plan:
@@ -84,9 +85,12 @@ class _Emitter:
             expr = f"{expr} + {offset!r}"
         self.lines.append(f"{indent}I{i}[{k}] = {expr}")
 
-    def op_ctransfer(self, indent: str, i: int, c: int, k: int, src: int, j: int, mapping: Any) -> None:
+    def op_ctransfer(self, indent: str, i: int, c: int, k: int, src: int, j: int, mapping: Any,
+                     carrier: Any = None) -> None:
         sc = _channel_index(self.blocks[src], self.blocks[i].channels[c].kind)
-        if mapping:
+        if carrier is not None:  # checked (raises CarryError naming the connection), mapped
+            self.lines.append(f"{indent}I{i}_{c}[{k}] = C{i}_{c}_{k}(O{src}_{sc}[{j}], n)")
+        elif mapping:
             self.lines += [f"{indent}x = O{src}_{sc}[{j}]", f"{indent}I{i}_{c}[{k}] = M{i}_{c}_{k}.get(x, x)"]
         else:
             self.lines.append(f"{indent}I{i}_{c}[{k}] = O{src}_{sc}[{j}]")

@@ -74,6 +74,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.observers import Observer
 
 NS = 1_000_000_000
@@ -217,6 +218,11 @@ class Pacer:
         self._durations.append(d)
         return d
 
+    def lateness_since(self, k: int) -> list[int]:
+        """How late steps ``k``, ``k + 1``, ... started [ns] against the deadlines they waited for (a
+        running count for a live view; :meth:`lateness_ns` is the run's own account)."""
+        return self._lateness[k:]
+
     def starts_ns(self) -> np.ndarray:
         """The clock readings at which the steps so far started [ns]."""
         return np.asarray(self._starts, dtype=np.int64)
@@ -290,7 +296,7 @@ def _env_number(name: str, kind: type, lo: float, hi: float) -> Any:
     return value
 
 
-class RealtimeSetupError(ValueError):
+class RealtimeSetupError(IpcosimError, ValueError):
     """A real-time option (environment variable) with a bad value."""
 
 

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from ipcosim.harness.master import integers
 from ipcosim.harness.master.algorithm import TimeBase
 from ipcosim.harness.master.layout import Layout
 from ipcosim.harness.master.plan import TypedRecord
@@ -91,7 +92,7 @@ class Recorder:
         lay = self.layout
         self.writer = writer or RowWriter(lay.row_fields())
         self.record = np.zeros((self.capacity, max(lay.n_values, 1)))
-        self.record_i = np.zeros((self.capacity, max(lay.n_ints, 1)), dtype=np.int32)
+        self.record_i = np.zeros((self.capacity, max(lay.n_ints, 1)), dtype=np.int64)
         self.record_s: dict[int, tuple] = {}  # String rows by (absolute) row number
         self.base_row = 0
         self._last_emit = _time.monotonic()
@@ -106,7 +107,7 @@ class Recorder:
         """Addresses the loops write absolute row ``r`` at (``+ r * row bytes``), Real and
         Integer/Boolean rows: the buffer's first row is the first row not yet written."""
         return (self.record.ctypes.data - self.base_row * self.row_bytes,
-                self.record_i.ctypes.data - self.base_row * self.record_i.shape[1] * 4)
+                self.record_i.ctypes.data - self.base_row * self.record_i.shape[1] * self.record_i.itemsize)
 
     def typed_record(self) -> TypedRecord | None:
         """Where the Python loop records the non-Real values (None: a Real-only system)."""
@@ -114,7 +115,7 @@ class Recorder:
         if not lay.n_ints and not lay.string_slots:
             return None
         slots = lay.string_slots
-        return TypedRecord(int_row_bytes=4 * lay.n_ints if lay.n_ints else 0,
+        return TypedRecord(int_row_bytes=ctypes.sizeof(ctypes.c_int64) * lay.n_ints if lay.n_ints else 0,
                            int_vector=ctypes.addressof(lay.ints_c),
                            strings=self.record_s if slots else None,
                            snapshot=lay.snapshot_strings if slots else None)
@@ -155,12 +156,27 @@ class Recorder:
                 or _time.monotonic() - self._last_emit >= self.flush_seconds)
 
     def emit(self, rows: int) -> None:
-        """Hand the buffer rows ``base_row .. rows-1`` (absolute numbers) to the writer."""
+        """Hand the buffer rows ``base_row .. rows-1`` (absolute numbers) to the writer.
+
+        Raises
+        ------
+        TickFailure
+            A row holds a value a connection cannot deliver (:meth:`_integer_column`): the rows
+            before it are written, it and the rest are not.
+        """
         t0 = _time.perf_counter()
         k = rows - self.base_row
         if k > 0:
             assert self.writer is not None
-            self.writer.append(self.rows(self.base_row, k))
+            try:
+                block = self.rows(self.base_row, k)
+            except integers.CarryError as exc:
+                bad = exc.row if exc.row is not None else self.base_row
+                if bad > self.base_row:
+                    self.writer.append(self.rows(self.base_row, bad - self.base_row))
+                self.base_row = rows  # the rest is never written
+                raise TickFailure(str(exc), bad, exc) from None
+            self.writer.append(block)
             if self.record_s:
                 for row in range(self.base_row, rows):
                     self.record_s.pop(row, None)
@@ -238,9 +254,33 @@ class Recorder:
                 data[name] = np.array(values, dtype=object) if rows else values
                 continue
             col = ints[:, src]
+            if kind == "integer":
+                data[name] = self._integer_column(col, src, slot, mapping, first_row)
+                continue
             if mapping:
                 col = np.array([mapping.get(int(x), int(x)) for x in col], dtype=np.int64)
-            data[name] = col.astype(bool) if kind == "boolean" else col
+            data[name] = col.astype(bool)
+
+    def _integer_column(self, held: np.ndarray, src: int, slot: int, mapping: dict[int, int],
+                        first_row: int) -> np.ndarray:
+        """An Integer column's values from the ``int64`` rows of slot ``src`` (the column's own
+        slot ``slot``, or its connection's source): in the column's type, and, for a connected
+        input whose type cannot hold every source value or with a mapping, what the connection
+        delivers, each value checked (CarryError at the first that does not fit: never wrapped)."""
+        lay = self.layout
+        src_t, dst_t = lay.int_types[src][0], lay.int_types[slot][0]
+        values = integers.column(held, src_t)
+        if src == slot or (not mapping and not integers.narrowing(src_t, dst_t)):
+            return values.astype(integers.DTYPE[dst_t])
+        carrier = integers.Carrier(src_t, dst_t, mapping, f"{lay.int_types[src][1]} -> {lay.int_types[slot][1]}")
+        out = []
+        for r, x in enumerate(values.tolist()):
+            try:
+                out.append(carrier.deliver(x))
+            except integers.CarryError as exc:
+                t = self.timebase.time((first_row + r) * self.record_every)
+                raise integers.CarryError(f"{exc} (at t = {t:.6g} s)", row=first_row + r) from None
+        return np.array(out, dtype=integers.DTYPE[dst_t])
 
     # ------------------------------------------------------------------ result
     def result(self, execution: "Execution", error: BaseException | None, wall: float, wall_loop: float,

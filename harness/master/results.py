@@ -193,7 +193,7 @@ class RowWriter:
     ``results.csv``, appended chunk by chunk with unbuffered writes (a killed process loses
     only the chunk being computed; the execution keeps chunks under a fraction of a second).
 
-    Fields keep their types (Real ``f8``, Integer ``i4``, Boolean ``?``, String ``O``). A String
+    Fields keep their types (Real ``f8``, Integer ``i4`` or its FMI 3.0 type's, Boolean ``?``, String ``O``). A String
     field is spooled as the number of its value in a table of the distinct values seen, so the
     memory a run holds grows with the distinct strings, not with its length.
 

@@ -14,8 +14,10 @@ adapted to the FMI 2.0 calling convention above; event mode is not used).
 
 Values of the other types travel through *channels* (:meth:`Slave.channel`): per component and
 type (``integer``, ``boolean``, ``string``) a bound ``get(buffer)`` and ``set(buffer)`` over the
-component's connectors of that type, resolved once. Integer and Boolean buffers are ``c_int``
-arrays (the FMI 2.0 representation), String buffers Python lists of ``bytes``.
+component's connectors of that type, resolved once. Integer and Boolean buffers are ``c_int64``
+arrays (every FMI integer type fits; ``UInt64`` as its 64 bits, :mod:`~ipcosim.harness.master.integers`),
+String buffers Python lists of ``bytes``. A value a variable's type cannot hold is never set: the
+master checks it first (:class:`~ipcosim.harness.master.integers.IntegerRangeError`).
 """
 from __future__ import annotations
 
@@ -25,6 +27,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from ipcosim.errors import IpcosimError
+from ipcosim.harness.master import integers
 from ipcosim.harness.master.system import Instance, Variable
 
 STATUS = {0: "fmi2OK", 1: "fmi2Warning", 2: "fmi2Discard", 3: "fmi2Error", 4: "fmi2Fatal", 5: "fmi2Pending"}
@@ -308,6 +311,8 @@ class FMUSlave(Slave):
     def set_values(self, variables: Sequence[Variable], values: Sequence[Any]) -> None:
         groups: dict[str, tuple[list[int], list[Any]]] = {}
         for var, value in zip(variables, values):
+            if _fmi_type(var.type) == "Integer":
+                value = self._checked(var, value)
             vrs, vals = groups.setdefault(_fmi_type(var.type), ([], []))
             vrs.append(var.vr)
             vals.append(value)
@@ -348,6 +353,15 @@ class FMUSlave(Slave):
             out.append(bool(v) if t == "Boolean" else (v.decode() if isinstance(v, bytes) else v))
         return out
 
+    def _checked(self, var: Variable, value: Any) -> int:
+        """An integer value for ``var``, exact and in its type's range, else IntegerRangeError."""
+        what = f"component {self.describe()}: {self.name}.{var.name}"
+        try:
+            x = integers.exact_integer(value)
+        except ValueError:
+            raise integers.IntegerRangeError(f"{what}: {value!r} is not an integer") from None
+        return integers.check(x, integers.integer_type(var.type, self.instance.model.fmi_version), what)
+
     def raw(self) -> tuple[Any, RawDoStep, RawGetSet, RawGetSet]:
         return self._fmu.component, self._do_step, self._get_real, self._set_real
 
@@ -355,9 +369,22 @@ class FMUSlave(Slave):
         f, c, n = self._fmu._functions, self._fmu.component, len(variables)
         vrs = (ctypes.c_uint * max(n, 1))(*[v.vr for v in variables])
         if kind in ("integer", "boolean"):
+            # fmi2Integer and fmi2Boolean are C ints: through an int buffer to and from the
+            # master's int64 one (the values set were checked to fit)
             name = "Integer" if kind == "integer" else "Boolean"
             get, put = f[f"fmi2Get{name}"], f[f"fmi2Set{name}"]
-            return (lambda buf: get(c, vrs, n, buf)), (lambda buf: put(c, vrs, n, buf))
+            tmp = (ctypes.c_int * max(n, 1))()
+
+            def get_ints(buf: Any) -> int:
+                status = get(c, vrs, n, tmp)
+                buf[:n] = tmp[:n]
+                return status
+
+            def set_ints(buf: Any) -> int:
+                tmp[:n] = buf[:n]
+                return put(c, vrs, n, tmp)
+
+            return get_ints, set_ints
         if kind == "string":
             get_s, put_s = f["fmi2GetString"], f["fmi2SetString"]
             tmp = (ctypes.c_char_p * max(n, 1))()
@@ -399,9 +426,9 @@ class FMU3Slave(FMUSlave):
 
     Instantiated without event mode and without early return: ``fmi3DoStep``'s
     ``eventHandlingNeeded`` is ignored, ``terminateSimulation`` ends the run (the loop sees
-    :data:`TERMINATE`). Float32 and the sized integer types are converted to the master's
-    ``c_double`` and ``c_int`` buffers. Use :class:`FMUSlave` as the constructor: it returns
-    this class for an FMI 3.0 model.
+    :data:`TERMINATE`). Float32 is converted to the master's ``c_double`` buffers; the sized
+    integer types travel exactly in its ``c_int64`` ones (``UInt64`` as its 64 bits). Use
+    :class:`FMUSlave` as the constructor: it returns this class for an FMI 3.0 model.
     """
 
     FMI = "fmi3"
@@ -440,6 +467,8 @@ class FMU3Slave(FMUSlave):
         for var, value in zip(variables, values):
             ct = _FMI3_CTYPES[var.type]
             v = str(value).encode() if var.type == "String" else value
+            if var.type in integers.RANGE or var.type == "Enumeration":
+                v = self._checked(var, value)
             status = self._typed("Set", var.type)(c, (ctypes.c_uint * 1)(var.vr), 1, (ct * 1)(v), 1)
             if status > WARNING:
                 raise self.fail(f"fmi3Set{var.type} ({var.name})", status)
@@ -503,26 +532,27 @@ class FMU3Slave(FMUSlave):
 
     def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
         c, n = self._fmu.component, len(variables)
-        groups = []  # (positions, vr array, ctypes array type, getter, setter)
+        groups = []  # (positions, vr array, ctypes array type, getter, setter, type)
         for type_ in dict.fromkeys(v.type for v in variables):
             pos = [i for i, v in enumerate(variables) if v.type == type_]
             vrs = (ctypes.c_uint * len(pos))(*[variables[i].vr for i in pos])
             groups.append((pos, vrs, _FMI3_CTYPES[type_] * len(pos), self._typed("Get", type_),
-                           self._typed("Set", type_)))
+                           self._typed("Set", type_), type_))
 
         def get(buf: Any) -> int:
             worst = OK
-            for pos, vrs, arr, g, _ in groups:
+            for pos, vrs, arr, g, _, type_ in groups:
                 tmp = arr()
                 worst = max(worst, g(c, vrs, len(pos), tmp, len(pos)))
                 for k, i in enumerate(pos):
-                    buf[i] = (tmp[k] or b"") if kind == "string" else int(tmp[k])
+                    buf[i] = (tmp[k] or b"") if kind == "string" else integers.stored(int(tmp[k]), type_)
             return worst
 
         def put(buf: Any) -> int:
             worst = OK
-            for pos, vrs, arr, _, s in groups:
-                worst = max(worst, s(c, vrs, len(pos), arr(*[buf[i] for i in pos]), len(pos)))
+            for pos, vrs, arr, _, s, type_ in groups:
+                vals = [buf[i] for i in pos] if kind == "string" else [integers.value(buf[i], type_) for i in pos]
+                worst = max(worst, s(c, vrs, len(pos), arr(*vals), len(pos)))
             return worst
 
         del n
@@ -690,12 +720,14 @@ class PySlave(Slave):
 
     def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
         vrs = [v.vr for v in variables]
-        convert: Callable[[Any], Any] = {"integer": int, "boolean": lambda x: 1 if x else 0,
-                                         "string": lambda x: x if isinstance(x, bytes) else str(x).encode()}[kind]
+        types = [v.type for v in variables]
+        convert: Callable[[Any, str], Any] = {
+            "integer": lambda x, t: integers.stored(int(x), t), "boolean": lambda x, t: 1 if x else 0,
+            "string": lambda x, t: x if isinstance(x, bytes) else str(x).encode()}[kind]
 
         def get(buf: Any) -> int:
             self.on_get()
-            values = [convert(self.values[vr]) for vr in vrs]
+            values = [convert(self.values[vr], t) for vr, t in zip(vrs, types)]
             if isinstance(buf, list):
                 buf[:] = values
             else:
@@ -706,6 +738,8 @@ class PySlave(Slave):
         def put(buf: Any) -> int:
             for i, vr in enumerate(vrs):
                 x = buf[i]
+                if kind == "integer":
+                    x = integers.value(int(x), types[i])
                 self.values[vr] = bool(x) if kind == "boolean" else (x.decode() if isinstance(x, bytes) else x)
             return OK
 

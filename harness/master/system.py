@@ -22,7 +22,8 @@ _KIND = {"Real": "real", "Integer": "integer", "Enumeration": "integer", "Boolea
 #: Which SSP transformation is valid for which connector types (SSP 1.0, ssc:GTransformationChoice).
 TRANSFORMATION_TYPES = {"LinearTransformation": ("Real",),
                         "IntegerMappingTransformation": ("Integer", "Enumeration"),
-                        "BooleanMappingTransformation": ("Boolean",)}
+                        "BooleanMappingTransformation": ("Boolean",),
+                        "EnumerationMappingTransformation": ("Enumeration",)}
 SUPPORTED_CONNECTION_TYPES = tuple(_KIND)
 
 
@@ -79,6 +80,8 @@ class Model:
     #: The FMU's DefaultExperiment stepSize and stopTime [s] (None when it gives none).
     default_step: float | None = None
     default_stop: float | None = None
+    #: The items (name -> value) of each Enumeration variable's type, by variable name.
+    enumerations: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
 
     def inputs(self) -> list[Variable]:
         return [v for v in self.variables.values() if v.causality == "input"]
@@ -163,6 +166,9 @@ class System:
     scenario: Scenario
     instances: tuple[Instance, ...]
     links: tuple[Link, ...]
+    #: Connections from a calculated parameter into a parameter or input: carried once, in
+    #: initialization mode, before the fixed point of the links (SSP 1.0 section 5.3.2.1).
+    parameter_links: tuple[Link, ...] = ()
     warnings: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()  # informational (swaps), not warnings
 

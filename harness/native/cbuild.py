@@ -24,6 +24,7 @@ import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.harness.native import cgen, fmi3, models
 from ipcosim.toolchain import CROSS_COMPILERS, find_compiler, find_cross_compiler
@@ -69,7 +70,7 @@ VARIANTS = {
 OUT_DIRS = {"2": "fmus-native", "3": "fmus-native-fmi3"}
 
 
-class NativeBuildError(RuntimeError):
+class NativeBuildError(IpcosimError, RuntimeError):
     """A native FMU could not be generated or compiled (names the model)."""
 
 
@@ -88,17 +89,12 @@ def model_names() -> list[str]:
     return [*PLANT_MODELS, *(model_name(kind, law) for law, kind in _laws()), "Setpoint"]
 
 
-#: Controller FMUs without a native flavour: the identification excitation looks its multisine up in a
-#: table indexed by the sample count, which the tracer cannot follow (it runs on the Python flavour).
-PYTHON_ONLY_LAWS = ("Excitation",)
-
-
 def _laws() -> list[tuple[str, str]]:
-    """(law, plant kind) of every controller FMU with a native flavour: ``catalog.LAWS`` on both plants, and
-    the swing-up (not ``PYTHON_ONLY_LAWS``)."""
-    from ipcosim.controllers.catalog import KINDS, LAWS, PARAMETER_SETS
-    return [(law, kind) for law in (*LAWS, *(la for la in PARAMETER_SETS if la not in LAWS)) for kind in KINDS
-            if kind in PARAMETER_SETS[law] and law not in PYTHON_ONLY_LAWS]
+    """(law, plant kind) of every controller FMU with a native flavour, in the registry's order (the
+    identification excitation has none: it looks its multisine up in a table indexed by the sample count,
+    which the tracer cannot follow; it runs on the Python flavour)."""
+    from ipcosim.controllers.catalog import KINDS, REGISTRY
+    return [(law, kind) for law, e in REGISTRY.items() for kind in KINDS if kind in e.sets and e.native]
 
 
 def native_model(name: str, python_dir: Path) -> models.NativeModel:

@@ -9,7 +9,7 @@ is one ``Float64`` / ``Int32`` / ``Boolean`` element; the model structure lists 
 instead of indices (``Output``, ``InitialUnknown``); the C source files move to
 ``sources/buildDescription.xml`` (:func:`build_description`); and FMI 3.0 asks for one
 independent variable, ``time`` (value reference one past the largest used, as none is free
-below it).
+below it; the FMI 2.0 variant has no such variable, so ``c/fmi3adapter.h`` answers it).
 """
 from __future__ import annotations
 

@@ -27,12 +27,13 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 from xml.etree import ElementTree
 
+from ipcosim.errors import IpcosimError
 from ipcosim.harness.native import tracer
 from ipcosim.harness.native.leaves import c_name, numbers
 from ipcosim.harness.native.tracer import Node, leaf, select
 
 
-class NativeModelError(RuntimeError):
+class NativeModelError(IpcosimError, RuntimeError):
     """A model cannot be generated (names the model and the reason)."""
 
 
@@ -116,9 +117,11 @@ def python_variables(fmu: Path) -> tuple[list[Variable], list[ElementTree.Elemen
 
 
 #: Instrument options of the Python plant (``ipcosim.fmus.instruments``) that the native plant does not
-#: model: each must stay 0 (off) in the native flavour. ``noise_seed`` and ``tap_time`` act only through
-#: them and may take any value. The lab bench's (encoders, end stops, DAC, computation delay) it models.
-NATIVE_INSTRUMENTS_OFF = ("noise_counts", "tap_force_impulse", "tap_torque_impulse")
+#: model: each must stay 0 (off) in the native flavour. ``noise_seed`` acts only through it and may take any
+#: value. The lab bench's (encoders, end stops, DAC, computation delay) and the taps it models.
+NATIVE_INSTRUMENTS_OFF = ("noise_counts",)
+#: The native plant's state that says whether the taps have acted (0 before, 1 after).
+TAPPED = "S:tapped"
 #: Longest computation delay of the native plant, in integrator steps (its delay line's length).
 NATIVE_MAX_DELAY_STEPS = 32
 
@@ -178,11 +181,12 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
     off = [name for name in NATIVE_INSTRUMENTS_OFF if name in present]
     return NativeModel(
         name=name, kind="plant", description=description, variables=variables, unit_definitions=units,
-        states={k: 0.0 for k in zkeys + dkeys + xkeys},
+        states={k: 0.0 for k in zkeys + dkeys + xkeys + [TAPPED]},
         initialize=list(zip(zkeys, started[:n])) + [(f"V:{s}", v) for s, v in zip(states, started[n:2 * n])]
-        + [(k, tracer.const(0.0)) for k in dkeys] + list(zip(xkeys, started[2 * n:])),
+        + [(k, tracer.const(0.0)) for k in dkeys + [TAPPED]] + list(zip(xkeys, started[2 * n:])),
         step=list(zip(zkeys, stepped[:n])) + [(f"V:{s}", v) for s, v in zip(states, stepped[n:2 * n])]
-        + list(zip(dkeys, stepped[2 * n:2 * n + len(dkeys)])) + list(zip(xkeys, stepped[2 * n + len(dkeys):])),
+        + list(zip(dkeys, stepped[2 * n:2 * n + len(dkeys)])) + list(zip(xkeys, stepped[2 * n + len(dkeys):-1]))
+        + [(TAPPED, stepped[-1])],
         checked=zkeys, meta={"role": "plant", "plant": kind, "integrator_step": repr(step), "instruments_off": off,
                              "max_delay_steps": NATIVE_MAX_DELAY_STEPS, "stage_coefficients": sorted(coefficients),
                              "design_values": {f: getattr(p0, f) for f in cls.__dataclass_fields__}},
@@ -253,23 +257,37 @@ class _PlantTrace:
                                                                               a[-1])))(*x, leaf("V:end_stop"))
         return x, stuck + stopped
 
+    def tap(self, p: Any, before: list[Any], z: list[Any]) -> tuple[Any, list[Any], list[Any]]:
+        """``InstrumentedPlant._tap`` traced: (the tapped flag after this step, the state and the integrator
+        state the step starts from). The taps act once, in the first step that ends after ``tap_time``, when
+        an impulse is set."""
+        force, torque = leaf("V:tap_force_impulse"), leaf("V:tap_torque_impulse")
+        due = tracer.select(leaf(TAPPED) < 0.5, tracer.select(leaf("S:time") > leaf("V:tap_time"),
+                                                              force * force + torque * torque > 0.0, False), False)
+        x = self._plant.tapped_state(self.kind, before, p, force, torque)
+        zx = self._physics.single_mass_to_momentum(x, p) if self.single else x
+        return (tracer.select(due, 1.0, leaf(TAPPED)), [tracer.select(due, a, b) for a, b in zip(x, before)],
+                [tracer.select(due, a, b) for a, b in zip(zx, z)])
+
     def step(self, shapes: list[tuple[int, int]], nonzero: set[str]) -> list[Any]:
-        """One step: ``z`` after it, the outputs, the delay buffer shifted, the constrained state ``x``."""
+        """One step: ``z`` after it, the outputs, the delay buffer shifted, the constrained state ``x``, the
+        tapped flag."""
         n, plant_mod = len(self.states), self._plant
         p = self.params()
         f = tracer.local((plant_mod.single_mass_internal_rhs if self.single else plant_mod.double_mass_internal_rhs)(p))
         buffer = [leaf(f"S:d{k}") for k in range(NATIVE_MAX_DELAY_STEPS)]
         v, vA = self.voltage(p, buffer)
-        z = sym_stages([leaf(f"S:z{i}") for i in range(n)], f, (vA,), shapes, nonzero)
+        # the state after the last step's constraints, then the taps
+        tapped, before, z0 = self.tap(p, [leaf(f"S:x{i}") for i in range(n)], [leaf(f"S:z{i}") for i in range(n)])
+        z = sym_stages(z0, f, (vA,), shapes, nonzero)
         x = plant_mod.single_mass_output_map(p)(z) if self.single else list(z)
-        before = [leaf(f"S:x{i}") for i in range(n)]  # the state after the last step's constraints
         x, held = self.constrain(p, before, x)
         if self.single:
             zx = self._physics.single_mass_to_momentum(x, p)
             z = [tracer.select(held > 0.0, a, b) for a, b in zip(zx, z)]
         else:
             z = x
-        return list(z) + self.outputs(x) + [v, *buffer[:-1]] + list(x)
+        return list(z) + self.outputs(x) + [v, *buffer[:-1]] + list(x) + [tapped]
 
     def start(self) -> list[Any]:
         """The start: ``z`` from the initial values, the outputs, the initial state."""
@@ -322,15 +340,21 @@ def _trace_step(base: Any, measured: tuple[str, ...]) -> tuple[Any, dict[str, An
             raise NativeModelError("a law's state layout depends on a branch")
         return [u] + [after[k] for k in keys]
 
-    from ipcosim.controllers import laws
-    saturate, schedule = laws.saturate, laws.Schedule.__call__
-    laws.saturate = tracer.local(saturate)  # pure functions: their branches merged where they return
-    laws.Schedule.__call__ = tracer.local(schedule)  # type: ignore[method-assign]
+    from ipcosim.controllers.catalog import law_modules
+    from ipcosim.controllers.laws.hsmc import Schedule
+    modules = law_modules()
+    saturates = {m: m.saturate for m in modules if hasattr(m, "saturate")}
+    schedule = Schedule.__call__
+    for m, saturate in saturates.items():
+        m.saturate = tracer.local(saturate)  # pure functions: their branches merged where they return
+    Schedule.__call__ = tracer.local(schedule)  # type: ignore[method-assign]
     try:
-        with tracer.math_hooks(laws):
+        with tracer.math_hooks(*modules):
             out = tracer.trace(fn)
     finally:
-        laws.saturate, laws.Schedule.__call__ = saturate, schedule  # type: ignore[method-assign]
+        for m, saturate in saturates.items():
+            m.saturate = saturate
+        Schedule.__call__ = schedule  # type: ignore[method-assign]
     return out[0], dict(zip(keys, out[1:])), before
 
 

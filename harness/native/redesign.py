@@ -18,11 +18,11 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping
 
-from ipcosim.errors import closest
+from ipcosim.errors import IpcosimError, closest
 from ipcosim.fmus.instruments import delay_steps
 
 
-class NativeParameterError(KeyError):
+class NativeParameterError(IpcosimError, KeyError):
     """A parameter the native flavour does not have (names the model and the flavour).
 
     ``parameter``: the name it lacks, where one parameter is meant (else None); ``design_only``: that name
@@ -159,13 +159,13 @@ PYTHON_FLAVOUR = "`ipcosim run --fmus python` runs it"
 
 def check_instruments(info: Mapping[str, Any], values: Mapping[str, Any]) -> None:
     """Raise NativeParameterError for an instrument option of the Python plant the native plant lacks set to
-    a value other than 0 (``ipcosim.harness.native.models.NATIVE_INSTRUMENTS_OFF``: noise and taps), or for a
+    a value other than 0 (``ipcosim.harness.native.models.NATIVE_INSTRUMENTS_OFF``: measurement noise), or for a
     computation delay longer than the native plant's delay line."""
     for name in info.get("instruments_off", ()):
         if name in values and float(values[name]) != 0.0:
             raise NativeParameterError(
                 f"the native flavour of {info['model']} has no {name}: parameter {name} = {values[name]} must "
-                f"be 0 there (measurement noise and taps are in the python flavour only: {PYTHON_FLAVOUR})")
+                f"be 0 there (measurement noise is in the python flavour only: {PYTHON_FLAVOUR})")
     longest = int(info.get("max_delay_steps", 0))
     step = float(values.get("integrator_step", info["integrator_step"]))
     if "input_delay" in values and delay_steps(float(values["input_delay"]), step) > longest:

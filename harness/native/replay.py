@@ -10,7 +10,7 @@ again through the project's build cache (``ipcosim.fmus.pybuild.build_cached``).
 
 The stage coefficients of the integrator depend on the physical parameters (the armature circuit's part of the
 Jacobian, ``Plant._circuit_part``): each call recomputes them with :func:`~ipcosim.harness.native.redesign.redesign`,
-which also refuses what the native plant does not model (noise, taps, a delay longer than its delay line).
+which also refuses what the native plant does not model (noise, a delay longer than its delay line).
 """
 from __future__ import annotations
 
@@ -137,7 +137,7 @@ class NativeReplay:
         Raises
         ------
         redesign.NativeParameterError
-            An instrument the native plant lacks (noise, taps) or a delay longer than its delay line.
+            An instrument the native plant lacks (noise) or a delay longer than its delay line.
         """
         if kind_of(params) != self.kind:
             raise ValueError(f"{kind_of(params)} parameters given to the {self.kind} replay")

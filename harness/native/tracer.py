@@ -16,6 +16,8 @@ import contextlib
 import math
 from typing import Any, Callable, Iterator, Sequence
 
+from ipcosim.errors import IpcosimError
+
 #: math functions a traced model may call, with their arity.
 MATH_FUNCTIONS = {"sin": 1, "cos": 1, "tan": 1, "tanh": 1, "sinh": 1, "cosh": 1, "sqrt": 1, "exp": 1, "log": 1,
                   "fabs": 1, "floor": 1, "ceil": 1, "atan": 1, "copysign": 2, "fmod": 2, "atan2": 2, "hypot": 2,
@@ -24,7 +26,7 @@ _BINARY = {"+", "-", "*", "/", "<", "<=", ">", ">=", "==", "!="}
 _COMPARE = {"<", "<=", ">", ">=", "==", "!="}
 
 
-class TraceError(RuntimeError):
+class TraceError(IpcosimError, RuntimeError):
     """A model did something the tracer cannot turn into C (names the operation)."""
 
 

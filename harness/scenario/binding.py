@@ -12,11 +12,12 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from ipcosim.errors import IpcosimError, closest
+from ipcosim.harness.master import integers
 from ipcosim.harness.master.system import (
     SSP_TYPE,
     TRANSFORMATION_TYPES,
@@ -27,7 +28,19 @@ from ipcosim.harness.master.system import (
     Variable,
     kind_of,
 )
-from ipcosim.harness.scenario.ssp import BASE_UNITS, Component, Connection, Connector, Scenario, Unit, fmu_search_path
+from ipcosim.harness.scenario.ssp import (
+    BASE_UNITS,
+    SIGNAL_KINDS,
+    Component,
+    Connection,
+    Connector,
+    Parameter,
+    ParameterLink,
+    ParameterSet,
+    Scenario,
+    Unit,
+    fmu_search_path,
+)
 
 
 class BindingError(IpcosimError, ValueError):
@@ -66,7 +79,9 @@ def read_model(path: Path, display: str | None = None) -> Model:
                   fmi_version=md.fmiVersion, units=_units(md),
                   can_handle_variable_step=bool(md.coSimulation.canHandleVariableCommunicationStepSize),
                   default_step=_positive_or_none(md.defaultExperiment, "stepSize"),
-                  default_stop=_positive_or_none(md.defaultExperiment, "stopTime"))
+                  default_stop=_positive_or_none(md.defaultExperiment, "stopTime"),
+                  enumerations={v.name: {i.name: int(i.value) for i in v.declaredType.items}
+                                for v in md.modelVariables if v.type == "Enumeration" and v.declaredType})
     _MODEL_CACHE[key] = model
     return model
 
@@ -293,16 +308,27 @@ def bind(scenario: Scenario, swap: Mapping[str, str | os.PathLike[str] | SwapTar
     infos: list[str] = []   # notes: what was done (swaps, connectors left out)
     instances = [_bind_component(scenario, comp, swap, dict(fmu_files or {}), dict(models or {}),
                                  (strict_parameters, strict_swaps), notes, infos) for comp in scenario.components]
+    for line in _unmatched(scenario, instances):
+        if strict_parameters:
+            raise BindingError(line)
+        notes.append(line + "; ignored")
     by_name = {i.name: i for i in instances}
     fed: dict[str, str] = {}  # which output feeds each input: {"comp.input": "comp.output"}
-    links = [_bind_connection(scenario, conn, by_name, fed) for conn in scenario.connections]
+    every = [_bind_connection(scenario, conn, by_name, fed) for conn in scenario.connections]
+    links = [k for k in every if k.src_var.causality != "calculatedParameter"]
+    carried = tuple(k for k in every if k.src_var.causality == "calculatedParameter")
+    for k in carried:
+        if not k.dst_var.settable:
+            raise BindingError(f"{scenario.origin}: connection {k.src_name} -> {k.dst_name}: {k.dst_name} is "
+                               f"{k.dst_var.causality}/{k.dst_var.variability} and cannot be set")
     for inst in instances:
         for v in inst.inputs:
             if f"{inst.name}.{v.name}" not in fed:
                 start = inst.start_value(v.name)
                 notes.append(f"{scenario.origin}: input {inst.name}.{v.name} is not connected; it keeps its start "
                              f"value {start!r}")
-    return System(scenario=scenario, instances=tuple(instances), links=tuple(links), warnings=tuple(notes),
+    return System(scenario=scenario, instances=tuple(instances), links=tuple(links), parameter_links=carried,
+                  warnings=tuple(notes),
                   notes=tuple(infos))
 
 
@@ -340,7 +366,7 @@ def _bind_component(scenario: Scenario, comp: Component, swap: Mapping[str, Any]
     assert model is not None
     where = f"{scenario.origin}: component {comp.name!r} ({model.path.name if model.path else comp.source})"
     connectors = _bind_connectors(scenario, comp, model, where, swapped_from, infos)
-    params = _bind_parameters(comp, model, where, strict[0] if swapped_from is None else strict[1], notes)
+    params = _bind_parameters(scenario, comp, model, where, strict[0] if swapped_from is None else strict[1], notes)
     for name, value in extra.items():
         var = model.variables.get(name)
         if var is None or not var.settable:
@@ -353,8 +379,10 @@ def _bind_component(scenario: Scenario, comp: Component, swap: Mapping[str, Any]
 
 def _bind_connectors(scenario: Scenario, comp: Component, model: Model, where: str, swapped_from: str | None,
                      infos: list[str]) -> list[Variable]:
-    """The FMU variables of a component's connectors, each checked (type, causality, unit); an
-    unconnected connector a swapped-in FMU lacks is left out (noted in ``infos``)."""
+    """The FMU variables of a component's input and output connectors, each checked (type,
+    causality, unit); an unconnected connector a swapped-in FMU lacks is left out (noted in
+    ``infos``). Connectors of the other kinds (``parameter``, ``calculatedParameter``...) are
+    checked the same way but are not values of the run: a parameter is set before it."""
     connectors = []
     for c in comp.connectors:
         var = model.variables.get(c.name)
@@ -366,15 +394,20 @@ def _bind_connectors(scenario: Scenario, comp: Component, model: Model, where: s
             raise BindingError(f"{where}: connector {c.name!r} is not a variable of the FMU"
                                + (" (swapped-in FMU lacks a connected connector)" if swapped_from else ""))
         _check_connector(c, var, where, _unit_table(scenario, model))
-        connectors.append(var)
+        if var.causality in SIGNAL_KINDS:  # an input or output (also under SSP 2.0's kind "unspecified")
+            connectors.append(var)
     return connectors
 
 
-def _bind_parameters(comp: Component, model: Model, where: str, strict: bool,
+def _bind_parameters(scenario: Scenario, comp: Component, model: Model, where: str, strict: bool,
                      notes: list[str]) -> list[tuple[Variable, Any]]:
-    """A component's parameter bindings as (variable, converted value); names the FMU does not
-    have are an error when ``strict``, else one note per parameter set in ``notes``; a variable
-    that cannot be set is always an error."""
+    """A component's start values from every parameter binding that reaches it, as (variable,
+    converted value) in the order of SSP's precedence (a later one wins): the component's own
+    bindings in element order, then those of the systems around it from the innermost to the
+    top level (hierarchical names ``component.variable``, and a system connector's value where
+    a connection carries it to the component). Names the FMU does not have in the component's
+    own bindings are an error when ``strict``, else one note per parameter set in ``notes``; a
+    variable that cannot be set is always an error."""
     params: list[tuple[Variable, Any]] = []
     for pset in comp.bindings:
         src = pset.source or "inline ParameterValues"
@@ -387,13 +420,116 @@ def _bind_parameters(comp: Component, model: Model, where: str, strict: bool,
             notes.append(msg + "; ignored (--strict: an error)")
         for p in pset.parameters:
             var = model.variables.get(p.name)
-            if var is None:
-                continue
-            if not var.settable:
-                raise BindingError(f"{where}: parameter set {pset.name!r} ({src}) sets {p.name!r}, which is "
-                                   f"{var.causality}/{var.variability} and cannot be set")
-            params.append((var, convert_value(var, p.value, f"{where}: {src}: {p.name}")))
+            if var is not None:
+                params.append((var, _parameter_value(scenario, comp, model, var, p, pset,
+                                                     f"{where}: parameter set {pset.name!r} ({src})")))
+    for binding in scenario.system_bindings:
+        pset = binding.pset
+        src = pset.source or "inline ParameterValues"
+        for p in pset.parameters:
+            for name, link in _targets(scenario, comp, binding.full_name(p.name)):
+                var = model.variables.get(name)
+                if var is None:
+                    continue  # a name no component has: reported once for the system (_unmatched)
+                what = (f"{binding.origin}: system-level parameter set {pset.name!r} ({src}) value "
+                        f"{p.name!r} for {comp.name}.{name}")
+                if link is not None and link.transform is not None:
+                    p = replace(p, transform=link.transform)
+                params.append((var, _parameter_value(scenario, comp, model, var, p, pset, what)))
     return params
+
+
+def _targets(scenario: Scenario, comp: Component, full: str) -> list[tuple[str, ParameterLink | None]]:
+    """The variables of ``comp`` that the hierarchical name ``full`` sets: ``comp.variable``, and
+    the connectors a system connector called ``full`` is connected to (with that connection)."""
+    out: list[tuple[str, ParameterLink | None]] = []
+    if full.startswith(comp.name + "."):
+        out.append((full[len(comp.name) + 1:], None))
+    out += [(link.connector, link) for link in scenario.parameter_links
+            if link.component == comp.name and link.node == full]
+    return out
+
+
+def _parameter_value(scenario: Scenario, comp: Component, model: Model, var: Variable, p: Parameter,
+                     pset: ParameterSet, what: str) -> Any:
+    """The value of parameter ``p`` for ``var``: converted from the value's unit to the variable's
+    (through the parameter set's, the SSD's and the FMU's unit definitions), then transformed
+    (a parameter mapping's or a connection's transformation), then as the variable's type."""
+    if var.causality == "structuralParameter":
+        raise BindingError(f"{what}: sets {var.name!r}, a structural parameter (FMI 3.0 configuration mode); "
+                           f"structural parameters are not supported")
+    if not var.settable:
+        raise BindingError(f"{what}: sets {var.name!r}, which is {var.causality}/{var.variability} and cannot be set")
+    if p.type == "Binary":
+        raise BindingError(f"{what}: {p.name}: ssv:Binary values are not supported")
+    value = p.value
+    if p.type == "Enumeration":
+        return _enumeration_value(model, var, p, what)
+    if p.unit is not None and kind_of(var.type) == "real" and not p.suppress_unit_conversion:
+        connector = comp.connector(var.name)
+        target = var.unit or (connector.unit if connector is not None else None)
+        table = {**_unit_table(scenario, model), **pset.units}
+        conv = unit_conversion(p.unit, target, table)
+        if conv is None:
+            known = [u for u in (p.unit, target) if u not in table]
+            why = (f"unit {known[0]!r} is not defined" if known else "the units measure different quantities")
+            raise BindingError(f"{what}: {p.name} = {value!r} {p.unit} cannot be converted to {var.name}'s unit "
+                               f"{target!r} ({why}); SSP converts units before applying a value")
+        value = conv[0] * float(value) + conv[1]
+    t = p.transform
+    if t is not None:
+        if t.kind == "LinearTransformation":
+            if kind_of(var.type) != "real":
+                raise BindingError(f"{what}: ssc:LinearTransformation on {var.name} ({var.type}); SSP defines it "
+                                   f"for Real values only")
+            value = t.factor * float(value) + t.offset
+        else:
+            table_map = dict(t.mapping)
+            key = int(bool(value)) if t.kind == "BooleanMappingTransformation" else int(value)
+            mapped = table_map.get(key, key)
+            value = bool(mapped) if t.kind == "BooleanMappingTransformation" else mapped
+    return convert_value(var, value, f"{what}: {p.name}")
+
+
+def _enumeration_value(model: Model, var: Variable, p: Parameter, what: str) -> int:
+    """An ``ssv:Enumeration`` value (an item name, through an ``EnumerationMappingTransformation``
+    where a mapping gives one) as the value of that item in the variable's enumeration type."""
+    items = model.enumerations.get(var.name)
+    if items is None:
+        raise BindingError(f"{what}: {p.name} = {p.value!r} is an enumeration item, but {var.name} is {var.type}, "
+                           f"not an Enumeration")
+    name = p.value
+    if p.transform is not None:
+        if p.transform.kind != "EnumerationMappingTransformation":
+            raise BindingError(f"{what}: ssc:{p.transform.kind} on the enumeration value {p.name}; SSP maps "
+                               f"enumeration items with ssc:EnumerationMappingTransformation")
+        name = dict(p.transform.mapping).get(name, name)
+    if name not in items:
+        raise BindingError(f"{what}: {p.name} = {name!r} is not an item of {var.name}'s enumeration "
+                           f"({', '.join(items)})")
+    return items[name]
+
+
+def _unmatched(scenario: System | Scenario, instances: list[Instance]) -> list[str]:
+    """One line per system-level parameter set naming the values that reach no variable of any
+    component and no system connector (SSP ignores them; a slip of a name otherwise goes unseen)."""
+    sc = scenario if isinstance(scenario, Scenario) else scenario.scenario
+    lines = []
+    for binding in sc.system_bindings:
+        missing = []
+        for p in binding.pset.parameters:
+            full = binding.full_name(p.name)
+            if full in sc.system_connectors:
+                continue
+            if not any(full.startswith(i.name + ".") and full[len(i.name) + 1:] in i.model.variables
+                       for i in instances):
+                missing.append(full)
+        if missing:
+            src = binding.pset.source or "inline ParameterValues"
+            lines.append(f"{binding.origin}: system-level parameter set {binding.pset.name!r} ({src}) sets "
+                         f"{len(missing)} name(s) no component variable or system connector has: "
+                         f"{', '.join(missing)}")
+    return lines
 
 
 def rebuild_command(folder: Path) -> str | None:
@@ -430,7 +566,7 @@ def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str,
     """One connection as a :class:`Link` from the output to the input (SSP's start/end do not
     imply direction), with its types checked, its input recorded in ``fed`` (an input fed twice
     is an error) and the linear transformation and unit conversion folded into one factor and
-    offset (transformation first)."""
+    offset (the unit conversion first, then the transformation)."""
     origin = scenario.origin
     a, b = by_name[conn.start_element], by_name[conn.end_element]
     va, vb = a.model.variables.get(conn.start_connector), b.model.variables.get(conn.end_connector)
@@ -441,21 +577,26 @@ def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str,
                                f"has no variable {cname!r}; {closest(cname, inst.model.variables)}"
                                f"{rebuild_hint(inst.model)}")
     kinds = (va.causality, vb.causality)
-    if kinds == ("input", "output"):
+    if kinds in (("input", "output"), ("parameter", "calculatedParameter"), ("input", "calculatedParameter")):
         a, b, va, vb = b, a, vb, va
         src_name, dst_name = conn.end, conn.start
-    elif kinds == ("output", "input"):
+    elif kinds in (("output", "input"), ("calculatedParameter", "parameter"), ("calculatedParameter", "input")):
         src_name, dst_name = conn.start, conn.end
     elif kinds[0] == kinds[1] and kinds[0] in ("output", "input"):
         raise BindingError(f"{origin}: connection {conn.start} -> {conn.end} connects two {kinds[0]}s; "
                            f"a connection must join one output to one input")
     else:
         raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: {conn.start} is {kinds[0]}, "
-                           f"{conn.end} is {kinds[1]}; only output -> input connections are supported")
+                           f"{conn.end} is {kinds[1]}; the master carries output -> input and calculatedParameter "
+                           f"-> parameter or input connections between components (SSP 1.0 section 5.3.2.1)")
     _check_types(conn, va, vb, f"{origin}: connection {src_name} -> {dst_name}")
     if dst_name in fed:
         raise BindingError(f"{origin}: input {dst_name} is connected twice (from {fed[dst_name]} and {src_name})")
     fed[dst_name] = src_name
+    if conn.transformation == "EnumerationMappingTransformation":
+        return Link(a.name, va, b.name, vb, mapping=_enumeration_mapping(conn, a.model, va, b.model, vb,
+                                                                         f"{origin}: connection {src_name} -> "
+                                                                         f"{dst_name}"))
     if SSP_TYPE[va.type] != "Real":
         return Link(a.name, va, b.name, vb, mapping=tuple(conn.mapping))
     factor, offset = conn.factor, conn.offset
@@ -466,8 +607,25 @@ def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str,
             raise BindingError(f"{origin}: connection {src_name} -> {dst_name}: unit {ua!r} does not match "
                                f"{ub!r} (mismatched units; define both in <ssd:Units> to convert, or set "
                                f"suppressUnitConversion)")
-        factor, offset = factor * conv[0], offset * conv[0] + conv[1]
+        # SSP 1.0 section 4.5.2: the unit conversion first, then the transformation:
+        # factor * (c0 * x + c1) + offset
+        factor, offset = factor * conv[0], factor * conv[1] + offset
     return Link(a.name, va, b.name, vb, factor, offset)
+
+
+def _enumeration_mapping(conn: Connection, ma: Model, va: Variable, mb: Model, vb: Variable,
+                         where: str) -> tuple[tuple[int, int], ...]:
+    """An ``ssc:EnumerationMappingTransformation`` (pairs of item names) as pairs of the items' values
+    in the source's and the target's enumeration types."""
+    ia, ib = ma.enumerations.get(va.name, {}), mb.enumerations.get(vb.name, {})
+    pairs = []
+    for source, target in conn.mapping:
+        for name, items, v in ((source, ia, va), (target, ib, vb)):
+            if name not in items:
+                raise BindingError(f"{where}: ssc:EnumerationMappingTransformation names {name!r}, which is not an "
+                                   f"item of {v.name}'s enumeration ({', '.join(items)})")
+        pairs.append((ia[source], ib[target]))
+    return tuple(pairs)
 
 
 def _check_types(conn: Any, va: Variable, vb: Variable, where: str) -> None:
@@ -500,14 +658,29 @@ def _connector_unit(scenario: Scenario, comp: str, var: Variable) -> str | None:
 
 def _check_connector(c: Connector, var: Variable, where: str, units: Mapping[str, Unit]) -> None:
     kind_ok = {"input": ("input",), "output": ("output",), "parameter": ("parameter",),
-               "calculatedParameter": ("calculatedParameter",), "inout": ("input", "output")}
+               "calculatedParameter": ("calculatedParameter",), "inout": ("input", "output"),
+               "structuralParameter": ("structuralParameter",), "local": ("local",),
+               "constant": ("output", "local"), "unspecified": ("input", "output", "parameter", "local",
+                                                                "calculatedParameter", "structuralParameter")}
     if var.causality not in kind_ok.get(c.kind, ()):
         raise BindingError(f"{where}: connector {c.name!r} is declared {c.kind} "
                            f"but the FMU variable is {var.causality}")
-    if c.type is not None and c.type != SSP_TYPE.get(var.type, var.type):
+    if var.causality == "structuralParameter":
+        raise BindingError(f"{where}: connector {c.name!r} is a structural parameter (FMI 3.0 configuration mode); "
+                           f"structural parameters are not supported")
+    if c.type is not None and not _same_type(c.type, var.type):
         raise BindingError(f"{where}: connector {c.name!r} is declared {c.type} but the FMU variable is {var.type}")
     if c.unit and var.unit and unit_conversion(c.unit, var.unit, units) != (1.0, 0.0):
         raise BindingError(f"{where}: connector {c.name!r} has unit {c.unit!r} but the FMU variable has {var.unit!r}")
+
+
+def _same_type(declared: str, fmu_type: str) -> bool:
+    """Whether a connector's SSP type fits an FMU variable's type: SSP 1.0's generic types (Real,
+    Integer...) fit every FMI type of that kind; SSP 2.0's sized types fit only themselves (and
+    FMI 2.0's Real and Integer the Float64 and Int32 they are)."""
+    if declared in ("Real", "Integer", "Boolean", "String", "Enumeration"):
+        return declared == SSP_TYPE.get(fmu_type, fmu_type)
+    return declared == fmu_type or {declared, fmu_type} in ({"Float64", "Real"}, {"Int32", "Integer"})
 
 
 def convert_value(var: Variable, value: Any, what: str) -> Any:
@@ -525,12 +698,10 @@ def convert_value(var: Variable, value: Any, what: str) -> Any:
             if isinstance(value, bool):
                 raise ValueError
             return float(value)
-        if kind == "integer":
-            if isinstance(value, float) and value.is_integer():
-                return int(value)
-            if isinstance(value, bool):
-                raise ValueError
-            return int(value)
+        if kind == "integer":  # exactly (FMI 3.0: Int8 .. UInt64), in the type's range below
+            x = integers.exact_integer(value)
+            if t not in integers.RANGE or integers.in_range(x, t):
+                return x
         if t == "Boolean":
             if isinstance(value, bool):
                 return value
@@ -544,6 +715,9 @@ def convert_value(var: Variable, value: Any, what: str) -> Any:
             return str(value)
     except (TypeError, ValueError):
         raise BindingError(f"{what}: {value!r} is not a valid {t} value") from None
+    if kind == "integer":
+        lo, hi = integers.RANGE[t]
+        raise BindingError(f"{what}: {value!r} is out of the range of {t} ({lo} .. {hi})")
     raise BindingError(f"{what}: variables of type {t} cannot be set")
 
 
@@ -561,7 +735,7 @@ def with_set(system: System, set: Mapping[str, Any]) -> tuple[System, dict[tuple
     """
     out: dict[tuple[str, str], Any] = {}
     for key, value in set.items():
-        comp, sep, var = str(key).partition(".")
+        comp, sep, var = _split_name(system, str(key))
         if not sep or not comp or not var:
             raise BindingError(f"--set {key}={value}: expected COMPONENT.VARIABLE=VALUE")
         try:
@@ -578,11 +752,22 @@ def with_set(system: System, set: Mapping[str, Any]) -> tuple[System, dict[tuple
                                f"(`ipcosim describe {system.scenario.name}` lists them){rebuild_hint(inst.model)}")
         if not v.settable:
             raise BindingError(f"{where}: {var!r} is {v.causality}/{v.variability} and cannot be set")
-        link = system.link_into(comp, var)
+        link = system.link_into(comp, var) or next((k for k in system.parameter_links
+                                                     if k.dst == comp and k.dst_var.name == var), None)
         if link is not None:
-            raise BindingError(f"{where}: input {var!r} is connected to {link.src_name}; set the source instead")
+            raise BindingError(f"{where}: {v.causality} {var!r} is connected to {link.src_name}; set the source "
+                               f"instead")
         out[(comp, var)] = convert_value(v, value, f"--set {key}")
     return system, out
+
+
+def _split_name(system: System, key: str) -> tuple[str, str, str]:
+    """``component``, ``.``, ``variable`` of ``component.variable``: the longest component name that
+    ``key`` starts with (a nested system's component is ``sub.component``), else split at the first dot."""
+    names = sorted((i.name for i in system.instances if key.startswith(i.name + ".")), key=len, reverse=True)
+    if names:
+        return names[0], ".", key[len(names[0]) + 1:]
+    return key.partition(".")
 
 
 def default_step(system: System) -> tuple[float | None, str]:

@@ -1,13 +1,17 @@
 """Loading SSP scenarios: ``SystemStructure.ssd`` and ``.ssv`` parameter sets, from a scenario
 folder or an ``.ssp`` archive, into an immutable :class:`Scenario`.
 
-Parse first, then run: this module only reads and checks files; nothing is instantiated. The
-object model and the SSV reader come from :mod:`fmpy.ssp.ssd` (``read_ssd``); this module
-extends it with what a master needs and FMPy leaves out -- schema validation that names the
-file and line of every problem, folders as well as archives, connector types and units, the
-``ssc:LinearTransformation`` of connections, ``suppressUnitConversion``, unit definitions, the
+Parse first, then run: this module only reads and checks files; nothing is instantiated. Every
+file is validated against the schema of the SSP version it declares (1.0: FMPy's copy of the
+standard's XSD files; 2.0: the copy in ``schema/ssp2``), naming the file and line of a problem;
+folders are read as well as archives. It reads connector kinds, types and units, the
+transformations of connections and ``suppressUnitConversion``, unit definitions, the
 ``DefaultExperiment`` (start, stop and the OSP ``FixedStepAlgorithm`` step used by libcosim),
-component step-size hints and the scenario's named parameter sets.
+component step-size hints, parameter bindings at every level (inline, ``.ssv``, ``prefix``,
+parameter mappings from ``.ssm`` or inline) and the scenario's named parameter sets. Nested
+systems are flattened into hierarchical component names, and connections through system connectors
+and signal dictionaries joined end to end. What the master does not run (an SSP as a component,
+arrays, clocks...) is refused here in one line naming the file, the element and the feature.
 
 Scenario names resolve to ``ssp/<name>/`` of the project (the committed sources); FMUs that a
 folder's SSD references as ``resources/<Model>.fmu`` are looked up in the folder's
@@ -15,13 +19,12 @@ folder's SSD references as ``resources/<Model>.fmu`` are looked up in the folder
 """
 from __future__ import annotations
 
-import io
 import math
 import os
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePosixPath
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 from lxml import etree
 
@@ -63,13 +66,28 @@ class Connector:
 
 
 @dataclass(frozen=True)
+class Transform:
+    """A transformation of a value on its way to its target (``ssc:GTransformationChoice``):
+    ``LinearTransformation`` (``factor * x + offset``, after any unit conversion) or an Integer or
+    Boolean mapping (``mapping``: (source, target) pairs; values not in it pass unchanged)."""
+
+    kind: str
+    factor: float = 1.0
+    offset: float = 0.0
+    mapping: tuple[tuple[Any, Any], ...] = ()
+
+
+@dataclass(frozen=True)
 class Parameter:
-    """One value of a parameter set (``ssv:Parameter``)."""
+    """One value of a parameter set (``ssv:Parameter``), with the transformation and unit handling
+    a parameter mapping (``ssm:MappingEntry``) gives it."""
 
     name: str
-    type: str  # Real | Integer | Boolean | String
+    type: str  # Real | Integer | Boolean | String (SSP 2.0's Float64, Int32... as given)
     value: Any
     unit: str | None = None
+    transform: Transform | None = None
+    suppress_unit_conversion: bool = False
 
 
 @dataclass(frozen=True)
@@ -79,6 +97,39 @@ class ParameterSet:
     name: str
     parameters: tuple[Parameter, ...]
     source: str | None = None
+    #: The set's own unit definitions (``ssv:Units``): what its values' ``unit`` names.
+    units: Mapping[str, Unit] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SystemBinding:
+    """A parameter binding of a system (the top-level one or a nested one): its values address
+    variables by hierarchical name (``component.variable``, ``prefix`` already prepended).
+
+    ``system`` is the system's hierarchical name ("" for the top level), ``depth`` its nesting
+    level (0 for the top level): a binding of a higher level (smaller depth) wins."""
+
+    system: str
+    depth: int
+    pset: ParameterSet
+    origin: str
+
+    def full_name(self, name: str) -> str:
+        """The hierarchical name of ``name`` seen from the top-level system."""
+        return f"{self.system}.{name}" if self.system else name
+
+
+@dataclass(frozen=True)
+class ParameterLink:
+    """A connection from a system's ``parameter`` or ``input`` connector (hierarchical name
+    ``node``) to a component's connector: the value a binding gives the system connector is
+    the component variable's start value (the system parameter is set before initialization)."""
+
+    node: str
+    component: str
+    connector: str
+    origin: str
+    transform: Transform | None = None
 
 
 @dataclass(frozen=True)
@@ -91,6 +142,8 @@ class Component:
     connectors: tuple[Connector, ...]
     bindings: tuple[ParameterSet, ...] = ()
     step_size_hint: float | None = None
+    #: Nesting level of the component's system (0: the top-level system).
+    depth: int = 0
 
     def connector(self, name: str) -> Connector | None:
         """The connector called ``name``, or None."""
@@ -170,6 +223,12 @@ class Scenario:
         ``parameter_set=`` can select.
     set_files : mapping of str to str
         Set name -> file name of those ``.ssv`` files.
+    version : str
+        The SSD's SSP version (``1.0`` or ``2.0``).
+    system_bindings, parameter_links, system_connectors
+        The system-level parameter bindings, the connections from system connectors to
+        components and the system connectors' hierarchical names (nested systems are flattened:
+        a component ``C`` of system ``B`` is the component ``B.C``).
     """
 
     name: str
@@ -182,6 +241,14 @@ class Scenario:
     experiment: Experiment
     parameter_sets: Mapping[str, ParameterSet] = field(default_factory=dict)
     set_files: Mapping[str, str] = field(default_factory=dict)
+    #: The SSD's ``version`` (``1.0`` or ``2.0``).
+    version: str = "1.0"
+    #: Parameter bindings of the top-level system and nested systems, lowest level first.
+    system_bindings: tuple[SystemBinding, ...] = ()
+    #: Values of system connectors that connections carry to components' connectors.
+    parameter_links: tuple[ParameterLink, ...] = ()
+    #: Hierarchical names of every system connector (what a system-level binding may address).
+    system_connectors: tuple[str, ...] = ()
 
     def component(self, name: str) -> Component:
         """The component called ``name`` (KeyError naming the known ones otherwise)."""
@@ -245,18 +312,6 @@ class _Source:
             return sorted(n for n in self._zip.namelist() if "/" not in n and n.endswith(suffix))
         return sorted(p.name for p in self.location.iterdir() if p.is_file() and p.name.endswith(suffix))
 
-    def as_zip(self, names: Iterable[str]) -> io.BytesIO | Path:
-        """The scenario as a zip (what fmpy's ``read_ssd`` reads): the archive itself, or an
-        in-memory archive of the given files of a folder."""
-        if self.is_archive:
-            return self.location
-        buf = io.BytesIO()
-        with zipfile.ZipFile(buf, "w") as zf:
-            for name in names:
-                zf.writestr(name, self.read(name))
-        buf.seek(0)
-        return buf
-
 
 def _display(path: Path) -> str:
     """A path as short as possible for messages (relative to the working directory)."""
@@ -270,17 +325,29 @@ def _display(path: Path) -> str:
 _SCHEMAS: dict[str, etree.XMLSchema] = {}
 
 
-def _schema(file_name: str) -> etree.XMLSchema:
-    """SSP 1.0 schema from FMPy's copy of the standard's XSD files."""
-    if file_name not in _SCHEMAS:
-        import fmpy.ssp.ssd as fssd
+def _schema(file_name: str, version: str = "1.0") -> etree.XMLSchema:
+    """The standard's XSD ``file_name`` of SSP ``version``: 1.0 from FMPy's copy, 2.0 from the copy
+    this package ships (``schema/ssp2``, the Modelica Association's files of release 2.0)."""
+    key = f"{version}/{file_name}"
+    if key not in _SCHEMAS:
+        if version == "2.0":
+            folder = Path(__file__).parent / "schema" / "ssp2"
+        else:
+            import fmpy.ssp.ssd as fssd
 
-        _SCHEMAS[file_name] = etree.XMLSchema(file=str(Path(fssd.__file__).parent / "schema" / file_name))
-    return _SCHEMAS[file_name]
+            folder = Path(fssd.__file__).parent / "schema"
+        _SCHEMAS[key] = etree.XMLSchema(file=str(folder / file_name))
+    return _SCHEMAS[key]
+
+
+def ssp_version(root: etree._Element) -> str:
+    """The SSP version a document declares: ``2.0`` for 2.x, else ``1.0`` (validated by that schema)."""
+    return "2.0" if (root.get("version") or "").startswith("2.") else "1.0"
 
 
 def parse_xml(data: bytes, display: str, schema_file: str) -> etree._Element:
-    """Parse and schema-validate an SSP XML file; one-line ScenarioError naming file and line.
+    """Parse and schema-validate an SSP XML file against the schema of the SSP version it declares
+    (1.0 or 2.0); one-line ScenarioError naming file and line.
 
     Parameters
     ----------
@@ -289,19 +356,22 @@ def parse_xml(data: bytes, display: str, schema_file: str) -> etree._Element:
     display : str
         File name used in messages.
     schema_file : str
-        ``SystemStructureDescription.xsd`` or ``SystemStructureParameterValues.xsd``.
+        ``SystemStructureDescription.xsd``, ``SystemStructureParameterValues.xsd`` or
+        ``SystemStructureParameterMapping.xsd``.
     """
     try:
         root = etree.fromstring(data)
     except etree.XMLSyntaxError as exc:
         raise ScenarioError(f"{display}: not well-formed XML: {exc}") from None
-    schema = _schema(schema_file)
+    version = ssp_version(root)
+    schema = _schema(schema_file, version)
     if not schema.validate(root):
         err = schema.error_log[0]
-        message = err.message.replace("{" + NS["ssd"] + "}", "ssd:").replace("{" + NS["ssc"] + "}", "ssc:")
-        message = message.replace("{" + NS["ssv"] + "}", "ssv:")
+        message = err.message
+        for prefix in ("ssd", "ssc", "ssv", "ssm", "ssb"):
+            message = message.replace("{" + NS[prefix] + "}", f"{prefix}:")
         more = f" (and {len(schema.error_log) - 1} more)" if len(schema.error_log) > 1 else ""
-        raise ScenarioError(f"{display}:{err.line}: fails the SSP 1.0 schema: {message}{more}")
+        raise ScenarioError(f"{display}:{err.line}: fails the SSP {version} schema: {message}{more}")
     return root
 
 
@@ -373,13 +443,26 @@ def _resolve_fmu(source: str, src: _Source, fmu_dirs: Sequence[Path]) -> Path | 
 
 
 # --------------------------------------------------------------------------- parsing
+#: SSP value and connector types: 1.0's and those SSP 2.0 adds for FMI 3.0 (sized types).
+REAL_TYPES = ("Real", "Float64", "Float32")
+INTEGER_TYPES = ("Integer", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")
+CONNECTOR_TYPES = REAL_TYPES + INTEGER_TYPES + ("Boolean", "String", "Enumeration", "Binary", "Clock")
+#: FMU causalities whose values flow through the run (recorded); parameters are set before it.
+SIGNAL_KINDS = ("input", "output", "inout")
+
+
 def _parse_value(type_: str, text: str | None, display: str, name: str) -> Any:
+    """A value of an SSV parameter as Python (float, int, bool, str); Enumeration (an item name)
+    and Binary (hex) stay text, for the binding to apply or refuse."""
     if text is None:
         raise ScenarioError(f"{display}: parameter {name!r} has no value")
+    if type_ in REAL_TYPES + INTEGER_TYPES and len(text.split()) > 1:
+        raise ScenarioError(f"{display}: parameter {name!r}: array values ({text!r}) are not supported "
+                            f"(SSP 2.0 arrays; the master carries scalars)")
     try:
-        if type_ == "Real":
+        if type_ in REAL_TYPES:
             return float(text)
-        if type_ in ("Integer", "Enumeration"):
+        if type_ in INTEGER_TYPES:
             return int(text)
         if type_ == "Boolean":
             if text.strip() in ("true", "1"):
@@ -392,32 +475,50 @@ def _parse_value(type_: str, text: str | None, display: str, name: str) -> Any:
     return text
 
 
-def _parameter_set(element: etree._Element, display: str, source: str | None) -> ParameterSet:
-    """Immutable copy of an ``ssv:ParameterSet`` (read through fmpy's SSV reader)."""
-    from fmpy.ssp.ssd import _get_parameter_set  # the SSV reader of read_ssd
-
-    fset = _get_parameter_set(element)
+def _parameter_set(element: etree._Element, display: str, source: str | None,
+                   mapping: Sequence[tuple[str, str, Transform | None, bool]] | None = None,
+                   prefix: str = "") -> ParameterSet:
+    """Immutable copy of an ``ssv:ParameterSet`` with its unit definitions: ``prefix`` prepended to
+    every name, then a parameter mapping (``mapping``: source name, target name, transformation,
+    suppressUnitConversion) renames and selects its values (only mapped values are applied), as
+    SSP 1.0 section 5.2.3 orders them."""
     params = []
-    for p, xml in zip(fset.parameters, element.findall("ssv:Parameters/ssv:Parameter", NS)):
-        if p.type is None:
-            raise ScenarioError(f"{display}: parameter {p.name!r} has no value element")
-        unit = p.unit
-        if unit is None and p.type == "Real":
-            real = xml.find("ssv:Real", NS)
-            unit = real.get("unit") if real is not None else None
-        params.append(Parameter(p.name, p.type, _parse_value(p.type, p.value, display, p.name), unit))
-    return ParameterSet(name=fset.name or "", parameters=tuple(params), source=source)
+    for xml in element.findall("ssv:Parameters/ssv:Parameter", NS):
+        name = xml.get("name")
+        value = next((c for c in xml if isinstance(c.tag, str) and etree.QName(c).namespace == NS["ssv"]), None)
+        if value is None:
+            raise ScenarioError(f"{display}:{xml.sourceline}: parameter {name!r} has no value element")
+        type_ = etree.QName(value).localname
+        text = value.get("value")
+        params.append(Parameter(name, type_, _parse_value(type_, text, f"{display}:{xml.sourceline}", name),
+                                value.get("unit") if type_ in REAL_TYPES else None))
+    if prefix:  # "prepended to all names in the parameter source prior to ... name mapping"
+        params = [replace(p, name=prefix + p.name) for p in params]
+    if mapping is not None:
+        by_name = {p.name: p for p in params}
+        params = [replace(by_name[src], name=target, transform=transform, suppress_unit_conversion=suppress)
+                  for src, target, transform, suppress in mapping if src in by_name]
+    units = {u.get("name"): _unit(u) for u in element.findall("ssv:Units/ssc:Unit", NS)}
+    return ParameterSet(name=element.get("name") or "", parameters=tuple(params), source=source, units=units)
 
 
-def _connector(xml: etree._Element) -> Connector:
+def _connector(xml: etree._Element, display: str) -> Connector:
+    """One ``ssd:Connector``: kind, SSP type, unit; SSP 2.0's arrays and clocks are refused by name."""
+    name = xml.get("name")
     type_, unit = None, None
-    for t in ("Real", "Integer", "Boolean", "String", "Enumeration", "Binary"):
+    for t in CONNECTOR_TYPES:
         el = xml.find(f"ssc:{t}", NS)
         if el is not None:
             type_ = t
-            unit = el.get("unit") if t == "Real" else None
+            unit = el.get("unit") if t in REAL_TYPES else None
             break
-    return Connector(name=xml.get("name"), kind=xml.get("kind"), type=type_, unit=unit)
+    if xml.find("ssc:Dimension", NS) is not None:
+        raise ScenarioError(f"{display}:{xml.sourceline}: connector {name!r} is an array (ssc:Dimension); array "
+                            f"connectors (SSP 2.0) are not supported")
+    if type_ == "Clock" or xml.find("ssd:Clock", NS) is not None:
+        raise ScenarioError(f"{display}:{xml.sourceline}: connector {name!r} is a clock or clocked (ssc:Clock); "
+                            f"clocks (SSP 2.0) are not supported")
+    return Connector(name=name, kind=xml.get("kind"), type=type_, unit=unit)
 
 
 def _unit(xml: etree._Element) -> Unit:
@@ -455,9 +556,10 @@ def load_scenario(scenario_or_path: str | os.PathLike[str],
     ScenarioNotFoundError
         The name or path does not exist.
     ScenarioError
-        Not a zip, no SystemStructure.ssd, not well-formed, fails the SSP 1.0 schema, an
-        unreadable parameter file, a connection naming an undeclared element or connector,
-        duplicate names, an input connected twice, a transformation on a non-Real connection.
+        Not a zip, no SystemStructure.ssd, not well-formed, fails the schema of its SSP version
+        (1.0 or 2.0), an unreadable parameter file or mapping, a connection naming an undeclared
+        element or connector, duplicate names, an input connected twice, a transformation on a
+        non-Real connection, or a feature the master does not run (named with file and line).
     """
     location = resolve_location(scenario_or_path)
     src = _Source(location)
@@ -468,9 +570,8 @@ def load_scenario(scenario_or_path: str | os.PathLike[str],
 
 
 def _load(src: _Source, fmu_dirs: Sequence[Path]) -> Scenario:
-    """Parse a scenario: the SSD (schema-validated), its parameter files, FMPy's object model of
-    the system, then what FMPy leaves out (connectors, bindings, step hints, transformations,
-    units, the default experiment), each checked with file and line in the message."""
+    """Parse a scenario: the SSD (schema-validated against its version), its parameter files and
+    mappings, then the system, flattened (see :class:`_Flattener`), and the default experiment."""
     if not src.exists(SSD_NAME):
         where = _display(src.location)
         container = "archive" if src.is_archive else "folder"
@@ -479,17 +580,10 @@ def _load(src: _Source, fmu_dirs: Sequence[Path]) -> Scenario:
     root = parse_xml(src.read(SSD_NAME), ssd_display, "SystemStructureDescription.xsd")
     ssv_files = src.top_level(".ssv")
     set_elements = _parameter_files(src, root, ssv_files, ssd_display)
-    fssd, system_xml = _read_system(src, root, set_elements, ssd_display)
-    components = []
-    seen: set[str] = set()
-    for fcomp, xml in zip(fssd.system.elements, system_xml.findall("ssd:Elements/ssd:Component", NS)):
-        if fcomp.name in seen:
-            raise ScenarioError(f"{ssd_display}:{xml.sourceline}: duplicate component name {fcomp.name!r}")
-        seen.add(fcomp.name)
-        components.append(_component(fcomp, xml, src, set_elements, fmu_dirs, ssd_display))
-    by_name = {c.name: c for c in components}
-    connections = [_connection(cxml, f"{ssd_display}:{cxml.sourceline}", by_name)
-                   for cxml in system_xml.findall("ssd:Connections/ssd:Connection", NS)]
+    system_xml = root.find("ssd:System", NS)
+    flat = _Flattener(src, set_elements, fmu_dirs, ssd_display)
+    flat.system(system_xml, "", 0)
+    connections = flat.connections()
     units = {u.get("name"): _unit(u) for u in root.findall("ssd:Units/ssc:Unit", NS)}
     experiment = _experiment(root, ssd_display)
     sets = {}
@@ -499,106 +593,313 @@ def _load(src: _Source, fmu_dirs: Sequence[Path]) -> Scenario:
         key = pset.name or PurePosixPath(fname).stem
         sets[key] = pset
         set_files[key] = fname
-    return Scenario(name=fssd.name or system_xml.get("name"), origin=ssd_display, location=src.location,
-                    description=system_xml.get("description") or "", components=tuple(components),
+    return Scenario(name=system_xml.get("name"), origin=ssd_display, location=src.location,
+                    description=system_xml.get("description") or "", components=tuple(flat.components),
                     connections=tuple(connections), units=units, experiment=experiment,
-                    parameter_sets=sets, set_files=set_files)
+                    parameter_sets=sets, set_files=set_files, version=ssp_version(root),
+                    system_bindings=tuple(sorted(flat.system_bindings, key=lambda b: -b.depth)),
+                    parameter_links=tuple(flat.parameter_links), system_connectors=tuple(flat.system_connectors))
 
 
 def _parameter_files(src: _Source, root: etree._Element, ssv_files: Sequence[str],
                      ssd_display: str) -> dict[str, etree._Element]:
-    """Every parameter file of the scenario, validated, by its path: the top-level ``.ssv`` files
-    (the selectable parameter sets) and those parameter bindings name in sub-folders."""
+    """Every parameter and mapping file of the scenario, validated, by its path: the top-level
+    ``.ssv`` files (the selectable parameter sets) and those parameter bindings and parameter
+    mappings name in sub-folders."""
     set_elements: dict[str, etree._Element] = {}
     for name in ssv_files:
         set_elements[name] = parse_xml(src.read(name), src.display(name), "SystemStructureParameterValues.xsd")
-    for b in root.iter(f"{{{NS['ssd']}}}ParameterBinding"):
-        source = b.get("source")
-        if source is not None and source not in set_elements:
-            if not src.exists(source):
-                raise ScenarioError(f"{ssd_display}:{b.sourceline}: parameter binding source {source!r} does not exist")
-            set_elements[source] = parse_xml(src.read(source), src.display(source),
-                                             "SystemStructureParameterValues.xsd")
-    for b in root.iter(f"{{{NS['ssd']}}}ParameterMapping"):
-        raise ScenarioError(f"{ssd_display}:{b.sourceline}: parameter mappings (.ssm) are not supported")
+    for tag, schema in (("ParameterBinding", "SystemStructureParameterValues.xsd"),
+                        ("ParameterMapping", "SystemStructureParameterMapping.xsd")):
+        for b in root.iter(f"{{{NS['ssd']}}}{tag}"):
+            source = b.get("source")
+            if b.get("sourceBase") == "component":
+                raise ScenarioError(f"{ssd_display}:{b.sourceline}: ssd:{tag} sourceBase=\"component\" (a file "
+                                    f"inside the component's FMU) is not supported")
+            if b.get("type") not in (None, "application/x-ssp-parameter-set", "application/x-ssp-parameter-mapping"):
+                raise ScenarioError(f"{ssd_display}:{b.sourceline}: ssd:{tag} of type {b.get('type')!r} is not "
+                                    f"supported (SSP's own formats only)")
+            if source is not None and source not in set_elements:
+                if not src.exists(source):
+                    what = "parameter binding" if tag == "ParameterBinding" else "parameter mapping"
+                    raise ScenarioError(f"{ssd_display}:{b.sourceline}: {what} source {source!r} does not exist")
+                set_elements[source] = parse_xml(src.read(source), src.display(source), schema)
     return set_elements
 
 
-def _read_system(src: _Source, root: etree._Element, set_elements: Mapping[str, etree._Element],
-                 ssd_display: str) -> tuple[Any, etree._Element]:
-    """FMPy's object model of the SSD (components, bindings, connections) and the SSD's
-    ``ssd:System`` element; a system of anything but components is refused."""
-    from fmpy.ssp.ssd import Component as FComponent
-    from fmpy.ssp.ssd import read_ssd
+class _Flattener:
+    """Nested systems flattened into one level: a component ``C`` of a system ``B`` becomes the
+    component ``B.C`` (its hierarchical name); system connectors and the signals of a signal
+    dictionary become junctions that a connection through them joins end to end; system-level
+    parameter bindings are kept with their system's name and level; connections from a system's
+    parameter or input connector become :class:`ParameterLink` s."""
 
-    archive = src.as_zip([SSD_NAME, *set_elements])
-    try:
-        fssd = read_ssd(archive, validate=False)
-    except Exception as exc:  # noqa: BLE001 -- fmpy raises bare exceptions
-        raise ScenarioError(f"{ssd_display}: cannot be read: {exc}") from None
-    if any(not isinstance(e, FComponent) for e in fssd.system.elements):
-        raise ScenarioError(f"{ssd_display}: nested systems and signal dictionaries are not supported; "
-                            f"the system must contain components only")
-    return fssd, root.find("ssd:System", NS)
+    def __init__(self, src: _Source, set_elements: Mapping[str, etree._Element], fmu_dirs: Sequence[Path],
+                 display: str) -> None:
+        self.src, self.set_elements, self.fmu_dirs, self.display = src, set_elements, fmu_dirs, display
+        self.components: list[Component] = []
+        self.system_bindings: list[SystemBinding] = []
+        self.system_connectors: list[str] = []
+        self.parameter_links: list[ParameterLink] = []
+        #: node -> (owner "system" | "component" | "signal", path, connector)
+        self.kinds: dict[str, tuple[str, str, Connector]] = {}
+        self.edges: list[tuple[str, str, etree._Element, str, str]] = []  # (node a, node b, xml, line, system)
+        self.aliases: dict[str, str] = {}  # a signal dictionary reference's connector -> its signal's node
+        self.dictionaries: list[dict[str, tuple[str, dict[str, Connector]]]] = []  # per enclosing system
 
+    def where(self, xml: etree._Element) -> str:
+        return f"{self.display}:{xml.sourceline}"
 
-def _component(fcomp: Any, xml: etree._Element, src: _Source, set_elements: Mapping[str, etree._Element],
-               fmu_dirs: Sequence[Path], ssd_display: str) -> Component:
-    """One component: FMPy's name and source, with the connectors, parameter bindings (files and
-    inline) and ``osp:StepSizeHint`` read from its XML, and its FMU file resolved."""
-    connectors = tuple(_connector(c) for c in xml.findall("ssd:Connectors/ssd:Connector", NS))
-    names = [c.name for c in connectors]
-    dup = {n for n in names if names.count(n) > 1}
-    if dup:
-        raise ScenarioError(f"{ssd_display}:{xml.sourceline}: component {fcomp.name!r} declares connector "
-                            f"{sorted(dup)[0]!r} twice")
-    bindings = []
-    for bxml in xml.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS):
-        source = bxml.get("source")
+    def system(self, xml: etree._Element, path: str, depth: int) -> None:
+        """Read system ``xml`` (hierarchical name ``path``) and, recursively, its sub-systems."""
+        self.dictionaries.append({d.get("name"): (f"#{path}/{d.get('name')}", self.dictionary(d))
+                                  for d in xml.findall("ssd:SignalDictionaries/ssd:SignalDictionary", NS)})
+        for c in xml.findall("ssd:Connectors/ssd:Connector", NS):
+            conn = _connector(c, self.display)
+            node = f"{path}.{conn.name}" if path else conn.name
+            self.kinds[node] = ("system", path, conn)
+            self.system_connectors.append(node)
+        for pset in self.bindings(xml, self.display):
+            self.system_bindings.append(SystemBinding(path, depth, pset, self.where(xml)))
+        seen: set[str] = set()
+        for el in xml.findall("ssd:Elements/*", NS):
+            tag = etree.QName(el).localname
+            name = el.get("name")
+            if name in seen:
+                what = "component" if tag == "Component" else "element"
+                raise ScenarioError(f"{self.where(el)}: duplicate {what} name {name!r}")
+            seen.add(name)
+            full = f"{path}.{name}" if path else name
+            if tag == "System":
+                self.system(el, full, depth + 1)
+            elif tag == "Component":
+                self.component(el, full, depth)
+            else:
+                self.reference(el, full)
+        for cxml in xml.findall("ssd:Connections/ssd:Connection", NS):
+            ends = []
+            for side in ("start", "end"):
+                element, connector = cxml.get(f"{side}Element") or "", cxml.get(f"{side}Connector")
+                if cxml.get(f"{side}Indices") is not None:
+                    raise ScenarioError(f"{self.where(cxml)}: connection with {side}Indices: array connections "
+                                        f"(SSP 2.0) are not supported")
+                scope = f"{path}.{element}" if (path and element) else (element or path)
+                node = f"{scope}.{connector}" if scope else connector
+                node = self.aliases.get(node, node)
+                if node not in self.kinds:
+                    owner = f"component {element!r}" if element else f"system {xml.get('name')!r}"
+                    if element and element not in seen:
+                        raise ScenarioError(f"{self.where(cxml)}: connection names component {element!r}, which "
+                                            f"the system does not have")
+                    raise ScenarioError(f"{self.where(cxml)}: connection names {element + '.' if element else ''}"
+                                        f"{connector}, but {owner} declares no connector {connector!r}")
+                ends.append(node)
+            self.edges.append((ends[0], ends[1], cxml, self.where(cxml), path))
+        self.dictionaries.pop()
+
+    def dictionary(self, xml: etree._Element) -> dict[str, Connector]:
+        """The entries of an ``ssd:SignalDictionary`` (inline ``ssb:SignalDictionary`` or an ``.ssb`` file,
+        validated) as connectors by name."""
+        source = xml.get("source")
         if source is not None:
-            bindings.append(_parameter_set(set_elements[source], src.display(source), source))
-        for inline in bxml.findall("ssd:ParameterValues/ssv:ParameterSet", NS):
-            bindings.append(_parameter_set(inline, ssd_display, None))
-    hint = None
-    ann = _osp_annotation(xml)
-    if ann is not None:
-        h = ann.find("osp:StepSizeHint", NS)
-        if h is not None:
-            hint = _positive(h.get("value"), f"{ssd_display}:{h.sourceline}: osp:StepSizeHint value")
-    return Component(name=fcomp.name, source=fcomp.source, fmu=_resolve_fmu(fcomp.source, src, fmu_dirs),
-                     connectors=connectors, bindings=tuple(bindings), step_size_hint=hint)
+            root = parse_xml(self.src.read(source), self.src.display(source), "SystemStructureSignalDictionary.xsd")
+        else:
+            root = xml.find("ssb:SignalDictionary", NS)
+        entries = {}
+        for e in (root.findall("ssb:DictionaryEntry", NS) if root is not None else ()):
+            c = _connector(e, self.display)
+            entries[e.get("name")] = Connector(e.get("name"), "inout", c.type, c.unit)
+        return entries
+
+    def reference(self, xml: etree._Element, full: str) -> None:
+        """A signal dictionary reference: each of its connectors stands for its dictionary's signal of
+        that name, one node for every reference to the dictionary (SSP 5.5: looked up from the
+        innermost system outwards)."""
+        name = xml.get("dictionary")
+        found = next((d[name] for d in reversed(self.dictionaries) if name in d), None)
+        if found is None:
+            raise ScenarioError(f"{self.where(xml)}: ssd:SignalDictionaryReference {full!r} references signal "
+                                f"dictionary {name!r}, which no enclosing system defines")
+        key, entries = found
+        for c in xml.findall("ssd:Connectors/ssd:Connector", NS):
+            conn = _connector(c, self.display)
+            if conn.name not in entries:
+                raise ScenarioError(f"{self.where(c)}: ssd:SignalDictionaryReference {full!r}: connector "
+                                    f"{conn.name!r} is not an entry of signal dictionary {name!r}")
+            node = f"{key}.{conn.name}"
+            self.kinds[node] = ("signal", key, entries[conn.name])
+            self.aliases[f"{full}.{conn.name}"] = node
+            self.kinds[f"{full}.{conn.name}"] = self.kinds[node]
+
+    def bindings(self, xml: etree._Element, display: str) -> list[ParameterSet]:
+        """The parameter sets of an element's ``ssd:ParameterBindings`` in element order (files and
+        inline), each mapped by its ``ssd:ParameterMapping`` and prefixed by its ``prefix``."""
+        out = []
+        for bxml in xml.findall("ssd:ParameterBindings/ssd:ParameterBinding", NS):
+            mapping = self.mapping(bxml)
+            prefix = bxml.get("prefix") or ""
+            source = bxml.get("source")
+            if source is not None:
+                out.append(_parameter_set(self.set_elements[source], self.src.display(source), source, mapping, prefix))
+            for inline in bxml.findall("ssd:ParameterValues/ssv:ParameterSet", NS):
+                out.append(_parameter_set(inline, display, None, mapping, prefix))
+        return out
+
+    def mapping(self, bxml: etree._Element) -> list[tuple[str, str, Transform | None, bool]] | None:
+        """A binding's parameter mapping (``.ssm`` file or inline ``ssm:ParameterMapping``), or None."""
+        mxml = bxml.find("ssd:ParameterMapping", NS)
+        if mxml is None:
+            return None
+        source = mxml.get("source")
+        root = self.set_elements[source] if source is not None else mxml.find("ssm:ParameterMapping", NS)
+        display = self.src.display(source) if source is not None else self.display
+        if root is None:
+            return []
+        entries = []
+        targets: set[str] = set()
+        for e in root.findall("ssm:MappingEntry", NS):
+            line = f"{display}:{e.sourceline}"
+            if e.get("target") in targets:
+                raise ScenarioError(f"{line}: ssm:MappingEntry maps a second parameter to {e.get('target')!r} "
+                                    f"(SSP: implementations must not map multiple parameters to the same name)")
+            targets.add(e.get("target"))
+            suppress = e.get("suppressUnitConversion", "false") in ("true", "1")
+            entries.append((e.get("source"), e.get("target"), _transform(e, line), suppress))
+        return entries
+
+    def component(self, xml: etree._Element, full: str, depth: int) -> None:
+        """One component under its hierarchical name, with its connectors, parameter bindings and
+        ``osp:StepSizeHint``, and its FMU file resolved."""
+        where = self.where(xml)
+        type_ = xml.get("type") or "application/x-fmu-sharedlibrary"
+        source = xml.get("source")
+        if type_ != "application/x-fmu-sharedlibrary" or (source or "").lower().split("#")[0].endswith((".ssp",
+                                                                                                         ".ssd")):
+            raise ScenarioError(f"{where}: component {full!r} (type {type_!r}, source {source!r}): an SSP or SSD used "
+                                f"as a component is not supported (FMU components only)")
+        if source is None:
+            raise ScenarioError(f"{where}: component {full!r} has no source (SSP 2.0: no implementation); a "
+                                f"component without an FMU cannot run")
+        if source.startswith("#"):
+            raise ScenarioError(f"{where}: component {full!r} references system {source!r} of this SSD; systems "
+                                f"instantiated by reference are not supported")
+        if xml.get("implementation") not in (None, "any", "CoSimulation"):
+            raise ScenarioError(f"{where}: component {full!r} asks for implementation={xml.get('implementation')!r}; "
+                                f"the master runs co-simulation FMUs only")
+        connectors = tuple(_connector(c, self.display) for c in xml.findall("ssd:Connectors/ssd:Connector", NS))
+        names = [c.name for c in connectors]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ScenarioError(f"{where}: component {full!r} declares connector {sorted(dup)[0]!r} twice")
+        for c in connectors:
+            self.kinds[f"{full}.{c.name}"] = ("component", full, c)
+        hint = None
+        ann = _osp_annotation(xml)
+        if ann is not None:
+            h = ann.find("osp:StepSizeHint", NS)
+            if h is not None:
+                hint = _positive(h.get("value"), f"{self.display}:{h.sourceline}: osp:StepSizeHint value")
+        self.components.append(Component(name=full, source=source, fmu=_resolve_fmu(source, self.src, self.fmu_dirs),
+                                         connectors=connectors, bindings=tuple(self.bindings(xml, self.display)),
+                                         step_size_hint=hint, depth=depth))
+
+    # ------------------------------------------------------------------ connections
+    def _role(self, node: str, other: str, scope: str, line: str) -> str:
+        """``source`` or ``destination``: which way data flows through ``node`` on an edge to
+        ``other`` declared in system ``scope`` (SSP's table of allowed connections: a system's own
+        input or parameter connector is a source inside it, a destination seen from its parent; an
+        element's is a destination; an inout, unspecified or signal dictionary connector takes the
+        direction the other end gives)."""
+        owner, path, conn = self.kinds[node]
+        kind = conn.kind
+        if kind in ("inout", "unspecified"):
+            if self.kinds[other][2].kind in ("inout", "unspecified"):
+                raise ScenarioError(f"{line}: connection {node} -> {other}: neither end gives the direction "
+                                    f"(kinds {kind} and {self.kinds[other][2].kind})")
+            return "destination" if self._role(other, node, scope, line) == "source" else "source"
+        feeding = kind in ("input", "parameter", "structuralParameter")
+        inside = owner == "system" and path == scope
+        return ("source" if feeding else "destination") if inside else ("destination" if feeding else "source")
+
+    def connections(self) -> list[Connection]:
+        """The component-to-component connections, with chains through system connectors joined
+        (at most one transformation on a chain), and the parameter links."""
+        feeds: dict[str, tuple[str, etree._Element, str]] = {}  # destination node -> (source node, xml, line)
+        for a, b, xml, line, scope in self.edges:
+            ra, rb = self._role(a, b, scope, line), self._role(b, a, scope, line)
+            if ra == rb:
+                ka, kb = self.kinds[a][2].kind, self.kinds[b][2].kind
+                if ka == kb and ka in ("input", "output"):
+                    raise ScenarioError(f"{line}: connection {a} -> {b} connects two {ka}s; a connection must "
+                                        f"join one output to one input")
+                raise ScenarioError(f"{line}: connection {a} -> {b} joins two {ra}s of data (kinds {ka} and "
+                                    f"{kb}); SSP's table of allowed connections has no such pair")
+            src, dst = (a, b) if ra == "source" else (b, a)
+            if dst in feeds:
+                raise ScenarioError(f"{line}: {dst} is fed twice (from {feeds[dst][0]} and {src})")
+            feeds[dst] = (src, xml, line)
+        out = []
+        for dst, (src, xml, line) in feeds.items():
+            if self.kinds[dst][0] != "component":
+                continue
+            chain = [(src, xml, line)]
+            while self.kinds[chain[-1][0]][0] in ("system", "signal") and chain[-1][0] in feeds:
+                if len(chain) > len(feeds):
+                    raise ScenarioError(f"{line}: the connections into {dst} loop through system connectors "
+                                        f"({' <- '.join(n for n, _, _ in chain[:4])} ...)")
+                chain.append(feeds[chain[-1][0]])
+            origin, first_line = chain[-1][0], chain[-1][2]
+            owner, path, conn = self.kinds[dst]
+            transforms = [x for _, x, _ in chain if _transform(x, line) is not None]
+            if len(transforms) > 1:
+                raise ScenarioError(f"{line}: the connection to {dst} passes {len(transforms)} transformations "
+                                    f"through system connectors; at most one per chain is supported")
+            cxml = transforms[0] if transforms else xml
+            if self.kinds[origin][0] == "signal":
+                continue  # a signal nothing writes: the input stays unconnected (bind warns)
+            if self.kinds[origin][0] == "system":
+                if len(chain) > 1 and transforms and any(self.kinds[n][2].unit for n, _, _ in chain[:-1]):
+                    raise ScenarioError(f"{line}: a transformed connection through system connectors with units")
+                self.parameter_links.append(ParameterLink(origin, path, conn.name, first_line,
+                                                          _transform(cxml, line)))
+                continue
+            if any(self.kinds[n][2].unit for n, _, _ in chain[:-1]) and transforms:
+                raise ScenarioError(f"{line}: a transformed connection through system connectors that declare "
+                                    f"units is not supported (give the units at the components)")
+            o_owner, o_path, o_conn = self.kinds[origin]
+            out.append(_connection(cxml, line, o_path, o_conn.name, path, conn.name))
+        return out
 
 
-def _connection(cxml: etree._Element, line: str, by_name: Mapping[str, Component]) -> Connection:
-    """One connection between declared connectors of declared components, with its
-    transformation (linear, or an integer or boolean mapping) and ``suppressUnitConversion``."""
-    se, sc, ee, ec = (cxml.get(k) for k in ("startElement", "startConnector", "endElement", "endConnector"))
-    if se is None or ee is None:
-        raise ScenarioError(f"{line}: connection {sc!r} -> {ec!r} to the system boundary is not supported "
-                            f"(give startElement and endElement)")
-    for elem, conn in ((se, sc), (ee, ec)):
-        if elem not in by_name:
-            raise ScenarioError(f"{line}: connection names component {elem!r}, which the system does not have")
-        if by_name[elem].connector(conn) is None:
-            raise ScenarioError(f"{line}: connection names {elem}.{conn}, but component {elem!r} declares "
-                                f"no connector {conn!r}")
-    factor, offset = 1.0, 0.0
-    kind, mapping = None, ()
-    lt = cxml.find("ssc:LinearTransformation", NS)
+def _transform(xml: etree._Element, line: str) -> Transform | None:
+    """The transformation of a connection or mapping entry (``ssc:GTransformationChoice``), or None."""
+    lt = xml.find("ssc:LinearTransformation", NS)
     if lt is not None:
-        kind = "LinearTransformation"
         factor, offset = float(lt.get("factor", 1.0)), float(lt.get("offset", 0.0))
         if not (math.isfinite(factor) and math.isfinite(offset)):
             raise ScenarioError(f"{line}: linear transformation factor/offset must be finite")
+        return Transform("LinearTransformation", factor, offset)
     for other in ("IntegerMappingTransformation", "BooleanMappingTransformation"):
-        mt = cxml.find(f"ssc:{other}", NS)
+        mt = xml.find(f"ssc:{other}", NS)
         if mt is not None:
-            kind, mapping = other, _map_entries(mt, other, line)
-    if cxml.find("ssc:EnumerationMappingTransformation", NS) is not None:
-        raise ScenarioError(f"{line}: ssc:EnumerationMappingTransformation is not supported (it maps "
-                            f"enumeration item names; map the values with ssc:IntegerMappingTransformation)")
+            return Transform(other, mapping=_map_entries(mt, other, line))
+    em = xml.find("ssc:EnumerationMappingTransformation", NS)
+    if em is not None:  # item names, resolved against the FMUs' enumeration types when bound
+        entries = tuple((e.get("source"), e.get("target")) for e in em.findall("ssc:MapEntry", NS))
+        if len({a for a, _ in entries}) != len(entries):
+            raise ScenarioError(f"{line}: ssc:EnumerationMappingTransformation maps a source item twice")
+        return Transform("EnumerationMappingTransformation", mapping=entries)
+    return None
+
+
+def _connection(cxml: etree._Element, line: str, se: str, sc: str, ee: str, ec: str) -> Connection:
+    """One connection between components' connectors (source first), with its transformation
+    (linear, or an integer or boolean mapping) and ``suppressUnitConversion``."""
+    t = _transform(cxml, line)
     suppress = cxml.get("suppressUnitConversion", "false") in ("true", "1")
-    return Connection(se, sc, ee, ec, factor, offset, suppress, kind, mapping)
+    if t is None:
+        return Connection(se, sc, ee, ec, suppress_unit_conversion=suppress)
+    return Connection(se, sc, ee, ec, t.factor, t.offset, suppress, t.kind, t.mapping)
 
 
 def _experiment(root: etree._Element, ssd_display: str) -> Experiment:

@@ -36,7 +36,7 @@ from typing import Any, Mapping, Sequence
 import control
 import numpy as np
 
-from ipcosim.controllers.catalog import LAWS, build_law, model_name
+from ipcosim.controllers.catalog import LAWS, build_law, entry, model_name
 from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.fmus.linearize import linearize
@@ -323,9 +323,10 @@ def pid_gain_search(loop: Loop) -> dict[str, Any]:
     Evidence beside the parity-interlacing argument, not a proof: the grid spans Kp 0.1..1e7 V/m,
     Ki 0.1..1e9 V/(m s), Kd 0.01..1e4 V s/m, each with both signs and zero.
     """
-    from ipcosim.controllers.laws import PID, PIDGains
+    from ipcosim.controllers.laws.pid import PID, PIDGains
 
-    tau = float(loop.law_object.gains.derivative_time_constant) if loop.law == "PID" else 1e-3
+    own = entry(loop.law).pid_gain_search  # the loop's law is the PID: its own derivative filter
+    tau = float(loop.law_object.gains.derivative_time_constant) if own else 1e-3
 
     def signed(lo: int, hi: int, n: int) -> np.ndarray:
         v = np.logspace(lo, hi, n)
@@ -406,7 +407,7 @@ def analyze_loop(loop: Loop, pid_search: bool | None = None) -> dict[str, Any]:
                    peak_sensitivity_frequency_rad_s=None, peak_complementary_sensitivity=None,
                    peak_complementary_sensitivity_frequency_rad_s=None, modulus_margin=None)
     out["friction_limit_cycles"] = limit_cycle.report(loop, stable)
-    if pid_search if pid_search is not None else loop.law == "PID":
+    if pid_search if pid_search is not None else entry(loop.law).pid_gain_search:
         out["pid_gain_search"] = pid_gain_search(loop)
     out["statement"] = statement(out)
     return out

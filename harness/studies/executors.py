@@ -91,7 +91,7 @@ def execute_case(spec: RunSpec, case: SweepCase) -> dict[str, Any]:
         runner = _runner_for(spec)
         metrics = dict(runner(dict(case.params), case.seed))
         error = " ".join(str(metrics.pop("error", "") or "").split())  # a run cut short but judged
-        status = spec.classify(metrics)
+        status = spec.classify(metrics, case.params)
     except Exception as exc:  # noqa: BLE001 -- a failed run is a result, not a crash
         status, error = "error", one_line(exc)
     return {"index": case.index, "seed": case.seed, "status": status, "success": status == "ok",

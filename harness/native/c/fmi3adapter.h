@@ -11,7 +11,18 @@
  * so the stepping, the checks and the messages are those of the FMI 2.0 variant. The log
  * messages go to the FMI 3.0 callback. What the native FMUs do not have (event mode, clocks,
  * FMU state, derivatives, model exchange, other variable types) answers fmi3Error, except a
- * get or set of no variables. */
+ * get or set of no variables.
+ *
+ * FMI 3.0 asks for an independent variable, which FMI 2.0 does not have: the model description
+ * declares `time` (Float64, value reference IPCOSIM_TIME_VR, one past the largest of the FMI 2.0
+ * variant, defined by the including file) and the adapter answers it here, in every state where
+ * fmi3GetFloat64 is allowed: the start time given to fmi3EnterInitializationMode (0 before it),
+ * then the communication point each fmi3DoStep reached (section 2.3, "t := tStart" on leaving
+ * initialization; 4.2.1, the FMU's time after a step). It cannot be set.
+ * Instantiation flags (fmi3InstantiateCoSimulation, section 2.3.1): earlyReturnAllowed is
+ * accepted (the step always reaches its end: mightReturnEarlyFromDoStep is false);
+ * eventModeUsed = fmi3True is refused with a logged error, as the standard requires of an FMU
+ * with hasEventMode = false. */
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -23,7 +34,12 @@ typedef struct {
     fmi2CallbackFunctions callbacks;
     fmi3InstanceEnvironment env;
     fmi3LogMessageCallback log;
+    fmi3Float64 time; /* the independent variable: start time, then the communication point reached */
 } Fmi3Adapter;
+
+#ifndef IPCOSIM_TIME_VR
+#error "define IPCOSIM_TIME_VR (the value reference of time) before including fmi3adapter.h"
+#endif
 
 #define ADAPTER(instance) ((Fmi3Adapter *)(instance))
 #define INNER(instance) (ADAPTER(instance)->inner)
@@ -61,12 +77,19 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3InstanceEnvironment instanceEnvironment,
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate) {
-    Fmi3Adapter *a = (Fmi3Adapter *)calloc(1, sizeof(Fmi3Adapter));
-    (void)eventModeUsed; /* hasEventMode is false: the importer uses no event mode */
-    (void)earlyReturnAllowed;
+    Fmi3Adapter *a;
+    (void)earlyReturnAllowed; /* accepted: no step returns early */
     (void)requiredIntermediateVariables;
     (void)nRequiredIntermediateVariables;
     (void)intermediateUpdate;
+    if (eventModeUsed) { /* hasEventMode is false: the standard asks the FMU to raise an error */
+        if (logMessage != NULL)
+            logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                       "eventModeUsed = fmi3True: this FMU has no Event Mode (hasEventMode = false); "
+                       "instantiate it with eventModeUsed = fmi3False");
+        return NULL;
+    }
+    a = (Fmi3Adapter *)calloc(1, sizeof(Fmi3Adapter));
     if (a == NULL) return NULL;
     a->env = instanceEnvironment;
     a->log = logMessage;
@@ -96,6 +119,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     s = fmi2SetupExperiment(INNER(instance), toleranceDefined ? fmi2True : fmi2False, tolerance, startTime,
                             stopTimeDefined ? fmi2True : fmi2False, stopTime);
     if (s > fmi2Warning) return (fmi3Status)s;
+    ADAPTER(instance)->time = startTime;
     return (fmi3Status)fmi2EnterInitializationMode(INNER(instance));
 }
 
@@ -108,13 +132,33 @@ fmi3Status fmi3Terminate(fmi3Instance instance) {
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance) {
-    return instance != NULL ? (fmi3Status)fmi2Reset(INNER(instance)) : fmi3Error;
+    if (instance == NULL) return fmi3Error;
+    ADAPTER(instance)->time = 0.0;
+    return (fmi3Status)fmi2Reset(INNER(instance));
+}
+
+static int asks_time(const fmi3ValueReference vr[], size_t nvr) {
+    size_t i;
+    for (i = 0; i < nvr; i++)
+        if (vr[i] == IPCOSIM_TIME_VR) return 1;
+    return 0;
 }
 
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, fmi3Float64 values[],
                           size_t nValues) {
-    if (instance == NULL || nValues != nvr) return fmi3Error;
-    return (fmi3Status)fmi2GetReal(INNER(instance), vr, nvr, values);
+    size_t i;
+    if (instance == NULL || nValues != nvr || (nvr > 0 && (vr == NULL || values == NULL))) return fmi3Error;
+    if (!asks_time(vr, nvr)) return (fmi3Status)fmi2GetReal(INNER(instance), vr, nvr, values); /* one call */
+    for (i = 0; i < nvr; i++) {
+        fmi2Status s;
+        if (vr[i] == IPCOSIM_TIME_VR) {
+            values[i] = ADAPTER(instance)->time;
+            continue;
+        }
+        s = fmi2GetReal(INNER(instance), &vr[i], 1, &values[i]);
+        if (s > fmi2Warning) return (fmi3Status)s;
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
@@ -185,7 +229,9 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     if (eventHandlingNeeded != NULL) *eventHandlingNeeded = fmi3False;
     if (terminateSimulation != NULL) *terminateSimulation = fmi3False;
     if (earlyReturn != NULL) *earlyReturn = fmi3False;
-    if (lastSuccessfulTime != NULL)  /* a discarded step keeps the state at the communication point */
+    /* a discarded step keeps the state at the communication point */
+    if (s == fmi2OK || s == fmi2Warning) ADAPTER(instance)->time = currentCommunicationPoint + communicationStepSize;
+    if (lastSuccessfulTime != NULL)
         *lastSuccessfulTime = s == fmi2OK ? currentCommunicationPoint + communicationStepSize
                                           : currentCommunicationPoint;
     return s == fmi2Pending ? fmi3Error : (fmi3Status)s;

@@ -6,4 +6,6 @@
 #define IPCOSIM_PASTE(a, b) a##b
 #define fmi2FullName(name) IPCOSIM_PASTE(ipcosim_fmi2_, name)
 #include "container.c"
+/* time: one past the largest value reference of the FMI 2.0 variant (harness/native/fmi3.py) */
+#define IPCOSIM_TIME_VR ((fmi3ValueReference)container_info.nby_vr)
 #include "fmi3adapter.h"

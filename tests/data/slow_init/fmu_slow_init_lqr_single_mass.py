@@ -4,6 +4,7 @@ Used by the real-time HIL swap test: the watchdog of the HIL adapter must not ru
 import time
 
 from ipcosim.controllers.controller_fmu import ControllerFmu
+from ipcosim.controllers.laws.lqr import LQR_LAW
 
 INIT_DELAY = 3.0   # [s]
 
@@ -11,7 +12,7 @@ INIT_DELAY = 3.0   # [s]
 class SlowInitLQRSingleMass(ControllerFmu):
     """LQR of the IP02 single mass whose initialization sleeps INIT_DELAY seconds (test only)."""
 
-    law = "LQR"
+    law = LQR_LAW
     kind = "single-mass"
 
     def setup(self) -> None:

@@ -28,9 +28,9 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Mapping, Sequence
 
-from ipcosim.controllers.laws import DiscreteLaw, LawParameterError
+from ipcosim.controllers.laws.base import DiscreteLaw, LawEntry, LawParameterError, ParamSpec
 
 
 @dataclass(frozen=True)
@@ -110,3 +110,27 @@ class Excitation(DiscreteLaw):
 
     def _compute(self, y: Sequence[float], r: float) -> float:
         return self.signal(self.ticks) - self.gains.hold_gain * (self._motor_cart(y) - r)
+
+
+def _excitation_specs(kind: str) -> list[ParamSpec]:
+    g = ExcitationGains()
+    return [ParamSpec(f, getattr(g, f), ExcitationGains.UNITS[f], ExcitationGains.DOCS[f],
+                      "positive" if f in ("band_low", "band_high", "period") else "nonnegative")
+            for f in ExcitationGains.UNITS]
+
+
+def _excitation_values(kind: str, parameter_set: str) -> dict[str, Any]:
+    g = ExcitationGains()
+    return {f: getattr(g, f) for f in ExcitationGains.UNITS}
+
+
+def _build_excitation(kind: str, v: Mapping[str, Any], backend: str) -> Excitation:
+    return Excitation(kind, ExcitationGains(**{f: float(v[f]) for f in ExcitationGains.UNITS}),
+                      float(v["sample_period"]), float(v["voltage_limit"]))
+
+
+# not a control law: the identification experiments' multisine and weak hold. No native flavour: it looks its
+# multisine up in a table indexed by the sample count, which the C generator's tracer cannot follow.
+EXCITATION_LAW = LawEntry("Excitation", {"single-mass": ("identify",), "double-mass": ("identify",)},
+                          _excitation_specs, _excitation_values, _build_excitation, classes=(Excitation,),
+                          feedback=False, native=False)

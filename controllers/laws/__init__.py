@@ -1,0 +1,28 @@
+"""Discrete control laws for the IP02 plants, pure Python (no FMI import): one module per law family.
+
+``base`` (what every law shares and the registry entry ``LawEntry``), ``pid`` (PID and cascade PID),
+``lqr``, ``lqg``, ``hsmc`` (HSMC and adaptive HSMC), ``swing_up``, ``excitation`` (the identification
+experiment). Each law module holds its law class, its parameters and named sets, its linear model and
+its registry entry; ``ipcosim.controllers.catalog`` collects the entries. This package imports none of
+them, so a controller FMU carries only its own law's module.
+
+Every law is a small class with explicit state:
+
+* ``step(measurements, reference) -> voltage`` is called once per sample instant k T with the
+  plant's measured positions (``ipcosim.fmus.physics.MEASURED[kind]`` order: cart position and pendulum
+  angle for the single mass; active cart, passive cart and pendulum angle for the double mass)
+  and the reference position of the motor-driven cart; it returns the voltage to hold until the
+  next instant, already limited to ``+-voltage_limit``.
+* ``reset()`` returns the law to its initial state (the first ``step`` initializes the velocity
+  estimates from the first measurement, so the output at t = 0 is defined by the inputs at t = 0).
+* ``sample_period`` [s] and ``voltage_limit`` [V] are attributes.
+
+A law never reads a true velocity: velocities come from filtered differentiation
+(``FilteredDerivative``) or from the LQR's observer. Laws with an integrator stop integrating
+while the output is saturated in the direction the integrator pushes (conditional integration,
+the clamping anti-windup).
+
+Sign conventions (``ipcosim.fmus.physics``): a positive voltage pushes the motor cart towards +x; the
+pendulum angle is counter-clockwise from upright, so pushing the cart towards +x makes the
+angle grow, and the pendulum leans towards +x for a *negative* angle.
+"""
