@@ -1,6 +1,7 @@
 """The system C compiler, for the two things that compile C: ``ipcosim build --native`` (the native
 FMUs, ``ipcosim.harness.native``) and the master's compiled stepping loop (``ipcosim.harness.master.cloop``),
-and the mingw-w64 cross compiler for the native FMUs' Windows DLLs.
+and the cross compilers of the native FMUs' other platforms (mingw-w64 for the Windows DLLs, Debian's
+aarch64 GNU/Linux compiler for the 64-bit ARM libraries).
 Below every room: it imports nothing of the package."""
 from __future__ import annotations
 
@@ -21,14 +22,19 @@ def find_compiler() -> str | None:
     return None
 
 
-#: Debian's mingw-w64 cross compiler for 64-bit Windows (package gcc-mingw-w64-x86-64).
-CROSS_COMPILER = "x86_64-w64-mingw32-gcc"
+#: The cross compiler of each further platform of the native FMUs: (environment variable naming
+#: another, Debian's program, the Debian package that installs it).
+CROSS_COMPILERS = {"win64": ("MINGW_CC", "x86_64-w64-mingw32-gcc", "gcc-mingw-w64-x86-64"),
+                   "aarch64": ("AARCH64_CC", "aarch64-linux-gnu-gcc", "gcc-aarch64-linux-gnu")}
 
 
-def find_cross_compiler() -> str | None:
-    """The compiler of Windows x86-64 DLLs: ``$MINGW_CC`` if set (None when it names no program),
-    else ``x86_64-w64-mingw32-gcc`` on PATH; None when there is none."""
-    env = os.environ.get("MINGW_CC")
+def find_cross_compiler(platform: str = "win64") -> str | None:
+    """The cross compiler for ``platform`` (``win64``: Windows x86-64 DLLs, ``aarch64``: 64-bit ARM
+    Linux libraries): the program its environment variable names if set (``$MINGW_CC``,
+    ``$AARCH64_CC``; None when it names no program), else Debian's compiler on PATH; None when
+    there is none."""
+    variable, program, _ = CROSS_COMPILERS[platform]
+    env = os.environ.get(variable)
     if env:
         return shutil.which(env)
-    return shutil.which(CROSS_COMPILER)
+    return shutil.which(program)

@@ -18,12 +18,17 @@
 * simulated seconds per CPU second of ``Prepared.run`` of single-mass LQR on the Python FMUs, median
   of ``LOOP_RUNS`` runs on the C loop (target) and on the Python loop, beside the wall-clock
   ``loop_real_time_factor``;
-* the number of Python modules inside the largest FMU (``resources/**.py``).
+* the number of Python modules inside the largest FMU (``resources/**.py``);
+* what an instantiate-and-free cycle of a Python FMU (a plant, a controller) leaves in fmpy's process,
+  ``CYCLES[1]`` cycles after ``CYCLES[0]`` of warm-up (``tests/hosts/fmpy_instance_cycles.py``): the
+  Python heap kept per cycle beyond what the same host keeps for the controller's native flavour
+  (target), and the resident memory per cycle beside it.
 
 The FMUs are those of ``build/`` (``make bench`` builds both flavours first).
 """
 from __future__ import annotations
 
+import json
 import os
 import statistics
 import subprocess
@@ -40,6 +45,11 @@ from ipcosim.harness.threads import single_threaded
 COLD_RUNS = int(os.environ.get("IPCOSIM_BENCH_COLD_RUNS", "5"))
 INIT_RUNS = int(os.environ.get("IPCOSIM_BENCH_INIT_RUNS", "3"))
 LOOP_RUNS = int(os.environ.get("IPCOSIM_BENCH_LOOP_RUNS", "5"))
+#: Instantiate-and-free cycles: (warm-up, measured) of each FMU.
+CYCLES = (200, int(os.environ.get("IPCOSIM_BENCH_CYCLES", "2000")))
+#: Target: Python heap a Python FMU's cycle keeps beyond fmpy's own (pythonfmu 0.7.0's wrapper kept every class
+#: it made by evaluating the FMU module again at each instantiation; ``ipcosim.fmus.wrapper``, section 3).
+CYCLE_TARGET_B = 250.0
 #: Targets, CPU time. Measured at load 0.5-7 with one BLAS thread and the bytecode compiled: cold
 #: run 0.57-0.77 s (the tree the issue was filed at takes the same), python/libcosim 0.43-0.46,
 #: native/fmpy 1.4-1.9, slowest initialization 28-44 ms, simulated seconds per CPU second on the C
@@ -224,6 +234,38 @@ def module_counts(fmu_dir: Path) -> dict[str, tuple[int, int]]:
     return out
 
 
+def instance_cycles(fmu_dir: Path, native_dir: Path) -> dict[str, dict[str, float]]:
+    """``{name: {"rss_per_cycle", "traced_per_cycle", "seconds_per_cycle"}}`` of the plant and the controller
+    of single-mass LQR (Python flavour) and of the controller's native flavour (what fmpy keeps itself)."""
+    from ipcosim.fmus.pybuild import ROOT
+
+    host = ROOT / "tests" / "hosts" / "fmpy_instance_cycles.py"
+    fmus = {"IP02SingleMass": fmu_dir / "IP02SingleMass.fmu", "LQRSingleMass": fmu_dir / "LQRSingleMass.fmu",
+            "native LQRSingleMass": native_dir / "LQRSingleMass.fmu"}
+    out = {}
+    for name, fmu in fmus.items():
+        proc = subprocess.run([sys.executable, str(host), str(fmu), *map(str, CYCLES)], capture_output=True,
+                              text=True, timeout=3600, env=CHILD_ENV)
+        if proc.returncode != 0:
+            raise RuntimeError(f"{fmu}: instantiate-and-free cycles failed: {proc.stderr.strip().splitlines()[-1:]}")
+        out[name] = json.loads(proc.stdout.strip().splitlines()[-1])
+    return out
+
+
+def _cycle_lines(cycles: dict[str, dict[str, float]]) -> list[str]:
+    own = {k: v["traced_per_cycle"] - cycles["native LQRSingleMass"]["traced_per_cycle"]
+           for k, v in cycles.items() if not k.startswith("native")}
+    worst = max(own, key=own.get)
+    return [f"instantiate-and-free cycles in fmpy, {CYCLES[1]} after {CYCLES[0]} of warm-up: Python heap kept per "
+            f"cycle beyond fmpy's own, worst {worst} "
+            + target("runtime.instance_cycle_heap_b", own[worst], CYCLE_TARGET_B, "B",
+                     what="Python FMU instantiate-and-free cycle in fmpy, Python heap kept beyond fmpy's own")
+            + "; resident memory per cycle "
+            + ", ".join(f"{k} " + figure(f"runtime.instance_cycle_rss_b_{k.replace(' ', '_')}",
+                                         v["rss_per_cycle"], "B", what=f"instantiate-and-free cycle of {k}, "
+                                         "resident memory kept") for k, v in cycles.items())]
+
+
 def run() -> list[str]:
     """Lines for ``make bench``."""
     from ipcosim.fmus.pybuild import ROOT
@@ -234,6 +276,7 @@ def run() -> list[str]:
         w = whole_runs(Path(tmp))
         inits = init_times(fmu_dir, Path(tmp))
     rtfs = loop_rtfs(BUILD_SSP_DIR / "single-mass-lqr.ssp")
+    cycles = instance_cycles(fmu_dir, ROOT / "build" / "fmus-native")
     counts = module_counts(fmu_dir)
     # The excitation FMUs compute one period of their multisine (about 200 lines x 20 000 samples, in
     # plain Python) at initialization, once per identification experiment: a figure of their own,
@@ -278,6 +321,7 @@ def run() -> list[str]:
         + f"; wall-clock loop_real_time_factor {rtfs['c']['wall']:.1f}x and {rtfs['python']['wall']:.1f}x",
         f"largest FMU: {largest}, {counts[largest][0]} Python modules in resources/ "
         f"({counts[largest][1]} of the project's private package, the rest pythonfmu's and the script)",
+        *_cycle_lines(cycles),
     ]
 
 

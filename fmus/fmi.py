@@ -77,11 +77,12 @@ instantiate with logging on.
 
 pythonfmu 0.7.0 workarounds (bugs of its C wrapper, found by testing; ``_take_reference``):
 
-* On every instantiation the wrapper re-executes the FMU script and releases one
-  reference to the script module's ``__dict__`` that it never took.
-  ``FmuBase.__init_subclass__`` adds one reference each time the FMU class statement
-  runs (without this, the second instance of an FMU in a process fails with "module has
-  no attribute ..." and later ones corrupt memory).
+* On every instantiation the wrapper evaluates the FMU module's file again, keeps every
+  class that evaluation makes, and releases one reference to the module's ``__dict__``
+  that it never took (without a reference taken for it, the second instance of an FMU in
+  a process fails with "module has no attribute ..." and later ones corrupt memory). The
+  build makes that file a stub that defines nothing when evaluated again and takes the
+  reference with ``_take_reference`` (``ipcosim.fmus.wrapper``, section 3).
 * After a Python exception the wrapper releases the instance, its log queue and the class
   twice (in the failing call and again in fmi2FreeInstance); ``FmuBase._fail``, through
   which every exception leaves, adds one reference to each first (without this the
@@ -123,6 +124,11 @@ def _take_reference(obj: Any) -> None:
 _py_incref = ctypes.pythonapi.Py_IncRef
 _py_incref.argtypes = [ctypes.py_object]
 _py_incref.restype = None
+_py_decref = ctypes.pythonapi.Py_DecRef
+_py_decref.argtypes = [ctypes.py_object]
+_py_decref.restype = None
+#: ``id`` of the last ``sys.path`` entry whose reference the wrapper kept was released (``_one_path_entry``).
+_released_entry = [0]
 
 
 class FmuError(IpcosimError, RuntimeError):
@@ -231,13 +237,21 @@ class VariableInfo:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-def _one_path_entry(folder: str | None) -> None:
+def _one_path_entry(folder: str | None, from_wrapper: bool) -> None:
     """Keep one ``sys.path`` entry of an instance's resources folder: pythonfmu 0.7.0's wrapper inserts
     it at the front at every instantiation (``fmi2Instantiate``), and sys.path would grow by one
-    entry a cycle in a process that instantiates and frees an FMU again and again."""
+    entry a cycle in a process that instantiates and frees an FMU again and again.
+
+    The wrapper also keeps a reference to the string it inserts, which no one releases: for an
+    instance the wrapper makes (``from_wrapper``) that entry's extra reference is released once, so the
+    string is freed when a later instantiation's entry replaces it. (``fmi2Reset`` makes the instance
+    again without inserting: the entry at the front is then the one already released.)"""
     if folder and sys.path.count(folder) > 1:
         first = sys.path.index(folder)
         sys.path[first + 1:] = [p for p in sys.path[first + 1:] if p != folder]
+    if from_wrapper and folder and sys.path and sys.path[0] == folder and id(sys.path[0]) != _released_entry[0]:
+        _released_entry[0] = id(sys.path[0])
+        _py_decref(sys.path[0])
 
 
 class FmuBase(Fmi2Slave):
@@ -248,21 +262,9 @@ class FmuBase(Fmi2Slave):
     ``teardown()``.
     """
 
-    def __init_subclass__(cls, **kwargs: Any) -> None:
-        super().__init_subclass__(**kwargs)
-        # pythonfmu 0.7.0 workaround (module docstring): keep one more reference to the dict
-        # of the module whose code defines this class, each time the class statement runs.
-        # The frame running the class statement is the nearest one whose globals are the
-        # module's (metaclass frames such as ABCMeta.__new__ lie in between).
-        frame = sys._getframe(1)
-        while frame is not None and frame.f_globals.get("__name__") != cls.__module__:
-            frame = frame.f_back
-        if frame is not None:
-            _take_reference(frame.f_globals)
-
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(**kwargs)
-        _one_path_entry(self.resources)
+        _one_path_entry(self.resources, "logger" in kwargs)  # only the wrapper passes its logger
         doc = (type(self).__doc__ or "").strip().splitlines()
         if self.description is None and doc:
             self.description = doc[0].strip()

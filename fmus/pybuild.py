@@ -171,8 +171,10 @@ def _stage_runtime(files: Iterable[Path], root: Path, dest: Path, private: str) 
     return target
 
 
-def _write_build_files(staged_script: Path, package: Path) -> None:
-    """Store the files the script's FMU class asks for (``FmuBase.build_files``) in its private package.
+def _write_build_files(staged_script: Path, package: Path) -> str:
+    """Store the files the script's FMU class asks for (``FmuBase.build_files``) in its private package;
+    returns the name of the FMU class in the script's namespace (pythonfmu's builder's choice: the
+    ``Fmi2Slave`` subclass with the longest MRO).
 
     The staged script is imported here, in the build process, as pythonfmu's builder imports it next.
     """
@@ -182,6 +184,9 @@ def _write_build_files(staged_script: Path, package: Path) -> None:
         if isinstance(cls, type) and cls.__module__ == module.__name__ and hasattr(cls, "build_files"):
             for name, text in cls.build_files().items():
                 (package / name).write_text(text)
+    slaves = [(len(c.__mro__), name) for name, c in vars(module).items()
+              if isinstance(c, type) and issubclass(c, pythonfmu.Fmi2Slave)]
+    return max(slaves, default=(0, ""))[1]
 
 
 def read_stamps(fmu_dir: Path) -> dict[str, dict[str, str]]:
@@ -323,13 +328,17 @@ def _build_staged(script: Path, files: Iterable[Path], root: Path, private: str,
     package = _stage_runtime(files, root, stage, private)
     staged_script = stage / script.name
     staged_script.write_text(_privatize(script.read_text(), private))
-    _write_build_files(staged_script, package)
+    class_name = _write_build_files(staged_script, package)
     try:
         built = Path(pythonfmu.FmuBuilder.build_FMU(staged_script, dest=tmp / "out",
                                                     project_files=[package, *project_files]))
     except Exception as exc:  # noqa: BLE001 -- one line naming the script
         raise BuildError(f"{script}: pythonfmu build failed: {type(exc).__name__}: {exc}") from exc
     _ensure_binaries(built)
+    try:
+        wrapper.stub_fmu(built, private, class_name)  # the wrapper's evaluation at every instantiation
+    except wrapper.WrapperError as exc:
+        raise BuildError(f"{script}: {exc}") from exc
     _add_bytecode(built, tmp / "pyc")
     check_fmu(built)
     try:

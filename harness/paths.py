@@ -8,6 +8,7 @@ that an installed wheel never writes into site-packages.
 """
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 
@@ -22,8 +23,11 @@ def in_checkout() -> bool:
     return (PACKAGE_ROOT / "pyproject.toml").is_file()
 
 
-def _version() -> str:
-    from importlib import metadata  # 20-25 ms to import: only an installed wheel needs it
+@functools.cache
+def distribution_version() -> str:
+    """The version of the installed ``ipcosim`` distribution (its metadata; ``"dev"`` when ipcosim runs
+    from a folder no installation names): ``ipcosim --version``, ``metrics.json``'s ``ipcosim_version``."""
+    from importlib import metadata  # 20-25 ms to import: once per process
 
     try:
         return metadata.version("ipcosim")
@@ -36,7 +40,7 @@ def default_build_dir() -> Path:
     if in_checkout():
         return PACKAGE_ROOT / "build"
     cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return cache / "ipcosim" / _version()
+    return cache / "ipcosim" / distribution_version()
 
 
 BUILD_DIR = default_build_dir()

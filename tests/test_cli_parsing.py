@@ -80,3 +80,27 @@ def test_help_of_every_command_prints(prog: str, capsys: pytest.CaptureFixture[s
         main([*prog.split()[1:], "--help"])
     assert info.value.code == 0
     assert capsys.readouterr().out.startswith(f"usage: {prog}")
+
+
+def _project_version() -> str:
+    """The version pyproject.toml gives the distribution."""
+    import tomllib
+    from pathlib import Path
+
+    return tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"]["version"]
+
+
+def test_version_is_the_installed_distributions(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out == f"ipcosim {_project_version()}\n"
+
+
+def test_metrics_name_the_version_that_ran(tmp_path) -> None:  # noqa: ANN001
+    import json
+
+    import ipcosim
+
+    ipcosim.run("single-mass-lqr", stop_time=0.01, out=tmp_path)
+    assert json.loads((tmp_path / "metrics.json").read_text())["ipcosim_version"] == _project_version()

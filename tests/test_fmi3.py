@@ -46,6 +46,7 @@ def test_fmi3_fmus_validate_and_describe_their_sources(native_fmus3: Path) -> No
             names = set(z.namelist())
         assert {f"sources/{f}" for f in listed} <= names and f"binaries/x86_64-linux/{fmu.stem}.so" in names
         assert (f"binaries/x86_64-windows/{fmu.stem}.dll" in names) == (find_cross_compiler() is not None)
+        assert (f"binaries/aarch64-linux/{fmu.stem}.so" in names) == (find_cross_compiler("aarch64") is not None)
 
 
 def test_fmi3_variables_are_the_fmi2_ones(native_fmus: tuple[Path, Path], native_fmus3: Path) -> None:
@@ -125,10 +126,13 @@ def test_missing_cross_compiler_is_one_line(native_fmus: tuple[Path, Path], tmp_
     from ipcosim.harness.native.cbuild import build_native
 
     monkeypatch.setenv("MINGW_CC", "no-such-cross-compiler")
+    monkeypatch.setenv("AARCH64_CC", "no-such-cross-compiler")
     (result,) = build_native(native_fmus[0], tmp_path, names=["Setpoint"], fmi="3")
     lines = capsys.readouterr().err.strip().splitlines()
     assert lines == ["ipcosim build --native: no mingw-w64 cross compiler found (set MINGW_CC, or install Debian's "
-                     "gcc-mingw-w64-x86-64): no win64 binary, Linux only"]
+                     "gcc-mingw-w64-x86-64): no win64 binary, Linux only",
+                     "ipcosim build --native: no aarch64 cross compiler found (set AARCH64_CC, or install Debian's "
+                     "gcc-aarch64-linux-gnu): no aarch64 binary, x86-64 only"]
     assert result.platforms == ("linux64",)
     with zipfile.ZipFile(result.fmu) as z:
         assert [n for n in z.namelist() if n.startswith("binaries/")] == ["binaries/x86_64-linux/Setpoint.so"]

@@ -63,3 +63,51 @@ def test_built_fmus_carry_the_patched_linux_binary_and_the_shipped_windows_one(p
         assert hashlib.sha256(linux).hexdigest() == wrapper._PATCHED_SHA256
         assert linux == wrapper.patch_binary(original)
         assert windows == shipped_dll
+
+
+
+#: What one instantiate-and-free cycle of a Python FMU may leave behind in its host's Python heap, beyond
+#: what the host leaves for any FMU (fmpy keeps some bytes per cycle of a C FMU too).
+CYCLE_BYTES = 250
+
+
+def _cycles(fmu: Path) -> dict[str, float]:
+    """``tests/hosts/fmpy_instance_cycles.py`` on ``fmu``: 50 cycles of warm-up, 300 measured."""
+    import json
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "hosts" / "fmpy_instance_cycles.py"), str(fmu),
+                           "50", "300"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def host_own_cycle(tmp_path_factory: pytest.TempPathFactory) -> dict[str, float]:
+    """The same host's cycles on a small C FMU (``tests/cfmu.py``): what fmpy itself keeps per cycle."""
+    import cfmu
+
+    return _cycles(cfmu.build(cfmu.counter(), tmp_path_factory.mktemp("cfmu")))
+
+
+@pytest.fixture(scope="module")
+def cycled_fmus(plant_fmus, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A plant and a controller (Python flavour)."""
+    from ipcosim.fmus.pybuild import build_all
+
+    (lqr,) = build_all(tmp_path_factory.mktemp("lqr"), scripts=[ROOT / "controllers" / "fmu_lqr_single_mass.py"])
+    return {"IP02SingleMass": plant_fmus["single-mass"], "LQRSingleMass": lqr.fmu}
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("model", ("IP02SingleMass", "LQRSingleMass"))
+def test_instantiate_and_free_again_and_again_gives_back_what_it_takes(model: str, cycled_fmus,
+                                                                       host_own_cycle) -> None:
+    """pythonfmu 0.7.0's wrapper evaluates the FMU module again at every instantiation and kept every class that
+    made (ipcosim.fmus.wrapper, section 3): 8.5-8.7 KB of the Python heap per cycle, in this host, before the module
+    stub; the sys.path string it inserts and keeps a reference to (ipcosim.fmus.fmi._one_path_entry) about 80 B."""
+    measured = _cycles(cycled_fmus[model])
+    own = measured["traced_per_cycle"] - host_own_cycle["traced_per_cycle"]
+    print(f"{model}: {measured}; the host with a C FMU: {host_own_cycle}; the FMU's own {own:.0f} B per cycle")
+    assert own <= CYCLE_BYTES, f"{model}: {own:.0f} B of the host's Python heap per cycle"

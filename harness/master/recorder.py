@@ -21,6 +21,7 @@ from ipcosim.harness.master.algorithm import TimeBase
 from ipcosim.harness.master.layout import Layout
 from ipcosim.harness.master.plan import TypedRecord
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError
+from ipcosim.harness.paths import distribution_version
 
 if TYPE_CHECKING:  # pragma: no cover
     from ipcosim.harness.master.execution import Execution
@@ -292,6 +293,7 @@ class Recorder:
         simulated = float(data["time"][-1] - data["time"][0]) if len(data) else 0.0
         metrics: dict[str, Any] = dict(task)
         metrics.update(timing_metrics(simulated, wall, wall_loop))
+        metrics["ipcosim_version"] = distribution_version()
         for obs in execution.observers:
             try:
                 metrics.update(obs.metrics())

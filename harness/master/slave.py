@@ -583,13 +583,28 @@ def load_library(instance: Instance, unzip_dir: Path) -> Any:
     from fmpy.fmi3 import FMU3Slave as FMPyFMU3Slave
 
     model = instance.model
-    cls = FMPyFMU3Slave if model.fmi_version.startswith("3") else FMU2Slave
+    fmi3 = model.fmi_version.startswith("3")
+    cls = FMPyFMU3Slave if fmi3 else FMU2Slave
+    library = None if fmi3 else fmi2_tuple_library(unzip_dir, model.model_identifier)
     try:
         return cls(guid=model.guid, unzipDirectory=str(unzip_dir), modelIdentifier=model.model_identifier,
-                         instanceName=instance.name)
+                   instanceName=instance.name, **({"libraryPath": library} if library else {}))
     except Exception as exc:  # noqa: BLE001 -- fmpy raises bare exceptions
         raise SlaveError(f"component {instance.name} ({model.name}): cannot load the FMU's shared library: {exc}",
                          instance.name, "load") from None
+
+
+def fmi2_tuple_library(unzip_dir: Path, identifier: str) -> str | None:
+    """An FMI 2.0 FMU's library for a machine FMI 2.0 has no folder name for (FMI 2.0 names x86 only:
+    ``linux64`` is 64-bit x86), in the FMI 3.0 platform tuple's folder as FMI 2.0.4 (section 2.3) asks,
+    e.g. ``binaries/aarch64-linux/`` on 64-bit ARM Linux, where fmpy does not look; None on x86 or
+    when the FMU has none there (fmpy's own choice then)."""
+    import fmpy
+
+    if fmpy.architecture in ("x86", "x86_64"):
+        return None
+    path = Path(unzip_dir) / "binaries" / fmpy.platform_tuple / f"{identifier}{fmpy.sharedLibraryExtension}"
+    return str(path) if path.is_file() else None
 
 
 def _fmi_type(t: str) -> str:

@@ -1,10 +1,11 @@
 """``ipcosim build --native``: every plant, controller and the setpoint as a source-code FMU.
 
 Each ``<Model>.fmu`` holds ``sources/`` (the generated ``model.c``, the shared ``fmi2glue.c``,
-``fmi2shared.h`` and ``model.h``, the FMI headers) and its binaries: ``linux64/<Model>.so``
-where a C compiler is found (``$CC``, ``cc``, ``gcc``, ``clang``) and ``win64/<Model>.dll``
-where the mingw-w64 cross compiler is (``toolchain.find_cross_compiler``), both compiled from the
-same files with the same flags (``-std=c99 -Wall -Wextra -pedantic -Werror -O2``). Two FMI
+``fmi2shared.h`` and ``model.h``, the FMI headers) and a binary for every platform of
+:data:`TARGETS` whose compiler is found: ``linux64/<Model>.so`` (a C compiler: ``$CC``, ``cc``,
+``gcc``, ``clang``), ``win64/<Model>.dll`` (mingw-w64) and ``aarch64-linux/<Model>.so`` (Debian's
+aarch64 GNU/Linux compiler; ``toolchain.find_cross_compiler``), all compiled from the same files
+with the same flags (``-std=c99 -Wall -Wextra -pedantic -Werror -O2 -ffp-contract=off``). Two FMI
 versions, one generator (:data:`VARIANTS`): FMI 2.0 lists its C files in the model description's
 ``<SourceFiles>``; FMI 3.0 (``--fmi 3``) adds ``fmi3glue.c`` (the FMI 3.0 functions over the
 FMI 2.0 glue, ``fmi3adapter.h``), lists them in ``sources/buildDescription.xml`` and derives its
@@ -20,19 +21,21 @@ import subprocess
 import sys
 import tempfile
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ipcosim.errors import IpcosimError
 from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.harness.native import cgen, fmi3, models
-from ipcosim.toolchain import find_compiler, find_cross_compiler
+from ipcosim.toolchain import CROSS_COMPILERS, find_compiler, find_cross_compiler
 
 C_DIR = Path(__file__).resolve().parent / "c"
 #: The hand-written glue every native FMU carries (``fmi2shared.h``: what it shares with the loop container).
 GLUE_FILES = ("fmi2glue.c", "model.h", "fmi2shared.h")
-#: The warnings and the floating-point flags every binary is compiled with (Linux and Windows alike).
-STRICT = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-O2")
+#: The warnings and the floating-point flags every binary is compiled with (every platform alike).
+#: Floating-point contraction off: no fused multiply-add where the source has a product and a sum
+#: (aarch64 has the instruction, baseline x86-64 has not), so every platform rounds the same.
+STRICT = ("-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", "-O2", "-ffp-contract=off")
 FLAGS = (*STRICT, "-fPIC", "-shared")
 #: The Windows DLL: the same flags (position-independent anyway), libgcc linked in (no DLL of it needed).
 WIN_FLAGS = (*STRICT, "-shared", "-static-libgcc")
@@ -45,7 +48,7 @@ class Variant:
     """One FMI version of the native FMUs: the C file holding a single model's FMI functions
     (``fmi2glue.c``, or ``fmi3glue.c`` over it) and an exported loop's (``container.c``, or
     ``fmi3container.c`` over it), the files both need besides the FMI 2.0 glue, the FMI headers,
-    and the binary folder per platform."""
+    and the binary folder per platform of :data:`TARGETS`."""
 
     fmi: str
     model_glue: str
@@ -55,10 +58,13 @@ class Variant:
     binaries: dict[str, str]
 
 
+#: FMI 2.0 names x86 folders only (``linux64``: "64-bit x86"); since 2.0.4 (section 2.3) any other platform
+#: takes its FMI 3.0 platform tuple, so the ARM library is in ``aarch64-linux`` in both variants.
 VARIANTS = {
-    "2": Variant("2", "fmi2glue.c", "container.c", (), FMI_HEADERS, {"linux64": "linux64", "win64": "win64"}),
-    "3": Variant("3", "fmi3glue.c", "fmi3container.c", ("fmi3adapter.h",),
-                 FMI_HEADERS + FMI3_HEADERS, {"linux64": "x86_64-linux", "win64": "x86_64-windows"}),
+    "2": Variant("2", "fmi2glue.c", "container.c", (), FMI_HEADERS,
+                 {"linux64": "linux64", "win64": "win64", "aarch64": "aarch64-linux"}),
+    "3": Variant("3", "fmi3glue.c", "fmi3container.c", ("fmi3adapter.h",), FMI_HEADERS + FMI3_HEADERS,
+                 {"linux64": "x86_64-linux", "win64": "x86_64-windows", "aarch64": "aarch64-linux"}),
 }
 #: Where ``ipcosim build --native --fmi N`` writes (below the build folder).
 OUT_DIRS = {"2": "fmus-native", "3": "fmus-native-fmi3"}
@@ -141,29 +147,60 @@ def compile_sources(sources: Path, files: list[str], out: Path, cc: str, flags: 
 
 
 @dataclass(frozen=True)
+class Target:
+    """One platform the native FMUs carry a binary for: its library's suffix, the compiler flags,
+    and the line saying what is missing when its compiler is."""
+
+    platform: str
+    suffix: str
+    flags: tuple[str, ...]
+    missing: str
+
+
+def _no_cross(platform: str, compiler: str, left: str) -> str:
+    variable, _, package = CROSS_COMPILERS[platform]
+    return (f"no {compiler} cross compiler found (set {variable}, or install Debian's {package}): "
+            f"no {platform} binary, {left}")
+
+
+#: Every platform, in build order; its binary folder per FMI version is in :data:`VARIANTS`.
+TARGETS = (
+    Target("linux64", ".so", FLAGS, "no C compiler found (set CC, or install gcc or clang): no linux64 binary"),
+    Target("win64", ".dll", WIN_FLAGS, _no_cross("win64", "mingw-w64", "Linux only")),
+    Target("aarch64", ".so", FLAGS, _no_cross("aarch64", "aarch64", "x86-64 only")),
+)
+
+
+@dataclass(frozen=True)
 class Compilers:
-    """The compilers found: ``linux64`` (the system C compiler) and ``win64`` (mingw-w64), each or None."""
+    """The compiler found for each platform of :data:`TARGETS` (None where there is none):
+    ``linux64`` the system C compiler, ``win64`` mingw-w64, ``aarch64`` the ARM GNU/Linux compiler."""
 
     linux64: str | None
     win64: str | None
+    aarch64: str | None = None
 
     @classmethod
     def find(cls) -> "Compilers":
         """The compilers on this machine (``toolchain.find_compiler``, ``find_cross_compiler``)."""
-        return cls(find_compiler(), find_cross_compiler())
+        return cls(find_compiler(), find_cross_compiler("win64"), find_cross_compiler("aarch64"))
+
+    def with_linux64(self, cc: str | None) -> "Compilers":
+        """These compilers with ``cc`` (if given) as the linux64 one."""
+        return replace(self, linux64=cc or self.linux64)
 
 
 def compile_binaries(root: Path, files: list[str], identifier: str, variant: Variant,
                      compilers: Compilers) -> list[str]:
-    """Compile ``root/sources/files`` into ``root/binaries/<platform>/`` with every compiler in
-    ``compilers``; returns the platforms built (``linux64``, ``win64``)."""
+    """Compile ``root/sources/files`` into ``root/binaries/<folder>/`` with every compiler in
+    ``compilers``; returns the platforms built (of ``linux64``, ``win64``, ``aarch64``)."""
     built = []
-    for platform, cc, suffix, flags in (("linux64", compilers.linux64, ".so", FLAGS),
-                                        ("win64", compilers.win64, ".dll", WIN_FLAGS)):
+    for target in TARGETS:
+        cc = getattr(compilers, target.platform)
         if cc:
-            out = root / "binaries" / variant.binaries[platform] / f"{identifier}{suffix}"
-            compile_sources(root / "sources", files, out, cc, flags)
-            built.append(platform)
+            out = root / "binaries" / variant.binaries[target.platform] / f"{identifier}{target.suffix}"
+            compile_sources(root / "sources", files, out, cc, target.flags)
+            built.append(target.platform)
     return built
 
 
@@ -210,9 +247,15 @@ def build_one(name: str, python_dir: Path, out_dir: Path, compilers: Compilers,
     return NativeResult(out_dir / f"{name}.fmu", bool(platforms), tuple(platforms))
 
 
+def compile_line(files: list[str]) -> str:
+    """The documentation's one line compiling ``files`` as the build does (on any platform)."""
+    return ("Compile: cc -std=c99 -ffp-contract=off -shared -fPIC -I sources "
+            + " ".join(f"sources/{f}" for f in files) + " -lm")
+
+
 def _readme(model: models.NativeModel, files: list[str]) -> str:
     lines = [f"{model.name} (native flavour), generated by ipcosim.harness.native from the Python model.",
-             "Compile: cc -std=c99 -shared -fPIC -I sources " + " ".join(f"sources/{f}" for f in files) + " -lm", ""]
+             compile_line(files), ""]
     if model.python_only:
         lines.append("Parameters of the Python flavour this flavour lacks (design-only; redesign with "
                      "ipcosim.harness.native.redesign): " + ", ".join(model.python_only))
@@ -221,13 +264,7 @@ def _readme(model: models.NativeModel, files: list[str]) -> str:
 
 def missing_compilers(compilers: Compilers, what: str) -> list[str]:
     """One line per missing compiler, saying what ``what`` then lacks."""
-    lines = []
-    if compilers.linux64 is None:
-        lines.append(f"{what}: no C compiler found (set CC, or install gcc or clang): no linux64 binary")
-    if compilers.win64 is None:
-        lines.append(f"{what}: no mingw-w64 cross compiler found (set MINGW_CC, or install Debian's "
-                     "gcc-mingw-w64-x86-64): no win64 binary, Linux only")
-    return lines
+    return [f"{what}: {t.missing}" for t in TARGETS if getattr(compilers, t.platform) is None]
 
 
 def build_native(python_dir: Path | str, out_dir: Path | str, names: list[str] | None = None,

@@ -364,8 +364,8 @@ def model_description(spec: ContainerSpec, gid: str, files: list[str], lay: _Lay
 
 def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None, fmi: str = "2") -> Path:
     """Generate, compile and pack the container FMU (FMI ``fmi``: ``"2"`` or ``"3"``) into ``out``;
-    returns ``out``. It carries a ``win64`` DLL beside the ``linux64`` library when the mingw-w64
-    cross compiler is found (else one line on stderr says it is Linux-only).
+    returns ``out``. It carries a ``win64`` DLL and an ``aarch64`` library beside the ``linux64`` one when
+    their cross compilers are found (else one line on stderr says which binary it lacks).
 
     Raises
     ------
@@ -375,8 +375,7 @@ def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None,
     cbuild.NativeBuildError
         The compiler failed on the sources.
     """
-    compilers = cbuild.Compilers.find()
-    compilers = cbuild.Compilers(cc or compilers.linux64, compilers.win64)
+    compilers = cbuild.Compilers.find().with_linux64(cc)
     if compilers.linux64 is None:
         raise ContainerError("no C compiler found (set CC, or install gcc or clang): the exported FMU needs one")
     for line in cbuild.missing_compilers(compilers, "ipcosim export"):
@@ -403,4 +402,4 @@ def _readme(spec: ContainerSpec, comps: dict[str, _Component], files: list[str])
     parts = ", ".join(f"{c.name} ({comps[c.name].model}, every {c.multiple} step(s))" for c in spec.components)
     return (f"{spec.name}: {spec.description}\n\nComponents, in Gauss-Seidel step order {' -> '.join(spec.order)}: "
             f"{parts}. Base step {spec.step!r} s; the communication step must be a whole multiple of it.\n"
-            "Compile: cc -std=c99 -shared -fPIC -I sources " + " ".join(f"sources/{f}" for f in files) + " -lm\n")
+            + cbuild.compile_line(files) + "\n")
