@@ -36,7 +36,7 @@ from typing import Any, Mapping, Sequence
 import control
 import numpy as np
 
-from ipcosim.controllers.catalog import LAWS, build_law, entry, model_name
+from ipcosim.controllers.catalog import LAWS, REGISTRY, build_law, entry, model_name
 from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.fmus.linearize import linearize
@@ -484,7 +484,7 @@ def analyze_loop(loop: Loop, pid_search: bool | None = None) -> dict[str, Any]:
                    peak_complementary_sensitivity_frequency_rad_s=None, modulus_margin=None,
                    disk_margin=None, sensor_margins={})
     out["friction_limit_cycles"] = limit_cycle.report(loop, stable)
-    if pid_search if pid_search is not None else entry(loop.law).pid_gain_search:
+    if pid_search if pid_search is not None else loop.law in REGISTRY and entry(loop.law).pid_gain_search:
         out["pid_gain_search"] = pid_gain_search(loop)
     out["statement"] = statement(out)
     return out
