@@ -227,7 +227,7 @@ def test_bad_input_ends_in_one_line(native_fmus: tuple[Path, Path], tmp_path: Pa
     fmu_dir = ["--fmu-dir", str(native_fmus[1])]
     cases = [
         (["nosuch-scenario", "--out", str(tmp_path / "a.fmu")], "unknown scenario 'nosuch-scenario'"),
-        (["single-mass-lqr-tap", "--out", str(tmp_path / "a.fmu")],
+        (["single-mass-identify", "--out", str(tmp_path / "a.fmu")],
          "only the native flavour can be exported: "),
         (["single-mass-lqr", "--out", str(tmp_path / "missing" / "a.fmu")], "missing is not a writable folder"),
         (["single-mass-lqr", "--out", str(tmp_path)], "is a folder"),
@@ -241,9 +241,9 @@ def test_bad_input_ends_in_one_line(native_fmus: tuple[Path, Path], tmp_path: Pa
         assert main(["export", *argv, *fmu_dir]) == 1, argv
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and err.startswith("ipcosim export: error: ") and words in err, err
-    # the refusal names the parameter
-    assert main(["export", "single-mass-lqr-tap", "--out", str(tmp_path / "a.fmu"), *fmu_dir]) == 1
-    assert "tap_torque_impulse = 0.005" in capsys.readouterr().err
+    # the refusal names the component without a native flavour
+    assert main(["export", "single-mass-identify", "--out", str(tmp_path / "a.fmu"), *fmu_dir]) == 1
+    assert "component 'controller'" in capsys.readouterr().err
     monkeypatch.setenv("CC", "no-such-compiler")
     assert main(["export", "single-mass-lqr", "--out", str(tmp_path / "a.fmu"), *fmu_dir]) == 1
     err = capsys.readouterr().err
