@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import os
 import shutil
+import subprocess
+import tempfile
 
 
 def find_compiler() -> str | None:
@@ -32,3 +34,25 @@ def find_cross_compiler() -> str | None:
     if env:
         return shutil.which(env)
     return shutil.which(CROSS_COMPILER)
+
+
+def run_compiler(cmd: list[str]) -> subprocess.CompletedProcess[str]:
+    """Run a compiler command with its temporary files in a folder of its own, removed afterwards.
+
+    An interruption (Ctrl-C, SIGTERM turned into an exception by the command line) asks the
+    compiler to stop with SIGTERM, so it removes its own files, and then removes the folder:
+    nothing is left in the temporary folder.
+    """
+    with tempfile.TemporaryDirectory(prefix="ipcosim-cc-") as scratch:
+        env = {**os.environ, "TMPDIR": scratch, "TMP": scratch, "TEMP": scratch}
+        with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env) as proc:
+            try:
+                out, err = proc.communicate()
+            except BaseException:
+                proc.terminate()
+                try:
+                    proc.wait(timeout=2.0)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                raise
+        return subprocess.CompletedProcess(cmd, proc.returncode, out, err)

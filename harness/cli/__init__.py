@@ -102,9 +102,10 @@ def _is_number(text: str) -> bool:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit status.
 
-    SIGINT and SIGTERM are deferred to the master's checks between FMU calls
-    (:mod:`ipcosim.harness.master.signals`): the run ends with its results so far on disk and
-    the status is ``128 + signal number``.
+    SIGINT and SIGTERM stop every command at once, except inside a run's FMU calls, where they
+    wait for the master's next check (:mod:`ipcosim.harness.master.signals`): the command's
+    clean-up runs (worker processes stopped, temporary folders removed), what it finished stays
+    on disk and is named in one line, and the status is ``128 + signal number``.
     """
     from ipcosim.harness.master import signals
     from ipcosim.harness.threads import single_threaded
@@ -118,15 +119,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             from ipcosim.harness.options import seconds_option
 
             limit = seconds_option("--timeout", limit)
-        with signals.deferred(timeout=limit):
-            status = int(args.func(args) or 0)
-            signals.check()  # a signal during the last writes: report it after them
-            return status
-    except signals.Interrupted as exc:
-        partial = getattr(exc, "result", None)
-        text = partial.error if partial is not None and partial.error else exc.message
-        print(f"ipcosim {args.command}: error: {text}", file=sys.stderr)
-        return exc.exit_status
+        with signals.deferred(timeout=limit, immediate=True):
+            try:
+                status = int(args.func(args) or 0)
+                signals.check()  # a signal during the last writes: report it after them
+                return status
+            except signals.Interrupted as exc:
+                return _interrupted(args.command, exc)
+    except signals.Interrupted as exc:  # a signal during the report of the first one
+        return _interrupted(args.command, exc)
     except KeyboardInterrupt:
         print("ipcosim: interrupted", file=sys.stderr)
         return 130
@@ -141,6 +142,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         print(f"ipcosim {args.command}: error: {message}", file=sys.stderr)
         return 1
+
+
+def _interrupted(command: str, exc: BaseException) -> int:
+    """Report a command stopped by a signal (or its wall-clock limit) in one line: the signal and
+    what was kept; the exit status (``128 + signal number``)."""
+    from ipcosim.harness.master import signals
+
+    partial = getattr(exc, "result", None)
+    text = partial.error if partial is not None and partial.error else getattr(exc, "message", "interrupted")
+    kept = signals.kept()
+    if kept is None and partial is None:
+        kept = "nothing was written"
+    print(f"ipcosim {command}: error: {text}" + (f"; {kept}" if kept else ""), file=sys.stderr)
+    return int(getattr(exc, "exit_status", 130))
 
 
 if __name__ == "__main__":

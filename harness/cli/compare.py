@@ -50,6 +50,7 @@ def main(args: argparse.Namespace) -> int:
     sweep of each, then write the report, ``metrics.csv`` and ``metrics.json``
     (``ipcosim.harness.studies.compare``)."""
     from ipcosim.errors import IpcosimError
+    from ipcosim.harness.master import signals
     from ipcosim.harness.studies.compare import comparison
     from ipcosim.harness.studies.executors import open_executor
 
@@ -60,14 +61,13 @@ def main(args: argparse.Namespace) -> int:
                        robustness=args.robustness, samples=args.samples, seed=args.seed, progress=not args.quiet)
     executor = open_executor(args.workers, args.scheduler)
     print(f"compare: {len(study.specs)} scenarios on {executor.description}", file=sys.stderr)
+    signals.keep(f"robustness runs finished so far are kept under {study.out / 'robustness'} and reused by "
+                 f"the same command" if args.robustness else "no report written")
     try:
         study.run(executor, progress=not args.quiet)
-    except KeyboardInterrupt:
-        print(f"ipcosim compare: interrupted; robustness runs finished so far are kept under "
-              f"{study.out / 'robustness'} and reused by the same command", file=sys.stderr)
-        return 130
     finally:
         executor.close()
+    signals.keep(None)
     files = study.write()
     print(f"report: {files['markdown']}, {files['html']}")
     ok, failed = study.counts()

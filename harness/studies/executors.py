@@ -147,7 +147,15 @@ RECYCLE_RUNS = 50
 def _worker_init() -> None:
     # The parent handles Ctrl-C (it stops the pool); workers must not die half-way on it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # The parent stops its workers with SIGTERM: leave at once, without the run's temporary folders.
+    signal.signal(signal.SIGTERM, _terminated)
     atexit.register(_quick_exit)
+
+
+def _terminated(signum: int, frame: object) -> None:
+    from ipcosim.harness.master import signals
+
+    signals.exit_now(128 + signum)
 
 
 class LocalExecutor:
@@ -226,9 +234,8 @@ class LocalExecutor:
                             row = _error_row(case, one_line(exc))
                         pending.pop(case.index, None)
                         yield row
-                except BaseException:
-                    for fut in futures:
-                        fut.cancel()
+                except BaseException:  # a signal, an error of the caller: stop the workers now
+                    self.abort()
                     raise
                 if not broken and self._used >= self.workers * self.recycle_runs:
                     self.close()  # fresh worker processes for the next runs
@@ -256,7 +263,15 @@ class LocalExecutor:
                 p.terminate()
             except Exception:  # noqa: BLE001
                 pass
+        for p in processes:  # a worker inside a long native call: kill it after a moment
+            p.join(timeout=0.5)
+            if p.is_alive():
+                p.kill()
+                p.join(timeout=1.0)
         pool.shutdown(wait=True, cancel_futures=True)
+        from ipcosim.harness.engine import remove_stale_extractions
+
+        remove_stale_extractions()  # the FMU folders of workers killed before their clean-up
 
     def abort(self) -> None:
         """Stop at once: cancel queued runs and end the worker processes."""
