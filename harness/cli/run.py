@@ -66,6 +66,7 @@ def main(args: argparse.Namespace) -> int:
     import warnings
 
     from ipcosim.harness.engine import prepare_with, run_with
+    from ipcosim.harness.master import signals
     from ipcosim.harness.master.realtime import budget_warning
     from ipcosim.harness.master.results import json_safe
     from ipcosim.harness.options import RunOptions
@@ -81,6 +82,7 @@ def main(args: argparse.Namespace) -> int:
         if not args.quiet:
             for note in prepared.system.notes:
                 print(f"note: {note}")
+        signals.keep(f"the rows so far are in {out / 'results.csv'}" if out is not None else None)
         result = run_with(options, prepared)
     if not args.quiet:
         m = json_safe(result.metrics)

@@ -156,9 +156,9 @@ def _watchdog(timeout: float, grace: float, done: threading.Event) -> None:
 
 @contextlib.contextmanager
 def holding() -> Iterator[None]:
-    """A section (a run's FMU calls) where a signal is only recorded, for :func:`check`; in an
-    immediate :func:`deferred` block, a signal recorded and not yet acted on is raised on leaving
-    it. Outside :func:`deferred` (and off the main thread) a no-op."""
+    """A section (a run's FMU calls) where a signal is only recorded, for :func:`check` (the
+    master's, or the command line's after the command). Outside :func:`deferred` (and off the
+    main thread) a no-op."""
     if not _State.active or threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -167,8 +167,6 @@ def holding() -> Iterator[None]:
         yield
     finally:
         _State.holding -= 1
-    if _State.immediate and not _State.holding:
-        check()
 
 
 @contextlib.contextmanager

@@ -276,6 +276,7 @@ class LocalExecutor:
     def abort(self) -> None:
         """Stop at once: cancel queued runs and end the worker processes."""
         self._kill_pool()
+        _stop_resource_tracker()
 
     def close(self) -> None:
         """Shut the pool down (waits for nothing: every submitted run has finished)."""
@@ -283,6 +284,20 @@ class LocalExecutor:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
         self._used = 0
+        _stop_resource_tracker()
+
+
+def _stop_resource_tracker() -> None:
+    """End (and wait for) the helper process multiprocessing starts beside a pool, which would
+    otherwise outlive this process by a moment, unwaited for; it is started again if needed."""
+    from multiprocessing import resource_tracker
+
+    stop = getattr(resource_tracker._resource_tracker, "_stop", None)  # noqa: SLF001 -- no public way
+    if stop is not None:
+        try:
+            stop()
+        except Exception:  # noqa: BLE001 -- a tracker already gone
+            pass
 
 
 _ADDRESS = re.compile(r"^(tcp|tls|ws|wss|ucx|inproc)://\S+$")
