@@ -12,6 +12,15 @@ import importlib
 import sys
 from typing import Sequence
 
+from ipcosim.errors import UsageError
+from ipcosim.harness.master.signals import TIMEOUT_STATUS
+
+#: Exit statuses of every command (docs/cli.md): the work done; it failed (one line says why);
+#: the command line was wrong (an unknown option or name, a bad value, an unusable --out: nothing was
+#: done); a real-time run finished but missed deadlines beyond its budget; the --timeout wall-clock
+#: limit stopped it; a signal stopped it (128 + the signal's number: 130 SIGINT, 143 SIGTERM).
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_REALTIME_DEGRADED, EXIT_TIMEOUT = 0, 1, 2, 3, TIMEOUT_STATUS
+
 #: Sub-command modules, in the order ``ipcosim --help`` lists them.
 COMMAND_MODULES = ("build", "list_", "describe", "run", "export", "linearize", "analyze", "rig", "compare", "sweep",
                    "tune", "identify")
@@ -141,7 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         print(f"ipcosim {args.command}: error: {message}", file=sys.stderr)
-        return 1
+        return EXIT_USAGE if isinstance(exc, UsageError) else EXIT_FAILURE
 
 
 def _interrupted(command: str, exc: BaseException) -> int:

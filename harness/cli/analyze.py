@@ -47,10 +47,11 @@ def _cycle_lines(report: dict | None) -> list[str]:
 
 def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.grammar import parse_set
+    from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.options import with_parameter_file
     from ipcosim.harness.studies.analyze import analyze
 
-    out = args.out or f"out/analyze/{args.scenario.rstrip('/').split('/')[-1]}"
+    out = claim_output(args.out or f"out/analyze/{args.scenario.rstrip('/').split('/')[-1]}", "analyze")
     values = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))
     r = analyze(args.scenario, parameter_set=args.parameter_set, set=values, out=out)
     if args.json:

@@ -51,11 +51,13 @@ def main(args: argparse.Namespace) -> int:
     (``ipcosim.harness.studies.compare``)."""
     from ipcosim.errors import IpcosimError
     from ipcosim.harness.master import signals
+    from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.compare import comparison
     from ipcosim.harness.studies.executors import open_executor
 
     if args.thesis_claims:
         return thesis_claims(Path(args.out))
+    claim_output(args.out, "compare")  # before any run
     names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else None
     study = comparison(names, args.out, fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time,
                        robustness=args.robustness, samples=args.samples, seed=args.seed, progress=not args.quiet)

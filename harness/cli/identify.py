@@ -29,8 +29,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.identify import IdentifyOptions, identify
 
+    if args.out:
+        claim_output(args.out, "identify")  # before the fit: a bad --out is one line at once
     result = identify(IdentifyOptions.create(args.source, plant=args.plant, fit=args.fit, preset=args.preset,
                                              out=args.out, refits=args.refits))
     if result.replay != "native":

@@ -4,13 +4,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ipcosim.harness.cli import add_parameter_file_option
+from ipcosim.harness.cli import EXIT_REALTIME_DEGRADED, add_parameter_file_option
 
 #: How the summary shows a metric that has no value (docs/metrics.md).
 NOT_REACHED = {"settling_time_s": "not settled", "recovery_time_s": "not recovered",
                "time_to_upright_s": "not upright at the end"}
-#: Exit status of a real-time run that went over its overrun budget (its results are written).
-EXIT_REALTIME_DEGRADED = 3
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -246,17 +246,18 @@ def sweep_study(scenario: str, vary: Sequence[str], *, set: Mapping[str, float] 
         kind comes from the scenario's name.
     """
     from ipcosim.harness.grammar import parse_all
+    from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.specs import default_out, study_spec
     from ipcosim.harness.studies.store import discard_results
 
+    folder = claim_output(Path(out) if out else default_out(scenario), "sweep")  # before any work
     set = {**(_bench(scenario, realism) if realism else {}), **(set or {})}
     spec, flavour = study_spec(scenario, fmus, names=[*set, *(v.partition("=")[0].strip() for v in vary)],
                                check=lambda s: parse_all(vary, s.parameters), stop_time=stop_time, step=step,
                                set=set, parameter_set=parameter_set)
     varies = parse_all(vary, spec.parameters)
     cases = make_cases(varies, spec.parameters, samples=samples, seed=seed)
-    folder = Path(out) if out else default_out(scenario)
     if fresh and folder.exists():
         discard_results(folder)
     return SweepStudy(spec, flavour, varies, cases, folder,

@@ -607,10 +607,10 @@ def _outputs(scenario: str, out: Path | str | None, ssv: Path | str | None,
              install: bool) -> tuple[Path, Path, Path | None]:
     """Where a tuning writes: its folder (created), the tuned set and, with ``install``, the copy beside the
     scenario (checked before any run)."""
+    from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.specs import default_out
 
-    folder = Path(out) if out else default_out(scenario, "tune")
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = claim_output(Path(out) if out else default_out(scenario, "tune"), "tune")
     return folder, Path(ssv) if ssv else folder / "autotuned.ssv", install_path(scenario) if install else None
 
 
