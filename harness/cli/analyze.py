@@ -69,5 +69,6 @@ def main(args: argparse.Namespace) -> int:
     print(f"  {r['statement']}")
     for line in _cycle_lines(r["friction_limit_cycles"]):
         print(f"  {line}")
-    print(f"  figures: {r['figures']['bode']}, {r['figures']['nyquist']}")
+    if r["figures"]:
+        print(f"  figures: {r['figures']['bode']}, {r['figures']['nyquist']}")
     return 0

@@ -58,13 +58,13 @@ def main(args: argparse.Namespace) -> int:
     if args.thesis_claims:
         return thesis_claims(Path(args.out))
     claim_output(args.out, "compare")  # before any run
+    signals.keep(f"robustness runs finished so far are kept under {Path(args.out) / 'robustness'} and reused by "
+                 f"the same command" if args.robustness else "no report written")
     names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else None
     study = comparison(names, args.out, fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time,
                        robustness=args.robustness, samples=args.samples, seed=args.seed, progress=not args.quiet)
     executor = open_executor(args.workers, args.scheduler)
     print(f"compare: {len(study.specs)} scenarios on {executor.description}", file=sys.stderr)
-    signals.keep(f"robustness runs finished so far are kept under {study.out / 'robustness'} and reused by "
-                 f"the same command" if args.robustness else "no report written")
     try:
         study.run(executor, progress=not args.quiet)
     finally:

@@ -94,8 +94,11 @@ def main(args: argparse.Namespace) -> int:
                 continue
             shown = f"{value:.6g}" if isinstance(value, float) else value
             print(f"  {key:24s} {NOT_REACHED.get(key, 'none') if value is None else shown}")
-        print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if args.plot else "")
+        plotted = args.plot and "plot_skipped" not in result.metadata
+        print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if plotted else "")
               + (f", baseline {options.save_baseline}" if options.save_baseline else ""))
+    if "plot_skipped" in result.metadata:
+        print(f"ipcosim run: warning: plot.png skipped: {result.metadata['plot_skipped']}", file=sys.stderr)
     degraded = budget_warning(result.metrics)
     if degraded:
         print(f"ipcosim run: warning: {degraded}", file=sys.stderr)

@@ -116,7 +116,10 @@ class Result:
             write_csv(self.data, files["results"], self.select(variables))
         self.write_metrics(files["metrics"])  # before the plot, which may fail (a missing extra)
         if plot:
-            files["plot"] = self.plot(out / "plot.png")
+            try:
+                files["plot"] = self.plot(out / "plot.png")
+            except ImportError as exc:  # the plotting extra is missing: the numbers are written, say so
+                self.metadata["plot_skipped"] = str(exc)
         return files
 
     def write_metrics(self, path: Path) -> None:

@@ -547,7 +547,10 @@ def analyze(scenario: str, *, parameter_set: str | None = None, set: Mapping[str
     loop, info = scenario_loop(scenario, parameter_set, set)
     result = {**info, **analyze_loop(loop)}
     if out is not None:
-        result["figures"] = plot_loop(loop, result, out, f"{info['scenario']} ({info['parameter_set']}): "
-                                                             "loop at the plant input")
+        from ipcosim.harness.extras import optional_figure
+
+        title = f"{info['scenario']} ({info['parameter_set']}): loop at the plant input"
+        result["figures"] = optional_figure(lambda: plot_loop(loop, result, out, title),
+                                            "the Bode and Nyquist figures") or {}
         (Path(out) / "analysis.json").write_text(json.dumps(result, indent=2))
     return result

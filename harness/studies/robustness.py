@@ -142,10 +142,14 @@ def write_summary(rows: Sequence[Mapping[str, Any]], spec: Any, varied: Sequence
     summary.update({"scenario": spec.name, **(extra or {})})
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     md = summary_markdown(summary, title=f"Robustness of {spec.name}")
-    figures = plot_distributions(rows, spec.metric_names, out / "figures", title=spec.name)
+    from ipcosim.harness.extras import optional_figure
+
+    figures = optional_figure(lambda: plot_distributions(rows, spec.metric_names, out / "figures", title=spec.name),
+                              "the sweep's figures") or []
     metric = "itae_position" if "itae_position" in spec.metric_names else spec.metric_names[0]
-    by_param = plot_parameters(rows, list(varied), metric, out / "figures",
-                               title=f"{spec.name}: {metric} against each varied parameter")
+    by_param = optional_figure(lambda: plot_parameters(rows, list(varied), metric, out / "figures",
+                                                       title=f"{spec.name}: {metric} against each varied parameter"),
+                               "the sweep's figures")
     if by_param is not None:
         figures.insert(0, by_param)
     md += "\n" + "\n".join(f"![{p.stem}](figures/{p.name})" for p in figures) + "\n"

@@ -1,0 +1,85 @@
+"""Every FMU declares a DefaultExperiment, so that another tool's defaults run it meaningfully:
+fmpy's ``simulate_fmu`` with no options steps it at the declared step size (fmpy doubles its
+output interval until at most 1000 rows, so the rows are a power-of-two multiple of that step)
+to the declared stop time; a controller alone answers its inputs."""
+from __future__ import annotations
+
+import math
+import zipfile
+from pathlib import Path
+from xml.etree import ElementTree
+
+import numpy as np
+import pytest
+
+fmpy = pytest.importorskip("fmpy")
+
+pytestmark = pytest.mark.integration
+
+
+def _experiment(fmu: Path) -> tuple[dict[str, str], float | None]:
+    """The DefaultExperiment's attributes and the start value of ``sample_period`` (if any)."""
+    with zipfile.ZipFile(fmu) as zf:
+        root = ElementTree.fromstring(zf.read("modelDescription.xml"))
+    exp = root.find("DefaultExperiment")
+    assert exp is not None, f"{fmu.name}: no DefaultExperiment"
+    period = None
+    for v in root.iter():
+        if v.get("name") == "sample_period":
+            start = v.get("start") if v.get("start") is not None else next(iter(v), v).get("start")
+            period = float(start)
+    return dict(exp.attrib), period
+
+
+def _fmus(folder: Path) -> list[Path]:
+    # The HIL adapters stand for the rig: without a rig server to talk to they refuse to initialize.
+    return sorted(p for p in folder.glob("*.fmu") if "HIL" not in p.stem)
+
+
+def _check_default_run(fmu: Path) -> None:
+    exp, period = _experiment(fmu)
+    step = float(exp["stepSize"])
+    assert step == (period if period is not None else 1e-3), (fmu.name, exp)
+    assert float(exp["startTime"]) == 0.0 and float(exp["stopTime"]) > 0
+    result = fmpy.simulate_fmu(str(fmu))  # fmpy's defaults: the DefaultExperiment
+    assert len(result) > 1, fmu.name
+    spacing = np.diff(result["time"])
+    ratio = spacing[0] / step
+    assert ratio >= 1 and math.log2(ratio) == pytest.approx(round(math.log2(ratio)), abs=1e-9), (fmu.name, ratio)
+    assert np.allclose(spacing, spacing[0])
+    assert result["time"][-1] == pytest.approx(float(exp["stopTime"]))
+
+
+def test_every_python_fmu_runs_with_fmpys_defaults(native_fmus):
+    fmus = _fmus(native_fmus[0])
+    assert len(fmus) >= 10
+    for fmu in fmus:
+        _check_default_run(fmu)
+
+
+@pytest.mark.parametrize("fmi", ["2", "3"])
+def test_every_native_fmu_runs_with_fmpys_defaults(native_fmus, native_fmus3, fmi):
+    fmus = _fmus(native_fmus[1] if fmi == "2" else native_fmus3)
+    assert len(fmus) >= 10
+    for fmu in fmus:
+        _check_default_run(fmu)
+
+
+def test_an_exported_loop_runs_with_fmpys_defaults(native_fmus, tmp_path):
+    from ipcosim.harness.export import ExportOptions, export
+
+    out = export(ExportOptions("single-mass-lqr", tmp_path / "Loop.fmu", None, None, (native_fmus[1],), {}, "2"))
+    _check_default_run(out)
+
+
+@pytest.mark.parametrize("flavour", [0, 1], ids=["python", "native"])
+def test_a_controller_alone_answers_its_inputs(native_fmus, flavour):
+    fmu = native_fmus[flavour] / "LQRSingleMass.fmu"
+    step_at = 0.5
+    inputs = np.array([(0.0, 0.0), (step_at, 0.0), (step_at, 0.05), (2.0, 0.05)],
+                      dtype=[("time", float), ("reference", float)])
+    result = fmpy.simulate_fmu(str(fmu), stop_time=2.0, input=inputs, output=["voltage"])
+    before, after = result["voltage"][result["time"] < step_at], result["voltage"][result["time"] > step_at + 0.01]
+    # measured positions 0 at the reference 0: the equilibrium, no voltage; a new reference: a voltage
+    assert np.all(before == 0.0)
+    assert np.all(np.abs(after) > 0.0)
