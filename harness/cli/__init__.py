@@ -100,6 +100,25 @@ def _negative_values(parser: argparse.ArgumentParser, argv: Sequence[str]) -> li
     return out
 
 
+def _unknown_option(parser: argparse.ArgumentParser, argv: Sequence[str], unknown: Sequence[str]) -> None:
+    """Exit 2 naming the first unknown argument, with the closest option of the sub-command it was
+    given to (``--stop-tim``: did you mean '--stop-time'?). Options are never abbreviated, so a
+    prefix is not taken for the option; it is only suggested."""
+    from ipcosim.errors import closest
+
+    words = [a for a in argv if not a.startswith("-")]
+    command = parser
+    for each in parsers(parser):  # the deepest sub-command named on the line: `rig serve`, not `rig`
+        path = each.prog.split()[1:]
+        if path and path == words[:len(path)] and len(path) > len(command.prog.split()) - 1:
+            command = each
+    first = unknown[0]
+    if not first.startswith("-"):
+        command.error(f"unexpected argument {first!r}")
+    options = [o for action in command._actions for o in action.option_strings]  # noqa: SLF001
+    command.error(f"unknown option {first.partition('=')[0]}; {closest(first.partition('=')[0], options)}")
+
+
 def _is_number(text: str) -> bool:
     try:
         float(text)
@@ -121,7 +140,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     single_threaded()  # before the command modules load numpy
     parser = build_parser()
-    args = parser.parse_args(_negative_values(parser, sys.argv[1:] if argv is None else argv))
+    argv = _negative_values(parser, sys.argv[1:] if argv is None else argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        _unknown_option(parser, argv, unknown)
     try:
         limit = getattr(args, "timeout", None)
         if limit is not None:

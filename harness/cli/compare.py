@@ -3,7 +3,8 @@
     ipcosim compare [--out DIR] [--robustness [--samples N]] [--scenarios a,b,...] [--stop-time S]
                     [--workers W] [--scheduler ADDR] [--seed S]
 
-FMUs missing from ``build/fmus`` (a fresh checkout) are built first, as ``ipcosim build`` does.
+FMUs missing from the build folder (``build/fmus`` of a source checkout, else the per-user cache:
+``ipcosim.harness.paths``) are built first, as ``ipcosim build`` does.
 Writes ``DIR/report.md``, ``DIR/report.html`` (self-contained), ``DIR/figures/<plant>.png``,
 ``DIR/metrics.csv`` / ``metrics.json`` and, with ``--robustness``, one resumable sweep per
 scenario under ``DIR/robustness/<scenario>/``.

@@ -14,6 +14,7 @@ NOT_REACHED = {"settling_time_s": "not settled", "recovery_time_s": "not recover
 def register(sub: argparse._SubParsersAction) -> None:
     from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL
     from ipcosim.harness.master.cloop import LOOPS
+    from ipcosim.harness.paths import BUILD_DIR, BUILD_FMU_DIR
     from ipcosim.harness.scenario.flavour import FLAVOURS
 
     p = sub.add_parser("run", help="co-simulate a scenario (SSP folder or archive)",
@@ -41,12 +42,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--record", action="append", default=[], metavar="VAR[,VAR...]",
                    help="columns of results.csv: names or patterns like 'plant.*' (default: every connector)")
     p.add_argument("--fmu-dir", action="append", default=[], metavar="DIR",
-                   help="extra folder to look for FMUs in (also IPCOSIM_FMU_PATH; default build/fmus)")
+                   help=f"extra folder to look for FMUs in (also IPCOSIM_FMU_PATH); the built ones are in "
+                        f"{BUILD_FMU_DIR} (build/ of a source checkout, else the per-user cache)")
     p.add_argument("--save-baseline", metavar="FILE",
                    help="also write the recorded columns (see --record) as a baseline CSV for assert_close_to")
     p.add_argument("--fmus", choices=FLAVOURS, default=FLAVOURS[0],
-                   help="FMU flavour: python (build/fmus, default) or native (build/fmus-native: C, from "
-                        "`ipcosim build --native`)")
+                   help=f"FMU flavour: python (default, in {BUILD_FMU_DIR}) or native (C, from `ipcosim build "
+                        f"--native`, in {BUILD_DIR / 'fmus-native'})")
     p.add_argument("--loop", choices=LOOPS, default=LOOPS[0],
                    help="the master's stepping loop: auto (default: compiled C where it can run, else Python), "
                         "c (an error where it cannot run) or python")
