@@ -115,8 +115,10 @@ def _unknown_option(parser: argparse.ArgumentParser, argv: Sequence[str], unknow
     first = unknown[0]
     if not first.startswith("-"):
         command.error(f"unexpected argument {first!r}")
+    given = first.partition("=")[0]
     options = [o for action in command._actions for o in action.option_strings]  # noqa: SLF001
-    command.error(f"unknown option {first.partition('=')[0]}; {closest(first.partition('=')[0], options)}")
+    longer = [o for o in options if o.startswith(given)]  # an abbreviation: the options it abbreviates
+    command.error(f"unknown option {given}; {closest(given, longer or options)}")
 
 
 def _is_number(text: str) -> bool:
