@@ -283,7 +283,7 @@ def test_unreachable_scheduler_is_one_clear_line(capsys):
 def test_cli_bad_vary_exits_nonzero_with_one_line(vary, fragment, capsys, tmp_path):
     code = cli_main(["sweep", "pure:single-mass-lqr", "--vary", vary, "--out", str(tmp_path)])
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 1 and len(err) == 1 and fragment in err[0]
+    assert code == 2 and len(err) == 1 and fragment in err[0]
     assert err[0].startswith("ipcosim sweep: error: --vary")
     assert not (tmp_path / "results.csv").exists()
 
