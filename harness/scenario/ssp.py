@@ -25,7 +25,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from lxml import etree
 
-from ipcosim.errors import IpcosimError, closest
+from ipcosim.errors import IpcosimError, UsageError, closest
 from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
 
 #: XML namespaces of SSP 1.0 (as in fmpy.ssp.ssd) plus the OSP annotations libcosim reads.
@@ -47,7 +47,7 @@ class ScenarioError(IpcosimError, ValueError):
     """An SSD, SSV or SSP archive that cannot be read, fails its schema or is inconsistent."""
 
 
-class ScenarioNotFoundError(IpcosimError, FileNotFoundError):
+class ScenarioNotFoundError(UsageError, FileNotFoundError):
     """A scenario name or path that does not exist."""
 
 
