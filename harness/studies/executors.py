@@ -234,6 +234,10 @@ class LocalExecutor:
                             row = _error_row(case, one_line(exc))
                         pending.pop(case.index, None)
                         yield row
+                except GeneratorExit:  # the caller has the rows it wanted: the pool stays for its next runs
+                    for fut in futures:
+                        fut.cancel()
+                    raise
                 except BaseException:  # a signal, an error of the caller: stop the workers now
                     self.abort()
                     raise
