@@ -68,6 +68,9 @@ def main(args: argparse.Namespace) -> int:
     print(f"compare: {len(study.specs)} scenarios on {executor.description}", file=sys.stderr)
     try:
         study.run(executor, progress=not args.quiet)
+    except BaseException:  # a signal or an error: stop the workers now, not after their runs
+        executor.abort()
+        raise
     finally:
         executor.close()
     signals.keep(None)

@@ -67,6 +67,9 @@ def main(args: argparse.Namespace) -> int:
     signals.keep(f"finished runs are kept in {study.out / 'results.csv'}; run the same command again to resume")
     try:
         result = study.run(executor, progress=not args.quiet, extra={"command": "ipcosim " + " ".join(sys.argv[1:])})
+    except BaseException:  # a signal or an error: stop the workers now, not after their runs
+        executor.abort()
+        raise
     finally:
         executor.close()
     signals.keep(None)

@@ -83,6 +83,9 @@ def main(args: argparse.Namespace) -> int:
     signals.keep("no parameter set written")
     try:
         result = study.run(executor, progress=not args.quiet)
+    except BaseException:  # a signal or an error: stop the workers now, not after their runs
+        executor.abort()
+        raise
     finally:
         executor.close()
     signals.keep(None)
