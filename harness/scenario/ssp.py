@@ -47,6 +47,10 @@ class ScenarioError(IpcosimError, ValueError):
     """An SSD, SSV or SSP archive that cannot be read, fails its schema or is inconsistent."""
 
 
+class UnknownParameterSetError(UsageError, ScenarioError):
+    """A parameter set the scenario does not have (``--parameter-set``)."""
+
+
 class ScenarioNotFoundError(UsageError, FileNotFoundError):
     """A scenario name or path that does not exist."""
 
@@ -659,7 +663,7 @@ def select_parameter_set(scenario: Scenario, name: str) -> Scenario:
     from dataclasses import replace
 
     if name not in scenario.parameter_sets:
-        raise ScenarioError(f"{scenario.origin}: scenario {scenario.name!r} has no parameter set {name!r}; "
+        raise UnknownParameterSetError(f"{scenario.origin}: scenario {scenario.name!r} has no parameter set {name!r}; "
                             f"{closest(name, scenario.parameter_sets)}")
     new_set = scenario.parameter_sets[name]
     files = set(scenario.set_files.values())
