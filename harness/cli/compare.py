@@ -73,7 +73,7 @@ def main(args: argparse.Namespace) -> int:
         raise
     finally:
         executor.close()
-    signals.keep(None)
+    signals.keep(f"the report in {study.out} is incomplete; run the same command again")
     files = study.write()
     print(f"report: {files['markdown']}, {files['html']}")
     ok, failed = study.counts()

@@ -72,7 +72,8 @@ def main(args: argparse.Namespace) -> int:
         raise
     finally:
         executor.close()
-    signals.keep(None)
+    signals.keep(f"every run is in {study.out / 'results.csv'}; the summary is incomplete: run the same command "
+                 "again to write it")
     if result.resumed:
         print(f"resumed: {result.resumed} runs were already done", file=sys.stderr)
     summary = study.write(result)
