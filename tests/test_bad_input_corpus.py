@@ -365,7 +365,7 @@ SUBPROCESS_CASES = {
     "parameter-infinite": Case(args=("--set", "g.gain=1e400"), line="gain", min_rows=0),
     "parameter-negative-delay": Case(args=("--set", "f.fail_time=-inf"), line="fail_time", min_rows=0),
     "parameter-bad-period": Case(args=("--set", "g.sample_period=-0.01"), line="g.sample_period", min_rows=-1),
-    "parameter-not-an-integer": Case(args=("--set", "f.fault=1.5"), line="f.fault", min_rows=-1),
+    "parameter-not-an-integer": Case(args=("--set", "f.fault=1.5"), status=2, line="f.fault", min_rows=-1),
     # signals at every phase
     # before the run starts (no FMU code running) the command stops at once, nothing written
     "sigterm-load": Case(signal_at="load:SIGTERM", status=143, line="interrupted by SIGTERM; nothing was written",

@@ -22,7 +22,8 @@ import pytest
 
 from ipcosim.harness.studies.store import read_results
 
-pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="reads /proc for the signal dispositions")
+pytestmark = [pytest.mark.integration,
+              pytest.mark.skipif(sys.platform != "linux", reason="reads /proc for the signal dispositions")]
 
 EXIT_WITHIN_S = 2.0
 
