@@ -45,14 +45,29 @@ def run_compiler(cmd: list[str]) -> subprocess.CompletedProcess[str]:
     """
     with tempfile.TemporaryDirectory(prefix="ipcosim-cc-") as scratch:
         env = {**os.environ, "TMPDIR": scratch, "TMP": scratch, "TEMP": scratch}
-        with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env) as proc:
+        with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                              start_new_session=os.name == "posix") as proc:
             try:
                 out, err = proc.communicate()
             except BaseException:
-                proc.terminate()
-                try:
-                    proc.wait(timeout=2.0)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
+                _stop_group(proc)
                 raise
         return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
+def _stop_group(proc: subprocess.Popen[str]) -> None:
+    """SIGTERM to the compiler and the programs it started (its own process group), SIGKILL after 2 s."""
+    import signal
+
+    def send(sig: int) -> None:
+        try:
+            os.killpg(proc.pid, sig) if os.name == "posix" else proc.terminate()
+        except OSError:
+            pass
+
+    send(signal.SIGTERM)
+    try:
+        proc.wait(timeout=2.0)
+    except subprocess.TimeoutExpired:
+        send(getattr(signal, "SIGKILL", signal.SIGTERM))
+        proc.wait()

@@ -91,9 +91,13 @@ def _handlers_installed(pid: int) -> bool:
 
 
 def _session(sid: int) -> list[str]:
-    """The processes of session ``sid`` still alive (zombies included: a child never waited for)."""
-    out = subprocess.run(["ps", "-e", "-o", "sid=,pid=,stat=,args="], capture_output=True, text=True).stdout
-    return [line.strip() for line in out.splitlines() if line.split() and line.split()[0] == str(sid)]
+    """The processes of session ``sid`` still there: running ones, and zombies whose parent is still
+    alive (a child never waited for). A zombie left to init (ppid 1) is not counted: init reaps it
+    on an ordinary system (the init of some containers does not)."""
+    out = subprocess.run(["ps", "-e", "-o", "sid=,ppid=,stat=,pid=,args="], capture_output=True, text=True).stdout
+    rows = [line.split(None, 4) for line in out.splitlines()]
+    return [" ".join(r) for r in rows
+            if len(r) >= 4 and r[0] == str(sid) and not (r[2].startswith("Z") and r[1] == "1")]
 
 
 @dataclass

@@ -49,4 +49,4 @@ def test_the_command_refuses_in_one_line_and_writes_nothing(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1, err
     assert "--vary" in err[0] and "100000000 runs" in err[0]
-    assert not out.exists()
+    assert not (out / "results.csv").exists()

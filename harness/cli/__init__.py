@@ -135,11 +135,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGINT and SIGTERM stop every command at once, except inside a run's FMU calls, where they
     wait for the master's next check (:mod:`ipcosim.harness.master.signals`): the command's
     clean-up runs (worker processes stopped, temporary folders removed), what it finished stays
-    on disk and is named in one line, and the status is ``128 + signal number``.
+    on disk and is named in one line, and the status is ``128 + signal number``. The ``ipcosim``
+    command then leaves without the interpreter's teardown: everything was cleaned up on the way
+    out, and a library's exit handlers interrupted half-way have been seen to crash it.
     """
     from ipcosim.harness.master import signals
     from ipcosim.harness.threads import single_threaded
 
+    console = argv is None  # the `ipcosim` command itself, not a call from Python
     single_threaded()  # before the command modules load numpy
     parser = build_parser()
     argv = _negative_values(parser, sys.argv[1:] if argv is None else argv)
@@ -158,9 +161,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 signals.check()  # a signal during the last writes: report it after them
                 return status
             except signals.Interrupted as exc:
-                return _interrupted(args.command, exc)
+                return _interrupted(args.command, exc, console)
     except signals.Interrupted as exc:  # a signal during the report of the first one
-        return _interrupted(args.command, exc)
+        return _interrupted(args.command, exc, console)
     except KeyboardInterrupt:
         print("ipcosim: interrupted", file=sys.stderr)
         return 130
@@ -177,9 +180,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE if isinstance(exc, UsageError) else EXIT_FAILURE
 
 
-def _interrupted(command: str, exc: BaseException) -> int:
+def _interrupted(command: str, exc: BaseException, console: bool = False) -> int:
     """Report a command stopped by a signal (or its wall-clock limit) in one line: the signal and
-    what was kept; the exit status (``128 + signal number``)."""
+    what was kept; the exit status (``128 + signal number``). With ``console`` (the ``ipcosim``
+    command itself) the process leaves at once with that status (``signals.exit_now``)."""
     from ipcosim.harness.master import signals
 
     partial = getattr(exc, "result", None)
@@ -188,7 +192,12 @@ def _interrupted(command: str, exc: BaseException) -> int:
     if kept is None and partial is None:
         kept = "nothing was written"
     print(f"ipcosim {command}: error: {text}" + (f"; {kept}" if kept else ""), file=sys.stderr)
-    return int(getattr(exc, "exit_status", 130))
+    status = int(getattr(exc, "exit_status", 130))
+    if console:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        signals.exit_now(status)
+    return status
 
 
 if __name__ == "__main__":

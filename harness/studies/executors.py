@@ -272,7 +272,7 @@ class LocalExecutor:
             if p.is_alive():
                 p.kill()
                 p.join(timeout=1.0)
-        pool.shutdown(wait=True, cancel_futures=True)
+        pool.shutdown(wait=True)  # its futures fail as broken: cancelling them races the pool's own thread
         from ipcosim.harness.engine import remove_stale_extractions
 
         remove_stale_extractions()  # the FMU folders of workers killed before their clean-up
@@ -294,8 +294,10 @@ class LocalExecutor:
 def _stop_resource_tracker() -> None:
     """End (and wait for) the helper process multiprocessing starts beside a pool, which would
     otherwise outlive this process by a moment, unwaited for; it is started again if needed."""
+    import gc
     from multiprocessing import resource_tracker
 
+    gc.collect()  # the pool's semaphores released and unregistered first: no "leaked semaphore" warning
     stop = getattr(resource_tracker._resource_tracker, "_stop", None)  # noqa: SLF001 -- no public way
     if stop is not None:
         try:
