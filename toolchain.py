@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import os
 import shutil
+import subprocess
+import tempfile
 
 
 def find_compiler() -> str | None:
@@ -38,3 +40,40 @@ def find_cross_compiler(platform: str = "win64") -> str | None:
     if env:
         return shutil.which(env)
     return shutil.which(program)
+
+
+def run_compiler(cmd: list[str]) -> subprocess.CompletedProcess[str]:
+    """Run a compiler command with its temporary files in a folder of its own, removed afterwards.
+
+    An interruption (Ctrl-C, SIGTERM turned into an exception by the command line) asks the
+    compiler to stop with SIGTERM, so it removes its own files, and then removes the folder:
+    nothing is left in the temporary folder.
+    """
+    with tempfile.TemporaryDirectory(prefix="ipcosim-cc-") as scratch:
+        env = {**os.environ, "TMPDIR": scratch, "TMP": scratch, "TEMP": scratch}
+        with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                              start_new_session=os.name == "posix") as proc:
+            try:
+                out, err = proc.communicate()
+            except BaseException:
+                _stop_group(proc)
+                raise
+        return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
+def _stop_group(proc: subprocess.Popen[str]) -> None:
+    """SIGTERM to the compiler and the programs it started (its own process group), SIGKILL after 2 s."""
+    import signal
+
+    def send(sig: int) -> None:
+        try:
+            os.killpg(proc.pid, sig) if os.name == "posix" else proc.terminate()
+        except OSError:
+            pass
+
+    send(signal.SIGTERM)
+    try:
+        proc.wait(timeout=2.0)
+    except subprocess.TimeoutExpired:
+        send(getattr(signal, "SIGKILL", signal.SIGTERM))
+        proc.wait()

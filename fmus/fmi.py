@@ -108,6 +108,7 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variab
 from pythonfmu.enums import Fmi2Status
 
 from ipcosim.errors import IpcosimError
+from ipcosim.fmus.experiment import default_experiment
 
 __all__ = ["FmuBase", "FmuError", "StepFailure", "VariableInfo", "parse_unit", "positive", "nonnegative"]
 
@@ -656,6 +657,7 @@ class FmuBase(Fmi2Slave):
     def to_xml(self, model_options: dict[str, str] = dict()) -> Element:  # noqa: B006 -- pythonfmu's signature
         """pythonfmu's model description plus units, unit definitions and the true model structure."""
         root = super().to_xml(model_options)
+        self._add_default_experiment(root)
         self._add_units(root)
         old = root.find("ModelStructure")
         if old is not None:
@@ -665,6 +667,19 @@ class FmuBase(Fmi2Slave):
         self._add_outputs(ms, index)
         self._add_initial_unknowns(ms, index)
         return root
+
+    def _add_default_experiment(self, root: Element) -> None:
+        """``DefaultExperiment`` (:func:`default_experiment`) before ``ModelVariables``, unless the
+        class declares its own."""
+        if root.find("DefaultExperiment") is not None:
+            return
+        period = None
+        for sv in root.iter("ScalarVariable"):
+            real = sv.find("Real")
+            if sv.get("name") == "sample_period" and real is not None and real.get("start"):
+                period = float(real.get("start"))
+        at = list(root).index(root.find("ModelVariables"))
+        root.insert(at, Element("DefaultExperiment", default_experiment(period)))
 
     def _add_units(self, root: Element) -> None:
         """Each Real variable's ``unit`` attribute, and the ``UnitDefinitions`` after ``CoSimulation``."""

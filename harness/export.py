@@ -106,12 +106,12 @@ def loop_spec(options: ExportOptions) -> ContainerSpec:
 
 def _check_out(out: Path) -> None:
     if out.is_dir():
-        raise ExportError(f"--out {out}: is a folder, not a file")
+        raise UsageError(f"--out {out}: is a folder, not a file")
     if out.suffix != ".fmu":
         raise UsageError(f"--out {out}: the file name must end in .fmu")
     parent = out.parent if str(out.parent) else Path(".")
     if not parent.is_dir() or not os.access(parent, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
-        raise ExportError(f"--out {out}: cannot write there ({parent} is not a writable folder)"
+        raise UsageError(f"--out {out}: cannot write there ({parent} is not a writable folder)"
                           if not parent.is_dir() or not os.access(parent, os.W_OK)
                           else f"--out {out}: the file is not writable")
 

@@ -2,9 +2,13 @@
 :mod:`ipcosim.errors`)."""
 from __future__ import annotations
 
+from typing import Callable, TypeVar
+
 from ipcosim.errors import IpcosimError
 
-__all__ = ["MissingExtraError", "EXTRAS", "require"]
+T = TypeVar("T")
+
+__all__ = ["MissingExtraError", "EXTRAS", "require", "optional_figure"]
 
 
 class MissingExtraError(IpcosimError, ImportError):
@@ -29,3 +33,27 @@ def require(module: str) -> None:
         extra, what = EXTRAS.get(module, (None, module))
         hint = f"pip install 'ipcosim[{extra}]'" if extra else f"pip install {module}"
         raise MissingExtraError(f"{module} is not installed ({what} need it): {hint}")
+
+
+_said: set[str] = set()
+
+
+def optional_figure(draw: Callable[[], T], what: str) -> T | None:
+    """``draw()``, or None with one line on stderr (once per figure kind) when the plotting
+    library it needs is not installed: a command that draws prints its numbers and skips the figure.
+
+    Examples
+    --------
+    >>> optional_figure(lambda: "drawn", "the figure")
+    'drawn'
+    """
+    import sys
+
+    try:
+        return draw()
+    except MissingExtraError as exc:
+        key = f"{what}: {exc}"
+        if key not in _said:
+            _said.add(key)
+            print(f"ipcosim: warning: {what} skipped: {exc}", file=sys.stderr)
+        return None

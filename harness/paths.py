@@ -43,6 +43,14 @@ def default_build_dir() -> Path:
     return cache / "ipcosim" / distribution_version()
 
 
+def user_scenario_dir() -> Path:
+    """The user's own scenario folder, ``$XDG_DATA_HOME/ipcosim/scenarios`` (default
+    ``~/.local/share/ipcosim/scenarios``): where ``ipcosim tune --install`` puts a shipped
+    scenario's copy with its tuned set when ipcosim is an installed wheel (never site-packages)."""
+    data = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share")
+    return data / "ipcosim" / "scenarios"
+
+
 BUILD_DIR = default_build_dir()
 BUILD_FMU_DIR = BUILD_DIR / "fmus"
 BUILD_SSP_DIR = BUILD_DIR / "ssp"

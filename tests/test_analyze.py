@@ -132,12 +132,12 @@ def test_cli_json_and_figures(tmp_path, capsys) -> None:
     assert json.loads((tmp_path / "analysis.json").read_text())["delay_margin_s"] == r["delay_margin_s"]
 
 
-@pytest.mark.parametrize("argv,needle", [
-    (["analyze", "no-such-scenario"], "unknown scenario 'no-such-scenario'"),
-    (["analyze", "single-mass-lqr", "--set", "plant.Mp=-1"], "parameter Mp = -1.0 kg must be > 0"),
-    (["analyze", "single-mass-lqr", "--set", "setpoint.amplitude=1"], "--set setpoint.amplitude"),
+@pytest.mark.parametrize("argv,needle,status", [
+    (["analyze", "no-such-scenario"], "unknown scenario 'no-such-scenario'", 2),  # usage: a name that is not there
+    (["analyze", "single-mass-lqr", "--set", "plant.Mp=-1"], "parameter Mp = -1.0 kg must be > 0", 1),  # the model's
+    (["analyze", "single-mass-lqr", "--set", "setpoint.amplitude=1"], "--set setpoint.amplitude", 2),
 ])
-def test_cli_errors_are_one_line(argv, needle, capsys, tmp_path) -> None:
-    assert cli_main(argv + ["--out", str(tmp_path)]) == 1
+def test_cli_errors_are_one_line(argv, needle, status, capsys, tmp_path) -> None:
+    assert cli_main(argv + ["--out", str(tmp_path)]) == status
     err = capsys.readouterr().err.strip()
     assert needle in err and len(err.splitlines()) == 1

@@ -38,7 +38,7 @@ def test_command_line_and_keywords_build_the_same_options(tmp_path):
     (["--swap", "plant"], {"swap": ["plant"]}, "--swap 'plant': expected COMPONENT=FMU_OR_ALIAS"),
 ])
 def test_python_raises_the_line_the_command_line_prints(capsys, argv, keywords, message):
-    assert cli.main(["run", "single-mass-lqr", *argv, "--quiet"]) == 1
+    assert cli.main(["run", "single-mass-lqr", *argv, "--quiet"]) == 2  # a usage error (docs/robustness.md)
     assert capsys.readouterr().err.strip() == f"ipcosim run: error: {message}"
     with pytest.raises(ipcosim.UsageError) as info:
         ipcosim.run("single-mass-lqr", **keywords)

@@ -66,7 +66,8 @@ def test_abbreviated_option_ends_in_usage_error(capsys: pytest.CaptureFixture[st
     with pytest.raises(SystemExit) as exc:
         main(["run", "single-mass-lqr", "--stop", "1"])
     assert exc.value.code == 2
-    assert "unrecognized arguments: --stop" in capsys.readouterr().err
+    # never taken for --stop-time; only suggested
+    assert "ipcosim run: error: unknown option --stop; did you mean '--stop-time'?" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
         main(["--deb", "list"])
     assert exc.value.code == 2
@@ -104,3 +105,19 @@ def test_metrics_name_the_version_that_ran(tmp_path) -> None:  # noqa: ANN001
 
     ipcosim.run("single-mass-lqr", stop_time=0.01, out=tmp_path)
     assert json.loads((tmp_path / "metrics.json").read_text())["ipcosim_version"] == _project_version()
+
+
+@pytest.mark.parametrize("argv, line", [
+    (["run", "single-mass-lqr", "--stop-tim", "1"], "ipcosim run: error: unknown option --stop-tim; did you mean "
+                                                    "'--stop-time'"),
+    (["sweep", "x", "--vary", "a=1", "--sample", "3"], "ipcosim sweep: error: unknown option --sample; did you "
+                                                       "mean '--samples'"),
+    (["rig", "serve", "--prot", "3"], "ipcosim rig serve: error: unknown option --prot; did you mean '--port'"),
+    (["run", "single-mass-lqr", "surplus"], "ipcosim run: error: unexpected argument 'surplus'"),
+])
+def test_a_misspelt_option_names_the_closest_of_its_command(argv, line, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(line), err

@@ -141,7 +141,7 @@ def test_without_matplotlib_analyze_keeps_its_margins(tmp_path, monkeypatch, cap
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "matplotlib" else real(name, *a))
     assert cli_main(["analyze", "single-mass-lqr", "--out", str(tmp_path)]) == 0
-    text = capsys.readouterr().out
-    assert sum("figures skipped: matplotlib is not installed" in line for line in text.splitlines()) == 1
+    text, err = capsys.readouterr()
+    assert sum("skipped: matplotlib is not installed" in line for line in err.splitlines()) == 1
     assert "disk margin (balanced)" in text and "cart_position: gain x" in text
     assert (tmp_path / "analysis.json").is_file() and not (tmp_path / "margins.png").exists()

@@ -75,7 +75,7 @@ def test_record_flag_selects_columns(tmp_path, capsys, test_fmus):
     rc, _ = run_cli(capsys, folder, "--out", tmp_path / "out2", "--record", "g.y")
     assert (tmp_path / "out2" / "results.csv").read_text().splitlines()[0] == "time,g.y"
     rc, err = run_cli(capsys, folder, "--out", tmp_path / "out3", "--record", "g.nothing")
-    assert rc == 1 and "--record g.nothing: no such variable" in err[-1]
+    assert rc == 2 and "--record g.nothing: no such variable" in err[-1]
 
 
 # ------------------------------------------------------------------ bad input before anything runs
@@ -88,9 +88,9 @@ def _one_error_line(err):
 
 def test_unknown_scenario_name_and_path(tmp_path, capsys):
     rc, err = run_cli(capsys, "single-mass-nothing")
-    assert rc == 1 and "unknown scenario 'single-mass-nothing'" in _one_error_line(err)
+    assert rc == 2 and "unknown scenario 'single-mass-nothing'" in _one_error_line(err)
     rc, err = run_cli(capsys, tmp_path / "missing.ssp")
-    assert rc == 1 and "missing.ssp' does not exist" in _one_error_line(err)
+    assert rc == 2 and "missing.ssp' does not exist" in _one_error_line(err)
 
 
 def test_ssp_not_a_zip_or_without_ssd(tmp_path, capsys):
@@ -169,23 +169,24 @@ def test_unconnected_input_is_a_warning_and_the_run_goes_on(tmp_path, capsys, te
 def test_bad_set(tmp_path, capsys, test_fmus, tracked, setting, expected):
     folder = scenario(tmp_path, test_fmus)
     rc, err = run_cli(capsys, folder, "--set", setting)
-    assert rc == 1 and expected in _one_error_line(err)
+    assert rc == 2 and expected in _one_error_line(err)  # a command-line mistake
     assert tracked[0] == []  # nothing instantiated
 
 
-@pytest.mark.parametrize("args, expected", [
-    (("--stop-time", "0"), "--stop-time 0: must be a positive number of seconds"),
-    (("--stop-time", "-2"), "--stop-time -2: must be a positive number of seconds"),
-    (("--stop-time", "soon"), "--stop-time 'soon': not a number"),
-    (("--step", "0"), "--step 0: must be a positive number of seconds"),
-    (("--step", "-0.001"), "--step -0.001: must be a positive number of seconds"),
-    (("--step", "0.004"), "g.sample_period = 0.01 s is not a whole multiple of the step 0.004 s"),
-    (("--set", "g.sample_period=0.015"), "g.sample_period = 0.015 s is not a whole multiple of the step 0.01 s"),
+@pytest.mark.parametrize("args, expected, status", [
+    (("--stop-time", "0"), "--stop-time 0: must be a positive number of seconds", 2),
+    (("--stop-time", "-2"), "--stop-time -2: must be a positive number of seconds", 2),
+    (("--stop-time", "soon"), "--stop-time 'soon': not a number", 2),
+    (("--step", "0"), "--step 0: must be a positive number of seconds", 2),
+    (("--step", "-0.001"), "--step -0.001: must be a positive number of seconds", 2),
+    # well-formed values the scenario's FMUs cannot be run with: a failure, not a usage error
+    (("--step", "0.004"), "g.sample_period = 0.01 s is not a whole multiple of the step 0.004 s", 1),
+    (("--set", "g.sample_period=0.015"), "g.sample_period = 0.015 s is not a whole multiple of the step 0.01 s", 1),
 ])
-def test_bad_times(tmp_path, capsys, test_fmus, tracked, args, expected):
+def test_bad_times(tmp_path, capsys, test_fmus, tracked, args, expected, status):
     folder = scenario(tmp_path, test_fmus)
     rc, err = run_cli(capsys, folder, *args)
-    assert rc == 1 and expected in _one_error_line(err)
+    assert rc == status and expected in _one_error_line(err)
     assert tracked[0] == []
 
 

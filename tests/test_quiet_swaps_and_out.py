@@ -58,7 +58,7 @@ def test_a_sweeps_results_are_never_replaced(tmp_path: Path, capsys: pytest.Capt
     out = tmp_path / "sweep"
     out.mkdir()
     (out / "results.csv").write_text("index,seed,status\n0,1,ok\n")
-    assert main(["run", "single-mass-lqr", "--stop-time", "0.05", "--quiet", "--out", str(out)]) == 1
+    assert main(["run", "single-mass-lqr", "--stop-time", "0.05", "--quiet", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "its results.csv is not a run's (first column 'index'" in err[0]
     assert (out / "results.csv").read_text() == "index,seed,status\n0,1,ok\n"

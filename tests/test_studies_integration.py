@@ -55,7 +55,7 @@ def test_sweep_on_the_cosimulation(fmu_env, tmp_path, capsys):
 def test_sweep_unknown_parameter_of_a_real_scenario(fmu_env, capsys):
     code = cli_main(["sweep", "single-mass-lqr", "--vary", "plant.Mq=uniform(0.8,1.2)*nominal"])
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 1 and len(err) == 1
+    assert code == 2 and len(err) == 1
     assert "unknown parameter 'plant.Mq'" in err[0] and "Mp" in err[0]
 
 

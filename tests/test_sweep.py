@@ -259,15 +259,16 @@ def _closed_port() -> int:
         return s.getsockname()[1]
 
 
-def test_unreachable_scheduler_is_one_clear_line(capsys):
+def test_unreachable_scheduler_is_one_clear_line(capsys, tmp_path):
     address = f"tcp://127.0.0.1:{_closed_port()}"
     with pytest.raises(SchedulerError, match=f"cannot reach the Dask scheduler at {address}"):
         DaskExecutor(address, timeout=1)
     code = cli_main(["sweep", "pure:single-mass-lqr", "--vary", "plant.Mp=uniform(0.8,1.2)*nominal",
-                     "--samples", "2", "--scheduler", address, "--out", "/nonexistent/never-written"])
+                     "--samples", "2", "--scheduler", address, "--out", str(tmp_path / "sweep")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 1 and len(err) == 1
     assert err[0].startswith("ipcosim sweep: error: cannot reach the Dask scheduler at " + address)
+    assert not (tmp_path / "sweep" / "results.csv").exists()  # no run, no row
     with pytest.raises(SchedulerError, match="expected an address like tcp://HOST:PORT"):
         DaskExecutor("localhost:8786")
 
@@ -283,7 +284,7 @@ def test_unreachable_scheduler_is_one_clear_line(capsys):
 def test_cli_bad_vary_exits_nonzero_with_one_line(vary, fragment, capsys, tmp_path):
     code = cli_main(["sweep", "pure:single-mass-lqr", "--vary", vary, "--out", str(tmp_path)])
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 1 and len(err) == 1 and fragment in err[0]
+    assert code == 2 and len(err) == 1 and fragment in err[0]
     assert err[0].startswith("ipcosim sweep: error: --vary")
     assert not (tmp_path / "results.csv").exists()
 

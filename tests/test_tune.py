@@ -110,19 +110,20 @@ def test_cli_tune_writes_ssv_and_table(tmp_path, capsys):
     report = (out / "tune.md").read_text()
     assert "| controller.q_position | 2000 |" in report and "| cost |" in report
     assert (out / "evaluations.csv").read_text().count("\n") == 13  # header + exactly --budget runs
-    assert sorted(p.name for p in out.iterdir()) == ["autotuned.ssv", "evaluations.csv", "tune.md"]
+    shown = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))  # not the folder's claim
+    assert shown == ["autotuned.ssv", "evaluations.csv", "tune.md"]
 
 
 def test_cli_tune_unknown_parameter_is_one_line(capsys):
     code = cli_main(["tune", "pure:single-mass-lqr", "--params", "controller.nope"])
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 1 and len(err) == 1 and "unknown parameter 'controller.nope'" in err[0]
+    assert code == 2 and len(err) == 1 and "unknown parameter 'controller.nope'" in err[0]
 
 
 def test_cli_tune_budget_below_the_minimum_is_one_line(capsys):
     code = cli_main(["tune", "pure:single-mass-lqr", "--params", "controller.q_position", "--budget", "1"])
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 1 and err == ["ipcosim tune: error: --budget 1: need at least 6 runs for 1 parameter(s) (the "
+    assert code == 2 and err == ["ipcosim tune: error: --budget 1: need at least 6 runs for 1 parameter(s) (the "
                                  "scenario's own values, then a first population of 5)"]
 
 
@@ -130,7 +131,7 @@ def test_cli_tune_install_needs_a_scenario_folder(tmp_path, capsys):
     code = cli_main(["tune", "pure:single-mass-lqr", "--params", "controller.q_position", "--budget", "6",
                      "--install", "--out", str(tmp_path / "t")])
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 1 and "--install: scenario 'pure:single-mass-lqr' has no folder" in err[-1]
+    assert code == 2 and "--install: scenario 'pure:single-mass-lqr' has no folder" in err[-1]
     assert not (tmp_path / "t").exists() or not any((tmp_path / "t").iterdir())
 
 

@@ -248,6 +248,11 @@ class CatalogError(ControllerParameterError):
     """Unknown law, plant kind, parameter set or parameter name."""
 
 
+#: The longest controller sample period accepted [s]: the pendulum's unstable pole (6.6 rad/s on
+#: the single mass, ``ipcosim linearize``) grows 700-fold in 1 s.
+MAX_SAMPLE_PERIOD = 1.0
+
+
 @dataclass(frozen=True)
 class ParamSpec:
     """One flat law parameter: FMU variable name, default, unit, description and constraint."""
@@ -256,7 +261,7 @@ class ParamSpec:
     default: float | bool
     unit: str | None
     description: str
-    constraint: str = "finite"     # finite | positive | nonnegative | bool
+    constraint: str = "finite"     # finite | positive | nonnegative | period | bool
 
     def check(self, value: Any) -> str | None:
         """``None`` if ``value`` is acceptable, else the reason."""
@@ -265,8 +270,11 @@ class ParamSpec:
         v = float(value)
         if not math.isfinite(v):
             return "not a finite number"
-        if self.constraint == "positive" and v <= 0:
+        if self.constraint in ("positive", "period") and v <= 0:
             return "must be > 0"
+        if self.constraint == "period" and v > MAX_SAMPLE_PERIOD:
+            return (f"must be at most {MAX_SAMPLE_PERIOD:g} s (the upright pendulum diverges e-fold in about "
+                    f"0.15 s; no sampled law holds it at {v:g} s)")
         if self.constraint == "nonnegative" and v < 0:
             return "must be >= 0"
         return None
@@ -314,7 +322,7 @@ def model_specs(kind: str) -> list[ParamSpec]:
 
 def common_specs() -> list[ParamSpec]:
     return [ParamSpec("sample_period", 1e-3, "s", "controller sample period: the output is updated at k*sample_period "
-                                                  "and held in between", "positive"),
+                                                  "and held in between", "period"),
             ParamSpec("voltage_limit", 10.0, "V", "output limit (the Q4 card's +-10 V analog output range)",
                       "positive")]
 

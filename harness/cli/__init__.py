@@ -12,6 +12,15 @@ import importlib
 import sys
 from typing import Sequence
 
+from ipcosim.errors import UsageError
+from ipcosim.harness.master.signals import TIMEOUT_STATUS
+
+#: Exit statuses of every command (docs/cli.md): the work done; it failed (one line says why);
+#: the command line was wrong (an unknown option or name, a bad value, an unusable --out: nothing was
+#: done); a real-time run finished but missed deadlines beyond its budget; the --timeout wall-clock
+#: limit stopped it; a signal stopped it (128 + the signal's number: 130 SIGINT, 143 SIGTERM).
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_REALTIME_DEGRADED, EXIT_TIMEOUT = 0, 1, 2, 3, TIMEOUT_STATUS
+
 #: Sub-command modules, in the order ``ipcosim --help`` lists them.
 COMMAND_MODULES = ("build", "list_", "describe", "run", "export", "linearize", "analyze", "rig", "compare", "sweep",
                    "tune", "identify", "view")
@@ -107,6 +116,27 @@ def _negative_values(parser: argparse.ArgumentParser, argv: Sequence[str]) -> li
     return out
 
 
+def _unknown_option(parser: argparse.ArgumentParser, argv: Sequence[str], unknown: Sequence[str]) -> None:
+    """Exit 2 naming the first unknown argument, with the closest option of the sub-command it was
+    given to (``--stop-tim``: did you mean '--stop-time'?). Options are never abbreviated, so a
+    prefix is not taken for the option; it is only suggested."""
+    from ipcosim.errors import closest
+
+    words = [a for a in argv if not a.startswith("-")]
+    command = parser
+    for each in parsers(parser):  # the deepest sub-command named on the line: `rig serve`, not `rig`
+        path = each.prog.split()[1:]
+        if path and path == words[:len(path)] and len(path) > len(command.prog.split()) - 1:
+            command = each
+    first = unknown[0]
+    if not first.startswith("-"):
+        command.error(f"unexpected argument {first!r}")
+    given = first.partition("=")[0]
+    options = [o for action in command._actions for o in action.option_strings]  # noqa: SLF001
+    longer = [o for o in options if o.startswith(given)]  # an abbreviation: the options it abbreviates
+    command.error(f"unknown option {given}; {closest(given, longer or options)}")
+
+
 def _is_number(text: str) -> bool:
     try:
         float(text)
@@ -118,31 +148,38 @@ def _is_number(text: str) -> bool:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit status.
 
-    SIGINT and SIGTERM are deferred to the master's checks between FMU calls
-    (:mod:`ipcosim.harness.master.signals`): the run ends with its results so far on disk and
-    the status is ``128 + signal number``.
+    SIGINT and SIGTERM stop every command at once, except inside a run's FMU calls, where they
+    wait for the master's next check (:mod:`ipcosim.harness.master.signals`): the command's
+    clean-up runs (worker processes stopped, temporary folders removed), what it finished stays
+    on disk and is named in one line, and the status is ``128 + signal number``. The ``ipcosim``
+    command then leaves without the interpreter's teardown: everything was cleaned up on the way
+    out, and a library's exit handlers interrupted half-way have been seen to crash it.
     """
     from ipcosim.harness.master import signals
     from ipcosim.harness.threads import single_threaded
 
+    console = argv is None  # the `ipcosim` command itself, not a call from Python
     single_threaded()  # before the command modules load numpy
     parser = build_parser()
-    args = parser.parse_args(_negative_values(parser, sys.argv[1:] if argv is None else argv))
+    argv = _negative_values(parser, sys.argv[1:] if argv is None else argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        _unknown_option(parser, argv, unknown)
     try:
         limit = getattr(args, "timeout", None)
         if limit is not None:
             from ipcosim.harness.options import seconds_option
 
             limit = seconds_option("--timeout", limit)
-        with signals.deferred(timeout=limit):
-            status = int(args.func(args) or 0)
-            signals.check()  # a signal during the last writes: report it after them
-            return status
-    except signals.Interrupted as exc:
-        partial = getattr(exc, "result", None)
-        text = partial.error if partial is not None and partial.error else exc.message
-        print(f"ipcosim {args.command}: error: {text}", file=sys.stderr)
-        return exc.exit_status
+        with signals.deferred(timeout=limit, immediate=True):
+            try:
+                status = int(args.func(args) or 0)
+                signals.check()  # a signal during the last writes: report it after them
+                return status
+            except signals.Interrupted as exc:
+                return _interrupted(args.command, exc, console)
+    except signals.Interrupted as exc:  # a signal during the report of the first one
+        return _interrupted(args.command, exc, console)
     except KeyboardInterrupt:
         print("ipcosim: interrupted", file=sys.stderr)
         return 130
@@ -156,7 +193,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         print(f"ipcosim {args.command}: error: {message}", file=sys.stderr)
-        return 1
+        return EXIT_USAGE if isinstance(exc, UsageError) else EXIT_FAILURE
+
+
+def _interrupted(command: str, exc: BaseException, console: bool = False) -> int:
+    """Report a command stopped by a signal (or its wall-clock limit) in one line: the signal and
+    what was kept; the exit status (``128 + signal number``). With ``console`` (the ``ipcosim``
+    command itself) the process leaves at once with that status (``signals.exit_now``)."""
+    from ipcosim.harness.master import signals
+
+    partial = getattr(exc, "result", None)
+    text = partial.error if partial is not None and partial.error else getattr(exc, "message", "interrupted")
+    kept = signals.kept()
+    if kept is None and partial is None:
+        kept = "nothing was written"
+    print(f"ipcosim {command}: error: {text}" + (f"; {kept}" if kept else ""), file=sys.stderr)
+    status = int(getattr(exc, "exit_status", 130))
+    if console:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        signals.exit_now(status)
+    return status
 
 
 if __name__ == "__main__":

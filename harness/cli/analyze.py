@@ -65,10 +65,11 @@ def _margin_lines(r: dict) -> list[str]:
 
 def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.grammar import parse_set
+    from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.options import with_parameter_file
     from ipcosim.harness.studies.analyze import analyze
 
-    out = args.out or f"out/analyze/{args.scenario.rstrip('/').split('/')[-1]}"
+    out = claim_output(args.out or f"out/analyze/{args.scenario.rstrip('/').split('/')[-1]}", "analyze")
     values = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))
     r = analyze(args.scenario, parameter_set=args.parameter_set, set=values, out=out)
     if args.json:
@@ -88,8 +89,6 @@ def main(args: argparse.Namespace) -> int:
     print(f"  {r['statement']}")
     for line in _cycle_lines(r["friction_limit_cycles"]):
         print(f"  {line}")
-    if r.get("figures_skipped"):
-        print(f"  figures skipped: {r['figures_skipped']}")
-    else:
+    if r["figures"]:
         print(f"  figures: {', '.join(r['figures'].values())}")
     return 0

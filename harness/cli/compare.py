@@ -3,7 +3,8 @@
     ipcosim compare [--out DIR] [--robustness [--samples N]] [--scenarios a,b,...] [--stop-time S]
                     [--workers W] [--scheduler ADDR] [--seed S]
 
-FMUs missing from ``build/fmus`` (a fresh checkout) are built first, as ``ipcosim build`` does.
+FMUs missing from the build folder (``build/fmus`` of a source checkout, else the per-user cache:
+``ipcosim.harness.paths``) are built first, as ``ipcosim build`` does.
 Writes ``DIR/report.md``, ``DIR/report.html`` (self-contained), ``DIR/figures/<plant>.png``,
 ``DIR/metrics.csv`` / ``metrics.json`` and, with ``--robustness``, one resumable sweep per
 scenario under ``DIR/robustness/<scenario>/``.
@@ -50,11 +51,16 @@ def main(args: argparse.Namespace) -> int:
     sweep of each, then write the report, ``metrics.csv`` and ``metrics.json``
     (``ipcosim.harness.studies.compare``)."""
     from ipcosim.errors import IpcosimError
+    from ipcosim.harness.master import signals
+    from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.compare import comparison
     from ipcosim.harness.studies.executors import open_executor
 
     if args.thesis_claims:
         return thesis_claims(Path(args.out))
+    claim_output(args.out, "compare")  # before any run
+    signals.keep(f"robustness runs finished so far are kept under {Path(args.out) / 'robustness'} and reused by "
+                 f"the same command" if args.robustness else "no report written")
     names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else None
     study = comparison(names, args.out, fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time,
                        robustness=args.robustness, samples=args.samples, seed=args.seed, progress=not args.quiet)
@@ -62,12 +68,12 @@ def main(args: argparse.Namespace) -> int:
     print(f"compare: {len(study.specs)} scenarios on {executor.description}", file=sys.stderr)
     try:
         study.run(executor, progress=not args.quiet)
-    except KeyboardInterrupt:
-        print(f"ipcosim compare: interrupted; robustness runs finished so far are kept under "
-              f"{study.out / 'robustness'} and reused by the same command", file=sys.stderr)
-        return 130
+    except BaseException:  # a signal or an error: stop the workers now, not after their runs
+        executor.abort()
+        raise
     finally:
         executor.close()
+    signals.keep(f"the report in {study.out} is incomplete; run the same command again")
     files = study.write()
     print(f"report: {files['markdown']}, {files['html']}")
     ok, failed = study.counts()

@@ -6,6 +6,8 @@ from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from ipcosim.harness.paths import BUILD_DIR
+
     p = sub.add_parser("export", help="write a scenario's closed loop as one FMU",
                        description="Write the whole closed loop of a scenario (setpoint, controller, plant) as one "
                                    "FMI 2.0 (or, with --fmi 3, FMI 3.0) co-simulation FMU built from the native "
@@ -23,7 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a parameter's value in the FMU (its start value), as `ipcosim run --set`, e.g. "
                         "--set controller.sample_period=0.002 (repeatable)")
     p.add_argument("--fmu-dir", action="append", default=[], type=Path, metavar="DIR",
-                   help="extra folder to look for the native FMUs in (default build/fmus-native)")
+                   help=f"extra folder to look for the native FMUs in (built ones: {BUILD_DIR / 'fmus-native'}, "
+                        "build/ of a source checkout, else the per-user cache)")
     p.add_argument("--fmi", choices=("2", "3"), default="2",
                    help="FMI version of the FMU: 2 (FMI 2.0, default) or 3 (FMI 3.0, same variables and results)")
     p.set_defaults(func=main)

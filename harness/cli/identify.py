@@ -30,16 +30,24 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="refits of synthetic logs behind the 95 %% intervals (default 8; 0: the sandwich alone, "
                         "faster, but it does not cover where the fit stopped: docs/identify.md)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--quiet", action="store_true", help="no line on stderr while fitting (--json has none either)")
     p.add_argument("--out", metavar="DIR",
                    help="write DIR/identified.ssv (for --parameter-file; a valid fit only) and DIR/identified.png")
     p.set_defaults(func=main)
 
 
 def main(args: argparse.Namespace) -> int:
+    from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.identify import IdentifyOptions, identify
 
-    result = identify(IdentifyOptions.create(args.source, plant=args.plant, fit=args.fit, preset=args.preset,
-                                             out=args.out, refits=args.refits))
+    if args.out:
+        claim_output(args.out, "identify")  # before the fit: a bad --out is one line at once
+    options = IdentifyOptions.create(args.source, plant=args.plant, fit=args.fit, preset=args.preset,
+                                     out=args.out, refits=args.refits)
+    if not (args.quiet or args.json):  # the fit and its refits take seconds: say so at once
+        print(f"identify: fitting {', '.join(options.fit) or 'the default parameters'} of the {args.plant} plant "
+              f"to {args.source} ...", file=sys.stderr)
+    result = identify(options)
     if result.replay != "native":
         print(f"ipcosim identify: the log was replayed in Python, 30 to 40 times slower than the native replay: "
               f"{result.replay}", file=sys.stderr)

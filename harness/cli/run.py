@@ -4,13 +4,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ipcosim.harness.cli import add_parameter_file_option
+from ipcosim.harness.cli import EXIT_REALTIME_DEGRADED, add_parameter_file_option
 
 #: How the summary shows a metric that has no value (docs/metrics.md).
 NOT_REACHED = {"settling_time_s": "not settled", "recovery_time_s": "not recovered",
                "time_to_upright_s": "not upright at the end"}
-#: Exit status of a real-time run that went over its overrun budget (its results are written).
-EXIT_REALTIME_DEGRADED = 3
 
 
 def task_verdict(m: dict, bound: float | None) -> str:
@@ -29,6 +27,7 @@ def task_verdict(m: dict, bound: float | None) -> str:
 def register(sub: argparse._SubParsersAction) -> None:
     from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL
     from ipcosim.harness.master.cloop import LOOPS
+    from ipcosim.harness.paths import BUILD_DIR, BUILD_FMU_DIR
     from ipcosim.harness.scenario.flavour import FLAVOURS
 
     p = sub.add_parser("run", help="co-simulate a scenario (SSP folder or archive)",
@@ -56,12 +55,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--record", action="append", default=[], metavar="VAR[,VAR...]",
                    help="columns of results.csv: names or patterns like 'plant.*' (default: every connector)")
     p.add_argument("--fmu-dir", action="append", default=[], metavar="DIR",
-                   help="extra folder to look for FMUs in (also IPCOSIM_FMU_PATH; default build/fmus)")
+                   help=f"extra folder to look for FMUs in (also IPCOSIM_FMU_PATH); the built ones are in "
+                        f"{BUILD_FMU_DIR} (build/ of a source checkout, else the per-user cache)")
     p.add_argument("--save-baseline", metavar="FILE",
                    help="also write the recorded columns (see --record) as a baseline CSV for assert_close_to")
     p.add_argument("--fmus", choices=FLAVOURS, default=FLAVOURS[0],
-                   help="FMU flavour: python (build/fmus, default) or native (build/fmus-native: C, from "
-                        "`ipcosim build --native`)")
+                   help=f"FMU flavour: python (default, in {BUILD_FMU_DIR}) or native (C, from `ipcosim build "
+                        f"--native`, in {BUILD_DIR / 'fmus-native'})")
     p.add_argument("--loop", choices=LOOPS, default=LOOPS[0],
                    help="the master's stepping loop: auto (default: compiled C where it can run, else Python), "
                         "c (an error where it cannot run) or python")
@@ -85,6 +85,7 @@ def main(args: argparse.Namespace) -> int:
     import warnings
 
     from ipcosim.harness.engine import prepare_with, run_with
+    from ipcosim.harness.master import signals
     from ipcosim.harness.master.realtime import budget_warning
     from ipcosim.harness.master.results import json_safe
     from ipcosim.harness.options import RunOptions
@@ -100,6 +101,7 @@ def main(args: argparse.Namespace) -> int:
         if not args.quiet:
             for note in prepared.system.notes:
                 print(f"note: {note}")
+        signals.keep(f"the rows so far are in {out / 'results.csv'}" if out is not None else None)
         result = run_with(options, prepared)
     if not args.quiet:
         m = json_safe(result.metrics)
@@ -115,8 +117,11 @@ def main(args: argparse.Namespace) -> int:
             print(f"  {key:24s} {NOT_REACHED.get(key, 'none') if value is None else shown}")
         if "cart_mean_error_m" in m:
             print(f"  {'task':24s} {task_verdict(m, meta.get('amplitude_bound_m'))}")
-        print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if args.plot else "")
+        plotted = args.plot and "plot_skipped" not in result.metadata
+        print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if plotted else "")
               + (f", baseline {options.save_baseline}" if options.save_baseline else ""))
+    if "plot_skipped" in result.metadata:
+        print(f"ipcosim run: warning: plot.png skipped: {result.metadata['plot_skipped']}", file=sys.stderr)
     degraded = budget_warning(result.metrics)
     if degraded:
         print(f"ipcosim run: warning: {degraded}", file=sys.stderr)

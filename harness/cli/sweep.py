@@ -53,6 +53,7 @@ def main(args: argparse.Namespace) -> int:
     """Run the sweep and write its summary and figures (``ipcosim.harness.studies.robustness.sweep_study``)."""
     from ipcosim.errors import IpcosimError
     from ipcosim.harness.grammar import parse_set
+    from ipcosim.harness.master import signals
     from ipcosim.harness.options import with_parameter_file
     from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.robustness import summary_line, sweep_study
@@ -63,14 +64,16 @@ def main(args: argparse.Namespace) -> int:
                         out=args.out, fresh=args.fresh, realism=args.realism)
     executor = open_executor(args.workers, args.scheduler)
     print(study.describe(executor), file=sys.stderr)
+    signals.keep(f"finished runs are kept in {study.out / 'results.csv'}; run the same command again to resume")
     try:
         result = study.run(executor, progress=not args.quiet, extra={"command": "ipcosim " + " ".join(sys.argv[1:])})
-    except KeyboardInterrupt:
-        print(f"ipcosim sweep: interrupted; finished runs are kept in {study.out / 'results.csv'}; "
-              "run the same command again to resume", file=sys.stderr)
-        return 130
+    except BaseException:  # a signal or an error: stop the workers now, not after their runs
+        executor.abort()
+        raise
     finally:
         executor.close()
+    signals.keep(f"every run is in {study.out / 'results.csv'}; the summary is incomplete: run the same command "
+                 "again to write it")
     if result.resumed:
         print(f"resumed: {result.resumed} runs were already done", file=sys.stderr)
     summary = study.write(result)

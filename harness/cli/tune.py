@@ -68,6 +68,7 @@ def main(args: argparse.Namespace) -> int:
     budget), then write the evaluations, the tuned parameter set and the report
     (``ipcosim.harness.studies.tune.tune_study``)."""
     from ipcosim.harness.grammar import parse_set
+    from ipcosim.harness.master import signals
     from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.tune import tune_study
 
@@ -79,13 +80,15 @@ def main(args: argparse.Namespace) -> int:
                        spread=args.spread, min_phase_margin=args.min_phase_margin)
     executor = open_executor(args.workers, args.scheduler)
     print(study.describe(executor), file=sys.stderr)
+    signals.keep("no parameter set written")
     try:
         result = study.run(executor, progress=not args.quiet)
-    except KeyboardInterrupt:
-        print("ipcosim tune: interrupted; nothing written", file=sys.stderr)
-        return 130
+    except BaseException:  # a signal or an error: stop the workers now, not after their runs
+        executor.abort()
+        raise
     finally:
         executor.close()
+    signals.keep(None)
     files = study.write(result)
     print(files.table, end="")
     print(f"tuned parameter set: {files.ssv}" + (f" (installed: {files.installed})" if files.installed else "")

@@ -27,7 +27,6 @@ import ctypes
 import hashlib
 import os
 import platform
-import subprocess
 import tempfile
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -35,7 +34,7 @@ from typing import Any, Callable, Sequence
 from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.algorithm import TimeBase
 from ipcosim.harness.master.plan import FUNCTIONS, Block, Op, loop_plan
-from ipcosim.toolchain import find_compiler
+from ipcosim.toolchain import find_compiler, run_compiler
 
 #: Flags of the compile: C99, no fused multiply-add (the Python loop rounds every operation).
 CFLAGS = ("-std=c99", "-O2", "-shared", "-fPIC", "-ffp-contract=off", "-Wall", "-Wextra", "-pedantic")
@@ -249,7 +248,7 @@ def _compile(source: str, so: Path, cc: str) -> None:
     try:
         with os.fdopen(fd, "w") as fh:
             fh.write(source)
-        proc = subprocess.run([cc, *CFLAGS, "-o", tmp_so, tmp_c], capture_output=True, text=True)
+        proc = run_compiler([cc, *CFLAGS, "-o", tmp_so, tmp_c])
         if proc.returncode != 0:
             lines = [x for x in proc.stderr.splitlines() if "error" in x] or proc.stderr.splitlines()
             raise LoopUnavailable(f"C compile failed: {(lines or [f'exit status {proc.returncode}'])[0].strip()}")

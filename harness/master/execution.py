@@ -256,8 +256,13 @@ class Execution:
         Rows go to the writer chunk by chunk as the run proceeds (memory stays bounded).
         Every instance is terminated (when FMI allows it) and freed, also after a failure, a
         KeyboardInterrupt or a signal deferred by :mod:`ipcosim.harness.master.signals`
-        (re-raised after cleanup with ``.result`` set).
+        (re-raised after cleanup with ``.result`` set). A signal is only recorded meanwhile
+        (``signals.holding``), never raised inside an FMU call.
         """
+        with signals.holding():
+            return self._run()
+
+    def _run(self) -> Result:
         self.recorder.open(self.writer)
         error: BaseException | None = None
         interrupted: BaseException | None = None

@@ -116,7 +116,10 @@ class Result:
             write_csv(self.data, files["results"], self.select(variables))
         self.write_metrics(files["metrics"])  # before the plot, which may fail (a missing extra)
         if plot:
-            files["plot"] = self.plot(out / "plot.png")
+            try:
+                files["plot"] = self.plot(out / "plot.png")
+            except ImportError as exc:  # the plotting extra is missing: the numbers are written, say so
+                self.metadata["plot_skipped"] = str(exc)
         return files
 
     def write_metrics(self, path: Path) -> None:
@@ -138,8 +141,98 @@ def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> li
     return [c for c in cols if c in chosen]
 
 
-class OutputFolderError(IpcosimError, OSError):
-    """The output folder cannot be created or written."""
+class OutputFolderError(UsageError, OSError):
+    """The output folder cannot be created or written, is another command's, or is in use."""
+
+
+#: What an output folder holds, written in it by :func:`claim_output`; a command never writes into
+#: a folder of another kind.
+KIND_FILE = ".ipcosim-kind"
+#: Held (``flock``) by the one process writing into an output folder.
+LOCK_FILE = ".ipcosim-lock"
+_held: dict[str, Any] = {}  # folder -> open lock file, for the life of the process
+
+
+def claim_output(out: str | os.PathLike[str], kind: str, what: str = "--out") -> Path:
+    """Make ``out`` the output folder of this process for ``kind`` (run, sweep, analyze, identify,
+    compare, tune), before any work: created, checked writable, of the same kind (or new), and
+    held by this process alone until it exits.
+
+    Raises
+    ------
+    OutputFolderError
+        One line naming ``what`` and the folder: a file, not writable, holding another command's
+        results, or being written by another process.
+    """
+    out = Path(out)
+    key = os.path.abspath(out)
+    if key in _held:
+        return out
+    if out.exists() and not out.is_dir():
+        raise OutputFolderError(f"{what} {out}: is a file, not a folder; give a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = tempfile.NamedTemporaryFile(dir=out, prefix=".ipcosim-write-check-", delete=True)
+        probe.write(b"x")
+        probe.close()
+    except OSError as exc:
+        raise OutputFolderError(f"{what} {out}: output folder is not writable ({exc.strerror or exc})") from None
+    _check_kind(out, kind, what)
+    lock = open(out / LOCK_FILE, "a+")  # noqa: SIM115 -- held open until the process exits
+    if not _try_lock(lock):
+        lock.seek(0)
+        owner = lock.read().strip() or "?"
+        lock.close()
+        raise OutputFolderError(f"{what} {out}: another ipcosim process (pid {owner}) is writing there; "
+                                f"wait for it or give another {what}")
+    lock.seek(0)
+    lock.truncate()
+    lock.write(str(os.getpid()))
+    lock.flush()
+    _held[key] = lock
+    (out / KIND_FILE).write_text(kind + "\n")
+    return out
+
+
+def release_output(out: str | os.PathLike[str]) -> None:
+    """Let another process write into ``out`` (a claim otherwise lasts until this process exits)."""
+    lock = _held.pop(os.path.abspath(out), None)
+    if lock is not None:
+        lock.close()
+
+
+def _try_lock(fh: Any) -> bool:
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no advisory locks; the kind check still holds
+        return True
+    try:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return False
+    return True
+
+
+def _check_kind(out: Path, kind: str, what: str) -> None:
+    """Refuse a folder that holds another kind of results: its kind file says so, or (a folder
+    written before kinds were recorded) a run's ``metrics.json`` or the first column of its
+    ``results.csv`` (``time``: a run's, ``index``: a sweep's)."""
+    try:
+        found = (out / KIND_FILE).read_text().strip()
+    except OSError:
+        found = ""
+    if not found and (out / "metrics.json").exists():
+        found = "run"
+    if not found:
+        try:
+            with (out / "results.csv").open(encoding="utf-8", errors="replace") as fh:
+                first = fh.readline().split(",", 1)[0].strip()
+        except OSError:
+            first = ""
+        found = {"time": "run", "index": "sweep"}.get(first, "")
+    if found and found != kind:
+        raise OutputFolderError(f"{what} {out}: holds the results of another command ({found}, not {kind}); "
+                                f"give another {what}")
 
 
 #: The files a run writes into its output folder (:meth:`Result.write`).
@@ -160,6 +253,7 @@ def open_output(out: str | Path, what: str = "--out") -> Path:
     """
     out = Path(out)
     _refuse_foreign_results(out / "results.csv", what)
+    claim_output(out, "run", what)
     try:
         for name in RUN_FILES if out.is_dir() else ():
             (out / name).unlink(missing_ok=True)

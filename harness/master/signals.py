@@ -1,11 +1,17 @@
-"""SIGINT and SIGTERM for a run: deferred to the master, never delivered into an FMU.
+"""SIGINT and SIGTERM for every command: at once outside FMU calls, deferred to the master inside them.
 
-While :func:`deferred` is active, a SIGINT or SIGTERM only records the signal. The master
+The command line enters :func:`deferred` with ``immediate=True`` around every command: a
+SIGINT or SIGTERM then raises :class:`Interrupted` at once wherever the command is (waiting for a
+sweep's workers, fitting, building an FMU), so it unwinds through the command's clean-up (worker
+processes stopped, temporary folders removed, finished results kept) within a second. Inside a
+run (the master enters :func:`deferred` again, which nests as a *holding* section) the signal is
+never delivered into an FMU: it is only recorded. The master
 calls :func:`check` between FMU calls (between chunks of steps, between the components'
 instantiation, initialization and clean-up calls); :func:`check` raises :class:`Interrupted`
 there, so the execution ends the way a failure does: results so far on disk, every FMU
 terminated and freed, temporary folders removed. The command line then exits with
-``128 + signal number``. An FMU's own code (a Python FMU runs in the same interpreter) never
+``128 + signal number``; what a command kept is said by the line it registers with :func:`keep`.
+An FMU's own code (a Python FMU runs in the same interpreter) never
 sees an exception it did not raise.
 
 A second signal while the first is being handled forces the exit at once (status
@@ -48,6 +54,9 @@ class Interrupted(KeyboardInterrupt):
 
 class _State:
     active = False
+    immediate = False  # raise at the signal outside holding sections (the command line)
+    holding = 0  # nesting depth of holding sections (a run's FMU calls)
+    kept: str | None = None
     pending: int | None = None
     critical = 0
     exit_after_critical: int | None = None
@@ -63,6 +72,17 @@ def register_temp(path: str | os.PathLike[str]) -> None:
 def unregister_temp(path: str | os.PathLike[str]) -> None:
     with contextlib.suppress(ValueError):
         _State.temp_dirs.remove(os.fspath(path))
+
+
+def keep(text: str | None) -> None:
+    """Say what an interrupted command has kept (``"finished runs in DIR/results.csv"``);
+    the command line prints it after the signal's name. None: nothing kept."""
+    _State.kept = text
+
+
+def kept() -> str | None:
+    """What the running command said it keeps when interrupted (:func:`keep`), or None."""
+    return _State.kept
 
 
 def pending() -> int | None:
@@ -101,9 +121,19 @@ def _force_exit(status: int, message: str = "second signal: exiting without fini
         os._exit(status)
 
 
+def exit_now(status: int) -> None:
+    """Leave the process at once with ``status``, removing the registered temporary folders
+    (a sweep's worker process stopped by its parent)."""
+    for path in list(_State.temp_dirs):
+        shutil.rmtree(path, ignore_errors=True)
+    os._exit(status)
+
+
 def _handler(signum: int, frame: object) -> None:
     if _State.pending is None:
         _State.pending = signum
+        if _State.immediate and not _State.holding:
+            raise Interrupted(signum)
         return
     status = 128 + signum
     if _State.critical:
@@ -125,8 +155,26 @@ def _watchdog(timeout: float, grace: float, done: threading.Event) -> None:
 
 
 @contextlib.contextmanager
-def deferred(timeout: float | None = None, grace: float = 2.0) -> Iterator[None]:
+def holding() -> Iterator[None]:
+    """A section (a run's FMU calls) where a signal is only recorded, for :func:`check` (the
+    master's, or the command line's after the command). Outside :func:`deferred` (and off the
+    main thread) a no-op."""
+    if not _State.active or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _State.holding += 1
+    try:
+        yield
+    finally:
+        _State.holding -= 1
+
+
+@contextlib.contextmanager
+def deferred(timeout: float | None = None, grace: float = 2.0, immediate: bool = False) -> Iterator[None]:
     """Defer SIGINT and SIGTERM to :func:`check` (main thread only; elsewhere a no-op).
+
+    Nested in an active block (a run inside a command), the block is a holding section: the
+    signal is recorded, never raised inside it.
 
     Parameters
     ----------
@@ -135,12 +183,20 @@ def deferred(timeout: float | None = None, grace: float = 2.0) -> Iterator[None]
         with ``signum == SIGALRM``.
     grace : float
         Seconds the master has to reach a check after the limit before the process exits.
+    immediate : bool
+        Raise :class:`Interrupted` at the signal itself, except inside nested (holding)
+        blocks: what the command line does, so that every command stops at once.
     """
-    if threading.current_thread() is not threading.main_thread() or _State.active:
+    if threading.current_thread() is not threading.main_thread():
         yield
+        return
+    if _State.active:
+        with holding():
+            yield
         return
     previous = {s: signal.getsignal(s) for s in HANDLED}
     _State.active, _State.pending, _State.exit_after_critical = True, None, None
+    _State.immediate, _State.holding, _State.kept = immediate, 0, None
     done = threading.Event()
     for s in HANDLED:
         signal.signal(s, _handler)
@@ -152,5 +208,5 @@ def deferred(timeout: float | None = None, grace: float = 2.0) -> Iterator[None]
         done.set()
         for s, h in previous.items():
             signal.signal(s, h)
-        _State.active = False
+        _State.active = _State.immediate = False
         _State.pending = None

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
 import sys
 import tempfile
 import zipfile
@@ -27,7 +26,7 @@ from pathlib import Path
 from ipcosim.errors import IpcosimError
 from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.harness.native import cgen, fmi3, models
-from ipcosim.toolchain import CROSS_COMPILERS, find_compiler, find_cross_compiler
+from ipcosim.toolchain import CROSS_COMPILERS, find_compiler, find_cross_compiler, run_compiler
 
 C_DIR = Path(__file__).resolve().parent / "c"
 #: The hand-written glue every native FMU carries (``fmi2shared.h``: what it shares with the loop container).
@@ -141,7 +140,7 @@ def compile_sources(sources: Path, files: list[str], out: Path, cc: str, flags: 
     """Compile ``files`` in ``sources`` into the shared library ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
     cmd = [cc, *flags, "-I", str(sources), *(str(sources / f) for f in files), "-o", str(out), "-lm"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = run_compiler(cmd)
     if proc.returncode != 0 or proc.stderr.strip():
         raise NativeBuildError(f"{out.stem}: {Path(cc).name} failed on the generated sources:\n{proc.stderr.strip()}")
 

@@ -9,6 +9,7 @@ import uuid
 from typing import Any
 from xml.etree import ElementTree
 
+from ipcosim.fmus.experiment import default_experiment
 from ipcosim.harness.native import tracer
 from ipcosim.harness.native.models import NativeModel
 
@@ -184,6 +185,8 @@ def model_description(model: NativeModel, gid: str, sources: list[str]) -> bytes
             unit = ElementTree.SubElement(ud, "Unit", {"name": name})
             ElementTree.SubElement(unit, "BaseUnit", _BASE_UNITS[name])
     log_categories(root)
+    period = next((v.start for v in model.variables if v.name == "sample_period" and v.start is not None), None)
+    ElementTree.SubElement(root, "DefaultExperiment", default_experiment(period))
     mv = ElementTree.SubElement(root, "ModelVariables")
     for v in model.variables:
         attrs = {"name": v.name, "valueReference": str(v.vr), "causality": v.causality, "variability": v.variability}

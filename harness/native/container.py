@@ -20,6 +20,7 @@ This module knows nothing of scenarios: :class:`ContainerSpec` says what to put 
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 import shutil
 import sys
@@ -391,10 +392,14 @@ def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None,
         (root / "documentation" / "index.txt").write_text(_readme(spec, comps, files))
         tmp_fmu = Path(tmp) / "out.fmu"
         cbuild.pack(root, tmp_fmu)
-        try:
-            shutil.copyfile(tmp_fmu, out)
+        staged = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+        try:  # beside the target, then renamed: never half an FMU at --out
+            shutil.copyfile(tmp_fmu, staged)
+            os.replace(staged, out)
         except OSError as exc:
             raise ContainerError(f"--out {out}: cannot write the FMU ({exc.strerror or exc})") from None
+        finally:
+            staged.unlink(missing_ok=True)
     return out
 
 

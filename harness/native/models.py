@@ -418,7 +418,10 @@ def law_model(kind: str, law: str, python_fmu: Path) -> NativeModel:
                        paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
                        meta={"role": "law", "law": law, "plant": kind, "design_values": dict(defaults)},
                        checks={**{p: "finite" for p in settable},
-                               **{s.name: s.constraint for s in catalog.schema(kind, law)
+                               # the native law keeps its gains at a new sample period (no redesign):
+                               # "period" checks only that it is positive there
+                               **{s.name: "positive" if s.constraint == "period" else s.constraint
+                                  for s in catalog.schema(kind, law)
                                   if s.constraint != "bool" and s.name in {v.name for v in native_vars}}})
 
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from ipcosim.errors import IpcosimError, closest
+from ipcosim.errors import IpcosimError, UsageError, closest
 from ipcosim.harness.master import integers
 from ipcosim.harness.master.system import (
     SSP_TYPE,
@@ -49,6 +49,14 @@ class BindingError(IpcosimError, ValueError):
 
 class FMUNotFoundError(BindingError, FileNotFoundError):
     """A component's FMU file does not exist."""
+
+
+class SetError(UsageError, BindingError):
+    """A ``--set`` that does not fit the scenario (a command-line mistake)."""
+
+
+class SwapFileNotFoundError(UsageError, FMUNotFoundError):
+    """A ``--swap`` naming an FMU file that does not exist (a command-line mistake)."""
 
 
 class UnconnectedInputWarning(UserWarning):
@@ -237,7 +245,7 @@ def resolve_swap(scenario: Scenario, component: str, target: str | os.PathLike[s
     if text.endswith(".fmu") or os.sep in text or "/" in text:
         path = Path(text)
         if not path.is_file():
-            raise FMUNotFoundError(f"--swap {component}={text}: FMU file does not exist")
+            raise SwapFileNotFoundError(f"--swap {component}={text}: FMU file does not exist")
         return SwapTarget(fmu=path.resolve(), description=f"FMU {text}")
     _load_alias_providers()
     if text not in swap_aliases:
@@ -729,7 +737,7 @@ def with_set(system: System, set: Mapping[str, Any]) -> tuple[System, dict[tuple
 
     Raises
     ------
-    BindingError
+    SetError
         Unknown component or variable, a variable that cannot be set (output, local,
         constant), a connected input, or a value that does not parse.
     """
@@ -737,27 +745,30 @@ def with_set(system: System, set: Mapping[str, Any]) -> tuple[System, dict[tuple
     for key, value in set.items():
         comp, sep, var = _split_name(system, str(key))
         if not sep or not comp or not var:
-            raise BindingError(f"--set {key}={value}: expected COMPONENT.VARIABLE=VALUE")
+            raise SetError(f"--set {key}={value}: expected COMPONENT.VARIABLE=VALUE")
         try:
             inst = system.instance(comp)
         except KeyError:
-            raise BindingError(f"--set {key}={value}: no component {comp!r}; "
+            raise SetError(f"--set {key}={value}: no component {comp!r}; "
                                f"{closest(comp, (i.name for i in system.instances))}") from None
         v = inst.model.variables.get(var)
         model_name = inst.model.path.name if inst.model.path else inst.model.name
         where = f"--set {key}={value}: component {comp!r} ({model_name})"
         if v is None:
             settable = (n for n, x in inst.model.variables.items() if x.settable)
-            raise BindingError(f"{where} has no variable {var!r}; {closest(var, settable)} "
+            raise SetError(f"{where} has no variable {var!r}; {closest(var, settable)} "
                                f"(`ipcosim describe {system.scenario.name}` lists them){rebuild_hint(inst.model)}")
         if not v.settable:
-            raise BindingError(f"{where}: {var!r} is {v.causality}/{v.variability} and cannot be set")
+            raise SetError(f"{where}: {var!r} is {v.causality}/{v.variability} and cannot be set")
         link = system.link_into(comp, var) or next((k for k in system.parameter_links
                                                      if k.dst == comp and k.dst_var.name == var), None)
         if link is not None:
-            raise BindingError(f"{where}: {v.causality} {var!r} is connected to {link.src_name}; set the source "
-                               f"instead")
-        out[(comp, var)] = convert_value(v, value, f"--set {key}")
+            raise SetError(f"{where}: {v.causality} {var!r} is connected to {link.src_name}; set the source "
+                           f"instead")
+        try:
+            out[(comp, var)] = convert_value(v, value, f"--set {key}")
+        except BindingError as exc:
+            raise SetError(str(exc)) from None
     return system, out
 
 

@@ -28,7 +28,7 @@ from typing import Any, Mapping, Sequence
 
 from lxml import etree
 
-from ipcosim.errors import IpcosimError, closest
+from ipcosim.errors import IpcosimError, UsageError, closest
 from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
 
 #: XML namespaces of SSP 1.0 (as in fmpy.ssp.ssd) plus the OSP annotations libcosim reads.
@@ -50,7 +50,11 @@ class ScenarioError(IpcosimError, ValueError):
     """An SSD, SSV or SSP archive that cannot be read, fails its schema or is inconsistent."""
 
 
-class ScenarioNotFoundError(IpcosimError, FileNotFoundError):
+class UnknownParameterSetError(UsageError, ScenarioError):
+    """A parameter set the scenario does not have (``--parameter-set``)."""
+
+
+class ScenarioNotFoundError(UsageError, FileNotFoundError):
     """A scenario name or path that does not exist."""
 
 
@@ -960,7 +964,7 @@ def select_parameter_set(scenario: Scenario, name: str) -> Scenario:
     from dataclasses import replace
 
     if name not in scenario.parameter_sets:
-        raise ScenarioError(f"{scenario.origin}: scenario {scenario.name!r} has no parameter set {name!r}; "
+        raise UnknownParameterSetError(f"{scenario.origin}: scenario {scenario.name!r} has no parameter set {name!r}; "
                             f"{closest(name, scenario.parameter_sets)}")
     new_set = scenario.parameter_sets[name]
     files = set(scenario.set_files.values())

@@ -50,7 +50,7 @@ _LAB_DOUBLE = {"b1": 0.1047, "b2": 0.1047, "cart_resolution": 2.275e-05, "pendul
                "end_stop": 0.407, "input_delay": 0.001, "voltage_resolution": 0.0048828125}
 _LAB_SINGLE = {"b": _LAB_DOUBLE["b1"], **{k: v for k, v in _LAB_DOUBLE.items() if not k.startswith("b")}}
 _HANGING = {"initial_pendulum_angle": 3.141592653589793}
-_IDENTIFY = ("a multisine voltage (0.2 .. 10 Hz, 2.5 V peak) with a weak hold of the motor-driven cart at 0, the "
+_IDENTIFY = ("a multisine voltage (0.2 .. 10 Hz, 3 V peak) with a weak hold of the motor-driven cart at 0, the "
              "pendulum hanging, on the lab plant (encoder counts, stick-slip Coulomb friction, end stops, DAC codes, "
              "one-sample delay): the identification experiment of docs/identify.md")
 VARIANTS: dict[str, tuple[str, str, str, float, float, dict[str, float]]] = {

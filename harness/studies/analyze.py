@@ -673,15 +673,14 @@ def analyze(scenario: str, *, parameter_set: str | None = None, set: Mapping[str
     import json
 
     loop, info = scenario_loop(scenario, parameter_set, set)
-    from ipcosim.harness.extras import MissingExtraError
 
     result = {**info, **analyze_loop(loop)}
     if out is not None:
-        try:
-            result["figures"] = plot_loop(loop, result, out, f"{info['scenario']} ({info['parameter_set']}): "
-                                                                 "loop at the plant input")
-        except MissingExtraError as exc:   # the numbers do not need the figures
-            result["figures"], result["figures_skipped"] = {}, str(exc)
+        from ipcosim.harness.extras import optional_figure
+
+        title = f"{info['scenario']} ({info['parameter_set']}): loop at the plant input"
+        result["figures"] = optional_figure(lambda: plot_loop(loop, result, out, title),
+                                            "the Bode, Nyquist and margin figures") or {}
         Path(out).mkdir(parents=True, exist_ok=True)
         (Path(out) / "analysis.json").write_text(json.dumps(result, indent=2))
     return result

@@ -30,6 +30,37 @@ def case_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, dtype=np.uint32)[0])
 
 
+#: The most runs a sweep may have: its cases, its rows and its plan are held in memory (about
+#: 2 kB a run), so a sweep is refused above this before anything is allocated.
+MAX_RUNS = 100_000
+
+
+def sweep_size(varies: Sequence[Vary], samples: int) -> int:
+    """The number of runs ``varies`` and ``samples`` give, computed without expanding them."""
+    size = samples
+    for v in varies:
+        if not v.is_random:
+            size *= int(v.args[2]) if v.kind == "grid" else len(v.args)
+    return size
+
+
+def check_size(varies: Sequence[Vary], samples: int, limit: int = MAX_RUNS) -> None:
+    """Refuse a sweep of more than ``limit`` runs, in one line naming the options and the size.
+
+    Raises
+    ------
+    VaryError
+        The product of the grid and list sizes times ``samples`` exceeds ``limit``.
+    """
+    size = sweep_size(varies, samples)
+    if size > limit:
+        factors = [f"{v.text or v.name}: {int(v.args[2]) if v.kind == 'grid' else len(v.args)} values"
+                   for v in varies if not v.is_random]
+        raise VaryError(f"--vary/--samples: {size} runs ({'; '.join(factors + [f'--samples {samples}'])}) is more "
+                        f"than a sweep's limit of {limit} runs; use fewer grid points or samples, or split the "
+                        f"sweep")
+
+
 def make_cases(varies: Sequence[Vary], nominal: Mapping[str, float], samples: int | None = None,
                seed: int = 0, fixed: Mapping[str, float] | None = None) -> list[SweepCase]:
     """Expand parsed variations into the list of runs.
@@ -51,11 +82,17 @@ def make_cases(varies: Sequence[Vary], nominal: Mapping[str, float], samples: in
     Returns
     -------
     list of SweepCase
+
+    Raises
+    ------
+    VaryError
+        ``samples`` < 1, or more than :data:`MAX_RUNS` runs (checked before any is made).
     """
     if samples is None:
         samples = 100 if any(v.is_random for v in varies) else 1
     if samples < 1:
         raise VaryError(f"--samples {samples}: need at least 1 sample")
+    check_size(varies, samples)
     grid_varies = [v for v in varies if not v.is_random]
     random_varies = [v for v in varies if v.is_random]
     grids = [v.points(nominal.get(v.name, 1.0)) for v in grid_varies]

@@ -147,7 +147,15 @@ RECYCLE_RUNS = 50
 def _worker_init() -> None:
     # The parent handles Ctrl-C (it stops the pool); workers must not die half-way on it.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # The parent stops its workers with SIGTERM: leave at once, without the run's temporary folders.
+    signal.signal(signal.SIGTERM, _terminated)
     atexit.register(_quick_exit)
+
+
+def _terminated(signum: int, frame: object) -> None:
+    from ipcosim.harness.master import signals
+
+    signals.exit_now(128 + signum)
 
 
 class LocalExecutor:
@@ -226,9 +234,12 @@ class LocalExecutor:
                             row = _error_row(case, one_line(exc))
                         pending.pop(case.index, None)
                         yield row
-                except BaseException:
+                except GeneratorExit:  # the caller has the rows it wanted: the pool stays for its next runs
                     for fut in futures:
                         fut.cancel()
+                    raise
+                except BaseException:  # a signal, an error of the caller: stop the workers now
+                    self.abort()
                     raise
                 if not broken and self._used >= self.workers * self.recycle_runs:
                     self.close()  # fresh worker processes for the next runs
@@ -256,11 +267,20 @@ class LocalExecutor:
                 p.terminate()
             except Exception:  # noqa: BLE001
                 pass
-        pool.shutdown(wait=True, cancel_futures=True)
+        for p in processes:  # a worker inside a long native call: kill it after a moment
+            p.join(timeout=0.5)
+            if p.is_alive():
+                p.kill()
+                p.join(timeout=1.0)
+        pool.shutdown(wait=True)  # its futures fail as broken: cancelling them races the pool's own thread
+        from ipcosim.harness.engine import remove_stale_extractions
+
+        remove_stale_extractions()  # the FMU folders of workers killed before their clean-up
 
     def abort(self) -> None:
         """Stop at once: cancel queued runs and end the worker processes."""
         self._kill_pool()
+        _stop_resource_tracker()
 
     def close(self) -> None:
         """Shut the pool down (waits for nothing: every submitted run has finished)."""
@@ -268,6 +288,22 @@ class LocalExecutor:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
         self._used = 0
+        _stop_resource_tracker()
+
+
+def _stop_resource_tracker() -> None:
+    """End (and wait for) the helper process multiprocessing starts beside a pool, which would
+    otherwise outlive this process by a moment, unwaited for; it is started again if needed."""
+    import gc
+    from multiprocessing import resource_tracker
+
+    gc.collect()  # the pool's semaphores released and unregistered first: no "leaked semaphore" warning
+    stop = getattr(resource_tracker._resource_tracker, "_stop", None)  # noqa: SLF001 -- no public way
+    if stop is not None:
+        try:
+            stop()
+        except Exception:  # noqa: BLE001 -- a tracker already gone
+            pass
 
 
 _ADDRESS = re.compile(r"^(tcp|tls|ws|wss|ucx|inproc)://\S+$")

@@ -26,6 +26,13 @@ class SweepProgress:
         self._last_print = 0.0
         self._last_decile = -1
 
+    def show(self) -> None:
+        """Draw the bar now (before the first run ends: a sweep shows its size at once)."""
+        if self.enabled:
+            self._draw(end="\r" if self.tty else "\n")
+            self._last_print = time.monotonic()
+            self._last_decile = int(10 * self.done / self.total)
+
     def update(self, status: str) -> None:
         self.done += 1
         self.new += 1

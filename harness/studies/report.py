@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 from ipcosim.fmus.params import KINDS
+from ipcosim.harness.extras import optional_figure
 from ipcosim.harness.studies.robustness import fmt
 
 CONTROLLERS = ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")
@@ -384,7 +385,8 @@ def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str
     out_dir.mkdir(parents=True, exist_ok=True)
     figures: dict[str, Path] = {}
     for plant in KINDS:
-        path = plot_plant(plant, results, out_dir / "figures" / f"{plant}.png")
+        path = optional_figure(lambda kind=plant: plot_plant(kind, results, out_dir / "figures" / f"{kind}.png"),
+                               "the comparison's figures")
         if path:
             figures[plant] = path
     header, rows = _table(results, robustness)

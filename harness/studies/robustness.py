@@ -145,10 +145,14 @@ def write_summary(rows: Sequence[Mapping[str, Any]], spec: Any, varied: Sequence
     summary.update({"scenario": spec.name, **(extra or {})})
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     md = summary_markdown(summary, title=f"Robustness of {spec.name}")
-    figures = plot_distributions(rows, spec.metric_names, out / "figures", title=spec.name)
+    from ipcosim.harness.extras import optional_figure
+
+    figures = optional_figure(lambda: plot_distributions(rows, spec.metric_names, out / "figures", title=spec.name),
+                              "the sweep's figures") or []
     metric = "itae_position" if "itae_position" in spec.metric_names else spec.metric_names[0]
-    by_param = plot_parameters(rows, list(varied), metric, out / "figures",
-                               title=f"{spec.name}: {metric} against each varied parameter")
+    by_param = optional_figure(lambda: plot_parameters(rows, list(varied), metric, out / "figures",
+                                                       title=f"{spec.name}: {metric} against each varied parameter"),
+                               "the sweep's figures")
     if by_param is not None:
         figures.insert(0, by_param)
     md += "\n" + "\n".join(f"![{p.stem}](figures/{p.name})" for p in figures) + "\n"
@@ -260,17 +264,18 @@ def sweep_study(scenario: str, vary: Sequence[str], *, set: Mapping[str, float] 
         kind comes from the scenario's name.
     """
     from ipcosim.harness.grammar import parse_all
+    from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.specs import default_out, study_spec
     from ipcosim.harness.studies.store import discard_results
 
+    folder = claim_output(Path(out) if out else default_out(scenario), "sweep")  # before any work
     set = {**(_bench(scenario, realism) if realism else {}), **(set or {})}
     spec, flavour = study_spec(scenario, fmus, names=[*set, *(v.partition("=")[0].strip() for v in vary)],
                                check=lambda s: parse_all(vary, s.parameters), stop_time=stop_time, step=step,
                                set=set, parameter_set=parameter_set)
     varies = parse_all(vary, spec.parameters)
     cases = make_cases(varies, spec.parameters, samples=samples, seed=seed)
-    folder = Path(out) if out else default_out(scenario)
     if fresh and folder.exists():
         discard_results(folder)
     return SweepStudy(spec, flavour, varies, cases, folder,

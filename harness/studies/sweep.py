@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence, TextIO
 
 from ipcosim.errors import IpcosimError
+from ipcosim.harness.master.results import claim_output
 from ipcosim.harness.studies.cases import SweepCase
 from ipcosim.harness.studies.executors import Executor, open_executor
 from ipcosim.harness.studies.progress import SweepProgress
@@ -219,7 +220,7 @@ def _open_results(path: Path, meta: dict[str, Any], columns: list[str],
     SweepMismatchError
         The folder holds results of another sweep (other plan hash or columns).
     """
-    path.parent.mkdir(parents=True, exist_ok=True)
+    claim_output(path.parent, "sweep")
     meta_path = path.parent / METADATA_FILE
     done: dict[int, dict[str, Any]] = {}
     existing = wanted is not None and path.exists() and path.stat().st_size > 0
@@ -255,6 +256,7 @@ def _run_missing(spec: RunSpec, cases: Sequence[SweepCase], done: dict[int, dict
                    stream=progress if hasattr(progress, "write") else None)
     for row in done.values():
         bar.counts[row["status"]] = bar.counts.get(row["status"], 0) + 1
+    bar.show()
     try:
         if todo:
             if executor is None:

@@ -451,7 +451,9 @@ def _scenario_dir(scenario: str) -> Path | None:
 
 
 def install_path(scenario: str) -> Path:
-    """Where ``--install`` puts a tuned set: ``autotuned.ssv`` in the scenario's folder (beside its other sets).
+    """Where ``--install`` puts a tuned set: ``autotuned.ssv`` in the scenario's folder (beside its other
+    sets); for a scenario shipped in an installed wheel, in the user's copy of it
+    (``ipcosim.harness.paths.user_scenario_dir``, made by :func:`install`), never in site-packages.
 
     Raises
     ------
@@ -461,7 +463,25 @@ def install_path(scenario: str) -> Path:
     folder = _scenario_dir(scenario)
     if folder is None or Path(scenario).suffix == ".ssp":
         raise UsageError(f"--install: scenario {scenario!r} has no folder to install a parameter set into")
+    from ipcosim.harness.paths import SCENARIO_DIR, in_checkout, user_scenario_dir
+
+    if not in_checkout() and folder.resolve().is_relative_to(SCENARIO_DIR.resolve()):
+        return user_scenario_dir() / folder.name / "autotuned.ssv"
     return folder / "autotuned.ssv"
+
+
+def install(scenario: str, path: Path, text: str) -> None:
+    """Write the tuned set ``text`` to ``path`` (:func:`install_path`), first copying the shipped
+    scenario's SSD and parameter sets into the user's folder when ``path`` is there."""
+    import os
+    import shutil
+
+    folder = _scenario_dir(scenario)
+    if folder is not None and path.parent != folder and not (path.parent / "SystemStructure.ssd").exists():
+        shutil.copytree(folder, path.parent, dirs_exist_ok=True, ignore=shutil.ignore_patterns("autotuned.ssv"))
+    staged = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    staged.write_text(text)
+    os.replace(staged, path)
 
 
 def starting_set(scenario: str, parameter_set: str | None = None) -> str | None:
@@ -568,9 +588,14 @@ class TuneStudy:
         self.ssv.parent.mkdir(parents=True, exist_ok=True)
         self.ssv.write_text(text)
         if self.install is not None:
-            self.install.write_text(text)
+            install(self.scenario, self.install, text)
         files.report.write_text(self._report(res, files.table, component))
         return files
+
+    def _installed_scenario(self) -> str:
+        """How to name the scenario that holds the installed set: its name, or the user's copy's folder."""
+        folder = _scenario_dir(self.scenario)
+        return self.scenario if self.install is None or self.install.parent == folder else str(self.install.parent)
 
     def _description(self, res: TuneResult) -> str:
         scenario_hash = getattr(self.spec, "scenario_hash", "") or self.spec.key
@@ -584,8 +609,8 @@ class TuneStudy:
             usage = "It holds the tuned values as component.variable (apply them with --set)."
         elif self.install is not None:
             usage = (f"It is the complete `{component}` parameter set ({self.parameter_set or 'default'} with the "
-                     f"tuned values), installed as `{self.install}`: `ipcosim run {self.scenario} --parameter-set "
-                     f"autotuned` runs it.")
+                     f"tuned values), installed as `{self.install}`: `ipcosim run {self._installed_scenario()} "
+                     f"--parameter-set autotuned` runs it.")
         else:
             usage = (f"It is the complete `{component}` parameter set ({self.parameter_set or 'default'} with the "
                      f"tuned values); copy it beside the scenario (or tune with --install) to run it with "
@@ -607,11 +632,12 @@ def _outputs(scenario: str, out: Path | str | None, ssv: Path | str | None,
              install: bool) -> tuple[Path, Path, Path | None]:
     """Where a tuning writes: its folder (created), the tuned set and, with ``install``, the copy beside the
     scenario (checked before any run)."""
+    from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.specs import default_out
 
-    folder = Path(out) if out else default_out(scenario, "tune")
-    folder.mkdir(parents=True, exist_ok=True)
-    return folder, Path(ssv) if ssv else folder / "autotuned.ssv", install_path(scenario) if install else None
+    installed = install_path(scenario) if install else None  # refused before the folder is made
+    folder = claim_output(Path(out) if out else default_out(scenario, "tune"), "tune")
+    return folder, Path(ssv) if ssv else folder / "autotuned.ssv", installed
 
 
 def tune_study(scenario: str, params: str, *, bounds: Sequence[str] = (), set: Mapping[str, float] | None = None,
