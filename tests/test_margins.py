@@ -139,6 +139,9 @@ def test_without_matplotlib_analyze_keeps_its_margins(tmp_path, monkeypatch, cap
     from ipcosim.harness.cli import main as cli_main
 
     real = importlib.util.find_spec
+    from ipcosim.harness import extras
+
+    monkeypatch.setattr(extras, "_said", set())  # each skip is said once a process: once in this test
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "matplotlib" else real(name, *a))
     assert cli_main(["analyze", "single-mass-lqr", "--out", str(tmp_path)]) == 0
     text, err = capsys.readouterr()
