@@ -83,7 +83,9 @@ def test_ssv_round_trip(tmp_path):
 
 
 def test_tune_improves_on_the_nominal_gains_within_budget():
-    spec = PurePlantSpec(stop_time=1.5)
+    # 2.5 s: the success criterion reads the last half of a run this short, which must be past the step's
+    # transient (the best loop settles at 0.87 s; over 0.75-1.5 s its cart still moves 2.2 mm)
+    spec = PurePlantSpec(stop_time=2.5)
     names = ["controller.q_position", "controller.q_angle"]
     bounds = [(100.0, 20000.0), (50.0, 800.0)]
     executor = LocalExecutor(2)
