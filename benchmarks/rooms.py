@@ -23,7 +23,7 @@ ROOMS = {
     "harness/master": ("harness/master", True),
     "harness/scenario": ("harness/scenario", True),
     "harness/studies": ("harness/studies", True),
-    "harness/evidence": ("harness/evidence", True),
+    "evidence": ("evidence", True),
     "harness/cli": ("harness/cli", True),
     "harness (top-level modules)": ("harness", False),
     "benchmarks": ("benchmarks", True),

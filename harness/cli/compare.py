@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from ipcosim.harness.cli import add_study_fmus_option
 
@@ -38,10 +37,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU cores)")
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler address tcp://HOST:PORT")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--thesis-claims", action="store_true",
-                   help="instead: judge the thesis's claims with its own gain sets on the ideal and the lab plant "
-                        "(20 s, pure loop) and search the conditions under which its double-mass LQR falls; "
-                        "writes DIR/claims.md and DIR/claims.json")
     p.set_defaults(func=main)
 
 
@@ -53,8 +48,6 @@ def main(args: argparse.Namespace) -> int:
     from ipcosim.harness.studies.compare import comparison
     from ipcosim.harness.studies.executors import open_executor
 
-    if args.thesis_claims:
-        return thesis_claims(Path(args.out))
     names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else None
     study = comparison(names, args.out, fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time,
                        robustness=args.robustness, samples=args.samples, seed=args.seed, progress=not args.quiet)
@@ -76,13 +69,3 @@ def main(args: argparse.Namespace) -> int:
         raise IpcosimError(study.failure())
     return 0
 
-
-def thesis_claims(out: Path) -> int:
-    """``--thesis-claims``: verdict, evidence and condition per claim (``ipcosim.harness.evidence.results_page``)."""
-    from ipcosim.harness.evidence.results_page import write_claims
-
-    rows, files = write_claims(out)
-    for r in rows:
-        print(f"{r['verdict']:34s} {r['form']}")
-    print(f"claims: {files['markdown']}, {files['json']}")
-    return 0

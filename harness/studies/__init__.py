@@ -2,4 +2,4 @@
 ``progress``), run specifications, robustness, tuning, analysis, identification (``identify``:
 the plant's parameters from a run's log) and the controller comparison report. The ``--vary``
 grammar is :mod:`ipcosim.harness.grammar`; the thesis's own evidence is
-:mod:`ipcosim.harness.evidence`. May import every room below the evidence."""
+:mod:`evidence`. May import every room below the evidence."""

@@ -23,7 +23,7 @@ def available_scenarios() -> list[str]:
     """The plant x controller scenarios of the project, in report order, plus any other folder
     that is not one of the generator's variants (swing-up, tap, lab: they pose other tasks)."""
     from ipcosim.harness.paths import SCENARIO_DIR
-    from ipcosim.harness.scenario.ssp_gen import VARIANTS
+    from ipcosim.harness.scenario.scenarios import VARIANTS
     from ipcosim.harness.studies.report import SCENARIOS
 
     found = sorted(p.name for p in SCENARIO_DIR.iterdir() if (p / "SystemStructure.ssd").exists()) \

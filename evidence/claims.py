@@ -243,7 +243,7 @@ CLAIMS: tuple[Claim, ...] = (
           "double-mass LQR lets the pendulum fall", _double_lqr_falls),
     Claim("it always has a steady-state error of 0.005575m", "4.2.3, Fig. 4.11 (simulation)",
           "double-mass HSMC upright, error >= 1 mm", _double_hsmc,
-          fitted="the lab plant's Coulomb friction is fitted to this error (ipcosim.harness.evidence.friction)"),
+          fitted="the lab plant's Coulomb friction is fitted to this error (evidence.friction)"),
     Claim("the steady-state error and settling time have been decreased", "4.2.4, Fig. 4.12",
           "double-mass adaptive HSMC settles sooner with a smaller error than HSMC",
           _adaptive_faster("double-mass", True)),
