@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any, Callable, Sequence
 
 from ipcosim.harness.cli import add_study_fmus_option
 
@@ -20,8 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "compare", help="run every scenario and write the controller comparison report",
         description="Run every plant x controller scenario and write a Markdown and a self-contained HTML "
-                    "report: metrics table, overlaid time series per plant and the thesis's claims beside "
-                    "the measured numbers.")
+                    "report: metrics table and overlaid time series per plant.")
     p.add_argument("--out", default="out/compare", help="report folder (default out/compare)")
     p.add_argument("--scenarios", help="comma-separated scenario names (default: every scenario in ssp/)")
     p.add_argument("--robustness", action="store_true",
@@ -40,10 +40,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=main)
 
 
-def main(args: argparse.Namespace) -> int:
+def main(args: argparse.Namespace, claims: Callable[[Any], Sequence[Any]] | None = None) -> int:
     """Co-simulate every scenario once (one sweep over the scenarios), optionally a robustness
     sweep of each, then write the report, ``metrics.csv`` and ``metrics.json``
-    (``ipcosim.harness.studies.compare``)."""
+    (``ipcosim.harness.studies.compare``); ``claims`` judges claims on the results for the report."""
     from ipcosim.errors import IpcosimError
     from ipcosim.harness.studies.compare import comparison
     from ipcosim.harness.studies.executors import open_executor
@@ -61,7 +61,7 @@ def main(args: argparse.Namespace) -> int:
         return 130
     finally:
         executor.close()
-    files = study.write()
+    files = study.write(claims)
     print(f"report: {files['markdown']}, {files['html']}")
     ok, failed = study.counts()
     print(f"{len(study.results)} scenarios: {ok} succeed, {failed} failed to run")

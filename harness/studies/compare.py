@@ -141,9 +141,10 @@ class Comparison:
                         progress=progress, extra_metadata={"vary": [v.text for v in varies], "seed": self.seed})
         return rob.summarize(res.rows, plain.metric_names)
 
-    def write(self) -> dict[str, Path]:
+    def write(self, claims: Callable[[Any], Sequence[Any]] | None = None) -> dict[str, Path]:
         """Write the report (``ipcosim.harness.studies.report.render``), ``metrics.csv`` and ``metrics.json``;
-        returns render's files and ``metrics_csv``/``metrics_json``."""
+        returns render's files and ``metrics_csv``/``metrics_json``. ``claims``: results -> the claims judged
+        on them (``render``'s ``claims``), shown in the report."""
         from ipcosim.harness.studies.report import render
         from ipcosim.harness.studies.store import package_versions
 
@@ -151,7 +152,7 @@ class Comparison:
                 "stop time": f"{self.stop_time:g} s" if self.stop_time else "scenario default",
                 "executor": self.executor_description, "packages": package_versions()}
         files = render(self.results, self.out, robustness=self.robustness or None, robustness_note=self.note,
-                       meta=meta)
+                       meta=meta, claims=claims(self.results) if claims else ())
         return {**files, **self._write_metrics()}
 
     @property
