@@ -37,7 +37,7 @@ def _exists(ref: str, base: Path) -> bool:
 
 
 def _prose(text: str) -> str:
-    """A doc without its generated snapshot blocks (``python -m benchmarks.rooms --write``: room labels)."""
+    """A doc without its generated snapshot blocks (``python -m devtools.rooms --write``: room labels)."""
     return re.sub(r"<!-- rooms:begin -->.*?<!-- rooms:end -->", "", text, flags=re.S)
 
 

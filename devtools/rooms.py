@@ -1,4 +1,4 @@
-"""The rooms of the code base in figures: ``python -m benchmarks.rooms [--write]``.
+"""The rooms of the code base in figures: ``python -m devtools.rooms [--write]``.
 
 For each room (docs/architecture.md) the non-blank lines of its ``.py`` files and its longest
 function (``def`` to last line, docstring included), and the number of import cycles between
@@ -27,6 +27,7 @@ ROOMS = {
     "harness/cli": ("harness/cli", True),
     "harness (top-level modules)": ("harness", False),
     "benchmarks": ("benchmarks", True),
+    "devtools": ("devtools", True),
 }
 BEGIN, END = "<!-- rooms:begin -->", "<!-- rooms:end -->"
 
