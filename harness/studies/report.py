@@ -233,7 +233,7 @@ INTRO = ("Each scenario moves the motor-driven cart from 0 to 0.05 m with the pe
          "Cost J = ITAE(x - r) + 0.1 ITAE(angle) + 1e-4 ISE(voltage), infinite when the pendulum falls. "
          "Angle reversals count swings of the pendulum larger than 0.005 rad (an oscillation measure). "
          "Gains: the controller parameter set each scenario ran with (thesis = the thesis's values, tuned = "
-         "the controller design's retuned values); the claims are judged on these runs.")
+         "the controller design's retuned values).")
 CLAIM_HEADER = ["thesis claim", "source", "checked as", "measured", "verdict"]
 
 
@@ -272,7 +272,7 @@ def _markdown(r: _Report) -> str:
     for plant, path in r.figures.items():
         md += [f"![{plant}](figures/{path.name})", ""]
     if r.claim_rows:
-        md += ["## The thesis's claims, measured", "", r.tally, "",
+        md += ["## The thesis's claims, measured", "", "Judged on the runs above. " + r.tally, "",
                _md_table(CLAIM_HEADER, [[f"\"{c[0]}\"", *c[1:]] for c in r.claim_rows])]
     if r.packages:
         md += ["Package versions: " + ", ".join(f"{k} {v}" for k, v in r.packages.items()), ""]
@@ -295,7 +295,7 @@ def _html_page(r: _Report) -> str:
         body.append(f'<figure><img alt="{plant}" src="data:image/png;base64,{data}"/>'
                     f"<figcaption>{html.escape(PLANT_LABELS[plant])}</figcaption></figure>")
     if r.claim_rows:
-        body += ["<h2>The thesis's claims, measured</h2>", f"<p>{r.tally}</p>",
+        body += ["<h2>The thesis's claims, measured</h2>", f"<p>Judged on the runs above. {r.tally}</p>",
                  _html_table(CLAIM_HEADER, r.claim_rows, r.claim_classes)]
     if r.packages:
         body.append("<p>Package versions: " + html.escape(", ".join(f"{k} {v}" for k, v in r.packages.items()))
