@@ -1,7 +1,8 @@
 """The controller comparison report (``ipcosim compare``): metrics table plant x controller,
-thesis-style overlaid time series per plant, and the thesis's qualitative claims beside the
-measured numbers, each marked confirmed or not. Written as Markdown and as one self-contained
-HTML page (figures embedded).
+thesis-style overlaid time series per plant, and, when :func:`render` is given them, claims judged
+on the results beside the measured numbers, each marked confirmed or not (the thesis's own claims
+are not part of the package). Written as Markdown and as one self-contained HTML page (figures
+embedded).
 
 The report is rendered from plain data -- one result row per scenario (metrics, status and,
 for the figures, the time series) plus optional robustness summaries -- so it can be checked
