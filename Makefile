@@ -50,7 +50,7 @@ bench: fmus
 # The FMUs of both flavours with reference results in the FMI cross-check layout, checked by fmpy.cross_check.
 crosscheck: $(STAMP)
 	$(BIN)/ipcosim build --native
-	$(BIN)/python -m ipcosim.harness.evidence.fmi_crosscheck build/crosscheck
+	$(BIN)/python -m evidence.fmi_crosscheck build/crosscheck
 
 clean:
 	rm -rf build out

@@ -90,7 +90,7 @@ def overhead(repeats: int = LOOP_REPEATS) -> list[str]:
 def other_masters(name: str, repeats: int = REPEATS) -> list[str]:
     """Ours against libcosim and fmpy on the same archive, extraction included on every side."""
     import ipcosim
-    from ipcosim.harness.evidence.crosscheck import run_fmpy_ssp, run_libcosim
+    from evidence.crosscheck import run_fmpy_ssp, run_libcosim
     from ipcosim.harness.paths import BUILD_SSP_DIR
 
     ssp = BUILD_SSP_DIR / f"{name}.ssp"

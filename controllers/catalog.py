@@ -20,7 +20,7 @@ LQG            tuned; lab (not in thesis)   tuned; lab (not in thesis)
 =============  ===========================  =========================================
 
 The first set listed is the default: the FMU parameter defaults are its values, and the SSP
-scenarios bind it (``parameter_sets`` feeds ``ipcosim.harness.scenario.ssp_gen``'s ``.ssv`` files).
+scenarios bind it (``parameter_sets`` feeds ``devtools.ssp_gen``'s ``.ssv`` files).
 
 Flat parameter names (``schema``): the law's gains as in its module of ``ipcosim.controllers.laws``; ``sample_period``
 [s]; ``voltage_limit`` [V]; for the model-based laws (LQR, LQG, HSMC, AdaptiveHSMC) the design model's
@@ -29,7 +29,7 @@ preset): the controller's *belief* about the plant, independent of the plant com
 
 Adding a law: one module in ``ipcosim.controllers.laws`` declaring its ``LawEntry``, listed in ``REGISTRY``
 below; its FMU scripts (``controllers/fmu_<law>_<plant>.py``); its scenario row
-(``ipcosim.harness.scenario.ssp_gen``).
+(``devtools.ssp_gen``).
 """
 from __future__ import annotations
 
@@ -114,7 +114,7 @@ def set_values(kind: str, law: str, parameter_set: str) -> dict[str, Any]:
 def parameter_sets(kind: str, law: str) -> dict[str, dict[str, Any]]:
     """``{set name: {FMU parameter: value}}`` of ``law`` on plant ``kind``.
 
-    Used by ``ipcosim.harness.scenario.ssp_gen``.
+    Used by ``devtools.ssp_gen``.
     """
     return {name: set_values(kind, law, name) for name in PARAMETER_SETS[law][kind]}
 

@@ -216,7 +216,7 @@ LAB_SOURCES = {
     "input_delay": "one sample (1 ms at the rig's 1 kHz): the voltage computed from a sample's readings is written "
                    "at the next sample",
     "b, b1, b2": "FITTED, not measured: 0.1047 N is the passive-cart Coulomb force that reproduces the thesis's "
-                 "5.575 mm double-mass HSMC error (ipcosim.harness.evidence.friction); assumed the same for every "
+                 "5.575 mm double-mass HSMC error (evidence.friction); assumed the same for every "
                  "cart; "
                  "stick-slip (Karnopp 1985, ipcosim.fmus.physics): below this force a cart does not move",
 }

@@ -17,7 +17,6 @@ below it, never one above:
                                                export, testing helpers, baselines, plots, pytest plugin,
                                                the live view
     harness.studies                            the generic study engine
-    harness.evidence                           the thesis's own evidence
     harness.cli                                the command line
 
 An import is any ``import``/``from`` statement, at module level or inside a function (a lazy
@@ -48,7 +47,6 @@ ROOMS: tuple[tuple[str, ...], ...] = (
      "harness.testing", "harness.baseline", "harness.plot", "harness.pytest_plugin", "harness.describe",
      "harness.live"),
     ("harness.studies",),
-    ("harness.evidence",),
     ("harness.cli",),
 )
 #: Prefixes that name one module only, not the package below them (the rest have rooms of their own).
@@ -190,6 +188,41 @@ def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
         if v not in index:
             visit(v)
     return cycles
+
+
+#: Top-level folders of the clone that are not installed: the package never imports them.
+OUTSIDE = ("evidence", "devtools", "benchmarks", "tests")
+
+
+def outside_imports(path: Path) -> list[str]:
+    """The imports of a module (file ``path``) of a folder the package does not install (``OUTSIDE``):
+    ``import``/``from`` statements anywhere in the module and strings naming one of their modules."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        names: list[str] = []
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            names = [node.module or ""]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and \
+                re.fullmatch(r"(\w+)(\.\w+)+(:\w+)?", node.value):
+            module = node.value.partition(":")[0]
+            if (ROOT / module.replace(".", "/")).with_suffix(".py").is_file():
+                names = [module]
+        found += [n for n in names if n.split(".")[0] in OUTSIDE]
+    return found
+
+
+def test_the_package_never_imports_the_evidence_or_the_tooling() -> None:
+    bad = {name: found for name, path in _modules().items() if (found := outside_imports(path))}
+    assert not bad, f"installed modules importing folders that are not installed: {bad}"
+
+
+def test_the_outside_check_sees_an_import(tmp_path) -> None:
+    mod = tmp_path / "m.py"
+    mod.write_text("def f():\n    from evidence.claims import judge\n    import devtools.apidoc\n"
+                   "    return 'evidence.results_page:main', 'evidence and more'\n")
+    assert outside_imports(mod) == ["evidence.claims", "devtools.apidoc", "evidence.results_page"]
 
 
 def test_no_import_cycles() -> None:

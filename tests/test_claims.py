@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipcosim.harness.evidence.claims import _lqr_case, oscillation
+from evidence.claims import _lqr_case, oscillation
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,18 +31,18 @@ def test_lqr_falls_between_the_analysed_delay_margin_and_the_search_result() -> 
 
 
 def test_results_margins_table_is_current() -> None:
-    from ipcosim.harness.evidence.results_page import margins_table
+    from evidence.results_page import margins_table
 
     assert margins_table() in (ROOT / "docs" / "results.md").read_text()
 
 
 def test_judge_gives_a_verdict_per_claim_on_both_plants() -> None:
     """Short runs: every claim gets a verdict and evidence on both plants; the PID claims hold on both."""
-    from ipcosim.harness.evidence.claims import CLAIMS, judge
+    from evidence.claims import CLAIMS, judge
 
     rows = judge(stop_time=3.0)
     assert [r["claim"] for r in rows] == [c.text for c in CLAIMS]
-    from ipcosim.harness.evidence.claims import verdict
+    from evidence.claims import verdict
 
     fitted = {c.text: c.fitted for c in CLAIMS}
     for r in rows:
@@ -53,7 +53,7 @@ def test_judge_gives_a_verdict_per_claim_on_both_plants() -> None:
 
 
 def test_verdicts_never_confirm_by_a_fit_and_below_a_count_are_indistinguishable() -> None:
-    from ipcosim.harness.evidence.claims import verdict
+    from evidence.claims import verdict
 
     assert verdict(True, True) == "confirmed" and verdict(False, False) == "not confirmed"
     fitted = verdict(False, True, "friction fitted to it")
@@ -63,7 +63,7 @@ def test_verdicts_never_confirm_by_a_fit_and_below_a_count_are_indistinguishable
 
 
 def test_equal_errors_within_one_count_are_a_tie_not_an_improvement() -> None:
-    from ipcosim.harness.evidence.claims import POSITION_TOLERANCE, Run, _adaptive_faster
+    from evidence.claims import POSITION_TOLERANCE, Run, _adaptive_faster
 
     def r(settle: float, err: float) -> Run:
         return Run({"upright": True, "settling_time_s": settle, "steady_state_error_m": err}, 0.0, 0.0)

@@ -4,9 +4,9 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from evidence.controllers_table import BEGIN, END, document
 from ipcosim.controllers.laws.hsmc import TUNED_HSMC
 from ipcosim.controllers.laws.pid import TUNED_CASCADE
-from ipcosim.harness.evidence.controllers_table import BEGIN, END, document
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "controllers.md"
 
@@ -43,7 +43,7 @@ def test_evidence_table_in_the_docs_is_current() -> None:
         text = doc.read_text()
         block = text[text.index(BEGIN) + len(BEGIN):text.index(END)].strip()
         assert _same_table(block, expected), \
-            f"run: python -m ipcosim.harness.evidence.controllers_table --update {doc.name}"
+            f"run: python -m evidence.controllers_table --update {doc.name}"
 
 
 def test_tuned_gains_in_the_docs_match_the_catalog() -> None:

@@ -37,7 +37,7 @@ def _exists(ref: str, base: Path) -> bool:
 
 
 def _prose(text: str) -> str:
-    """A doc without its generated snapshot blocks (``python -m benchmarks.rooms --write``: room labels)."""
+    """A doc without its generated snapshot blocks (``python -m devtools.rooms --write``: room labels)."""
     return re.sub(r"<!-- rooms:begin -->.*?<!-- rooms:end -->", "", text, flags=re.S)
 
 
@@ -136,17 +136,17 @@ def test_no_hint_names_an_option_its_command_does_not_take() -> None:
 
 
 def test_the_api_table_is_the_signature() -> None:
-    from ipcosim.harness.cli.apidoc import BLOCK, render
+    from devtools.apidoc import BLOCK, render
 
     text = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
     block = re.search(rf"<!-- {BLOCK} -->\n(.*?)<!-- /{BLOCK} -->", text, re.S)
     assert block, f"docs/api.md has no <!-- {BLOCK} --> block"
-    assert block.group(1) == render(), "run `python -m ipcosim.harness.cli.apidoc --update`"
+    assert block.group(1) == render(), "run `python -m devtools.apidoc --update`"
 
 
 @pytest.mark.parametrize("option", ["--fmus", "--overrun-budget", "--strict", "--timeout", "--loop", "--quiet"])
 def test_the_api_table_names_every_run_option(option: str) -> None:
-    from ipcosim.harness.cli.apidoc import render
+    from devtools.apidoc import render
 
     assert option in render()
 

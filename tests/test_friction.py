@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import pytest
 
+from evidence.friction import THESIS_DOUBLE_MASS_HSMC_ERROR, hsmc_error
 from ipcosim.fmus.params import PRESETS, preset
-from ipcosim.harness.evidence.friction import THESIS_DOUBLE_MASS_HSMC_ERROR, hsmc_error
 
 
 def test_fitted_friction_reproduces_the_thesis_error() -> None:

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import ipcosim.harness
+from evidence.crosscheck import run_libcosim
 from ipcosim.fmus.kinds import plant_kind
-from ipcosim.harness.evidence.crosscheck import run_libcosim
 from ipcosim.harness.scenario.ssp import load_scenario
 
 pytestmark = pytest.mark.integration

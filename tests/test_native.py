@@ -389,7 +389,7 @@ def test_native_scenario_runs_in_libcosim(native_fmus: tuple[Path, Path], tmp_pa
     pytest.importorskip("libcosimpy")
     import ipcosim
     import ipcosim.harness.scenario.flavour as flavour
-    from ipcosim.harness.evidence.crosscheck import run_libcosim
+    from evidence.crosscheck import run_libcosim
 
     _, native = native_fmus
     monkeypatch.setattr(flavour, "native_fmu_dir", lambda: native)
@@ -496,7 +496,7 @@ def test_set_lqr_gains_acts_alike_on_both_flavours(native_fmus: tuple[Path, Path
 def test_crosscheck_layout_validates_and_flavours_agree(native_fmus: tuple[Path, Path], tmp_path: Path) -> None:
     """``make crosscheck``'s tree passes fmpy.cross_check, and each model's reference result is the same
     in both flavours (each FMU alone on the same input signal)."""
-    from ipcosim.harness.evidence.fmi_crosscheck import write_tree
+    from evidence.fmi_crosscheck import write_tree
 
     python, native = native_fmus
     count, problems = write_tree(tmp_path, {"ipcosim-python": python, "ipcosim-native": native}, "test")

@@ -5,8 +5,10 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
-OUTSIDE = {"tests", "benchmarks", "examples", "build", "out", "tools", "docs", "ssp"}
+OUTSIDE = {"tests", "benchmarks", "examples", "build", "out", "tools", "docs", "ssp", "evidence", "devtools"}
 
 
 def _config() -> dict:
@@ -37,3 +39,22 @@ def test_every_non_python_file_the_code_reads_is_package_data() -> None:
             base = ROOT.joinpath(*pkg.split(".")[1:])
             covered |= any(match == ROOT / rel for match in base.glob(pat))
         assert covered, f"{rel} is not package data: a wheel would lack it"
+
+
+@pytest.mark.integration
+def test_the_wheel_holds_the_kit_not_the_evidence_or_the_tooling(tmp_path) -> None:
+    """The built wheel: the package's modules under ``ipcosim/`` only, none of the thesis's evidence
+    (``evidence/``), the repository's tooling (``devtools/``) or their former places in the package."""
+    import subprocess
+    import sys
+    import zipfile
+
+    subprocess.run([sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "-q",
+                    "-w", str(tmp_path)], check=True, capture_output=True)
+    wheel = next(tmp_path.glob("ipcosim-*.whl"))
+    names = [n for n in zipfile.ZipFile(wheel).namelist() if n.endswith(".py")]
+    assert names and all(n.startswith("ipcosim/") for n in names), [n for n in names if not n.startswith("ipcosim/")]
+    moved = ("ipcosim/evidence/", "ipcosim/devtools/", "ipcosim/harness/evidence/", "ipcosim/harness/cli/apidoc.py",
+             "ipcosim/harness/scenario/ssp_gen.py")
+    assert not [n for n in names if n.startswith(moved)]
+    assert "ipcosim/harness/studies/report.py" in names and "ipcosim/harness/scenario/scenarios.py" in names

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from ipcosim.harness.evidence.claims import CLAIMS, verdict
-from ipcosim.harness.evidence.results_page import BEGIN, END, breakaway_note, margin_rows, remeasure, render
+from evidence.claims import CLAIMS, verdict
+from evidence.results_page import BEGIN, END, breakaway_note, margin_rows, remeasure, render
 from ipcosim.harness.studies.robustness import FACTORS, decisive_factor, wilson_interval
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -88,7 +88,7 @@ def test_remeasuring_an_unknown_row_names_it_and_the_closest_before_running_anyt
 
 
 def test_the_success_table_rates_follow_from_the_counts_and_the_target_law_has_two_seeds(data: dict) -> None:
-    from ipcosim.harness.evidence.results_page import ROBUST_SCENARIOS, VERDICT_SEEDS
+    from evidence.results_page import ROBUST_SCENARIOS, VERDICT_SEEDS
 
     rows = data["verdict"]
     assert {r["scenario"] for r in rows} == {name for name, _ in ROBUST_SCENARIOS}
@@ -106,8 +106,8 @@ def test_the_success_table_rates_follow_from_the_counts_and_the_target_law_has_t
 
 
 def test_each_comparison_verdict_is_the_success_criterion_of_its_measurements(data: dict) -> None:
+    from evidence.comparison import BENCHES, LAWS
     from ipcosim.fmus.metrics import amplitude_bound, success_status
-    from ipcosim.harness.evidence.comparison import BENCHES, LAWS
 
     rows = data["comparison"]
     assert [(r["scenario"], r["bench"]) for r in rows] == [

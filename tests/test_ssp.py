@@ -10,6 +10,7 @@ import pytest
 from lxml import etree
 from ssd_helpers import component, connection, connector, ssd, ssv, write_scenario
 
+from devtools.ssp_gen import CONTROLLERS, PLANTS, ssd_text
 from ipcosim.harness.scenario.binding import unit_conversion
 from ipcosim.harness.scenario.ssp import (
     NS,
@@ -20,7 +21,6 @@ from ipcosim.harness.scenario.ssp import (
     scenario_names,
     select_parameter_set,
 )
-from ipcosim.harness.scenario.ssp_gen import CONTROLLERS, PLANTS, ssd_text
 from ipcosim.harness.scenario.ssp_pack import pack
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,7 +29,7 @@ EXPECTED = sorted(f"{p}-{c}" for p in ("single-mass", "double-mass")
 
 
 def test_the_twelve_scenarios_exist_and_follow_the_contract():
-    from ipcosim.harness.scenario.ssp_gen import VARIANTS
+    from devtools.ssp_gen import VARIANTS
 
     assert scenario_names() == sorted(EXPECTED + list(VARIANTS))
     for name in EXPECTED:
@@ -58,9 +58,9 @@ def test_the_twelve_scenarios_exist_and_follow_the_contract():
 
 
 def test_scenario_files_are_what_the_generator_writes():
-    """The committed files equal what ``python -m ipcosim.harness.scenario.ssp_gen`` writes from the controllers'
+    """The committed files equal what ``python -m devtools.ssp_gen`` writes from the controllers'
     catalog (so a changed parameter set cannot silently diverge from the scenarios)."""
-    from ipcosim.harness.scenario.ssp_gen import parameter_sets, ssv_text
+    from devtools.ssp_gen import parameter_sets, ssv_text
 
     for name in EXPECTED:
         plant = name[:11]
@@ -221,7 +221,7 @@ def test_list_prints_one_line_per_scenario(capsys):
     from ipcosim.harness import cli
 
     assert cli.main(["list"]) == 0
-    from ipcosim.harness.scenario.ssp_gen import VARIANTS
+    from devtools.ssp_gen import VARIANTS
 
     lines = capsys.readouterr().out.splitlines()
     assert [line.split()[0] for line in lines] == sorted(EXPECTED + list(VARIANTS))
@@ -232,7 +232,7 @@ def test_list_prints_one_line_per_scenario(capsys):
 def test_variant_scenarios_are_what_the_generator_writes():
     """single-mass-swing-up, single-mass-lqr-tap, double-mass-hsmc-lab: committed files = generator output,
     and their plant start values and experiments load as written."""
-    from ipcosim.harness.scenario.ssp_gen import VARIANTS, variant_files
+    from devtools.ssp_gen import VARIANTS, variant_files
 
     for name, (plant, law, _, amplitude, stop_time, plant_values) in VARIANTS.items():
         files = variant_files(name)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any, Callable, Sequence
 
 from ipcosim.harness.cli import add_study_fmus_option
 
@@ -22,8 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "compare", help="run every scenario and write the controller comparison report",
         description="Run every plant x controller scenario and write a Markdown and a self-contained HTML "
-                    "report: metrics table, overlaid time series per plant and the thesis's claims beside "
-                    "the measured numbers.")
+                    "report: metrics table and overlaid time series per plant.")
     p.add_argument("--out", default="out/compare", help="report folder (default out/compare)")
     p.add_argument("--scenarios", help="comma-separated scenario names (default: every scenario in ssp/)")
     p.add_argument("--robustness", action="store_true",
@@ -39,25 +39,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU cores)")
     p.add_argument("--scheduler", metavar="ADDR", help="Dask scheduler address tcp://HOST:PORT")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--thesis-claims", action="store_true",
-                   help="instead: judge the thesis's claims with its own gain sets on the ideal and the lab plant "
-                        "(20 s, pure loop) and search the conditions under which its double-mass LQR falls; "
-                        "writes DIR/claims.md and DIR/claims.json")
     p.set_defaults(func=main)
 
 
-def main(args: argparse.Namespace) -> int:
+def main(args: argparse.Namespace, claims: Callable[[Any], Sequence[Any]] | None = None) -> int:
     """Co-simulate every scenario once (one sweep over the scenarios), optionally a robustness
     sweep of each, then write the report, ``metrics.csv`` and ``metrics.json``
-    (``ipcosim.harness.studies.compare``)."""
+    (``ipcosim.harness.studies.compare``); ``claims`` judges claims on the results for the report."""
     from ipcosim.errors import IpcosimError
     from ipcosim.harness.master import signals
     from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.compare import comparison
     from ipcosim.harness.studies.executors import open_executor
 
-    if args.thesis_claims:
-        return thesis_claims(Path(args.out))
     claim_output(args.out, "compare")  # before any run
     signals.keep(f"robustness runs finished so far are kept under {Path(args.out) / 'robustness'} and reused by "
                  f"the same command" if args.robustness else "no report written")
@@ -74,7 +68,7 @@ def main(args: argparse.Namespace) -> int:
     finally:
         executor.close()
     signals.keep(f"the report in {study.out} is incomplete; run the same command again")
-    files = study.write()
+    files = study.write(claims)
     print(f"report: {files['markdown']}, {files['html']}")
     ok, failed = study.counts()
     print(f"{len(study.results)} scenarios: {ok} succeed, {failed} failed to run")
@@ -82,13 +76,3 @@ def main(args: argparse.Namespace) -> int:
         raise IpcosimError(study.failure())
     return 0
 
-
-def thesis_claims(out: Path) -> int:
-    """``--thesis-claims``: verdict, evidence and condition per claim (``ipcosim.harness.evidence.results_page``)."""
-    from ipcosim.harness.evidence.results_page import write_claims
-
-    rows, files = write_claims(out)
-    for r in rows:
-        print(f"{r['verdict']:34s} {r['form']}")
-    print(f"claims: {files['markdown']}, {files['json']}")
-    return 0

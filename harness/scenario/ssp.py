@@ -25,6 +25,7 @@ import zipfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePosixPath
 from typing import Any, Mapping, Sequence
+from xml.sax.saxutils import quoteattr
 
 from lxml import etree
 
@@ -1017,3 +1018,25 @@ def read_parameter_file(path: str | os.PathLike[str]) -> dict[str, Any]:
             raise ScenarioError(f"--parameter-file {path}: parameter {name!r} names no component "
                                 f"(write it COMPONENT.VARIABLE, e.g. plant.{name})")
     return values
+
+
+def ssv_text(values: Mapping[str, Any], name: str, description: str = "") -> str:
+    """An SSP 1.0 parameter set (``.ssv``) named ``name``: bool -> Boolean, int -> Integer, else Real
+    (written with ``repr``, so a value reads back exactly). The one SSV writer: the scenarios'
+    parameter sets, ``ipcosim tune``'s ``autotuned.ssv`` and ``ipcosim identify``'s ``identified.ssv``."""
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             f'<ssv:ParameterSet xmlns:ssv="{NS["ssv"]}" version="1.0" name={quoteattr(name)}'
+             + (f" description={quoteattr(description)}" if description else "") + ">",
+             "  <ssv:Parameters>"]
+    for key, value in values.items():
+        lines.append(f"    <ssv:Parameter name={quoteattr(key)}>{_ssv_value(value)}</ssv:Parameter>")
+    lines += ["  </ssv:Parameters>", "</ssv:ParameterSet>", ""]
+    return "\n".join(lines)
+
+
+def _ssv_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return f'<ssv:Boolean value="{str(value).lower()}"/>'
+    if isinstance(value, int):
+        return f'<ssv:Integer value="{value}"/>'
+    return f'<ssv:Real value="{float(value)!r}"/>'

@@ -23,7 +23,7 @@ def available_scenarios() -> list[str]:
     """The plant x controller scenarios of the project, in report order, plus any other folder
     that is not one of the generator's variants (swing-up, tap, lab: they pose other tasks)."""
     from ipcosim.harness.paths import SCENARIO_DIR
-    from ipcosim.harness.scenario.ssp_gen import VARIANTS
+    from ipcosim.harness.scenario.scenarios import VARIANTS
     from ipcosim.harness.studies.report import SCENARIOS
 
     found = sorted(p.name for p in SCENARIO_DIR.iterdir() if (p / "SystemStructure.ssd").exists()) \
@@ -141,9 +141,10 @@ class Comparison:
                         progress=progress, extra_metadata={"vary": [v.text for v in varies], "seed": self.seed})
         return rob.summarize(res.rows, plain.metric_names)
 
-    def write(self) -> dict[str, Path]:
+    def write(self, claims: Callable[[Any], Sequence[Any]] | None = None) -> dict[str, Path]:
         """Write the report (``ipcosim.harness.studies.report.render``), ``metrics.csv`` and ``metrics.json``;
-        returns render's files and ``metrics_csv``/``metrics_json``."""
+        returns render's files and ``metrics_csv``/``metrics_json``. ``claims``: results -> the claims judged
+        on them (``render``'s ``claims``), shown in the report."""
         from ipcosim.harness.studies.report import render
         from ipcosim.harness.studies.store import package_versions
 
@@ -151,7 +152,7 @@ class Comparison:
                 "stop time": f"{self.stop_time:g} s" if self.stop_time else "scenario default",
                 "executor": self.executor_description, "packages": package_versions()}
         files = render(self.results, self.out, robustness=self.robustness or None, robustness_note=self.note,
-                       meta=meta)
+                       meta=meta, claims=claims(self.results) if claims else ())
         return {**files, **self._write_metrics()}
 
     @property

@@ -1,7 +1,8 @@
 """The controller comparison report (``ipcosim compare``): metrics table plant x controller,
-thesis-style overlaid time series per plant, and the thesis's qualitative claims beside the
-measured numbers, each marked confirmed or not. Written as Markdown and as one self-contained
-HTML page (figures embedded).
+thesis-style overlaid time series per plant, and, when :func:`render` is given them, claims judged
+on the results beside the measured numbers, each marked confirmed or not (the thesis's own claims
+are not part of the package). Written as Markdown and as one self-contained HTML page (figures
+embedded).
 
 The report is rendered from plain data -- one result row per scenario (metrics, status and,
 for the figures, the time series) plus optional robustness summaries -- so it can be checked
@@ -11,10 +12,9 @@ from __future__ import annotations
 
 import base64
 import html
-import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 from ipcosim.fmus.params import KINDS
 from ipcosim.harness.extras import optional_figure
@@ -29,10 +29,7 @@ CONTROLLER_COLORS = {"pid": "tab:gray", "cascade-pid": "tab:purple", "lqr": "tab
 SCENARIOS = tuple(f"{p}-{c}" for p in KINDS for c in CONTROLLERS)
 
 #: The task's step [m] and the +-2 % band half-width [m].
-STEP = 0.05
-BAND = 0.02 * STEP
 #: Thesis's steady-state error of the double-mass HSMC [m] (section 4.2.3).
-THESIS_DOUBLE_HSMC_SSE = 0.005575
 
 TABLE_COLUMNS = (("status", "status", None), ("settling_time_s", "settling time [s]", 4),
                  ("overshoot_m", "overshoot [m]", 3), ("steady_state_error_m", "steady-state error [m]", 3),
@@ -64,187 +61,6 @@ class Verdict:
 
 
 Results = Mapping[str, Mapping[str, Any]]
-
-
-def _row(results: Results, scenario: str) -> Mapping[str, Any] | None:
-    row = results.get(scenario)
-    if row is None or row.get("status") in (None, "error"):
-        return None
-    return row
-
-
-def _missing(results: Results, *scenarios: str) -> Verdict | None:
-    absent = [s for s in scenarios if _row(results, s) is None]
-    if not absent:
-        return None
-    why = []
-    for s in absent:
-        row = results.get(s)
-        why.append(f"{s}: {row.get('error') or 'failed'}" if row else f"{s}: not run")
-    return Verdict("not measured", "; ".join(why))
-
-
-def _num(row: Mapping[str, Any], key: str, missing: float = math.inf) -> float:
-    v = row.get(key)
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else missing
-
-
-def _desc(row: Mapping[str, Any]) -> str:
-    return (f"status {row.get('status')}, settling {fmt(row.get('settling_time_s'))} s, "
-            f"max abs angle {fmt(row.get('max_abs_angle_rad'))} rad")
-
-
-def _yes(flag: bool) -> str:
-    return "confirmed" if flag else "not confirmed"
-
-
-def _fails(scn: str) -> Callable[[Results], Verdict]:
-    def check(r: Results) -> Verdict:
-        miss = _missing(r, scn)
-        if miss:
-            return miss
-        row = r[scn]
-        return Verdict(_yes(row["status"] != "ok"), f"{scn}: {_desc(row)}")
-    return check
-
-
-def _lqr_single(r: Results) -> Verdict:
-    a, b = "single-mass-lqr", "single-mass-hsmc"
-    miss = _missing(r, a, b)
-    if miss:
-        return miss
-    la, lb = _num(r[a], "angle_reversals", -1), _num(r[b], "angle_reversals", -1)
-    ok = r[a]["status"] == "ok" and la > lb
-    return Verdict(_yes(ok), f"LQR: {_desc(r[a])}, {fmt(la)} angle reversals (HSMC: {fmt(lb)})")
-
-
-def _hsmc_integral_single(r: Results) -> Verdict:
-    s = "single-mass-hsmc"
-    miss = _missing(r, s)
-    if miss:
-        return miss
-    sse = _num(r[s], "steady_state_error_m")
-    return Verdict(_yes(r[s]["status"] == "ok" and sse < BAND),
-                   f"steady-state error {fmt(sse)} m (band {BAND:g} m), status {r[s]['status']}")
-
-
-def _settles_faster(plant: str) -> Callable[[Results], Verdict]:
-    def check(r: Results) -> Verdict:
-        a, h = f"{plant}-adaptive-hsmc", f"{plant}-hsmc"
-        miss = _missing(r, a, h)
-        if miss:
-            return miss
-        ta, th = _num(r[a], "settling_time_s"), _num(r[h], "settling_time_s")
-        return Verdict(_yes(ta < th), f"settling time adaptive {fmt(r[a].get('settling_time_s'))} s vs "
-                                      f"HSMC {fmt(r[h].get('settling_time_s'))} s ('-': never inside the band)")
-    return check
-
-
-def _fewer_oscillations(r: Results) -> Verdict:
-    h, lq = "single-mass-hsmc", "single-mass-lqr"
-    miss = _missing(r, h, lq)
-    if miss:
-        return miss
-    nh, nl = _num(r[h], "angle_reversals", -1), _num(r[lq], "angle_reversals", -1)
-    return Verdict(_yes(0 <= nh < nl), f"angle reversals HSMC {fmt(nh)} vs LQR {fmt(nl)}")
-
-
-def _hsmc_better(r: Results) -> Verdict:
-    parts, ok, measured = [], True, False
-    for plant in KINDS:
-        h = f"{plant}-hsmc"
-        if _row(r, h) is None:
-            continue
-        for other in ("pid", "lqr"):
-            o = f"{plant}-{other}"
-            if _row(r, o) is None:
-                continue
-            measured = True
-            jh, jo = _num(r[h], "cost"), _num(r[o], "cost")
-            ok &= jh < jo
-            parts.append(f"{PLANT_LABELS[plant]}: J(HSMC) {fmt(jh)} vs J({CONTROLLER_LABELS[other]}) {fmt(jo)}")
-    if not measured:
-        return Verdict("not measured", "HSMC, PID and LQR scenarios not run")
-    return Verdict(_yes(ok), "; ".join(parts))
-
-
-def _double_lqr_falls(r: Results) -> Verdict:
-    s = "double-mass-lqr"
-    miss = _missing(r, s)
-    if miss:
-        return miss
-    return Verdict(_yes(r[s].get("upright") is False),
-                   f"{_desc(r[s])}, {fmt(r[s].get('angle_reversals'))} angle reversals, "
-                   f"falls at {fmt(r[s].get('fall_time_s'))} s")
-
-
-def _double_hsmc(r: Results) -> Verdict:
-    s = "double-mass-hsmc"
-    miss = _missing(r, s)
-    if miss:
-        return miss
-    sse = _num(r[s], "steady_state_error_m")
-    ok = r[s].get("upright") is True and sse >= BAND
-    return Verdict(_yes(ok), f"upright {fmt(r[s].get('upright'))}, steady-state error {fmt(sse)} m "
-                             f"(thesis {THESIS_DOUBLE_HSMC_SSE} m; band {BAND:g} m)")
-
-
-def _double_adaptive(r: Results) -> Verdict:
-    a, h = "double-mass-adaptive-hsmc", "double-mass-hsmc"
-    miss = _missing(r, a, h)
-    if miss:
-        return miss
-    ea, eh = _num(r[a], "steady_state_error_m"), _num(r[h], "steady_state_error_m")
-    ta, th = _num(r[a], "settling_time_s"), _num(r[h], "settling_time_s")
-    return Verdict(_yes(ea < eh and ta < th),
-                   f"steady-state error {fmt(ea)} vs {fmt(eh)} m; settling {fmt(r[a].get('settling_time_s'))} vs "
-                   f"{fmt(r[h].get('settling_time_s'))} s (adaptive vs HSMC)")
-
-
-@dataclass(frozen=True)
-class Claim:
-    """A qualitative claim of the thesis, its source and how it is checked."""
-
-    quote: str
-    source: str
-    test: str
-    check: Callable[[Results], Verdict]
-
-
-CLAIMS: tuple[Claim, ...] = (
-    Claim("Thus, unfortunately PID control does not work for this system.", "3.2.1 (single mass)",
-          "single-mass-pid fails the task (falls or does not settle in the band)", _fails("single-mass-pid")),
-    Claim("It meets the criterion, but has a lot of oscillations.", "3.2.2, Fig. 3.9 (single-mass LQR)",
-          "single-mass-lqr is upright and settled, with more angle reversals than HSMC", _lqr_single),
-    Claim("an integral controller can eliminate the steady-state error for the inverted pendulum single-mass "
-          "system", "ch. 5, Figs. 3.11, 3.19", "single-mass-hsmc settles with steady-state error below the "
-                                               "+-2 % band (0.001 m)", _hsmc_integral_single),
-    Claim("Compared with Figure 3.12, the settling time has been reduced.", "3.2.4 (single-mass adaptive HSMC)",
-          "settling time of single-mass-adaptive-hsmc < single-mass-hsmc", _settles_faster("single-mass")),
-    Claim("Compared with Figure 3.18, we can see it has decreased oscillations greatly.",
-          "3.3, Fig. 3.19 (single-mass HSMC vs LQR, experiment)",
-          "fewer angle reversals with single-mass-hsmc than single-mass-lqr", _fewer_oscillations),
-    Claim("Hierarchical sliding mode control could give a better result than PID and LQR control for "
-          "nonlinear system.", "ch. 5", "cost J of HSMC below PID and LQR on each plant", _hsmc_better),
-    Claim("Figure 4.7 shows that PID control cannot work for this system.", "4.3 (double mass)",
-          "double-mass-pid fails the task", _fails("double-mass-pid")),
-    Claim("the performance of LQR controller has a lot of oscillations and that would cause the pendulum fall "
-          "when the carts stop moving.", "4.3, Fig. 4.9 (double-mass LQR)", "double-mass-lqr does not stay upright",
-          _double_lqr_falls),
-    Claim("It shows that the active cart moves 0.05m distance and the pendulum always up. Wherever initial "
-          "position of carts has been set, it always has a steady-state error of 0.005575m",
-          "4.2.3, Fig. 4.11 (double-mass HSMC)",
-          "double-mass-hsmc upright, with a steady-state error at least the +-2 % band", _double_hsmc),
-    Claim("Compare with Figure 4.11, the steady-state error and settling time have been decreased.",
-          "4.2.4, Fig. 4.12 (double-mass adaptive HSMC)",
-          "double-mass-adaptive-hsmc has smaller steady-state error and settling time than double-mass-hsmc",
-          _double_adaptive),
-)
-
-
-def check_claims(results: Results) -> list[tuple[Claim, Verdict]]:
-    """Every claim with its verdict on the given results (scenario -> row)."""
-    return [(c, c.check(results)) for c in CLAIMS]
 
 
 # --------------------------------------------------------------------------- figures
@@ -360,7 +176,8 @@ img{max-width:100%}blockquote{margin:0;font-style:italic}code{background:#f4f4f4
 
 
 def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str, Any]] | None = None,
-           robustness_note: str = "", meta: Mapping[str, Any] | None = None) -> dict[str, Path]:
+           robustness_note: str = "", meta: Mapping[str, Any] | None = None,
+           claims: Sequence[tuple[str, str, str, Verdict]] = ()) -> dict[str, Path]:
     """Write ``report.md``, ``report.html`` (self-contained) and ``figures/<plant>.png``.
 
     Parameters
@@ -376,6 +193,9 @@ def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str
         How the robustness column was obtained.
     meta : mapping, optional
         Run settings shown in the report (stop time, packages...).
+    claims : sequence, optional
+        Claims judged on these results, each (quote, source, how it is checked, :class:`Verdict`);
+        the report shows them beside the numbers (none: no claims section).
 
     Returns
     -------
@@ -390,17 +210,16 @@ def render(results: Results, out_dir: Path, robustness: Mapping[str, Mapping[str
         if path:
             figures[plant] = path
     header, rows = _table(results, robustness)
-    verdicts = check_claims(results)
     meta = dict(meta or {})
     parts = _Report(
         settings=", ".join(f"{k} {v}" for k, v in meta.items() if k != "packages"),
         header=header, rows=rows, robustness_note=robustness_note,
         errors=[(s, r.get("error")) for s, r in results.items() if r.get("status") == "error"],
         figures=figures,
-        counts={k: sum(1 for _, v in verdicts if v.verdict == k)
+        counts={k: sum(1 for *_, v in claims if v.verdict == k)
                 for k in ("confirmed", "not confirmed", "not measured")},
-        claim_rows=[[c.quote, c.source, c.test, v.measured, v.verdict] for c, v in verdicts],
-        claim_classes=[v.verdict.replace(" ", "-") for _, v in verdicts],
+        claim_rows=[[quote, source, test, v.measured, v.verdict] for quote, source, test, v in claims],
+        claim_classes=[v.verdict.replace(" ", "-") for *_, v in claims],
         packages=dict(meta.get("packages") or {}))
     md_path = out_dir / "report.md"
     md_path.write_text(_markdown(parts))
@@ -417,7 +236,7 @@ INTRO = ("Each scenario moves the motor-driven cart from 0 to 0.05 m with the pe
          "Cost J = ITAE(x - r) + 0.1 ITAE(angle) + 1e-4 ISE(voltage), infinite when the pendulum falls. "
          "Angle reversals count swings of the pendulum larger than 0.005 rad (an oscillation measure). "
          "Gains: the controller parameter set each scenario ran with (thesis = the thesis's values, tuned = "
-         "the controller design's retuned values); the claims are judged on these runs.")
+         "the controller design's retuned values).")
 CLAIM_HEADER = ["thesis claim", "source", "checked as", "measured", "verdict"]
 
 
@@ -455,8 +274,9 @@ def _markdown(r: _Report) -> str:
     md += ["## Time series", ""]
     for plant, path in r.figures.items():
         md += [f"![{plant}](figures/{path.name})", ""]
-    md += ["## The thesis's claims, measured", "", r.tally, "",
-           _md_table(CLAIM_HEADER, [[f"\"{c[0]}\"", *c[1:]] for c in r.claim_rows])]
+    if r.claim_rows:
+        md += ["## The thesis's claims, measured", "", "Judged on the runs above. " + r.tally, "",
+               _md_table(CLAIM_HEADER, [[f"\"{c[0]}\"", *c[1:]] for c in r.claim_rows])]
     if r.packages:
         md += ["Package versions: " + ", ".join(f"{k} {v}" for k, v in r.packages.items()), ""]
     return "\n".join(md)
@@ -477,8 +297,9 @@ def _html_page(r: _Report) -> str:
         data = base64.b64encode(path.read_bytes()).decode()
         body.append(f'<figure><img alt="{plant}" src="data:image/png;base64,{data}"/>'
                     f"<figcaption>{html.escape(PLANT_LABELS[plant])}</figcaption></figure>")
-    body += ["<h2>The thesis's claims, measured</h2>", f"<p>{r.tally}</p>",
-             _html_table(CLAIM_HEADER, r.claim_rows, r.claim_classes)]
+    if r.claim_rows:
+        body += ["<h2>The thesis's claims, measured</h2>", f"<p>Judged on the runs above. {r.tally}</p>",
+                 _html_table(CLAIM_HEADER, r.claim_rows, r.claim_classes)]
     if r.packages:
         body.append("<p>Package versions: " + html.escape(", ".join(f"{k} {v}" for k, v in r.packages.items()))
                     + "</p>")

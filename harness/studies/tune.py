@@ -577,7 +577,7 @@ class TuneStudy:
     def write(self, res: TuneResult) -> TunedFiles:
         """Write every run (``evaluations.csv``), the tuned parameter set (``ssv``, and ``install`` when
         given; :func:`tuned_parameter_set`) and the report ``tune.md``."""
-        from ipcosim.harness.scenario.ssp_gen import ssv_text
+        from ipcosim.harness.scenario.ssp import ssv_text
 
         files = TunedFiles(self.ssv, self.install, self.out / "tune.md", self.out / "evaluations.csv",
                            before_after_markdown(res, f"{self.parameter_set} gains" if self.parameter_set

@@ -1,4 +1,4 @@
-"""The rooms of the code base in figures: ``python -m benchmarks.rooms [--write]``.
+"""The rooms of the code base in figures: ``python -m devtools.rooms [--write]``.
 
 For each room (docs/architecture.md) the non-blank lines of its ``.py`` files and its longest
 function (``def`` to last line, docstring included), and the number of import cycles between
@@ -23,10 +23,11 @@ ROOMS = {
     "harness/master": ("harness/master", True),
     "harness/scenario": ("harness/scenario", True),
     "harness/studies": ("harness/studies", True),
-    "harness/evidence": ("harness/evidence", True),
+    "evidence": ("evidence", True),
     "harness/cli": ("harness/cli", True),
     "harness (top-level modules)": ("harness", False),
     "benchmarks": ("benchmarks", True),
+    "devtools": ("devtools", True),
 }
 BEGIN, END = "<!-- rooms:begin -->", "<!-- rooms:end -->"
 

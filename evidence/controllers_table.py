@@ -1,6 +1,6 @@
 """Closed-loop evidence without the master: every law x plant x parameter set in the pure loop.
 
-``python -m ipcosim.harness.evidence.controllers_table`` prints the metrics table (markdown) that docs/controllers.md
+``python -m evidence.controllers_table`` prints the metrics table (markdown) that docs/controllers.md
 show beside the thesis's claims; ``--update docs/controllers.md`` rewrites the table between
 the ``<!-- evidence:begin -->`` / ``<!-- evidence:end -->`` markers (a test checks the document
 holds what this module computes).
@@ -120,7 +120,7 @@ def update(path: Path, text: str) -> bool:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m ipcosim.harness.evidence.controllers_table",
+    parser = argparse.ArgumentParser(prog="python -m evidence.controllers_table",
                                      description=__doc__.splitlines()[0], allow_abbrev=False)
     parser.add_argument("--update", type=Path, help="rewrite the table block in this markdown file")
     args = parser.parse_args(argv)

@@ -4,5 +4,6 @@ The claims judged on the thesis's terms (:mod:`.claims`), the fitted passive-car
 (:mod:`.friction`), the pure-loop table of docs/controllers.md (:mod:`.controllers_table`),
 docs/results.md (:mod:`.results_page`) and the cross-checks against other importers of the
 same scenarios (:mod:`.crosscheck`: libcosim, FMPy; :mod:`.fmi_crosscheck`: the FMI
-cross-check layout). May import every room below the command line.
+cross-check layout). Not installed: run from a clone (``python -m evidence.<module>``); it imports the
+package, never the other way round.
 """

@@ -190,7 +190,7 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 
 INTRO = (
-    "Every law on both plants, through the native FMUs (`ipcosim.harness.evidence.comparison`), on the *ideal* "
+    "Every law on both plants, through the native FMUs (`evidence.comparison`), on the *ideal* "
     "plant (no friction, exact readings) and on the *lab* bench (encoder counts, stick-slip Coulomb friction "
     "0.1047 N, end stops, DAC codes, the 1 ms computation delay, +-10 V), with the parameter set the robustness "
     f"table uses (the LQG's `lab` set on the lab bench). *Step*: the thesis's task, {STOP_TIME:g} s. *Verdict*: "

@@ -1,6 +1,6 @@
 """``docs/api.md``'s table of the Python API beside the command line, generated from the functions'
 signatures and from the ``ipcosim run`` parser, so the reference cannot fall behind the code:
-``python -m ipcosim.harness.cli.apidoc --update`` rewrites the block between the ``api:run`` markers.
+``python -m devtools.apidoc --update`` rewrites the block between the ``api:run`` markers.
 """
 from __future__ import annotations
 
@@ -92,7 +92,7 @@ def update(doc: Path = DOC) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     """``--update``: rewrite docs/api.md; else print the block."""
-    parser = argparse.ArgumentParser(prog="python -m ipcosim.harness.cli.apidoc", allow_abbrev=False,
+    parser = argparse.ArgumentParser(prog="python -m devtools.apidoc", allow_abbrev=False,
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--update", action="store_true", help="rewrite the block in docs/api.md")
     args = parser.parse_args(argv)

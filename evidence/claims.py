@@ -30,6 +30,8 @@ from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT, I
 from ipcosim.fmus.metrics import UPRIGHT_LIMIT_RAD, compute_metrics
 from ipcosim.fmus.params import KINDS, preset
 from ipcosim.fmus.physics import MOTOR_CART
+from ipcosim.harness.studies.report import CONTROLLER_LABELS, PLANT_LABELS, Results, Verdict
+from ipcosim.harness.studies.robustness import fmt
 
 STOP_TIME = 20.0
 PLANT_STEP = 1e-3
@@ -115,6 +117,148 @@ def thesis_runs(realism_name: str, stop_time: float = STOP_TIME) -> dict[tuple[s
     return out
 
 
+# ------------------------------------------------------- the same claims on ``ipcosim compare``'s results
+#: The co-simulation comparison's task band: 2 % of the 0.05 m step [m].
+BAND = 0.02 * 0.05
+THESIS_DOUBLE_HSMC_SSE = 0.005575
+
+
+def _cosim_row(results: Results, scenario: str) -> Mapping[str, Any] | None:
+    row = results.get(scenario)
+    if row is None or row.get("status") in (None, "error"):
+        return None
+    return row
+
+
+def _cosim_missing(results: Results, *scenarios: str) -> Verdict | None:
+    absent = [s for s in scenarios if _cosim_row(results, s) is None]
+    if not absent:
+        return None
+    why = []
+    for s in absent:
+        row = results.get(s)
+        why.append(f"{s}: {row.get('error') or 'failed'}" if row else f"{s}: not run")
+    return Verdict("not measured", "; ".join(why))
+
+
+def _cosim_num(row: Mapping[str, Any], key: str, missing: float = math.inf) -> float:
+    v = row.get(key)
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else missing
+
+
+def _cosim_desc(row: Mapping[str, Any]) -> str:
+    return (f"status {row.get('status')}, settling {fmt(row.get('settling_time_s'))} s, "
+            f"max abs angle {fmt(row.get('max_abs_angle_rad'))} rad")
+
+
+def _cosim_yes(flag: bool) -> str:
+    return "confirmed" if flag else "not confirmed"
+
+
+def _cosim_fails(scn: str) -> Callable[[Results], Verdict]:
+    def check(r: Results) -> Verdict:
+        miss = _cosim_missing(r, scn)
+        if miss:
+            return miss
+        row = r[scn]
+        return Verdict(_cosim_yes(row["status"] != "ok"), f"{scn}: {_cosim_desc(row)}")
+    return check
+
+
+def _cosim_lqr_single(r: Results) -> Verdict:
+    a, b = "single-mass-lqr", "single-mass-hsmc"
+    miss = _cosim_missing(r, a, b)
+    if miss:
+        return miss
+    la, lb = _cosim_num(r[a], "angle_reversals", -1), _cosim_num(r[b], "angle_reversals", -1)
+    ok = r[a]["status"] == "ok" and la > lb
+    return Verdict(_cosim_yes(ok), f"LQR: {_cosim_desc(r[a])}, {fmt(la)} angle reversals (HSMC: {fmt(lb)})")
+
+
+def _cosim_hsmc_integral_single(r: Results) -> Verdict:
+    s = "single-mass-hsmc"
+    miss = _cosim_missing(r, s)
+    if miss:
+        return miss
+    sse = _cosim_num(r[s], "steady_state_error_m")
+    return Verdict(_cosim_yes(r[s]["status"] == "ok" and sse < BAND),
+                   f"steady-state error {fmt(sse)} m (band {BAND:g} m), status {r[s]['status']}")
+
+
+def _cosim_settles_faster(plant: str) -> Callable[[Results], Verdict]:
+    def check(r: Results) -> Verdict:
+        a, h = f"{plant}-adaptive-hsmc", f"{plant}-hsmc"
+        miss = _cosim_missing(r, a, h)
+        if miss:
+            return miss
+        ta, th = _cosim_num(r[a], "settling_time_s"), _cosim_num(r[h], "settling_time_s")
+        return Verdict(_cosim_yes(ta < th), f"settling time adaptive {fmt(r[a].get('settling_time_s'))} s vs "
+                                      f"HSMC {fmt(r[h].get('settling_time_s'))} s ('-': never inside the band)")
+    return check
+
+
+def _cosim_fewer_oscillations(r: Results) -> Verdict:
+    h, lq = "single-mass-hsmc", "single-mass-lqr"
+    miss = _cosim_missing(r, h, lq)
+    if miss:
+        return miss
+    nh, nl = _cosim_num(r[h], "angle_reversals", -1), _cosim_num(r[lq], "angle_reversals", -1)
+    return Verdict(_cosim_yes(0 <= nh < nl), f"angle reversals HSMC {fmt(nh)} vs LQR {fmt(nl)}")
+
+
+def _cosim_hsmc_better(r: Results) -> Verdict:
+    parts, ok, measured = [], True, False
+    for plant in KINDS:
+        h = f"{plant}-hsmc"
+        if _cosim_row(r, h) is None:
+            continue
+        for other in ("pid", "lqr"):
+            o = f"{plant}-{other}"
+            if _cosim_row(r, o) is None:
+                continue
+            measured = True
+            jh, jo = _cosim_num(r[h], "cost"), _cosim_num(r[o], "cost")
+            ok &= jh < jo
+            parts.append(f"{PLANT_LABELS[plant]}: J(HSMC) {fmt(jh)} vs J({CONTROLLER_LABELS[other]}) {fmt(jo)}")
+    if not measured:
+        return Verdict("not measured", "HSMC, PID and LQR scenarios not run")
+    return Verdict(_cosim_yes(ok), "; ".join(parts))
+
+
+def _cosim_double_lqr_falls(r: Results) -> Verdict:
+    s = "double-mass-lqr"
+    miss = _cosim_missing(r, s)
+    if miss:
+        return miss
+    return Verdict(_cosim_yes(r[s].get("upright") is False),
+                   f"{_cosim_desc(r[s])}, {fmt(r[s].get('angle_reversals'))} angle reversals, "
+                   f"falls at {fmt(r[s].get('fall_time_s'))} s")
+
+
+def _cosim_double_hsmc(r: Results) -> Verdict:
+    s = "double-mass-hsmc"
+    miss = _cosim_missing(r, s)
+    if miss:
+        return miss
+    sse = _cosim_num(r[s], "steady_state_error_m")
+    ok = r[s].get("upright") is True and sse >= BAND
+    return Verdict(_cosim_yes(ok), f"upright {fmt(r[s].get('upright'))}, steady-state error {fmt(sse)} m "
+                             f"(thesis {THESIS_DOUBLE_HSMC_SSE} m; band {BAND:g} m)")
+
+
+def _cosim_double_adaptive(r: Results) -> Verdict:
+    a, h = "double-mass-adaptive-hsmc", "double-mass-hsmc"
+    miss = _cosim_missing(r, a, h)
+    if miss:
+        return miss
+    ea, eh = _cosim_num(r[a], "steady_state_error_m"), _cosim_num(r[h], "steady_state_error_m")
+    ta, th = _cosim_num(r[a], "settling_time_s"), _cosim_num(r[h], "settling_time_s")
+    return Verdict(_cosim_yes(ea < eh and ta < th),
+                   f"steady-state error {fmt(ea)} vs {fmt(eh)} m; settling {fmt(r[a].get('settling_time_s'))} vs "
+                   f"{fmt(r[h].get('settling_time_s'))} s (adaptive vs HSMC)")
+
+
+
 # ----------------------------------------------------------------------------- the claims
 @dataclass(frozen=True)
 class Claim:
@@ -123,6 +267,8 @@ class Claim:
     ``check`` returns ``(holds, evidence)`` with ``holds`` None when the difference the claim is about is
     below the sensor's resolution (indistinguishable). ``fitted`` names a lab-plant value fitted to this
     very claim: a lab plant that shows it reproduces it by construction, which confirms nothing.
+    ``cosim_form`` and ``cosim_check`` judge the same claim on the co-simulation comparison's results
+    (scenario -> result row, ``ipcosim.harness.studies.compare``; :func:`on_comparison`).
     """
 
     text: str
@@ -130,6 +276,8 @@ class Claim:
     form: str
     check: Callable[[Mapping[tuple[str, str], Run]], tuple[bool | None, str]]
     fitted: str = ""
+    cosim_form: str = ""
+    cosim_check: Callable[[Results], Verdict] | None = None
 
 
 def _fmt(r: Run) -> str:
@@ -226,27 +374,47 @@ def _double_hsmc(R):
 
 CLAIMS: tuple[Claim, ...] = (
     Claim("PID control does not work for this system.", "3.2.1", "thesis PID fails the task (single mass)",
-          _fails("single-mass")),
+          _fails("single-mass"),
+          cosim_form="single-mass-pid fails the task (falls or does not settle in the band)",
+          cosim_check=_cosim_fails("single-mass-pid")),
     Claim("It meets the criterion, but has a lot of oscillations.", "3.2.2, Fig. 3.9 (simulation)",
-          "single-mass LQR does the task, oscillation > 2x the HSMC's (pendulum, cart, voltage)", _lqr_single),
+          "single-mass LQR does the task, oscillation > 2x the HSMC's (pendulum, cart, voltage)", _lqr_single,
+          cosim_form="single-mass-lqr is upright and settled, with more angle reversals than HSMC",
+          cosim_check=_cosim_lqr_single),
     Claim("an integral controller can eliminate the steady-state error", "ch. 5, Fig. 3.11",
-          "single-mass HSMC upright with error < 1 mm at 20 s", _hsmc_integral),
+          "single-mass HSMC upright with error < 1 mm at 20 s", _hsmc_integral,
+          cosim_form="single-mass-hsmc settles with steady-state error below the +-2 % band (0.001 m)",
+          cosim_check=_cosim_hsmc_integral_single),
     Claim("the settling time has been reduced", "3.2.4, Fig. 3.12", "single-mass adaptive HSMC settles before HSMC",
-          _adaptive_faster("single-mass", False)),
+          _adaptive_faster("single-mass", False),
+          cosim_form="settling time of single-mass-adaptive-hsmc < single-mass-hsmc",
+          cosim_check=_cosim_settles_faster("single-mass")),
     Claim("it has decreased oscillations greatly", "3.3, Fig. 3.19 (experiment)",
-          "single-mass HSMC oscillation < half the LQR's (pendulum, cart, voltage)", _fewer_oscillations),
+          "single-mass HSMC oscillation < half the LQR's (pendulum, cart, voltage)", _fewer_oscillations,
+          cosim_form="fewer angle reversals with single-mass-hsmc than single-mass-lqr",
+          cosim_check=_cosim_fewer_oscillations),
     Claim("HSMC could give a better result than PID and LQR", "ch. 5",
-          "HSMC upright with a lower ITAE than LQR and PID, both plants", _hsmc_better),
+          "HSMC upright with a lower ITAE than LQR and PID, both plants", _hsmc_better,
+          cosim_form="cost J of HSMC below PID and LQR on each plant",
+          cosim_check=_cosim_hsmc_better),
     Claim("PID control cannot work for this system", "4.2.1, Fig. 4.7", "thesis PID fails the task (double mass)",
-          _fails("double-mass")),
+          _fails("double-mass"),
+          cosim_form="double-mass-pid fails the task",
+          cosim_check=_cosim_fails("double-mass-pid")),
     Claim("a lot of oscillations and that would cause the pendulum fall when the carts stop", "4.2.2, Fig. 4.9",
-          "double-mass LQR lets the pendulum fall", _double_lqr_falls),
+          "double-mass LQR lets the pendulum fall", _double_lqr_falls,
+          cosim_form="double-mass-lqr does not stay upright",
+          cosim_check=_cosim_double_lqr_falls),
     Claim("it always has a steady-state error of 0.005575m", "4.2.3, Fig. 4.11 (simulation)",
           "double-mass HSMC upright, error >= 1 mm", _double_hsmc,
-          fitted="the lab plant's Coulomb friction is fitted to this error (ipcosim.harness.evidence.friction)"),
+          fitted="the lab plant's Coulomb friction is fitted to this error (evidence.friction)",
+          cosim_form="double-mass-hsmc upright, with a steady-state error at least the +-2 % band",
+          cosim_check=_cosim_double_hsmc),
     Claim("the steady-state error and settling time have been decreased", "4.2.4, Fig. 4.12",
           "double-mass adaptive HSMC settles sooner with a smaller error than HSMC",
-          _adaptive_faster("double-mass", True)),
+          _adaptive_faster("double-mass", True),
+          cosim_form="double-mass-adaptive-hsmc has smaller steady-state error and settling time than double-mass-hsmc",
+          cosim_check=_cosim_double_adaptive),
 )
 
 
@@ -320,3 +488,25 @@ def search_lqr_fall(stop_time: float = STOP_TIME) -> list[dict[str, Any]]:
                      "falls_at": found[0] if found else None,
                      "evidence": _fmt(found[1]) if found else f"largest tried: {_fmt(last)}"})
     return rows
+
+
+def on_comparison(results: Results) -> list[tuple[str, str, str, Verdict]]:
+    """Every claim judged on the co-simulation comparison's results (scenario -> result row): (quote,
+    source, how it is checked, verdict), the rows of the report's claims section."""
+    return [(c.text, c.source, c.cosim_form, c.cosim_check(results)) for c in CLAIMS if c.cosim_check]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m evidence.claims [OPTIONS]``: ``ipcosim compare [OPTIONS]`` with the thesis's claims judged
+    on its results beside the numbers (the report's claims section)."""
+    import sys
+
+    from ipcosim.harness.cli import build_parser
+    from ipcosim.harness.cli.compare import main as compare
+
+    args = build_parser().parse_args(["compare", *(sys.argv[1:] if argv is None else argv)])
+    return compare(args, claims=on_comparison)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -10,7 +10,7 @@ a fixed input signal (``_in.csv``: a voltage pulse for the plants; a reference s
 moving measured positions for the controllers); ``_ref.csv`` holds its outputs. The tree is
 then checked with ``fmpy.cross_check.validate_vendor_repo.validate_repo``.
 
-    python -m ipcosim.harness.evidence.fmi_crosscheck [OUT] [--python DIR] [--native DIR]
+    python -m evidence.fmi_crosscheck [OUT] [--python DIR] [--native DIR]
 """
 from __future__ import annotations
 
@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     """Command line (see the module docstring)."""
     from ipcosim.harness.paths import BUILD_DIR
 
-    p = argparse.ArgumentParser(prog="python -m ipcosim.harness.evidence.fmi_crosscheck", allow_abbrev=False)
+    p = argparse.ArgumentParser(prog="python -m evidence.fmi_crosscheck", allow_abbrev=False)
     p.add_argument("out", nargs="?", default=str(Path(BUILD_DIR) / "crosscheck"))
     p.add_argument("--python", default=str(Path(BUILD_DIR) / "fmus"))
     p.add_argument("--native", default=str(Path(BUILD_DIR) / "fmus-native"))
