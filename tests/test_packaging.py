@@ -49,7 +49,13 @@ def test_the_wheel_holds_the_kit_not_the_evidence_or_the_tooling(tmp_path) -> No
     import sys
     import zipfile
 
-    subprocess.run([sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "-q",
+    import shutil
+
+    # from a copy without the checkout's generated folders: setuptools reuses a build/lib left by an earlier
+    # build, which may still hold modules the sources no longer have
+    src = tmp_path / "src"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(".git", ".venv", "build", "out", "tools", "*.egg-info"))
+    subprocess.run([sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "-q",
                     "-w", str(tmp_path)], check=True, capture_output=True)
     wheel = next(tmp_path.glob("ipcosim-*.whl"))
     names = [n for n in zipfile.ZipFile(wheel).namelist() if n.endswith(".py")]
