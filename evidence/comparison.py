@@ -107,12 +107,34 @@ def analysis_row(scenario: str, pset: str) -> dict[str, Any]:
             "predicted_cycle": None if best is None else {
                 "parameter": best["parameter"], "frequency_Hz": best["frequency_Hz"],
                 "cart_amplitude_m": best["amplitudes"].get(motor)},
-            "disk_margin": _found(a, "disk"), "worst_sensor": _found(a, "sensor")}
+            "disk_margin": _disk(a.get("disk_margin")), "worst_sensor": _worst_sensor(a.get("sensor_margins"))}
 
 
-def _found(analysis: dict[str, Any], word: str) -> Any:
-    """The first entry of the analysis whose key names ``word`` (a disk margin, the sensor-gain ranges)."""
-    return next((v for k, v in analysis.items() if word in k), None)
+def _disk(disk: dict[str, Any] | None) -> dict[str, float] | None:
+    """The balanced disk margin at the plant input: its gain range and phase."""
+    if not disk:
+        return None
+    return {k: float(disk[k]) for k in ("alpha", "gain_lower", "gain_upper", "phase_deg")}
+
+
+def _worst_sensor(sensors: dict[str, Any] | None) -> dict[str, Any] | None:
+    """The measured signal whose loop-at-a-time gain range is narrowest (the smaller of its distances from 1)."""
+    if not sensors:
+        return None
+    name, m = min(sensors.items(), key=lambda kv: min(float(kv[1]["gain_upper"]) - 1, 1 - float(kv[1]["gain_lower"])))
+    return {"signal": name, "gain_lower": float(m["gain_lower"]), "gain_upper": float(m["gain_upper"]),
+            "delay_margin_s": None if m.get("delay_margin_s") is None else float(m["delay_margin_s"])}
+
+
+def _disk_text(d: dict[str, float] | None) -> str:
+    return "" if d is None else f"x{d['gain_lower']:.3g} .. x{d['gain_upper']:.3g}, +-{d['phase_deg']:.1f} deg"
+
+
+def _sensor_text(w: dict[str, Any] | None) -> str:
+    if w is None:
+        return ""
+    delay = "" if w["delay_margin_s"] is None else f", {w['delay_margin_s'] * 1e3:.3g} ms"
+    return f"{w['signal']}: x{w['gain_lower']:.3g} .. x{w['gain_upper']:.3g}{delay}"
 
 
 def measure(kinds: Sequence[str] = KINDS) -> list[dict[str, Any]]:
@@ -184,8 +206,7 @@ def table(rows: list[dict[str, Any]]) -> str:
             _f(s.get("overshoot_m"), 1e3), _f(s.get("cart_mean_error_m"), 1e3, ".2f"), _cycle(s), _predicted(a),
             _f(s.get("rms_voltage_V"), 1, ".2f"), _f(s.get("energy_J"), 1, ".3g"),
             _disturbance(r["push"]), _disturbance(r["tap"]), _margins(a),
-            "" if a.get("disk_margin") is None else str(a["disk_margin"]),
-            "" if a.get("worst_sensor") is None else str(a["worst_sensor"])]) + " |")
+            _disk_text(a.get("disk_margin")), _sensor_text(a.get("worst_sensor"))]) + " |")
     return "\n".join(lines)
 
 
@@ -205,8 +226,9 @@ INTRO = (
     "angle, the motor cart's largest excursion and the recovery time (the angle back inside +-0.01 rad for "
     "good). *Margins* and the prediction: `ipcosim analyze` at the plant input, of the row's ideal-plant set "
     "(the LQG's `lab` set is the `tuned` design plus a friction compensation whose breakaway term is positive "
-    "feedback on the frictionless linear plant: see the margins table); the disk and worst-sensor margins where "
-    "the analysis reports them.")
+    "feedback on the frictionless linear plant: see the margins table); the *disk margin* is the balanced one at the plant input "
+    "(the gain and phase it tolerates at once), the *worst sensor* the measured signal whose loop-at-a-time gain "
+    "range is narrowest, with that range and its delay margin (docs/studies.md, `ipcosim analyze`).")
 
 
 if __name__ == "__main__":

@@ -45,11 +45,10 @@ def test_every_non_python_file_the_code_reads_is_package_data() -> None:
 def test_the_wheel_holds_the_kit_not_the_evidence_or_the_tooling(tmp_path) -> None:
     """The built wheel: the package's modules under ``ipcosim/`` only, none of the thesis's evidence
     (``evidence/``), the repository's tooling (``devtools/``) or their former places in the package."""
+    import shutil
     import subprocess
     import sys
     import zipfile
-
-    import shutil
 
     # from a copy without the checkout's generated folders: setuptools reuses a build/lib left by an earlier
     # build, which may still hold modules the sources no longer have
