@@ -27,7 +27,7 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from ipcosim.errors import UsageError
+from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.hil.observer import CardObserver
 from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, task_kinds
 from ipcosim.harness.grammar import strip_nominal
@@ -52,6 +52,11 @@ from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
 from ipcosim.harness.scenario.binding import SwapTarget, bind, default_step, default_stop_time, warn_all, with_set
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
+
+
+class NothingToSimulateError(IpcosimError, ValueError):
+    """A system without a single FMU component (only nested systems and connectors): a run would
+    record time alone."""
 
 
 def plot_run(result: Result, path: Path | None = None) -> Any:
@@ -177,6 +182,9 @@ class Prepared:
             self.scenario = system.scenario
             return
         scenario = self._load(scenario_or_path, parameter_set, fmu_dirs)
+        if not scenario.components:
+            raise NothingToSimulateError(f"{scenario.origin}: system {scenario.name!r} has no component to "
+                                         "simulate (no FMU in it or in its sub-systems)")
         work = self._workdir(workdir)
         try:
             archived = self._archive_members(scenario, work) if scenario.location.is_file() else {}
