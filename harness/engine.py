@@ -27,7 +27,7 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from ipcosim.errors import UsageError
+from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.hil.observer import CardObserver
 from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, task_kinds
 from ipcosim.harness.grammar import strip_nominal
@@ -52,6 +52,51 @@ from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
 from ipcosim.harness.scenario.binding import SwapTarget, bind, default_step, default_stop_time, warn_all, with_set
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
+
+
+class NothingToSimulateError(IpcosimError, ValueError):
+    """A system without a single FMU component (only nested systems and connectors): a run would
+    record time alone."""
+
+
+class NoBinaryError(IpcosimError, OSError):
+    """An FMU without a shared library for this machine's platform."""
+
+
+def binary_folders(fmi_version: str) -> tuple[str, ...]:
+    """The ``binaries/`` folders an FMU's shared library for this machine may be in: FMI 2.0's
+    platform name (``linux64``; off x86 also FMI 3.0's tuple, as FMI 2.0.4 section 2.3 allows),
+    FMI 3.0's platform tuple (``x86_64-linux``)."""
+    import fmpy
+
+    if fmi_version.startswith("3"):
+        return (fmpy.platform_tuple,)
+    if fmpy.architecture in ("x86", "x86_64"):
+        return (fmpy.platform,)
+    return (fmpy.platform, fmpy.platform_tuple)
+
+
+def check_binary(fmu: Path, model: Any, where: str) -> None:
+    """Refuse, in one line naming ``where``, an FMU whose archive holds no shared library for this
+    platform (``binaries/<platform>/<modelIdentifier>.<ext>``), listing the platforms it has.
+
+    Raises
+    ------
+    NoBinaryError
+    """
+    import fmpy
+
+    if not zipfile.is_zipfile(fmu):
+        return  # an extracted folder or a non-archive: fmpy reports what it lacks
+    with zipfile.ZipFile(fmu) as zf:
+        names = [n.replace("\\", "/") for n in zf.namelist()]
+    folders = binary_folders(model.fmi_version)
+    library = f"{model.model_identifier}{fmpy.sharedLibraryExtension}"
+    if any(f"binaries/{folder}/{library}" in names for folder in folders):
+        return
+    parts = [n.split("/") for n in names]
+    has = sorted({p[1] for p in parts if len(p) >= 3 and p[0] == "binaries" and p[1] and p[-1]})  # with a file
+    raise NoBinaryError(f"{where}: has no binary for {folders[0]} (it has: {', '.join(has) or 'none'})")
 
 
 def plot_run(result: Result, path: Path | None = None) -> Any:
@@ -177,6 +222,9 @@ class Prepared:
             self.scenario = system.scenario
             return
         scenario = self._load(scenario_or_path, parameter_set, fmu_dirs)
+        if not scenario.components:
+            raise NothingToSimulateError(f"{scenario.origin}: system {scenario.name!r} has no component to "
+                                         "simulate (no FMU in it or in its sub-systems)")
         work = self._workdir(workdir)
         try:
             archived = self._archive_members(scenario, work) if scenario.location.is_file() else {}
@@ -245,10 +293,13 @@ class Prepared:
 
     def _extract(self, work: Path) -> None:
         by_file: dict[Path, Path] = {}
+        sources = {c.name: c.source for c in self.scenario.components}
         for inst in self.system.instances:
             path = inst.model.path
             assert path is not None
             if path not in by_file:
+                fmu = sources.get(inst.name, path.name) if inst.swapped_from is None else str(path)
+                check_binary(path, inst.model, f"{self.scenario.origin}: component {inst.name!r} ({fmu})")
                 target = work / f"{len(by_file)}-{path.stem}"
                 if not (target / "modelDescription.xml").exists():
                     safe_extract(path, target)
