@@ -226,9 +226,10 @@ INTRO = (
     "angle, the motor cart's largest excursion and the recovery time (the angle back inside +-0.01 rad for "
     "good). *Margins* and the prediction: `ipcosim analyze` at the plant input, of the row's ideal-plant set "
     "(the LQG's `lab` set is the `tuned` design plus a friction compensation whose breakaway term is positive "
-    "feedback on the frictionless linear plant: see the margins table); the *disk margin* is the balanced one at the plant input "
-    "(the gain and phase it tolerates at once), the *worst sensor* the measured signal whose loop-at-a-time gain "
-    "range is narrowest, with that range and its delay margin (docs/studies.md, `ipcosim analyze`).")
+    "feedback on the frictionless linear plant: see the margins table); the *disk margin* is the balanced one at "
+    "the plant input (the gain and phase it tolerates at once), the *worst sensor* the measured signal whose "
+    "loop-at-a-time gain range is narrowest, with that range and its delay margin (docs/studies.md, "
+    "`ipcosim analyze`).")
 
 
 if __name__ == "__main__":
