@@ -46,7 +46,7 @@ from ipcosim.harness.master.results import (
     open_output,
     select_columns,
 )
-from ipcosim.harness.master.slave import FMUSlave, load_library
+from ipcosim.harness.master.slave import FMUSlave, fmu_slave, load_library
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
@@ -403,7 +403,7 @@ class Prepared:
         lib = self._libraries.get(instance.name)
         if lib is None:
             lib = self._libraries[instance.name] = load_library(instance, self.unzip_dirs[instance.name])
-        slave = FMUSlave(instance, self.unzip_dirs[instance.name], library=lib)
+        slave = fmu_slave(instance, self.unzip_dirs[instance.name], library=lib)
         if self.reuse_instances:
             slave.reusable = True
             self._kept[instance.name] = slave
