@@ -80,7 +80,7 @@ def test_a_silent_controller_loses_its_lease_safely_and_a_second_client_can_rese
         mon.reset()                                         # refused while the controller holds its lease
     assert exc.value.code == ErrorCode.BUSY
     mon.close()
-    assert wait_for(lambda: srv.rig.motor_voltage() == 0.0 and not srv.rig.wd_running)   # controller silent
+    assert wait_for(lambda: srv.rig.motor_voltage() == 0.0 and not srv.rig.watchdog.running)   # controller silent
     mon = card(srv, role="monitor")
     mon.reset()                                             # the lease lapsed: the operator's reset works
     assert mon.status().amplifier_enabled
