@@ -22,6 +22,7 @@ ROOMS = {
     "controllers": ("controllers", True),
     "harness/master": ("harness/master", True),
     "harness/scenario": ("harness/scenario", True),
+    "harness/hil": ("harness/hil", True),
     "harness/studies": ("harness/studies", True),
     "evidence": ("evidence", True),
     "harness/cli": ("harness/cli", True),

@@ -28,9 +28,9 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError, UsageError
-from ipcosim.fmus.hil.observer import CardObserver
 from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, task_kinds
 from ipcosim.harness.grammar import strip_nominal
+from ipcosim.harness.hil.observer import CardObserver
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, check_times
@@ -46,7 +46,7 @@ from ipcosim.harness.master.results import (
     open_output,
     select_columns,
 )
-from ipcosim.harness.master.slave import FMUSlave, load_library
+from ipcosim.harness.master.slave import FMUSlave, fmu_slave, load_library
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
@@ -454,7 +454,7 @@ class Prepared:
         lib = self._libraries.get(instance.name)
         if lib is None:
             lib = self._libraries[instance.name] = load_library(instance, self.unzip_dirs[instance.name])
-        slave = FMUSlave(instance, self.unzip_dirs[instance.name], library=lib)
+        slave = fmu_slave(instance, self.unzip_dirs[instance.name], library=lib)
         if self.reuse_instances:
             slave.reusable = True
             self._kept[instance.name] = slave
@@ -588,9 +588,9 @@ def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers
 def open_live_view(options: RunOptions, prepared: Prepared, values: Mapping[str, Any]) -> Any:
     """The live view of a run (``--live``): its page served, its address printed; the scene after the
     plant kind, the rig's status from a monitor session (opened by the page's serving process) when a HIL
-    adapter drives a virtual rig (:func:`ipcosim.fmus.hil.observer.rig_monitor`). Returns the
+    adapter drives a virtual rig (:func:`ipcosim.harness.hil.observer.rig_monitor`). Returns the
     :class:`~ipcosim.harness.live.session.LiveSession` whose ``feed`` the run observes with."""
-    from ipcosim.fmus.hil.observer import rig_monitor
+    from ipcosim.harness.hil.observer import rig_monitor
     from ipcosim.harness.live.scene import scene
     from ipcosim.harness.live.session import open_live
     from ipcosim.harness.options import scenario_label

@@ -45,11 +45,11 @@ def native_fmus3(native_fmus: tuple[Path, Path]) -> Path:
 
 @pytest.fixture
 def tracked(monkeypatch: pytest.MonkeyPatch) -> tuple[list, list]:
-    """Every FMUSlave instantiated and freed during the test: ``(made, freed)``."""
-    from ipcosim.harness.master.slave import FMUSlave
+    """Every FMI 2.0 FMU slave instantiated and every FMU slave freed during the test: ``(made, freed)``."""
+    from ipcosim.harness.master.slave import FMU2Slave, FMUSlave
 
     made, freed = [], []
-    real_inst, real_free = FMUSlave.instantiate, FMUSlave.free
+    real_inst, real_free = FMU2Slave.instantiate, FMUSlave.free
 
     def inst(self):
         made.append(self)
@@ -61,6 +61,6 @@ def tracked(monkeypatch: pytest.MonkeyPatch) -> tuple[list, list]:
         if was not in ("freed", "created"):
             freed.append(self)
 
-    monkeypatch.setattr(FMUSlave, "instantiate", inst)
+    monkeypatch.setattr(FMU2Slave, "instantiate", inst)
     monkeypatch.setattr(FMUSlave, "free", free)
     return made, freed

@@ -5,7 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ipcosim.harness.master.slave import DISCARD, ERROR, OK, PySlave
+from py_slave import PySlave
+
+from ipcosim.harness.master.slave import DISCARD, ERROR, OK
 from ipcosim.harness.master.system import Instance, Model, System, Variable
 from ipcosim.harness.scenario.binding import bind
 from ipcosim.harness.scenario.ssp import Component, Connection, Connector, Experiment, Scenario

@@ -5,14 +5,16 @@ below it, never one above:
 
     errors, toolchain                          the base exceptions, the C-compiler rule
     fmus                                       physics, plant FMU glue, task metrics, the Python FMU
-                                               build, the whole of HIL (card API, virtual rig, adapter
-                                               glue, rig server, swap alias, card observer)
+                                               build, what the HIL adapter FMU runs (card API, card
+                                               clients, wire format, virtual rig, adapter glue)
     controllers                                control-law design, discrete laws, the pure closed loop,
                                                controller FMU glue
     harness.paths, harness.extras              where things are found and built; the missing-extra check
     harness.native                             the C generator, over the plants and the laws
     harness.master                             the generic master (knows no plant, law or generator)
     harness.scenario                           SSP read, validate, bind, pack, flavours
+    harness.hil                                the rig server and service, the card observer, the
+                                               ``hil`` swap alias
     ipcosim, harness (the facade)              the lazy public names, options, grammar, engine, public,
                                                export, testing helpers, baselines, plots, pytest plugin,
                                                the live view
@@ -43,6 +45,7 @@ ROOMS: tuple[tuple[str, ...], ...] = (
     ("harness.native",),
     ("harness.master",),
     ("harness.scenario",),
+    ("harness.hil",),
     ("", "harness", "harness.options", "harness.grammar", "harness.engine", "harness.public", "harness.export",
      "harness.testing", "harness.baseline", "harness.plot", "harness.pytest_plugin", "harness.describe",
      "harness.live"),

@@ -168,8 +168,8 @@ def test_inproc_creates_a_rig_from_the_query():
 def test_swap_alias_picks_the_adapter_by_plant_kind(tmp_path, monkeypatch):
     from types import SimpleNamespace
 
-    from ipcosim.fmus.hil.swap import HilSwapError, card_clock, find_adapter, resolve_hil
     from ipcosim.fmus.kinds import plant_kind
+    from ipcosim.harness.hil.swap import HilSwapError, card_clock, find_adapter, resolve_hil
     from ipcosim.harness.scenario.ssp import fmu_search_path
 
     assert plant_kind("x", "IP02SingleMass", set()) == "single-mass"

@@ -13,7 +13,7 @@ import pytest
 from fmi_helpers import wait_for
 
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.fmus.hil.server import RigServer
+from ipcosim.harness.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT = 0.5   # [s] long enough that a stall of a loaded VM does not trip it before the test does
@@ -61,7 +61,7 @@ def test_hung_client_watchdog_expires_and_the_motor_goes_to_zero_within_the_time
         assert wait_for(lambda: rig.status().watchdog_expired)
         assert rig.motor_voltage() == 0.0
         # on the rig's clock: expiry no later than one physics tick after the timeout since the last reload
-        assert rig.wd_expired_at_ns - rig.wd_last_reload_ns <= int(TIMEOUT * 1e9) + rig.tick_ns
+        assert rig.watchdog.expired_at_ns - rig.watchdog.last_reload_ns <= int(TIMEOUT * 1e9) + rig.tick_ns
         assert any(e.kind == "watchdog" for e in rig.events)
     finally:
         os.kill(proc.pid, signal.SIGKILL)
@@ -77,4 +77,4 @@ def test_killed_client_loses_the_session_and_the_motor_goes_to_zero(wallclock_se
     proc.wait(timeout=30)
     assert wait_for(lambda: rig.motor_voltage() == 0.0)
     assert wait_for(lambda: any(e.kind == "session" and "ended" in e.message for e in rig.events))
-    assert wait_for(lambda: not rig.wd_running)
+    assert wait_for(lambda: not rig.watchdog.running)

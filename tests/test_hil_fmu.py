@@ -19,7 +19,7 @@ from fmpy.validation import validate_fmu
 
 from ipcosim.fmus.hil.inproc import register_rig, unregister_rig
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.fmus.hil.server import RigServer
+from ipcosim.harness.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
 CART_RES, PEND_RES = 2.275e-5, 1.534e-3        # thesis-data.md, encoders
@@ -140,7 +140,7 @@ def test_adapter_passes_validate_fmu(kind, hil_fmus):
     assert private_resource(names, "fmus/hil/api.py")
     assert not any("/harness/" in n for n in names), names  # nothing of the master side
     assert all(n.endswith(".pyc") for n in names if "__pycache__" in n)  # only the build's checked bytecode
-    assert not private_resource(names, "fmus/hil/server.py")
+    assert not private_resource(names, "harness/hil/server.py")
     assert not private_resource(names, "harness/cli/__init__.py")
 
 
@@ -209,14 +209,14 @@ def test_start_zeroes_encoders_and_the_first_step_arms_the_watchdog(hil_fmus, un
     assert init_status(hil) == OK, hil.text()
     assert list(rig.read_encoder([0, 1])) == [0, 0]
     assert rig.motor_voltage() == 0.0
-    assert not rig.wd_running                          # not armed before stepping begins
+    assert not rig.watchdog.running                          # not armed before stepping begins
     hil.set(voltage=2.0)
     assert do_step(hil, 0.0, 1e-3) == OK
-    assert rig.wd_running and rig.wd_timeout_ns == 250_000_000
+    assert rig.watchdog.running and rig.watchdog.timeout_ns == 250_000_000
     assert rig.motor_voltage() == pytest.approx(2.0, abs=LSB)
-    assert rig.wd_last_reload_ns == 0                  # reloaded at the start of the step
+    assert rig.watchdog.last_reload_ns == 0                  # reloaded at the start of the step
     hil.slave.terminate()
-    assert rig.motor_voltage() == 0.0 and not rig.wd_running
+    assert rig.motor_voltage() == 0.0 and not rig.watchdog.running
     hil.slave.freeInstance()
 
 
@@ -394,5 +394,5 @@ def test_initialization_longer_than_the_watchdog_and_the_lease_does_not_stop_the
         for k in range(20):
             f.set(voltage=0.5)
             assert do_step(f, k * 1e-3, 1e-3) == OK, f.text()
-        assert srv.rig.wd_running and not srv.rig.status().watchdog_expired
+        assert srv.rig.watchdog.running and not srv.rig.status().watchdog_expired
         free(f)

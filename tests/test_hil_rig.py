@@ -163,10 +163,10 @@ def test_watchdog_expiry_forces_the_expiration_state_and_latches():
     r.write_analog([0], [5.0])
     r.advance(0.04)
     assert r.watchdog_reload() is True
-    reload_ns = r.wd_last_reload_ns
+    reload_ns = r.watchdog.last_reload_ns
     r.advance(0.2)
     assert r.watchdog_is_expired()
-    assert r.wd_expired_at_ns - reload_ns <= 50_000_000 + r.tick_ns      # within the timeout (+ one tick)
+    assert r.watchdog.expired_at_ns - reload_ns <= 50_000_000 + r.tick_ns      # within the timeout (+ one tick)
     assert r.motor_voltage() == pytest.approx(dac_quantize(1.0))         # the expiration state, not 5 V
     with pytest.raises(HILError) as e:
         r.write_analog([0], [3.0])
@@ -301,7 +301,7 @@ def test_wallclock_watchdog_expires_on_real_time_without_any_request():
     clock.ns += 200_000_000                      # the client went silent for 0.2 s
     st = r.status()
     assert st.watchdog_expired and st.motor_voltage == 0.0
-    assert r.wd_expired_at_ns == 50_000_000      # at the first grid point at the timeout
+    assert r.watchdog.expired_at_ns == 50_000_000      # at the first grid point at the timeout
 
 
 def test_config_errors_name_the_field():

@@ -21,8 +21,8 @@ from fmi_helpers import wait_for
 from ipcosim.fmus.hil import ErrorCode, HILError
 from ipcosim.fmus.hil.protocol import HEADER, MAGIC, MAX_PAYLOAD, Msg, encode_frame, pack_channels, pack_text
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.fmus.hil.server import RigAccessError, RigServer, escape
 from ipcosim.fmus.hil.tcpip import TcpipCard
+from ipcosim.harness.hil.server import RigAccessError, RigServer, escape
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -80,7 +80,7 @@ def test_a_silent_controller_loses_its_lease_safely_and_a_second_client_can_rese
         mon.reset()                                         # refused while the controller holds its lease
     assert exc.value.code == ErrorCode.BUSY
     mon.close()
-    assert wait_for(lambda: srv.rig.motor_voltage() == 0.0 and not srv.rig.wd_running)   # controller silent
+    assert wait_for(lambda: srv.rig.motor_voltage() == 0.0 and not srv.rig.watchdog.running)   # controller silent
     mon = card(srv, role="monitor")
     mon.reset()                                             # the lease lapsed: the operator's reset works
     assert mon.status().amplifier_enabled
@@ -332,7 +332,7 @@ def test_fuzzing_clients_cannot_stop_the_server_answering_a_well_behaved_one(ser
 
 
 def test_the_log_is_rate_limited_and_says_how_many_lines_it_held_back():
-    from ipcosim.fmus.hil.server import RateLimitedLog
+    from ipcosim.harness.hil.server import RateLimitedLog
 
     now = [0.0]
     lines: list[str] = []

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.fmus.hil.server import RigServer
+from ipcosim.harness.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[1]
 CART_RES, PEND_RES = 2.275e-5, 1.534e-3          # thesis-data.md, encoders
@@ -321,11 +321,11 @@ def test_master_dies_and_the_rigs_watchdog_puts_the_motor_at_zero(env, tmp_path)
                 time.sleep(0.01)
             assert rig.status().watchdog_expired and rig.motor_voltage() == 0.0
             # on the rig's clock, within the adapter's watchdog timeout plus one physics tick
-            assert rig.wd_expired_at_ns - rig.wd_last_reload_ns <= int(WD * 1e9) + rig.tick_ns
+            assert rig.watchdog.expired_at_ns - rig.watchdog.last_reload_ns <= int(WD * 1e9) + rig.tick_ns
         finally:
             os.kill(proc.pid, signal.SIGKILL)                  # and dies
             proc.wait(timeout=30)
         end = time.monotonic() + 30
         while not any(e.kind == "session" and "ended" in e.message for e in rig.events) and time.monotonic() < end:
             time.sleep(0.01)
-        assert rig.motor_voltage() == 0.0 and not rig.wd_running
+        assert rig.motor_voltage() == 0.0 and not rig.watchdog.running

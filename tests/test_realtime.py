@@ -220,7 +220,7 @@ def test_a_degraded_realtime_run_warns_and_exits_3(tmp_path, monkeypatch, capsys
 
 def test_a_fault_of_the_card_makes_the_run_not_upright_whatever_the_last_sample():
     """The card's observer (the HIL room's) records the fault; the pacer itself knows no cards."""
-    from ipcosim.fmus.hil.observer import CardObserver
+    from ipcosim.harness.hil.observer import CardObserver
     from ipcosim.harness.master.realtime import RealtimePacer
 
     message = ("component plant (IP02HILSingleMass): fmi2DoStep returned fmi2Discard at t = 2.5 s: pendulum limit "

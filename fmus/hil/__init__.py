@@ -9,11 +9,11 @@ Open a card by type and id (the Quanser convention), or by one URI ``[TYPE:]ID``
 
 Backends: ``quanser`` (:mod:`.quanser`), ``tcpip`` (:mod:`.tcpip`, served by
 ``ipcosim rig serve``), in-process (:mod:`.inproc`). The virtual rig is :mod:`.rig`, its
-wire protocol :mod:`.protocol`, its server :mod:`.server` (``ipcosim rig serve``).
+wire protocol :mod:`.protocol`.
 
-The rest of hardware-in-the-loop lives here too: the adapter FMU's glue (:mod:`.adapter`), the
-``--swap plant=hil`` alias (:mod:`.swap`) and the observer of a run's cards (:mod:`.observer`).
-Nothing here imports the master or the scenarios: they call in.
+This package holds what the HIL adapter FMU runs (its glue is :mod:`.adapter`); the rig's
+server, the ``--swap plant=hil`` alias and the observer of a run's cards sit above the master,
+in :mod:`ipcosim.harness.hil`. Nothing here imports the master or the scenarios: they call in.
 """
 from __future__ import annotations
 

@@ -19,7 +19,8 @@ FMUs step). Around it the rig models what a controller meets on the real bench:
   writes) until :meth:`VirtualRig.reset` (the operator's reset).
 * **Hard end stops** at +-0.407 m (half the 0.814 m track): a cart reaching one stops
   dead (inelastic; its outward velocity is set to zero).
-* **Watchdog** -- as on the Q4 (see :mod:`ipcosim.fmus.hil.api`), timed on the rig's clock.
+* **Watchdog** -- as on the Q4 (see :mod:`ipcosim.fmus.hil.api`), timed on the rig's clock
+  (its registers: :class:`Watchdog`).
   Expiry forces the analog outputs to their expiration states (0 V unless configured)
   and latches: writes are refused until ``watchdog_clear``.
 * **Noise and latency** (optional) -- Gaussian count noise of standard deviation
@@ -32,7 +33,8 @@ Clocks. ``lockstep``: the rig's time advances only when asked (:meth:`VirtualRig
 ``wallclock``: the rig's time is the host's monotonic clock since :meth:`start_clock`;
 the physics runs on a fixed grid of ``tick`` seconds, kept up to date by a background
 thread and by every request. Time is kept in integer nanoseconds (never accumulated
-floats). The rig is thread-safe (one re-entrant lock).
+floats); the clock is a :class:`RigClock`, the background thread a :class:`Ticker`. The rig
+is thread-safe (one re-entrant lock).
 """
 from __future__ import annotations
 
@@ -214,6 +216,120 @@ class RigEvent:
     message: str
 
 
+# --- the card's watchdog and the rig's clock, which the rig composes -----------------------------
+
+class Watchdog:
+    """The watchdog's registers: running, expired (latched), timeout, deadline, last reload, expiry time [ns]."""
+
+    def __init__(self) -> None:
+        self.running = False
+        self.expired = False
+        self.timeout_ns = 0
+        self.deadline_ns = 0
+        self.last_reload_ns: int | None = None
+        self.expired_at_ns: int | None = None
+
+    def start(self, timeout_ns: int, now_ns: int) -> None:
+        """Run with ``timeout_ns``, reloaded at ``now_ns``."""
+        self.timeout_ns = timeout_ns
+        self.running = True
+        self._reloaded(now_ns)
+
+    def reload(self, now_ns: int) -> bool:
+        """Reload at ``now_ns``; False (and nothing done) if it had expired."""
+        if self.expired:
+            return False
+        if self.running:
+            self._reloaded(now_ns)
+        return True
+
+    def clear(self, now_ns: int) -> None:
+        """Clear an expiry; a running watchdog is reloaded at ``now_ns``."""
+        self.expired = False
+        if self.running:
+            self._reloaded(now_ns)
+
+    def stop(self) -> None:
+        """Stop the timer (an expiry stays until cleared)."""
+        self.running = False
+
+    def due(self, t_ns: int) -> bool:
+        """Whether it expires at rig time ``t_ns`` (running, not yet expired, deadline reached)."""
+        return self.running and not self.expired and t_ns >= self.deadline_ns
+
+    def expire(self, t_ns: int) -> None:
+        """Latch the expiry at rig time ``t_ns``."""
+        self.expired = True
+        self.expired_at_ns = t_ns
+
+    def _reloaded(self, now_ns: int) -> None:
+        self.last_reload_ns = now_ns
+        self.deadline_ns = now_ns + self.timeout_ns
+
+
+class RigClock:
+    """Rig time [ns] of one rig.
+
+    Parameters
+    ----------
+    mode : str
+        ``lockstep`` or ``wallclock``.
+    clock_ns : callable
+        Monotonic host clock in nanoseconds (wallclock; injectable for tests).
+    """
+
+    def __init__(self, mode: str, clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
+        self.mode = mode
+        self.clock_ns = clock_ns
+        self.wall0_ns: int | None = None   # wallclock: host time of rig time 0
+
+    @property
+    def lockstep(self) -> bool:
+        """True for the ``lockstep`` clock."""
+        return self.mode == "lockstep"
+
+    def start(self, physics_ns: int) -> None:
+        """Wallclock: rig time ``physics_ns`` is now (once; later calls keep the first start)."""
+        if self.wall0_ns is None:
+            self.wall0_ns = self.clock_ns() - physics_ns
+
+    def now_ns(self, physics_ns: int) -> int:
+        """The rig's time: ``physics_ns`` (lockstep) or host time since :meth:`start` (wallclock,
+        started now if it was not)."""
+        if self.lockstep:
+            return physics_ns
+        if self.wall0_ns is None:
+            self.start(physics_ns)
+        return self.clock_ns() - self.wall0_ns
+
+
+class Ticker:
+    """A daemon thread calling ``tick()`` every ``period`` seconds until :meth:`stop`."""
+
+    def __init__(self, period: float, tick: Callable[[], None], name: str = "rig-ticker") -> None:
+        self.period, self.tick, self.name = period, tick, name
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    def start(self) -> None:
+        """Start the thread (if not running)."""
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._loop, name=self.name, daemon=True)
+            self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the thread and wait for it (at most 5 s)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None
+
+    def _loop(self) -> None:
+        while not self._stop.wait(self.period):
+            self.tick()
+
+
 class VirtualRig:
     """The virtual IP02 + Q4 rig (see the module docstring).
 
@@ -230,7 +346,7 @@ class VirtualRig:
         self.config = (config or RigConfig()).checked()
         self.kind = self.config.plant
         self.params = preset(self.config.preset or DEFAULT_PRESET[self.kind], **dict(self.config.params))
-        self._clock_ns = clock_ns
+        self.clock = RigClock(self.config.clock, clock_ns)
         self.lock = threading.RLock()
         self.tick_ns = max(1, to_ns(self.config.tick_s))
         self.latency_ns = to_ns(self.config.latency)
@@ -239,9 +355,7 @@ class VirtualRig:
         self.plant.set_state(self._x0)
         self._rng = np.random.default_rng(self.config.seed)
         self._t_ns = 0                      # time of the physics state
-        self._wall0_ns: int | None = None   # wallclock: host time of rig time 0
-        self._ticker: threading.Thread | None = None
-        self._stop_ticker = threading.Event()
+        self._ticker = Ticker(max(self.tick_ns / NS, 1e-3), self._tick)
         self._halted = threading.Event()
         self._last_step_ns = -NS              # rig time of the last STEP (the ticker rests while they come)
         self.events: collections.deque[RigEvent] = collections.deque(maxlen=1000)
@@ -292,12 +406,7 @@ class VirtualRig:
         self._pending: collections.deque[tuple[int, int, float]] = collections.deque()
         self._expiration = [0.0] * ANALOG_OUTPUTS
         self._enc_offset = [0] * ENCODER_INPUTS
-        self.wd_running = False
-        self.wd_expired = False
-        self.wd_timeout_ns = 0
-        self.wd_deadline_ns = 0
-        self.wd_last_reload_ns: int | None = None
-        self.wd_expired_at_ns: int | None = None
+        self.watchdog = Watchdog()
 
     def info(self, card_type: str = "q4", card_id: str = "0") -> CardInfo:
         """The card description a client gets on opening."""
@@ -311,47 +420,39 @@ class VirtualRig:
     @property
     def lockstep(self) -> bool:
         """True for the ``lockstep`` clock."""
-        return self.config.clock == "lockstep"
+        return self.clock.lockstep
 
     def start_clock(self, ticker: bool = True) -> None:
         """Wallclock: set rig time 0 to now and (optionally) start the background ticker."""
         if self.lockstep:
             return
         with self.lock:
-            if self._wall0_ns is None:
-                self._wall0_ns = self._clock_ns() - self._t_ns
-        if ticker and self._ticker is None:
-            self._stop_ticker.clear()
-            self._ticker = threading.Thread(target=self._tick_loop, name="rig-ticker", daemon=True)
+            self.clock.start(self._t_ns)
+        if ticker:
             self._ticker.start()
 
     def stop_clock(self) -> None:
         """Stop the background ticker (wallclock)."""
-        self._stop_ticker.set()
-        if self._ticker is not None:
-            self._ticker.join(timeout=5.0)
-            self._ticker = None
+        self._ticker.stop()
 
-    def _tick_loop(self) -> None:
+    def _tick(self) -> None:
         # Requests sync the physics themselves; the ticker keeps an idle rig (watchdog!) going.
         # Every event still happens at its grid instant: a late ticker only computes it later.
-        period = max(self.tick_ns / NS, 1e-3)
-        while not self._stop_ticker.wait(period):
-            if self.now_ns() - self._last_step_ns < 2 * period * NS:
-                continue    # a controller is stepping: its requests keep the physics up to date
-            try:
-                with self.lock:
-                    self.sync()
-            except HILError:
-                pass  # a plant fault is recorded as an event; keep the clock running
+        if self.now_ns() - self._last_step_ns < 2 * self._ticker.period * NS:
+            return    # a controller is stepping: its requests keep the physics up to date
+        try:
+            with self.lock:
+                self.sync()
+        except HILError:
+            pass  # a plant fault is recorded as an event; keep the clock running
 
     def now_ns(self) -> int:
         """The rig's clock [ns]: simulated (lockstep) or host time since start_clock (wallclock)."""
         if self.lockstep:
             return self._t_ns
-        if self._wall0_ns is None:
+        if self.clock.wall0_ns is None:
             self.start_clock(ticker=False)
-        return self._clock_ns() - self._wall0_ns
+        return self.clock.now_ns(self._t_ns)
 
     def time(self) -> float:
         """The rig's clock [s]."""
@@ -398,7 +499,7 @@ class VirtualRig:
         while self._pending and self._pending[0][0] <= t_ns:
             _, ch, v = self._pending.popleft()
             self._applied[ch] = v
-        if self.wd_running and not self.wd_expired and t_ns >= self.wd_deadline_ns:
+        if self.watchdog.due(t_ns):
             self._expire_watchdog(t_ns)
         v = AMPLIFIER_GAIN * self._applied[MOTOR_CHANNEL] if self.amplifier_enabled else 0.0
         try:
@@ -470,17 +571,17 @@ class VirtualRig:
             return
 
     def _expire_watchdog(self, t_ns: int) -> None:
-        self.wd_expired = True
-        self.wd_expired_at_ns = t_ns
+        wd = self.watchdog
+        wd.expire(t_ns)
         for ch in range(ANALOG_OUTPUTS):
             self._ao[ch] = self._expiration[ch]
             self._applied[ch] = self._expiration[ch]  # the card forces its outputs at once
         self._pending.clear()
         self.counters["watchdog_expiries"] += 1
-        last = self.wd_last_reload_ns if self.wd_last_reload_ns is not None else t_ns
+        last = wd.last_reload_ns if wd.last_reload_ns is not None else t_ns
         self._event(t_ns, "watchdog", f"watchdog expired at rig time {t_ns / NS:.4f} s "
                                       f"({(t_ns - last) / NS:.4f} s after the last reload; timeout "
-                                      f"{self.wd_timeout_ns / NS:g} s): outputs forced to their expiration "
+                                      f"{wd.timeout_ns / NS:g} s): outputs forced to their expiration "
                                       f"states")
 
     def _event(self, t_ns: int, kind: str, message: str) -> None:
@@ -510,10 +611,10 @@ class VirtualRig:
             self.sync()
             chans = self._check_ao(channels)
             values = as_finite(volts, len(chans), "write_analog")
-            if self.wd_expired:
+            if self.watchdog.expired:
                 raise HILError(ErrorCode.WATCHDOG_EXPIRED,
                                f"write_analog refused: the watchdog expired at rig time "
-                               f"{(self.wd_expired_at_ns or 0) / NS:.4f} s and was not cleared")
+                               f"{(self.watchdog.expired_at_ns or 0) / NS:.4f} s and was not cleared")
             for c, v in zip(chans, values):
                 q = dac_quantize(v)
                 self._ao[c] = q
@@ -568,42 +669,31 @@ class VirtualRig:
             if not (math.isfinite(timeout) and 0 < timeout <= MAX_WATCHDOG_TIMEOUT):
                 raise HILError(ErrorCode.INVALID_ARGUMENT, f"watchdog_start: timeout = {timeout} s must be in "
                                                            f"(0, {MAX_WATCHDOG_TIMEOUT:g}] s")
-            self.wd_timeout_ns = max(1, to_ns(timeout))
-            self.wd_running = True
-            self.wd_last_reload_ns = self.now_ns()
-            self.wd_deadline_ns = self.wd_last_reload_ns + self.wd_timeout_ns
+            self.watchdog.start(max(1, to_ns(timeout)), self.now_ns())
 
     def watchdog_reload(self) -> bool:
         """Reload; False if the watchdog had expired."""
         with self.lock:
             self.sync()
-            if self.wd_expired:
-                return False
-            if self.wd_running:
-                self.wd_last_reload_ns = self.now_ns()
-                self.wd_deadline_ns = self.wd_last_reload_ns + self.wd_timeout_ns
-            return True
+            return self.watchdog.reload(self.now_ns())
 
     def watchdog_is_expired(self) -> bool:
         """Whether the watchdog expired and was not cleared."""
         with self.lock:
             self.sync()
-            return self.wd_expired
+            return self.watchdog.expired
 
     def watchdog_clear(self) -> None:
         """Clear an expiry (outputs stay at their expiration states until written)."""
         with self.lock:
             self.sync()
-            self.wd_expired = False
-            if self.wd_running:
-                self.wd_last_reload_ns = self.now_ns()
-                self.wd_deadline_ns = self.wd_last_reload_ns + self.wd_timeout_ns
+            self.watchdog.clear(self.now_ns())
 
     def watchdog_stop(self) -> None:
         """Stop the timer (an expiry stays until cleared)."""
         with self.lock:
             self.sync()
-            self.wd_running = False
+            self.watchdog.stop()
 
     def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
              until_ns: int, reload: bool = True) -> StepResult:
@@ -675,7 +765,7 @@ class VirtualRig:
                 self._ao[ch] = self._expiration[ch]
                 self._applied[ch] = self._expiration[ch]
             self._pending.clear()
-            self.wd_running = False
+            self.watchdog.stop()
             self.limits_armed = False
             self._event(self._t_ns, "session", f"session ended ({reason}): outputs set to their expiration "
                                                f"states, limits disarmed")
@@ -703,7 +793,7 @@ class VirtualRig:
             for ch in range(ANALOG_OUTPUTS):
                 self._ao[ch] = self._applied[ch] = 0.0
             self._pending.clear()
-            self.wd_running = False
+            self.watchdog.stop()
             self.limits_armed = False
             self._event(self._t_ns, "halt", f"{reason}: outputs at 0 V")
 
@@ -719,7 +809,7 @@ class VirtualRig:
             self.sync()
             return RigStatus(amplifier_enabled=self.amplifier_enabled,
                              limit_tripped=bool(self.limit_message) and not self.amplifier_enabled,
-                             watchdog_expired=self.wd_expired, watchdog_running=self.wd_running,
+                             watchdog_expired=self.watchdog.expired, watchdog_running=self.watchdog.running,
                              limit_message=self.limit_message, time=self.now_ns() / NS,
                              motor_voltage=(AMPLIFIER_GAIN * self._applied[MOTOR_CHANNEL]
                                             if self.amplifier_enabled else 0.0),

@@ -71,8 +71,8 @@ def _token_options(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """``serve``, or the operator's ``reset``/``status`` of a running rig (``ipcosim.fmus.hil.service``)."""
-    from ipcosim.fmus.hil.service import operate, read_token
+    """``serve``, or the operator's ``reset``/``status`` of a running rig (``ipcosim.harness.hil.service``)."""
+    from ipcosim.harness.hil.service import operate, read_token
 
     if args.rig_command == "serve":
         return serve(args)
@@ -82,8 +82,8 @@ def main(args: argparse.Namespace) -> int:
 
 def serve(args: argparse.Namespace) -> int:
     """Serve a virtual rig until Ctrl-C, SIGTERM or ``--duration``."""
-    from ipcosim.fmus.hil import service
     from ipcosim.harness.grammar import parse_numbers
+    from ipcosim.harness.hil import service
     from ipcosim.harness.master.realtime import apply_cpu_affinity, apply_sched_fifo
 
     options = service.ServeOptions(

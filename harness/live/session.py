@@ -115,7 +115,7 @@ class SharedSource:
         self.ring = SampleRing(len(self.config["names"]), buffer=buffer[Board.SIZE:], counter=self.board.counter)
         rig = self.config.get("rig")
         if rig:
-            from ipcosim.fmus.hil.observer import RigMonitor
+            from ipcosim.harness.hil.observer import RigMonitor
 
             self.rig = RigPoller(RigMonitor(rig["card_type"], rig["card_id"], rig["host"], rig["port"],
                                             os.environ.get(RIG_TOKEN_VARIABLE) or None))
@@ -247,7 +247,7 @@ def open_live(make_scene: Callable[[Sequence[str]], dict[str, Any]], *, host: st
         Where to serve and the access token (``--live-host``, ``--live-port``, ``--live-token``).
     rig : dict, optional
         ``card_type``, ``card_id``, ``host``, ``port`` of the virtual rig whose status the page shows
-        (:func:`ipcosim.fmus.hil.observer.rig_monitor`); ``rig_token`` its access token.
+        (:func:`ipcosim.harness.hil.observer.rig_monitor`); ``rig_token`` its access token.
     announce : str
         The prefix of the line printed on stderr with the page's address.
 

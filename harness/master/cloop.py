@@ -16,7 +16,7 @@ has them, no contraction into fused multiply-adds), so the records are bit for b
 The library is called through :class:`ctypes.CDLL`, which releases the GIL for the whole
 chunk: FMU functions are called as the Python loop's ctypes calls call them (pythonfmu's FMUs
 take the GIL in every FMI function). Functions of a slave that are Python callables (a
-:class:`~ipcosim.harness.master.slave.PySlave`, the FMI 3.0 adapter) are called through ctypes
+Python slave of the master's tests, the FMI 3.0 adapter) are called through ctypes
 callbacks, which take the GIL; an exception there ends the chunk and is re-raised.
 
 Not covered: Integer, Boolean and String connectors (the Python loop runs those systems).

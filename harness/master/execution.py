@@ -43,7 +43,7 @@ from ipcosim.harness.master.plan import Block
 from ipcosim.harness.master.pyloop import compile_loop
 from ipcosim.harness.master.recorder import Recorder, TaskMetrics, TickFailure
 from ipcosim.harness.master.results import Result, RowWriter
-from ipcosim.harness.master.slave import DISCARD, TERMINATE, FMUSlave, Slave
+from ipcosim.harness.master.slave import DISCARD, TERMINATE, Slave, fmu_slave
 from ipcosim.harness.master.system import Instance, System, kind_of
 
 SlaveFactory = Callable[[Instance], Slave]
@@ -115,7 +115,7 @@ class Execution:
     observers, manipulators : sequences
         See :mod:`ipcosim.harness.master.observers`, :mod:`ipcosim.harness.master.manipulators`.
     slave_factory : callable, optional
-        ``factory(instance) -> Slave``; default :class:`FMUSlave` on ``unzip_dirs``.
+        ``factory(instance) -> Slave``; default :func:`~ipcosim.harness.master.slave.fmu_slave` on ``unzip_dirs``.
     unzip_dirs : mapping of component name to Path
         Extracted FMUs (for the default factory).
     record_every : int
@@ -216,7 +216,7 @@ class Execution:
         return self.system.instance(comp).start_value(var)
 
     def _fmu_slave(self, instance: Instance) -> Slave:
-        return FMUSlave(instance, self.unzip_dirs[instance.name])
+        return fmu_slave(instance, self.unzip_dirs[instance.name])
 
     # ------------------------------------------------------------------ manipulation API
     def set_start(self, component: str, variable: str, value: Any) -> None:

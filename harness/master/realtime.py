@@ -60,7 +60,7 @@ study) can ask for them without new arguments:
     host's stalls (``benchmarks/stall_probe.py``).
 
 What a run learns from a card it drives (its faults, its overruns) is recorded by the
-hardware-in-the-loop room's own observer, :mod:`ipcosim.fmus.hil.observer`.
+hardware-in-the-loop room's own observer, :mod:`ipcosim.harness.hil.observer`.
 """
 from __future__ import annotations
 

@@ -6,11 +6,11 @@ fast path, its raw C-signature functions: ``do_step(c, t, h, flag) -> status``,
 called with value-reference arrays resolved once and value arrays that live in the
 execution's value vector (one batched call per component and step, no per-step allocation).
 
-:class:`FMUSlave` loads an extracted FMU with FMPy's ``FMU2Slave`` and calls the shared
-library's functions directly; :class:`PySlave` is a pure-Python slave with the same calling
-convention (used by tests and for mock components). :class:`FMU3Slave` drives an FMI 3.0
-co-simulation FMU through the same interface (its ``fmi3DoStep`` and typed getters and setters
-adapted to the FMI 2.0 calling convention above; event mode is not used).
+:func:`fmu_slave` makes the slave of an extracted FMU, loaded through FMPy, whose shared
+library's functions are called directly: an :class:`FMU2Slave` for an FMI 2.0 FMU, an
+:class:`FMU3Slave` for an FMI 3.0 one (its ``fmi3DoStep`` and typed getters and setters adapted
+to the FMI 2.0 calling convention above; event mode is not used). The two are siblings over
+:class:`FMUSlave`, what they share.
 
 Values of the other types travel through *channels* (:meth:`Slave.channel`): per component and
 type (``integer``, ``boolean``, ``string``) a bound ``get(buffer)`` and ``set(buffer)`` over the
@@ -148,7 +148,10 @@ def _route_log(env: Any, instance_name: bytes | None, status: int, category: byt
 
 
 class FMUSlave(Slave):
-    """An FMI 2.0 co-simulation FMU instance (an extracted FMU loaded through FMPy).
+    """What the slaves of an extracted FMU (loaded through FMPy) share, whatever its FMI version:
+    the log, the calls of the lifecycle common to both, freeing and reuse. Made by
+    :func:`fmu_slave`, which picks :class:`FMU2Slave` or :class:`FMU3Slave` by the model's FMI
+    version.
 
     Parameters
     ----------
@@ -176,14 +179,8 @@ class FMUSlave(Slave):
 
     MAX_MESSAGES = 50
 
-    #: Prefix of the FMI functions this class calls (FMU3Slave: fmi3).
-    FMI = "fmi2"
-
-    def __new__(cls, instance: Instance, *args: Any, **kwargs: Any) -> "FMUSlave":
-        # one entry point for FMUs of either version: an FMI 3.0 FMU gets the FMI 3.0 slave
-        if cls is FMUSlave and instance.model.fmi_version.startswith("3"):
-            cls = FMU3Slave
-        return super().__new__(cls)
+    #: Prefix of the FMI functions the class calls (``fmi2``, ``fmi3``).
+    FMI = ""
 
     def __init__(self, instance: Instance, unzip_dir: Path, logging_on: bool = True, library: Any = None) -> None:
         self.name = instance.name
@@ -197,10 +194,8 @@ class FMUSlave(Slave):
         self._callbacks: Any = None
         self._logger: Any = None
         self.state = "created"
-
     def messages(self) -> list[str]:
         return list(self._messages)
-
     def _log(self, env: Any, instance_name: bytes | None, status: int, category: bytes | None,
              message: bytes | None) -> None:
         text = message.decode("utf-8", "replace") if message else ""
@@ -214,6 +209,56 @@ class FMUSlave(Slave):
         if status >= ERROR:
             self.errors_logged += 1
         del self._messages[:-self.MAX_MESSAGES]
+    def _call(self, function: str, *args: Any) -> None:
+        status = self._fmu._functions[function](self._fmu.component, *args)
+        if status > WARNING:
+            raise self.fail(function, status)
+    def exit_initialization_mode(self) -> None:
+        self._call(f"{self.FMI}ExitInitializationMode")
+        self.state = "stepping"
+    def terminate(self) -> None:
+        if self.state in ("initialization", "stepping", "step-failed"):
+            self.state = "terminating"
+            self._call(f"{self.FMI}Terminate")
+            self.state = "terminated"
+    def free(self) -> None:
+        if self._fmu is None or self.state in ("freed", "created", "parked"):
+            return
+        if self.reusable and self.state == "terminated" and self._fmu.component is not None:
+            self.state = "parked"
+            return
+        _SINKS.pop(getattr(self, "_sink", None), None)
+        try:
+            if self._fmu.component is not None:
+                getattr(self._fmu, f"{self.FMI}FreeInstance")(self._fmu.component)
+        finally:
+            self.state = "freed"
+            self._fmu.component = None
+            if self._owns_library:
+                try:
+                    self._fmu.freeLibrary()
+                except Exception:  # noqa: BLE001 -- unloading is best effort
+                    pass
+    def release(self) -> None:
+        """Free the instance for good (also a parked one)."""
+        self.reusable = False
+        if self.state == "parked":
+            self.state = "terminated"
+        self.free()
+    def _checked(self, var: Variable, value: Any) -> int:
+        """An integer value for ``var``, exact and in its type's range, else IntegerRangeError."""
+        what = f"component {self.describe()}: {self.name}.{var.name}"
+        try:
+            x = integers.exact_integer(value)
+        except ValueError:
+            raise integers.IntegerRangeError(f"{what}: {value!r} is not an integer") from None
+        return integers.check(x, integers.integer_type(var.type, self.instance.model.fmi_version), what)
+
+
+class FMU2Slave(FMUSlave):
+    """An FMI 2.0 co-simulation FMU instance (see :class:`FMUSlave`)."""
+
+    FMI = "fmi2"
 
     def instantiate(self) -> None:
         from fmpy import calloc, free  # type: ignore[attr-defined]
@@ -258,56 +303,12 @@ class FMUSlave(Slave):
             raise SlaveError(f"component {self.describe()}: fmi2Instantiate failed ({exc})"
                              + (f": {msgs[-1]}" if msgs else ""), self.name, "fmi2Instantiate") from None
         self.state = "instantiated"
-
-    def _call(self, function: str, *args: Any) -> None:
-        status = self._fmu._functions[function](self._fmu.component, *args)
-        if status > WARNING:
-            raise self.fail(function, status)
-
     def setup_experiment(self, start_time: float, stop_time: float | None) -> None:
         self._call("fmi2SetupExperiment", 0, 0.0, float(start_time), 1 if stop_time is not None else 0,
                    float(stop_time or 0.0))
-
     def enter_initialization_mode(self) -> None:
         self._call("fmi2EnterInitializationMode")
         self.state = "initialization"
-
-    def exit_initialization_mode(self) -> None:
-        self._call(f"{self.FMI}ExitInitializationMode")
-        self.state = "stepping"
-
-    def terminate(self) -> None:
-        if self.state in ("initialization", "stepping", "step-failed"):
-            self.state = "terminating"
-            self._call(f"{self.FMI}Terminate")
-            self.state = "terminated"
-
-    def free(self) -> None:
-        if self._fmu is None or self.state in ("freed", "created", "parked"):
-            return
-        if self.reusable and self.state == "terminated" and self._fmu.component is not None:
-            self.state = "parked"
-            return
-        _SINKS.pop(getattr(self, "_sink", None), None)
-        try:
-            if self._fmu.component is not None:
-                getattr(self._fmu, f"{self.FMI}FreeInstance")(self._fmu.component)
-        finally:
-            self.state = "freed"
-            self._fmu.component = None
-            if self._owns_library:
-                try:
-                    self._fmu.freeLibrary()
-                except Exception:  # noqa: BLE001 -- unloading is best effort
-                    pass
-
-    def release(self) -> None:
-        """Free the instance for good (also a parked one)."""
-        self.reusable = False
-        if self.state == "parked":
-            self.state = "terminated"
-        self.free()
-
     def set_values(self, variables: Sequence[Variable], values: Sequence[Any]) -> None:
         groups: dict[str, tuple[list[int], list[Any]]] = {}
         for var, value in zip(variables, values):
@@ -333,7 +334,6 @@ class FMUSlave(Slave):
             if status > WARNING:
                 names = ", ".join(v.name for v in variables if _fmi_type(v.type) == t)
                 raise self.fail(f"fmi2Set{t} ({names})", status)
-
     def get_values(self, variables: Sequence[Variable]) -> list[Any]:
         out: list[Any] = []
         fmu = self._fmu
@@ -352,19 +352,8 @@ class FMUSlave(Slave):
             v = buf[0]
             out.append(bool(v) if t == "Boolean" else (v.decode() if isinstance(v, bytes) else v))
         return out
-
-    def _checked(self, var: Variable, value: Any) -> int:
-        """An integer value for ``var``, exact and in its type's range, else IntegerRangeError."""
-        what = f"component {self.describe()}: {self.name}.{var.name}"
-        try:
-            x = integers.exact_integer(value)
-        except ValueError:
-            raise integers.IntegerRangeError(f"{what}: {value!r} is not an integer") from None
-        return integers.check(x, integers.integer_type(var.type, self.instance.model.fmi_version), what)
-
     def raw(self) -> tuple[Any, RawDoStep, RawGetSet, RawGetSet]:
         return self._fmu.component, self._do_step, self._get_real, self._set_real
-
     def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
         f, c, n = self._fmu._functions, self._fmu.component, len(variables)
         vrs = (ctypes.c_uint * max(n, 1))(*[v.vr for v in variables])
@@ -399,7 +388,6 @@ class FMUSlave(Slave):
 
             return get_strings, set_strings
         raise ValueError(f"no channel for value kind {kind!r}")
-
     def terminated(self) -> tuple[bool, str]:
         value = ctypes.c_int(0)
         status = self._fmu._functions["fmi2GetBooleanStatus"](self._fmu.component, 3, ctypes.byref(value))
@@ -407,7 +395,6 @@ class FMUSlave(Slave):
             return False, f"fmi2GetBooleanStatus(fmi2Terminated) returned {STATUS.get(status, status)}"
         return bool(value.value), (f"fmi2GetBooleanStatus(fmi2Terminated) returned "
                                    f"{'fmi2True' if value.value else 'fmi2False'}")
-
     def last_successful_time(self) -> float | None:
         value = ctypes.c_double(math.nan)
         status = self._fmu._functions["fmi2GetRealStatus"](self._fmu.component, 2, ctypes.byref(value))
@@ -427,8 +414,7 @@ class FMU3Slave(FMUSlave):
     Instantiated without event mode and without early return: ``fmi3DoStep``'s
     ``eventHandlingNeeded`` is ignored, ``terminateSimulation`` ends the run (the loop sees
     :data:`TERMINATE`). Float32 is converted to the master's ``c_double`` buffers; the sized
-    integer types travel exactly in its ``c_int64`` ones (``UInt64`` as its 64 bits). Use
-    :class:`FMUSlave` as the constructor: it returns this class for an FMI 3.0 model.
+    integer types travel exactly in its ``c_int64`` ones (``UInt64`` as its 64 bits).
     """
 
     FMI = "fmi3"
@@ -567,6 +553,13 @@ class FMU3Slave(FMUSlave):
         return value if math.isfinite(value) else None
 
 
+def fmu_slave(instance: Instance, unzip_dir: Path, logging_on: bool = True, library: Any = None) -> FMUSlave:
+    """The slave of one extracted FMU: an :class:`FMU3Slave` for an FMI 3.0 model, else an
+    :class:`FMU2Slave` (the arguments are :class:`FMUSlave`'s)."""
+    cls = FMU3Slave if instance.model.fmi_version.startswith("3") else FMU2Slave
+    return cls(instance, unzip_dir, logging_on=logging_on, library=library)
+
+
 def load_library(instance: Instance, unzip_dir: Path) -> Any:
     """An FMPy ``FMU2Slave`` (``FMU3Slave`` for FMI 3.0) with the FMU's shared library loaded and its
     functions resolved.
@@ -609,142 +602,3 @@ def fmi2_tuple_library(unzip_dir: Path, identifier: str) -> str | None:
 
 def _fmi_type(t: str) -> str:
     return {"Float64": "Real", "Float32": "Real", "Enumeration": "Integer"}.get(t, t)
-
-
-# --------------------------------------------------------------------------- Python slave
-class PySlave(Slave):
-    """A slave implemented in Python with the FMU calling convention (tests, mock components).
-
-    Subclasses implement :meth:`step` (advance from ``t`` by ``h``; return an FMI status or
-    True/False for OK/Discard) and keep values in ``self.values`` (value reference -> value).
-    Every FMI call is appended to ``self.calls`` so tests can check the lifecycle.
-
-    Parameters
-    ----------
-    instance : Instance
-        The bound component (its model gives value references and start values).
-    """
-
-    def __init__(self, instance: Instance) -> None:
-        self.name = instance.name
-        self.model_name = instance.model.name
-        self.instance = instance
-        self.values: dict[int, Any] = {v.vr: v.start for v in instance.model.variables.values()}
-        self.calls: list[str] = []
-        self.log: list[str] = []
-        self.state = "created"
-
-    # subclasses ------------------------------------------------------------
-    def step(self, t: float, h: float) -> int | bool:
-        """Advance from ``t`` to ``t + h``; return an FMI status (or True/False)."""
-        return OK
-
-    def on_enter_initialization(self) -> None:
-        """Hook: called on fmi2EnterInitializationMode."""
-
-    def on_exit_initialization(self) -> None:
-        """Hook: called on fmi2ExitInitializationMode."""
-
-    def on_get(self) -> None:
-        """Hook: called before values are read (compute outputs from inputs here)."""
-
-    # lifecycle -------------------------------------------------------------
-    def instantiate(self) -> None:
-        self.calls.append("instantiate")
-        self.state = "instantiated"
-
-    def setup_experiment(self, start_time: float, stop_time: float | None) -> None:
-        self.calls.append("setup_experiment")
-
-    def enter_initialization_mode(self) -> None:
-        self.calls.append("enter_initialization_mode")
-        self.on_enter_initialization()
-        self.state = "initialization"
-
-    def exit_initialization_mode(self) -> None:
-        self.calls.append("exit_initialization_mode")
-        self.on_exit_initialization()
-        self.state = "stepping"
-
-    def terminate(self) -> None:
-        if self.state in ("initialization", "stepping", "step-failed"):
-            self.calls.append("terminate")
-            self.state = "terminated"
-
-    def free(self) -> None:
-        if self.state in ("freed", "created"):
-            return
-        self.calls.append("free")
-        self.state = "freed"
-
-    def messages(self) -> list[str]:
-        return list(self.log)
-
-    def set_values(self, variables: Sequence[Variable], values: Sequence[Any]) -> None:
-        self.calls.append("set_values")
-        for var, value in zip(variables, values):
-            self.values[var.vr] = value
-
-    def get_values(self, variables: Sequence[Variable]) -> list[Any]:
-        self.on_get()
-        return [self.values[v.vr] for v in variables]
-
-    def raw(self) -> tuple[Any, RawDoStep, RawGetSet, RawGetSet]:
-        def do_step(c: Any, t: float, h: float, flag: int) -> int:
-            self.calls.append("do_step")
-            try:
-                status = self.step(t, h)
-            except Exception as exc:  # noqa: BLE001 -- an FMU reports errors by status
-                self.log.append(f"[fmi2Error] {exc}")
-                return ERROR
-            if status is True or status is None:
-                return OK
-            if status is False:
-                return DISCARD
-            return int(status)
-
-        def get_real(c: Any, vrs: Any, n: int, out: Any) -> int:
-            self.on_get()
-            values = self.values
-            for i in range(n):
-                out[i] = values[vrs[i]]
-            return OK
-
-        def set_real(c: Any, vrs: Any, n: int, vals: Any) -> int:
-            values = self.values
-            for i in range(n):
-                values[vrs[i]] = vals[i]
-            return OK
-
-        return None, do_step, get_real, set_real
-
-    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
-        vrs = [v.vr for v in variables]
-        types = [v.type for v in variables]
-        convert: Callable[[Any, str], Any] = {
-            "integer": lambda x, t: integers.stored(int(x), t), "boolean": lambda x, t: 1 if x else 0,
-            "string": lambda x, t: x if isinstance(x, bytes) else str(x).encode()}[kind]
-
-        def get(buf: Any) -> int:
-            self.on_get()
-            values = [convert(self.values[vr], t) for vr, t in zip(vrs, types)]
-            if isinstance(buf, list):
-                buf[:] = values
-            else:
-                for i, x in enumerate(values):
-                    buf[i] = x
-            return OK
-
-        def put(buf: Any) -> int:
-            for i, vr in enumerate(vrs):
-                x = buf[i]
-                if kind == "integer":
-                    x = integers.value(int(x), types[i])
-                self.values[vr] = bool(x) if kind == "boolean" else (x.decode() if isinstance(x, bytes) else x)
-            return OK
-
-        return get, put
-
-    def terminated(self) -> tuple[bool, str]:
-        flag = bool(getattr(self, "terminate_requested", False))
-        return flag, f"the status query returned {'true' if flag else 'false'}"

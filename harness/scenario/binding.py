@@ -215,7 +215,7 @@ class SwapRequest:
 #: ``SWAP_ALIAS_PROVIDERS`` are imported on first use and their ``SWAP_ALIASES`` (name ->
 #: resolver) registered; :func:`register_swap_alias` adds one from anywhere.
 swap_aliases: dict[str, Callable[[SwapRequest], SwapTarget]] = {}
-SWAP_ALIAS_PROVIDERS: tuple[str, ...] = ("ipcosim.fmus.hil.swap",)
+SWAP_ALIAS_PROVIDERS: tuple[str, ...] = ()  # ``hil``: ipcosim.harness.hil registers it on import
 _providers_loaded = False
 
 

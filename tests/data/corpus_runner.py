@@ -13,7 +13,7 @@ import sys
 
 from ipcosim.harness import cli, engine
 from ipcosim.harness.master import results
-from ipcosim.harness.master.slave import FMUSlave
+from ipcosim.harness.master.slave import FMU2Slave, FMUSlave
 
 counts = {"instantiated": 0, "freed": 0}
 phase, _, signame = os.environ.get("CORPUS_SIGNAL_AT", "").partition(":")
@@ -59,8 +59,8 @@ def _counted_free(self):
 
 
 _wrap(engine.Prepared, "_extract", before=lambda: _kill("load"))
-_wrap(FMUSlave, "instantiate", before=lambda: _kill("instantiate"), after=_instantiated)
-_wrap(FMUSlave, "enter_initialization_mode", before=lambda: _kill("initialize"))
+_wrap(FMU2Slave, "instantiate", before=lambda: _kill("instantiate"), after=_instantiated)
+_wrap(FMU2Slave, "enter_initialization_mode", before=lambda: _kill("initialize"))
 _wrap(results.Result, "write", before=lambda: _kill("write"))
 FMUSlave.free = _counted_free
 

@@ -17,6 +17,7 @@ from typing import Any, Sequence
 
 from ipcosim.fmus.hil import DEFAULT_URI, HILError, parse_card_uri
 from ipcosim.fmus.kinds import plant_kind
+from ipcosim.harness.scenario.binding import SwapRequest, register_swap_alias
 
 ADAPTERS = {"single-mass": "IP02HILSingleMass", "double-mass": "IP02HILDoubleMass"}
 
@@ -67,13 +68,11 @@ def card_clock(uri: str) -> str:
     return "wallclock"
 
 
-def resolve_hil(request: Any) -> dict[str, Any]:
+def resolve_hil(request: SwapRequest) -> dict[str, Any]:
     """Resolver of the ``hil`` alias: a swap request -> the fields of its swap target.
 
-    ``request`` is an :class:`ipcosim.harness.scenario.binding.SwapRequest` (read by attribute:
-    ``scenario``, ``component``, ``model``, ``fmu_dirs``); the answer holds the target's ``fmu``,
-    ``parameters``, ``realtime`` and ``description``, which the binding turns into its
-    ``SwapTarget``.
+    The answer holds the target's ``fmu``, ``parameters``, ``realtime`` and ``description``,
+    which the binding turns into its ``SwapTarget``.
     """
     model = request.model
     connectors = {c.name for c in request.scenario.component(request.component).connectors} \
@@ -90,6 +89,7 @@ def resolve_hil(request: Any) -> dict[str, Any]:
             "description": f"HIL adapter {ADAPTERS[kind]} on {uri} ({clock})"}
 
 
-#: The swap aliases this module provides, read by :mod:`ipcosim.harness.scenario.binding` (which
-#: lists this module among its alias providers).
+#: The swap aliases this module provides, registered with the binding when it is imported.
 SWAP_ALIASES = {"hil": resolve_hil}
+for _name, _resolver in SWAP_ALIASES.items():
+    register_swap_alias(_name, _resolver)

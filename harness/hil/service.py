@@ -18,7 +18,7 @@ from typing import Callable, Mapping
 from ipcosim.errors import UsageError
 from ipcosim.fmus.hil.protocol import MAX_TOKEN, TOKEN_ENV
 from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig, experiment_config
-from ipcosim.fmus.hil.server import (
+from ipcosim.harness.hil.server import (
     DEFAULT_HOST,
     DEFAULT_IDLE_TIMEOUT,
     DEFAULT_IO_TIMEOUT,

@@ -676,8 +676,8 @@ class RigServer:
         rig = self.rig
         st = rig.status()
         with rig.lock:
-            last = rig.wd_last_reload_ns if rig.wd_last_reload_ns is not None else -1
-            expired_at = rig.wd_expired_at_ns if rig.wd_expired_at_ns is not None else -1
+            last = rig.watchdog.last_reload_ns if rig.watchdog.last_reload_ns is not None else -1
+            expired_at = rig.watchdog.expired_at_ns if rig.watchdog.expired_at_ns is not None else -1
         counters = {**{f"rig.{k}": v for k, v in st.counters.items()},
                     **{f"server.{k}": v for k, v in self.counters.items()}}
         body = STATUS_REPLY.pack(st.motor_voltage, last, expired_at) + pack_text(st.limit_message)

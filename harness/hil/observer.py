@@ -8,17 +8,20 @@ recorded. In a paced run it also records ``card_overruns``: the sum of the ``ove
 outputs of the components that have one (steps whose request reached the card after their
 sample instant), read after the last step.
 
-:class:`CardObserver` keeps the master's observer interface
-(:class:`ipcosim.harness.master.observers.Observer`: ``start``, ``next_tick``, ``step``,
-``finish``, ``metrics``) without importing the master: it reads the execution's
-``instances``, ``slaves`` and ``n_ticks`` by attribute.
+:class:`CardObserver` is a master observer
+(:class:`ipcosim.harness.master.observers.Observer`).
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from ipcosim.harness.master.observers import Observer
+
+if TYPE_CHECKING:
+    from ipcosim.harness.master.execution import Execution
 
 
-class CardObserver:
+class CardObserver(Observer):
     """Records a card's fault (``rig_fault``, ``upright: false``) and, with ``overruns``, the
     cards' ``card_overruns`` after the last step."""
 
@@ -28,7 +31,7 @@ class CardObserver:
         self._last_tick: int | None = None
         self._card_overruns: int | None = None
 
-    def start(self, execution: Any) -> None:
+    def start(self, execution: Execution) -> None:
         """Note the run's last tick (the overruns are read there)."""
         self._last_tick = execution.n_ticks if self.overruns else None
 
@@ -36,7 +39,7 @@ class CardObserver:
         """Only the last tick, and only when counting overruns."""
         return self._last_tick if self._last_tick is not None and n < self._last_tick else None
 
-    def step(self, execution: Any, n: int) -> None:
+    def step(self, execution: Execution, n: int) -> None:
         """After the last step: the sum of the ``overruns`` outputs."""
         total = None
         for inst, slave in zip(execution.instances, execution.slaves):
@@ -49,7 +52,7 @@ class CardObserver:
                 pass
         self._card_overruns = total
 
-    def finish(self, execution: Any, error: BaseException | None) -> None:
+    def finish(self, execution: Execution, error: BaseException | None) -> None:
         """Keep the failure's message if it came from a card."""
         self.fault = card_fault(execution, error)
 
@@ -64,7 +67,7 @@ class CardObserver:
         return out
 
 
-def card_fault(execution: Any, error: BaseException | None) -> str | None:
+def card_fault(execution: Execution, error: BaseException | None) -> str | None:
     """The message of a run's failure if it came from a component driving a card (a HIL adapter), else None.
 
     An adapter is recognised by its ``limit_tripped`` and ``last_error`` outputs.
