@@ -62,3 +62,18 @@ def test_plot_distributions_writes_one_png_per_metric(tmp_path) -> None:
     paths = plot_distributions(rows, ["a", "b"], tmp_path)
     assert [p.name for p in paths] == ["a.png", "b.png"]
     assert all(p.read_bytes()[:4] == b"\x89PNG" for p in paths)
+
+
+def test_a_far_outlier_is_counted_not_allowed_to_squash_the_rest(tmp_path) -> None:
+    import matplotlib.pyplot as plt
+
+    good = np.linspace(1.0, 10.0, 300)  # settling times of 300 runs, 1 .. 10 s
+    fig = histogram(good, np.array([123456.7]), "settling_time_s")
+    fig.savefig(tmp_path / "h.png")
+    ax = fig.axes[0]
+    assert ax.get_xlim()[1] < 20.0, "the axis spans the 300 runs, not the one far out"
+    heights = [p.get_height() for p in ax.patches]
+    assert sum(heights) == pytest.approx(300), "every run on the axis is in a bar"
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend == ["success (300)", "failure (1)", "1 run(s) off the axis: 1.235e+05"], legend
+    plt.close(fig)

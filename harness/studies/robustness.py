@@ -301,22 +301,37 @@ def _bench(scenario: str, realism: str) -> dict[str, float]:
 
 def histogram(xg: np.ndarray, xb: np.ndarray, name: str, title: str = "") -> Any:
     """The figure of one metric's distribution: successful (``xg``) and failed (``xb``) runs
-    stacked, its x tick labels apart (:func:`_readable_ticks`)."""
+    stacked, its x tick labels apart (:func:`_readable_ticks`). A few runs far outside the rest
+    (:func:`ipcosim.harness.plot.axis_limits`) are counted in the legend instead of stretching the axis."""
     import matplotlib.pyplot as plt
+
+    from ipcosim.harness.plot import axis_limits
 
     fig, ax = plt.subplots(figsize=(5.0, 3.2), dpi=100)
     allx = np.concatenate([xg, xb])
+    labels = [f"success ({xg.size})", f"failure ({xb.size})"]
+    lo, hi = axis_limits([allx]) or (0.0, 0.0)
+    beyond = (allx < lo) | (allx > hi)
+    note = None
+    if beyond.any() and hi > lo:  # a few runs far out would squash the rest into one bar: counted, not drawn
+        xg, xb = xg[(xg >= lo) & (xg <= hi)], xb[(xb >= lo) & (xb <= hi)]
+        far = allx[beyond]
+        note = (f"{far.size} run(s) off the axis: " + (f"{far.min():.4g}" if far.size == 1 else
+                                                        f"{far.min():.4g} .. {far.max():.4g}"))
+        allx = allx[~beyond]
     bins = np.histogram_bin_edges(allx, bins=min(30, max(5, int(np.sqrt(allx.size)) + 1)))
     if np.ptp(allx) == 0:
         bins = np.array([allx[0] - 0.5, allx[0] + 0.5]) if allx[0] == 0 else \
             np.array([allx[0] * 0.99, allx[0] * 1.01])
         bins = np.sort(bins)
     ax.hist([xg, xb], bins=bins, stacked=True, color=["tab:green", "tab:red"],
-            label=[f"success ({xg.size})", f"failure ({xb.size})"])
+            label=labels)
     ax.set_xlabel(name)
     ax.set_ylabel("runs")
     if title:
         ax.set_title(title, fontsize=9)
+    if note:
+        ax.plot([], [], " ", label=note)  # in the legend, where it cannot cover a bar or the title
     ax.legend(fontsize=8)
     fig.tight_layout()
     _readable_ticks(fig, ax.xaxis)
