@@ -416,6 +416,7 @@ class Prepared:
                     partial.write(out, variables=variables, plot=plot, csv=False)
             raise
         self._describe(result, execution)
+        result.metadata["set"] = dict(set or {})  # the run figure's title lists them
         if out is not None:
             result.metadata["files"] = {k: str(v) for k, v in
                                         result.write(out, variables=variables, plot=plot, csv=False).items()}

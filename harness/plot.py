@@ -151,10 +151,45 @@ def figure(result: "Result", title: str | None = None, backend: str | None = Non
         if len(ax.get_legend_handles_labels()[0]) > 1:
             ax.legend(loc="best", fontsize="small")
     axes[-1, 0].set_xlabel("time [s]")
-    meta = result.metadata
-    name = title or meta.get("scenario", "")
-    extra = f" ({meta['parameter_set']})" if meta.get("parameter_set") else ""
-    status = "" if result.ok else "  [FAILED]"
-    fig.suptitle(f"{name}{extra}{status}")
+    fig.suptitle(title_text(result, title), fontsize="medium")
     fig.tight_layout()
     return fig
+
+
+#: Characters per line of the run figure's title before it is wrapped.
+TITLE_WIDTH = 90
+
+
+def title_text(result: "Result", title: str | None = None) -> str:
+    """The run figure's title: what was run and how far its results can be trusted.
+
+    Line one: the scenario (or ``title``), its parameter set in brackets, and the marks
+    ``[HIL: plant=hil]`` (a component swapped for the hardware-in-the-loop one), ``[swapped: ...]``
+    (any other swap), ``[DEGRADED real time: x % late steps > budget y %]`` (a paced run over
+    its overrun budget, the run that exits 3) and ``[FAILED]``. Then every ``--set`` value
+    (``set: plant.Mp=0.2, ...``), wrapped at :data:`TITLE_WIDTH` characters.
+    """
+    import textwrap
+
+    meta, metrics = result.metadata, result.metrics
+    head = [title or str(meta.get("scenario", ""))]
+    if meta.get("parameter_set"):
+        head.append(f"({meta['parameter_set']})")
+    swaps = {str(k): str(v) for k, v in (meta.get("swaps") or {}).items()}
+    hil = {k: v for k, v in swaps.items() if Path(v).stem.lower().startswith("hil")}
+    if hil:
+        head.append("[HIL: " + ", ".join(f"{k}={v}" for k, v in hil.items()) + "]")
+    others = {k: v for k, v in swaps.items() if k not in hil}
+    if others:
+        head.append("[swapped: " + ", ".join(f"{k}={v}" for k, v in others.items()) + "]")
+    if metrics.get("overrun_budget_exceeded"):
+        head.append(f"[DEGRADED real time: {100 * float(metrics.get('overrun_fraction', 0.0)):.2f} % late steps > "
+                    f"budget {100 * float(metrics.get('overrun_budget', 0.0)):.2f} %]")
+    if not result.ok:
+        head.append("[FAILED]")
+    lines = textwrap.wrap(" ".join(h for h in head if h), TITLE_WIDTH) or [""]
+    sets = meta.get("set") or {}
+    if sets:
+        lines += textwrap.wrap("set: " + ", ".join(f"{k}={v}" for k, v in sets.items()), TITLE_WIDTH,
+                               break_on_hyphens=False)
+    return "\n".join(lines)

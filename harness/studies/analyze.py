@@ -555,7 +555,7 @@ def plot_loop(loop: Loop, result: Mapping[str, Any], out: str | Path, title: str
     out.mkdir(parents=True, exist_ok=True)
     w = frequency_grid(loop.T, 3000)
     Lw = loop_response(loop, w)
-    bode = _save(plt, _plot_bode(plt, w, Lw, title), out / "bode.png")
+    bode = _save(plt, _plot_bode(plt, w, Lw, title, result), out / "bode.png")
     nyquist = _save(plt, _plot_nyquist(plt, Lw, result.get("modulus_margin"), title), out / "nyquist.png")
     figures = {"bode": bode, "nyquist": nyquist}
     if result.get("sensor_margins"):
@@ -573,22 +573,61 @@ def _save(plt: Any, fig: Any, path: Path) -> str:
     return str(path)
 
 
-def _plot_bode(plt: Any, w: np.ndarray, Lw: np.ndarray, title: str) -> Any:
-    """The Bode figure: |L|, |S| and |T| in dB above the phase of L, against frequency [rad/s]."""
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
+def _plot_bode(plt: Any, w: np.ndarray, Lw: np.ndarray, title: str, result: Mapping[str, Any] | None = None) -> Any:
+    """The Bode figure: |L|, |S| and |T| in dB above the phase of L, against frequency [rad/s].
+
+    The phase panel has the -180 deg line (and -180 + k 360 deg wherever the unwrapped phase runs);
+    with ``result`` (:func:`analyze_loop`) the margins are drawn where they are: each gain margin as
+    a bar from |L| up (or down) to 0 dB at its phase crossover, each phase margin as a bar from the
+    -180 deg line to the phase at its gain crossover, both labelled with their value."""
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6.4))
+    mag = 20 * np.log10(np.abs(Lw))
     for vals, label in ((Lw, "|L|"), (1 / (1 + Lw), "|S|"), (Lw / (1 + Lw), "|T|")):
         ax1.semilogx(w, 20 * np.log10(np.abs(vals)), label=label)
     ax1.axhline(0, color="k", lw=0.5)
     ax1.set_ylabel("magnitude [dB]")
-    ax1.legend()
     ax1.set_title(title)
-    ax2.semilogx(w, np.degrees(np.unwrap(np.angle(Lw))))
+    phase = np.degrees(np.unwrap(np.angle(Lw)))
+    ax2.semilogx(w, phase, label="phase of L")
+    lo, hi = min(float(phase.min()), -190.0), max(float(phase.max()), -170.0)
+    for k, level in enumerate(np.arange(-180.0 + 360.0 * math.ceil((lo + 180.0) / 360.0), hi, 360.0)):
+        ax2.axhline(level, color="tab:red", ls="--", lw=0.9, label="-180 deg (mod 360)" if k == 0 else None)
+    ax2.set_ylim(lo - 15.0, hi + 40.0)  # room for the labels above the curve
     ax2.set_ylabel("phase of L [deg]")
     ax2.set_xlabel("frequency [rad/s]")
+    logw = np.log10(w)
+    for pm in (result or {}).get("phase_margins") or []:
+        wc, margin = pm["frequency_rad_s"], pm["phase_margin_deg"]
+        at = float(np.interp(math.log10(wc), logw, phase))
+        ax2.plot([wc, wc], [at - margin, at], color="tab:purple", lw=2.2, solid_capstyle="butt")
+        ax2.plot([wc], [at], "o", color="tab:purple", ms=5)
+        ax1.plot([wc], [0.0], "o", color="tab:purple", ms=5)
+        ax2.annotate(f"PM {margin:.3g} deg\nat {wc:.3g} rad/s", (wc, at), fontsize=8, color="tab:purple",
+                     **_beside(wc, logw, 4))
+    gm = (result or {}).get("gain_margin") or {}
+    for side in ("upper", "lower"):
+        wg, db = gm.get(f"{side}_frequency_rad_s"), gm.get(f"{side}_dB")
+        if db is None or not wg or not w[0] * (1 - 1e-9) <= wg <= w[-1] * (1 + 1e-9):
+            continue  # infinite, at rest (z = 1: off a log axis) or beyond the grid: in analysis.json only
+        at = float(np.interp(math.log10(wg), logw, mag))
+        ax1.plot([wg, wg], [at, 0.0], color="tab:brown", lw=2.2, solid_capstyle="butt")
+        ax1.plot([wg], [at], "s", color="tab:brown", ms=5)
+        ax2.plot([wg], [float(np.interp(math.log10(wg), logw, phase))], "s", color="tab:brown", ms=5)
+        ax1.annotate(f"GM {db:+.3g} dB\nat {wg:.3g} rad/s", (wg, at / 2), fontsize=8, color="tab:brown",
+                     va="center", **_beside(wg, logw, 0))
+    ax1.legend(fontsize=8, loc="lower left")
+    ax2.legend(fontsize=8, loc="lower left")
     for ax in (ax1, ax2):
         ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     return fig
+
+
+def _beside(w: float, logw: np.ndarray, dy: float) -> dict[str, Any]:
+    """Where a margin's label goes: right of its mark, or left of it in the last third of the axis."""
+    right = math.log10(w) < logw[0] + 2 / 3 * (logw[-1] - logw[0])
+    return {"xytext": (6 if right else -6, dy), "textcoords": "offset points", "ha": "left" if right else "right",
+            "bbox": {"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.85}}
 
 
 def _plot_nyquist(plt: Any, Lw: np.ndarray, modulus_margin: float | None, title: str) -> Any:

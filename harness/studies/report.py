@@ -26,6 +26,8 @@ CONTROLLER_LABELS = {"pid": "PID", "cascade-pid": "cascade PID", "lqr": "LQR + o
 PLANT_LABELS = {"single-mass": "single mass", "double-mass": "double mass"}
 CONTROLLER_COLORS = {"pid": "tab:gray", "cascade-pid": "tab:purple", "lqr": "tab:orange", "hsmc": "tab:blue",
                      "adaptive-hsmc": "tab:green"}
+#: Colours of the laws outside CONTROLLER_COLORS (an LQG, a discrete LQR), in table order.
+EXTRA_COLORS = ("tab:red", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
 SCENARIOS = tuple(f"{p}-{c}" for p in KINDS for c in CONTROLLERS)
 
 #: The task's step [m] and the +-2 % band half-width [m].
@@ -78,15 +80,18 @@ def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    series = [(c, results[f"{plant}-{c}"]["series"]) for c in CONTROLLERS
-              if f"{plant}-{c}" in results and results[f"{plant}-{c}"].get("series")]
+    laws = [(split(scenario)[1], results[scenario]) for scenario in table_order(results)
+            if split(scenario)[0] == plant]
+    series = [(c, row["series"]) for c, row in laws if row.get("series")]
     if not series:
         return None
+    others = iter(EXTRA_COLORS * (1 + len(laws) // len(EXTRA_COLORS)))
+    colors = {c: CONTROLLER_COLORS.get(c) or next(others) for c, _ in laws}
     fig, axes = plt.subplots(3, 1, figsize=(8.0, 7.5), dpi=100, sharex=True)
     ref_drawn = False
     for controller, s in series:
         label = CONTROLLER_LABELS.get(controller, controller)
-        color = CONTROLLER_COLORS.get(controller)
+        color = colors[controller]
         if not ref_drawn:
             axes[0].plot(s["time"], s["reference"], "k--", lw=0.8, label="reference")
             ref_drawn = True
@@ -106,6 +111,11 @@ def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
     axes[0].set_title(f"IP02 {PLANT_LABELS.get(plant, plant)}: controllers compared")
     for ax in axes:
         ax.grid(True, alpha=0.3)
+    for controller, row in laws:  # a law of the table without a time series is named, not dropped
+        if not row.get("series"):
+            axes[0].plot([], [], color=colors[controller], lw=0, marker="s",
+                         label=f"{CONTROLLER_LABELS.get(controller, controller)}: no time series "
+                               f"({row.get('status') or 'not run'})")
     axes[0].legend(fontsize=8, ncol=3)
     axes[1].set_ylim(-0.4, 0.4)
     fig.tight_layout()
@@ -121,6 +131,12 @@ def until(series: Mapping[str, Sequence[float]], end: float | None) -> dict[str,
     return {key: list(values[:n]) for key, values in series.items()}
 
 
+def table_order(results: Results) -> list[str]:
+    """The scenarios of ``results`` in the table's (and the figures') order: the project's
+    plant x controller scenarios first, then any other (an LQG, a discrete LQR) by name."""
+    return sorted(results, key=lambda s: (SCENARIOS.index(s) if s in SCENARIOS else 99, s))
+
+
 # --------------------------------------------------------------------------- document
 
 
@@ -129,7 +145,7 @@ def _table(results: Results, robustness: Mapping[str, Mapping[str, Any]] | None)
     if robustness:
         header.append("robust success (+-20 %)")
     rows = []
-    for scenario in sorted(results, key=lambda s: (SCENARIOS.index(s) if s in SCENARIOS else 99, s)):
+    for scenario in table_order(results):
         row = results[scenario]
         plant, controller = split(scenario)
         cells = [PLANT_LABELS.get(plant, plant), CONTROLLER_LABELS.get(controller, controller),
