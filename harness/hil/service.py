@@ -15,7 +15,7 @@ import sys
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
 
-from ipcosim.errors import UsageError
+from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.hil.protocol import MAX_TOKEN, TOKEN_ENV
 from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig, experiment_config
 from ipcosim.harness.hil.server import (
@@ -68,6 +68,10 @@ def parse_limit(text: str, option: str, hi: float) -> float | None:
     if not (0 < value <= hi):   # NaN fails too
         raise UsageError(f"{option} {text}: expected a number in (0, {hi:g}] or 'off'")
     return value
+
+
+class RigModelError(IpcosimError, ValueError):
+    """A value the rig's plant model refuses (a negative mass, say): the work cannot be done (exit 1)."""
 
 
 @dataclass
@@ -130,13 +134,14 @@ class ServeOptions:
             raise UsageError(str(exc).strip("'\"")) from None
 
     def rig(self) -> VirtualRig:
-        """The options checked, then the rig they describe (UsageError naming what does not fit)."""
+        """The options checked, then the rig they describe (UsageError naming an option that does not fit;
+        RigModelError for a value the plant model refuses, such as a negative mass: exit 1, as ``run``)."""
         self.checked()
         config = self.config()
         try:
             return VirtualRig(config)
         except (ValueError, KeyError) as exc:
-            raise UsageError(str(exc).strip("'\"")) from None
+            raise RigModelError(str(exc).strip("'\"")) from None
 
     def server(self, rig: VirtualRig, log: Callable[[str], None]) -> RigServer:
         """The started server of ``rig`` on the options' address (UsageError if it cannot serve there)."""
