@@ -2,7 +2,7 @@
 family) looked up by name -- its parameters (names, units, defaults), its named parameter sets, and the
 factory that builds it from flat parameter values, the same values a controller FMU holds.
 
-Each law has a ``thesis`` set (the thesis's numbers, reference/thesis-data.md section 2) and,
+Each law has a ``thesis`` set (the thesis's numbers: its sections 3.2 and 4.2, App. A and B) and,
 where the thesis's numbers do not do the task on the thesis's own model (move the motor-driven
 cart 0.05 m within 10 s, |angle| < 0.35 rad, within +-10 V), a ``tuned`` set that does
 (``ipcosim.controllers.tuning`` says how it was found; docs/controllers.md says why it was needed). The
@@ -20,7 +20,7 @@ LQG            tuned; lab (not in thesis)   tuned; lab (not in thesis)
 =============  ===========================  =========================================
 
 The first set listed is the default: the FMU parameter defaults are its values, and the SSP
-scenarios bind it (``parameter_sets`` feeds ``devtools.ssp_gen``'s ``.ssv`` files).
+scenarios bind it (``parameter_sets`` feeds their ``.ssv`` files: docs/master.md).
 
 Flat parameter names (``schema``): the law's gains as in its module of ``ipcosim.controllers.laws``; ``sample_period``
 [s]; ``voltage_limit`` [V]; for the model-based laws (LQR, LQG, HSMC, AdaptiveHSMC) the design model's
@@ -29,7 +29,7 @@ preset): the controller's *belief* about the plant, independent of the plant com
 
 Adding a law: one module in ``ipcosim.controllers.laws`` declaring its ``LawEntry``, listed in ``REGISTRY``
 below; its FMU scripts (``controllers/fmu_<law>_<plant>.py``); its scenario row
-(``devtools.ssp_gen``).
+(``ipcosim.harness.scenario.scenarios``).
 """
 from __future__ import annotations
 
@@ -114,7 +114,7 @@ def set_values(kind: str, law: str, parameter_set: str) -> dict[str, Any]:
 def parameter_sets(kind: str, law: str) -> dict[str, dict[str, Any]]:
     """``{set name: {FMU parameter: value}}`` of ``law`` on plant ``kind``.
 
-    Used by ``devtools.ssp_gen``.
+    The scenarios' ``.ssv`` files hold these values (docs/controllers.md, FMUs).
     """
     return {name: set_values(kind, law, name) for name in PARAMETER_SETS[law][kind]}
 

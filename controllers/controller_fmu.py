@@ -1,6 +1,6 @@
 """FMI face of the control laws, shared by the ``controllers/fmu_<law>_<plant>.py`` scripts.
 
-Variables (DESIGN.md contract): inputs ``reference`` [m] and the plant's measured positions
+Variables (docs/controllers.md, FMUs): inputs ``reference`` [m] and the plant's measured positions
 (``ipcosim.fmus.physics.MEASURED``); output ``voltage`` [V]; parameters = the law's schema
 (``ipcosim.controllers.laws.base.LawEntry.schema``: every gain and weight with its unit; ``sample_period``,
 ``voltage_limit``; the model-based laws' ``model_*`` design-model constants). The LQR and LQG FMUs also have

@@ -7,7 +7,7 @@ Two interchangeable back ends compute the same design:
 * ``backend="scipy"``: ``scipy.linalg.solve_continuous_are``, ``scipy.signal.place_poles`` and
   ``scipy.linalg.expm``. The controller FMUs redo the design with it in initialization mode
   (their runtime needs only numpy and scipy), so a weight changed through an FMU parameter
-  gives the gains it implies. ``tests/test_controllers_design.py`` checks both agree.
+  gives the gains it implies. Both back ends agree to 1e-8 (docs/controllers.md).
 
 The design model is the plant linearized about the upright equilibrium *without* the armature
 inductance (current eliminated: the thesis's App. A.2 and B.3 models; the electrical pole at
@@ -70,7 +70,7 @@ BACKENDS = ("control", "scipy")
 PBH_TOLERANCE = 1e-10
 
 
-# --- the thesis's design data (reference/thesis-data.md, section 2) ---------------------------------
+# --- the thesis's design data (the thesis, sec. 3.2.2 / 4.2.2, App. A.2 / B.3) ---------------------
 
 def thesis_single_mass_Q() -> np.ndarray:
     """App. A.2 state weights for ``[xc, xc', th, th']``: Bryson-style q_i = w / (a * x_max^2)."""

@@ -7,7 +7,7 @@ positions and the reference *at that instant* (zero-delay sampling, the same ord
 uses: setpoint, plant, controller). Time is integer ticks, never accumulated.
 
 This is the project's one pure closed loop: the controllers' tables and friction fit, the thesis's
-claims (``evidence.claims``, through the bench's instruments) and the FMU-free study
+claims (docs/results.md, through the bench's instruments) and the FMU-free study
 stand-in (``ipcosim.harness.studies.runners.PurePlantSpec``, a state feedback that reads the true state and
 stops integrating once the pendulum has fallen far) all run it.
 """

@@ -1,4 +1,4 @@
-"""The thesis's LQR design data as plain numbers (reference/thesis-data.md, section 2).
+"""The thesis's LQR design data as plain numbers (the thesis, sec. 3.2.2 / 4.2.2, App. A.2 / B.3).
 
 Kept apart from ``ipcosim.controllers.design`` (numpy, scipy) so that the parameter catalog, and
 with it every controller FMU, reads them without the design stack.

@@ -14,7 +14,7 @@ through the derivative filters, and a 1 ms sample period far above the loop's dy
 Search: Nelder-Mead, first on a feasibility measure (largest real part minus damping margin)
 from the thesis's values and perturbations of them, then on J from the feasible points. The result
 is then checked on the nonlinear plant with the sampled law, its derivative filters and the voltage
-limit (``tests/test_controllers.py``, ``evidence.controllers_table``).
+limit (docs/controllers.md, Closed-loop evidence).
 The search uses constraints tightened by ``TUNING_MARGIN`` (2 %) so that the optimum -- which lies
 on a constraint boundary, often as a double pole -- still meets the nominal constraints after
 rounding; the numbers in ``ipcosim.controllers.catalog`` are rounded to the fewest significant digits

@@ -55,7 +55,7 @@ dependencies) and ``initial="exact"`` with their start value otherwise;
 ``<ModelStructure><Outputs>`` with the declared direct dependencies.
 
 Error reporting, as pythonfmu 0.7.0's C wrapper allows (measured through fmpy with a
-logger callback, ``tests/test_fmi_plumbing.py``):
+logger callback):
 
 * ``step`` raising :class:`StepFailure` -> the message is logged with status
   fmi2Error (category ``logStatusError``) and ``fmi2DoStep`` returns **fmi2Discard**;

@@ -42,7 +42,7 @@ END_STOP_M = 0.407
 #: --cart-limit``, ``--pendulum-limit-deg``): each cart +-0.30 m, the pendulum +-20 deg from upright.
 CART_LIMIT_M = 0.30
 PENDULUM_LIMIT_RAD = math.radians(20.0)
-#: Q4 analog output: 12-bit DAC over +-10 V (thesis-data.md section 1; ``ipcosim.fmus.hil.rig``).
+#: Q4 analog output: 12-bit DAC over +-10 V (the Q4 card of the thesis, sec. 3.3; ``ipcosim.fmus.hil.rig``).
 DAC_BITS = 12
 DAC_RANGE_V = 10.0
 DAC_V_PER_CODE = 2 * DAC_RANGE_V / (1 << DAC_BITS)
@@ -216,7 +216,7 @@ LAB_SOURCES = {
     "input_delay": "one sample (1 ms at the rig's 1 kHz): the voltage computed from a sample's readings is written "
                    "at the next sample",
     "b, b1, b2": "FITTED, not measured: 0.1047 N is the passive-cart Coulomb force that reproduces the thesis's "
-                 "5.575 mm double-mass HSMC error (evidence.friction); assumed the same for every "
+                 "5.575 mm double-mass HSMC error (docs/plant.md); assumed the same for every "
                  "cart; "
                  "stick-slip (Karnopp 1985, ipcosim.fmus.physics): below this force a cart does not move",
 }

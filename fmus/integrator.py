@@ -19,7 +19,7 @@ phi_3 are computed once per step size from one ``expm`` of an augmented block ma
 (``ipcosim.fmus.expm``: the FMU runtime imports no numpy). Four
 right-hand-side calls per step, one step per communication interval; the stage products are
 compiled once per step size into straight-line Python without the zero coefficients. The accuracy
-is measured in ``tests/test_integrator.py`` against scipy's Radau at rtol 1e-10.
+is measured against scipy's Radau at rtol 1e-10 (docs/plant.md, Integration).
 """
 from __future__ import annotations
 

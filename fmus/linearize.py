@@ -37,7 +37,7 @@ class LinearModel:
         return ev[np.lexsort((ev.imag, -ev.real))]
 
     def to_json_dict(self) -> dict:
-        """The ``ipcosim linearize --json`` document (format fixed by DESIGN.md)."""
+        """The ``ipcosim linearize --json`` document (docs/plant.md: the A, B, C, D, states, outputs and poles)."""
         return {"A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(), "D": self.D.tolist(),
                 "states": list(self.states), "outputs": list(self.outputs),
                 "poles": [[float(p.real), float(p.imag)] for p in self.poles]}

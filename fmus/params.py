@@ -138,7 +138,7 @@ PRESETS: dict[str, tuple[str, dict[str, float], str]] = {
                     "consistent"),
     "thesis-ch4": ("double-mass", {},
                    "double mass, medium pendulum: reproduces thesis eq. 4.23 and App. B.3"),
-    # b2 FITTED (not measured): evidence.friction.fit_passive_cart_friction()
+    # b2 FITTED (not measured): docs/plant.md, thesis-ch4-friction, says how
     "thesis-ch4-friction": ("double-mass", {"b2": 0.1047},
                             "thesis-ch4 plus a passive-cart Coulomb force b2 = 0.1047 N, FITTED so that the "
                             "thesis's double-mass HSMC leaves the thesis's 5.575 mm steady-state error (20 s)"),

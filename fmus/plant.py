@@ -284,7 +284,7 @@ class Plant:
 
         The only stiff mode is the armature circuit's (-Ra/La); the mechanical eigenvalues are
         below ~20 rad/s (h |lambda| <= 0.02 at 1 ms), which the scheme's explicit part (RK4 where
-        L vanishes) integrates to ~1e-7 m / 1e-6 rad over 2 s (``tests/test_integrator.py``). This
+        L vanishes) integrates to ~1e-7 m / 1e-6 rad over 2 s (measured: docs/plant.md, Integration). This
         sparse L makes most stage coefficients exact zeros: a step costs a third of the
         arithmetic of the full Jacobian's.
         """

@@ -1,6 +1,6 @@
 """FMI face of the IP02 plants, shared by ``fmu_ip02_single_mass.py`` and ``fmu_ip02_double_mass.py``.
 
-Variables (contract in DESIGN.md): input ``voltage`` [V]; outputs = the full state, the
+Variables (docs/plant.md, The plant FMUs): input ``voltage`` [V]; outputs = the full state, the
 encoder-measured positions first (``ipcosim.fmus.physics.MEASURED``), then the velocities and
 ``motor_current``; parameters ``initial_<state>`` and every physical constant of
 ``ipcosim.fmus.params`` under its own name, unit and description (defaults = the plant's default

@@ -1,11 +1,15 @@
 """Docs that hold: every file, section, command and option that README.md and docs/ name exists,
-and every `ipcosim ...` hint the code prints names options its command takes."""
+every `ipcosim ...` hint the code prints names options its command takes, and the docstrings and
+comments of the installed package cite only what a wheel user has."""
 from __future__ import annotations
 
 import argparse
 import ast
 import glob
+import io
 import re
+import tokenize
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -157,3 +161,65 @@ def test_the_checker_sees_a_wrong_option() -> None:
     assert _bad_uses("see `harness/bench_plant.py`", "x", commands) == []
     assert not _exists("harness/bench_plant.py", ROOT)
     assert isinstance(build_parser(), argparse.ArgumentParser)
+
+
+#: What the installed package's docstrings and comments may not cite: files a wheel user does not have
+#: (the design contract, the thesis-data page and its sources, the evidence and tooling modules beside the
+#: package, the repository's tests and benchmarks).
+UNSHIPPED_RE = re.compile(r"DESIGN\.md|thesis-data|\.\./shared|(?<![\w.-])seed/"
+                          r"|(?<![\w.-])(?:evidence|devtools)(?:\.[a-z_]|/)"
+                          r"|(?<![\w./-])(?:tests|benchmarks)/[\w.]")
+DOCS_PAGE_RE = re.compile(r"(?<![\w./-])docs/[\w./-]*?\.md")
+
+
+def _installed_modules() -> list[Path]:
+    """The ``.py`` files of the packages pyproject.toml installs (``ipcosim.x.y`` is the folder ``x/y``)."""
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    assert config["package-dir"] == {"ipcosim": "."}
+    return [f for name in config["packages"] for f in sorted(ROOT.joinpath(*name.split(".")[1:]).glob("*.py"))]
+
+
+def _prose_of(source: str) -> list[tuple[int, str]]:
+    """``(line, text)`` of every docstring (and bare string statement) and every comment of a module."""
+    out = [(node.lineno, node.value.value) for node in ast.walk(ast.parse(source))
+           if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)]
+    out += [(tok.start[0], tok.string) for tok in tokenize.generate_tokens(io.StringIO(source).readline)
+            if tok.type == tokenize.COMMENT]
+    return out
+
+
+def _bad_citations(text: str) -> list[tuple[int, str]]:
+    """``(line within text, why)`` of each citation in ``text`` of something that does not ship."""
+    bad = []
+    for word in re.finditer(r"[^\s`'\"(),;:]+", text):
+        line = text.count("\n", 0, word.start())
+        if UNSHIPPED_RE.search(word.group(0)):
+            bad.append((line, f"cites {word.group(0)}, which a wheel user does not have"))
+        bad += [(line, f"cites {ref}, no such page") for ref in DOCS_PAGE_RE.findall(word.group(0))
+                if not (ROOT / ref).is_file()]
+    return bad
+
+
+def test_the_installed_package_cites_only_what_ships() -> None:
+    modules = _installed_modules()
+    assert ROOT / "fmus" / "plant.py" in modules and ROOT / "errors.py" in modules
+    assert not any(p.is_relative_to(ROOT / d) for p in modules for d in ("tests", "evidence", "devtools", "benchmarks"))
+    bad = [f"{path.relative_to(ROOT)}:{line + offset}: {why}" for path in modules
+           for line, text in _prose_of(path.read_text(encoding="utf-8")) for offset, why in _bad_citations(text)]
+    assert not bad, bad
+
+
+def test_the_citation_checker_reads_docstrings_and_comments() -> None:
+    source = ('"""Module (see DESIGN.md)."""\nX = 1  # docs/plant.md, and evidence.friction\n'
+              'def f():\n    """Measured in ``tests/test_x.py``."""\n    return "DESIGN.md"  # docs/nowhere.md\n')
+    found = {line: _bad_citations(text) for line, text in _prose_of(source)}
+    assert [len(found[n]) for n in (1, 2, 4, 5)] == [1, 1, 1, 1], found   # the string literal "DESIGN.md" is code
+    assert "docs/nowhere.md" in found[5][0][1] and "evidence.friction," in found[2][0][1]
+    assert _bad_citations("first line\nsecond, see ../shared/DESIGN.md.") == [
+        (1, "cites ../shared/DESIGN.md., which a wheel user does not have")]
+    for fine in ("the thesis, App. A.5", "docs/plant.md", "noise_seed/2", "the thesis's evidence.",
+                 "ipcosim.harness.studies.runners", "a seeded run", "shared library"):
+        assert _bad_citations(fine) == [], fine
+    for wrong in ("reference/thesis-data.md", "../shared/DESIGN.md", "../seed/thesis.txt", "devtools/ssp_gen.py",
+                  "``devtools.ssp_gen``", "benchmarks/stall_probe.py", "docs/plants.md"):
+        assert _bad_citations(wrong), wrong

@@ -44,7 +44,7 @@ class PID(DiscreteLaw):
     """Single-loop PID from the motor-cart position error to the voltage (the thesis's PID).
 
     It ignores the pendulum: on the thesis's own model the tuner's gains ask for kilovolts, and
-    within the +-10 V limit the loop does not keep the pendulum up (``tests/test_controllers.py``).
+    within the +-10 V limit the loop does not keep the pendulum up (docs/controllers.md, PID).
     """
 
     def __init__(self, kind: str, gains: PIDGains = PIDGains(), sample_period: float = 1e-3,

@@ -46,8 +46,8 @@ from ipcosim.fmus.physics import MEASURED, STATE_UNITS
 
 #: Default card: the virtual rig of ``ipcosim rig serve`` on its default address.
 DEFAULT_CARD_URI = "q4:0@tcpip://127.0.0.1:18920"
-CART_M_PER_COUNT = 2.275e-5            # thesis-data.md: IP02 cart encoder
-PENDULUM_RAD_PER_COUNT = 1.534e-3      # thesis-data.md: pendulum encoder, counter-clockwise positive
+CART_M_PER_COUNT = 2.275e-5            # IP02 cart encoder: 4096 counts/rev (the thesis, sec. 3.3)
+PENDULUM_RAD_PER_COUNT = 1.534e-3      # pendulum encoder, 2 pi / 4096 rad, counter-clockwise positive
 #: How long to wait for a lockstep virtual rig's answer [s] (a real-time card: watchdog_timeout).
 LOCKSTEP_REPLY_TIMEOUT = 5.0
 

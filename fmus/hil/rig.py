@@ -64,7 +64,7 @@ from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, preset
 from ipcosim.fmus.physics import MEASURED
 from ipcosim.fmus.plant import Plant, PlantStepError
 
-# Q4 card and IP02 facts (thesis-data.md section 1 table and section 3).
+# Q4 card and IP02 facts (the thesis, sec. 3.3: Q4 card, 4096-count encoders; docs/plant.md, Parameters).
 ANALOG_OUTPUTS = 4
 ENCODER_INPUTS = 4
 DAC_BITS = instruments.DAC_BITS

@@ -15,7 +15,7 @@ from typing import Sequence
 from ipcosim.errors import UsageError
 from ipcosim.harness.master.signals import TIMEOUT_STATUS
 
-#: Exit statuses of every command (docs/cli.md): the work done; it failed (one line says why);
+#: Exit statuses of every command (docs/robustness.md): the work done; it failed (one line says why);
 #: the command line was wrong (an unknown option or name, a bad value, an unusable --out: nothing was
 #: done); a real-time run finished but missed deadlines beyond its budget; the --timeout wall-clock
 #: limit stopped it; a signal stopped it (128 + the signal's number: 130 SIGINT, 143 SIGTERM).

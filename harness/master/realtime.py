@@ -57,7 +57,7 @@ study) can ask for them without new arguments:
     Write every step's start (host monotonic clock [ns], shared by the machine's processes)
     and lateness [ns] to ``FILE`` (``.npz``: ``starts_ns``, ``lateness_ns``, ``period_ns``)
     when the run ends, to lay the loop's timing beside another process's, e.g. a probe of the
-    host's stalls (``benchmarks/stall_probe.py``).
+    host's stalls (docs/hil.md, Measured).
 
 What a run learns from a card it drives (its faults, its overruns) is recorded by the
 hardware-in-the-loop room's own observer, :mod:`ipcosim.harness.hil.observer`.

@@ -1,6 +1,7 @@
 """The project's scenarios as data: the plants, the controllers of the plant x controller scenarios and the
-variants beyond them (``ssp/<name>/``). ``devtools/ssp_gen.py`` writes ``ssp/`` from this table; the comparison
-(``ipcosim.harness.studies.compare``) tells the variants, which pose other tasks, from it."""
+variants beyond them (``ssp/<name>/``). The scenarios' files in ``ssp/`` are written from this table
+(docs/master.md); the comparison (``ipcosim.harness.studies.compare``) tells the variants, which pose other
+tasks, from it."""
 from __future__ import annotations
 
 PLANTS = {

@@ -289,7 +289,7 @@ def _hanging_offset(angle0: float, path: Path) -> float:
 
 @dataclass
 class Identification:
-    """Estimates, intervals and fit quality of one identification (``to_json``: the DESIGN.md shape)."""
+    """Estimates, intervals and fit quality of one identification (``to_json``: ``--json``, docs/identify.md)."""
 
     plant: str
     preset: str
