@@ -62,6 +62,33 @@ def check_size(varies: Sequence[Vary], samples: int, limit: int = MAX_RUNS) -> N
                         f"sweep")
 
 
+class _Linspace:
+    """The points of a ``grid(a,b,n)`` form one at a time: point ``k`` is element ``k`` of
+    ``numpy.linspace(a, b, n)`` (``a + k * step``, ``b`` itself last), times the nominal value of
+    a relative form, as :meth:`Vary.points` gives them all at once."""
+
+    def __init__(self, vary: Vary, nominal: float) -> None:
+        start, stop, n = vary.args
+        self.start, self.stop, self.n = float(start), float(stop), int(n)
+        self.scale = nominal if vary.relative else 1.0
+        div = self.n - 1
+        self.step = (self.stop - self.start) / div if div > 0 else math.nan
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, k: int) -> float:
+        if self.n == 1:
+            value = 0.0 * (self.stop - self.start) + self.start
+        elif k == self.n - 1:
+            value = self.stop
+        elif self.step == 0.0:  # numpy's own branch: k / div * delta
+            value = k / (self.n - 1) * (self.stop - self.start) + self.start
+        else:
+            value = k * self.step + self.start
+        return float(np.float64(value)) * self.scale
+
+
 class CaseStream(Sequence[SweepCase]):
     """The runs of a sweep, made one at a time when asked for: run ``i`` is computed from ``i``
     alone (its grid point, its sample and its seed), so iterating the stream, or taking any run
@@ -77,8 +104,9 @@ class CaseStream(Sequence[SweepCase]):
         self._grid_varies = [v for v in varies if not v.is_random]
         self._random_varies = [v for v in varies if v.is_random]
         self._nominal = {v.name: nominal.get(v.name, 1.0) for v in varies}
-        # each grid's own points (their sum is small); never their product
-        self._grids = [v.points(self._nominal[v.name]) for v in self._grid_varies]
+        # each list's values, each grid's points computed when asked for; never their product
+        self._grids = [_Linspace(v, self._nominal[v.name]) if v.kind == "grid" else v.points(self._nominal[v.name])
+                       for v in self._grid_varies]
         self._samples = int(samples)
         self._seed = int(seed)
         self._fixed = dict(fixed or {})
