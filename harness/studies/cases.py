@@ -31,8 +31,8 @@ def case_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, dtype=np.uint32)[0])
 
 
-#: The most runs a sweep may have: its cases, its rows and its plan are held in memory (about
-#: 2 kB a run), so a sweep is refused above this before anything is allocated.
+#: The most runs a sweep may have: its cases are made lazily (:class:`CaseStream`), but its rows
+#: are held in memory (about 1.4 kB a run), so a sweep is refused above this before anything is allocated.
 MAX_RUNS = 100_000
 
 
