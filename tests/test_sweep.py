@@ -234,8 +234,8 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
 def test_dask_local_cluster_gives_the_same_rows_as_the_process_pool(tmp_path):
     distributed = pytest.importorskip("distributed")
     spec = PurePlantSpec(stop_time=2.0)
-    cases = make_cases(parse_all(["plant.Mp=uniform(0.8,1.2)*nominal", "plant.Beq=[9,14]"], spec.parameters),
-                       spec.parameters, samples=2, seed=11)
+    cases = list(make_cases(parse_all(["plant.Mp=uniform(0.8,1.2)*nominal", "plant.Beq=[9,14]"], spec.parameters),
+                            spec.parameters, samples=2, seed=11))
     cases.append(SweepCase(index=len(cases), params={"plant.Mp": -1.0}, seed=1))  # an invalid value: an error row
     local = run_sweep(spec, cases, workers=2)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",

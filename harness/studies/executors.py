@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import atexit
 import concurrent.futures as cf
+import itertools
 import multiprocessing
 import os
 import re
@@ -22,7 +23,7 @@ import threading
 import time
 from collections import OrderedDict
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Iterable, Iterator
 
 from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.harness.studies.cases import SweepCase
@@ -199,17 +200,27 @@ class LocalExecutor:
                                                 initializer=_worker_init)
         return self._pool
 
-    def run(self, spec: RunSpec, cases: Sequence[SweepCase]) -> Iterator[dict[str, Any]]:
+    def run(self, spec: RunSpec, cases: Iterable[SweepCase]) -> Iterator[dict[str, Any]]:
         """Yield the row of every case, in completion order.
+
+        The cases are taken from ``cases`` as the pool needs them, at most one pool's share
+        (``workers * recycle_runs``) ahead, so a stream of cases is never held whole.
 
         When a worker process dies (an FMU that crashes the process), the pool is replaced and
         the runs that were in flight are re-run one at a time; a run that kills its worker when
         it runs alone is recorded as an error, the others go on normally.
         """
-        pending = {c.index: c for c in cases}
+        source = iter(cases)
+        pending: dict[int, SweepCase] = {}
+
+        def take(n: int) -> None:  # at least n cases pending, while the source lasts
+            for case in itertools.islice(source, max(0, n - len(pending))):
+                pending[case.index] = case
+
         suspects: list[int] = []
         track = Path(tempfile.mkdtemp(prefix="ipcosim-sweep-"))
         try:
+            take(1)
             while pending:
                 if suspects:
                     index = suspects.pop(0)
@@ -217,7 +228,9 @@ class LocalExecutor:
                         continue
                     batch = [pending[index]]
                 else:
-                    batch = list(pending.values())[:max(1, self.workers * self.recycle_runs - self._used)]
+                    size = max(1, self.workers * self.recycle_runs - self._used)
+                    take(size)
+                    batch = list(itertools.islice(pending.values(), size))
                 pool = self._ensure_pool()
                 self._used += len(batch)
                 futures = {pool.submit(_tracked_execute, spec, c, str(track)): c for c in batch}
@@ -234,6 +247,7 @@ class LocalExecutor:
                             row = _error_row(case, one_line(exc))
                         pending.pop(case.index, None)
                         yield row
+                    take(1)
                 except GeneratorExit:  # the caller has the rows it wanted: the pool stays for its next runs
                     for fut in futures:
                         fut.cancel()
@@ -251,6 +265,7 @@ class LocalExecutor:
                         pending.pop(case.index, None)
                         yield _error_row(case, "worker process died during the run (crashed twice, "
                                                "once when run alone)")
+                        take(1)
                     else:
                         suspects = [i for i in in_flight if i in pending]
         finally:
@@ -357,10 +372,11 @@ class DaskExecutor:
         n = len(self.client.scheduler_info().get("workers", {}))
         return f"dask cluster at {self.address}, {n} worker{'s' if n != 1 else ''}"
 
-    def run(self, spec: RunSpec, cases: Sequence[SweepCase]) -> Iterator[dict[str, Any]]:
-        """Yield the row of every case, in completion order."""
+    def run(self, spec: RunSpec, cases: Iterable[SweepCase]) -> Iterator[dict[str, Any]]:
+        """Yield the row of every case, in completion order (the cases are all submitted at once)."""
         from distributed import as_completed
 
+        cases = list(cases)
         if not cases:
             return
         spec_future = self.client.scatter(spec, broadcast=True, hash=False)

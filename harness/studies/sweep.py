@@ -25,6 +25,9 @@ Failures
 """
 from __future__ import annotations
 
+import functools
+import hashlib
+import itertools
 import json
 import math
 import os
@@ -36,10 +39,10 @@ from typing import Any, Mapping, Sequence, TextIO
 
 from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.results import claim_output
-from ipcosim.harness.studies.cases import SweepCase
+from ipcosim.harness.studies.cases import CaseStream, SweepCase
 from ipcosim.harness.studies.executors import Executor, open_executor
 from ipcosim.harness.studies.progress import SweepProgress
-from ipcosim.harness.studies.runners import STATUSES, RunSpec, stable_hash
+from ipcosim.harness.studies.runners import STATUSES, RunSpec
 from ipcosim.harness.studies.store import (
     BASE_COLUMNS,
     METADATA_FILE,
@@ -112,16 +115,26 @@ class SweepResult:
 def columns_for(spec: RunSpec, cases: Sequence[SweepCase]) -> list[str]:
     """Columns of a sweep's results: base, parameters (in first-seen order), metrics, run time."""
     params: dict[str, None] = {}
-    for case in cases:
-        for name in case.params:
-            params.setdefault(name, None)
+    if isinstance(cases, CaseStream):  # every run sets the same parameters
+        params = dict.fromkeys(cases.param_names) if len(cases) else {}
+    else:
+        for case in cases:
+            for name in case.params:
+                params.setdefault(name, None)
     return [*BASE_COLUMNS, *params, *spec.metric_names, *TAIL_COLUMNS]
 
 
 def plan_hash(spec: RunSpec, cases: Sequence[SweepCase]) -> str:
-    """Identity of a sweep: the spec and every case's parameters and seed."""
-    return stable_hash({"spec": spec.key,
-                        "cases": [[c.index, c.seed, sorted(c.params.items())] for c in cases]})
+    """Identity of a sweep: the spec and every case's parameters and seed.
+
+    The :func:`~ipcosim.harness.studies.runners.stable_hash` of ``{"spec": ..., "cases": [[index,
+    seed, sorted params], ...]}``, its JSON text hashed a case at a time (no list of the cases)."""
+    dumps = functools.partial(json.dumps, sort_keys=True, default=repr, separators=(",", ":"))
+    digest = hashlib.sha256(b'{"cases":[')
+    for i, c in enumerate(cases):
+        digest.update((("," if i else "") + dumps([c.index, c.seed, sorted(c.params.items())])).encode())
+    digest.update(('],"spec":' + dumps(spec.key) + "}").encode())
+    return digest.hexdigest()[:16]
 
 
 def run_sweep(spec: RunSpec, cases: Sequence[SweepCase], *, out: str | os.PathLike | None = None,
@@ -168,13 +181,17 @@ def run_sweep(spec: RunSpec, cases: Sequence[SweepCase], *, out: str | os.PathLi
         After stopping the workers; every finished run is in ``out``.
     """
     t_start = time.monotonic()
-    indices = [c.index for c in cases]
-    if len(set(indices)) != len(indices):
-        raise ValueError("sweep cases must have unique indices")
+    indices: range | set[int]
+    if isinstance(cases, CaseStream):  # runs 0..n-1 by construction, none held
+        indices = range(len(cases))
+    else:
+        indices = {c.index for c in cases}
+        if len(indices) != len(cases):
+            raise ValueError("sweep cases must have unique indices")
     columns = columns_for(spec, cases)
     meta = _start_metadata(spec, cases, extra_metadata)
     path = Path(out) / RESULTS_FILE if out is not None else None
-    done, writer = (_open_results(path, meta, columns, set(indices) if resume else None) if path is not None
+    done, writer = (_open_results(path, meta, columns, indices if resume else None) if path is not None
                     else ({}, None))
     resumed = len(done)
     _run_missing(spec, cases, done, columns, meta, writer, executor=executor, workers=workers,
@@ -205,12 +222,13 @@ def _start_metadata(spec: RunSpec, cases: Sequence[SweepCase], extra: Mapping[st
     """What ``metadata.json`` records at the start: the scenario, the plan's identity, the seeds
     (the first 10 000), package versions, the start time and ``extra``."""
     return {"scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan_hash(spec, cases),
-            "spec": spec.describe(), "runs": len(cases), "seeds": {"cases": [c.seed for c in cases][:10000]},
+            "spec": spec.describe(), "runs": len(cases),
+            "seeds": {"cases": [c.seed for c in itertools.islice(cases, 10000)]},
             "packages": package_versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **dict(extra or {})}
 
 
 def _open_results(path: Path, meta: dict[str, Any], columns: list[str],
-                  wanted: set[int] | None) -> tuple[dict[int, dict[str, Any]], ResultsWriter]:
+                  wanted: range | set[int] | None) -> tuple[dict[int, dict[str, Any]], ResultsWriter]:
     """Open a sweep's ``results.csv`` for appending and write its ``metadata.json``; with
     ``wanted`` (the case indices; None: start afresh), the rows of those cases an earlier,
     interrupted run of the same sweep finished, by index (recorded as ``resumed_runs``).
@@ -250,7 +268,7 @@ def _run_missing(spec: RunSpec, cases: Sequence[SweepCase], done: dict[int, dict
     """Run the cases not in ``done`` on ``executor`` (or one opened from ``workers`` /
     ``scheduler`` and closed here, aborted on an exception), adding each finished row to
     ``done`` and appending it to ``writer``, with a progress bar over all ``cases``."""
-    todo = [c for c in cases if c.index not in done]
+    todo = (c for c in cases if c.index not in done)  # fed to the executor as it takes them
     own_executor = executor is None
     bar = SweepProgress(len(cases), done=len(done), enabled=bool(progress),
                    stream=progress if hasattr(progress, "write") else None)
@@ -258,7 +276,7 @@ def _run_missing(spec: RunSpec, cases: Sequence[SweepCase], done: dict[int, dict
         bar.counts[row["status"]] = bar.counts.get(row["status"], 0) + 1
     bar.show()
     try:
-        if todo:
+        if len(cases) > len(done):
             if executor is None:
                 executor = open_executor(workers, scheduler)
             meta["executor"] = executor.description
