@@ -208,7 +208,8 @@ def module_stub(doc: str | None, private: str, script: str, class_name: str) -> 
     """The module file pythonfmu's wrapper evaluates at every instantiation (module docstring, 3):
     at the import it runs ``resources/<private>/<script>`` in the module's namespace and stores the
     class ``class_name`` as the attribute ``""``; every later evaluation defines nothing and takes
-    one reference to the module's namespace (``fmus.fmi._take_reference`` of the private runtime).
+    one reference to the module's namespace (``Py_IncRef`` through ctypes, so an FMU whose runtime lacks the
+    project's FMU base, such as a user's, is stubbed the same way).
     ``doc`` is the script's docstring, kept as the stub's."""
     return (f'{(repr(doc) if doc else "")}\n'
             "# pythonfmu 0.7.0's wrapper evaluates this file again at every instantiation and keeps every class\n"
@@ -221,7 +222,9 @@ def module_stub(doc: str | None, private: str, script: str, class_name: str) -> 
             f'    globals()[""] = {class_name}\n'
             "    del _os, _path, _file\n"
             "else:  # the wrapper's evaluation, which then releases a reference to this namespace it never took\n"
-            f'    __import__({private + ".fmus.fmi"!r}, fromlist=["_take_reference"])._take_reference(globals())\n')
+            "    import ctypes as _ctypes\n"
+            "    _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(globals()))\n"
+            "    del _ctypes\n")
 
 
 def stub_fmu(fmu: Path, private: str, class_name: str) -> None:
