@@ -45,7 +45,7 @@ def test_user_tests_pass_fail_and_skip_with_readable_messages(pytester):
     assert re.search(r"ipcosim runs \(results.csv, metrics.json\)", out)
     assert re.search(r"run-01-single-mass-lqr: upright=True, settling_time_s=None", out)
     # the missing FMU: the command line's one line
-    assert "FMUNotFoundError: --swap controller=build/NoSuchController.fmu: FMU file does not exist" in out
+    assert "SwapFileNotFoundError: --swap controller=build/NoSuchController.fmu: FMU file does not exist" in out
     # the rig test: skipped with the reason
     assert re.search(r"SKIPPED \[1\] test_user.py:\d+: needs a rig: run pytest with --ipcosim-rig URI", out)
 

@@ -44,10 +44,12 @@ def main(args: argparse.Namespace) -> int:
         claim_output(args.out, "identify")  # before the fit: a bad --out is one line at once
     options = IdentifyOptions.create(args.source, plant=args.plant, fit=args.fit, preset=args.preset,
                                      out=args.out, refits=args.refits)
-    if not (args.quiet or args.json):  # the fit and its refits take seconds: say so at once
-        print(f"identify: fitting {', '.join(options.fit) or 'the default parameters'} of the {args.plant} plant "
-              f"to {args.source} ...", file=sys.stderr)
-    result = identify(options)
+    def started() -> None:  # the fit and its refits take seconds: say so once the log is accepted
+        if not (args.quiet or args.json):
+            print(f"identify: fitting {', '.join(options.fit) or 'the default parameters'} of the {args.plant} "
+                  f"plant to {args.source} ...", file=sys.stderr)
+
+    result = identify(options, started)
     if result.replay != "native":
         print(f"ipcosim identify: the log was replayed in Python, 30 to 40 times slower than the native replay: "
               f"{result.replay}", file=sys.stderr)

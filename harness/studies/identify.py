@@ -487,9 +487,10 @@ def simulator(kind: str) -> tuple[Callable[..., Any], str]:
         return replay, f"python ({exc})"
 
 
-def identify(options: IdentifyOptions) -> Identification:
+def identify(options: IdentifyOptions, started: Callable[[], None] | None = None) -> Identification:
     """Estimate ``options.fit`` from the log ``options.source`` (see the module docstring); with
     ``options.out``, write ``identified.ssv`` and ``identified.png`` there (:func:`write_identified`).
+    ``started`` is called once the log and the parameters are accepted, when the fit (seconds) begins.
 
     Raises
     ------
@@ -504,6 +505,8 @@ def identify(options: IdentifyOptions) -> Identification:
     simulate, how = simulator(kind)
     problem = _Problem(log, kind, options.fit, preset(name), bench, simulate)
     _check_identifiable(problem, problem.central_jacobian(problem.start, COVARIANCE_STEP))
+    if started is not None:
+        started()
     sol = _fit(problem, problem.start)
     candidates = [problem]
     for samples in DELAY_SAMPLES:   # the computation delay: whole samples, the one that fits best
