@@ -50,8 +50,11 @@ from ipcosim.harness.master.slave import FMUSlave, fmu_slave, load_library
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
-from ipcosim.harness.scenario.binding import SwapTarget, bind, default_step, default_stop_time, warn_all, with_set
+from ipcosim.harness.scenario.binding import bind, warn_all
+from ipcosim.harness.scenario.default_experiment import default_step, default_stop_time
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
+from ipcosim.harness.scenario.swaps import SwapTarget
+from ipcosim.harness.scenario.values import with_set
 
 
 class NothingToSimulateError(IpcosimError, ValueError):

@@ -29,8 +29,9 @@ from xml.sax.saxutils import quoteattr
 
 from lxml import etree
 
-from ipcosim.errors import IpcosimError, UsageError, closest
+from ipcosim.errors import closest
 from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
+from ipcosim.harness.scenario.errors import ScenarioError, ScenarioNotFoundError, UnknownParameterSetError
 
 #: XML namespaces of SSP 1.0 (as in fmpy.ssp.ssd) plus the OSP annotations libcosim reads.
 NS = {
@@ -45,18 +46,6 @@ NS = {
 OSP_ANNOTATION = "com.opensimulationplatform"
 SSD_NAME = "SystemStructure.ssd"
 BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
-
-
-class ScenarioError(IpcosimError, ValueError):
-    """An SSD, SSV or SSP archive that cannot be read, fails its schema or is inconsistent."""
-
-
-class UnknownParameterSetError(UsageError, ScenarioError):
-    """A parameter set the scenario does not have (``--parameter-set``)."""
-
-
-class ScenarioNotFoundError(UsageError, FileNotFoundError):
-    """A scenario name or path that does not exist."""
 
 
 # --------------------------------------------------------------------------- description
