@@ -92,8 +92,8 @@ class Slave:
         """``(handle, do_step, get_real, set_real)`` with C calling conventions (see module doc)."""
         raise NotImplementedError
 
-    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
-        """``(get, set)`` for the ``variables`` (all of value kind ``kind``), each taking one
+    def channel(self, value_type: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+        """``(get, set)`` for the ``variables`` (all of value type ``value_type``), each taking one
         buffer (see the module documentation) and returning an FMI status."""
         raise NotImplementedError
 
@@ -354,13 +354,13 @@ class FMU2Slave(FMUSlave):
         return out
     def raw(self) -> tuple[Any, RawDoStep, RawGetSet, RawGetSet]:
         return self._fmu.component, self._do_step, self._get_real, self._set_real
-    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+    def channel(self, value_type: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
         f, c, n = self._fmu._functions, self._fmu.component, len(variables)
         vrs = (ctypes.c_uint * max(n, 1))(*[v.vr for v in variables])
-        if kind in ("integer", "boolean"):
+        if value_type in ("integer", "boolean"):
             # fmi2Integer and fmi2Boolean are C ints: through an int buffer to and from the
             # master's int64 one (the values set were checked to fit)
-            name = "Integer" if kind == "integer" else "Boolean"
+            name = "Integer" if value_type == "integer" else "Boolean"
             get, put = f[f"fmi2Get{name}"], f[f"fmi2Set{name}"]
             tmp = (ctypes.c_int * max(n, 1))()
 
@@ -374,7 +374,7 @@ class FMU2Slave(FMUSlave):
                 return put(c, vrs, n, tmp)
 
             return get_ints, set_ints
-        if kind == "string":
+        if value_type == "string":
             get_s, put_s = f["fmi2GetString"], f["fmi2SetString"]
             tmp = (ctypes.c_char_p * max(n, 1))()
 
@@ -387,7 +387,7 @@ class FMU2Slave(FMUSlave):
                 return put_s(c, vrs, n, (ctypes.c_char_p * max(n, 1))(*src))
 
             return get_strings, set_strings
-        raise ValueError(f"no channel for value kind {kind!r}")
+        raise ValueError(f"no channel for value type {value_type!r}")
     def terminated(self) -> tuple[bool, str]:
         value = ctypes.c_int(0)
         status = self._fmu._functions["fmi2GetBooleanStatus"](self._fmu.component, 3, ctypes.byref(value))
@@ -516,7 +516,7 @@ class FMU3Slave(FMUSlave):
 
         return get_real, set_real
 
-    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+    def channel(self, value_type: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
         c, n = self._fmu.component, len(variables)
         groups = []  # (positions, vr array, ctypes array type, getter, setter, type)
         for type_ in dict.fromkeys(v.type for v in variables):
@@ -531,13 +531,13 @@ class FMU3Slave(FMUSlave):
                 tmp = arr()
                 worst = max(worst, g(c, vrs, len(pos), tmp, len(pos)))
                 for k, i in enumerate(pos):
-                    buf[i] = (tmp[k] or b"") if kind == "string" else integers.stored(int(tmp[k]), type_)
+                    buf[i] = (tmp[k] or b"") if value_type == "string" else integers.stored(int(tmp[k]), type_)
             return worst
 
         def put(buf: Any) -> int:
             worst = OK
             for pos, vrs, arr, _, s, type_ in groups:
-                vals = [buf[i] for i in pos] if kind == "string" else [integers.value(buf[i], type_) for i in pos]
+                vals = [buf[i] for i in pos] if value_type == "string" else [integers.value(buf[i], type_) for i in pos]
                 worst = max(worst, s(c, vrs, len(pos), arr(*vals), len(pos)))
             return worst
 

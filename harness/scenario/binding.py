@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ipcosim.errors import closest
-from ipcosim.harness.master.system import SSP_TYPE, Instance, Link, Model, System, Variable, kind_of
+from ipcosim.harness.master.system import SSP_TYPE, Instance, Link, Model, System, Variable, value_type_of
 from ipcosim.harness.scenario.checks import check_connector, check_types, unmatched_names
 from ipcosim.harness.scenario.errors import BindingError, FMUNotFoundError
 from ipcosim.harness.scenario.model_description import read_model
@@ -242,7 +242,7 @@ def _parameter_value(scenario: Scenario, comp: Component, model: Model, var: Var
     value = p.value
     if p.type == "Enumeration":
         return enumeration_value(model, var, p, what)
-    if p.unit is not None and kind_of(var.type) == "real" and not p.suppress_unit_conversion:
+    if p.unit is not None and value_type_of(var.type) == "real" and not p.suppress_unit_conversion:
         connector = comp.connector(var.name)
         target = var.unit or (connector.unit if connector is not None else None)
         table = {**unit_table(scenario, model), **pset.units}
@@ -273,19 +273,20 @@ def _bind_connection(scenario: Scenario, conn: Connection, by_name: Mapping[str,
                                f"{inst.name!r} ({inst.model.path.name if inst.model.path else inst.model.name}) "
                                f"has no variable {cname!r}; {closest(cname, inst.model.variables)}"
                                f"{rebuild_hint(inst.model)}")
-    kinds = (va.causality, vb.causality)
-    if kinds in (("input", "output"), ("parameter", "calculatedParameter"), ("input", "calculatedParameter")):
+    causalities = (va.causality, vb.causality)
+    if causalities in (("input", "output"), ("parameter", "calculatedParameter"), ("input", "calculatedParameter")):
         a, b, va, vb = b, a, vb, va
         src_name, dst_name = conn.end, conn.start
-    elif kinds in (("output", "input"), ("calculatedParameter", "parameter"), ("calculatedParameter", "input")):
+    elif causalities in (("output", "input"), ("calculatedParameter", "parameter"), ("calculatedParameter", "input")):
         src_name, dst_name = conn.start, conn.end
-    elif kinds[0] == kinds[1] and kinds[0] in ("output", "input"):
-        raise BindingError(f"{origin}: connection {conn.start} -> {conn.end} connects two {kinds[0]}s; "
+    elif causalities[0] == causalities[1] and causalities[0] in ("output", "input"):
+        raise BindingError(f"{origin}: connection {conn.start} -> {conn.end} connects two {causalities[0]}s; "
                            f"a connection must join one output to one input")
     else:
-        raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: {conn.start} is {kinds[0]}, "
-                           f"{conn.end} is {kinds[1]}; the master carries output -> input and calculatedParameter "
-                           f"-> parameter or input connections between components (SSP 1.0 section 5.3.2.1)")
+        raise BindingError(f"{origin}: connection {conn.start} -> {conn.end}: {conn.start} is {causalities[0]}, "
+                           f"{conn.end} is {causalities[1]}; the master carries output -> input and "
+                           f"calculatedParameter -> parameter or input connections between components (SSP 1.0 "
+                           f"section 5.3.2.1)")
     check_types(conn, va, vb, f"{origin}: connection {src_name} -> {dst_name}")
     if dst_name in fed:
         raise BindingError(f"{origin}: input {dst_name} is connected twice (from {fed[dst_name]} and {src_name})")

@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping
 
-from ipcosim.harness.master.system import Model, Variable, kind_of
+from ipcosim.harness.master.system import Model, Variable, value_type_of
 from ipcosim.harness.scenario.errors import BindingError
 from ipcosim.harness.scenario.ssp import BASE_UNITS, Unit
 
@@ -111,10 +111,10 @@ def _start_value(type_: str, start: Any) -> Any:
     if start is None:
         return None
     try:
-        kind = kind_of(type_)
-        if kind == "real":
+        value_type = value_type_of(type_)
+        if value_type == "real":
             return float(start)
-        if kind == "integer":
+        if value_type == "integer":
             return int(start)
         if type_ == "Boolean":
             return str(start).strip().lower() in ("true", "1")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ipcosim.harness.master.system import Model, Variable, kind_of
+from ipcosim.harness.master.system import Model, Variable, value_type_of
 from ipcosim.harness.scenario.errors import BindingError
 from ipcosim.harness.scenario.ssp import Connection, Parameter, Transform
 
@@ -21,7 +21,7 @@ def transformed(value: Any, t: Transform, var: Variable, what: str) -> Any:
     """A parameter's value for ``var`` through transformation ``t``: linear (Real values only), or a
     boolean or integer mapping (a value the mapping does not name stays as it is)."""
     if t.kind == "LinearTransformation":
-        if kind_of(var.type) != "real":
+        if value_type_of(var.type) != "real":
             raise BindingError(f"{what}: ssc:LinearTransformation on {var.name} ({var.type}); SSP defines it "
                                f"for Real values only")
         return t.factor * float(value) + t.offset

@@ -6,7 +6,7 @@ from typing import Any, Mapping
 
 from ipcosim.errors import closest
 from ipcosim.harness.master import integers
-from ipcosim.harness.master.system import System, Variable, kind_of
+from ipcosim.harness.master.system import System, Variable, value_type_of
 from ipcosim.harness.scenario.errors import BindingError, SetError
 from ipcosim.harness.scenario.rebuild import rebuild_hint
 
@@ -20,13 +20,13 @@ def convert_value(var: Variable, value: Any, what: str) -> Any:
         ``what`` is not a valid value of the variable's type.
     """
     t = var.type
-    kind = kind_of(t)
+    value_type = value_type_of(t)
     try:
-        if kind == "real":
+        if value_type == "real":
             if isinstance(value, bool):
                 raise ValueError
             return float(value)
-        if kind == "integer":  # exactly (FMI 3.0: Int8 .. UInt64), in the type's range below
+        if value_type == "integer":  # exactly (FMI 3.0: Int8 .. UInt64), in the type's range below
             x = integers.exact_integer(value)
             if t not in integers.RANGE or integers.in_range(x, t):
                 return x
@@ -43,7 +43,7 @@ def convert_value(var: Variable, value: Any, what: str) -> Any:
             return str(value)
     except (TypeError, ValueError):
         raise BindingError(f"{what}: {value!r} is not a valid {t} value") from None
-    if kind == "integer":
+    if value_type == "integer":
         lo, hi = integers.RANGE[t]
         raise BindingError(f"{what}: {value!r} is out of the range of {t} ({lo} .. {hi})")
     raise BindingError(f"{what}: variables of type {t} cannot be set")
