@@ -20,15 +20,15 @@ def after_unit_conversion(factor: float, offset: float, conversion: tuple[float,
 def transformed(value: Any, t: Transform, var: Variable, what: str) -> Any:
     """A parameter's value for ``var`` through transformation ``t``: linear (Real values only), or a
     boolean or integer mapping (a value the mapping does not name stays as it is)."""
-    if t.kind == "LinearTransformation":
+    if t.type == "LinearTransformation":
         if value_type_of(var.type) != "real":
             raise BindingError(f"{what}: ssc:LinearTransformation on {var.name} ({var.type}); SSP defines it "
                                f"for Real values only")
         return t.factor * float(value) + t.offset
     table_map = dict(t.mapping)
-    key = int(bool(value)) if t.kind == "BooleanMappingTransformation" else int(value)
+    key = int(bool(value)) if t.type == "BooleanMappingTransformation" else int(value)
     mapped = table_map.get(key, key)
-    return bool(mapped) if t.kind == "BooleanMappingTransformation" else mapped
+    return bool(mapped) if t.type == "BooleanMappingTransformation" else mapped
 
 
 def enumeration_mapping(conn: Connection, ma: Model, va: Variable, mb: Model, vb: Variable,
@@ -55,8 +55,8 @@ def enumeration_value(model: Model, var: Variable, p: Parameter, what: str) -> i
                            f"not an Enumeration")
     name = p.value
     if p.transform is not None:
-        if p.transform.kind != "EnumerationMappingTransformation":
-            raise BindingError(f"{what}: ssc:{p.transform.kind} on the enumeration value {p.name}; SSP maps "
+        if p.transform.type != "EnumerationMappingTransformation":
+            raise BindingError(f"{what}: ssc:{p.transform.type} on the enumeration value {p.name}; SSP maps "
                                f"enumeration items with ssc:EnumerationMappingTransformation")
         name = dict(p.transform.mapping).get(name, name)
     if name not in items:
