@@ -60,7 +60,7 @@ class NativeModel:
     """Everything the C generator needs for one model (see the module docstring)."""
 
     name: str
-    kind: str                                   # plant | sampled | source
+    timing: str                                 # plant (integrated) | sampled | source (the C MODEL_KIND_*)
     description: str
     variables: list[NativeVariable]
     states: dict[str, float]                    # state slot key -> start value
@@ -180,7 +180,7 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
     present = {v.name for v in variables}
     off = [name for name in NATIVE_INSTRUMENTS_OFF if name in present]
     return NativeModel(
-        name=name, kind="plant", description=description, variables=variables, unit_definitions=units,
+        name=name, timing="plant", description=description, variables=variables, unit_definitions=units,
         states={k: 0.0 for k in zkeys + dkeys + xkeys + [TAPPED]},
         initialize=list(zip(zkeys, started[:n])) + [(f"V:{s}", v) for s, v in zip(states, started[n:2 * n])]
         + [(k, tracer.const(0.0)) for k in dkeys + [TAPPED]] + list(zip(xkeys, started[2 * n:])),
@@ -412,7 +412,7 @@ def law_model(kind: str, law: str, python_fmu: Path) -> NativeModel:
     states = {f"L:{p}": float(before1.get(p, 0.0)) for p in state_paths}
     states.update({"S:first": 1.0, "S:tick": 0.0})
     settable = sorted({v.name for v in native_vars if v.causality == "parameter"})
-    return NativeModel(name=name, kind="sampled", description=description, variables=native_vars,
+    return NativeModel(name=name, timing="sampled", description=description, variables=native_vars,
                        unit_definitions=units, states=states, initialize=step, step=step,
                        checked=["V:voltage"] + [f"L:{p}" for p in state_paths], python_only=python_only,
                        paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
@@ -591,7 +591,7 @@ def setpoint_model(python_fmu: Path) -> NativeModel:
     args = ("waveform", "amplitude", "step_time", "offset", "ramp_rate", "period")
     with tracer.math_hooks():
         (ref,) = tracer.trace(lambda: [reference_at(leaf("S:time"), *(leaf(f"V:{a}") for a in args))])
-    return NativeModel(name="Setpoint", kind="source", description=description, variables=variables,
+    return NativeModel(name="Setpoint", timing="source", description=description, variables=variables,
                        unit_definitions=units, states={}, initialize=[("V:reference", ref)],
                        step=[("V:reference", ref)], checked=["V:reference"], meta={"role": "source"},
                        checks={a: "finite" for a in args})
