@@ -561,7 +561,7 @@ class Execution:
             return False
         t, t_next = self.time_of(self.tick), self.time_of(self.tick + 1)
         self.terminated_by = {"component": slave.name, "model": slave.model_name, "time": t,
-                              "note": f"component {slave.describe()} ended the simulation in its step from "
+                              "note": f"component {slave.label()} ended the simulation in its step from "
                                       f"t = {t:.6g} s to {t_next:.6g} s ({query}); the run ends at t = {t:.6g} s"}
         return True
 

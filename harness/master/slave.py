@@ -119,7 +119,8 @@ class Slave:
         pick = (errors or msgs)[-1] if (errors or msgs) else ""
         return pick.split("] ", 1)[1] if pick.startswith("[") and "] " in pick else pick
 
-    def describe(self) -> str:
+    def label(self) -> str:
+        """``component (model)``: the component a message is about."""
         return f"{self.name} ({self.model_name})" if self.model_name else self.name
 
     def fail(self, function: str, status: int, time: float | None = None) -> SlaveError:
@@ -129,7 +130,7 @@ class Slave:
         at = f" at t = {time:.6g} s" if time is not None else ""
         detail = self.last_error()
         detail = f": {detail}" if detail else ""
-        return SlaveError(f"component {self.describe()}: {function} returned {STATUS.get(status, status)}{at}{detail}",
+        return SlaveError(f"component {self.label()}: {function} returned {STATUS.get(status, status)}{at}{detail}",
                           self.name, function, status, time)
 
 
@@ -247,7 +248,7 @@ class FMUSlave(Slave):
         self.free()
     def _checked(self, var: Variable, value: Any) -> int:
         """An integer value for ``var``, exact and in its type's range, else IntegerRangeError."""
-        what = f"component {self.describe()}: {self.name}.{var.name}"
+        what = f"component {self.label()}: {self.name}.{var.name}"
         try:
             x = integers.exact_integer(value)
         except ValueError:
@@ -300,7 +301,7 @@ class FMU2Slave(FMUSlave):
             self.state = "failed-instantiate"
             _SINKS.pop(self._sink, None)
             msgs = self.messages()
-            raise SlaveError(f"component {self.describe()}: fmi2Instantiate failed ({exc})"
+            raise SlaveError(f"component {self.label()}: fmi2Instantiate failed ({exc})"
                              + (f": {msgs[-1]}" if msgs else ""), self.name, "fmi2Instantiate") from None
         self.state = "instantiated"
     def setup_experiment(self, start_time: float, stop_time: float | None) -> None:
@@ -431,7 +432,7 @@ class FMU3Slave(FMUSlave):
         except Exception as exc:  # noqa: BLE001
             self.state = "failed-instantiate"
             msgs = self.messages()
-            raise SlaveError(f"component {self.describe()}: fmi3InstantiateCoSimulation failed ({exc})"
+            raise SlaveError(f"component {self.label()}: fmi3InstantiateCoSimulation failed ({exc})"
                              + (f": {msgs[-1]}" if msgs else ""), self.name, "fmi3InstantiateCoSimulation") from None
         self._flags = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
         self.state = "instantiated"
