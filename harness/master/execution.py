@@ -340,7 +340,7 @@ class Execution:
         changed: list[str] = []
         for it in range(1, self.max_init_iterations + 1):
             signals.check()
-            changed = self._sweep()
+            changed = self._init_pass()
             self.init_iterations = it
             if not changed:
                 break
@@ -413,7 +413,7 @@ class Execution:
         return compile_loop(self.blocks, self.order, self.algorithm, self.timebase, self.record_every,
                             self.recorder.typed_record())
 
-    def _sweep(self) -> list[str]:
+    def _init_pass(self) -> list[str]:
         """One pass in step order: transfer, set inputs, read outputs; returns changed inputs."""
         changed: list[str] = []
         for idx in self.init_order:
