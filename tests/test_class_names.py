@@ -6,7 +6,8 @@ import ast
 import tomllib
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+#: The clone: the folder above this test that holds pyproject.toml (the test may sit in a sub-folder of tests/).
+ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
 
 
 def installed_files(root: Path = ROOT) -> list[Path]:

@@ -9,7 +9,8 @@ from pathlib import Path
 
 from devtools import rooms
 
-ROOT = Path(__file__).resolve().parents[1]
+#: The clone: the folder above this test that holds pyproject.toml (the test may sit in a sub-folder of tests/).
+ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
 DOC = ROOT / "docs" / "architecture.md"
 #: The folders whose files the table counts: the installed package's and the clone's own tooling.
 COUNTED = ("fmus", "controllers", "harness", "evidence", "benchmarks", "devtools")
