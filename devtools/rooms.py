@@ -1,10 +1,12 @@
 """The rooms of the code base in figures: ``python -m devtools.rooms [--write]``.
 
-For each room (docs/architecture.md) the non-blank lines of its ``.py`` files and its longest
-function (``def`` to last line, docstring included), and the number of import cycles between
-the modules (the graph of ``tests/test_architecture.py``). Prints a Markdown table; with
-``--write`` it also replaces the table in docs/architecture.md (between the ``rooms`` markers).
-Not a benchmark of speed: it reads source files only and runs nothing of them.
+For each room (docs/architecture.md) its modules (``.py`` files), the non-blank lines of those
+files, its longest function (``def`` to last line, docstring included) and the import cycles its
+modules take part in, and the number of import cycles between all the package's modules (the graph
+of ``tests/test_architecture.py``). Prints a Markdown table; with ``--write`` it also replaces the
+table in docs/architecture.md (between the ``rooms`` markers), which ``tests/test_rooms_figures.py``
+compares with what this module computes from the tree. Not a benchmark of speed: it reads source
+files only and runs nothing of them.
 """
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 #: room -> (folder, whether its sub-folders belong to it); sub-folders listed as rooms of their own are left out.
 ROOMS = {
+    "ipcosim (top-level modules)": (".", False),
     "fmus": ("fmus", False),
     "fmus/hil": ("fmus/hil", True),
     "harness/native": ("harness/native", True),
@@ -26,6 +29,7 @@ ROOMS = {
     "harness/studies": ("harness/studies", True),
     "evidence": ("evidence", True),
     "harness/cli": ("harness/cli", True),
+    "harness/live": ("harness/live", True),
     "harness (top-level modules)": ("harness", False),
     "benchmarks": ("benchmarks", True),
     "devtools": ("devtools", True),
@@ -57,24 +61,44 @@ def longest_function(files: list[Path]) -> tuple[str, int, bool]:
     return best
 
 
-def import_cycle_count() -> int:
-    """Import cycles among the package's modules, by the machinery of tests/test_architecture.py."""
-    spec = importlib.util.spec_from_file_location("_architecture", ROOT / "tests" / "test_architecture.py")
+def import_cycles() -> list[list[str]]:
+    """The import cycles among the package's modules (dotted names below ``ipcosim``), by the machinery
+    of tests/.../test_architecture.py."""
+    path = next((ROOT / "tests").rglob("test_architecture.py"))  # wherever tests/ files it
+    spec = importlib.util.spec_from_file_location("_architecture", path)
     assert spec is not None and spec.loader is not None
     arch = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(arch)
-    return len(arch.import_cycles(arch._graph()))
+    return arch.import_cycles(arch._graph())
+
+
+def module_name(path: Path) -> str:
+    """The dotted name below ``ipcosim`` of a file (``harness/master/slave.py``: ``harness.master.slave``)."""
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
 def table() -> str:
-    rows = ["| room | lines (non-blank, .py) | longest function | its lines |", "|---|---:|---|---:|"]
+    cycles = import_cycles()
+    rows = ["| room | modules | lines (non-blank, .py) | longest function | its lines | import cycles |",
+            "|---|---:|---:|---|---:|---:|"]
     for room, (folder, deep) in ROOMS.items():
         files = room_files(folder, deep)
+        names = {module_name(f) for f in files}
         name, n, why = longest_function(files)
         note = " (its docstring says why)" if why else ""
-        rows.append(f"| {room} | {nonblank_lines(files)} | `{name}`{note} | {n} |")
-    rows += ["", f"Import cycles between modules: {import_cycle_count()}."]
+        inside = sum(1 for cycle in cycles if names.intersection(cycle))
+        rows.append(f"| {room} | {len(files)} | {nonblank_lines(files)} | `{name}`{note} | {n} | {inside} |")
+    rows += ["", f"Import cycles between modules: {len(cycles)}."]
     return "\n".join(rows) + "\n"
+
+
+def written(doc: Path) -> str | None:
+    """The text between the markers of ``doc`` as ``--write`` writes it, or None without markers."""
+    page = doc.read_text()
+    if BEGIN not in page or END not in page:
+        return None
+    return page.split(BEGIN, 1)[1].split(END, 1)[0].removeprefix("\n")
 
 
 def write(doc: Path, text: str) -> None:

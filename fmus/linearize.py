@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
-from ipcosim.fmus.params import DoubleMassParams, PlantParams, kind_of
+from ipcosim.fmus.params import DoubleMassParams, PlantParams, plant_kind_of
 from ipcosim.fmus.physics import MEASURED, rhs_for, rhs_no_inductance, state_names
 
 if TYPE_CHECKING:
@@ -71,7 +71,7 @@ def force_columns(params: PlantParams) -> list[tuple[str, list[float]]]:
     against a kinetic force of 1 N, less the same without friction (friction enters the equations
     additively, so the difference is exact, whatever the velocity).
     """
-    kind = kind_of(params)
+    kind = plant_kind_of(params)
     names = state_names(kind)
     rhs = rhs_for(params)
     free = replace(params, **{n: 0.0 for n, _ in COULOMB_CARTS[kind]})
@@ -95,7 +95,7 @@ def linear_matrices(params: PlantParams, inductance: bool = True
         p = replace(params, b1=0.0, b2=0.0)
     else:
         p = replace(params, b=0.0)
-    kind = kind_of(p)
+    kind = plant_kind_of(p)
     names = state_names(kind)
     if inductance:
         rhs = rhs_for(p)

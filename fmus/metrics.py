@@ -30,7 +30,7 @@ reference (0.05 m) while the pendulum stays upright. Definitions (``docs/metrics
 ``upright``
     ``True`` if ``|angle| < 0.35 rad`` at every sample (and every sample is finite).
 
-The metrics of a scenario kind (:func:`task_kinds`) come only with runs of that kind:
+The metrics of a task (:func:`tasks_of`) come only with runs that do it:
 ``time_to_upright_s`` and ``track_used_m`` with a swing-up (the pendulum starts outside the
 upright limit), ``peak_angle_after_tap_rad`` and ``recovery_time_s`` with a tap (a tap impulse
 is set) -- :func:`upright_metrics` and :func:`tap_metrics` define them.
@@ -70,8 +70,8 @@ RESIDUAL_KEYS = ("residual_window_s", "cart_mean_error_m", "cart_peak_to_peak_m"
 PASSIVE_RESIDUAL_KEYS = ("passive_cart_mean_error_m", "passive_cart_peak_to_peak_m", "passive_cart_frequency_Hz")
 METRIC_KEYS = ("settling_time_s", "overshoot_m", "steady_state_error_m", "max_abs_angle_rad",
                "peak_voltage_V", "rms_voltage_V", "upright") + RESIDUAL_KEYS
-#: The metrics of each scenario kind (:func:`task_kinds`), present only in runs of that kind.
-KIND_METRICS = {"swing-up": ("time_to_upright_s", "track_used_m"),
+#: The metrics of each task beyond the step (:func:`tasks_of`), present only in runs that do it.
+TASK_METRICS = {"swing-up": ("time_to_upright_s", "track_used_m"),
                 "tap": ("peak_angle_after_tap_rad", "recovery_time_s")}
 #: The passive cart's reading (double mass): its residual oscillation is measured too.
 PASSIVE_COLUMNS = ("plant.passive_cart_position",)
@@ -89,8 +89,8 @@ SPECTRUM_PADDING = 8
 TAP_PARAMETERS = ("tap_force_impulse", "tap_torque_impulse")
 
 
-def task_kinds(plant_start: Callable[[str], Any]) -> frozenset[str]:
-    """The scenario kinds of a run (keys of :data:`KIND_METRICS`), from its plant's start values.
+def tasks_of(plant_start: Callable[[str], Any]) -> frozenset[str]:
+    """The tasks a run does beyond the step (keys of :data:`TASK_METRICS`), from its plant's start values.
 
     Parameters
     ----------
@@ -103,18 +103,18 @@ def task_kinds(plant_start: Callable[[str], Any]) -> frozenset[str]:
         ``"tap"`` if a tap impulse is set, ``"swing-up"`` if the pendulum starts outside the
         upright limit; empty for a plain step run.
     """
-    kinds = set()
+    tasks = set()
     if any(float(plant_start(name) or 0.0) != 0.0 for name in TAP_PARAMETERS):
-        kinds.add("tap")
+        tasks.add("tap")
     if abs(float(wrapped(float(plant_start("initial_pendulum_angle") or 0.0)))) >= UPRIGHT_LIMIT_RAD:
-        kinds.add("swing-up")
-    return frozenset(kinds)
+        tasks.add("swing-up")
+    return frozenset(tasks)
 
 
-def _of_kinds(metrics: dict[str, Any], kinds: Iterable[str]) -> dict[str, Any]:
-    """``metrics`` without the metrics of the scenario kinds not in ``kinds``."""
-    keep = {key for kind in kinds for key in KIND_METRICS.get(kind, ())}
-    return {k: v for k, v in metrics.items() if k in keep or not any(k in keys for keys in KIND_METRICS.values())}
+def _of_tasks(metrics: dict[str, Any], tasks: Iterable[str]) -> dict[str, Any]:
+    """``metrics`` without the metrics of the tasks not in ``tasks``."""
+    keep = {key for task in tasks for key in TASK_METRICS.get(task, ())}
+    return {k: v for k, v in metrics.items() if k in keep or not any(k in keys for keys in TASK_METRICS.values())}
 
 
 class MetricsError(IpcosimError, ValueError):
@@ -384,15 +384,15 @@ def first_column(columns: Sequence[str], candidates: Sequence[str]) -> str | Non
     return None
 
 
-def task_metrics(data: np.ndarray, kinds: Iterable[str] = ()) -> dict[str, Any]:
-    """The metrics of a pendulum run (:func:`compute_metrics`, and the metrics of its ``kinds``,
-    :data:`KIND_METRICS`), from the plant's motor-cart position and angle, the reference and the
+def task_metrics(data: np.ndarray, tasks: Iterable[str] = ()) -> dict[str, Any]:
+    """The metrics of a pendulum run (:func:`compute_metrics`, and the metrics of its ``tasks``,
+    :data:`TASK_METRICS`), from the plant's motor-cart position and angle, the reference and the
     controller's voltage; an empty dict when the result lacks those columns or has fewer than two rows."""
-    return streamed_task_metrics(lambda: [data], list(data.dtype.names or ()), kinds)
+    return streamed_task_metrics(lambda: [data], list(data.dtype.names or ()), tasks)
 
 
 def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: Sequence[str],
-                          kinds: Iterable[str] = ()) -> dict[str, Any]:
+                          tasks: Iterable[str] = ()) -> dict[str, Any]:
     """:func:`task_metrics` computed in two passes over the rows, a chunk at a time, so that
     the metrics of a run of any length need no more memory than one chunk.
 
@@ -402,8 +402,8 @@ def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: S
         ``chunks()`` -> iterable of structured arrays (consecutive rows; called twice).
     columns : sequence of str
         The field names.
-    kinds : iterable of str
-        The run's scenario kinds (:func:`task_kinds`): their metrics are included.
+    tasks : iterable of str
+        The run's tasks beyond the step (:func:`tasks_of`): their metrics are included.
 
     Returns
     -------
@@ -417,10 +417,10 @@ def streamed_task_metrics(chunks: Callable[[], Iterable[np.ndarray]], columns: S
     if None in (pos, ang, ref, volt):
         return {}
     result = _step_task(chunks, pos, ang, ref, volt, first_column(columns, PASSIVE_COLUMNS))
-    kinds = set(kinds)
-    if result and kinds:  # the kind metrics' pass only where they are reported
+    tasks = set(tasks)
+    if result and tasks:  # the task metrics' pass only where they are reported
         result.update(_upright_pass(chunks, pos, ang))
-    return _of_kinds(result, kinds)
+    return _of_tasks(result, tasks)
 
 
 def _step_task(chunks: Callable[[], Iterable[np.ndarray]], pos: str, ang: str, ref: str, volt: str,

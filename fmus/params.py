@@ -231,6 +231,6 @@ def with_values(params: PlantParams, values: Mapping[str, float]) -> PlantParams
     return validate(replace(params, **{k: float(v) for k, v in values.items()}))
 
 
-def kind_of(params: PlantParams) -> str:
+def plant_kind_of(params: PlantParams) -> str:
     """'single-mass' or 'double-mass'."""
     return "double-mass" if isinstance(params, DoubleMassParams) else "single-mass"

@@ -16,7 +16,7 @@ from ipcosim.fmus.instruments import (
     tap_velocity_change,
 )
 from ipcosim.fmus.integrator import FastETDRK4
-from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, kind_of, validate
+from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, plant_kind_of, validate
 from ipcosim.fmus.physics import (
     MEASURED,
     double_mass_applied_forces,
@@ -143,7 +143,7 @@ def constrain(before: Sequence[float], after: Sequence[float], p: PlantParams, e
     """``[*state, carts stuck, carts stopped]`` after a step's constraints: :func:`stick`, then the end stops
     (``ipcosim.fmus.instruments.stop_carts``)."""
     x, stuck = stick(before, after, p)
-    x, stopped = stop_carts(x, CARTS[kind_of(p)], end_stop)
+    x, stopped = stop_carts(x, CARTS[plant_kind_of(p)], end_stop)
     return [*x, stuck, stopped]
 
 
@@ -169,7 +169,7 @@ class Plant:
 
     def __init__(self, params: PlantParams, x0: Sequence[float] | None = None, t0: float = 0.0) -> None:
         self.params = validate(params)
-        self.kind = kind_of(params)
+        self.kind = plant_kind_of(params)
         self.state_names = state_names(self.kind)
         self._rhs = rhs_for(params)
         if self.kind == "single-mass":

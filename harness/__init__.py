@@ -12,9 +12,9 @@ from __future__ import annotations
 from typing import Any
 
 _EXPORTS = {
-    "swap_aliases": "ipcosim.harness.scenario.binding", "register_swap_alias": "ipcosim.harness.scenario.binding",
-    "SwapTarget": "ipcosim.harness.scenario.binding",
-    "SwapRequest": "ipcosim.harness.scenario.binding",
+    "swap_aliases": "ipcosim.harness.scenario.swaps", "register_swap_alias": "ipcosim.harness.scenario.swaps",
+    "SwapTarget": "ipcosim.harness.scenario.swaps",
+    "SwapRequest": "ipcosim.harness.scenario.swaps",
     "Observer": "ipcosim.harness.master.observers", "Manipulator": "ipcosim.harness.master.manipulators",
 }
 

@@ -18,8 +18,8 @@ from typing import Any
 
 from ipcosim.harness.engine import Prepared
 from ipcosim.harness.master.system import Instance, Model, System
-from ipcosim.harness.scenario.binding import read_model
 from ipcosim.harness.scenario.flavour import native_fmu_dir
+from ipcosim.harness.scenario.model_description import read_model
 
 
 def describe(scenario: str | os.PathLike[str], *, parameter_set: str | None = None) -> dict[str, Any]:

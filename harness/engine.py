@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError, UsageError
-from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, task_kinds
+from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, tasks_of
 from ipcosim.harness.grammar import strip_nominal
 from ipcosim.harness.hil.observer import CardObserver
 from ipcosim.harness.master import signals
@@ -50,8 +50,11 @@ from ipcosim.harness.master.slave import FMUSlave, fmu_slave, load_library
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
-from ipcosim.harness.scenario.binding import SwapTarget, bind, default_step, default_stop_time, warn_all, with_set
+from ipcosim.harness.scenario.binding import bind, warn_all
+from ipcosim.harness.scenario.default_experiment import default_step, default_stop_time
 from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
+from ipcosim.harness.scenario.swaps import SwapTarget
+from ipcosim.harness.scenario.values import with_set
 
 
 class NothingToSimulateError(IpcosimError, ValueError):
@@ -350,8 +353,8 @@ class Prepared:
                          task_metrics=self._run_task_metrics(values), loop=loop)
 
     def _run_task_metrics(self, values: Mapping[tuple[str, str], Any]) -> TaskMetrics | None:
-        """The task metrics of one run: the IP02 task's with the metrics of the run's scenario kinds
-        (:func:`ipcosim.fmus.metrics.task_kinds` of the plant's start values after ``values``)."""
+        """The task metrics of one run: the IP02 task's with the metrics of the run's further tasks
+        (:func:`ipcosim.fmus.metrics.tasks_of` the plant's start values after ``values``)."""
         if self.task_metrics is not streamed_task_metrics:
             return self.task_metrics
         try:
@@ -364,7 +367,7 @@ class Prepared:
                 return values[("plant", name)]
             return plant.start_value(name) if name in plant.model.variables else None
 
-        return functools.partial(streamed_task_metrics, kinds=task_kinds(start))
+        return functools.partial(streamed_task_metrics, tasks=tasks_of(start))
 
     def run(self, stop_time: float | None = None, step: float | None = None,
             set: Mapping[str, Any] | None = None, *, out: str | os.PathLike[str] | None = None,

@@ -116,7 +116,7 @@ class Vary:
     ----------
     name : str
         ``component.variable``.
-    kind : str
+    form : str
         ``uniform``, ``normal``, ``grid``, ``values`` (list or single number).
     args : tuple of float
         The form's arguments (for ``values``: the values).
@@ -127,7 +127,7 @@ class Vary:
     """
 
     name: str
-    kind: str
+    form: str
     args: tuple[float, ...]
     relative: bool = False
     text: str = ""
@@ -135,23 +135,23 @@ class Vary:
     @property
     def is_random(self) -> bool:
         """True for sampled forms (uniform, normal)."""
-        return self.kind in ("uniform", "normal")
+        return self.form in ("uniform", "normal")
 
     def points(self, nominal: float) -> list[float]:
         """The values of a grid or list form (absolute, nominal applied)."""
         scale = nominal if self.relative else 1.0
-        if self.kind == "grid":
+        if self.form == "grid":
             start, stop, n = self.args
             return [float(v) * scale for v in np.linspace(start, stop, int(n))]
-        if self.kind == "values":
+        if self.form == "values":
             return [v * scale for v in self.args]
-        raise ValueError(f"{self.kind} is a random form, it has no points")
+        raise ValueError(f"{self.form} is a random form, it has no points")
 
     def sample(self, rng: np.random.Generator, nominal: float) -> float:
         """One random value (absolute, nominal applied)."""
         scale = nominal if self.relative else 1.0
         a, b = self.args
-        value = rng.uniform(a, b) if self.kind == "uniform" else rng.normal(a, b)
+        value = rng.uniform(a, b) if self.form == "uniform" else rng.normal(a, b)
         return float(value) * scale
 
 

@@ -33,7 +33,7 @@ class CheckFailed(IpcosimError, AssertionError):
     """A run that does not meet a check (the message says how, in physical units)."""
 
 
-def describe(result: "Result") -> str:
+def run_label(result: "Result") -> str:
     """``scenario [swaps, set values]``: which run a message is about."""
     meta = result.metadata
     items = [f"{k}={Path(str(v)).name}" for k, v in (meta.get("swaps") or {}).items()]
@@ -53,14 +53,14 @@ def _column(result: "Result", candidates: Sequence[str], what: str) -> np.ndarra
     __tracebackhide__ = True  # pytest shows the test's line, not this helper's
     name = first_column(result.columns, candidates)
     if name is None:
-        raise CheckFailed(f"{describe(result)}: no {what} recorded (looked for {', '.join(candidates)})")
+        raise CheckFailed(f"{run_label(result)}: no {what} recorded (looked for {', '.join(candidates)})")
     return np.asarray(result[name], dtype=float)
 
 
 def _fail(result: "Result", text: str) -> None:
     __tracebackhide__ = True
     where = (result.metadata.get("files") or {}).get("results")
-    raise CheckFailed(f"{describe(result)}: {text}" + (f"\n  results: {where}" if where else ""))
+    raise CheckFailed(f"{run_label(result)}: {text}" + (f"\n  results: {where}" if where else ""))
 
 
 def assert_upright(result: "Result", limit_rad: float = UPRIGHT_LIMIT_RAD) -> None:

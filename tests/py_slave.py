@@ -115,12 +115,12 @@ class PySlave(Slave):
 
         return None, do_step, get_real, set_real
 
-    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+    def channel(self, value_type: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
         vrs = [v.vr for v in variables]
         types = [v.type for v in variables]
         convert: Callable[[Any, str], Any] = {
             "integer": lambda x, t: integers.stored(int(x), t), "boolean": lambda x, t: 1 if x else 0,
-            "string": lambda x, t: x if isinstance(x, bytes) else str(x).encode()}[kind]
+            "string": lambda x, t: x if isinstance(x, bytes) else str(x).encode()}[value_type]
 
         def get(buf: Any) -> int:
             self.on_get()
@@ -135,9 +135,9 @@ class PySlave(Slave):
         def put(buf: Any) -> int:
             for i, vr in enumerate(vrs):
                 x = buf[i]
-                if kind == "integer":
+                if value_type == "integer":
                     x = integers.value(int(x), types[i])
-                self.values[vr] = bool(x) if kind == "boolean" else (x.decode() if isinstance(x, bytes) else x)
+                self.values[vr] = bool(x) if value_type == "boolean" else (x.decode() if isinstance(x, bytes) else x)
             return OK
 
         return get, put

@@ -20,7 +20,7 @@ from ipcosim.harness.studies.analyze import (
     position_only_limit,
     scenario_loop,
 )
-from ipcosim.harness.studies.loop import LinearizationError, LinearLaw, linear_law
+from ipcosim.harness.studies.linear_law import LinearizationError, LinearLaw, linear_law
 
 # the swing-up is nonlinear and the excitation a time signal: neither has a linear model
 CASES = [(law, kind, s) for law, per in PARAMETER_SETS.items() if law not in ("SwingUp", "Excitation")

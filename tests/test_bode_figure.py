@@ -17,7 +17,7 @@ from ipcosim.harness.studies.analyze import (  # noqa: E402
     loop_from,
     loop_response,
 )
-from ipcosim.harness.studies.loop import LinearLaw  # noqa: E402
+from ipcosim.harness.studies.linear_law import LinearLaw  # noqa: E402
 
 K, T = 50.0, 0.01
 

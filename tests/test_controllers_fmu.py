@@ -37,7 +37,7 @@ def controller_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]
     return {r.fmu.stem: r.fmu for r in results}
 
 
-def kind_of(model: str) -> str:
+def plant_kind_of(model: str) -> str:
     return "single-mass" if model.endswith("SingleMass") else "double-mass"
 
 
@@ -108,7 +108,7 @@ def test_vdmcheck_reports_no_errors(controller_fmus, model: str) -> None:
 
 @pytest.mark.parametrize("model", MODELS)
 def test_contract_variables_units_and_structure(controller_fmus, model: str) -> None:
-    kind, law = kind_of(model), law_of(model)
+    kind, law = plant_kind_of(model), law_of(model)
     root = model_description(controller_fmus[model])
     assert root.get("modelName") == model
     svs = list(root.iter("ScalarVariable"))
@@ -147,7 +147,7 @@ def test_contract_variables_units_and_structure(controller_fmus, model: str) -> 
 
 @pytest.mark.parametrize("model", ["LQRSingleMass", "HSMCDoubleMass", "CascadePIDSingleMass"])
 def test_output_is_right_at_time_zero(controller_fmus, model: str) -> None:
-    kind, law = kind_of(model), law_of(model)
+    kind, law = plant_kind_of(model), law_of(model)
     y0 = [0.01, -0.02] if kind == "single-mass" else [0.01, 0.005, -0.02]
     f = start(controller_fmus[model])
     f.set(reference=0.05, **dict(zip(MEASURED[kind], y0)))
@@ -177,7 +177,7 @@ def test_setpoint_waveforms_and_time_zero(controller_fmus) -> None:
 
 @pytest.mark.parametrize("model", MODELS)
 def test_closed_loop_through_fmpy_equals_the_pure_loop(controller_fmus, plant_fmus, model: str) -> None:
-    kind, law = kind_of(model), law_of(model)
+    kind, law = plant_kind_of(model), law_of(model)
     n = 3000
     ys, us = cosimulate(controller_fmus[model], plant_fmus[kind], controller_fmus["Setpoint"], kind, n)
     ref = run_loop(make_law(kind, law), preset(DEFAULT_PRESET[kind]), stop_time=n * H)

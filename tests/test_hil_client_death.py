@@ -62,11 +62,11 @@ def test_hung_client_watchdog_expires_and_the_motor_goes_to_zero_within_the_time
         assert rig.motor_voltage() == 0.0
         # on the rig's clock: expiry no later than one physics tick after the timeout since the last reload
         assert rig.watchdog.expired_at_ns - rig.watchdog.last_reload_ns <= int(TIMEOUT * 1e9) + rig.tick_ns
-        assert any(e.kind == "watchdog" for e in rig.events)
+        assert any(e.topic == "watchdog" for e in rig.events)
     finally:
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
-    assert wait_for(lambda: any(e.kind == "session" and "ended" in e.message for e in rig.events))
+    assert wait_for(lambda: any(e.topic == "session" and "ended" in e.message for e in rig.events))
 
 
 def test_killed_client_loses_the_session_and_the_motor_goes_to_zero(wallclock_server):
@@ -76,5 +76,5 @@ def test_killed_client_loses_the_session_and_the_motor_goes_to_zero(wallclock_se
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait(timeout=30)
     assert wait_for(lambda: rig.motor_voltage() == 0.0)
-    assert wait_for(lambda: any(e.kind == "session" and "ended" in e.message for e in rig.events))
+    assert wait_for(lambda: any(e.topic == "session" and "ended" in e.message for e in rig.events))
     assert wait_for(lambda: not rig.watchdog.running)

@@ -227,7 +227,7 @@ def test_losing_the_controller_forces_zero_volts(server):
             break
         time.sleep(0.01)
     assert server.rig.motor_voltage() == 0.0
-    assert any(e.kind == "session" and "ended" in e.message for e in server.rig.events)
+    assert any(e.topic == "session" and "ended" in e.message for e in server.rig.events)
 
 
 def test_a_stalled_rig_times_out_with_a_clear_error():

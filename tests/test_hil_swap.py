@@ -326,6 +326,6 @@ def test_master_dies_and_the_rigs_watchdog_puts_the_motor_at_zero(env, tmp_path)
             os.kill(proc.pid, signal.SIGKILL)                  # and dies
             proc.wait(timeout=30)
         end = time.monotonic() + 30
-        while not any(e.kind == "session" and "ended" in e.message for e in rig.events) and time.monotonic() < end:
+        while not any(e.topic == "session" and "ended" in e.message for e in rig.events) and time.monotonic() < end:
             time.sleep(0.01)
         assert rig.motor_voltage() == 0.0 and not rig.watchdog.running

@@ -26,7 +26,8 @@ from ipcosim.harness.engine import Prepared
 from ipcosim.harness.master.algorithm import AlgebraicLoopError, StepSizeError, gauss_seidel_order
 from ipcosim.harness.master.manipulators import ScheduledValues
 from ipcosim.harness.master.observers import Observer, Progress
-from ipcosim.harness.scenario.binding import BindingError, UnconnectedInputWarning
+from ipcosim.harness.scenario.binding import UnconnectedInputWarning
+from ipcosim.harness.scenario.errors import BindingError
 
 K, H = 5.0, 0.01
 

@@ -1,4 +1,4 @@
-"""Metrics a control engineer can read: kind metrics only in their scenarios, no settling for a
+"""Metrics a control engineer can read: a task's metrics only in the runs that do it, no settling for a
 fallen pendulum, and every metric a run writes defined in docs/metrics.md."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import ipcosim
-from ipcosim.fmus.metrics import KIND_METRICS, compute_metrics, task_kinds
+from ipcosim.fmus.metrics import TASK_METRICS, compute_metrics, tasks_of
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -20,11 +20,11 @@ def documented_metrics() -> set[str]:
     return {key for row in re.findall(r"^\| (`[^|]+`) \|", text, re.M) for key in re.findall(r"`([^`]+)`", row)}
 
 
-def test_kinds_come_from_the_plant_start_values() -> None:
-    assert task_kinds({}.get) == frozenset()
-    assert task_kinds({"tap_torque_impulse": 0.005}.get) == {"tap"}
-    assert task_kinds({"tap_force_impulse": -0.1, "initial_pendulum_angle": np.pi}.get) == {"tap", "swing-up"}
-    assert task_kinds({"initial_pendulum_angle": 2 * np.pi + 0.01}.get) == frozenset()  # wrapped: upright
+def test_tasks_come_from_the_plant_start_values() -> None:
+    assert tasks_of({}.get) == frozenset()
+    assert tasks_of({"tap_torque_impulse": 0.005}.get) == {"tap"}
+    assert tasks_of({"tap_force_impulse": -0.1, "initial_pendulum_angle": np.pi}.get) == {"tap", "swing-up"}
+    assert tasks_of({"initial_pendulum_angle": 2 * np.pi + 0.01}.get) == frozenset()  # wrapped: upright
 
 
 def test_a_fallen_pendulum_has_not_settled() -> None:
@@ -39,12 +39,12 @@ def test_a_fallen_pendulum_has_not_settled() -> None:
 
 
 @pytest.mark.integration
-@pytest.mark.parametrize("scenario,kinds", [("single-mass-lqr", ()), ("single-mass-lqr-tap", ("tap",)),
+@pytest.mark.parametrize("scenario,tasks", [("single-mass-lqr", ()), ("single-mass-lqr-tap", ("tap",)),
                                             ("single-mass-swing-up", ("swing-up",))])
-def test_kind_metrics_only_in_their_scenarios_and_all_documented(scenario: str, kinds: tuple[str, ...]) -> None:
+def test_task_metrics_only_in_their_scenarios_and_all_documented(scenario: str, tasks: tuple[str, ...]) -> None:
     m = ipcosim.run(scenario, stop_time=2.5).metrics
-    for kind, keys in KIND_METRICS.items():
-        assert all((key in m) == (kind in kinds) for key in keys), (kind, sorted(m))
+    for task, keys in TASK_METRICS.items():
+        assert all((key in m) == (task in tasks) for key in keys), (task, sorted(m))
     assert set(m) <= documented_metrics(), set(m) - documented_metrics()
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from ipcosim.harness import paths
 from ipcosim.harness.master.system import Model
-from ipcosim.harness.scenario.binding import rebuild_hint
+from ipcosim.harness.scenario.rebuild import rebuild_hint
 
 
 def _model(path: Path) -> Model:

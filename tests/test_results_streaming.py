@@ -88,10 +88,10 @@ def test_streamed_tap_and_upright_metrics_on_chunk_boundaries(size, ends_down):
     if ends_down:
         th[-1] = 1.0
     data["plant.pendulum_angle"] = th
-    whole = task_metrics(data, kinds={"tap", "swing-up"})
+    whole = task_metrics(data, tasks={"tap", "swing-up"})
     # the angle first leaves its initial value at row 1: the "tap" of this run starts there
     assert whole["recovery_time_s"] == (None if ends_down else pytest.approx(t[300] - t[1]))
     assert whole["time_to_upright_s"] == (None if ends_down else pytest.approx(t[50]))
-    streamed = streamed_task_metrics(_chunks(data, size), NAMES, kinds={"tap", "swing-up"})
+    streamed = streamed_task_metrics(_chunks(data, size), NAMES, tasks={"tap", "swing-up"})
     for key in ("time_to_upright_s", "track_used_m", "peak_angle_after_tap_rad", "recovery_time_s"):
         assert streamed[key] == (pytest.approx(whole[key]) if whole[key] is not None else None), key

@@ -11,17 +11,16 @@ from lxml import etree
 from ssd_helpers import component, connection, connector, ssd, ssv, write_scenario
 
 from devtools.ssp_gen import CONTROLLERS, PLANTS, ssd_text
-from ipcosim.harness.scenario.binding import unit_conversion
+from ipcosim.harness.scenario.errors import ScenarioError, ScenarioNotFoundError
 from ipcosim.harness.scenario.ssp import (
     NS,
-    ScenarioError,
-    ScenarioNotFoundError,
     Unit,
     load_scenario,
     scenario_names,
     select_parameter_set,
 )
 from ipcosim.harness.scenario.ssp_pack import pack
+from ipcosim.harness.scenario.units import unit_conversion
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPECTED = sorted(f"{p}-{c}" for p in ("single-mass", "double-mass")

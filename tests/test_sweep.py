@@ -36,7 +36,7 @@ def strip_time(rows):
 # ----------------------------------------------------------------------------- grammar
 
 
-@pytest.mark.parametrize("expr, kind, args, relative", [
+@pytest.mark.parametrize("expr, form, args, relative", [
     ("plant.Mp=uniform(0.8,1.2)*nominal", "uniform", (0.8, 1.2), True),
     ("plant.Mp = nominal * uniform(0.8, 1.2)", "uniform", (0.8, 1.2), True),
     ("plant.Mp=normal(0.2,0.01)", "normal", (0.2, 0.01), False),
@@ -44,9 +44,9 @@ def strip_time(rows):
     ("plant.K=[100, 1.2e2,140]", "values", (100.0, 120.0, 140.0), False),
     ("controller.c1=3.5", "values", (3.5,), False),
 ])
-def test_parse_vary_forms(expr, kind, args, relative):
+def test_parse_vary_forms(expr, form, args, relative):
     v = parse_vary(expr, PARAMS)
-    assert (v.kind, v.args, v.relative) == (kind, args, relative)
+    assert (v.form, v.args, v.relative) == (form, args, relative)
 
 
 @pytest.mark.parametrize("expr, fragment", [

@@ -212,7 +212,7 @@ class RigEvent:
     """Something the rig's log keeps: a limit trip, a watchdog expiry, a session change..."""
 
     time: float
-    kind: str
+    topic: str  # limit, fault, watchdog, session, reset, halt
     message: str
 
 
@@ -584,8 +584,8 @@ class VirtualRig:
                                       f"{wd.timeout_ns / NS:g} s): outputs forced to their expiration "
                                       f"states")
 
-    def _event(self, t_ns: int, kind: str, message: str) -> None:
-        self.events.append(RigEvent(t_ns / NS, kind, message))
+    def _event(self, t_ns: int, topic: str, message: str) -> None:
+        self.events.append(RigEvent(t_ns / NS, topic, message))
         self.event_count += 1
 
     # --- card operations (every one syncs the wallclock first) ------------------------------------

@@ -299,8 +299,8 @@ class RigServer:
         new = min(total - self._events_seen, len(events))
         for ev in events[len(events) - new:] if new > 0 else []:
             # safety events always reach the log; session changes (client-driven) are rate-limited
-            log = self.log if ev.kind == "session" else self._raw_log
-            log(f"rig t={ev.time:.4f}s {ev.kind}: {escape(ev.message, 400)}")
+            log = self.log if ev.topic == "session" else self._raw_log
+            log(f"rig t={ev.time:.4f}s {ev.topic}: {escape(ev.message, 400)}")
         self._events_seen = total
 
     # --- connections ---------------------------------------------------------------------------

@@ -17,7 +17,7 @@ from typing import Any, Sequence
 
 from ipcosim.fmus.hil import DEFAULT_URI, HILError, parse_card_uri
 from ipcosim.fmus.kinds import plant_kind
-from ipcosim.harness.scenario.binding import SwapRequest, register_swap_alias
+from ipcosim.harness.scenario.swaps import SwapRequest, register_swap_alias
 
 ADAPTERS = {"single-mass": "IP02HILSingleMass", "double-mass": "IP02HILDoubleMass"}
 

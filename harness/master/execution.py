@@ -44,7 +44,7 @@ from ipcosim.harness.master.pyloop import compile_loop
 from ipcosim.harness.master.recorder import Recorder, TaskMetrics, TickFailure
 from ipcosim.harness.master.results import Result, RowWriter
 from ipcosim.harness.master.slave import DISCARD, TERMINATE, Slave, fmu_slave
-from ipcosim.harness.master.system import Instance, System, kind_of
+from ipcosim.harness.master.system import Instance, System, value_type_of
 
 SlaveFactory = Callable[[Instance], Slave]
 
@@ -232,7 +232,7 @@ class Execution:
         is also what the next batched set sends; a connected input is overwritten by its
         connection at the component's next step."""
         var = self.instances[self.index[component]].model.variables[variable]
-        if var.causality == "input" and kind_of(var.type) == "real":
+        if var.causality == "input" and value_type_of(var.type) == "real":
             self.layout.put(component, variable, float(value))
         self.slaves[self.index[component]].set_values([var], [float(value)])
 
@@ -244,7 +244,7 @@ class Execution:
     def row_names(self) -> list[str]:
         """Field names of the recorded rows: ``time``, then ``component.variable`` (every
         connector of every type, in SSD order)."""
-        return list(self.layout.column_kinds)
+        return list(self.layout.column_types)
 
     def row_fields(self) -> list[tuple[str, str]]:
         """Name and numpy type of every recorded field (see :meth:`Layout.row_fields`)."""
@@ -340,7 +340,7 @@ class Execution:
         changed: list[str] = []
         for it in range(1, self.max_init_iterations + 1):
             signals.check()
-            changed = self._sweep()
+            changed = self._init_pass()
             self.init_iterations = it
             if not changed:
                 break
@@ -377,7 +377,7 @@ class Execution:
             changed = False
             for k, link in enumerate(links):
                 value = self.slaves[self.index[link.src]].get_values([link.src_var])[0]
-                if link.kind == "real":
+                if link.value_type == "real":
                     value = link.factor * float(value) + link.offset
                 elif link.mapping:
                     value = dict(link.mapping).get(int(value), int(value))
@@ -413,7 +413,7 @@ class Execution:
         return compile_loop(self.blocks, self.order, self.algorithm, self.timebase, self.record_every,
                             self.recorder.typed_record())
 
-    def _sweep(self) -> list[str]:
+    def _init_pass(self) -> list[str]:
         """One pass in step order: transfer, set inputs, read outputs; returns changed inputs."""
         changed: list[str] = []
         for idx in self.init_order:
@@ -433,7 +433,7 @@ class Execution:
             if ch.n_in:
                 status = ch.set(ch.in_values)
                 if status > 1:
-                    raise self.slaves[b.index].fail(f"fmi2Set{ch.kind.capitalize()}", status, self.start_time)
+                    raise self.slaves[b.index].fail(f"fmi2Set{ch.value_type.capitalize()}", status, self.start_time)
 
     def _transfer(self, b: Block, changed: list[str]) -> None:
         """Copy connected outputs into ``b``'s inputs; append the names of inputs that changed."""
@@ -445,9 +445,9 @@ class Execution:
                 b.in_values[k] = new
                 changed.append(f"{b.name}.{inputs[k].name}")
         for ch in b.channels:
-            ins = self.layout.typed[b.index][ch.kind][1]
+            ins = self.layout.typed[b.index][ch.value_type][1]
             for k, src, j, mapping, carrier in ch.transfers:
-                src_ch = next(c for c in self.blocks[src].channels if c.kind == ch.kind)
+                src_ch = next(c for c in self.blocks[src].channels if c.value_type == ch.value_type)
                 new = src_ch.out_values[j]
                 if carrier is not None:
                     new = carrier(new)
@@ -466,7 +466,7 @@ class Execution:
             if ch.n_out:
                 status = ch.get(ch.out_values)
                 if status > 1:
-                    raise self.slaves[b.index].fail(f"fmi2Get{ch.kind.capitalize()}", status,
+                    raise self.slaves[b.index].fail(f"fmi2Get{ch.value_type.capitalize()}", status,
                                                     t if t is not None else self.start_time)
 
     def _step_all(self) -> None:
@@ -561,7 +561,7 @@ class Execution:
             return False
         t, t_next = self.time_of(self.tick), self.time_of(self.tick + 1)
         self.terminated_by = {"component": slave.name, "model": slave.model_name, "time": t,
-                              "note": f"component {slave.describe()} ended the simulation in its step from "
+                              "note": f"component {slave.label()} ended the simulation in its step from "
                                       f"t = {t:.6g} s to {t_next:.6g} s ({query}); the run ends at t = {t:.6g} s"}
         return True
 

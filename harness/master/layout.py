@@ -9,7 +9,7 @@ inputs, boolean outputs, inputs), which holds every FMI integer type exactly
 (:mod:`~ipcosim.harness.master.integers`); String connectors live in lists per component. A
 :class:`~ipcosim.harness.master.plan.Block` is one component's view of these vectors with its
 raw FMI functions, a :class:`~ipcosim.harness.master.plan.Channel` its connectors of one
-non-Real kind. The layout also names the record's columns (:attr:`Layout.column_kinds`).
+non-Real value type. The layout also names the record's columns (:attr:`Layout.column_types`).
 """
 from __future__ import annotations
 
@@ -22,9 +22,9 @@ from ipcosim.harness.master import integers
 from ipcosim.harness.master.algorithm import GAUSS_SEIDEL
 from ipcosim.harness.master.plan import Block, Channel
 from ipcosim.harness.master.slave import Slave
-from ipcosim.harness.master.system import System, Variable, kind_of
+from ipcosim.harness.master.system import System, Variable, value_type_of
 
-#: numpy type of a record column of each value kind (an Integer column: of its type, ``integers.DTYPE``).
+#: numpy type of a record column of each value type (an Integer column: of its type, ``integers.DTYPE``).
 COLUMN_DTYPE = {"real": "f8", "integer": "i4", "boolean": "?", "string": "O"}
 
 #: ``start_value(component, variable)``: the value a connector starts the run with.
@@ -58,8 +58,8 @@ class Layout:
         offsets = []
         pos = 0
         for inst in self.instances:
-            outs = [v for v in inst.outputs if kind_of(v.type) == "real"]
-            ins = [v for v in inst.inputs if kind_of(v.type) == "real"]
+            outs = [v for v in inst.outputs if value_type_of(v.type) == "real"]
+            ins = [v for v in inst.inputs if value_type_of(v.type) == "real"]
             self.real_outputs.append(outs)
             self.real_inputs.append(ins)
             offsets.append((pos, pos + len(outs)))
@@ -87,26 +87,26 @@ class Layout:
         self.typed: list[dict[str, tuple[list[Variable], list[Variable]]]] = []
         self.int_offset: dict[tuple[int, str], int] = {}
         self.strings: dict[int, tuple[list[bytes], list[bytes]]] = {}
-        self.tslot: dict[tuple[str, str], tuple[str, int]] = {}  # (kind, int slot or string index)
+        self.tslot: dict[tuple[str, str], tuple[str, int]] = {}  # (value type, int slot or string index)
         #: The sized type (``integers.RANGE``) and ``component.variable`` of each Integer slot.
         self.int_types: dict[int, tuple[str, str]] = {}
         self.string_slots: list[tuple[list[bytes], int]] = []
         pos = 0
         for k, inst in enumerate(self.instances):
             groups = {}
-            for kind in ("integer", "boolean", "string"):
-                outs = [v for v in inst.outputs if kind_of(v.type) == kind]
-                ins = [v for v in inst.inputs if kind_of(v.type) == kind]
+            for value_type in ("integer", "boolean", "string"):
+                outs = [v for v in inst.outputs if value_type_of(v.type) == value_type]
+                ins = [v for v in inst.inputs if value_type_of(v.type) == value_type]
                 if not (outs or ins):
                     continue
-                groups[kind] = (outs, ins)
-                if kind == "string":
+                groups[value_type] = (outs, ins)
+                if value_type == "string":
                     self._place_strings(k, outs, ins)
                 else:
-                    self.int_offset[(k, kind)] = pos
+                    self.int_offset[(k, value_type)] = pos
                     for j, v in enumerate(outs + ins):
-                        self.tslot[(inst.name, v.name)] = (kind, pos + j)
-                        if kind == "integer":
+                        self.tslot[(inst.name, v.name)] = (value_type, pos + j)
+                        if value_type == "integer":
                             self.int_types[pos + j] = (integers.integer_type(v.type, inst.model.fmi_version),
                                                        f"{inst.name}.{v.name}")
                     pos += len(outs) + len(ins)
@@ -114,9 +114,9 @@ class Layout:
         self.n_ints = pos
         self.ints_c = (ctypes.c_int64 * (pos + 1))()
         self.ints = np.ctypeslib.as_array(self.ints_c)[:pos]
-        for (comp, var), (kind, slot) in self.tslot.items():
+        for (comp, var), (value_type, slot) in self.tslot.items():
             if self.instances[self.index[comp]].model.variables[var].causality == "input":
-                self.store(kind, slot, start_value(comp, var))
+                self.store(value_type, slot, start_value(comp, var))
 
     def _place_strings(self, k: int, outs: list[Variable], ins: list[Variable]) -> None:
         """Component ``k``'s String outputs and inputs: one list each, numbered in ``string_slots``."""
@@ -131,31 +131,31 @@ class Layout:
         """The record columns: ``time``, then every connector in SSD order. A connected input's
         column is the transformed source value (what the connection delivers at that time):
         ``columns`` (Real: name, slot, (source slot, factor, offset) or None), ``typed_columns``
-        (name, kind, slot, (source slot, mapping) or None) and the kind of every column,
-        ``column_kinds`` (``real``, ``integer``, ``boolean``, ``string``), and its numpy type,
+        (name, value_type, slot, (source slot, mapping) or None) and the value type of every column,
+        ``column_types`` (``real``, ``integer``, ``boolean``, ``string``), and its numpy type,
         ``column_dtypes`` (an Integer column: its FMI type's, ``integers.DTYPE``)."""
         self.columns: list[tuple[str, int, tuple[int, float, float] | None]] = []
         self.typed_columns: list[tuple[str, str, int, tuple[int, dict[int, int]] | None]] = []
-        self.column_kinds: dict[str, str] = {"time": "real"}
+        self.column_types: dict[str, str] = {"time": "real"}
         self.column_dtypes: dict[str, str] = {"time": COLUMN_DTYPE["real"]}
         for inst in self.instances:
             for v in inst.connectors:
-                kind = kind_of(v.type)
-                if kind is None:
+                value_type = value_type_of(v.type)
+                if value_type is None:
                     continue
                 name = f"{inst.name}.{v.name}"
-                self.column_kinds[name] = kind
-                self.column_dtypes[name] = COLUMN_DTYPE[kind]
+                self.column_types[name] = value_type
+                self.column_dtypes[name] = COLUMN_DTYPE[value_type]
                 link = self.system.link_into(inst.name, v.name)
-                if kind == "real":
+                if value_type == "real":
                     src = (self.slot[(link.src, link.src_var.name)], link.factor, link.offset) if link else None
                     self.columns.append((name, self.slot[(inst.name, v.name)], src))
                 else:
                     slot = self.tslot[(inst.name, v.name)][1]
-                    if kind == "integer":
+                    if value_type == "integer":
                         self.column_dtypes[name] = integers.DTYPE[self.int_types[slot][0]]
                     typed = (self.tslot[(link.src, link.src_var.name)][1], dict(link.mapping)) if link else None
-                    self.typed_columns.append((name, kind, slot, typed))
+                    self.typed_columns.append((name, value_type, slot, typed))
 
     def row_fields(self) -> list[tuple[str, str]]:
         """Name and numpy type of every recorded field: ``time``, then ``component.variable``
@@ -163,7 +163,7 @@ class Layout:
         return list(self.column_dtypes.items())
 
     # ------------------------------------------------------------------ values
-    def store(self, kind: str, slot: int, value: Any) -> None:
+    def store(self, value_type: str, slot: int, value: Any) -> None:
         """Put a start value into the typed value store.
 
         Raises
@@ -171,10 +171,10 @@ class Layout:
         IntegerRangeError
             An Integer value that is not an integer, or that the variable's type cannot hold.
         """
-        if kind == "string":
+        if value_type == "string":
             lst, j = self.string_slots[slot]
             lst[j] = b"" if value is None else (value if isinstance(value, bytes) else str(value).encode())
-        elif kind == "boolean":
+        elif value_type == "boolean":
             self.ints[slot] = int(bool(value))
         else:
             type_, name = self.int_types[slot]
@@ -198,11 +198,11 @@ class Layout:
         """Current value of a connector: float, int, bool or str."""
         if (component, variable) in self.slot:
             return float(self.values[self.slot[(component, variable)]])
-        kind, slot = self.tslot[(component, variable)]
-        if kind == "string":
+        value_type, slot = self.tslot[(component, variable)]
+        if value_type == "string":
             lst, j = self.string_slots[slot]
             return lst[j].decode("utf-8", "replace")
-        if kind == "boolean":
+        if value_type == "boolean":
             return bool(self.ints[slot])
         return integers.value(int(self.ints[slot]), self.int_types[slot][0])
 
@@ -251,11 +251,11 @@ class Layout:
         ``private``: its outputs are read into a private array and published later (Jacobi
         multi-rate)."""
         out = []
-        for kind, (outs, ins) in self.typed[k].items():
-            if kind == "string":
+        for value_type, (outs, ins) in self.typed[k].items():
+            if value_type == "string":
                 o_vals, i_vals = self.strings[k]
             else:
-                off = self.int_offset[(k, kind)]
+                off = self.int_offset[(k, value_type)]
                 o_vals = (ctypes.c_int64 * max(len(outs), 1)).from_buffer(self.ints_c, 8 * off)
                 i_vals = (ctypes.c_int64 * max(len(ins), 1)).from_buffer(self.ints_c, 8 * (off + len(outs)))
             transfers = []
@@ -263,21 +263,21 @@ class Layout:
                 link = self.system.link_into(self.instances[k].name, v.name)
                 if link is not None:
                     src = self.index[link.src]
-                    src_j = [x.name for x in self.typed[src][kind][0]].index(link.src_var.name)
-                    transfers.append((j, src, src_j, dict(link.mapping) or None, self._carrier(kind, link)))
+                    src_j = [x.name for x in self.typed[src][value_type][0]].index(link.src_var.name)
+                    transfers.append((j, src, src_j, dict(link.mapping) or None, self._carrier(value_type, link)))
             own = None
             if private and outs:
-                own = [b""] * len(outs) if kind == "string" else (ctypes.c_int64 * len(outs))()
-            get = slave.channel(kind, outs)[0] if outs else None
-            put = slave.channel(kind, ins)[1] if ins else None
-            out.append(Channel(kind, get, put, o_vals, i_vals, len(outs), len(ins), tuple(transfers), own))
+                own = [b""] * len(outs) if value_type == "string" else (ctypes.c_int64 * len(outs))()
+            get = slave.channel(value_type, outs)[0] if outs else None
+            put = slave.channel(value_type, ins)[1] if ins else None
+            out.append(Channel(value_type, get, put, o_vals, i_vals, len(outs), len(ins), tuple(transfers), own))
         return tuple(out)
 
-    def _carrier(self, kind: str, link: Any) -> integers.Carrier | None:
+    def _carrier(self, value_type: str, link: Any) -> integers.Carrier | None:
         """What an Integer connection does with a value when it is not a plain copy (see
         :class:`integers.Carrier`): when the destination's type cannot hold every value of the
         source's, or a mapping applies; None otherwise (a Boolean or String one: always)."""
-        if kind != "integer":
+        if value_type != "integer":
             return None
         src_t = self.int_types[self.tslot[(link.src, link.src_var.name)][1]][0]
         dst_t = self.int_types[self.tslot[(link.dst, link.dst_var.name)][1]][0]

@@ -38,7 +38,7 @@ class SetValues(Manipulator):
     Parameters
     ----------
     values : mapping of (component, variable) to value
-        Already checked and converted (see :func:`ipcosim.harness.scenario.binding.with_set`).
+        Already checked and converted (see :func:`ipcosim.harness.scenario.values.with_set`).
     """
 
     def __init__(self, values: Mapping[tuple[str, str], Any]) -> None:

@@ -6,7 +6,7 @@ its two renderings, Python (:mod:`ipcosim.harness.master.pyloop`) and C
 :mod:`ipcosim.harness.master.algorithm`): one batched set and one batched get per component and
 step, the transfers between them, and the multi-rate conditions. A :class:`Block` is one
 component's place in the value vector and its raw FMI functions; a :class:`Channel` its
-connectors of one non-Real kind; :class:`TypedRecord` where the non-Real values are recorded.
+connectors of one non-Real value type; :class:`TypedRecord` where the non-Real values are recorded.
 """
 from __future__ import annotations
 
@@ -15,13 +15,13 @@ from typing import Any, Callable, Sequence
 
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, TimeBase
 
-#: FMI 2.0 name of each value kind's getter/setter (for messages).
+#: FMI 2.0 name of each value type's getter/setter (for messages).
 FMI_NAME = {"integer": "Integer", "boolean": "Boolean", "string": "String"}
 
 
 @dataclass
 class Channel:
-    """One component's connectors of one non-Real value kind and their bound get/set.
+    """One component's connectors of one non-Real value type and their bound get/set.
 
     ``out_values``/``in_values`` are ``c_int64`` array views (Integer, Boolean) or lists of bytes
     (String); ``transfers`` are ``(input index, source block, source output index, mapping,
@@ -30,7 +30,7 @@ class Channel:
     delivers its value through (range checked, mapped).
     """
 
-    kind: str
+    value_type: str
     get: Callable[[Any], int]
     set: Callable[[Any], int]
     out_values: Any

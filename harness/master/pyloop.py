@@ -87,7 +87,7 @@ class _Emitter:
 
     def op_ctransfer(self, indent: str, i: int, c: int, k: int, src: int, j: int, mapping: Any,
                      carrier: Any = None) -> None:
-        sc = _channel_index(self.blocks[src], self.blocks[i].channels[c].kind)
+        sc = _channel_index(self.blocks[src], self.blocks[i].channels[c].value_type)
         if carrier is not None:  # checked (raises CarryError naming the connection), mapped
             self.lines.append(f"{indent}I{i}_{c}[{k}] = C{i}_{c}_{k}(O{src}_{sc}[{j}], n)")
         elif mapping:
@@ -99,7 +99,7 @@ class _Emitter:
         self.check(indent, i, f"sr{i}(c{i}, vi{i}, {self.blocks[i].n_in}, I{i})", "fmi2SetReal")
 
     def op_cset(self, indent: str, i: int, c: int) -> None:
-        self.check(indent, i, f"S{i}_{c}(I{i}_{c})", f"fmi2Set{FMI_NAME[self.blocks[i].channels[c].kind]}")
+        self.check(indent, i, f"S{i}_{c}(I{i}_{c})", f"fmi2Set{FMI_NAME[self.blocks[i].channels[c].value_type]}")
 
     def op_step(self, indent: str, i: int, multiple: int | None, last: str, partial: bool) -> None:
         start = "t" if multiple is None else self.time.expr(f"(n // {multiple}) * {multiple}")
@@ -114,7 +114,7 @@ class _Emitter:
 
     def op_cget(self, indent: str, i: int, c: int, private: bool) -> None:
         target = "P" if private else "O"
-        self.check(indent, i, f"G{i}_{c}({target}{i}_{c})", f"fmi2Get{FMI_NAME[self.blocks[i].channels[c].kind]}")
+        self.check(indent, i, f"G{i}_{c}({target}{i}_{c})", f"fmi2Get{FMI_NAME[self.blocks[i].channels[c].value_type]}")
 
     def op_publish(self, indent: str, i: int) -> None:
         self.lines.append(f"{indent}O{i}[:] = P{i}")
@@ -123,8 +123,8 @@ class _Emitter:
         self.lines.append(f"{indent}O{i}_{c}[:] = P{i}_{c}[:{self.blocks[i].channels[c].n_out}]")
 
 
-def _channel_index(block: Block, kind: str) -> int:
-    return next(k for k, ch in enumerate(block.channels) if ch.kind == kind)
+def _channel_index(block: Block, value_type: str) -> int:
+    return next(k for k, ch in enumerate(block.channels) if ch.value_type == value_type)
 
 
 def _record(L: list[str], ns: dict[str, Any], ind: str, record_every: int, typed: TypedRecord | None) -> None:

@@ -246,15 +246,15 @@ class Recorder:
         rows = len(data)
         ints = self.record_i[:rows]
         strings = [self.record_s.get(first_row + r) for r in range(rows)] if self.layout.string_slots else []
-        for name, kind, slot, link in self.layout.typed_columns:
+        for name, value_type, slot, link in self.layout.typed_columns:
             src, mapping = link if link is not None else (slot, {})
-            if kind == "string":
+            if value_type == "string":
                 values = [row[src].decode("utf-8", "replace") if row is not None else ""
                           for row in strings]
                 data[name] = np.array(values, dtype=object) if rows else values
                 continue
             col = ints[:, src]
-            if kind == "integer":
+            if value_type == "integer":
                 data[name] = self._integer_column(col, src, slot, mapping, first_row)
                 continue
             if mapping:
@@ -309,7 +309,7 @@ class Recorder:
             return {}
         assert self.writer is not None
         try:
-            return dict(task_metrics(self.writer.chunks, list(self.layout.column_kinds)))
+            return dict(task_metrics(self.writer.chunks, list(self.layout.column_types)))
         except Exception as exc:  # noqa: BLE001 -- metrics must not hide the run's result
             return {"metrics_error": str(exc)}
 

@@ -107,7 +107,7 @@ class Result:
         Returns
         -------
         dict
-            File kind -> path written.
+            What was written (``results``, ``metrics``, ``plot``) -> its path.
         """
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
@@ -145,17 +145,17 @@ class OutputFolderError(UsageError, OSError):
     """The output folder cannot be created or written, is another command's, or is in use."""
 
 
-#: What an output folder holds, written in it by :func:`claim_output`; a command never writes into
-#: a folder of another kind.
-KIND_FILE = ".ipcosim-kind"
+#: The command whose results an output folder holds, written in it by :func:`claim_output`; a command
+#: never writes into another command's folder.
+COMMAND_FILE = ".ipcosim-kind"
 #: Held (``flock``) by the one process writing into an output folder.
 LOCK_FILE = ".ipcosim-lock"
 _held: dict[str, Any] = {}  # folder -> open lock file, for the life of the process
 
 
-def claim_output(out: str | os.PathLike[str], kind: str, what: str = "--out") -> Path:
-    """Make ``out`` the output folder of this process for ``kind`` (run, sweep, analyze, identify,
-    compare, tune), before any work: created, checked writable, of the same kind (or new), and
+def claim_output(out: str | os.PathLike[str], command: str, what: str = "--out") -> Path:
+    """Make ``out`` the output folder of this process for ``command`` (run, sweep, analyze, identify,
+    compare, tune), before any work: created, checked writable, the same command's (or new), and
     held by this process alone until it exits.
 
     Raises
@@ -177,7 +177,7 @@ def claim_output(out: str | os.PathLike[str], kind: str, what: str = "--out") ->
         probe.close()
     except OSError as exc:
         raise OutputFolderError(f"{what} {out}: output folder is not writable ({exc.strerror or exc})") from None
-    _check_kind(out, kind, what)
+    _check_command(out, command, what)
     lock = open(out / LOCK_FILE, "a+")  # noqa: SIM115 -- held open until the process exits
     if not _try_lock(lock):
         lock.seek(0)
@@ -190,7 +190,7 @@ def claim_output(out: str | os.PathLike[str], kind: str, what: str = "--out") ->
     lock.write(str(os.getpid()))
     lock.flush()
     _held[key] = lock
-    (out / KIND_FILE).write_text(kind + "\n")
+    (out / COMMAND_FILE).write_text(command + "\n")
     return out
 
 
@@ -204,7 +204,7 @@ def release_output(out: str | os.PathLike[str]) -> None:
 def _try_lock(fh: Any) -> bool:
     try:
         import fcntl
-    except ImportError:  # not POSIX: no advisory locks; the kind check still holds
+    except ImportError:  # not POSIX: no advisory locks; the command check still holds
         return True
     try:
         fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -213,12 +213,12 @@ def _try_lock(fh: Any) -> bool:
     return True
 
 
-def _check_kind(out: Path, kind: str, what: str) -> None:
-    """Refuse a folder that holds another kind of results: its kind file says so, or (a folder
-    written before kinds were recorded) a run's ``metrics.json`` or the first column of its
+def _check_command(out: Path, command: str, what: str) -> None:
+    """Refuse a folder that holds another command's results: its command file says so, or (a folder
+    written before commands were recorded) a run's ``metrics.json`` or the first column of its
     ``results.csv`` (``time``: a run's, ``index``: a sweep's)."""
     try:
-        found = (out / KIND_FILE).read_text().strip()
+        found = (out / COMMAND_FILE).read_text().strip()
     except OSError:
         found = ""
     if not found and (out / "metrics.json").exists():
@@ -230,8 +230,8 @@ def _check_kind(out: Path, kind: str, what: str) -> None:
         except OSError:
             first = ""
         found = {"time": "run", "index": "sweep"}.get(first, "")
-    if found and found != kind:
-        raise OutputFolderError(f"{what} {out}: holds the results of another command ({found}, not {kind}); "
+    if found and found != command:
+        raise OutputFolderError(f"{what} {out}: holds the results of another command ({found}, not {command}); "
                                 f"give another {what}")
 
 
@@ -439,12 +439,12 @@ def write_csv(data: np.ndarray, path: Path, columns: Sequence[str]) -> None:
 
 
 def _csv_column(values: np.ndarray) -> list[str]:
-    kind = values.dtype.kind
-    if kind == "f":
+    code = values.dtype.kind  # numpy's type code: f float, b bool, i/u integer, O object
+    if code == "f":
         return ["%.17g" % v for v in values]
-    if kind == "b":
+    if code == "b":
         return ["true" if v else "false" for v in values]
-    if kind in "iu":
+    if code in "iu":
         return [str(int(v)) for v in values]
     return [str(v) for v in values]
 

@@ -92,8 +92,8 @@ class Slave:
         """``(handle, do_step, get_real, set_real)`` with C calling conventions (see module doc)."""
         raise NotImplementedError
 
-    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
-        """``(get, set)`` for the ``variables`` (all of value kind ``kind``), each taking one
+    def channel(self, value_type: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+        """``(get, set)`` for the ``variables`` (all of value type ``value_type``), each taking one
         buffer (see the module documentation) and returning an FMI status."""
         raise NotImplementedError
 
@@ -119,7 +119,8 @@ class Slave:
         pick = (errors or msgs)[-1] if (errors or msgs) else ""
         return pick.split("] ", 1)[1] if pick.startswith("[") and "] " in pick else pick
 
-    def describe(self) -> str:
+    def label(self) -> str:
+        """``component (model)``: the component a message is about."""
         return f"{self.name} ({self.model_name})" if self.model_name else self.name
 
     def fail(self, function: str, status: int, time: float | None = None) -> SlaveError:
@@ -129,7 +130,7 @@ class Slave:
         at = f" at t = {time:.6g} s" if time is not None else ""
         detail = self.last_error()
         detail = f": {detail}" if detail else ""
-        return SlaveError(f"component {self.describe()}: {function} returned {STATUS.get(status, status)}{at}{detail}",
+        return SlaveError(f"component {self.label()}: {function} returned {STATUS.get(status, status)}{at}{detail}",
                           self.name, function, status, time)
 
 
@@ -247,7 +248,7 @@ class FMUSlave(Slave):
         self.free()
     def _checked(self, var: Variable, value: Any) -> int:
         """An integer value for ``var``, exact and in its type's range, else IntegerRangeError."""
-        what = f"component {self.describe()}: {self.name}.{var.name}"
+        what = f"component {self.label()}: {self.name}.{var.name}"
         try:
             x = integers.exact_integer(value)
         except ValueError:
@@ -300,7 +301,7 @@ class FMU2Slave(FMUSlave):
             self.state = "failed-instantiate"
             _SINKS.pop(self._sink, None)
             msgs = self.messages()
-            raise SlaveError(f"component {self.describe()}: fmi2Instantiate failed ({exc})"
+            raise SlaveError(f"component {self.label()}: fmi2Instantiate failed ({exc})"
                              + (f": {msgs[-1]}" if msgs else ""), self.name, "fmi2Instantiate") from None
         self.state = "instantiated"
     def setup_experiment(self, start_time: float, stop_time: float | None) -> None:
@@ -354,13 +355,13 @@ class FMU2Slave(FMUSlave):
         return out
     def raw(self) -> tuple[Any, RawDoStep, RawGetSet, RawGetSet]:
         return self._fmu.component, self._do_step, self._get_real, self._set_real
-    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+    def channel(self, value_type: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
         f, c, n = self._fmu._functions, self._fmu.component, len(variables)
         vrs = (ctypes.c_uint * max(n, 1))(*[v.vr for v in variables])
-        if kind in ("integer", "boolean"):
+        if value_type in ("integer", "boolean"):
             # fmi2Integer and fmi2Boolean are C ints: through an int buffer to and from the
             # master's int64 one (the values set were checked to fit)
-            name = "Integer" if kind == "integer" else "Boolean"
+            name = "Integer" if value_type == "integer" else "Boolean"
             get, put = f[f"fmi2Get{name}"], f[f"fmi2Set{name}"]
             tmp = (ctypes.c_int * max(n, 1))()
 
@@ -374,7 +375,7 @@ class FMU2Slave(FMUSlave):
                 return put(c, vrs, n, tmp)
 
             return get_ints, set_ints
-        if kind == "string":
+        if value_type == "string":
             get_s, put_s = f["fmi2GetString"], f["fmi2SetString"]
             tmp = (ctypes.c_char_p * max(n, 1))()
 
@@ -387,7 +388,7 @@ class FMU2Slave(FMUSlave):
                 return put_s(c, vrs, n, (ctypes.c_char_p * max(n, 1))(*src))
 
             return get_strings, set_strings
-        raise ValueError(f"no channel for value kind {kind!r}")
+        raise ValueError(f"no channel for value type {value_type!r}")
     def terminated(self) -> tuple[bool, str]:
         value = ctypes.c_int(0)
         status = self._fmu._functions["fmi2GetBooleanStatus"](self._fmu.component, 3, ctypes.byref(value))
@@ -431,7 +432,7 @@ class FMU3Slave(FMUSlave):
         except Exception as exc:  # noqa: BLE001
             self.state = "failed-instantiate"
             msgs = self.messages()
-            raise SlaveError(f"component {self.describe()}: fmi3InstantiateCoSimulation failed ({exc})"
+            raise SlaveError(f"component {self.label()}: fmi3InstantiateCoSimulation failed ({exc})"
                              + (f": {msgs[-1]}" if msgs else ""), self.name, "fmi3InstantiateCoSimulation") from None
         self._flags = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
         self.state = "instantiated"
@@ -516,7 +517,7 @@ class FMU3Slave(FMUSlave):
 
         return get_real, set_real
 
-    def channel(self, kind: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
+    def channel(self, value_type: str, variables: Sequence[Variable]) -> tuple[BoundGetSet, BoundGetSet]:
         c, n = self._fmu.component, len(variables)
         groups = []  # (positions, vr array, ctypes array type, getter, setter, type)
         for type_ in dict.fromkeys(v.type for v in variables):
@@ -531,13 +532,13 @@ class FMU3Slave(FMUSlave):
                 tmp = arr()
                 worst = max(worst, g(c, vrs, len(pos), tmp, len(pos)))
                 for k, i in enumerate(pos):
-                    buf[i] = (tmp[k] or b"") if kind == "string" else integers.stored(int(tmp[k]), type_)
+                    buf[i] = (tmp[k] or b"") if value_type == "string" else integers.stored(int(tmp[k]), type_)
             return worst
 
         def put(buf: Any) -> int:
             worst = OK
             for pos, vrs, arr, _, s, type_ in groups:
-                vals = [buf[i] for i in pos] if kind == "string" else [integers.value(buf[i], type_) for i in pos]
+                vals = [buf[i] for i in pos] if value_type == "string" else [integers.value(buf[i], type_) for i in pos]
                 worst = max(worst, s(c, vrs, len(pos), arr(*vals), len(pos)))
             return worst
 

@@ -18,19 +18,19 @@ SSP_TYPE = {"Real": "Real", "Float64": "Real", "Float32": "Real",
             "Integer": "Integer", "Int8": "Integer", "UInt8": "Integer", "Int16": "Integer", "UInt16": "Integer",
             "Int32": "Integer", "UInt32": "Integer", "Int64": "Integer", "UInt64": "Integer",
             "Enumeration": "Enumeration", "Boolean": "Boolean", "String": "String"}
-_KIND = {"Real": "real", "Integer": "integer", "Enumeration": "integer", "Boolean": "boolean", "String": "string"}
+_VALUE_TYPE = {"Real": "real", "Integer": "integer", "Enumeration": "integer", "Boolean": "boolean", "String": "string"}
 #: Which SSP transformation is valid for which connector types (SSP 1.0, ssc:GTransformationChoice).
 TRANSFORMATION_TYPES = {"LinearTransformation": ("Real",),
                         "IntegerMappingTransformation": ("Integer", "Enumeration"),
                         "BooleanMappingTransformation": ("Boolean",),
                         "EnumerationMappingTransformation": ("Enumeration",)}
-SUPPORTED_CONNECTION_TYPES = tuple(_KIND)
+SUPPORTED_CONNECTION_TYPES = tuple(_VALUE_TYPE)
 
 
-def kind_of(type_: str) -> str | None:
-    """The master's value kind (``real``, ``integer``, ``boolean``, ``string``) of an FMU
+def value_type_of(type_: str) -> str | None:
+    """The master's value type (``real``, ``integer``, ``boolean``, ``string``) of an FMU
     variable type; None for a type the master does not carry (Binary, Clock)."""
-    return _KIND.get(SSP_TYPE.get(type_, ""))
+    return _VALUE_TYPE.get(SSP_TYPE.get(type_, ""))
 
 
 @dataclass(frozen=True)
@@ -146,9 +146,9 @@ class Link:
     mapping: tuple[tuple[int, int], ...] = ()
 
     @property
-    def kind(self) -> str:
-        """The value kind the link carries (``real``, ``integer``, ``boolean``, ``string``)."""
-        return kind_of(self.src_var.type) or "real"
+    def value_type(self) -> str:
+        """The value type the link carries (``real``, ``integer``, ``boolean``, ``string``)."""
+        return value_type_of(self.src_var.type) or "real"
 
     @property
     def src_name(self) -> str:

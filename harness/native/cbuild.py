@@ -203,7 +203,8 @@ def compile_binaries(root: Path, files: list[str], identifier: str, variant: Var
     return built
 
 
-def describe(root: Path, fmi2_description: bytes, identifier: str, files: list[str], variant: Variant) -> None:
+def write_descriptions(root: Path, fmi2_description: bytes, identifier: str, files: list[str],
+                       variant: Variant) -> None:
     """Write the FMU's description files: ``modelDescription.xml`` (FMI 2.0, or FMI 3.0 derived
     from it, with ``sources/buildDescription.xml``)."""
     if variant.fmi == "2":
@@ -234,7 +235,7 @@ def build_one(name: str, python_dir: Path, out_dir: Path, compilers: Compilers,
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         files, gid = write_sources(model, root / "sources", variant)
-        describe(root, cgen.model_description(model, gid, files), name, files, variant)
+        write_descriptions(root, cgen.model_description(model, gid, files), name, files, variant)
         platforms = compile_binaries(root, files, name, variant, compilers)
         (root / "resources").mkdir()
         (root / "resources" / "native.json").write_text(json.dumps(

@@ -13,7 +13,7 @@ from ipcosim.fmus.experiment import default_experiment
 from ipcosim.harness.native import tracer
 from ipcosim.harness.native.models import NativeModel
 
-_KIND = {"plant": "MODEL_KIND_PLANT", "sampled": "MODEL_KIND_SAMPLED", "source": "MODEL_KIND_SOURCE"}
+_TIMING = {"plant": "MODEL_KIND_PLANT", "sampled": "MODEL_KIND_SAMPLED", "source": "MODEL_KIND_SOURCE"}
 _BASE_UNITS = {"s": {"s": "1"}, "1": {}}
 _TYPE = {"Real": "VAR_REAL", "Integer": "VAR_INTEGER", "Boolean": "VAR_BOOLEAN"}
 
@@ -119,10 +119,10 @@ def _model_info(model: NativeModel, slots: dict[str, int], gid: str, sizes: dict
     """The ``model_info`` record: name, GUID, kind, the tables and their lengths (:func:`_tables`), the
     slot of the period (the plant's integrator step, a sampled law's sample period; -1 for a source),
     the tick counter's slot (-1 without one) and the two functions."""
-    period = ("V:integrator_step" if model.kind == "plant" else "V:sample_period" if model.kind == "sampled" else "")
+    period = {"plant": "V:integrator_step", "sampled": "V:sample_period"}.get(model.timing, "")
     return [
         "const ModelInfo model_info = {",
-        f'    "{model.name}", "{gid}", {_KIND[model.kind]}, NV, start_values, variables, {sizes["variables"]},',
+        f'    "{model.name}", "{gid}", {_TIMING[model.timing]}, NV, start_values, variables, {sizes["variables"]},',
         f"    checked, {sizes['checked']}, {slots[period] if period else -1}, "
         f"{slots['S:tick'] if 'S:tick' in slots else -1}, checks, {sizes['checks']}, by_vr, {sizes['by_vr']},",
         "    model_initialize, model_step};",

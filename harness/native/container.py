@@ -386,7 +386,7 @@ def build_container(spec: ContainerSpec, out: Path | str, cc: str | None = None,
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp) / "fmu"
         files, gid, lay, comps = write_sources(spec, root / "sources", variant)
-        cbuild.describe(root, model_description(spec, gid, files, lay), spec.name, files, variant)
+        cbuild.write_descriptions(root, model_description(spec, gid, files, lay), spec.name, files, variant)
         cbuild.compile_binaries(root, files, spec.name, variant, compilers)
         (root / "documentation").mkdir()
         (root / "documentation" / "index.txt").write_text(_readme(spec, comps, files))

@@ -38,7 +38,7 @@ class NativeModelError(IpcosimError, RuntimeError):
 
 
 @dataclass
-class Variable:
+class NativeVariable:
     """One FMI scalar variable of a native model (``index`` = its slot in the value array)."""
 
     name: str
@@ -60,9 +60,9 @@ class NativeModel:
     """Everything the C generator needs for one model (see the module docstring)."""
 
     name: str
-    kind: str                                   # plant | sampled | source
+    timing: str                                 # plant (integrated) | sampled | source (the C MODEL_KIND_*)
     description: str
-    variables: list[Variable]
+    variables: list[NativeVariable]
     states: dict[str, float]                    # state slot key -> start value
     initialize: list[tuple[str, Any]]           # (slot key, node) assignments
     step: list[tuple[str, Any]]
@@ -73,7 +73,7 @@ class NativeModel:
     checks: dict[str, str] = field(default_factory=dict)   # parameter -> finite | positive | nonnegative | zero
     unit_definitions: list[ElementTree.Element] = field(default_factory=list)
 
-    def variable(self, name: str) -> Variable:
+    def variable(self, name: str) -> NativeVariable:
         for v in self.variables:
             if v.name == name:
                 return v
@@ -83,7 +83,7 @@ class NativeModel:
 # ============================================================================ the Python flavour
 
 
-def python_variables(fmu: Path) -> tuple[list[Variable], list[ElementTree.Element], str]:
+def python_variables(fmu: Path) -> tuple[list[NativeVariable], list[ElementTree.Element], str]:
     """Variables, unit definitions and description of a built Python FMU."""
     with zipfile.ZipFile(fmu) as z:
         root = ElementTree.fromstring(z.read("modelDescription.xml"))
@@ -94,7 +94,7 @@ def python_variables(fmu: Path) -> tuple[list[Variable], list[ElementTree.Elemen
     for sv in elems:
         typ = next(iter(sv))
         start = typ.get("start")
-        out.append(Variable(name=sv.get("name", ""), vr=int(sv.get("valueReference", "0")),
+        out.append(NativeVariable(name=sv.get("name", ""), vr=int(sv.get("valueReference", "0")),
                             causality=sv.get("causality", "local"), variability=sv.get("variability", "continuous"),
                             type=typ.tag, initial=sv.get("initial"), unit=typ.get("unit"),
                             description=sv.get("description", ""),
@@ -180,7 +180,7 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
     present = {v.name for v in variables}
     off = [name for name in NATIVE_INSTRUMENTS_OFF if name in present]
     return NativeModel(
-        name=name, kind="plant", description=description, variables=variables, unit_definitions=units,
+        name=name, timing="plant", description=description, variables=variables, unit_definitions=units,
         states={k: 0.0 for k in zkeys + dkeys + xkeys + [TAPPED]},
         initialize=list(zip(zkeys, started[:n])) + [(f"V:{s}", v) for s, v in zip(states, started[n:2 * n])]
         + [(k, tracer.const(0.0)) for k in dkeys + [TAPPED]] + list(zip(xkeys, started[2 * n:])),
@@ -296,20 +296,20 @@ class _PlantTrace:
         return list(z0) + self.outputs(x0) + x0
 
 
-def _plant_parameters(step: float, coefficients: dict[str, float]) -> list[Variable]:
+def _plant_parameters(step: float, coefficients: dict[str, float]) -> list[NativeVariable]:
     """The native plant's own parameters: its integrator step and the nonzero stage coefficients."""
-    extra = [Variable("integrator_step", 0, "parameter", "fixed", start=step, initial="exact", unit="s",
+    extra = [NativeVariable("integrator_step", 0, "parameter", "fixed", start=step, initial="exact", unit="s",
                       description="communication step the integrator's coefficients are computed for [s]; every "
                                   "fmi2DoStep must use it")]
     for pname, value in coefficients.items():
         k, i, j = pname.split("_")[1:]
-        extra.append(Variable(pname, 0, "parameter", "fixed", start=value, initial="exact", unit="1",
+        extra.append(NativeVariable(pname, 0, "parameter", "fixed", start=value, initial="exact", unit="1",
                               description=f"ETDRK4 stage matrix {k}[{i},{j}] (ipcosim.fmus.integrator."
                                           "etdrk4_f_form), computed for integrator_step"))
     return extra
 
 
-def _append(variables: list[Variable], extra: list[Variable]) -> None:
+def _append(variables: list[NativeVariable], extra: list[NativeVariable]) -> None:
     vr = max(v.vr for v in variables) + 1
     taken = {v.name for v in variables}
     for v in extra:
@@ -412,7 +412,7 @@ def law_model(kind: str, law: str, python_fmu: Path) -> NativeModel:
     states = {f"L:{p}": float(before1.get(p, 0.0)) for p in state_paths}
     states.update({"S:first": 1.0, "S:tick": 0.0})
     settable = sorted({v.name for v in native_vars if v.causality == "parameter"})
-    return NativeModel(name=name, kind="sampled", description=description, variables=native_vars,
+    return NativeModel(name=name, timing="sampled", description=description, variables=native_vars,
                        unit_definitions=units, states=states, initialize=step, step=step,
                        checked=["V:voltage"] + [f"L:{p}" for p in state_paths], python_only=python_only,
                        paths={p: aliases[f"L:{p}"][2:] for p in param_paths},
@@ -447,9 +447,9 @@ def _trace_law(law0: Any, kind: str) -> tuple[list[tuple[str, Any]], list[str], 
     return step, state_paths, param_paths, before1, before2
 
 
-def _law_variables(name: str, variables: list[Variable], extra: list[Variable], param_paths: list[str],
+def _law_variables(name: str, variables: list[NativeVariable], extra: list[NativeVariable], param_paths: list[str],
                    alias: dict[str, str], renamed: dict[str, str], values: dict[str, float]
-                   ) -> tuple[list[Variable], list[str]]:
+                   ) -> tuple[list[NativeVariable], list[str]]:
     """The native law's variables (the Python FMU's, less its design-only parameters, plus ``extra``), each
     parameter starting at the exact number the law holds; and the design-only (Python-only) names."""
     python_params = {v.name for v in variables if v.causality == "parameter"}
@@ -477,7 +477,7 @@ def _law_variables(name: str, variables: list[Variable], extra: list[Variable], 
 
 
 def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
-                        python_vars: list[Variable]) -> tuple[list[Variable], dict[str, str]]:
+                        python_vars: list[NativeVariable]) -> tuple[list[NativeVariable], dict[str, str]]:
     """Native-only parameters for law numbers that equal no Python parameter.
 
     The designed gains of an LQR or LQG (``K[i]``, ``N`` or ``K_voltage``, ``K_integral``, ``M[i][j]`` of
@@ -486,7 +486,7 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
     (``ipcosim.controllers.catalog.gain_specs``).
     """
     renamed: dict[str, str] = {}
-    extra: list[Variable] = []
+    extra: list[NativeVariable] = []
     taken = {v.name for v in python_vars}
     lqr, where = (law.balance, "balance.") if hasattr(law, "balance") else (law, "")  # a swing-up's LQR
     coef = getattr(lqr, "coefficients", None)
@@ -502,7 +502,7 @@ def _derived_parameters(law: Any, paths: list[str], values: dict[str, float],
             if p not in gains:
                 raise NativeModelError(f"law constant {p}: its native name {renamed[p]} is a Python variable")
             continue
-        extra.append(Variable(renamed[p], 0, "parameter", "fixed", start=values[p], initial="exact",
+        extra.append(NativeVariable(renamed[p], 0, "parameter", "fixed", start=values[p], initial="exact",
                               description=f"law constant {p} (ipcosim.controllers.laws), computed at build time by "
                                           "the Python design; see docs/native.md to redesign"))
     return extra, renamed
@@ -591,7 +591,7 @@ def setpoint_model(python_fmu: Path) -> NativeModel:
     args = ("waveform", "amplitude", "step_time", "offset", "ramp_rate", "period")
     with tracer.math_hooks():
         (ref,) = tracer.trace(lambda: [reference_at(leaf("S:time"), *(leaf(f"V:{a}") for a in args))])
-    return NativeModel(name="Setpoint", kind="source", description=description, variables=variables,
+    return NativeModel(name="Setpoint", timing="source", description=description, variables=variables,
                        unit_definitions=units, states={}, initialize=[("V:reference", ref)],
                        step=[("V:reference", ref)], checked=["V:reference"], meta={"role": "source"},
                        checks={a: "finite" for a in args})

@@ -29,7 +29,7 @@ import numpy as np
 from ipcosim.errors import IpcosimError
 from ipcosim.fmus.instruments import Instruments
 from ipcosim.fmus.kinds import PLANT_MODELS
-from ipcosim.fmus.params import kind_of
+from ipcosim.fmus.params import plant_kind_of
 from ipcosim.fmus.physics import MEASURED, state_names
 from ipcosim.fmus.plant import PlantStepError
 from ipcosim.harness.native import cbuild, cgen, redesign, tracer
@@ -139,8 +139,8 @@ class NativeReplay:
         redesign.NativeParameterError
             An instrument the native plant lacks (noise) or a delay longer than its delay line.
         """
-        if kind_of(params) != self.kind:
-            raise ValueError(f"{kind_of(params)} parameters given to the {self.kind} replay")
+        if plant_kind_of(params) != self.kind:
+            raise ValueError(f"{plant_kind_of(params)} parameters given to the {self.kind} replay")
         bench = replace(instruments or Instruments(), cart_resolution=0.0, pendulum_resolution=0.0, noise_counts=0.0)
         x0 = [0.0] * len(state_names(self.kind)) if x0 is None else list(x0)
         python = {**asdict(params), **{f.name: float(getattr(bench, f.name)) for f in fields(bench)},

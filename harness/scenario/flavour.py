@@ -90,7 +90,7 @@ def native_set(system: Any, set: Mapping[str, Any], python_values: Mapping[str, 
         Naming the component, the parameter and the flavour.
     """
     from ipcosim.harness.native.redesign import NativeParameterError, check_settable, native_info, redesign
-    from ipcosim.harness.scenario.binding import rebuild_hint
+    from ipcosim.harness.scenario.rebuild import rebuild_hint
 
     by_comp: dict[str, dict[str, Any]] = {}
     for key, value in set.items():

@@ -29,8 +29,9 @@ from xml.sax.saxutils import quoteattr
 
 from lxml import etree
 
-from ipcosim.errors import IpcosimError, UsageError, closest
+from ipcosim.errors import closest
 from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
+from ipcosim.harness.scenario.errors import ScenarioError, ScenarioNotFoundError, UnknownParameterSetError
 
 #: XML namespaces of SSP 1.0 (as in fmpy.ssp.ssd) plus the OSP annotations libcosim reads.
 NS = {
@@ -45,18 +46,6 @@ NS = {
 OSP_ANNOTATION = "com.opensimulationplatform"
 SSD_NAME = "SystemStructure.ssd"
 BASE_UNITS = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
-
-
-class ScenarioError(IpcosimError, ValueError):
-    """An SSD, SSV or SSP archive that cannot be read, fails its schema or is inconsistent."""
-
-
-class UnknownParameterSetError(UsageError, ScenarioError):
-    """A parameter set the scenario does not have (``--parameter-set``)."""
-
-
-class ScenarioNotFoundError(UsageError, FileNotFoundError):
-    """A scenario name or path that does not exist."""
 
 
 # --------------------------------------------------------------------------- description
@@ -76,7 +65,7 @@ class Transform:
     ``LinearTransformation`` (``factor * x + offset``, after any unit conversion) or an Integer or
     Boolean mapping (``mapping``: (source, target) pairs; values not in it pass unchanged)."""
 
-    kind: str
+    type: str  # its SSP element: LinearTransformation, IntegerMappingTransformation...
     factor: float = 1.0
     offset: float = 0.0
     mapping: tuple[tuple[Any, Any], ...] = ()
@@ -647,7 +636,7 @@ class _Flattener:
         self.system_connectors: list[str] = []
         self.parameter_links: list[ParameterLink] = []
         #: node -> (owner "system" | "component" | "signal", path, connector)
-        self.kinds: dict[str, tuple[str, str, Connector]] = {}
+        self.nodes: dict[str, tuple[str, str, Connector]] = {}
         self.edges: list[tuple[str, str, etree._Element, str, str]] = []  # (node a, node b, xml, line, system)
         self.aliases: dict[str, str] = {}  # a signal dictionary reference's connector -> its signal's node
         self.dictionaries: list[dict[str, tuple[str, dict[str, Connector]]]] = []  # per enclosing system
@@ -662,7 +651,7 @@ class _Flattener:
         for c in xml.findall("ssd:Connectors/ssd:Connector", NS):
             conn = _connector(c, self.display)
             node = f"{path}.{conn.name}" if path else conn.name
-            self.kinds[node] = ("system", path, conn)
+            self.nodes[node] = ("system", path, conn)
             self.system_connectors.append(node)
         for pset in self.bindings(xml, self.display):
             self.system_bindings.append(SystemBinding(path, depth, pset, self.where(xml)))
@@ -691,7 +680,7 @@ class _Flattener:
                 scope = f"{path}.{element}" if (path and element) else (element or path)
                 node = f"{scope}.{connector}" if scope else connector
                 node = self.aliases.get(node, node)
-                if node not in self.kinds:
+                if node not in self.nodes:
                     owner = f"component {element!r}" if element else f"system {xml.get('name')!r}"
                     if element and element not in seen:
                         raise ScenarioError(f"{self.where(cxml)}: connection names component {element!r}, which "
@@ -732,9 +721,9 @@ class _Flattener:
                 raise ScenarioError(f"{self.where(c)}: ssd:SignalDictionaryReference {full!r}: connector "
                                     f"{conn.name!r} is not an entry of signal dictionary {name!r}")
             node = f"{key}.{conn.name}"
-            self.kinds[node] = ("signal", key, entries[conn.name])
+            self.nodes[node] = ("signal", key, entries[conn.name])
             self.aliases[f"{full}.{conn.name}"] = node
-            self.kinds[f"{full}.{conn.name}"] = self.kinds[node]
+            self.nodes[f"{full}.{conn.name}"] = self.nodes[node]
 
     def bindings(self, xml: etree._Element, display: str) -> list[ParameterSet]:
         """The parameter sets of an element's ``ssd:ParameterBindings`` in element order (files and
@@ -797,7 +786,7 @@ class _Flattener:
         if dup:
             raise ScenarioError(f"{where}: component {full!r} declares connector {sorted(dup)[0]!r} twice")
         for c in connectors:
-            self.kinds[f"{full}.{c.name}"] = ("component", full, c)
+            self.nodes[f"{full}.{c.name}"] = ("component", full, c)
         hint = None
         ann = _osp_annotation(xml)
         if ann is not None:
@@ -815,12 +804,12 @@ class _Flattener:
         input or parameter connector is a source inside it, a destination seen from its parent; an
         element's is a destination; an inout, unspecified or signal dictionary connector takes the
         direction the other end gives)."""
-        owner, path, conn = self.kinds[node]
+        owner, path, conn = self.nodes[node]
         kind = conn.kind
         if kind in ("inout", "unspecified"):
-            if self.kinds[other][2].kind in ("inout", "unspecified"):
+            if self.nodes[other][2].kind in ("inout", "unspecified"):
                 raise ScenarioError(f"{line}: connection {node} -> {other}: neither end gives the direction "
-                                    f"(kinds {kind} and {self.kinds[other][2].kind})")
+                                    f"(kinds {kind} and {self.nodes[other][2].kind})")
             return "destination" if self._role(other, node, scope, line) == "source" else "source"
         feeding = kind in ("input", "parameter", "structuralParameter")
         inside = owner == "system" and path == scope
@@ -833,7 +822,7 @@ class _Flattener:
         for a, b, xml, line, scope in self.edges:
             ra, rb = self._role(a, b, scope, line), self._role(b, a, scope, line)
             if ra == rb:
-                ka, kb = self.kinds[a][2].kind, self.kinds[b][2].kind
+                ka, kb = self.nodes[a][2].kind, self.nodes[b][2].kind
                 if ka == kb and ka in ("input", "output"):
                     raise ScenarioError(f"{line}: connection {a} -> {b} connects two {ka}s; a connection must "
                                         f"join one output to one input")
@@ -845,33 +834,33 @@ class _Flattener:
             feeds[dst] = (src, xml, line)
         out = []
         for dst, (src, xml, line) in feeds.items():
-            if self.kinds[dst][0] != "component":
+            if self.nodes[dst][0] != "component":
                 continue
             chain = [(src, xml, line)]
-            while self.kinds[chain[-1][0]][0] in ("system", "signal") and chain[-1][0] in feeds:
+            while self.nodes[chain[-1][0]][0] in ("system", "signal") and chain[-1][0] in feeds:
                 if len(chain) > len(feeds):
                     raise ScenarioError(f"{line}: the connections into {dst} loop through system connectors "
                                         f"({' <- '.join(n for n, _, _ in chain[:4])} ...)")
                 chain.append(feeds[chain[-1][0]])
             origin, first_line = chain[-1][0], chain[-1][2]
-            owner, path, conn = self.kinds[dst]
+            owner, path, conn = self.nodes[dst]
             transforms = [x for _, x, _ in chain if _transform(x, line) is not None]
             if len(transforms) > 1:
                 raise ScenarioError(f"{line}: the connection to {dst} passes {len(transforms)} transformations "
                                     f"through system connectors; at most one per chain is supported")
             cxml = transforms[0] if transforms else xml
-            if self.kinds[origin][0] == "signal":
+            if self.nodes[origin][0] == "signal":
                 continue  # a signal nothing writes: the input stays unconnected (bind warns)
-            if self.kinds[origin][0] == "system":
-                if len(chain) > 1 and transforms and any(self.kinds[n][2].unit for n, _, _ in chain[:-1]):
+            if self.nodes[origin][0] == "system":
+                if len(chain) > 1 and transforms and any(self.nodes[n][2].unit for n, _, _ in chain[:-1]):
                     raise ScenarioError(f"{line}: a transformed connection through system connectors with units")
                 self.parameter_links.append(ParameterLink(origin, path, conn.name, first_line,
                                                           _transform(cxml, line)))
                 continue
-            if any(self.kinds[n][2].unit for n, _, _ in chain[:-1]) and transforms:
+            if any(self.nodes[n][2].unit for n, _, _ in chain[:-1]) and transforms:
                 raise ScenarioError(f"{line}: a transformed connection through system connectors that declare "
                                     f"units is not supported (give the units at the components)")
-            o_owner, o_path, o_conn = self.kinds[origin]
+            o_owner, o_path, o_conn = self.nodes[origin]
             out.append(_connection(cxml, line, o_path, o_conn.name, path, conn.name))
         return out
 
@@ -904,7 +893,7 @@ def _connection(cxml: etree._Element, line: str, se: str, sc: str, ee: str, ec: 
     suppress = cxml.get("suppressUnitConversion", "false") in ("true", "1")
     if t is None:
         return Connection(se, sc, ee, ec, suppress_unit_conversion=suppress)
-    return Connection(se, sc, ee, ec, t.factor, t.offset, suppress, t.kind, t.mapping)
+    return Connection(se, sc, ee, ec, t.factor, t.offset, suppress, t.type, t.mapping)
 
 
 def _experiment(root: etree._Element, ssd_display: str) -> Experiment:
@@ -927,17 +916,17 @@ def _experiment(root: etree._Element, ssd_display: str) -> Experiment:
     return Experiment(start, stop, step)
 
 
-def _map_entries(xml: etree._Element, kind: str, line: str) -> tuple[tuple[Any, Any], ...]:
+def _map_entries(xml: etree._Element, type_: str, line: str) -> tuple[tuple[Any, Any], ...]:
     """The (source, target) pairs of a mapping transformation (Boolean values as 0/1)."""
     def value(text: str | None) -> int:
-        if kind == "BooleanMappingTransformation":
+        if type_ == "BooleanMappingTransformation":
             return 1 if text in ("true", "1") else 0
         return int(text)  # schema-validated xs:int
 
     entries = tuple((value(e.get("source")), value(e.get("target"))) for e in xml.findall("ssc:MapEntry", NS))
     sources = [a for a, _ in entries]
     if len(set(sources)) != len(sources):
-        raise ScenarioError(f"{line}: ssc:{kind} maps a source value twice")
+        raise ScenarioError(f"{line}: ssc:{type_} maps a source value twice")
     return entries
 
 

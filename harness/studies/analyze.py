@@ -3,7 +3,7 @@
 The loop is broken at the plant input (the voltage). The plant is the scenario's plant linearized
 about upright *with* the motor inductance (``ipcosim.fmus.linearize``), discretized exactly with a
 zero-order hold at the controller's sample period; the controller is the law of the scenario's
-controller component as a linear discrete system (``ipcosim.harness.studies.loop``). Their product
+controller component as a linear discrete system (``ipcosim.harness.studies.linear_law``). Their product
 ``L(z) = -C(z) P(z)`` is the loop transfer function at the plant input of the sampled-data loop,
 exact at the sample instants, so ``L(e^{jwT})`` for ``0 < w < pi/T`` is its frequency response.
 
@@ -43,7 +43,7 @@ from ipcosim.fmus.linearize import linearize
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, ParameterError, preset
 from ipcosim.fmus.physics import MEASURED
 from ipcosim.harness.studies import limit_cycle
-from ipcosim.harness.studies.loop import LinearLaw, linear_law
+from ipcosim.harness.studies.linear_law import LinearLaw, linear_law
 
 
 class AnalysisError(IpcosimError, ValueError):

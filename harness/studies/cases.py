@@ -41,7 +41,7 @@ def sweep_size(varies: Sequence[Vary], samples: int) -> int:
     size = samples
     for v in varies:
         if not v.is_random:
-            size *= int(v.args[2]) if v.kind == "grid" else len(v.args)
+            size *= int(v.args[2]) if v.form == "grid" else len(v.args)
     return size
 
 
@@ -55,7 +55,7 @@ def check_size(varies: Sequence[Vary], samples: int, limit: int = MAX_RUNS) -> N
     """
     size = sweep_size(varies, samples)
     if size > limit:
-        factors = [f"{v.text or v.name}: {int(v.args[2]) if v.kind == 'grid' else len(v.args)} values"
+        factors = [f"{v.text or v.name}: {int(v.args[2]) if v.form == 'grid' else len(v.args)} values"
                    for v in varies if not v.is_random]
         raise VaryError(f"--vary/--samples: {size} runs ({'; '.join(factors + [f'--samples {samples}'])}) is more "
                         f"than a sweep's limit of {limit} runs; use fewer grid points or samples, or split the "
@@ -105,7 +105,7 @@ class CaseStream(Sequence[SweepCase]):
         self._random_varies = [v for v in varies if v.is_random]
         self._nominal = {v.name: nominal.get(v.name, 1.0) for v in varies}
         # each list's values, each grid's points computed when asked for; never their product
-        self._grids = [_Linspace(v, self._nominal[v.name]) if v.kind == "grid" else v.points(self._nominal[v.name])
+        self._grids = [_Linspace(v, self._nominal[v.name]) if v.form == "grid" else v.points(self._nominal[v.name])
                        for v in self._grid_varies]
         self._samples = int(samples)
         self._seed = int(seed)

@@ -84,7 +84,7 @@ class CosimSpec(RunSpec):
         """
         from ipcosim.fmus.metrics import METRIC_KEYS, PASSIVE_RESIDUAL_KEYS
         from ipcosim.harness.engine import Prepared
-        from ipcosim.harness.scenario.binding import with_set
+        from ipcosim.harness.scenario.values import with_set
         from ipcosim.harness.studies.cost import COST_TERMS
 
         prepared = Prepared(scenario, parameter_set=parameter_set, slave_factory=_no_slave, warn=False, fmus=fmus)

@@ -14,7 +14,7 @@ force), the other carts' friction (each cart is taken alone), and whether the cy
 
 The loop is ``ipcosim.harness.studies.analyze``'s: the plant linearized about upright with the motor
 inductance, sampled with a zero-order hold at the law's period, closed by the law's linear transcription
-(``ipcosim.harness.studies.loop``). A law's own friction compensation is nonlinear and is not in that
+(``ipcosim.harness.studies.linear_law``). A law's own friction compensation is nonlinear and is not in that
 transcription, so the prediction is that of the law without it.
 """
 from __future__ import annotations

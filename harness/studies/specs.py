@@ -127,8 +127,8 @@ def _not_native(name: str, native: RunSpec, python: Mapping[str, Any] | None) ->
     a design parameter its native FMU lists as the Python flavour's only (``python_only`` of its
     ``native.json``), a parameter of the ``python`` flavour (its parameters; None: not known) that the native
     FMU was built without (the native folder is older than the sources), or a name neither flavour has."""
-    from ipcosim.harness.scenario.binding import rebuild_command
     from ipcosim.harness.scenario.flavour import native_fmu_dir
+    from ipcosim.harness.scenario.rebuild import rebuild_command
 
     where = f"{name} is not a parameter of the native FMUs in {native_fmu_dir()}"
     if name.partition(".")[2] in _python_only(native, name.partition(".")[0]):

@@ -21,7 +21,7 @@ import ipcosim
 from ipcosim.errors import IpcosimError
 from ipcosim.harness import cli
 from ipcosim.harness.describe import describe
-from ipcosim.harness.scenario.binding import BindingError
+from ipcosim.harness.scenario.errors import BindingError
 
 pytestmark = [pytest.mark.skipif(shutil.which("gcc") is None and shutil.which("cc") is None,
                                  reason="needs a C compiler to build the test FMUs"),
