@@ -37,15 +37,8 @@ from ipcosim.harness.master.execution import Execution, SlaveFactory, check_time
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress
 from ipcosim.harness.master.realtime import RealtimePacer
-from ipcosim.harness.master.recorder import TaskMetrics, timing_metrics
-from ipcosim.harness.master.results import (
-    Result,
-    RowWriter,
-    SimulationError,
-    json_safe,
-    open_output,
-    select_columns,
-)
+from ipcosim.harness.master.recorder import TaskMetrics
+from ipcosim.harness.master.results import Result, RunFiles, SimulationError, json_safe
 from ipcosim.harness.master.slave import FMUSlave, fmu_slave, load_library
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
@@ -312,11 +305,14 @@ class Prepared:
                   algorithm: str | None = None, observers: Sequence[Observer] = (),
                   manipulators: Sequence[Manipulator] = (), realtime: bool | None = None, progress: bool = False,
                   record_every: int = 1, max_init_iterations: int = 20, loop: str = "auto",
-                  overrun_budget: float | None = None) -> Execution:
-        """A ready :class:`Execution` (checked: step, stop time, the ``set`` start values, step multiples);
-        ``loop``: the stepping loop, ``auto``, ``c`` or ``python`` (see :class:`Execution`);
-        ``overrun_budget``: a paced run's allowed overrun fraction
-        (:class:`~ipcosim.harness.master.realtime.RealtimePacer`)."""
+                  overrun_budget: float | None = None, out: str | os.PathLike[str] | None = None,
+                  variables: Sequence[str] | None = None, plot: bool = False,
+                  started: float | None = None) -> Execution:
+        """A ready :class:`Execution` (checked: step, stop time, the ``set`` start values, step multiples,
+        the ``variables``; ``out`` opened for its files); ``loop``: the stepping loop, ``auto``, ``c``
+        or ``python`` (see :class:`Execution`); ``overrun_budget``: a paced run's allowed overrun
+        fraction (:class:`~ipcosim.harness.master.realtime.RealtimePacer`); ``started``: when the
+        whole run began (:func:`time.perf_counter`), for its ``wall_time_s``."""
         stop, why_stop = (stop_time, "") if stop_time is not None else default_stop_time(self.system)
         h, why_step = (step, "") if step is not None else default_step(self.system)
         if stop is None:
@@ -331,6 +327,7 @@ class Prepared:
             "step": "--step" if step is not None else (f"{origin}: osp:FixedStepAlgorithm baseStepSize"
                                                         if self.scenario.experiment.step_size is not None
                                                         else why_step)})
+        given = dict(set or {})
         if self.fmus == "native" and set:
             from ipcosim.harness.scenario.flavour import native_set
             set = native_set(self.system, set, self._python_values)
@@ -347,7 +344,9 @@ class Prepared:
                          manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
                          unzip_dirs=self.unzip_dirs,
                          record_every=record_every, max_init_iterations=max_init_iterations,
-                         task_metrics=self._run_task_metrics(values), loop=loop)
+                         task_metrics=self._run_task_metrics(values), loop=loop,
+                         files=RunFiles(Path(out), variables, plot) if out is not None else None,
+                         metadata={**self._describe(values), "set": given}, plotter=plot_run, started=started)
 
     def _run_task_metrics(self, values: Mapping[tuple[str, str], Any]) -> TaskMetrics | None:
         """The task metrics of one run: the IP02 task's with the metrics of the run's scenario kinds
@@ -399,52 +398,27 @@ class Prepared:
             If the run failed and ``raise_on_error`` (``.result`` holds the partial result,
             already written to ``out`` when given).
         """
-        t0 = time.perf_counter()
-        load, self.load_seconds = self.load_seconds, 0.0  # the loading belongs to the first run
-        execution = self.execution(stop_time, step, set, **kwargs)
-        columns = select_columns(execution.row_names(), variables)  # unknown names fail before the run
-        if out is not None:  # results.csv streamed while the run proceeds
-            folder = open_output(out)
-            execution.writer = RowWriter(execution.row_fields(), folder / "results.csv", columns)
-        try:
-            result = execution.run()
-        except KeyboardInterrupt as exc:  # save what was computed, then stop
-            partial = getattr(exc, "result", None)
-            if partial is not None:
-                partial.plotter = plot_run
-                if out is not None:
-                    partial.write(out, variables=variables, plot=plot, csv=False)
-            raise
-        self._describe(result, execution)
-        result.metadata["set"] = dict(set or {})  # the run figure's title lists them
-        if out is not None:
-            result.metadata["files"] = {k: str(v) for k, v in
-                                        result.write(out, variables=variables, plot=plot, csv=False).items()}
-        self._whole_run_timing(result, load + time.perf_counter() - t0, out)
+        started = time.perf_counter() - self.load_seconds  # the loading belongs to the first run
+        self.load_seconds = 0.0
+        execution = self.execution(stop_time, step, set, out=out, variables=variables, plot=plot, started=started,
+                                   **kwargs)
+        result = execution.run()  # results.csv streamed, metrics.json written at its end (out given)
         if result.error is not None and raise_on_error:
             raise SimulationError(result.error, result)
         return result
 
-    def _describe(self, result: Result, execution: Execution) -> None:
-        """What the run's figure and metadata say beyond the master's account: its plotter, the
-        voltage limit it draws (:mod:`ipcosim.harness.plot`), the parameter set and the swaps."""
-        result.plotter = plot_run
-        result.metadata["voltage_limit_V"] = next(
-            (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
-        result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
-        result.metadata["swaps"] = dict(self.swap)
-        b2, K = (_start(execution, "plant", n) for n in ("b2", "K"))  # the success criterion's amplitude bound
-        result.metadata["amplitude_bound_m"] = amplitude_bound(float(b2 or 0.0), float(K or 0.0))
+    def _describe(self, values: Mapping[tuple[str, str], Any]) -> dict[str, Any]:
+        """What a run's figure and metadata say beyond the master's account: the voltage limit it
+        draws (:mod:`ipcosim.harness.plot`), the parameter set, the swaps and the success criterion's
+        amplitude bound, from the values the run starts with (``values`` over the bound ones)."""
+        def start(component: str, variable: str) -> Any:
+            return _start(self.system, values, component, variable)
 
-    @staticmethod
-    def _whole_run_timing(result: Result, wall: float, out: str | os.PathLike[str] | None) -> None:
-        """Make ``wall_time_s`` the whole run's (load, instantiate, initialize, step, write) and
-        ``real_time_factor`` relative to it; ``metrics.json`` is rewritten with the final figures."""
-        meta = result.metadata
-        result.metrics.update(timing_metrics(meta.get("simulated_s", 0.0), wall, meta.get("loop_wall_time_s", 0.0)))
-        meta["wall_time_s"] = wall
-        if out is not None and "metrics" in meta.get("files", {}):
-            result.write_metrics(Path(meta["files"]["metrics"]))
+        b2, K = (start("plant", n) for n in ("b2", "K"))
+        return {"voltage_limit_V": next((v for v in (start(c, "voltage_limit") for c in ("controller", "plant"))
+                                         if v), None),
+                "parameter_set": self.parameter_set or ",".join(self.scenario.bound_sets) or None,
+                "swaps": dict(self.swap), "amplitude_bound_m": amplitude_bound(float(b2 or 0.0), float(K or 0.0))}
 
     def _fmu_slave(self, instance: Any) -> FMUSlave:
         """A slave on this preparation's loaded library of the component (loaded on first use
@@ -485,15 +459,15 @@ class Prepared:
         self.close()
 
 
-def _start(execution: Execution, component: str, variable: str) -> Any:
-    """The value ``component.variable`` starts a run with (its override, else its bound start), or None."""
+def _start(system: System, values: Mapping[tuple[str, str], Any], component: str, variable: str) -> Any:
+    """The value ``component.variable`` starts a run with (its ``values`` entry, else its bound start), or None."""
     try:
-        inst = execution.system.instance(component)
+        inst = system.instance(component)
     except KeyError:
         return None
     if variable not in inst.model.variables:
         return None
-    return execution.set.get((component, variable), inst.start_value(variable))
+    return values.get((component, variable), inst.start_value(variable))
 
 
 def build_missing(scenario: Scenario) -> list[str]:

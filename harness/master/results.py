@@ -127,6 +127,17 @@ class Result:
         path.write_text(json.dumps(json_safe(self.metrics), indent=2) + "\n")
 
 
+@dataclass(frozen=True)
+class RunFiles:
+    """Where one run's files go (``--out``): ``results.csv`` streamed while it runs (the columns
+    ``variables`` select, default every one), ``metrics.json`` written once at its end and, with
+    ``plot``, ``plot.png``."""
+
+    folder: Path
+    variables: Sequence[str] | None = None
+    plot: bool = False
+
+
 def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> list[str]:
     """Names of ``columns`` matching ``patterns`` (see :meth:`Result.select`)."""
     cols = list(columns)
