@@ -116,3 +116,24 @@ def test_metrics_json_is_written_once_with_the_final_figures(tmp_path, monkeypat
     assert len(writes) == 1
     assert writes[0]["wall_time_s"] == result.metrics["wall_time_s"] == result.metadata["wall_time_s"]
     assert result.metadata["files"]["metrics"] == str(tmp_path / "run" / "metrics.json")
+
+
+def test_a_sweep_loads_and_binds_its_scenario_once_and_parses_vary_once(tmp_path, monkeypatch) -> None:
+    from ipcosim.harness import engine, grammar
+    from ipcosim.harness.studies.robustness import sweep_study
+
+    calls = {"bind": 0, "parse_all": 0}
+
+    def counted(module, name):
+        original = getattr(module, name)
+
+        def wrapper(*args, **kwargs):
+            calls[name] += 1
+            return original(*args, **kwargs)
+        monkeypatch.setattr(module, name, wrapper)
+
+    counted(engine, "bind")
+    counted(grammar, "parse_all")
+    study = sweep_study("single-mass-lqr", ["plant.Mp=grid(0.1,0.2,2)"], fmus="python", out=tmp_path / "sweep")
+    assert calls == {"bind": 1, "parse_all": 1}
+    assert [v.name for v in study.varies] == ["plant.Mp"]
