@@ -39,7 +39,7 @@ from ipcosim.harness.master.observers import Observer, Progress
 from ipcosim.harness.master.realtime import RealtimePacer
 from ipcosim.harness.master.recorder import TaskMetrics
 from ipcosim.harness.master.results import Result, RunFiles, SimulationError, json_safe
-from ipcosim.harness.master.slave import FMUSlave, fmu_slave, load_library
+from ipcosim.harness.master.slave import LoadedSlaves
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
@@ -204,12 +204,12 @@ class Prepared:
         self.parameter_set = parameter_set
         self.swap = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
                      for k, v in (swap or {}).items()}
-        self._libraries: dict[str, Any] = {}
         self.reuse_instances = reuse_instances
-        self._kept: dict[str, FMUSlave] = {}  # component -> its instance between runs (reuse_instances)
         self._tmp: Path | None = None
         self._finalizer: Any = None
         self.unzip_dirs: dict[str, Path] = {}
+        self._slaves = LoadedSlaves(self.unzip_dirs, reuse=reuse_instances)  # loaded once, for every run
+        self._libraries, self._kept = self._slaves.libraries, self._slaves.kept
         if system is not None:
             self.system = system
             self.scenario = system.scenario
@@ -341,7 +341,7 @@ class Prepared:
             observers.append(CardObserver())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
                          algorithm=algorithm or self.algorithm, set=values, observers=observers,
-                         manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
+                         manipulators=manipulators, slave_factory=self.slave_factory or self._slaves,
                          unzip_dirs=self.unzip_dirs,
                          record_every=record_every, max_init_iterations=max_init_iterations,
                          task_metrics=self._run_task_metrics(values), loop=loop,
@@ -358,12 +358,8 @@ class Prepared:
         except KeyError:
             return self.task_metrics
 
-        def start(name: str) -> Any:
-            if ("plant", name) in values:
-                return values[("plant", name)]
-            return plant.start_value(name) if name in plant.model.variables else None
-
-        return functools.partial(streamed_task_metrics, kinds=task_kinds(start))
+        starts = {name: values.get(("plant", name), plant.start_value(name)) for name in plant.model.variables}
+        return functools.partial(streamed_task_metrics, kinds=task_kinds(starts.get))
 
     def run(self, stop_time: float | None = None, step: float | None = None,
             set: Mapping[str, Any] | None = None, *, out: str | os.PathLike[str] | None = None,
@@ -420,35 +416,9 @@ class Prepared:
                 "parameter_set": self.parameter_set or ",".join(self.scenario.bound_sets) or None,
                 "swaps": dict(self.swap), "amplitude_bound_m": amplitude_bound(float(b2 or 0.0), float(K or 0.0))}
 
-    def _fmu_slave(self, instance: Any) -> FMUSlave:
-        """A slave on this preparation's loaded library of the component (loaded on first use
-        and kept for the following runs: one run at a time per Prepared)."""
-        kept = self._kept.get(instance.name)
-        if kept is not None and kept.state == "parked":
-            return kept
-        lib = self._libraries.get(instance.name)
-        if lib is None:
-            lib = self._libraries[instance.name] = load_library(instance, self.unzip_dirs[instance.name])
-        slave = fmu_slave(instance, self.unzip_dirs[instance.name], library=lib)
-        if self.reuse_instances:
-            slave.reusable = True
-            self._kept[instance.name] = slave
-        return slave
-
     def close(self) -> None:
         """Unload the FMUs' libraries and remove the extracted FMUs (if this object created the folder)."""
-        for slave in self._kept.values():
-            try:
-                slave.release()
-            except Exception:  # noqa: BLE001 -- best effort, as unloading below
-                pass
-        self._kept.clear()
-        for lib in self._libraries.values():
-            try:
-                lib.freeLibrary()
-            except Exception:  # noqa: BLE001 -- best effort
-                pass
-        self._libraries.clear()
+        self._slaves.close()
         if self._finalizer is not None:
             self._finalizer()
 
@@ -481,8 +451,8 @@ def build_missing(scenario: Scenario) -> list[str]:
         The models built (none: nothing was missing, or only FMUs this project does not make,
         which binding then reports by name).
     """
-    if scenario.location.is_file():
-        return []  # an .ssp archive carries its FMUs
+    if scenario.location.is_file() or all(c.fmu is not None for c in scenario.components):
+        return []  # an .ssp archive carries its FMUs; every FMU found
     from ipcosim.fmus.pybuild import build_all, model_scripts
     from ipcosim.harness.scenario import ssp
 
