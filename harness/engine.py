@@ -346,7 +346,7 @@ class Prepared:
                          record_every=record_every, max_init_iterations=max_init_iterations,
                          task_metrics=self._run_task_metrics(values), loop=loop,
                          files=RunFiles(Path(out), variables, plot) if out is not None else None,
-                         metadata={**self._describe(values), "set": given}, plotter=plot_run, started=started)
+                         metadata={**self._run_metadata(values), "set": given}, plotter=plot_run, started=started)
 
     def _run_task_metrics(self, values: Mapping[tuple[str, str], Any]) -> TaskMetrics | None:
         """The task metrics of one run: the IP02 task's with the metrics of the run's scenario kinds
@@ -403,7 +403,7 @@ class Prepared:
             raise SimulationError(result.error, result)
         return result
 
-    def _describe(self, values: Mapping[tuple[str, str], Any]) -> dict[str, Any]:
+    def _run_metadata(self, values: Mapping[tuple[str, str], Any]) -> dict[str, Any]:
         """What a run's figure and metadata say beyond the master's account: the voltage limit it
         draws (:mod:`ipcosim.harness.plot`), the parameter set, the swaps and the success criterion's
         amplitude bound, from the values the run starts with (``values`` over the bound ones)."""
