@@ -38,7 +38,7 @@ from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress
 from ipcosim.harness.master.realtime import RealtimePacer
 from ipcosim.harness.master.recorder import TaskMetrics
-from ipcosim.harness.master.results import Result, RunFiles, SimulationError, json_safe
+from ipcosim.harness.master.results import Result, RunOutput, SimulationError, json_safe
 from ipcosim.harness.master.slave import LoadedSlaves
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
@@ -345,8 +345,8 @@ class Prepared:
                          unzip_dirs=self.unzip_dirs,
                          record_every=record_every, max_init_iterations=max_init_iterations,
                          task_metrics=self._run_task_metrics(values), loop=loop,
-                         files=RunFiles(Path(out), variables, plot) if out is not None else None,
-                         metadata={**self._run_metadata(values), "set": given}, plotter=plot_run, started=started)
+                         output=RunOutput(Path(out) if out is not None else None, variables, plot,
+                                          {**self._run_metadata(values), "set": given}, plot_run, started))
 
     def _run_task_metrics(self, values: Mapping[tuple[str, str], Any]) -> TaskMetrics | None:
         """The task metrics of one run: the IP02 task's with the metrics of the run's scenario kinds

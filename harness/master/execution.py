@@ -42,7 +42,7 @@ from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.plan import Block
 from ipcosim.harness.master.pyloop import compile_loop
 from ipcosim.harness.master.recorder import Recorder, TaskMetrics, TickFailure, timing_metrics
-from ipcosim.harness.master.results import Plotter, Result, RowWriter, RunFiles, open_output, select_columns
+from ipcosim.harness.master.results import Result, RowWriter, RunOutput, open_output, select_columns
 from ipcosim.harness.master.slave import DISCARD, TERMINATE, Slave, fmu_slave
 from ipcosim.harness.master.system import Instance, System, kind_of
 
@@ -123,7 +123,7 @@ class Execution:
     max_init_iterations : int
         Bound on the initialization fixed-point iterations.
     writer : RowWriter, optional
-        Where the rows go while the run proceeds (default: ``files``'s results.csv, else a spool
+        Where the rows go while the run proceeds (default: ``output``'s results.csv, else a spool
         file only); see :meth:`row_fields` for its fields.
     task_metrics : callable, optional
         The task's metrics of the recorded rows (see :data:`~ipcosim.harness.master.recorder.TaskMetrics`), added to the
@@ -134,17 +134,11 @@ class Execution:
         connectors only and a C compiler is found; else the Python loop), ``c`` (the C loop, or
         :class:`~ipcosim.harness.master.cloop.LoopUnavailable` saying why not) or ``python``.
         The metadata's ``loop`` says which ran and why.
-    files : RunFiles, optional
-        Where the run's files go: results.csv is opened here (its columns checked) and streamed
-        while the run proceeds; metrics.json (and plot.png) are written once when it ends, also
-        after a failure or an interrupt.
-    metadata : mapping, optional
-        What the caller adds to the result's metadata (the run's figure reads it).
-    plotter : callable, optional
-        The result's :attr:`~ipcosim.harness.master.results.Result.plotter`.
-    started : float, optional
-        :func:`time.perf_counter` when the whole run began (loading included): ``wall_time_s``
-        and ``real_time_factor`` are then the whole run's; default the execution's own.
+    output : RunOutput, optional
+        What the result carries beyond the master's account (metadata, plotter, the whole run's
+        timing) and where its files go: results.csv is opened here (its columns checked) and
+        streamed while the run proceeds; metrics.json (and plot.png) are written once when it
+        ends, also after a failure or an interrupt.
     """
 
     def __init__(self, system: System, step: float, stop_time: float, start_time: float | None = None,
@@ -152,9 +146,8 @@ class Execution:
                  observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
                  slave_factory: SlaveFactory | None = None, unzip_dirs: Mapping[str, Path] | None = None,
                  record_every: int = 1, max_init_iterations: int = 20, writer: RowWriter | None = None,
-                 task_metrics: TaskMetrics | None = None, loop: str = "auto", files: RunFiles | None = None,
-                 metadata: Mapping[str, Any] | None = None, plotter: Plotter | None = None,
-                 started: float | None = None) -> None:
+                 task_metrics: TaskMetrics | None = None, loop: str = "auto",
+                 output: RunOutput | None = None) -> None:
         if algorithm not in ALGORITHMS:
             raise StepSizeError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
         if loop not in LOOPS:
@@ -191,13 +184,10 @@ class Execution:
                                  capacity=CHUNK // record_every + 2, flush_seconds=CHUNK_SECONDS)
         self.slaves: list[Slave] = []
         self.blocks: list[Block] = []
-        self.files = files
-        self.metadata = dict(metadata or {})
-        self.plotter = plotter
-        self.started = started
-        if writer is None and files is not None:  # unknown columns fail before the folder is touched
-            columns = select_columns(self.row_names(), files.variables)
-            writer = RowWriter(self.row_fields(), open_output(files.folder) / "results.csv", columns)
+        self.output = output or RunOutput()
+        if writer is None and self.output.folder is not None:  # unknown columns fail before the folder is touched
+            columns = select_columns(self.row_names(), self.output.variables)
+            writer = RowWriter(self.row_fields(), open_output(self.output.folder) / "results.csv", columns)
         self.writer = writer
         self.task_metrics = task_metrics
         self.tick = 0
@@ -313,15 +303,16 @@ class Execution:
     def _conclude(self, result: Result) -> None:
         """Complete the result (the caller's metadata and plotter, the whole run's timing) and write
         its files: plot.png, then metrics.json once with the final figures (also when the plot fails)."""
-        result.plotter = self.plotter
-        result.metadata.update(self.metadata)
-        if self.files is None:
+        output = self.output
+        result.plotter = output.plotter
+        result.metadata.update(output.metadata)
+        if output.folder is None:
             self._whole_run_timing(result)
             return
-        folder = Path(self.files.folder)
+        folder = Path(output.folder)
         files = {"results": folder / "results.csv", "metrics": folder / "metrics.json"}
         try:
-            if self.files.plot:
+            if output.plot:
                 try:
                     files["plot"] = result.plot(folder / "plot.png")
                 except ImportError as exc:  # the plotting extra is missing: the numbers are written, say so
@@ -333,11 +324,11 @@ class Execution:
 
     def _whole_run_timing(self, result: Result) -> None:
         """``wall_time_s`` and ``real_time_factor`` of the whole run (loading and writing included)
-        when the caller said when it began (``started``)."""
-        if self.started is None:
+        when the caller said when it began (``output.started``)."""
+        if self.output.started is None:
             return
         meta = result.metadata
-        wall = _time.perf_counter() - self.started
+        wall = _time.perf_counter() - self.output.started
         result.metrics.update(timing_metrics(meta.get("simulated_s", 0.0), wall, meta.get("loop_wall_time_s", 0.0)))
         meta["wall_time_s"] = wall
 
