@@ -12,20 +12,21 @@ from pathlib import Path
 
 #: Name of the generated block in docs/api.md (``<!-- api:run -->`` ... ``<!-- /api:run -->``).
 BLOCK = "api:run"
-DOC = Path(__file__).resolve().parents[2] / "docs" / "api.md"
+DOC = Path(__file__).resolve().parents[1] / "docs" / "api.md"
 
 
 def python_call(function: object, name: str) -> str:
     """``name(args) -> returns`` from ``function``'s signature (annotations left out but the return's);
-    :func:`ipcosim.run`'s ``**more`` is written out as the keywords of :meth:`ipcosim.RunOptions.create`."""
+    :func:`ipcosim.run`'s ``**more`` is written out as the other fields of :class:`ipcosim.RunOptions`."""
     from ipcosim.harness.options import RunOptions
 
     sig = inspect.signature(function)  # type: ignore[arg-type]
     params = list(sig.parameters.values())
     if name == "ipcosim.run":
-        more = inspect.signature(RunOptions.create).parameters
+        more = inspect.signature(RunOptions).parameters
         params = [p for p in params if p.kind is not inspect.Parameter.VAR_KEYWORD]
-        params += [p for n, p in more.items() if n not in sig.parameters and p.kind is inspect.Parameter.KEYWORD_ONLY]
+        params += [p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for n, p in more.items()
+                   if n not in sig.parameters]
     words, star = [], False
     for p in params:
         if p.kind is inspect.Parameter.KEYWORD_ONLY and not star:

@@ -37,16 +37,9 @@ from ipcosim.harness.master.execution import Execution, SlaveFactory, check_time
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer, Progress
 from ipcosim.harness.master.realtime import RealtimePacer
-from ipcosim.harness.master.recorder import TaskMetrics, timing_metrics
-from ipcosim.harness.master.results import (
-    Result,
-    RowWriter,
-    SimulationError,
-    json_safe,
-    open_output,
-    select_columns,
-)
-from ipcosim.harness.master.slave import FMUSlave, fmu_slave, load_library
+from ipcosim.harness.master.recorder import TaskMetrics
+from ipcosim.harness.master.results import Result, RunOutput, SimulationError, json_safe
+from ipcosim.harness.master.slave import LoadedSlaves
 from ipcosim.harness.master.system import System
 from ipcosim.harness.options import RunOptions
 from ipcosim.harness.scenario.archive import member_path, safe_extract
@@ -214,12 +207,12 @@ class Prepared:
         self.parameter_set = parameter_set
         self.swap = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
                      for k, v in (swap or {}).items()}
-        self._libraries: dict[str, Any] = {}
         self.reuse_instances = reuse_instances
-        self._kept: dict[str, FMUSlave] = {}  # component -> its instance between runs (reuse_instances)
         self._tmp: Path | None = None
         self._finalizer: Any = None
         self.unzip_dirs: dict[str, Path] = {}
+        self._slaves = LoadedSlaves(self.unzip_dirs, reuse=reuse_instances)  # loaded once, for every run
+        self._libraries, self._kept = self._slaves.libraries, self._slaves.kept
         if system is not None:
             self.system = system
             self.scenario = system.scenario
@@ -315,11 +308,14 @@ class Prepared:
                   algorithm: str | None = None, observers: Sequence[Observer] = (),
                   manipulators: Sequence[Manipulator] = (), realtime: bool | None = None, progress: bool = False,
                   record_every: int = 1, max_init_iterations: int = 20, loop: str = "auto",
-                  overrun_budget: float | None = None) -> Execution:
-        """A ready :class:`Execution` (checked: step, stop time, the ``set`` start values, step multiples);
-        ``loop``: the stepping loop, ``auto``, ``c`` or ``python`` (see :class:`Execution`);
-        ``overrun_budget``: a paced run's allowed overrun fraction
-        (:class:`~ipcosim.harness.master.realtime.RealtimePacer`)."""
+                  overrun_budget: float | None = None, out: str | os.PathLike[str] | None = None,
+                  variables: Sequence[str] | None = None, plot: bool = False,
+                  started: float | None = None) -> Execution:
+        """A ready :class:`Execution` (checked: step, stop time, the ``set`` start values, step multiples,
+        the ``variables``; ``out`` opened for its files); ``loop``: the stepping loop, ``auto``, ``c``
+        or ``python`` (see :class:`Execution`); ``overrun_budget``: a paced run's allowed overrun
+        fraction (:class:`~ipcosim.harness.master.realtime.RealtimePacer`); ``started``: when the
+        whole run began (:func:`time.perf_counter`), for its ``wall_time_s``."""
         stop, why_stop = (stop_time, "") if stop_time is not None else default_stop_time(self.system)
         h, why_step = (step, "") if step is not None else default_step(self.system)
         if stop is None:
@@ -334,6 +330,7 @@ class Prepared:
             "step": "--step" if step is not None else (f"{origin}: osp:FixedStepAlgorithm baseStepSize"
                                                         if self.scenario.experiment.step_size is not None
                                                         else why_step)})
+        given = dict(set or {})
         if self.fmus == "native" and set:
             from ipcosim.harness.scenario.flavour import native_set
             set = native_set(self.system, set, self._python_values)
@@ -347,10 +344,12 @@ class Prepared:
             observers.append(CardObserver())
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
                          algorithm=algorithm or self.algorithm, set=values, observers=observers,
-                         manipulators=manipulators, slave_factory=self.slave_factory or self._fmu_slave,
+                         manipulators=manipulators, slave_factory=self.slave_factory or self._slaves,
                          unzip_dirs=self.unzip_dirs,
                          record_every=record_every, max_init_iterations=max_init_iterations,
-                         task_metrics=self._run_task_metrics(values), loop=loop)
+                         task_metrics=self._run_task_metrics(values), loop=loop,
+                         output=RunOutput(Path(out) if out is not None else None, variables, plot,
+                                          {**self._run_metadata(values), "set": given}, plot_run, started))
 
     def _run_task_metrics(self, values: Mapping[tuple[str, str], Any]) -> TaskMetrics | None:
         """The task metrics of one run: the IP02 task's with the metrics of the run's further tasks
@@ -362,12 +361,8 @@ class Prepared:
         except KeyError:
             return self.task_metrics
 
-        def start(name: str) -> Any:
-            if ("plant", name) in values:
-                return values[("plant", name)]
-            return plant.start_value(name) if name in plant.model.variables else None
-
-        return functools.partial(streamed_task_metrics, tasks=tasks_of(start))
+        starts = {name: values.get(("plant", name), plant.start_value(name)) for name in plant.model.variables}
+        return functools.partial(streamed_task_metrics, tasks=tasks_of(starts.get))
 
     def run(self, stop_time: float | None = None, step: float | None = None,
             set: Mapping[str, Any] | None = None, *, out: str | os.PathLike[str] | None = None,
@@ -402,82 +397,31 @@ class Prepared:
             If the run failed and ``raise_on_error`` (``.result`` holds the partial result,
             already written to ``out`` when given).
         """
-        t0 = time.perf_counter()
-        load, self.load_seconds = self.load_seconds, 0.0  # the loading belongs to the first run
-        execution = self.execution(stop_time, step, set, **kwargs)
-        columns = select_columns(execution.row_names(), variables)  # unknown names fail before the run
-        if out is not None:  # results.csv streamed while the run proceeds
-            folder = open_output(out)
-            execution.writer = RowWriter(execution.row_fields(), folder / "results.csv", columns)
-        try:
-            result = execution.run()
-        except KeyboardInterrupt as exc:  # save what was computed, then stop
-            partial = getattr(exc, "result", None)
-            if partial is not None:
-                partial.plotter = plot_run
-                if out is not None:
-                    partial.write(out, variables=variables, plot=plot, csv=False)
-            raise
-        self._describe(result, execution)
-        result.metadata["set"] = dict(set or {})  # the run figure's title lists them
-        if out is not None:
-            result.metadata["files"] = {k: str(v) for k, v in
-                                        result.write(out, variables=variables, plot=plot, csv=False).items()}
-        self._whole_run_timing(result, load + time.perf_counter() - t0, out)
+        started = time.perf_counter() - self.load_seconds  # the loading belongs to the first run
+        self.load_seconds = 0.0
+        execution = self.execution(stop_time, step, set, out=out, variables=variables, plot=plot, started=started,
+                                   **kwargs)
+        result = execution.run()  # results.csv streamed, metrics.json written at its end (out given)
         if result.error is not None and raise_on_error:
             raise SimulationError(result.error, result)
         return result
 
-    def _describe(self, result: Result, execution: Execution) -> None:
-        """What the run's figure and metadata say beyond the master's account: its plotter, the
-        voltage limit it draws (:mod:`ipcosim.harness.plot`), the parameter set and the swaps."""
-        result.plotter = plot_run
-        result.metadata["voltage_limit_V"] = next(
-            (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
-        result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
-        result.metadata["swaps"] = dict(self.swap)
-        b2, K = (_start(execution, "plant", n) for n in ("b2", "K"))  # the success criterion's amplitude bound
-        result.metadata["amplitude_bound_m"] = amplitude_bound(float(b2 or 0.0), float(K or 0.0))
+    def _run_metadata(self, values: Mapping[tuple[str, str], Any]) -> dict[str, Any]:
+        """What a run's figure and metadata say beyond the master's account: the voltage limit it
+        draws (:mod:`ipcosim.harness.plot`), the parameter set, the swaps and the success criterion's
+        amplitude bound, from the values the run starts with (``values`` over the bound ones)."""
+        def start(component: str, variable: str) -> Any:
+            return _start(self.system, values, component, variable)
 
-    @staticmethod
-    def _whole_run_timing(result: Result, wall: float, out: str | os.PathLike[str] | None) -> None:
-        """Make ``wall_time_s`` the whole run's (load, instantiate, initialize, step, write) and
-        ``real_time_factor`` relative to it; ``metrics.json`` is rewritten with the final figures."""
-        meta = result.metadata
-        result.metrics.update(timing_metrics(meta.get("simulated_s", 0.0), wall, meta.get("loop_wall_time_s", 0.0)))
-        meta["wall_time_s"] = wall
-        if out is not None and "metrics" in meta.get("files", {}):
-            result.write_metrics(Path(meta["files"]["metrics"]))
-
-    def _fmu_slave(self, instance: Any) -> FMUSlave:
-        """A slave on this preparation's loaded library of the component (loaded on first use
-        and kept for the following runs: one run at a time per Prepared)."""
-        kept = self._kept.get(instance.name)
-        if kept is not None and kept.state == "parked":
-            return kept
-        lib = self._libraries.get(instance.name)
-        if lib is None:
-            lib = self._libraries[instance.name] = load_library(instance, self.unzip_dirs[instance.name])
-        slave = fmu_slave(instance, self.unzip_dirs[instance.name], library=lib)
-        if self.reuse_instances:
-            slave.reusable = True
-            self._kept[instance.name] = slave
-        return slave
+        b2, K = (start("plant", n) for n in ("b2", "K"))
+        return {"voltage_limit_V": next((v for v in (start(c, "voltage_limit") for c in ("controller", "plant"))
+                                         if v), None),
+                "parameter_set": self.parameter_set or ",".join(self.scenario.bound_sets) or None,
+                "swaps": dict(self.swap), "amplitude_bound_m": amplitude_bound(float(b2 or 0.0), float(K or 0.0))}
 
     def close(self) -> None:
         """Unload the FMUs' libraries and remove the extracted FMUs (if this object created the folder)."""
-        for slave in self._kept.values():
-            try:
-                slave.release()
-            except Exception:  # noqa: BLE001 -- best effort, as unloading below
-                pass
-        self._kept.clear()
-        for lib in self._libraries.values():
-            try:
-                lib.freeLibrary()
-            except Exception:  # noqa: BLE001 -- best effort
-                pass
-        self._libraries.clear()
+        self._slaves.close()
         if self._finalizer is not None:
             self._finalizer()
 
@@ -488,15 +432,15 @@ class Prepared:
         self.close()
 
 
-def _start(execution: Execution, component: str, variable: str) -> Any:
-    """The value ``component.variable`` starts a run with (its override, else its bound start), or None."""
+def _start(system: System, values: Mapping[tuple[str, str], Any], component: str, variable: str) -> Any:
+    """The value ``component.variable`` starts a run with (its ``values`` entry, else its bound start), or None."""
     try:
-        inst = execution.system.instance(component)
+        inst = system.instance(component)
     except KeyError:
         return None
     if variable not in inst.model.variables:
         return None
-    return execution.set.get((component, variable), inst.start_value(variable))
+    return values.get((component, variable), inst.start_value(variable))
 
 
 def build_missing(scenario: Scenario) -> list[str]:
@@ -510,8 +454,8 @@ def build_missing(scenario: Scenario) -> list[str]:
         The models built (none: nothing was missing, or only FMUs this project does not make,
         which binding then reports by name).
     """
-    if scenario.location.is_file():
-        return []  # an .ssp archive carries its FMUs
+    if scenario.location.is_file() or all(c.fmu is not None for c in scenario.components):
+        return []  # an .ssp archive carries its FMUs; every FMU found
     from ipcosim.fmus.pybuild import build_all, model_scripts
     from ipcosim.harness.scenario import ssp
 

@@ -1,24 +1,29 @@
 """The options of one run: the single object behind ``ipcosim run`` and :func:`ipcosim.run`.
 
-The command line builds a :class:`RunOptions` from its arguments (:meth:`RunOptions.from_args`),
-the Python API from keywords (:meth:`RunOptions.create`); both hand it to
+Each option is declared once, as a field of :class:`RunOptions` carrying its :class:`Option`: the
+command-line flag, its help, and the check that turns a given value (text from the command line,
+or a Python value) into the field's value. The command line's parser is built from the fields
+(:func:`add_run_arguments`), its arguments become the object (:meth:`RunOptions.from_args`), and
+:func:`ipcosim.run`'s keywords become the same object through the same checks; both hand it to
 :func:`ipcosim.harness.engine.run_with`. A check that fails names the option the way the command
-line spells it (``--stop-time -1: must be a positive number of seconds``), so the API raises
-the same one-line message the command line prints.
+line spells it (``--stop-time -1: must be a positive number of seconds``), so the API raises the
+same one-line message the command line prints.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from ipcosim.errors import UsageError
 from ipcosim.harness.grammar import parse_pairs, parse_set
 from ipcosim.harness.master.algorithm import ALGORITHMS
 from ipcosim.harness.master.cloop import LOOPS
+from ipcosim.harness.paths import BUILD_DIR, BUILD_FMU_DIR
 from ipcosim.harness.scenario.flavour import FLAVOURS
 
 
@@ -59,101 +64,182 @@ def _number_option(option: str, value: Any, ok: Any, not_number: str, out_of_ran
     return number
 
 
+#: ``--parameter-file``'s help, for ``run``, ``sweep`` and ``analyze`` alike (:func:`with_parameter_file`).
+PARAMETER_FILE_HELP = ("SSV file of COMP.VAR values (e.g. `ipcosim identify --out DIR`'s DIR/identified.ssv), "
+                       "applied after the scenario's own sets; --set values apply after it")
+
+
 @dataclass(frozen=True)
-class RunOptions:
-    """Everything that defines one run of a scenario (see ``ipcosim run --help``).
+class Option:
+    """How one run option is given and checked (the metadata of a :class:`RunOptions` field).
 
     Attributes
     ----------
-    scenario : str or path
-        Scenario name (``single-mass-lqr``), folder, SystemStructure.ssd or ``.ssp`` archive.
-    stop_time, step : float or None
-        Simulated time and communication step [s]; None: the scenario's DefaultExperiment.
-    set : dict
-        ``{"component.variable": value}`` start values; a value ``"1.1*nominal"`` is
-        relative to the value the scenario binds.
-    swap : dict
-        ``{"component": FMU path or alias}``, e.g. ``{"plant": "hil"}``.
-    parameter_set : str or None
-        The scenario's parameter set (``thesis``, ``tuned``) instead of its default.
-    realtime : bool or None
-        Pace to wall-clock time; None: only when a swapped-in component asks for it.
-    out : Path or None
-        Folder for ``results.csv`` and ``metrics.json`` (and ``plot.png``); None writes nothing.
-    plot : bool
-        Also write ``plot.png``.
-    record : tuple of str
-        Columns of results.csv (names or patterns such as ``plant.*``); empty: every connector.
-    algorithm : str
-        ``gauss-seidel`` or ``jacobi``.
-    fmu_dirs : tuple of Path
-        Extra folders to look for FMUs in.
-    save_baseline : Path or None
-        Also write the recorded columns as a baseline CSV (see :mod:`ipcosim.harness.baseline`).
-    progress : bool
-        Show a progress bar on a terminal.
-    fmus : str
-        FMU flavour: ``python`` (pythonfmu FMUs, default) or ``native`` (C FMUs from
-        ``ipcosim build --native``).
-    timeout : float or None
-        Wall-clock limit [s]: the run stops there with its results so far
-        (:class:`ipcosim.harness.master.signals.Interrupted`; the command line exits 124).
-    loop : str
-        The master's stepping loop: ``auto`` (the C loop where it can run, else the Python
-        loop), ``c`` (an error where it cannot run) or ``python`` (see docs/master.md).
-    parameter_file : Path or None
-        An SSV file of ``component.variable`` values (``ipcosim identify --out``'s ``identified.ssv``),
-        applied after the scenario's own sets; ``set`` applies after it (:func:`with_parameter_file`).
-    overrun_budget : float or None
-        A real-time run's allowed overruns, as a fraction of its steps; beyond it
-        ``metrics["overrun_budget_exceeded"]`` is true (the command line warns and exits 3).
-        None: ``IPCOSIM_RT_OVERRUN_BUDGET``, else 0.01
-        (:data:`ipcosim.harness.master.realtime.DEFAULT_OVERRUN_BUDGET`).
-    strict : bool
-        Parameters of the scenario that a swapped-in FMU does not have are an error (default:
-        ignored, named in one warning line per component).
-    live : bool
-        Serve a page that shows the run as it happens, with a stop button (docs/live.md); its
-        address is printed on stderr when the run starts.
-    live_host, live_port, live_token : str, int, str or None
-        Where the live page is served (default 127.0.0.1, any free port) and its access token: an
-        address other than loopback needs one (``--live-host 0.0.0.0 --live-token T``).
+    flag : str
+        The command line's spelling: ``--stop-time``, or a name without dashes for a positional
+        argument; empty: an option of the Python API only.
+    help : str
+        The command line's help, also the field's description in :class:`RunOptions`'s docstring.
+    check : callable
+        ``check(flag, value) -> value``: the field's value from a given one (text or a Python
+        value); raises UsageError naming ``flag`` and the value.
+    metavar, action, choices : optional
+        As :meth:`argparse.ArgumentParser.add_argument` takes them.
+    dest : str
+        The parser's name of the argument when it is not the field's (``--quiet`` stores ``progress``).
+    command_default : callable, optional
+        ``command_default(args)``: the command line's value when the flag is absent and the
+        argument holds None (``--out``: ``out/<scenario>``).
     """
 
-    scenario: str | os.PathLike[str]
-    stop_time: float | None = None
-    step: float | None = None
-    set: dict[str, Any] = field(default_factory=dict)
-    swap: dict[str, Any] = field(default_factory=dict)
-    parameter_set: str | None = None
-    realtime: bool | None = None
-    out: Path | None = None
-    plot: bool = False
-    record: tuple[str, ...] = ()
-    algorithm: str = "gauss-seidel"
-    fmu_dirs: tuple[Path, ...] = ()
-    save_baseline: Path | None = None
-    progress: bool = False
-    fmus: str = "python"
-    timeout: float | None = None
-    loop: str = "auto"
-    parameter_file: Path | None = None
-    overrun_budget: float | None = None
-    strict: bool = False
-    live: bool = False
-    live_host: str = "127.0.0.1"
-    live_port: int = 0
-    live_token: str | None = None
+    flag: str
+    help: str
+    check: Callable[[str, Any], Any]
+    metavar: str | None = None
+    action: str | None = None
+    choices: tuple[str, ...] | None = None
+    dest: str | None = None
+    command_default: Callable[[argparse.Namespace], Any] | None = None
+
+
+def option(default: Any = None, *, flag: str = "", help: str,  # noqa: A002 -- argparse's word
+           check: Callable[[str, Any], Any] | None = None, **how: Any) -> Any:
+    """A field of :class:`RunOptions` declaring its :class:`Option`."""
+    return field(default=default, metadata={"option": Option(flag, help, check or _as_given, **how)})
+
+
+def _as_given(flag: str, value: Any) -> Any:
+    return value
+
+
+def _flag(flag: str, value: Any) -> bool:
+    return bool(value)
+
+
+def _path(flag: str, value: Any) -> Path | None:
+    return None if value is None else Path(value)
+
+
+def _choice(values: Sequence[str], joined: str = "one of ") -> Callable[[str, Any], str]:
+    """A check that ``value`` is one of ``values`` (``--loop fast: expected one of auto, c, python``)."""
+    def check(flag: str, value: Any) -> str:
+        if value not in values:
+            listed = ", ".join(values) if joined else " or ".join(values)
+            raise UsageError(f"{flag} {value}: expected {joined}{listed}")
+        return value
+    return check
+
+
+def _scenario(flag: str, value: Any) -> Any:
+    if not os.fspath(value):
+        raise UsageError("scenario: empty name")
+    return value
+
+
+def _columns(flag: str, value: Any) -> tuple[str, ...]:
+    """``--record`` items, each possibly ``a,b``: the column names or patterns."""
+    items = [value] if isinstance(value, str) else (value or ())
+    return tuple(v.strip() for item in items for v in str(item).split(",") if v.strip())
+
+
+def _folders(flag: str, value: Any) -> tuple[Path, ...]:
+    return tuple(Path(d) for d in (value or ()))
+
+
+def _realtime(flag: str, value: Any) -> bool | None:
+    return value if value is None else bool(value)
+
+
+def _port(flag: str, value: Any) -> int:
+    return _port_option(flag, value)
+
+
+def _default_out(args: argparse.Namespace) -> Path:
+    return Path("out") / scenario_label(args.scenario)
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Everything that defines one run of a scenario (see ``ipcosim run --help``); the attributes
+    below are written from the fields' declarations.
+
+    Every field is checked when the object is made (``RunOptions("single-mass-lqr", stop_time="2")``
+    holds ``stop_time=2.0``), whatever the caller gave: text as on the command line, or Python values
+    (numbers, mappings or ``"a=b"`` lists, paths).
+    """
+
+    scenario: str | os.PathLike[str] = option(
+        flag="scenario", metavar="SCENARIO|PATH", check=_scenario,
+        help="scenario name (see `ipcosim list`), scenario folder, SystemStructure.ssd or .ssp archive")
+    stop_time: float | None = option(flag="--stop-time", metavar="S", check=seconds_option,
+                                     help="simulated time [s] (default: the scenario's, 10 s)")
+    step: float | None = option(flag="--step", metavar="H", check=seconds_option,
+                                help="communication step [s] (default: the scenario's, 0.001 s)")
+    set: dict[str, Any] = option(  # type: ignore[assignment]  -- None: no value; checked into a dict
+        flag="--set", action="append", metavar="COMP.VAR=VALUE", check=lambda flag, v: parse_set(v),
+        help="override a parameter or input start value, e.g. --set plant.Mp=0.2 (repeatable)")
+    swap: dict[str, Any] = option(  # type: ignore[assignment]
+        flag="--swap", action="append", metavar="COMPONENT=FMU_OR_ALIAS",
+        check=lambda flag, v: parse_pairs(flag, v, "COMPONENT=FMU_OR_ALIAS"),
+        help="replace a component by another FMU with compatible connectors, e.g. --swap plant=hil")
+    parameter_set: str | None = option(
+        flag="--parameter-set", metavar="NAME",
+        help="bind this parameter set of the scenario (thesis, tuned...) instead of the default")
+    realtime: bool | None = option(flag="--realtime", action="store_const", check=_realtime,
+                                   help="pace the run to wall-clock time")
+    out: Path | None = option(flag="--out", metavar="DIR", check=_path, command_default=_default_out,
+                              help="output folder (default: out/<scenario>)")
+    plot: bool = option(False, flag="--plot", action="store_true", help="also write DIR/plot.png")
+    record: tuple[str, ...] = option(  # type: ignore[assignment]
+        flag="--record", action="append", metavar="VAR[,VAR...]", check=_columns,
+        help="columns of results.csv: names or patterns like 'plant.*' (default: every connector)")
+    algorithm: str = option(
+        ALGORITHMS[0], flag="--algorithm", choices=ALGORITHMS, check=_choice(ALGORITHMS),
+        help="co-simulation algorithm (default gauss-seidel, ordered by the FMUs' dependencies)")
+    fmu_dirs: tuple[Path, ...] = option(  # type: ignore[assignment]
+        flag="--fmu-dir", action="append", metavar="DIR", dest="fmu_dir", check=_folders,
+        help=f"extra folder to look for FMUs in (also IPCOSIM_FMU_PATH); the built ones are in "
+             f"{BUILD_FMU_DIR} (build/ of a source checkout, else the per-user cache)")
+    save_baseline: Path | None = option(
+        flag="--save-baseline", metavar="FILE", check=_path,
+        help="also write the recorded columns (see --record) as a baseline CSV for assert_close_to")
+    progress: bool = option(False, flag="--quiet", action="store_false", dest="quiet", check=_flag,
+                            help="print nothing but errors")
+    fmus: str = option(FLAVOURS[0], flag="--fmus", choices=FLAVOURS, check=_choice(FLAVOURS, ""),
+                       help=f"FMU flavour: python (default, in {BUILD_FMU_DIR}) or native (C, from `ipcosim "
+                            f"build --native`, in {BUILD_DIR / 'fmus-native'})")
+    timeout: float | None = option(
+        flag="--timeout", metavar="S", check=seconds_option,
+        help="wall-clock limit [s]: stop the run there with its results so far (exit status 124)")
+    loop: str = option(LOOPS[0], flag="--loop", choices=LOOPS, check=_choice(LOOPS),
+                       help="the master's stepping loop: auto (default: compiled C where it can run, else "
+                            "Python), c (an error where it cannot run) or python")
+    overrun_budget: float | None = option(
+        flag="--overrun-budget", metavar="FRACTION", check=fraction_option,
+        help="a real-time run's allowed late steps, as a fraction of its steps (default: "
+             "IPCOSIM_RT_OVERRUN_BUDGET, else 0.01); a run beyond it warns and exits with status 3")
+    strict: bool = option(False, flag="--strict", action="store_true",
+                          help="parameters of the scenario that a swapped-in FMU does not have are an error "
+                               "(default: ignored, named in one warning line)")
+    parameter_file: Path | None = option(flag="--parameter-file", metavar="FILE.ssv", check=_path,
+                                         help=PARAMETER_FILE_HELP)
+    live: bool = option(False, flag="--live", action="store_true", check=_flag,
+                        help="serve a page showing the run as it happens, with a stop button (its address is "
+                             "printed)")
+    live_host: str = option("127.0.0.1", flag="--live-host", metavar="ADDRESS",
+                            help="where the live page listens (default 127.0.0.1; another address needs "
+                                 "--live-token)")
+    live_port: int = option(0, flag="--live-port", metavar="N", check=_port,
+                            help="the live page's port (default 0: any free port)")
+    live_token: str | None = option(flag="--live-token", metavar="TOKEN",
+                                    help="access token the live page asks every request for")
 
     def __post_init__(self) -> None:
-        if self.loop not in LOOPS:
-            raise UsageError(f"--loop {self.loop}: expected one of {', '.join(LOOPS)}")
-        if self.fmus not in FLAVOURS:
-            raise UsageError(f"--fmus {self.fmus}: expected {' or '.join(FLAVOURS)}")
-        if self.algorithm not in ALGORITHMS:
-            raise UsageError(f"--algorithm {self.algorithm}: expected one of {', '.join(ALGORITHMS)}")
-        if not os.fspath(self.scenario):
-            raise UsageError("scenario: empty name")
+        for f in dataclasses.fields(self):
+            how: Option = f.metadata["option"]
+            object.__setattr__(self, f.name, how.check(how.flag or f.name, getattr(self, f.name)))
+        if self.parameter_file is not None:  # the --set values win over the file's
+            object.__setattr__(self, "set", with_parameter_file(self.parameter_file, self.set))
         if self.live:
             from ipcosim.harness.live.server import check_address
 
@@ -162,55 +248,70 @@ class RunOptions:
             raise UsageError("--live-host, --live-port and --live-token: only with --live")
 
     @classmethod
-    def create(cls, scenario: str | os.PathLike[str], *, stop_time: Any = None, step: Any = None,
-               set: Mapping[str, Any] | Sequence[str] | None = None,  # noqa: A002 -- the option's name
-               swap: Mapping[str, Any] | Sequence[str] | None = None, parameter_set: str | None = None,
-               realtime: bool | None = None, out: str | os.PathLike[str] | None = None, plot: bool = False,
-               record: Sequence[str] | str | None = None, algorithm: str = "gauss-seidel",
-               fmu_dirs: Sequence[str | os.PathLike[str]] | None = None,
-               save_baseline: str | os.PathLike[str] | None = None, progress: bool = False,
-               fmus: str = "python", timeout: Any = None, loop: str = "auto",
-               overrun_budget: Any = None, strict: bool = False,
-               parameter_file: str | os.PathLike[str] | None = None, live: bool = False,
-               live_host: str = "127.0.0.1", live_port: Any = 0, live_token: str | None = None) -> "RunOptions":
-        """Checked options from Python values (numbers or text, mappings or ``"a=b"`` lists).
+    def create(cls, scenario: str | os.PathLike[str], **options: Any) -> "RunOptions":
+        """The checked options (the same as ``RunOptions(scenario, **options)``).
 
         Raises
         ------
         UsageError
             A value the command line would reject, with the command line's message.
         """
-        if isinstance(record, str):
-            record = [record]
-        columns = tuple(v.strip() for item in (record or ()) for v in str(item).split(",") if v.strip())
-        return cls(scenario=scenario, stop_time=seconds_option("--stop-time", stop_time),
-                   step=seconds_option("--step", step),
-                   set=with_parameter_file(parameter_file, parse_set(set)),
-                   swap=parse_pairs("--swap", swap, "COMPONENT=FMU_OR_ALIAS"),
-                   parameter_set=parameter_set,
-                   realtime=realtime, out=Path(out) if out is not None else None, plot=plot, record=columns,
-                   algorithm=algorithm, fmu_dirs=tuple(Path(d) for d in (fmu_dirs or ())),
-                   save_baseline=Path(save_baseline) if save_baseline is not None else None, progress=progress,
-                   fmus=fmus, timeout=seconds_option("--timeout", timeout), loop=loop,
-                   overrun_budget=fraction_option("--overrun-budget", overrun_budget), strict=strict,
-                   parameter_file=Path(parameter_file) if parameter_file is not None else None,
-                   live=bool(live), live_host=live_host, live_port=_port_option("--live-port", live_port),
-                   live_token=live_token)
+        return cls(scenario, **options)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "RunOptions":
-        """The options of an ``ipcosim run`` command line (default ``--out``: ``out/<scenario>``)."""
-        out = Path(args.out) if args.out else Path("out") / scenario_label(args.scenario)
-        return cls.create(args.scenario, stop_time=args.stop_time, step=args.step, set=args.set, swap=args.swap,
-                          parameter_set=args.parameter_set, realtime=True if args.realtime else None, out=out,
-                          plot=args.plot, record=args.record, algorithm=args.algorithm, fmu_dirs=args.fmu_dir,
-                          save_baseline=args.save_baseline, progress=not args.quiet,
-                          fmus=getattr(args, "fmus", "python"), timeout=getattr(args, "timeout", None),
-                          loop=getattr(args, "loop", "auto"), overrun_budget=getattr(args, "overrun_budget", None),
-                          strict=getattr(args, "strict", False),
-                          parameter_file=getattr(args, "parameter_file", None),
-                          live=getattr(args, "live", False), live_host=getattr(args, "live_host", "127.0.0.1"),
-                          live_port=getattr(args, "live_port", 0), live_token=getattr(args, "live_token", None))
+        """The options of an ``ipcosim run`` command line (:func:`add_run_arguments`)."""
+        values = {}
+        for f in dataclasses.fields(cls):
+            how: Option = f.metadata["option"]
+            value = getattr(args, how.dest or f.name)
+            values[f.name] = how.command_default(args) if value is None and how.command_default else value
+        return cls(**values)
+
+
+def run_options() -> list[tuple[str, Option]]:
+    """Every run option: the field's name and its :class:`Option`, in declaration order."""
+    return [(f.name, f.metadata["option"]) for f in dataclasses.fields(RunOptions)]
+
+
+def add_run_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add every run option with a flag to ``parser`` (``ipcosim run``'s), from the fields."""
+    for name, how in run_options():
+        if not how.flag:
+            continue
+        kwargs: dict[str, Any] = {"help": how.help}
+        if how.action == "store_const":
+            kwargs.update(action="store_const", const=True)
+        elif how.action:
+            kwargs["action"] = how.action
+        if how.action == "append":
+            kwargs["default"] = []
+        if how.metavar:
+            kwargs["metavar"] = how.metavar
+        if how.choices:
+            kwargs.update(choices=how.choices, default=_default(name))
+        elif how.action is None and _default(name) is not None:
+            kwargs["default"] = _default(name)
+        if how.flag.startswith("-"):
+            kwargs["dest"] = how.dest or name
+        parser.add_argument(how.flag, **kwargs)
+
+
+def _default(name: str) -> Any:
+    return RunOptions.__dataclass_fields__[name].default
+
+
+def _attributes() -> str:
+    """The numpydoc Attributes section of :class:`RunOptions`, from the fields' help."""
+    lines = ["", "    Attributes", "    ----------"]
+    for name, how in run_options():
+        given = how.flag if how.flag.startswith("-") else "positional"
+        lines.append(f"    {name} : {given}" + (" (its inverse)" if how.action == "store_false" else ""))
+        lines.append(f"        {how.help[0].upper()}{how.help[1:]}.")
+    return "\n".join(lines) + "\n"
+
+
+RunOptions.__doc__ = (RunOptions.__doc__ or "").rstrip() + "\n" + _attributes()
 
 
 def _port_option(option: str, value: Any) -> int:

@@ -89,8 +89,8 @@ def run(scenario: str | os.PathLike[str], *, swap: Mapping[str, Any] | None = No
     """
     from ipcosim.harness.engine import run_with
 
-    options = RunOptions.create(scenario, swap=swap, set=set, stop_time=stop_time, step=step,
-                                parameter_set=parameter_set, realtime=True if realtime else None, out=out, **more)
+    options = RunOptions(scenario, swap=swap, set=set, stop_time=stop_time, step=step,  # type: ignore[arg-type]
+                         parameter_set=parameter_set, realtime=True if realtime else None, out=out, **more)
     return run_with(options, observers=observers, manipulators=manipulators)
 
 

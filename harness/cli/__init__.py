@@ -37,10 +37,11 @@ def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
 
 
 def add_parameter_file_option(p: argparse.ArgumentParser) -> None:
-    """``--parameter-file`` of run, sweep and analyze (``ipcosim.harness.options.with_parameter_file``)."""
-    p.add_argument("--parameter-file", metavar="FILE.ssv",
-                   help="SSV file of COMP.VAR values (e.g. `ipcosim identify --out DIR`'s DIR/identified.ssv), "
-                        "applied after the scenario's own sets; --set values apply after it")
+    """``--parameter-file`` of sweep and analyze, as ``ipcosim run`` has it
+    (``ipcosim.harness.options.with_parameter_file``)."""
+    from ipcosim.harness.options import PARAMETER_FILE_HELP
+
+    p.add_argument("--parameter-file", metavar="FILE.ssv", help=PARAMETER_FILE_HELP)
 
 
 class Parser(argparse.ArgumentParser):

@@ -41,8 +41,8 @@ from ipcosim.harness.master.manipulators import Manipulator, SetValues
 from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.plan import Block
 from ipcosim.harness.master.pyloop import compile_loop
-from ipcosim.harness.master.recorder import Recorder, TaskMetrics, TickFailure
-from ipcosim.harness.master.results import Result, RowWriter
+from ipcosim.harness.master.recorder import Recorder, TaskMetrics, TickFailure, timing_metrics
+from ipcosim.harness.master.results import Result, RowWriter, RunOutput, open_output, select_columns
 from ipcosim.harness.master.slave import DISCARD, TERMINATE, Slave, fmu_slave
 from ipcosim.harness.master.system import Instance, System, value_type_of
 
@@ -123,8 +123,8 @@ class Execution:
     max_init_iterations : int
         Bound on the initialization fixed-point iterations.
     writer : RowWriter, optional
-        Where the rows go while the run proceeds (default: a spool file only); see
-        :meth:`row_fields` for its fields.
+        Where the rows go while the run proceeds (default: ``output``'s results.csv, else a spool
+        file only); see :meth:`row_fields` for its fields.
     task_metrics : callable, optional
         The task's metrics of the recorded rows (see :data:`~ipcosim.harness.master.recorder.TaskMetrics`), added to the
         result's metrics; None: only the run's own (timing, observers).
@@ -134,6 +134,11 @@ class Execution:
         connectors only and a C compiler is found; else the Python loop), ``c`` (the C loop, or
         :class:`~ipcosim.harness.master.cloop.LoopUnavailable` saying why not) or ``python``.
         The metadata's ``loop`` says which ran and why.
+    output : RunOutput, optional
+        What the result carries beyond the master's account (metadata, plotter, the whole run's
+        timing) and where its files go: results.csv is opened here (its columns checked) and
+        streamed while the run proceeds; metrics.json (and plot.png) are written once when it
+        ends, also after a failure or an interrupt.
     """
 
     def __init__(self, system: System, step: float, stop_time: float, start_time: float | None = None,
@@ -141,7 +146,8 @@ class Execution:
                  observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
                  slave_factory: SlaveFactory | None = None, unzip_dirs: Mapping[str, Path] | None = None,
                  record_every: int = 1, max_init_iterations: int = 20, writer: RowWriter | None = None,
-                 task_metrics: TaskMetrics | None = None, loop: str = "auto") -> None:
+                 task_metrics: TaskMetrics | None = None, loop: str = "auto",
+                 output: RunOutput | None = None) -> None:
         if algorithm not in ALGORITHMS:
             raise StepSizeError(f"unknown algorithm {algorithm!r}; expected one of {', '.join(ALGORITHMS)}")
         if loop not in LOOPS:
@@ -178,6 +184,10 @@ class Execution:
                                  capacity=CHUNK // record_every + 2, flush_seconds=CHUNK_SECONDS)
         self.slaves: list[Slave] = []
         self.blocks: list[Block] = []
+        self.output = output or RunOutput()
+        if writer is None and self.output.folder is not None:  # unknown columns fail before the folder is touched
+            columns = select_columns(self.row_names(), self.output.variables)
+            writer = RowWriter(self.row_fields(), open_output(self.output.folder) / "results.csv", columns)
         self.writer = writer
         self.task_metrics = task_metrics
         self.tick = 0
@@ -284,9 +294,43 @@ class Execution:
             result.error = f"{what} at t = {self.time_of(self.tick):.6g} s"
             result.metadata["error"] = result.error
             result.metadata["status"] = "interrupted"
+        self._conclude(result)
+        if interrupted is not None:
             interrupted.result = result  # type: ignore[attr-defined]  -- for callers that save it
             raise interrupted
         return result
+
+    def _conclude(self, result: Result) -> None:
+        """Complete the result (the caller's metadata and plotter, the whole run's timing) and write
+        its files: plot.png, then metrics.json once with the final figures (also when the plot fails)."""
+        output = self.output
+        result.plotter = output.plotter
+        result.metadata.update(output.metadata)
+        if output.folder is None:
+            self._whole_run_timing(result)
+            return
+        folder = Path(output.folder)
+        files = {"results": folder / "results.csv", "metrics": folder / "metrics.json"}
+        try:
+            if output.plot:
+                try:
+                    files["plot"] = result.plot(folder / "plot.png")
+                except ImportError as exc:  # the plotting extra is missing: the numbers are written, say so
+                    result.metadata["plot_skipped"] = str(exc)
+        finally:
+            result.metadata["files"] = {k: str(v) for k, v in files.items()}
+            self._whole_run_timing(result)
+            result.write_metrics(files["metrics"])
+
+    def _whole_run_timing(self, result: Result) -> None:
+        """``wall_time_s`` and ``real_time_factor`` of the whole run (loading and writing included)
+        when the caller said when it began (``output.started``)."""
+        if self.output.started is None:
+            return
+        meta = result.metadata
+        wall = _time.perf_counter() - self.output.started
+        result.metrics.update(timing_metrics(meta.get("simulated_s", 0.0), wall, meta.get("loop_wall_time_s", 0.0)))
+        meta["wall_time_s"] = wall
 
     def _start_and_step(self) -> float:
         """Instantiate, initialize, record row 0, start the observers and step every tick;

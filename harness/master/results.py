@@ -11,7 +11,7 @@ import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -125,6 +125,36 @@ class Result:
     def write_metrics(self, path: Path) -> None:
         """Write ``metrics.json``."""
         path.write_text(json.dumps(json_safe(self.metrics), indent=2) + "\n")
+
+
+@dataclass(frozen=True)
+class RunOutput:
+    """What one run's result carries beyond the master's account, and where its files go.
+
+    Attributes
+    ----------
+    folder : Path or None
+        ``--out``: ``results.csv`` streamed there while the run proceeds, ``metrics.json`` written
+        once at its end and, with ``plot``, ``plot.png``; None writes nothing.
+    variables : sequence of str or None
+        Columns of results.csv (names or patterns, :func:`select_columns`); None: every one.
+    plot : bool
+        Also write ``plot.png`` (with ``plotter``).
+    metadata : mapping
+        Added to the result's metadata (what the run's figure reads: the parameter set, the swaps...).
+    plotter : callable or None
+        The result's :attr:`Result.plotter`.
+    started : float or None
+        :func:`time.perf_counter` when the whole run began (loading included): ``wall_time_s`` and
+        ``real_time_factor`` are then the whole run's; None: the execution's own.
+    """
+
+    folder: Path | None = None
+    variables: Sequence[str] | None = None
+    plot: bool = False
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+    plotter: Plotter | None = None
+    started: float | None = None
 
 
 def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> list[str]:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import ctypes
 import math
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError
 from ipcosim.harness.master import integers
@@ -559,6 +559,55 @@ def fmu_slave(instance: Instance, unzip_dir: Path, logging_on: bool = True, libr
     :class:`FMU2Slave` (the arguments are :class:`FMUSlave`'s)."""
     cls = FMU3Slave if instance.model.fmi_version.startswith("3") else FMU2Slave
     return cls(instance, unzip_dir, logging_on=logging_on, library=library)
+
+
+class LoadedSlaves:
+    """The slaves of many runs of one system, one run at a time: each component's FMU library loaded
+    on first use and kept for the following runs (:func:`load_library`) and, with ``reuse``, each
+    component's instance too, reset between runs instead of instantiated anew (:attr:`FMUSlave.reusable`).
+    Called with an instance, it is an :class:`~ipcosim.harness.master.execution.Execution`'s slave factory.
+
+    Parameters
+    ----------
+    unzip_dirs : mapping of component name to Path
+        The extracted FMUs (read when a component's slave is first asked for).
+    reuse : bool
+        Keep each component's instance between runs.
+    """
+
+    def __init__(self, unzip_dirs: Mapping[str, Path], reuse: bool = False) -> None:
+        self.unzip_dirs = unzip_dirs
+        self.reuse = reuse
+        self.libraries: dict[str, Any] = {}  # component -> its loaded library
+        self.kept: dict[str, FMUSlave] = {}  # component -> its instance between runs (reuse)
+
+    def __call__(self, instance: Instance) -> FMUSlave:
+        kept = self.kept.get(instance.name)
+        if kept is not None and kept.state == "parked":
+            return kept
+        lib = self.libraries.get(instance.name)
+        if lib is None:
+            lib = self.libraries[instance.name] = load_library(instance, self.unzip_dirs[instance.name])
+        slave = fmu_slave(instance, self.unzip_dirs[instance.name], library=lib)
+        if self.reuse:
+            slave.reusable = True
+            self.kept[instance.name] = slave
+        return slave
+
+    def close(self) -> None:
+        """Free the kept instances and unload the libraries (best effort: every one is tried)."""
+        for slave in self.kept.values():
+            try:
+                slave.release()
+            except Exception:  # noqa: BLE001 -- best effort, as unloading below
+                pass
+        self.kept.clear()
+        for lib in self.libraries.values():
+            try:
+                lib.freeLibrary()
+            except Exception:  # noqa: BLE001 -- best effort
+                pass
+        self.libraries.clear()
 
 
 def load_library(instance: Instance, unzip_dir: Path) -> Any:

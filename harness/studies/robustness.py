@@ -271,10 +271,14 @@ def sweep_study(scenario: str, vary: Sequence[str], *, set: Mapping[str, float] 
 
     folder = claim_output(Path(out) if out else default_out(scenario), "sweep")  # before any work
     set = {**(_bench(scenario, realism) if realism else {}), **(set or {})}
+    parsed: list[tuple[Any, Any]] = []  # (spec, its --vary parsed): the last is the spec chosen
+
+    def check(candidate: Any) -> None:
+        parsed.append((candidate, parse_all(vary, candidate.parameters)))
+
     spec, flavour = study_spec(scenario, fmus, names=[*set, *(v.partition("=")[0].strip() for v in vary)],
-                               check=lambda s: parse_all(vary, s.parameters), stop_time=stop_time, step=step,
-                               set=set, parameter_set=parameter_set)
-    varies = parse_all(vary, spec.parameters)
+                               check=check, stop_time=stop_time, step=step, set=set, parameter_set=parameter_set)
+    varies = next(v for s, v in reversed(parsed) if s is spec)  # --vary parsed once, against the spec that runs
     cases = make_cases(varies, spec.parameters, samples=samples, seed=seed)
     if fresh and folder.exists():
         discard_results(folder)

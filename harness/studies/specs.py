@@ -1,6 +1,7 @@
 """Turn a scenario name or path (plus run settings) into a run specification."""
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
@@ -104,18 +105,19 @@ def study_spec(scenario: str, fmus: str = "auto", names: Iterable[str] = (),
     """
     if fmus not in STUDY_FLAVOURS:
         raise UsageError(f"--fmus {fmus}: expected one of {', '.join(STUDY_FLAVOURS)}")
+    python = functools.lru_cache(maxsize=1)(lambda: spec_for(scenario, fmus="python", **kwargs))  # loaded once
     if fmus != "auto" or scenario in PURE_SCENARIOS:
-        spec = spec_for(scenario, fmus="python" if fmus == "auto" else fmus, **kwargs)
+        spec = python() if fmus != "native" else spec_for(scenario, fmus="native", **kwargs)
         if fmus == "native" and scenario not in PURE_SCENARIOS:
-            _check_native_names(scenario, spec, list(names), kwargs)
+            _check_native_names(spec, list(names), python)
         if check is not None:
             check(spec)
         if scenario in PURE_SCENARIOS:
             return spec, "no FMUs (a pure-Python stand-in)"
         return spec, f"{fmus} FMUs"
-    reason = _native_refusal(scenario, list(names), check, kwargs)
+    reason = _native_refusal(scenario, list(names), check, kwargs, python)
     if isinstance(reason, str):
-        spec = spec_for(scenario, fmus="python", **kwargs)
+        spec = python()
         if check is not None:
             check(spec)
         return spec, f"python FMUs (native flavour not used: {reason})"
@@ -154,7 +156,7 @@ def _python_only(native: RunSpec, component: str) -> tuple[str, ...]:
     return tuple(info.get("python_only", ())) if info else ()
 
 
-def _check_native_names(scenario: str, spec: RunSpec, names: list[str], kwargs: Mapping[str, Any]) -> None:
+def _check_native_names(spec: RunSpec, names: list[str], python_spec: Callable[[], RunSpec]) -> None:
     """UsageError for the first of ``names`` the native ``spec`` lacks but the Python flavour has, or whose closest
     name is the Python flavour's only (any other name neither has is left to the study's own check, which
     answers with the closest names)."""
@@ -162,7 +164,7 @@ def _check_native_names(scenario: str, spec: RunSpec, names: list[str], kwargs: 
 
     missing = [n for n in names if n not in spec.parameters]
     if missing:
-        python = _python_parameters(scenario, kwargs)
+        python = _python_parameters(python_spec)
         if python is None:
             return   # no Python flavour to compare with: the study's own check answers
         both = set(python) | set(spec.parameters)
@@ -176,19 +178,20 @@ def _check_native_names(scenario: str, spec: RunSpec, names: list[str], kwargs: 
                                  f"({', '.join(map(repr, only))}: of the Python FMUs only; --fmus python runs them)")
 
 
-def _python_parameters(scenario: str, kwargs: Mapping[str, Any]) -> Mapping[str, Any] | None:
+def _python_parameters(python_spec: Callable[[], RunSpec]) -> Mapping[str, Any] | None:
     """The parameters of the scenario's Python-flavour spec, or None when it cannot be made."""
     from ipcosim.errors import IpcosimError
 
     try:
-        return spec_for(scenario, fmus="python", **kwargs).parameters
+        return python_spec().parameters
     except (IpcosimError, OSError):
         return None
 
 
 def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], object] | None,
-                    kwargs: Mapping[str, Any]) -> RunSpec | str:
-    """The native spec of a study, or why the native flavour cannot run it (one line)."""
+                    kwargs: Mapping[str, Any], python_spec: Callable[[], RunSpec]) -> RunSpec | str:
+    """The native spec of a study, or why the native flavour cannot run it (one line); ``python_spec``
+    gives the Python flavour's (made at most once)."""
     from ipcosim.errors import IpcosimError
     from ipcosim.harness.native.models import NATIVE_INSTRUMENTS_OFF
     from ipcosim.harness.scenario.flavour import native_fmu_dir
@@ -201,7 +204,7 @@ def _native_refusal(scenario: str, names: list[str], check: Callable[[RunSpec], 
         return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     for name in names:
         if name not in spec.parameters:
-            return _not_native(name, spec, _python_parameters(scenario, kwargs))
+            return _not_native(name, spec, _python_parameters(python_spec))
         if name.partition(".")[2] in NATIVE_INSTRUMENTS_OFF:
             return f"{name} is an instrument option the native plant lacks"
     if check is not None:

@@ -61,7 +61,7 @@ def _counted_free(self):
 _wrap(engine.Prepared, "_extract", before=lambda: _kill("load"))
 _wrap(FMU2Slave, "instantiate", before=lambda: _kill("instantiate"), after=_instantiated)
 _wrap(FMU2Slave, "enter_initialization_mode", before=lambda: _kill("initialize"))
-_wrap(results.Result, "write", before=lambda: _kill("write"))
+_wrap(results.Result, "write_metrics", before=lambda: _kill("write"))
 FMUSlave.free = _counted_free
 
 
