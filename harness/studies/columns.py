@@ -26,8 +26,10 @@ from ipcosim.harness.studies.store import iter_results
 #: Values of one metric taken into memory at once (0.5 MB) to summarize them with numpy's functions;
 #: a metric of more runs is summarized from passes over its values on disk.
 IN_MEMORY_VALUES = 1 << 16
-#: Rows read or values handled at a time.
+#: Values handled at a time.
 CHUNK = 1 << 14
+#: Rows of the results file parsed at a time (about 1.5 kB each).
+ROW_BLOCK = 1024
 #: Percentiles of the summary (with the median, numpy's middle value or mean of the two middle ones).
 PERCENTILES = {"p5": 5.0, "p90": 90.0, "p95": 95.0}
 
@@ -56,9 +58,10 @@ class ResultColumns:
         The names that had a number (a finite one, or true or false) in some row.
     """
 
-    def __init__(self, path: str | os.PathLike, names: Sequence[str], chunk: int = CHUNK) -> None:
+    def __init__(self, path: str | os.PathLike, names: Sequence[str], chunk: int | None = None) -> None:
         self.names = list(dict.fromkeys(names))
-        self.chunk = chunk
+        self.chunk = chunk or CHUNK
+        block_rows = ROW_BLOCK
         self._dir = tempfile.TemporaryDirectory(prefix="ipcosim-columns-")
         self.runs = 0
         self.counts: dict[str, int] = {}
@@ -71,7 +74,7 @@ class ResultColumns:
             block: list[Any] = []
             for row in rows:
                 block.append(row)
-                if len(block) == chunk:
+                if len(block) == block_rows:
                     self._write(block, files, status_file, codes)
                     block = []
             self._write(block, files, status_file, codes)
@@ -110,7 +113,7 @@ class ResultColumns:
 
     def chunks(self, name: str, statuses: Iterable[str] | None = None) -> Iterator[np.ndarray]:
         """The finite values of column ``name`` of the runs with one of ``statuses`` (all runs: None), in
-        file order, at most ``chunk`` at a time."""
+        file order, at most ``chunk`` (default :data:`CHUNK`) at a time."""
         wanted = None if statuses is None else np.array(sorted(self._codes[s] for s in statuses if s in self._codes),
                                                         dtype=np.uint8)
         with open(self._file(name), "rb") as values, open(self._file(None), "rb") as status:

@@ -98,12 +98,13 @@ def summarize_results(path: Path, metric_names: Sequence[str], limit: int | None
 FIGURE_RUNS = 5000
 
 
-def figure_rows(path: Path, limit: int = FIGURE_RUNS, seed: int = 0) -> tuple[list[dict[str, Any]], int]:
+def figure_rows(path: Path, limit: int | None = None, seed: int = 0) -> tuple[list[dict[str, Any]], int]:
     """The rows of a results file a sweep's figures draw, and the number of rows in the file: every row when there
-    are at most ``limit``, else ``limit`` of them drawn uniformly at random (reservoir sampling, reproducible with
-    ``seed``), in file order."""
+    are at most ``limit`` (default :data:`FIGURE_RUNS`), else ``limit`` of them drawn uniformly at random
+    (reservoir sampling, reproducible with ``seed``), in file order."""
     from ipcosim.harness.studies.store import iter_results
 
+    limit = limit or FIGURE_RUNS
     rng = np.random.default_rng(seed)
     kept: list[tuple[int, dict[str, Any]]] = []
     n = 0

@@ -102,6 +102,8 @@ def _complete_lines(fh: TextIO) -> Iterator[str]:
 
 #: Rows of a results file sorted in memory at once by :func:`sort_results` (about 0.3 kB each).
 SORT_CHUNK = 4096
+#: Sorted chunks merged at once by :func:`sort_results` (each an open file with its 8 kB buffer).
+MERGE_FILES = 64
 
 
 def _row_index(line: bytes) -> int:
@@ -112,14 +114,15 @@ def _row_index(line: bytes) -> int:
         return -1
 
 
-def sort_results(path: Path, keep: Callable[[int], bool] = lambda index: True,
-                 chunk: int = SORT_CHUNK) -> None:
+def sort_results(path: Path, keep: Callable[[int], bool] = lambda index: True, chunk: int | None = None) -> None:
     """Sort a results file by run index in place, atomically, holding at most ``chunk`` rows.
 
     Each row keeps its text as written. Rows whose index ``keep`` refuses are dropped, so is a half-written
     last line; of two rows with the same index the first one stays. Chunks of ``chunk`` rows are sorted
-    in memory and merged from temporary files (a merge of many chunks in rounds of at most 64 files).
+    in memory (default :data:`SORT_CHUNK`) and merged from temporary files (a merge of many chunks in rounds of
+    at most :data:`MERGE_FILES`).
     """
+    chunk = chunk or SORT_CHUNK
     with open(path, "rb") as fh, tempfile.TemporaryDirectory(prefix="ipcosim-sort-") as tmp:
         header = fh.readline()
         if not header.endswith(b"\n"):
@@ -135,10 +138,10 @@ def sort_results(path: Path, keep: Callable[[int], bool] = lambda index: True,
             with open(spill, "wb") as out:
                 out.writelines(line for _, _, line in block)
             spills.append(spill)
-        while len(spills) > 64:  # merge in rounds: never more than 64 files open
+        while len(spills) > MERGE_FILES:  # merge in rounds: never more files open than that
             merged = Path(tmp) / f"{len(spills)}-{next(order)}.csv"
-            _merge(spills[:64], merged)
-            spills = [merged, *spills[64:]]  # the earliest rows first, as they were
+            _merge(spills[:MERGE_FILES], merged)
+            spills = [merged, *spills[MERGE_FILES:]]  # the earliest rows first, as they were
         result = path.with_suffix(".csv.tmp")
         with open(result, "wb") as out:
             out.write(header)

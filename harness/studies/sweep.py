@@ -265,12 +265,16 @@ def _close_results(done: Finished, meta: dict[str, Any], elapsed: float, path: P
         (path.parent / METADATA_FILE).write_text(json.dumps(meta, indent=2, default=repr) + "\n")
 
 
+#: Seeds of the first runs that ``metadata.json`` lists.
+RECORDED_SEEDS = 10000
+
+
 def _start_metadata(spec: RunSpec, cases: Sequence[SweepCase], extra: Mapping[str, Any] | None) -> dict[str, Any]:
     """What ``metadata.json`` records at the start: the scenario, the plan's identity, the seeds
-    (the first 10 000), package versions, the start time and ``extra``."""
+    (the first :data:`RECORDED_SEEDS`), package versions, the start time and ``extra``."""
     return {"scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan_hash(spec, cases),
             "spec": spec.describe(), "runs": len(cases),
-            "seeds": {"cases": [c.seed for c in itertools.islice(cases, 10000)]},
+            "seeds": {"cases": [c.seed for c in itertools.islice(cases, RECORDED_SEEDS)]},
             "packages": package_versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **dict(extra or {})}
 
 
