@@ -175,12 +175,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             try:
                 status = int(args.func(args) or 0)
                 signals.check()  # a signal during the last writes: report it after them
+                if status:
+                    _abandon_outputs()
                 return status
             except signals.Interrupted as exc:
+                _abandon_outputs()
                 return _interrupted(args.command, exc, console)
     except signals.Interrupted as exc:  # a signal during the report of the first one
+        _abandon_outputs()
         return _interrupted(args.command, exc, console)
     except KeyboardInterrupt:
+        _abandon_outputs()
         print("ipcosim: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader went away (`ipcosim list | head`): nothing to report
@@ -189,11 +194,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except Exception as exc:  # noqa: BLE001 -- the CLI's one-line error contract
+        _abandon_outputs()
         if args.debug:
             raise
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         print(f"ipcosim {args.command}: error: {message}", file=sys.stderr)
         return EXIT_USAGE if isinstance(exc, UsageError) else EXIT_FAILURE
+
+
+def _abandon_outputs() -> None:
+    """A command that failed or was stopped before writing anything leaves no folder of its own behind
+    (``ipcosim.harness.master.results.abandon_outputs``)."""
+    from ipcosim.harness.master.results import abandon_outputs
+
+    try:
+        abandon_outputs()
+    except OSError:
+        pass
 
 
 def _interrupted(command: str, exc: BaseException, console: bool = False) -> int:
