@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from pathlib import Path
 from typing import Sequence
 
 from ipcosim.errors import UsageError
@@ -179,11 +180,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     _abandon_outputs()
                 return status
             except signals.Interrupted as exc:
-                _abandon_outputs()
-                return _interrupted(args.command, exc, console)
+                return _interrupted(args.command, exc, console, removed=_abandon_outputs())
     except signals.Interrupted as exc:  # a signal during the report of the first one
-        _abandon_outputs()
-        return _interrupted(args.command, exc, console)
+        return _interrupted(args.command, exc, console, removed=_abandon_outputs())
     except KeyboardInterrupt:
         _abandon_outputs()
         print("ipcosim: interrupted", file=sys.stderr)
@@ -202,26 +201,31 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE if isinstance(exc, UsageError) else EXIT_FAILURE
 
 
-def _abandon_outputs() -> None:
+def _abandon_outputs() -> list[Path]:
     """A command that failed or was stopped before writing anything leaves no folder of its own behind
-    (``ipcosim.harness.master.results.abandon_outputs``)."""
+    (``ipcosim.harness.master.results.abandon_outputs``). Returns the folders removed."""
     from ipcosim.harness.master.results import abandon_outputs
 
     try:
-        abandon_outputs()
+        return abandon_outputs()
     except OSError:
-        pass
+        return []
 
 
-def _interrupted(command: str, exc: BaseException, console: bool = False) -> int:
+def _interrupted(command: str, exc: BaseException, console: bool = False, removed: Sequence[Path] = ()) -> int:
     """Report a command stopped by a signal (or its wall-clock limit) in one line: the signal and
-    what was kept; the exit status (``128 + signal number``). With ``console`` (the ``ipcosim``
-    command itself) the process leaves at once with that status (``signals.exit_now``)."""
+    what was kept (nothing, when what the command meant to keep names a folder in ``removed``, given up
+    empty); the exit status (``128 + signal number``). With ``console`` (the ``ipcosim`` command itself)
+    the process leaves at once with that status (``signals.exit_now``)."""
+    import os
+
     from ipcosim.harness.master import signals
 
     partial = getattr(exc, "result", None)
     text = partial.error if partial is not None and partial.error else getattr(exc, "message", "interrupted")
     kept = signals.kept()
+    if kept and any(str(d) in kept or os.path.relpath(d) in kept for d in removed):
+        kept = "nothing was written"
     if kept is None and partial is None:
         kept = "nothing was written"
     print(f"ipcosim {command}: error: {text}" + (f"; {kept}" if kept else ""), file=sys.stderr)

@@ -238,6 +238,11 @@ def abandon_outputs() -> list[Path]:
     return removed
 
 
+def held_outputs() -> list[Path]:
+    """The output folders this process holds."""
+    return [Path(key) for key in _held]
+
+
 def release_output(out: str | os.PathLike[str]) -> None:
     """Let another process write into ``out`` (a claim otherwise lasts until this process exits)."""
     _made.pop(os.path.abspath(out), None)
