@@ -292,8 +292,14 @@ def test_a_step_response_is_refused_before_fitting(step_run, tmp_path):
     p = cli("identify", str(step_run), "--plant", "single-mass", "--out", str(tmp_path / "id"))
     assert p.returncode != 0 and p.stdout == "" and len(p.stderr.splitlines()) == 1, p.stderr
     assert "the voltage does not excite the plant through the log" in p.stderr and "results.csv" in p.stderr
-    # nothing written, identified.ssv least of all (the folder claimed for --out holds only the claim's hidden files)
-    assert not [p.name for p in (tmp_path / "id").glob("*") if not p.name.startswith(".")]
+    # nothing written, identified.ssv least of all: the folder it made for --out is gone with its claim
+    assert not (tmp_path / "id").exists()
+    # a folder that was there stays, with what it held and nothing of the refused command's
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("mine")
+    p = cli("identify", str(step_run), "--plant", "single-mass", "--out", str(tmp_path / "mine"))
+    assert p.returncode != 0 and "does not excite" in p.stderr
+    assert sorted(q.name for q in (tmp_path / "mine").iterdir()) == ["notes.txt"]
     # the other plant kind's columns: named, with the kind to give
     p = cli("identify", str(step_run), "--plant", "double-mass")
     assert p.returncode != 0 and len(p.stderr.splitlines()) == 1

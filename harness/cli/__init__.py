@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from pathlib import Path
 from typing import Sequence
 
 from ipcosim.errors import UsageError
@@ -176,12 +177,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             try:
                 status = int(args.func(args) or 0)
                 signals.check()  # a signal during the last writes: report it after them
+                if status:
+                    _abandon_outputs()
                 return status
             except signals.Interrupted as exc:
-                return _interrupted(args.command, exc, console)
+                return _interrupted(args.command, exc, console, removed=_abandon_outputs())
     except signals.Interrupted as exc:  # a signal during the report of the first one
-        return _interrupted(args.command, exc, console)
+        return _interrupted(args.command, exc, console, removed=_abandon_outputs())
     except KeyboardInterrupt:
+        _abandon_outputs()
         print("ipcosim: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader went away (`ipcosim list | head`): nothing to report
@@ -190,6 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except Exception as exc:  # noqa: BLE001 -- the CLI's one-line error contract
+        _abandon_outputs()
         if args.debug:
             raise
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
@@ -197,15 +202,31 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE if isinstance(exc, UsageError) else EXIT_FAILURE
 
 
-def _interrupted(command: str, exc: BaseException, console: bool = False) -> int:
+def _abandon_outputs() -> list[Path]:
+    """A command that failed or was stopped before writing anything leaves no folder of its own behind
+    (``ipcosim.harness.master.results.abandon_outputs``). Returns the folders removed."""
+    from ipcosim.harness.master.results import abandon_outputs
+
+    try:
+        return abandon_outputs()
+    except OSError:
+        return []
+
+
+def _interrupted(command: str, exc: BaseException, console: bool = False, removed: Sequence[Path] = ()) -> int:
     """Report a command stopped by a signal (or its wall-clock limit) in one line: the signal and
-    what was kept; the exit status (``128 + signal number``). With ``console`` (the ``ipcosim``
-    command itself) the process leaves at once with that status (``signals.exit_now``)."""
+    what was kept (nothing, when what the command meant to keep names a folder in ``removed``, given up
+    empty); the exit status (``128 + signal number``). With ``console`` (the ``ipcosim`` command itself)
+    the process leaves at once with that status (``signals.exit_now``)."""
+    import os
+
     from ipcosim.harness.master import signals
 
     partial = getattr(exc, "result", None)
     text = partial.error if partial is not None and partial.error else getattr(exc, "message", "interrupted")
     kept = signals.kept()
+    if kept and any(str(d) in kept or os.path.relpath(d) in kept for d in removed):
+        kept = "nothing was written"
     if kept is None and partial is None:
         kept = "nothing was written"
     print(f"ipcosim {command}: error: {text}" + (f"; {kept}" if kept else ""), file=sys.stderr)

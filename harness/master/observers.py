@@ -52,50 +52,73 @@ class Observer:
 
 
 class Progress(Observer):
-    """A progress bar on ``stream`` for runs that last longer than ``delay`` seconds.
+    """The run's progress on ``stream`` for runs that last longer than ``delay`` seconds: a bar
+    redrawn in place on a terminal; elsewhere (a pipe, a log file) a plain line every ``interval``
+    seconds of wall time, the first after ``max(delay, 2 s)``, and one at the end.
 
     Parameters
     ----------
     stream : text stream
-        Where to draw (stderr by default); nothing is drawn unless it is a terminal or
-        ``force`` is set.
+        Where to write (stderr by default).
     delay : float
         Wall-clock seconds before the bar appears.
+    force : bool
+        Draw the terminal's bar whatever ``stream`` is.
+    interval : float
+        Wall-clock seconds between two lines where ``stream`` is not a terminal.
     """
 
-    def __init__(self, stream: TextIO | None = None, delay: float = 1.0, force: bool = False, width: int = 30) -> None:
+    def __init__(self, stream: TextIO | None = None, delay: float = 1.0, force: bool = False, width: int = 30,
+                 interval: float = 5.0) -> None:
         self.stream = stream if stream is not None else sys.stderr
         self.delay = delay
         self.width = width
-        self.enabled = force or bool(getattr(self.stream, "isatty", lambda: False)())
+        self.tty = force or bool(getattr(self.stream, "isatty", lambda: False)())
+        self.interval = interval
         self.shown = False
         self._every = 1
         self._t0 = 0.0
         self._total = 1
+        self._next_line = 0.0
 
     def start(self, execution: "Execution") -> None:
         self._t0 = time.perf_counter()
         self._total = execution.n_ticks
         self._every = max(1, execution.n_ticks // 200)
+        self._next_line = max(self.delay, 2.0)
 
     def next_tick(self, n: int) -> int | None:
-        if not self.enabled:
-            return None
         return (n // self._every + 1) * self._every
 
     def step(self, execution: "Execution", n: int) -> None:
         elapsed = time.perf_counter() - self._t0
         if elapsed < self.delay:
             return
-        self.shown = True
         frac = n / self._total
-        filled = int(self.width * frac)
         eta = elapsed / frac - elapsed if frac > 0 else 0.0
+        if not self.tty:
+            if elapsed >= self._next_line:
+                self.shown = True
+                self._next_line = elapsed + self.interval
+                self._line(execution, n, elapsed, eta)
+            return
+        self.shown = True
+        filled = int(self.width * frac)
         self.stream.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {100 * frac:5.1f}%  "
                           f"t = {execution.time_of(n):.3f} s  ETA {eta:5.1f} s")
         self.stream.flush()
 
+    def _line(self, execution: "Execution", n: int, elapsed: float, eta: float) -> None:
+        """One plain line: how far the run is, in simulated and wall time."""
+        self.stream.write(f"run: {100 * n / self._total:5.1f} %  t = {execution.time_of(n):.3f} s of "
+                          f"{execution.time_of(self._total):.3f} s, {elapsed:.1f} s elapsed, ETA {eta:.1f} s\n")
+        self.stream.flush()
+
     def finish(self, execution: "Execution", error: BaseException | None) -> None:
+        if self.shown and not self.tty:
+            if error is None:
+                self._line(execution, self._total, time.perf_counter() - self._t0, 0.0)
+            return
         if self.shown:
             self.stream.write("\n")
             self.stream.flush()

@@ -9,6 +9,7 @@ import json
 import math
 import os
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
@@ -181,6 +182,8 @@ COMMAND_FILE = ".ipcosim-kind"
 #: Held (``flock``) by the one process writing into an output folder.
 LOCK_FILE = ".ipcosim-lock"
 _held: dict[str, Any] = {}  # folder -> open lock file, for the life of the process
+#: folder -> (the folders and claim files the claim created, the names in the folder before it, its time)
+_made: dict[str, tuple[list[Path], list[str], set[str], float]] = {}
 
 
 def claim_output(out: str | os.PathLike[str], command: str, what: str = "--out") -> Path:
@@ -200,6 +203,13 @@ def claim_output(out: str | os.PathLike[str], command: str, what: str = "--out")
         return out
     if out.exists() and not out.is_dir():
         raise OutputFolderError(f"{what} {out}: is a file, not a folder; give a folder")
+    new_dirs = [d for d in (out, *out.absolute().parents) if not d.exists()]  # innermost first
+    new_files = [name for name in (LOCK_FILE, COMMAND_FILE) if not (out / name).exists()]
+    claimed_at = time.time()
+    try:
+        before = set(os.listdir(out)) if out.is_dir() else set()
+    except OSError:
+        before = set()
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = tempfile.NamedTemporaryFile(dir=out, prefix=".ipcosim-write-check-", delete=True)
@@ -220,12 +230,52 @@ def claim_output(out: str | os.PathLike[str], command: str, what: str = "--out")
     lock.write(str(os.getpid()))
     lock.flush()
     _held[key] = lock
+    _made[key] = (new_dirs, new_files, before, claimed_at)
     (out / COMMAND_FILE).write_text(command + "\n")
     return out
 
 
+def abandon_outputs() -> list[Path]:
+    """Undo the claims of this process on folders it wrote nothing into (a command refused or stopped before
+    writing: no name in the folder but those there before the claim and the claim's own, none of those changed
+    since): the claim's files it created are removed, then the folders it created, innermost first, each only
+    while empty. A folder that was there before stays, and so does everything else in it. Returns the folders
+    removed."""
+    removed: list[Path] = []
+    for key in list(_held):
+        folder = Path(key)
+        new_dirs, new_files, before, claimed_at = _made.get(key, ([], [], set(), 0.0))
+        claim = {LOCK_FILE, COMMAND_FILE}
+        try:
+            names = set(os.listdir(folder)) - claim
+            untouched = names <= before and all((folder / n).lstat().st_mtime < claimed_at for n in names)
+        except OSError:
+            continue
+        if not untouched:
+            continue  # the command wrote something: its claim stays until the process ends
+        for name in new_files:
+            try:
+                (folder / name).unlink()
+            except OSError:
+                pass
+        release_output(folder)
+        for d in new_dirs:
+            try:
+                d.rmdir()
+            except OSError:
+                break  # not empty (or gone): it, and the folders above it, stay
+            removed.append(d)
+    return removed
+
+
+def held_outputs() -> list[Path]:
+    """The output folders this process holds."""
+    return [Path(key) for key in _held]
+
+
 def release_output(out: str | os.PathLike[str]) -> None:
     """Let another process write into ``out`` (a claim otherwise lasts until this process exits)."""
+    _made.pop(os.path.abspath(out), None)
     lock = _held.pop(os.path.abspath(out), None)
     if lock is not None:
         lock.close()

@@ -31,8 +31,10 @@ def case_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1, dtype=np.uint32)[0])
 
 
-#: The most runs a sweep may have: its cases are made lazily (:class:`CaseStream`), but its rows
-#: are held in memory (about 1.4 kB a run), so a sweep is refused above this before anything is allocated.
+#: The most runs a sweep may have, refused above this before anything is made: its memory does not
+#: grow with its size (cases made lazily by :class:`CaseStream`, rows kept on disk only), but its disk
+#: and time do (about 0.5 kB of ``results.csv`` a run; the plan's hash goes over every run before the
+#: first starts), so a size mistyped by a few orders of magnitude is caught.
 MAX_RUNS = 100_000
 
 

@@ -62,28 +62,62 @@ def summarize(rows: Sequence[Mapping[str, Any]], metric_names: Sequence[str]) ->
     dict
         ``runs``, ``counts`` (per status), ``success_rate``, ``success_ci95`` and ``metrics``:
         per metric ``n`` (runs with a value), ``mean``, ``std``, ``min``, ``p5``, ``median``,
-        ``p90``, ``p95``, ``max``.
+        ``p90``, ``p95``, ``max`` (``ipcosim.harness.studies.columns.array_distribution``).
     """
-    n = len(rows)
+    from ipcosim.harness.studies.columns import array_distribution
+
     counts: dict[str, int] = {}
     for r in rows:
         counts[r["status"]] = counts.get(r["status"], 0) + 1
-    ok = counts.get("ok", 0)
     completed = [r for r in rows if r["status"] != "error"]
-    metrics: dict[str, dict[str, float]] = {}
-    for name in metric_names:
-        x = _numeric(completed, name)
-        if x.size == 0:
-            metrics[name] = {"n": 0}
-            continue
-        metrics[name] = {"n": int(x.size), "mean": float(np.mean(x)), "std": float(np.std(x)),
-                         "min": float(np.min(x)), "p5": float(np.percentile(x, 5)),
-                         "median": float(np.median(x)), "p90": float(np.percentile(x, 90)),
-                         "p95": float(np.percentile(x, 95)),
-                         "max": float(np.max(x))}
+    return _summary(len(rows), counts, {name: array_distribution(_numeric(completed, name)) for name in metric_names})
+
+
+def _summary(n: int, counts: dict[str, int], metrics: dict[str, dict[str, float]]) -> dict[str, Any]:
+    ok = counts.get("ok", 0)
     lo, hi = wilson_interval(ok, n)
     return {"runs": n, "counts": counts, "success_rate": ok / n if n else math.nan,
             "success_ci95": [lo, hi], "metrics": metrics}
+
+
+def summarize_results(path: Path, metric_names: Sequence[str], limit: int | None = None) -> dict[str, Any]:
+    """:func:`summarize` of the rows of a results file, read back in memory independent of their number
+    (``ipcosim.harness.studies.columns``: numpy's functions on a metric's values when there are at most
+    ``limit``, default ``columns.IN_MEMORY_VALUES``, else the same numbers from passes over them on disk)."""
+    from ipcosim.harness.studies import columns
+
+    limit = columns.IN_MEMORY_VALUES if limit is None else limit
+    with columns.ResultColumns(path, metric_names) as cols:
+        completed = [s for s in cols.counts if s != "error"]
+        metrics = {name: columns.distribution(cols.source(name, completed), limit) for name in metric_names}
+        return _summary(cols.runs, dict(cols.counts), metrics)
+
+
+#: Runs drawn in a sweep's figures: every run of a sweep up to this size, else a random sample of this many
+#: (the summary's numbers are always of every run).
+FIGURE_RUNS = 5000
+
+
+def figure_rows(path: Path, limit: int | None = None, seed: int = 0) -> tuple[list[dict[str, Any]], int]:
+    """The rows of a results file a sweep's figures draw, and the number of rows in the file: every row when there
+    are at most ``limit`` (default :data:`FIGURE_RUNS`), else ``limit`` of them drawn uniformly at random
+    (reservoir sampling, reproducible with ``seed``), in file order."""
+    from ipcosim.harness.studies.store import iter_results
+
+    limit = limit or FIGURE_RUNS
+    rng = np.random.default_rng(seed)
+    kept: list[tuple[int, dict[str, Any]]] = []
+    n = 0
+    _, rows = iter_results(path)
+    for n, row in enumerate(rows, start=1):
+        if len(kept) < limit:
+            kept.append((n, row))
+        else:
+            j = int(rng.integers(n))
+            if j < limit:
+                kept[j] = (n, row)
+    kept.sort(key=lambda item: item[0])
+    return [row for _, row in kept], n
 
 
 def fmt(value: Any, digits: int = 4) -> str:
@@ -120,7 +154,7 @@ def summary_markdown(summary: Mapping[str, Any], title: str = "Robustness") -> s
     return "\n".join(lines) + "\n"
 
 
-def write_summary(rows: Sequence[Mapping[str, Any]], spec: Any, varied: Sequence[str], out: Path,
+def write_summary(rows: Sequence[Mapping[str, Any]] | Path, spec: Any, varied: Sequence[str], out: Path,
                   extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Write a robustness sweep's ``summary.json``, ``summary.md`` and ``figures/`` (the metric against each
     varied parameter, then every metric's distribution) under ``out``; returns the summary
@@ -128,8 +162,9 @@ def write_summary(rows: Sequence[Mapping[str, Any]], spec: Any, varied: Sequence
 
     Parameters
     ----------
-    rows : sequence of mapping
-        The sweep's rows.
+    rows : sequence of mapping, or Path
+        The sweep's rows, or its results file (read back in memory independent of its size:
+        :func:`summarize_results`, and the figures draw :func:`figure_rows`).
     spec : RunSpec
         The scenario that ran (its ``name`` and ``metric_names``).
     varied : sequence of str
@@ -141,17 +176,25 @@ def write_summary(rows: Sequence[Mapping[str, Any]], spec: Any, varied: Sequence
     """
     import json
 
-    summary = summarize(rows, spec.metric_names)
+    if isinstance(rows, Path):
+        summary = summarize_results(rows, spec.metric_names)
+        drawn, total = figure_rows(rows)
+    else:
+        summary = summarize(rows, spec.metric_names)
+        drawn, total = list(rows), len(rows)
     summary.update({"scenario": spec.name, **(extra or {})})
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     md = summary_markdown(summary, title=f"Robustness of {spec.name}")
     from ipcosim.harness.extras import optional_figure
 
-    figures = optional_figure(lambda: plot_distributions(rows, spec.metric_names, out / "figures", title=spec.name),
+    sample = f" (a random {len(drawn)} of {total} runs)" if len(drawn) < total else ""
+    figures = optional_figure(lambda: plot_distributions(drawn, spec.metric_names, out / "figures",
+                                                         title=spec.name + sample),
                               "the sweep's figures") or []
     metric = "itae_position" if "itae_position" in spec.metric_names else spec.metric_names[0]
-    by_param = optional_figure(lambda: plot_parameters(rows, list(varied), metric, out / "figures",
-                                                       title=f"{spec.name}: {metric} against each varied parameter"),
+    by_param = optional_figure(lambda: plot_parameters(drawn, list(varied), metric, out / "figures",
+                                                       title=f"{spec.name}: {metric} against each varied "
+                                                             f"parameter{sample}"),
                                "the sweep's figures")
     if by_param is not None:
         figures.insert(0, by_param)
@@ -227,7 +270,8 @@ class SweepStudy:
 
     def write(self, result: Any) -> dict[str, Any]:
         """The summary, its Markdown and its figures (:func:`write_summary`); returns the summary."""
-        return write_summary(result.rows, self.spec, [v.name for v in self.varies], self.out,
+        return write_summary(result.path if result.path is not None else result.rows, self.spec,
+                             [v.name for v in self.varies], self.out,
                              {"vary": self.metadata["vary"], "seed": self.metadata["seed"]})
 
 

@@ -14,8 +14,13 @@ Results (:mod:`ipcosim.harness.studies.store`)
     run time), appended to ``DIR/results.csv`` as soon as the run finishes and flushed, so an
     interrupted sweep keeps every finished run. Running the same sweep into the same folder
     again resumes: finished runs are read back and not redone. When the sweep completes, the
-    file is rewritten sorted by run index. ``DIR/metadata.json`` holds the scenario hash,
+    file is sorted by run index. ``DIR/metadata.json`` holds the scenario hash,
     variations, seeds, executor and package versions.
+
+Memory
+    A sweep into a folder holds none of its rows: a bit per run says which are finished, and the counts
+    per status and the first error are kept as the rows pass (:class:`Finished`); the rows are read back
+    from the file when asked for (``SweepResult.rows``). A sweep without a folder keeps its rows in memory.
 
 Failures
     A run that raises (FMU error, bad parameter value) becomes a row with status ``error``
@@ -50,8 +55,10 @@ from ipcosim.harness.studies.store import (
     TAIL_COLUMNS,
     ResultsWriter,
     flatten,
+    iter_results,
     package_versions,
     read_results,
+    sort_results,
 )
 
 __all__ = ["SweepResult", "SweepMismatchError", "run_sweep", "columns_for", "plan_hash"]
@@ -61,14 +68,42 @@ class SweepMismatchError(IpcosimError, ValueError):
     """The output folder holds results of a different sweep."""
 
 
+class Finished:
+    """The finished runs of a sweep, in memory independent of its size: which ones (a bit per run number
+    for a :class:`CaseStream`, else a set of the indices), how many of each status, the error of the
+    lowest-numbered failed run and, with ``keep_rows``, the rows themselves."""
 
+    def __init__(self, cases: Sequence[SweepCase], keep_rows: bool) -> None:
+        self._bits = bytearray((len(cases) + 7) // 8) if isinstance(cases, CaseStream) else None
+        self._set: set[int] = set()
+        self.count = 0
+        self.counts = {s: 0 for s in STATUSES}
+        self.first_error: tuple[int, str] | None = None
+        self.rows: dict[int, dict[str, Any]] | None = {} if keep_rows else None
 
+    def __contains__(self, index: int) -> bool:
+        if self._bits is not None:
+            return 0 <= index < 8 * len(self._bits) and bool(self._bits[index >> 3] & (1 << (index & 7)))
+        return index in self._set
 
+    def __len__(self) -> int:
+        return self.count
 
-
-
-
-
+    def add(self, flat: Mapping[str, Any]) -> None:
+        """Count a finished run's flat row (once per index)."""
+        index, status = flat["index"], flat["status"]
+        if index in self:
+            return
+        if self._bits is not None:
+            self._bits[index >> 3] |= 1 << (index & 7)
+        else:
+            self._set.add(index)
+        self.count += 1
+        self.counts[status] = self.counts.get(status, 0) + 1
+        if status == "error" and (self.first_error is None or index < self.first_error[0]):
+            self.first_error = (index, str(flat.get("error") or ""))
+        if self.rows is not None:
+            self.rows[index] = dict(flat)
 
 
 @dataclass
@@ -77,8 +112,6 @@ class SweepResult:
 
     Attributes
     ----------
-    rows : list of dict
-        One flat row per run (``flatten``), sorted by index.
     columns : list of str
         Column order of the results file.
     metadata : dict
@@ -89,27 +122,47 @@ class SweepResult:
         Runs read back from an earlier, interrupted sweep.
     elapsed_s : float
         Wall time of this call.
+    counts : dict
+        Runs per status.
+    first_error : str or None
+        The error message of the lowest-numbered failed run.
+    held : list of dict or None
+        The rows of an in-memory sweep (None: they are in ``path``).
     """
 
-    rows: list[dict[str, Any]]
     columns: list[str]
     metadata: dict[str, Any]
     path: Path | None = None
     resumed: int = 0
     elapsed_s: float = 0.0
     counts: dict[str, int] = field(default_factory=dict)
+    first_error: str | None = None
+    held: list[dict[str, Any]] | None = None
+
+    @property
+    def rows(self) -> list[dict[str, Any]]:
+        """One flat row per run (``flatten``), sorted by index: read from ``path`` when the sweep wrote one
+        (a list of every row: for a large sweep, read the file a row at a time with ``store.iter_results``)."""
+        if self.held is not None:
+            return self.held
+        return read_results(self.path)[1] if self.path is not None else []
+
+    @property
+    def runs(self) -> int:
+        """Number of runs with a row."""
+        return sum(self.counts.values())
 
     def failure(self) -> str | None:
         """The error when every run failed (None otherwise: some ran, or there were none)."""
-        errors = [r for r in self.rows if r["status"] == "error"]
-        if self.rows and len(errors) == len(self.rows):
-            return f"all {len(errors)} runs failed; first error: {errors[0]['error']}"
+        errors = self.counts.get("error", 0)
+        if errors and errors == self.runs:
+            return f"all {errors} runs failed; first error: {self.first_error}"
         return None
 
     @property
     def success_rate(self) -> float:
         """Fraction of runs with status ``ok``."""
-        return sum(1 for r in self.rows if r["status"] == "ok") / len(self.rows) if self.rows else math.nan
+        return self.counts.get("ok", 0) / self.runs if self.runs else math.nan
 
 
 def columns_for(spec: RunSpec, cases: Sequence[SweepCase]) -> list[str]:
@@ -191,47 +244,45 @@ def run_sweep(spec: RunSpec, cases: Sequence[SweepCase], *, out: str | os.PathLi
     columns = columns_for(spec, cases)
     meta = _start_metadata(spec, cases, extra_metadata)
     path = Path(out) / RESULTS_FILE if out is not None else None
-    done, writer = (_open_results(path, meta, columns, indices if resume else None) if path is not None
-                    else ({}, None))
+    done = Finished(cases, keep_rows=path is None)
+    writer = _open_results(path, meta, columns, done, indices if resume else None) if path is not None else None
     resumed = len(done)
     _run_missing(spec, cases, done, columns, meta, writer, executor=executor, workers=workers,
                  scheduler=scheduler, progress=progress)
+    _close_results(done, meta, time.monotonic() - t_start, path)
+    return SweepResult(columns=columns, metadata=meta, path=path, resumed=resumed, elapsed_s=meta["elapsed_s"],
+                       counts=dict(done.counts), first_error=done.first_error[1] if done.first_error else None,
+                       held=sorted(done.rows.values(), key=lambda r: r["index"]) if done.rows is not None else None)
 
-    rows = sorted(done.values(), key=lambda r: r["index"])
-    counts = _close_results(rows, meta, time.monotonic() - t_start, writer, path)
-    return SweepResult(rows=rows, columns=columns, metadata=meta, path=path, resumed=resumed,
-                       elapsed_s=meta["elapsed_s"], counts=counts)
 
-
-def _close_results(rows: list[dict[str, Any]], meta: dict[str, Any], elapsed: float,
-                   writer: ResultsWriter | None, path: Path | None) -> dict[str, int]:
-    """Count the rows by status into ``meta`` (with the end time and ``elapsed`` [s]); with a
-    results file, rewrite it sorted by case and write the final ``metadata.json``. Returns the counts."""
-    counts = {s: 0 for s in STATUSES}
-    for r in rows:
-        counts[r["status"]] = counts.get(r["status"], 0) + 1
-    meta.update({"finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "elapsed_s": elapsed, "counts": counts,
-                 "success_rate": counts.get("ok", 0) / len(rows) if rows else None})
-    if writer is not None and path is not None:
-        writer.rewrite_sorted(rows)
+def _close_results(done: Finished, meta: dict[str, Any], elapsed: float, path: Path | None) -> None:
+    """Record the counts per status in ``meta`` (with the end time and ``elapsed`` [s]); with a
+    results file, sort it by case (the finished runs' rows only) and write the final ``metadata.json``."""
+    meta.update({"finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "elapsed_s": elapsed, "counts": dict(done.counts),
+                 "success_rate": done.counts.get("ok", 0) / len(done) if len(done) else None})
+    if path is not None:
+        sort_results(path, keep=done.__contains__)
         (path.parent / METADATA_FILE).write_text(json.dumps(meta, indent=2, default=repr) + "\n")
-    return counts
+
+
+#: Seeds of the first runs that ``metadata.json`` lists.
+RECORDED_SEEDS = 10000
 
 
 def _start_metadata(spec: RunSpec, cases: Sequence[SweepCase], extra: Mapping[str, Any] | None) -> dict[str, Any]:
     """What ``metadata.json`` records at the start: the scenario, the plan's identity, the seeds
-    (the first 10 000), package versions, the start time and ``extra``."""
+    (the first :data:`RECORDED_SEEDS`), package versions, the start time and ``extra``."""
     return {"scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan_hash(spec, cases),
             "spec": spec.describe(), "runs": len(cases),
-            "seeds": {"cases": [c.seed for c in itertools.islice(cases, 10000)]},
+            "seeds": {"cases": [c.seed for c in itertools.islice(cases, RECORDED_SEEDS)]},
             "packages": package_versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **dict(extra or {})}
 
 
-def _open_results(path: Path, meta: dict[str, Any], columns: list[str],
-                  wanted: range | set[int] | None) -> tuple[dict[int, dict[str, Any]], ResultsWriter]:
+def _open_results(path: Path, meta: dict[str, Any], columns: list[str], done: Finished,
+                  wanted: range | set[int] | None) -> ResultsWriter:
     """Open a sweep's ``results.csv`` for appending and write its ``metadata.json``; with
-    ``wanted`` (the case indices; None: start afresh), the rows of those cases an earlier,
-    interrupted run of the same sweep finished, by index (recorded as ``resumed_runs``).
+    ``wanted`` (the case indices; None: start afresh), count into ``done`` the rows of those cases an
+    earlier, interrupted run of the same sweep finished, read a row at a time (recorded as ``resumed_runs``).
 
     Raises
     ------
@@ -240,7 +291,6 @@ def _open_results(path: Path, meta: dict[str, Any], columns: list[str],
     """
     claim_output(path.parent, "sweep")
     meta_path = path.parent / METADATA_FILE
-    done: dict[int, dict[str, Any]] = {}
     existing = wanted is not None and path.exists() and path.stat().st_size > 0
     if existing:
         old_meta: dict[str, Any] = {}
@@ -249,20 +299,23 @@ def _open_results(path: Path, meta: dict[str, Any], columns: list[str],
                 old_meta = json.loads(meta_path.read_text())
             except json.JSONDecodeError:
                 old_meta = {}
-        old_columns, old_rows = read_results(path)
+        old_columns, old_rows = iter_results(path)
         if old_meta.get("plan_hash") != meta["plan_hash"] or old_columns != columns:
+            old_rows.close()
             raise SweepMismatchError(
                 f"{path} holds results of a different sweep (scenario, settings, --vary, --samples or "
                 f"--seed differ); choose another --out or start afresh with --fresh")
-        done = {r["index"]: r for r in old_rows if r["index"] in wanted}
+        for row in old_rows:
+            if row["index"] in wanted:
+                done.add(row)
         meta["resumed_runs"] = len(done)
     writer = ResultsWriter(path, columns)
     writer.open(existing=existing)
     meta_path.write_text(json.dumps(meta, indent=2, default=repr) + "\n")
-    return done, writer
+    return writer
 
 
-def _run_missing(spec: RunSpec, cases: Sequence[SweepCase], done: dict[int, dict[str, Any]], columns: list[str],
+def _run_missing(spec: RunSpec, cases: Sequence[SweepCase], done: Finished, columns: list[str],
                  meta: dict[str, Any], writer: ResultsWriter | None, *, executor: Executor | None,
                  workers: int | None, scheduler: Any, progress: bool | TextIO) -> None:
     """Run the cases not in ``done`` on ``executor`` (or one opened from ``workers`` /
@@ -272,8 +325,7 @@ def _run_missing(spec: RunSpec, cases: Sequence[SweepCase], done: dict[int, dict
     own_executor = executor is None
     bar = SweepProgress(len(cases), done=len(done), enabled=bool(progress),
                    stream=progress if hasattr(progress, "write") else None)
-    for row in done.values():
-        bar.counts[row["status"]] = bar.counts.get(row["status"], 0) + 1
+    bar.counts.update({s: n for s, n in done.counts.items() if n})
     bar.show()
     try:
         if len(cases) > len(done):
@@ -283,7 +335,7 @@ def _run_missing(spec: RunSpec, cases: Sequence[SweepCase], done: dict[int, dict
             for row in executor.run(spec, todo):
                 flat = flatten(row)
                 flat = {**{c: flat.get(c) for c in columns}, **flat}
-                done[flat["index"]] = flat
+                done.add(flat)
                 if writer is not None:
                     writer.append(flat)
                 bar.update(flat["status"])
