@@ -43,11 +43,13 @@ def test_a_short_run_in_a_pipe_writes_no_line() -> None:
 
 @pytest.mark.integration
 def test_the_run_command_with_stderr_piped_reports_progress_in_lines_and_quiet_silences_it(tmp_path) -> None:
-    cmd = [sys.executable, "-m", "ipcosim.harness.cli", "run", "single-mass-lqr", "--stop-time", "40"]
+    # paced to wall time, so the run lasts its 3 s however fast the machine (a loaded one may exceed the
+    # overrun budget: status 3, still a finished run with its progress)
+    cmd = [sys.executable, "-m", "ipcosim.harness.cli", "run", "single-mass-lqr", "--stop-time", "3", "--realtime"]
     loud = subprocess.run([*cmd, "--out", str(tmp_path / "a")], capture_output=True, text=True, timeout=300)
-    assert loud.returncode == 0, loud.stderr
+    assert loud.returncode in (0, 3), loud.stderr
     progress = [line for line in loud.stderr.splitlines() if line.startswith("run: ")]
     assert len(progress) >= 2 and "\r" not in loud.stderr, loud.stderr  # one during the run (>= 2 s), one at its end
-    assert progress[-1].startswith("run: 100.0 %  t = 40.000 s of 40.000 s")
+    assert progress[-1].startswith("run: 100.0 %  t = 3.000 s of 3.000 s")
     quiet = subprocess.run([*cmd, "--out", str(tmp_path / "b"), "--quiet"], capture_output=True, text=True, timeout=300)
-    assert quiet.returncode == 0 and quiet.stderr == "", quiet.stderr
+    assert quiet.returncode in (0, 3) and "run: " not in quiet.stderr, quiet.stderr
