@@ -235,6 +235,11 @@ LAB_LQG: dict[str, dict[str, float]] = {
     "double-mass": {"friction_velocity": 2e-3, "friction_breakaway_gain": 1.0},
 }
 
+#: The double mass's ``lab-soft`` set: the ``lab`` set with the voltage weight R 20 times the ``tuned`` one's.
+#: The softer regulator kicks the motor cart less at each pendulum count edge, and the friction cycle it
+#: leaves on the lab bench with every spread is smaller (docs/controllers.md, "Shrinking the cycle").
+LAB_SOFT_LQG: dict[str, dict[str, float]] = {"double-mass": {"R": 8.0}}
+
 
 def _lqg_specs(kind: str) -> list[ParamSpec]:
     from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT  # noqa: PLC0415
@@ -304,7 +309,9 @@ def _lqg_values(kind: str, parameter_set: str) -> dict[str, Any]:
     t = TUNED_LQG[kind]
     v: dict[str, Any] = {f"Q_{s}": float(q) for s, q in zip(design_states(kind), t["Q"])}
     v.update({k: float(t[k]) for k in ("Q_integral", "R", "process_noise", "acceleration_noise")})
-    return {**v, **(_lab_lqg(kind) if parameter_set == "lab" else {})}
+    if parameter_set in ("lab", "lab-soft"):
+        v.update(_lab_lqg(kind))
+    return {**v, **(LAB_SOFT_LQG[kind] if parameter_set == "lab-soft" else {})}
 
 
 def lqg_weight_parameters(kind: str) -> tuple[str, ...]:
@@ -434,8 +441,9 @@ def linear_lqg(law: LQG, b: Builder) -> tuple[Lin, list[str]]:
 
 
 # not in the thesis: discrete LQG with integral action (ipcosim.controllers.lqg), weights TUNED_LQG;
-# lab: the same design with the Coulomb friction compensation of LAB_LQG (for a plant with friction)
-LQG_LAW = LawEntry("LQG", {"single-mass": ("tuned", "lab"), "double-mass": ("tuned", "lab")},
+# lab: the same design with the Coulomb friction compensation of LAB_LQG (for a plant with friction);
+# lab-soft: the lab set with the voltage weight of LAB_SOFT_LQG
+LQG_LAW = LawEntry("LQG", {"single-mass": ("tuned", "lab"), "double-mass": ("tuned", "lab", "lab-soft")},
                    lambda kind: _lqg_specs(kind) + model_specs(kind), _lqg_values, _build_lqg, classes=(LQG,),
                    model_based=True, designed=Designed(lqg_gain_specs, lqg_weight_parameters, lqg_gains,
                                                        lqg_from_gains), linear=linear_lqg)
