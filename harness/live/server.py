@@ -30,6 +30,7 @@ from typing import Any, Protocol
 from urllib.parse import parse_qs, quote, urlsplit
 
 from ipcosim.errors import UsageError
+from ipcosim.harness.paths import distribution_version
 
 #: Most rows one ``/samples`` answer carries (a page catching up takes several).
 MAX_ROWS = 5000
@@ -90,11 +91,12 @@ def check_address(host: str, port: Any, token: str | None, option: str = "--live
 
 
 def page(live: bool, token: str | None = None) -> str:
-    """The page, told whether it shows a live run (a stop button, polling until the run ends); its first
-    data come from ``boot.js`` (with the token the page was asked for with), loaded before the page counts
-    as loaded."""
+    """The page, told whether it shows a live run (a stop button, polling until the run ends) and the
+    version of the ipcosim serving it (the page names the version that made the run: a finished run's
+    ``metrics.json`` says which); its first data come from ``boot.js`` (with the token the page was asked
+    for with), loaded before the page counts as loaded."""
     text = resources.files("ipcosim.harness.live").joinpath("page.html").read_text(encoding="utf-8")
-    boot = json.dumps({"live": live, "interval_ms": POLL_MS})
+    boot = json.dumps({"live": live, "interval_ms": POLL_MS, "version": distribution_version()})
     return (text.replace("/*BOOT*/{}/*END*/", boot)
             .replace("/*BOOTJS*/boot.js", "boot.js" + (f"?token={quote(token)}" if token else "")))
 
