@@ -431,6 +431,7 @@ class Prepared:
         result.plotter = plot_run
         result.metadata["voltage_limit_V"] = next(
             (v for v in (_start(execution, c, "voltage_limit") for c in ("controller", "plant")) if v), None)
+        result.metrics["voltage_limit_V"] = result.metadata["voltage_limit_V"]  # `ipcosim view` draws it
         result.metadata["parameter_set"] = self.parameter_set or ",".join(self.scenario.bound_sets) or None
         result.metadata["swaps"] = dict(self.swap)
         b2, K = (_start(execution, "plant", n) for n in ("b2", "K"))  # the success criterion's amplitude bound
