@@ -15,6 +15,7 @@ import sys
 import threading
 import time
 import urllib.error
+import urllib.parse
 import urllib.request
 from pathlib import Path
 
@@ -131,6 +132,9 @@ def test_with_a_token_every_request_needs_it_and_a_stop_needs_its_header() -> No
     try:
         base = f"http://127.0.0.1:{server.port}/"
         assert server.url.endswith("?token=s3cret")
+        host = urllib.parse.urlsplit(server.url).hostname
+        assert host not in ("127.0.0.1", "0.0.0.0", "localhost"), server.url  # served on every interface: an address
+        assert _get(server.url)[0] == 200                                     # of this machine others can reach
         assert _get(base)[0] == 403 and _get(base + "samples?since=0")[0] == 403
         assert _get(base + "?token=wrong")[0] == 403
         status, body = _get(base + "?token=s3cret")

@@ -22,6 +22,7 @@ import hmac
 import ipaddress
 import json
 import math
+import socket
 import threading
 import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -88,6 +89,17 @@ def check_address(host: str, port: Any, token: str | None, option: str = "--live
     if not 0 <= number <= 65535:
         raise UsageError(f"{option}-port {port}: expected a port number 0..65535 (0: any free port)")
     return number
+
+
+def reachable_address() -> str:
+    """This machine's address on its default route (where another host reaches a page served on every
+    interface), else its host name."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect(("192.0.2.1", 9))  # a documentation address: nothing is sent, the route picks the source
+            return probe.getsockname()[0]
+    except OSError:
+        return socket.gethostname()
 
 
 def page(live: bool, token: str | None = None) -> str:
@@ -230,8 +242,9 @@ class LiveServer:
 
     @property
     def url(self) -> str:
-        """The page's address (with the token when there is one)."""
-        name = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host  # noqa: S104 -- a name to show
+        """The page's address (with the token when there is one); served on every interface, the machine's
+        address that other hosts reach (:func:`reachable_address`)."""
+        name = reachable_address() if self.host in ("0.0.0.0", "", "::") else self.host  # noqa: S104 -- a test
         name = f"[{name}]" if ":" in name else name
         return f"http://{name}:{self.port}/" + (f"?token={quote(self.token)}" if self.token else "")
 
