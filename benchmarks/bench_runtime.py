@@ -22,8 +22,8 @@
 * what an instantiate-and-free cycle of a Python FMU (a plant, a controller) leaves in fmpy's process,
   ``CYCLES[1]`` cycles after ``CYCLES[0]`` of warm-up (``tests/hosts/fmpy_instance_cycles.py``): the
   resident memory the process grows by per cycle (target, each FMU; the controller's native flavour,
-  fmpy's own, beside them) and over the next ``CYCLES[1]`` cycles (figures), and the Python heap kept per
-  cycle beyond what the same host keeps for the native flavour (target).
+  fmpy's own, beside them), and the Python heap kept per cycle beyond what the same host keeps for the
+  native flavour (target).
 
 The FMUs are those of ``build/`` (``make bench`` builds both flavours first).
 """
@@ -51,9 +51,9 @@ CYCLES = (200, int(os.environ.get("IPCOSIM_BENCH_CYCLES", "2000")))
 #: Targets: the resident memory fmpy's process grows by per instantiate-and-free cycle of a Python FMU, and the
 #: Python heap such a cycle keeps beyond fmpy's own (pythonfmu 0.7.0's wrapper kept every class it made by
 #: evaluating the FMU module again at each instantiation; ``ipcosim.fmus.wrapper``, section 3). What the resident
-#: memory still grows by over the first window is not kept per cycle: allocator pages the process touches for the
-#: first time, as with a native FMU (fmpy's own cycle: 170 B), and 0-4 B a cycle over the next window; measured
-#: 170-180 B for the plant and the controller (docs/other-tools.md, "What a host may do with one FMU").
+#: memory still grows by is not kept per cycle: pages of the allocator's arenas the process touches for the first
+#: time, as with a native FMU (fmpy's own cycle: 170-180 B), and 0-6 B a cycle over the 2,000 cycles after
+#: (docs/other-tools.md, "What a host may do with one FMU", gives the measurements).
 CYCLE_TARGET_B = 250.0
 #: Targets, CPU time. Measured at load 0.5-7 with one BLAS thread and the bytecode compiled: cold
 #: run 0.57-0.77 s (the tree the issue was filed at takes the same), python/libcosim 0.43-0.46,
@@ -249,7 +249,7 @@ def instance_cycles(fmu_dir: Path, native_dir: Path) -> dict[str, dict[str, floa
             "native LQRSingleMass": native_dir / "LQRSingleMass.fmu"}
     out = {}
     for name, fmu in fmus.items():
-        proc = subprocess.run([sys.executable, str(host), str(fmu), *map(str, CYCLES), "2"], capture_output=True,
+        proc = subprocess.run([sys.executable, str(host), str(fmu), *map(str, CYCLES)], capture_output=True,
                               text=True, timeout=3600, env=CHILD_ENV)
         if proc.returncode != 0:
             raise RuntimeError(f"{fmu}: instantiate-and-free cycles failed: {proc.stderr.strip().splitlines()[-1:]}")
@@ -268,11 +268,9 @@ def _cycle_lines(cycles: dict[str, dict[str, float]]) -> list[str]:
                  if k.startswith("native") else
                  f"{v['rss_per_cycle']:.0f} B ("
                  + target(key, v["rss_per_cycle"], CYCLE_TARGET_B, "B", what=f"{what}, resident memory growth") + ")")
-        return (f"{k} {first}, then "
-                + figure(key + "_next", v["rss_windows"][1], "B",
-                         what=f"{what}, resident memory growth over the next {CYCLES[1]} cycles"))
+        return f"{k} {first}"
     return [f"instantiate-and-free cycles in fmpy, {CYCLES[1]} after {CYCLES[0]} of warm-up, the process's resident "
-            f"memory growth per cycle (then over the next {CYCLES[1]}):",
+            "memory growth per cycle:",
             *(f"    {rss(k, v)}" for k, v in cycles.items()),
             f"    Python heap kept per cycle beyond fmpy's own, worst {worst} {own[worst]:.0f} B ("
             + target("runtime.instance_cycle_heap_b", own[worst], CYCLE_TARGET_B, "B",
