@@ -129,6 +129,7 @@ for tok in tokenize.generate_tokens(io.StringIO((resources / (module + ".py")).r
             words.add(value)
 fresh = {w: "".join(list(w)) for w in words}   # new string objects, interned by nothing
 print(json.dumps(sorted(w for w, copy in fresh.items() if sys.intern(copy) is copy)))
+import shutil; shutil.rmtree(unzip, ignore_errors=True)
 """
 
 
