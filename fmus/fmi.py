@@ -130,6 +130,13 @@ _py_decref.argtypes = [ctypes.py_object]
 _py_decref.restype = None
 #: ``id`` of the last ``sys.path`` entry whose reference the wrapper kept was released (``_one_path_entry``).
 _released_entry = [0]
+#: The top package this module is imported under (the FMU's private package, e.g. ``_ipcosim_lqr_..._47392e74a6``),
+#: interned and held for the module's life. Every instantiation interns that name (``pathlib`` interns the parts
+#: of a path; compiling the FMU's module file interns its identifier constants): with no live copy the interned
+#: string was made and freed each time, and each made a new entry in the interpreter's table of interned strings,
+#: whose deleted slots are reclaimed only when the table is resized (a host instantiating again and again
+#: reallocated that table, 0.5-1 MB, every few thousand instantiations and doubled it once).
+_PACKAGE = sys.intern(__name__.split(".", 1)[0])
 
 
 class FmuError(IpcosimError, RuntimeError):
@@ -513,7 +520,7 @@ class FmuBase(Fmi2Slave):
         folder, which may be gone by now; a module imported lazily (off the default path, e.g.
         the design stack) must then come from this instance's folder (same build, same files).
         """
-        top = __name__.split(".", 1)[0]
+        top = _PACKAGE
         if not top.startswith("_ipcosim_") or not self.resources:
             return
         root = Path(self.resources) / top

@@ -23,6 +23,7 @@ is measured against scipy's Radau at rtol 1e-10 (docs/plant.md, Integration).
 """
 from __future__ import annotations
 
+import functools
 from typing import Any, Callable, Sequence
 
 from ipcosim.fmus.expm import Matrix, as_matrix, expm, identity, lincomb, matmul, matvec
@@ -167,6 +168,25 @@ class FastETDRK4:
     def step(self, x: Sequence[float], f: Callable[..., Sequence[float]], *args: float) -> list[float]:
         """Advance ``x`` by ``h`` for ``x' = f(*x, *args)``; returns the new state as a list."""
         return self._step(x, f, args)
+
+
+def shared_etdrk4(L: Sequence[Sequence[float]], h: float) -> FastETDRK4:
+    """The :class:`FastETDRK4` of ``(L, h)``, made once and shared by every caller with the same linear part and
+    step (the same plant parameters): making one costs ~10 ms, most of a plant instance's set-up, and compiles
+    its stages, whose local names the interpreter interns; a host instantiating an FMU again and again made it
+    each time, and the names, interned again once the last stepper was collected, took new entries of the
+    interpreter's interned-string table (0.34 an instantiation). It holds no state between steps. The
+    :data:`SHARED_STEPPERS` most recently used are kept."""
+    return _shared(tuple(tuple(float(v) for v in row) for row in L), float(h))
+
+
+#: How many ``(L, h)`` steppers :func:`shared_etdrk4` keeps (a sweep over parameters makes a new one per set).
+SHARED_STEPPERS = 16
+
+
+@functools.lru_cache(maxsize=SHARED_STEPPERS)
+def _shared(L: tuple[tuple[float, ...], ...], h: float) -> FastETDRK4:
+    return FastETDRK4(L, h)
 
 
 def _compile_stages(n: int, stages: Sequence[Matrix]) -> Callable[..., list[float]]:

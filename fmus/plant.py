@@ -15,7 +15,7 @@ from ipcosim.fmus.instruments import (
     stop_carts,
     tap_velocity_change,
 )
-from ipcosim.fmus.integrator import FastETDRK4
+from ipcosim.fmus.integrator import FastETDRK4, shared_etdrk4
 from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, plant_kind_of, validate
 from ipcosim.fmus.physics import (
     MEASURED,
@@ -234,7 +234,7 @@ class Plant:
         if stepper is None:
             if not (h > 0 and math.isfinite(h)):
                 raise ValueError(f"step size h = {h} s must be positive and finite")
-            stepper = self._steppers[h] = FastETDRK4(self._L, h)
+            stepper = self._steppers[h] = shared_etdrk4(self._L, h)
         if not math.isfinite(voltage):
             raise ValueError(f"input voltage = {voltage} V at t = {t} s is not finite")
         limit = self._limit

@@ -63,6 +63,10 @@ naming the pinned version. The win64 binary is left as pythonfmu ships it.
    attribute ``""``. The evaluations then define nothing, the wrapper's search finds no class and
    takes the attribute ``""``, which is the FMU class, and each evaluation takes the reference the
    wrapper then releases. The FMU runs the same code, with the same class and module names.
+   Compiling the stub at every instantiation also interns its identifier-like constants: it names the
+   script in one constant that is not an identifier (:func:`module_stub`), and every other name it holds
+   stays alive in the process, so an instantiation takes no new slot of the interpreter's table of
+   interned strings (the FMU glue holds the private package's name, ``ipcosim.fmus.fmi._PACKAGE``).
 """
 from __future__ import annotations
 
@@ -82,7 +86,7 @@ __all__ = ["PINNED_VERSION", "PATCH_ID", "WrapperError", "check_pythonfmu", "mod
 #: The pythonfmu release whose wrapper binary the patch and the glue in ``ipcosim.fmus.fmi`` answer.
 PINNED_VERSION = "0.7.0"
 #: Names the patch in the build stamp, so FMUs built before (or after) a change of it are rebuilt.
-PATCH_ID = "pythonfmu-0.7.0-exit-2-stub-1"
+PATCH_ID = "pythonfmu-0.7.0-exit-2-stub-2"
 _ORIGINAL_SHA256 = "4be156a552c16f30eb4395805c59855d8d4086056d0f165442565f6c5fbac0c9"
 _PATCHED_SHA256 = "1087129bcbeb8bef99fbdf6df9f7a090175343c2da86c0bcffcbfe97db797651"
 _NOP5 = bytes.fromhex("0f1f440000")
@@ -210,13 +214,15 @@ def module_stub(doc: str | None, private: str, script: str, class_name: str) -> 
     class ``class_name`` as the attribute ``""``; every later evaluation defines nothing and takes
     one reference to the module's namespace (``Py_IncRef`` through ctypes, so an FMU whose runtime lacks the
     project's FMU base, such as a user's, is stubbed the same way).
-    ``doc`` is the script's docstring, kept as the stub's."""
+    ``doc`` is the script's docstring, kept as the stub's. The script's path is one constant that is not an
+    identifier: the wrapper compiles this file at every instantiation, and compiling interns every identifier-like
+    string constant (a private package name alone would be interned, and freed, once per instantiation)."""
     return (f'{(repr(doc) if doc else "")}\n'
             "# pythonfmu 0.7.0's wrapper evaluates this file again at every instantiation and keeps every class\n"
             f"# that defines: the FMU's code is {private}/{script}, run once, at the import, in this module.\n"
             'if "" not in globals():\n'
             "    import os as _os\n"
-            f"    _path = _os.path.join(_os.path.dirname(__file__), {private!r}, {script!r})\n"
+            f"    _path = _os.path.join(_os.path.dirname(__file__), {private + '/' + script!r})\n"
             '    with open(_path, encoding="utf-8") as _file:\n'
             '        exec(compile(_file.read(), _path, "exec"), globals())\n'
             f'    globals()[""] = {class_name}\n'

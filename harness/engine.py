@@ -342,6 +342,7 @@ class Prepared:
             observers += [RealtimePacer(overrun_budget=overrun_budget), CardObserver(overruns=True)]
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
             observers.append(CardObserver())
+        metadata = self._run_metadata(values)
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
                          algorithm=algorithm or self.algorithm, set=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._slaves,
@@ -349,7 +350,8 @@ class Prepared:
                          record_every=record_every, max_init_iterations=max_init_iterations,
                          task_metrics=self._run_task_metrics(values), loop=loop,
                          output=RunOutput(Path(out) if out is not None else None, variables, plot,
-                                          {**self._run_metadata(values), "set": given}, plot_run, started))
+                                          {**metadata, "set": given}, plot_run, started,
+                                          {"voltage_limit_V": metadata["voltage_limit_V"]}))  # `ipcosim view` draws it
 
     def _run_task_metrics(self, values: Mapping[tuple[str, str], Any]) -> TaskMetrics | None:
         """The task metrics of one run: the IP02 task's with the metrics of the run's further tasks

@@ -69,7 +69,11 @@ def test_serve_refuses_a_second_controller(rig_process):
 def test_bad_options_are_one_line_errors():
     out = ipcosim("rig", "serve", "--port", "0", "--set", "Mp=-1", "--duration", "1")
     assert out.returncode == 1 and out.stderr.count("\n") == 1 and "Mp" in out.stderr
+    # an unknown name is a usage error (docs/robustness.md's exit-status table), with the closest known names
     out = ipcosim("rig", "serve", "--port", "0", "--initial", "angle=0.1", "--duration", "1")
-    assert out.returncode == 1 and "no state 'angle'" in out.stderr
+    assert out.returncode == 2 and out.stderr.count("\n") == 1, out.stderr
+    assert "--initial angle" in out.stderr and "no state 'angle'" in out.stderr and "pendulum_angle" in out.stderr
+    out = ipcosim("rig", "serve", "--port", "0", "--plant", "double-mass", "--set", "Mpp=0.1", "--duration", "1")
+    assert out.returncode == 2 and "--set Mpp" in out.stderr and "'Mp'" in out.stderr, out.stderr
     out = ipcosim("rig", "status", "--port", "1")
     assert out.returncode == 1 and "cannot connect" in out.stderr and out.stderr.count("\n") == 1

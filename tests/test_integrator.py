@@ -160,3 +160,22 @@ def test_folded_rhs_double_mass_equals_physics(b: float) -> None:
         x = rng.normal(size=7) * [0.1, 0.5, 0.1, 0.5, 2.0, 3.0, 1.0]
         v = rng.uniform(-9, 9)
         assert np.allclose(f(*x, v), double_mass_rhs(x, v, p), rtol=1e-13, atol=1e-12)
+
+
+def test_one_stepper_per_linear_part_and_step_steps_as_a_new_one() -> None:
+    """Plants of the same parameters share the stepper of their (L, h) (making one is most of an instance's
+    set-up), and a shared one steps bit for bit as one made for the caller; another L or h gets its own."""
+    from ipcosim.fmus.integrator import shared_etdrk4
+
+    rng = np.random.default_rng(3)
+    L = rng.normal(size=(3, 3))
+    L[2, 2] = -5000.0
+    first, again = shared_etdrk4(L.tolist(), 1e-3), shared_etdrk4([list(row) for row in L], 1e-3)
+    assert again is first
+    assert shared_etdrk4(L.tolist(), 2e-3) is not first and shared_etdrk4((L * 1.01).tolist(), 1e-3) is not first
+
+    def f(*x: float) -> tuple[float, ...]:
+        return tuple(L @ np.array(x) + np.cos(x))
+
+    x = rng.normal(size=3).tolist()
+    assert first.step(x, f) == FastETDRK4(L, 1e-3).step(x, f)  # exactly: the same arithmetic

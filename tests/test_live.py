@@ -15,6 +15,7 @@ import sys
 import threading
 import time
 import urllib.error
+import urllib.parse
 import urllib.request
 from pathlib import Path
 
@@ -131,6 +132,9 @@ def test_with_a_token_every_request_needs_it_and_a_stop_needs_its_header() -> No
     try:
         base = f"http://127.0.0.1:{server.port}/"
         assert server.url.endswith("?token=s3cret")
+        host = urllib.parse.urlsplit(server.url).hostname
+        assert host not in ("127.0.0.1", "0.0.0.0", "localhost"), server.url  # served on every interface: an address
+        assert _get(server.url)[0] == 200                                     # of this machine others can reach
         assert _get(base)[0] == 403 and _get(base + "samples?since=0")[0] == 403
         assert _get(base + "?token=wrong")[0] == 403
         status, body = _get(base + "?token=s3cret")
@@ -152,6 +156,18 @@ def test_a_loopback_page_answers_to_loopback_names_only() -> None:
         assert _get(base, {"Host": f"attacker.example:{server.port}"})[0] == 403  # a rebound DNS name
     finally:
         server.close()
+
+
+def _project_version() -> str:
+    """The version pyproject.toml gives the distribution (what ``pip install -e .`` installed)."""
+    import tomllib
+
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+
+
+def test_the_page_names_the_version_that_made_the_run() -> None:
+    boot = re.search(r"const BOOT = (\{.*?\});", page(True))
+    assert boot and json.loads(boot.group(1))["version"] == _project_version()
 
 
 def _free_port() -> int:
@@ -200,11 +216,13 @@ def test_the_stop_button_ends_a_real_time_run_with_its_results_written(tmp_path:
 
 # ---------------------------------------------------------------------------------------- ipcosim view
 def test_view_shows_a_finished_run_from_its_folder(tmp_path: Path) -> None:
-    ipcosim.run("single-mass-lqr", stop_time=1.0, out=tmp_path)
+    ipcosim.run("single-mass-lqr", stop_time=1.0, out=tmp_path, set={"controller.voltage_limit": 4.5})
     server = view_server(tmp_path)
     try:
         sc = json.loads(_get(f"http://127.0.0.1:{server.port}/scene")[1])
         assert sc["scene"]["kind"] == "single-mass" and sc["scene"]["pendulum"]["cart"] == "plant.cart_position"
+        # the run's own voltage limit, recorded in its folder, not the card's range
+        assert sc["scene"]["limits"]["voltage_V"] == 4.5 and sc["scene"]["limits"]["voltage_label"] == "voltage limit"
         s = _samples(server.port)
         rows = np.array(s["rows"], dtype=float)
         assert len(rows) == 1001 and rows[-1, 0] == pytest.approx(1.0)  # 1 s at the scenario's 1 ms step
@@ -326,6 +344,27 @@ def test_the_live_page_draws_a_real_time_run_and_its_traces_move(tmp_path: Path)
 
 @pytest.mark.integration
 @pytest.mark.skipif(CHROMIUM is None, reason=NO_CHROMIUM)
+def test_the_view_of_a_run_names_the_version_that_made_it(tmp_path: Path) -> None:
+    ipcosim.run("single-mass-lqr", stop_time=0.2, out=tmp_path)
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["ipcosim_version"] == _project_version()
+    server = view_server(tmp_path)
+    try:
+        dom = chromium(server.url, dom=True)
+    finally:
+        server.close()
+    assert f'<span id="version">ipcosim {_project_version()}</span>' in dom
+    (tmp_path / "metrics.json").write_text(json.dumps({**metrics, "ipcosim_version": "0.0.1"}))  # an older run's
+    server = view_server(tmp_path)
+    try:
+        dom = chromium(server.url, dom=True)
+    finally:
+        server.close()
+    assert f'<span id="version">ipcosim 0.0.1 (shown by ipcosim {_project_version()})</span>' in dom
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(CHROMIUM is None, reason=NO_CHROMIUM)
 def test_the_live_page_of_a_hil_run_shows_the_rigs_status(tmp_path: Path) -> None:
     # limits off and a generous watchdog: on a loaded shared host the pendulum may fall through the pacing,
     # and this test is about what the page shows of a rig that is running, not about the balance
@@ -353,6 +392,7 @@ def test_the_live_page_of_a_hil_run_shows_the_rigs_status(tmp_path: Path) -> Non
         rig.send_signal(signal.SIGTERM)
         rig.communicate(timeout=30)
     rows = {m.group(1): m.group(2) for m in re.finditer(r"<tr><td>([^<]*)</td><td[^>]*>([^<]*)</td></tr>", dom)}
+    assert f'<span id="version">ipcosim {_project_version()}</span>' in dom
     assert rows.get("watchdog") == "armed" and rows.get("amplifier") == "enabled", (sorted(rows.items()), s.get("rig"))
     assert rows.get("limits") == "not tripped"
     assert "late steps" in rows and "overrun budget" in rows

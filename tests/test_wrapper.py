@@ -100,6 +100,57 @@ def cycled_fmus(plant_fmus, tmp_path_factory: pytest.TempPathFactory) -> dict[st
     return {"IP02SingleMass": plant_fmus["single-mass"], "LQRSingleMass": lqr.fmu}
 
 
+#: A host that instantiates an FMU twice, then prints which strings an instantiation interns are not interned
+#: (alive) any more: the identifiers and identifier-like string constants of the module file the wrapper compiles
+#: at every instantiation, and the FMU's private package name (``pathlib`` interns each part of a path).
+INTERNED_HOST = r"""
+import io, json, sys, tempfile, tokenize, zipfile, ast
+from pathlib import Path
+from fmpy import read_model_description
+from fmpy.fmi2 import FMU2Slave
+fmu = sys.argv[1]
+md = read_model_description(fmu)
+unzip = tempfile.mkdtemp()
+zipfile.ZipFile(fmu).extractall(unzip)
+for k in range(2):
+    s = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
+                  instanceName=f"i{k}")
+    s.instantiate(); s.setupExperiment(startTime=0.0); s.enterInitializationMode(); s.exitInitializationMode()
+    s.terminate(); s.freeInstance()
+resources = Path(unzip) / "resources"
+module = (resources / "slavemodule.txt").read_text().strip()
+words = {p.name for p in resources.iterdir() if p.is_dir() and p.name.startswith("_ipcosim_")}
+for tok in tokenize.generate_tokens(io.StringIO((resources / (module + ".py")).read_text()).readline):
+    if tok.type == tokenize.NAME:
+        words.add(tok.string)
+    elif tok.type == tokenize.STRING:
+        value = ast.literal_eval(tok.string)
+        if isinstance(value, str) and value.isidentifier():
+            words.add(value)
+fresh = {w: "".join(list(w)) for w in words}   # new string objects, interned by nothing
+print(json.dumps(sorted(w for w, copy in fresh.items() if sys.intern(copy) is copy)))
+import shutil; shutil.rmtree(unzip, ignore_errors=True)
+"""
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("model", ("IP02SingleMass", "LQRSingleMass"))
+def test_an_instantiation_interns_no_string_it_then_frees(model: str, cycled_fmus) -> None:
+    """Compiling the wrapper's module file and the FMU's paths intern strings; one that nothing keeps alive is made
+    and freed again at every instantiation, and each time takes a new entry of the interpreter's table of interned
+    strings (a deleted entry is reclaimed only when the table is resized): a host instantiating again and again
+    resized that table (0.5-1 MB) every few thousand instantiations and doubled it once, within its first 2,000
+    (the private package name was interned and freed three times an instantiation)."""
+    import json
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-c", INTERNED_HOST, str(cycled_fmus[model])], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert json.loads(proc.stdout.strip().splitlines()[-1]) == [], "interned at each instantiation, then freed"
+
+
 @pytest.mark.integration
 @pytest.mark.parametrize("model", ("IP02SingleMass", "LQRSingleMass"))
 def test_instantiate_and_free_again_and_again_gives_back_what_it_takes(model: str, cycled_fmus,

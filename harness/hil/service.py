@@ -12,12 +12,14 @@ import math
 import os
 import signal
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Callable, Mapping
 
-from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.errors import IpcosimError, UsageError, closest
 from ipcosim.fmus.hil.protocol import MAX_TOKEN, TOKEN_ENV
 from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig, experiment_config
+from ipcosim.fmus.params import PLANT_KINDS
+from ipcosim.fmus.physics import state_names
 from ipcosim.harness.hil.server import (
     DEFAULT_HOST,
     DEFAULT_IDLE_TIMEOUT,
@@ -116,7 +118,22 @@ class ServeOptions:
             raise UsageError(f"--rt-priority {self.rt_priority}: expected 1..99")
         if self.cpu is not None and not 0 <= self.cpu <= 4095:
             raise UsageError(f"--cpu {self.cpu}: expected a CPU number")
+        self._check_names()
         return self
+
+    def _check_names(self) -> None:
+        """The ``--initial`` states and ``--set`` parameters name the plant's (an unknown name is a usage
+        error, exit 2, with the closest names; a value the model refuses is the rig's, exit 1)."""
+        if self.plant not in PLANT_KINDS:
+            return  # the rig's configuration names the plant kinds (``config``)
+        states = state_names(self.plant)
+        for key in self.initial:
+            if key not in states:
+                raise UsageError(f"--initial {key}: the {self.plant} rig has no state {key!r}; {closest(key, states)}")
+        names = [f.name for f in fields(PLANT_KINDS[self.plant])]
+        for key in self.params:
+            if key not in names:
+                raise UsageError(f"--set {key}: the {self.plant} plant has no parameter {key!r}; {closest(key, names)}")
 
     def config(self) -> RigConfig:
         """The rig's configuration: the experiment's set-up (``experiment_config``) under the options given."""

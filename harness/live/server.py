@@ -22,6 +22,7 @@ import hmac
 import ipaddress
 import json
 import math
+import socket
 import threading
 import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -30,6 +31,7 @@ from typing import Any, Protocol
 from urllib.parse import parse_qs, quote, urlsplit
 
 from ipcosim.errors import UsageError
+from ipcosim.harness.paths import distribution_version
 
 #: Most rows one ``/samples`` answer carries (a page catching up takes several).
 MAX_ROWS = 5000
@@ -89,12 +91,24 @@ def check_address(host: str, port: Any, token: str | None, option: str = "--live
     return number
 
 
+def reachable_address() -> str:
+    """This machine's address on its default route (where another host reaches a page served on every
+    interface), else its host name."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect(("192.0.2.1", 9))  # a documentation address: nothing is sent, the route picks the source
+            return probe.getsockname()[0]
+    except OSError:
+        return socket.gethostname()
+
+
 def page(live: bool, token: str | None = None) -> str:
-    """The page, told whether it shows a live run (a stop button, polling until the run ends); its first
-    data come from ``boot.js`` (with the token the page was asked for with), loaded before the page counts
-    as loaded."""
+    """The page, told whether it shows a live run (a stop button, polling until the run ends) and the
+    version of the ipcosim serving it (the page names the version that made the run: a finished run's
+    ``metrics.json`` says which); its first data come from ``boot.js`` (with the token the page was asked
+    for with), loaded before the page counts as loaded."""
     text = resources.files("ipcosim.harness.live").joinpath("page.html").read_text(encoding="utf-8")
-    boot = json.dumps({"live": live, "interval_ms": POLL_MS})
+    boot = json.dumps({"live": live, "interval_ms": POLL_MS, "version": distribution_version()})
     return (text.replace("/*BOOT*/{}/*END*/", boot)
             .replace("/*BOOTJS*/boot.js", "boot.js" + (f"?token={quote(token)}" if token else "")))
 
@@ -228,8 +242,9 @@ class LiveServer:
 
     @property
     def url(self) -> str:
-        """The page's address (with the token when there is one)."""
-        name = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host  # noqa: S104 -- a name to show
+        """The page's address (with the token when there is one); served on every interface, the machine's
+        address that other hosts reach (:func:`reachable_address`)."""
+        name = reachable_address() if self.host in ("0.0.0.0", "", "::") else self.host  # noqa: S104 -- a test
         name = f"[{name}]" if ":" in name else name
         return f"http://{name}:{self.port}/" + (f"?token={quote(self.token)}" if self.token else "")
 

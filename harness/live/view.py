@@ -38,6 +38,11 @@ def _number(text: str) -> float:
         return math.nan
 
 
+def _positive(value: Any) -> float | None:
+    """A positive number from metrics.json, else None (a folder written before the key, or a run without a limit)."""
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0 else None
+
+
 def read_results(path: Path) -> tuple[list[str], np.ndarray]:
     """The numeric columns of a run's results.csv (text columns such as a card's ``last_error`` are left
     out) and their rows.
@@ -80,7 +85,8 @@ class FinishedRun:
         except (OSError, ValueError) as exc:
             raise ViewError(f"{folder / 'metrics.json'}: cannot read it ({exc})") from None
         self.title = folder.resolve().name
-        self._scene = {"scene": scene(self.names, self.title), "names": self.names}
+        limit = _positive(self.metrics.get("voltage_limit_V"))  # the run's, recorded since the key exists
+        self._scene = {"scene": scene(self.names, self.title, voltage_limit=limit), "names": self.names}
         step = float(rows[1, 0] - rows[0, 0]) if len(rows) > 1 else 0.0
         self.info = {"start_time": float(rows[0, 0]), "stop_time": float(rows[-1, 0]), "step": step,
                      "paced": "realtime_steps" in self.metrics}

@@ -306,6 +306,7 @@ class Execution:
         output = self.output
         result.plotter = output.plotter
         result.metadata.update(output.metadata)
+        result.metrics.update(output.metrics)
         if output.folder is None:
             self._whole_run_timing(result)
             return

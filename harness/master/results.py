@@ -148,6 +148,9 @@ class RunOutput:
     started : float or None
         :func:`time.perf_counter` when the whole run began (loading included): ``wall_time_s`` and
         ``real_time_factor`` are then the whole run's; None: the execution's own.
+    metrics : mapping
+        Added to the result's metrics, so ``metrics.json`` records them (the voltage limit ``ipcosim view``
+        draws).
     """
 
     folder: Path | None = None
@@ -156,6 +159,7 @@ class RunOutput:
     metadata: Mapping[str, Any] = field(default_factory=dict)
     plotter: Plotter | None = None
     started: float | None = None
+    metrics: Mapping[str, Any] = field(default_factory=dict)
 
 
 def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> list[str]:
