@@ -19,9 +19,8 @@ from pathlib import Path
 from xml.etree import ElementTree
 
 import pytest
-from loop_plans import _binary
+from loop_plans import MINGW, WINE, _binary
 from loop_plans import host_path as _path
-from test_win64 import MINGW, WINE
 
 from ipcosim.harness.native.cbuild import model_names
 from ipcosim.toolchain import find_compiler

@@ -2,22 +2,12 @@
 fallen pendulum, and every metric a run writes defined in docs/metrics.md."""
 from __future__ import annotations
 
-import re
-from pathlib import Path
-
 import numpy as np
 import pytest
+from metrics_doc import documented_metrics
 
 import ipcosim
 from ipcosim.fmus.metrics import KIND_METRICS, compute_metrics, task_kinds
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def documented_metrics() -> set[str]:
-    """The keys docs/metrics.md defines (first cell of its tables)."""
-    text = (ROOT / "docs" / "metrics.md").read_text()
-    return {key for row in re.findall(r"^\| (`[^|]+`) \|", text, re.M) for key in re.findall(r"`([^`]+)`", row)}
 
 
 def test_kinds_come_from_the_plant_start_values() -> None:

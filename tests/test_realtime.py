@@ -210,7 +210,7 @@ def test_a_degraded_realtime_run_warns_and_exits_3(tmp_path, monkeypatch, capsys
     m = json.loads((out / "metrics.json").read_text())
     assert m["overrun_budget_exceeded"] is True and m["overrun_fraction"] > 0.01 and m["lateness_max_s"] > 1e-3
     assert (out / "results.csv").is_file(), "a degraded run keeps its results"
-    from test_metrics_kinds import documented_metrics
+    from metrics_doc import documented_metrics
     assert set(m) <= documented_metrics(), set(m) - documented_metrics()
     assert main(["run", "single-mass-lqr", "--realtime", "--stop-time", "0.3", "--out", str(out), "--quiet",
                  "--overrun-budget", "0.9"]) == 0

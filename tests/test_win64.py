@@ -10,19 +10,16 @@ are printed). Skipped, with the reason, where the cross compiler or wine is miss
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
-from loop_plans import TICKS, cart, compare, compile_host, run_host, write_plan, write_single_plan
+from loop_plans import MINGW, TICKS, WINE, cart, compare, compile_host, run_host, write_plan, write_single_plan
 
-from ipcosim.toolchain import find_compiler, find_cross_compiler
+from ipcosim.toolchain import find_compiler
 
-CC, MINGW = find_compiler(), find_cross_compiler()
-WINE = next((w for w in (shutil.which("wine64"), "/usr/lib/wine/wine64", shutil.which("wine"))
-             if w and os.access(w, os.X_OK)), None)
+CC = find_compiler()
 pytestmark = [
     pytest.mark.integration,
     pytest.mark.skipif(CC is None, reason="no C compiler (set CC or install gcc)"),
