@@ -8,7 +8,7 @@ from evidence.controllers_table import BEGIN, END, document
 from ipcosim.controllers.laws.hsmc import TUNED_HSMC
 from ipcosim.controllers.laws.pid import TUNED_CASCADE
 
-DOC = Path(__file__).resolve().parents[1] / "docs" / "controllers.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "controllers.md"
 
 
 _NUMBER = re.compile(r"-?\d+\.\d+")

@@ -21,7 +21,7 @@ from ipcosim.fmus.physics import MEASURED
 
 pytestmark = pytest.mark.integration
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 MODELS = [model_name(kind, law) for law in LAWS for kind in KINDS]
 FMI_DISCARD, FMI_FATAL = 2, 4
 H = 1e-3

@@ -144,7 +144,7 @@ def test_fmu_redesigns_for_a_changed_weight() -> None:
 
     from ipcosim.fmus.pybuild import build_all
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     import tempfile
     with tempfile.TemporaryDirectory() as tmp:
         (fmu,) = [r.fmu for r in build_all(Path(tmp), scripts=[root / "controllers" / "fmu_lqg_single_mass.py"])]

@@ -16,7 +16,7 @@ from ipcosim.fmus.metrics import upright_metrics
 from ipcosim.fmus.params import preset
 from ipcosim.fmus.plant import InstrumentedPlant
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 H = 1e-3
 
 

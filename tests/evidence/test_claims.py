@@ -10,7 +10,7 @@ import pytest
 
 from evidence.claims import _lqr_case, oscillation
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_oscillation_is_the_rms_above_the_cutoff() -> None:

@@ -14,7 +14,7 @@ from evidence.claims import CLAIMS, verdict
 from evidence.results_page import BEGIN, END, breakaway_note, margin_rows, remeasure, render
 from ipcosim.harness.studies.robustness import FACTORS, decisive_factor, wilson_interval
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAGE = ROOT / "docs" / "results.md"
 DATA = ROOT / "docs" / "results.json"
 

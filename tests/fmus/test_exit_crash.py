@@ -26,8 +26,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-HOSTS = Path(__file__).resolve().parent / "hosts"
+ROOT = Path(__file__).resolve().parents[2]
+HOSTS = Path(__file__).resolve().parents[1] / "hosts"
 MODELS = {"Setpoint": "controllers/fmu_setpoint.py", "LQRSingleMass": "controllers/fmu_lqr_single_mass.py",
           "LQRDoubleMass": "controllers/fmu_lqr_double_mass.py", "IP02SingleMass": "fmus/fmu_ip02_single_mass.py",
           "IP02DoubleMass": "fmus/fmu_ip02_double_mass.py"}

@@ -14,7 +14,7 @@ from fmpy.fmi1 import FMICallException
 from ipcosim.fmus.pybuild import build_all
 
 pytestmark = pytest.mark.integration
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 FMI_DISCARD, FMI_ERROR, FMI_FATAL = 2, 3, 4
 H = 0.1
 

@@ -16,8 +16,8 @@ from fmpy.validation import validate_fmu
 from ipcosim.fmus.fmi import FmuBase, FmuError, parse_unit
 from ipcosim.fmus.pybuild import BuildError, build_all, check_fmu
 
-ROOT = Path(__file__).resolve().parents[1]
-PROBE = Path(__file__).resolve().parent / "data" / "fmu_plumbing_probe.py"
+ROOT = Path(__file__).resolve().parents[2]
+PROBE = Path(__file__).resolve().parents[1] / "data" / "fmu_plumbing_probe.py"
 
 FMI_OK, FMI_DISCARD, FMI_ERROR, FMI_FATAL = 0, 2, 3, 4
 

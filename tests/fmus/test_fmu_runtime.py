@@ -22,8 +22,8 @@ from ipcosim.harness.hil.server import RigServer
 
 pytestmark = pytest.mark.integration
 
-ROOT = Path(__file__).resolve().parents[1]
-DRIVER = Path(__file__).with_name("fmu_runtime_driver.py")
+ROOT = Path(__file__).resolve().parents[2]
+DRIVER = Path(__file__).resolve().parents[1] / "fmu_runtime_driver.py"
 BLOCKED = "numpy,scipy,control,fmpy,ipcosim"
 STEPS = 30
 LQR_GAINS = [f"K_{s}" for s in ("cart_position", "cart_velocity", "pendulum_angle", "pendulum_velocity")] + \

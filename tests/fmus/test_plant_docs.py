@@ -8,7 +8,7 @@ import pytest
 
 from ipcosim.fmus.params import PLANT_KINDS, PRESETS, parameter_info, preset
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "plant.md"
 README = ROOT / "docs" / "plant.md"  # the table of every preset side by side
 

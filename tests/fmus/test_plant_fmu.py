@@ -21,7 +21,7 @@ from ipcosim.fmus.plant import Plant
 
 pytestmark = pytest.mark.integration
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 KINDS = ["single-mass", "double-mass"]
 FMI_DISCARD, FMI_ERROR, FMI_FATAL = 2, 3, 4
 H = 1e-3

@@ -10,7 +10,7 @@ import pytest
 from ipcosim.fmus import wrapper
 from ipcosim.fmus.pybuild import BuildError, build_one
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ import pytest
 
 from ipcosim.fmus.hil import ErrorCode, HILError, open_card
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def ipcosim(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:

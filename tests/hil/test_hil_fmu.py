@@ -21,7 +21,7 @@ from ipcosim.fmus.hil.inproc import register_rig, unregister_rig
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 from ipcosim.harness.hil.server import RigServer
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CART_RES, PEND_RES = 2.275e-5, 1.534e-3        # thesis-data.md, encoders
 LSB = 20.0 / 4096                              # 12-bit DAC over +-10 V
 OK, DISCARD, FATAL = 0, 2, 4

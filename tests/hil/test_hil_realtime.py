@@ -29,7 +29,7 @@ from fmi_helpers import wait_for
 
 from ipcosim.fmus.hil.tcpip import TcpipCard
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SLOW = ROOT / "tests" / "data" / "slow_init"
 #: The walk-through of docs/hil.md: (rig command, run command), copied there verbatim.
 WALKTHROUGH = {

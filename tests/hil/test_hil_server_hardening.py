@@ -24,7 +24,7 @@ from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 from ipcosim.fmus.hil.tcpip import TcpipCard
 from ipcosim.harness.hil.server import RigAccessError, RigServer, escape
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 

@@ -23,7 +23,7 @@ import pytest
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
 from ipcosim.harness.hil.server import RigServer
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CART_RES, PEND_RES = 2.275e-5, 1.534e-3          # thesis-data.md, encoders
 LSB = 20.0 / 4096
 MEASURED = {"single-mass": ("cart_position", "pendulum_angle"),

@@ -30,7 +30,7 @@ from ipcosim.harness.live.server import LiveServer, page
 from ipcosim.harness.live.view import Table, view_server
 from ipcosim.harness.master.signals import Interrupted
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 #: The machine is shared: SCHED_FIFO where permitted, and any overrun fraction within budget (the budget's own
 #: warning is tests/test_realtime.py's).

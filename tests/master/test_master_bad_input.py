@@ -14,7 +14,7 @@ from ssd_helpers import component, connection, connector, ssd, write_scenario
 from ipcosim.harness import cli
 
 pytestmark = pytest.mark.integration
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 @pytest.fixture(scope="session")

@@ -19,7 +19,7 @@ from ipcosim.fmus.kinds import plant_kind
 from ipcosim.harness.scenario.ssp import load_scenario
 
 pytestmark = pytest.mark.integration
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = sorted(p.name for p in (ROOT / "ssp").iterdir() if (p / "SystemStructure.ssd").is_file())
 
 

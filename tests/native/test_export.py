@@ -16,7 +16,7 @@ import pytest
 
 from ipcosim.toolchain import find_compiler
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CC = find_compiler()
 pytestmark = [pytest.mark.integration, pytest.mark.skipif(CC is None, reason="no C compiler (set CC or install gcc)")]
 SCENARIOS = ("single-mass-lqr", "double-mass-lqr")

@@ -25,7 +25,7 @@ from loop_plans import host_path as _path
 from ipcosim.harness.native.cbuild import model_names
 from ipcosim.toolchain import find_compiler
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CC = find_compiler()
 pytestmark = [pytest.mark.integration, pytest.mark.skipif(CC is None, reason="no C compiler (set CC or install gcc)")]
 #: The exported loops: one per plant.

@@ -23,7 +23,7 @@ import pytest
 from ipcosim.harness.native import tracer
 from ipcosim.toolchain import find_compiler
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CC = find_compiler()
 needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler (set CC or install gcc/clang)")
 

@@ -32,7 +32,7 @@ import ast
 import re
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("fmus", "controllers", "harness")
 
 #: The rooms, lowest first: each a tuple of module names or package prefixes (dotted, below ``ipcosim``;

@@ -16,7 +16,7 @@ import pytest
 
 from ipcosim.harness.cli import build_parser, parsers
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = sorted([ROOT / "README.md", ROOT / "examples" / "my-controller" / "README.md", *(ROOT / "docs").glob("*.md")])
 #: Top folders a doc may point into; generated ones (build/, out/) need not exist in a checkout.
 TRACKED = ("docs", "fmus", "controllers", "harness", "benchmarks", "examples", "ssp", "tests")

@@ -22,7 +22,7 @@ from ssd_helpers import component, connection, connector, ssd, ssv, write_scenar
 from ipcosim.harness import cli
 
 pytestmark = pytest.mark.integration
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 # ------------------------------------------------------------------ fixtures

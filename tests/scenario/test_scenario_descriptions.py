@@ -8,7 +8,7 @@ from xml.etree import ElementTree
 
 import pytest
 
-SSP = Path(__file__).resolve().parents[1] / "ssp"
+SSP = Path(__file__).resolve().parents[2] / "ssp"
 NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
       "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues"}
 

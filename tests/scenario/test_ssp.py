@@ -23,7 +23,7 @@ from ipcosim.harness.scenario.ssp import (
 )
 from ipcosim.harness.scenario.ssp_pack import pack
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXPECTED = sorted(f"{p}-{c}" for p in ("single-mass", "double-mass")
                   for c in ("pid", "cascade-pid", "lqr", "lqg", "hsmc", "adaptive-hsmc"))
 

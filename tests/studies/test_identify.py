@@ -22,7 +22,7 @@ from ipcosim.fmus.physics import MEASURED, state_names
 from ipcosim.fmus.plant import replay
 from ipcosim.harness.studies.identify import IdentifyError, IdentifyOptions, identify, read_log
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: Hidden truths, away from every preset (the estimator starts from thesis-ch3 / thesis-ch4).
 SINGLE_TRUTH = {"Mc": 0.87, "Beq": 13.1, "Bp": 0.0031, "b": 0.072}
 DOUBLE_TRUTH = {"Ma": 1.04, "Mc": 0.86, "K": 155.0, "Ba": 7.6, "Bf": 2.6, "b1": 0.065, "b2": 0.14}

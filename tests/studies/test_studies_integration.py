@@ -11,7 +11,7 @@ import pytest
 from ipcosim.harness.cli import main as cli_main
 from ipcosim.harness.studies.store import read_results
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.integration
 
 

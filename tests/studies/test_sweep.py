@@ -25,7 +25,7 @@ from ipcosim.harness.studies.runners import PurePlantSpec, SyntheticSpec, classi
 from ipcosim.harness.studies.store import read_results
 from ipcosim.harness.studies.sweep import SweepMismatchError, run_sweep
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PARAMS = {"plant.Mp": 0.2, "plant.K": 140.0, "controller.c1": 4.7}
 
 

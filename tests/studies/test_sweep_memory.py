@@ -21,7 +21,7 @@ from ipcosim.harness.studies.executors import RECYCLE_RUNS, LocalExecutor
 from ipcosim.harness.studies.runners import SyntheticSpec, stable_hash
 from ipcosim.harness.studies.sweep import plan_hash
 
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def test_local_pool_is_replaced_after_its_share_of_runs(tmp_path):
