@@ -2,7 +2,7 @@
 
 For each room (docs/architecture.md) the non-blank lines of its ``.py`` files and its longest
 function (``def`` to last line, docstring included), and the number of import cycles between
-the modules (the graph of ``tests/test_architecture.py``). Prints a Markdown table; with
+the modules (the graph of ``tests/project/test_architecture.py``). Prints a Markdown table; with
 ``--write`` it also replaces the table in docs/architecture.md (between the ``rooms`` markers).
 Not a benchmark of speed: it reads source files only and runs nothing of them.
 """
@@ -58,8 +58,8 @@ def longest_function(files: list[Path]) -> tuple[str, int, bool]:
 
 
 def import_cycle_count() -> int:
-    """Import cycles among the package's modules, by the machinery of tests/test_architecture.py."""
-    spec = importlib.util.spec_from_file_location("_architecture", ROOT / "tests" / "test_architecture.py")
+    """Import cycles among the package's modules, by the machinery of tests/project/test_architecture.py."""
+    spec = importlib.util.spec_from_file_location("_architecture", ROOT / "tests" / "project" / "test_architecture.py")
     assert spec is not None and spec.loader is not None
     arch = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(arch)

@@ -3,7 +3,7 @@
 The host, compiled for each platform (linux64 natively, win64 with mingw-w64 and run under wine,
 aarch64 with Debian's cross compiler and run under qemu-user), runs a closed loop of FMUs' shared
 libraries from a plan file and prints every output after every tick as its IEEE bits, so two
-platforms' runs compare bit for bit (``tests/test_win64.py``, ``tests/test_aarch64.py``).
+platforms' runs compare bit for bit (``tests/native/test_win64.py``, ``tests/native/test_aarch64.py``).
 """
 from __future__ import annotations
 

@@ -144,7 +144,7 @@ def test_many_instances_in_one_process(probe_fmu: Path, probe_dir: Path) -> None
     """pythonfmu 0.7.0 drops a reference to the script module's dict per instantiation; FmuBase
     compensates. (It also leaks the re-executed class, whose methods keep the dict referenced, so
     this probe would survive without the fix; the plant scripts, whose classes define no method,
-    would not: tests/test_plant_fmu.py::test_many_instances.)"""
+    would not: tests/fmus/test_plant_fmu.py::test_many_instances.)"""
     for k in range(12):
         f = start(probe_fmu, probe_dir, y0=float(k))
         f.set(u=1.0)

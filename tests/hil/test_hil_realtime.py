@@ -104,7 +104,7 @@ class Rig:
 def env(realtime_fmus: Path) -> dict[str, str]:
     """These tests check what a run on the shared machine did (upright, step counts, faults); its load
     is not theirs to judge, so any overrun fraction is within budget (the budget's warning and exit
-    status are tests/test_realtime.py's)."""
+    status are tests/master/test_realtime.py's)."""
     return dict(os.environ, IPCOSIM_FMU_PATH=str(realtime_fmus), PYTHONPATH=str(ROOT), IPCOSIM_RT_PRIORITY=RT_PRIORITY,
                 IPCOSIM_RT_OVERRUN_BUDGET="1")
 

@@ -50,7 +50,7 @@ def fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture
 def env(fmu_dir, monkeypatch):
     """The FMUs; any overrun fraction of a paced run on the shared machine within budget (its warning and
-    exit status are tests/test_realtime.py's)."""
+    exit status are tests/master/test_realtime.py's)."""
     monkeypatch.setenv("IPCOSIM_FMU_PATH", str(fmu_dir))
     monkeypatch.setenv("IPCOSIM_RT_OVERRUN_BUDGET", "1")
     return dict(os.environ, IPCOSIM_FMU_PATH=str(fmu_dir), PYTHONPATH=str(ROOT))

@@ -33,7 +33,7 @@ from ipcosim.harness.master.signals import Interrupted
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 #: The machine is shared: SCHED_FIFO where permitted, and any overrun fraction within budget (the budget's own
-#: warning is tests/test_realtime.py's).
+#: warning is tests/master/test_realtime.py's).
 RT_ENV = {"IPCOSIM_RT_PRIORITY": "20", "IPCOSIM_RT_OVERRUN_BUDGET": "1"}
 NO_CHROMIUM = "chromium is not installed (apt install chromium): the page cannot be looked at"
 

@@ -5,7 +5,7 @@ a run a component ends itself; which loop ran in the metadata; the fallback with
 the cache keyed by the structure alone.
 
 The mock components are Python slaves, which the C loop calls back through ctypes when forced
-(``loop="c"``); the native and Python FMUs are in tests/test_native.py."""
+(``loop="c"``); the native and Python FMUs are in tests/native/test_native.py."""
 from __future__ import annotations
 
 import shutil

@@ -1,7 +1,7 @@
 """Every FMI 3.0 FMU the project makes, run the way a strict FMI 3.0 importer runs it.
 
 ``tests/c/strict_host.c`` (compiled for Linux and, with mingw-w64, for Windows under wine, as in
-``tests/test_win64.py``) instantiates each FMU with ``eventModeUsed`` and ``earlyReturnAllowed``
+``tests/native/test_win64.py``) instantiates each FMU with ``eventModeUsed`` and ``earlyReturnAllowed``
 set (the first must be refused: the FMUs have no Event Mode, FMI 3.0 section 2.3.1), reads every
 variable of its model description, grouped by type, in Instantiated, Initialization Mode, after
 initialization, after every step and in Terminated, and checks that the independent variable

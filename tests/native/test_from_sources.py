@@ -104,7 +104,7 @@ def native_scenarios(native_dir: Path) -> dict[str, np.ndarray]:
         try:
             runs[name] = ipcosim.run(name, fmus="native", stop_time=STOP, fmu_dirs=[native_dir]).data
         except FlavourError:
-            continue  # a scenario with instruments: Python flavour only (tests/test_native.py)
+            continue  # a scenario with instruments: Python flavour only (tests/native/test_native.py)
     return runs
 
 
