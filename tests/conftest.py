@@ -22,7 +22,8 @@ def plant_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 @pytest.fixture(scope="session")
 def native_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """(Python FMU folder, native FMU folder), built for this session (tests/native/test_native.py, test_export.py)."""
+    """(Python FMU folder, native FMU folder), built for this session (tests/native/test_native.py,
+    tests/api/test_export.py)."""
     from ipcosim.fmus.pybuild import build_all
     from ipcosim.harness.native.cbuild import build_native
 
