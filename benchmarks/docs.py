@@ -10,7 +10,7 @@ rendered from ``benchmarks/last.json`` (``make bench`` writes it) as a table of 
 :data:`BLOCKS` lists for ``NAME``: what was measured, the figure, its target (and whether it was met)
 or, for a reference figure, the anchor it is read against; under it the machine, its load average
 and the date of the run. ``--update`` rewrites the blocks; without it the stale blocks are listed
-and the exit status is 1. ``tests/test_bench_docs.py`` checks the committed docs against the
+and the exit status is 1. ``tests/project/test_bench_docs.py`` checks the committed docs against the
 committed JSON, and that no speed figure is written anywhere else (:func:`stray_figures`).
 """
 from __future__ import annotations

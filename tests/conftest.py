@@ -22,7 +22,8 @@ def plant_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 @pytest.fixture(scope="session")
 def native_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """(Python FMU folder, native FMU folder), built for this session (tests/test_native.py, test_export.py)."""
+    """(Python FMU folder, native FMU folder), built for this session (tests/native/test_native.py,
+    tests/api/test_export.py)."""
     from ipcosim.fmus.pybuild import build_all
     from ipcosim.harness.native.cbuild import build_native
 
@@ -35,7 +36,7 @@ def native_fmus(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 @pytest.fixture(scope="session")
 def native_fmus3(native_fmus: tuple[Path, Path]) -> Path:
     """The FMI 3.0 variant of the native FMUs (``build_native(..., fmi="3")``), built for this session
-    next to ``native_fmus``' FMI 2.0 ones (tests/test_fmi3.py, test_from_sources.py)."""
+    next to ``native_fmus``' FMI 2.0 ones (tests/native/test_fmi3.py, test_from_sources.py)."""
     from ipcosim.harness.native.cbuild import build_native
 
     out = native_fmus[1].parent / "fmus-native-fmi3"

@@ -1,6 +1,6 @@
 """Drive one extracted FMU's Python class the way pythonfmu's wrapper does, optionally with imports blocked.
 
-Run as a script in a fresh interpreter (``tests/test_fmu_runtime.py``)::
+Run as a script in a fresh interpreter (``tests/fmus/test_fmu_runtime.py``)::
 
     python fmu_runtime_driver.py UNZIPPED_DIR SPEC_JSON [--block numpy,scipy,control,fmpy,ipcosim]
 

@@ -3,10 +3,12 @@
 The host, compiled for each platform (linux64 natively, win64 with mingw-w64 and run under wine,
 aarch64 with Debian's cross compiler and run under qemu-user), runs a closed loop of FMUs' shared
 libraries from a plan file and prints every output after every tick as its IEEE bits, so two
-platforms' runs compare bit for bit (``tests/test_win64.py``, ``tests/test_aarch64.py``).
+platforms' runs compare bit for bit (``tests/native/test_win64.py``, ``tests/native/test_aarch64.py``).
 """
 from __future__ import annotations
 
+import os
+import shutil
 import struct
 import subprocess
 import zipfile
@@ -14,6 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ipcosim.toolchain import find_cross_compiler
+
+#: The win64 cross compiler and wine to run its DLLs (None where missing: the Windows runs skip).
+MINGW = find_cross_compiler()
+WINE = next((w for w in (shutil.which("wine64"), "/usr/lib/wine/wine64", shutil.which("wine"))
+             if w and os.access(w, os.X_OK)), None)
 TICKS = 3000  # 3 s at the scenarios' 1 ms step
 #: Binary folder and suffix per (FMI version, platform).
 BINARY = {("2.0", "linux64"): ("linux64", ".so"), ("2.0", "win64"): ("win64", ".dll"),
