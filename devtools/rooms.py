@@ -3,8 +3,8 @@
 For each room (docs/architecture.md) its modules (``.py`` files), the non-blank lines of those
 files, its longest function (``def`` to last line, docstring included) and the import cycles its
 modules take part in, and the number of import cycles between all the package's modules (the graph
-of ``tests/test_architecture.py``). Prints a Markdown table; with ``--write`` it also replaces the
-table in docs/architecture.md (between the ``rooms`` markers), which ``tests/test_rooms_figures.py``
+of ``tests/project/test_architecture.py``). Prints a Markdown table; with ``--write`` it also replaces the
+table in docs/architecture.md (between the ``rooms`` markers), which ``tests/project/test_rooms_figures.py``
 compares with what this module computes from the tree. Not a benchmark of speed: it reads source
 files only and runs nothing of them.
 """

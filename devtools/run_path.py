@@ -14,7 +14,7 @@ of the command (results.csv and metrics.json written, summary printed). How it c
   counted;
 - a call *goes back* when a module calls (directly, or through library code such as a callback
   from a C loop) a function of a module in a higher room of the layout
-  (``tests/test_architecture.py``'s ROOMS): listed with the first function called.
+  (``tests/project/test_architecture.py``'s ROOMS): listed with the first function called.
 
 Not a benchmark: the hook slows the run down many times.
 """
@@ -34,8 +34,8 @@ DEFAULT_ARGS = ("single-mass-lqr", "--stop-time", "1")
 
 
 def _architecture() -> Any:
-    """tests/test_architecture.py as a module (its ROOMS and ``room_of``)."""
-    spec = importlib.util.spec_from_file_location("_architecture", ROOT / "tests" / "test_architecture.py")
+    """tests/project/test_architecture.py as a module (its ROOMS and ``room_of``)."""
+    spec = importlib.util.spec_from_file_location("_architecture", ROOT / "tests" / "project" / "test_architecture.py")
     assert spec is not None and spec.loader is not None
     arch = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(arch)
