@@ -166,7 +166,7 @@ def _watched(cmd: list[str], env: dict[str, str], watched: dict[str, Any]) -> su
     return subprocess.CompletedProcess(cmd, proc.returncode, "", first + err)
 
 
-def describe(label: str, m: dict[str, Any]) -> str:
+def summary_line(label: str, m: dict[str, Any]) -> str:
     steps = m.get("realtime_steps") or 1
     hist = m.get("lateness_histogram") or {}
     late = " ".join(f"{k}:{v}" for k, v in hist.items() if v)
@@ -227,7 +227,7 @@ def single_mass(lines: list[str]) -> None:
             else:
                 with rig("single-mass", rt) as (_, uri):
                     m = run_scenario("single-mass-lqr", rate, hil_uri=uri, rt=rt)
-            lines.append(describe(f"LQR single, {rate} Hz{', rt' if rt else ''}", m))
+            lines.append(summary_line(f"LQR single, {rate} Hz{', rt' if rt else ''}", m))
             print('   ' + lines[-1], flush=True)
             if rt and rate == 1000:
                 lines.append(f"{'':32s}" + _targets("hil.lqr_1khz", "LQR single 1 kHz rt", m))
@@ -279,7 +279,7 @@ def double_mass(lines: list[str]) -> None:
             with rig("double-mass", True) as (_, uri):
                 m = run_scenario("double-mass-hsmc", rate, hil_uri=uri, rt=True)
         rel = abs(m.get("rms_voltage_V", float("nan")) - lock["rms_voltage_V"]) / lock["rms_voltage_V"]
-        lines.append(describe(f"HSMC double, {rate} Hz, rt", m)
+        lines.append(summary_line(f"HSMC double, {rate} Hz, rt", m)
                      + f"\n{'':32s}rms: lockstep rig {lock['rms_voltage_V']:.3f} V (HIL differs by {100 * rel:.0f} %), "
                        f"plant FMU {sim['rms_voltage_V']:.3f} V")
         if rate == 1000:
@@ -368,7 +368,7 @@ def viewer(lines: list[str]) -> None:
                               what=f"LQR single 1 kHz rt, {VIEWER_STOP_TIME:g} s, {label}: overruns the host's "
                                    f"stalls do not explain")
         seen = m.get("viewer") or {}
-        lines.append(describe(f"LQR single 1 kHz rt, {label}", m)
+        lines.append(summary_line(f"LQR single 1 kHz rt, {label}", m)
                      + f"\n{'':32s}own overruns {own[watched]}, all {split.get('overruns')} of {split.get('steps')}; "
                        f"host stalls {1e3 * split.get('host_stall_s', float('nan')):.0f} ms"
                      + (f"; the viewer got {seen.get('answers')} answers, {seen.get('rows')} rows, the rig's "

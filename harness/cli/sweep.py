@@ -63,7 +63,7 @@ def main(args: argparse.Namespace) -> int:
                         fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time, step=args.step,
                         out=args.out, fresh=args.fresh, realism=args.realism)
     executor = open_executor(args.workers, args.scheduler)
-    print(study.describe(executor), file=sys.stderr)
+    print(study.plan_line(executor), file=sys.stderr)
     signals.keep(f"finished runs are kept in {study.out / 'results.csv'}; run the same command again to resume")
     try:
         result = study.run(executor, progress=not args.quiet, extra={"command": "ipcosim " + " ".join(sys.argv[1:])})

@@ -79,7 +79,7 @@ def main(args: argparse.Namespace) -> int:
                        max_peak_sensitivity=args.max_peak_sensitivity, min_delay_margin=args.min_delay_margin,
                        spread=args.spread, min_phase_margin=args.min_phase_margin)
     executor = open_executor(args.workers, args.scheduler)
-    print(study.describe(executor), file=sys.stderr)
+    print(study.plan_line(executor), file=sys.stderr)
     signals.keep("no parameter set written")
     try:
         result = study.run(executor, progress=not args.quiet)

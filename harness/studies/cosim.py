@@ -138,7 +138,7 @@ class CosimSpec(RunSpec):
             data = buf.getvalue()
         return dataclasses.replace(self, archive=data)
 
-    def describe(self) -> dict[str, Any]:
+    def identity(self) -> dict[str, Any]:
         # "overrides" is the stored key of the --set values in a sweep's metadata.json (a file format that
         # resumed sweeps and other tools read), kept under that name.
         out = {"name": self.name, "scenario_hash": self.scenario_hash, "location": self.location,

@@ -250,7 +250,7 @@ class SweepStudy:
     out: Path
     metadata: dict[str, Any] = field(default_factory=dict)
 
-    def describe(self, executor: Any) -> str:
+    def plan_line(self, executor: Any) -> str:
         """One line: the scenario, the runs, where they run, the flavour and the folder."""
         return (f"sweep {self.spec.name}: {len(self.cases)} runs on {executor.description}, {self.flavour} -> "
                 f"{self.out}")

@@ -65,7 +65,7 @@ class RunSpec:
     """Base of run specifications (see the module docstring).
 
     Subclasses set ``name``, ``parameters`` (``component.variable`` -> nominal value of every
-    parameter a sweep may vary) and ``metric_names``, and implement ``build`` and ``describe``.
+    parameter a sweep may vary) and ``metric_names``, and implement ``build`` and ``identity``.
     """
 
     name: str = "spec"
@@ -77,8 +77,8 @@ class RunSpec:
         """Create the per-worker runner (load models once)."""
         raise NotImplementedError
 
-    def describe(self) -> dict[str, Any]:
-        """JSON-serialisable description (recorded in the sweep's metadata, hashed into ``key``)."""
+    def identity(self) -> dict[str, Any]:
+        """What identifies the spec, JSON-serialisable (recorded in the sweep's metadata, hashed into ``key``)."""
         return {"name": self.name}
 
     def classify(self, metrics: Mapping[str, Any], params: Mapping[str, Any] | None = None) -> str:
@@ -89,7 +89,7 @@ class RunSpec:
     @property
     def key(self) -> str:
         """Identity of the spec: runs of specs with equal keys are interchangeable."""
-        return stable_hash(self.describe())
+        return stable_hash(self.identity())
 
 
 # --------------------------------------------------------------------------- synthetic
@@ -115,7 +115,7 @@ worker process abruptly (as a crashing FMU would) when ``model.x > crash_above``
     parameters: Mapping[str, float] = field(default_factory=lambda: {"model.x": 1.0, "model.y": 2.0})
     metric_names: tuple[str, ...] = ("value", "upright", "settling_time_s")
 
-    def describe(self) -> dict[str, Any]:
+    def identity(self) -> dict[str, Any]:
         return {"name": self.name, "delay_s": self.delay_s, "fail_above": repr(self.fail_above),
                 "crash_above": repr(self.crash_above),
                 "noise": self.noise, "parameters": dict(self.parameters)}
@@ -187,7 +187,7 @@ class PurePlantSpec(RunSpec):
         self.parameters = params
         self.metric_names = tuple(METRIC_KEYS) + COST_TERMS
 
-    def describe(self) -> dict[str, Any]:
+    def identity(self) -> dict[str, Any]:
         return {"name": self.name, "stop_time": self.stop_time, "step": self.step, "preset": self.preset,
                 "with_series": self.with_series, "parameters": dict(self.parameters)}
 
@@ -282,8 +282,8 @@ class MultiSpec(RunSpec):
         self.metric_names = tuple(names)
         self.parameters = {SCENARIO_PARAM: 0.0}
 
-    def describe(self) -> dict[str, Any]:
-        return {"name": self.name, "specs": [s.describe() for s in self.specs]}
+    def identity(self) -> dict[str, Any]:
+        return {"name": self.name, "specs": [s.identity() for s in self.specs]}
 
     def build(self) -> Runner:
         specs = self.specs

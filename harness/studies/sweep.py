@@ -273,7 +273,7 @@ def _start_metadata(spec: RunSpec, cases: Sequence[SweepCase], extra: Mapping[st
     """What ``metadata.json`` records at the start: the scenario, the plan's identity, the seeds
     (the first :data:`RECORDED_SEEDS`), package versions, the start time and ``extra``."""
     return {"scenario": spec.name, "scenario_hash": spec.key, "plan_hash": plan_hash(spec, cases),
-            "spec": spec.describe(), "runs": len(cases),
+            "spec": spec.identity(), "runs": len(cases),
             "seeds": {"cases": [c.seed for c in itertools.islice(cases, RECORDED_SEEDS)]},
             "packages": package_versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **dict(extra or {})}
 

@@ -556,7 +556,7 @@ class TuneStudy:
     w_angle: float = costmod.W_ANGLE
     w_voltage: float = costmod.W_VOLTAGE
 
-    def describe(self, executor: Any) -> str:
+    def plan_line(self, executor: Any) -> str:
         """One line: what is tuned within which bounds, the budget and where it runs."""
         ranges = ", ".join(f"[{lo:g}, {hi:g}]" for lo, hi in self.bounds)
         return (f"tune {self.spec.name}: {', '.join(self.names)} within {ranges}, budget {self.budget} runs on "
