@@ -43,7 +43,7 @@ def test_evidence_table_in_the_docs_is_current() -> None:
         text = doc.read_text()
         block = text[text.index(BEGIN) + len(BEGIN):text.index(END)].strip()
         assert _same_table(block, expected), \
-            f"run: python -m evidence.controllers_table --update {doc.name}"
+            f"run: python -m evidence.controllers_table --update docs/{doc.name}"
 
 
 def test_tuned_gains_in_the_docs_match_the_catalog() -> None:
