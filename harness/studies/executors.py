@@ -308,10 +308,14 @@ class LocalExecutor:
 
 def _stop_resource_tracker() -> None:
     """End (and wait for) the helper process multiprocessing starts beside a pool, which would
-    otherwise outlive this process by a moment, unwaited for; it is started again if needed."""
+    otherwise outlive this process by a moment, unwaited for; it is started again if needed. Left
+    running while another pool's workers live: they hold its pipe, so waiting for it would never end."""
     import gc
+    import multiprocessing
     from multiprocessing import resource_tracker
 
+    if multiprocessing.active_children():
+        return
     gc.collect()  # the pool's semaphores released and unregistered first: no "leaked semaphore" warning
     stop = getattr(resource_tracker._resource_tracker, "_stop", None)  # noqa: SLF001 -- no public way
     if stop is not None:

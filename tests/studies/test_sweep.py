@@ -147,6 +147,33 @@ def test_local_sweep_rows_failures_recorded_and_file_written(tmp_path):
     assert spec.key in meta and "numpy" in meta and str(cases[0].seed) in meta
 
 
+def test_closing_one_pool_while_another_lives_returns(tmp_path):
+    """Two local pools share multiprocessing's resource tracker, whose pipe every worker holds: closing
+    the first while the second's workers live must not wait for that tracker to end (it never would)."""
+    script = textwrap.dedent("""
+        from ipcosim.harness.grammar import parse_all
+        from ipcosim.harness.studies.cases import make_cases
+        from ipcosim.harness.studies.executors import LocalExecutor
+        from ipcosim.harness.studies.runners import SyntheticSpec
+        from ipcosim.harness.studies.sweep import run_sweep
+
+        if __name__ == "__main__":
+            spec = SyntheticSpec()
+            cases = make_cases(parse_all(["model.x=[0.5,1]"], spec.parameters), spec.parameters)
+            one, two = LocalExecutor(1), LocalExecutor(2)
+            for ex in (one, two):
+                assert len(run_sweep(spec, cases, executor=ex).rows) == 2
+            one.close()
+            assert len(run_sweep(spec, cases, executor=two).rows) == 2
+            two.close()
+            print("closed")
+    """)
+    (tmp_path / "two_pools.py").write_text(script)
+    done = subprocess.run([sys.executable, str(tmp_path / "two_pools.py")], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "closed", done.stderr
+
+
 def test_worker_crash_is_recorded_not_fatal(tmp_path):
     spec = SyntheticSpec(crash_above=1.5, delay_s=0.02)
     cases = make_cases(parse_all(["model.x=[1,1.1,3,1.2,1.3]"], spec.parameters), spec.parameters)
