@@ -75,10 +75,11 @@ def measure(spec: Any, runs: int = RUNS, repeats: int = REPEATS) -> dict[str, fl
                     t0 = time.perf_counter()
                     result = run_sweep(spec, cases[:n], executor=executors[workers], out=tmp)
                     wall = (time.perf_counter() - t0) / n
-                inside = sum(r["run_time_s"] or 0.0 for r in result.rows) / n
+                    rows = result.rows  # read back from tmp/results.csv: before the folder goes
+                inside = sum(r["run_time_s"] or 0.0 for r in rows) / n
                 if wall < best.get(f"w{workers}", math.inf):
                     best[f"w{workers}"], best[f"w{workers}_inside"] = wall, inside
-                best[f"w{workers}_errors"] = sum(r["status"] == "error" for r in result.rows)
+                best[f"w{workers}_errors"] = sum(r["status"] == "error" for r in rows)
     finally:
         for ex in executors.values():
             ex.close()
