@@ -30,7 +30,6 @@ from typing import Any, Mapping, Sequence
 from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, tasks_of
 from ipcosim.harness.grammar import strip_nominal
-from ipcosim.harness.hil.observer import CardObserver
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, check_times
@@ -227,6 +226,8 @@ class Prepared:
             if fmus == "native":
                 scenario, self._python_values = to_native(_with_fmus(scenario, archived))
             self.scenario = scenario
+            if swap:
+                import ipcosim.harness.hil  # noqa: F401 -- registers the ``hil`` swap alias (only a swap needs it)
             self.system = bind(scenario, swap=swap, fmu_files=archived, strict_swaps=strict)
             if warn:
                 warn_all(self.system)
@@ -339,9 +340,9 @@ class Prepared:
         if progress:
             observers.append(Progress())
         if realtime or (realtime is None and self.system.realtime):
-            observers += [RealtimePacer(overrun_budget=overrun_budget), CardObserver(overruns=True)]
+            observers += [RealtimePacer(overrun_budget=overrun_budget), _card_observer(overruns=True)]
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
-            observers.append(CardObserver())
+            observers.append(_card_observer())
         metadata = self._run_metadata(values)
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
                          algorithm=algorithm or self.algorithm, set=values, observers=observers,
@@ -432,6 +433,14 @@ class Prepared:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+def _card_observer(overruns: bool = False) -> Observer:
+    """The observer of a run's HIL cards (:class:`~ipcosim.harness.hil.observer.CardObserver`),
+    imported only for a run that may drive one: a plain simulation loads no HIL code."""
+    from ipcosim.harness.hil.observer import CardObserver
+
+    return CardObserver(overruns=overruns)
 
 
 def _start(system: System, values: Mapping[tuple[str, str], Any], component: str, variable: str) -> Any:

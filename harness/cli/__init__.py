@@ -30,7 +30,7 @@ COMMAND_MODULES = ("build", "list_", "describe", "run", "export", "linearize", "
 def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
     """``--fmus`` of the studies (sweep, tune, compare): ``auto`` by default
     (``ipcosim.harness.studies.specs.study_spec``)."""
-    from ipcosim.harness.studies.specs import STUDY_FLAVOURS
+    from ipcosim.harness.scenario.flavour import STUDY_FLAVOURS
 
     p.add_argument("--fmus", choices=STUDY_FLAVOURS, default=STUDY_FLAVOURS[0],
                    help="FMU flavour: auto (default: the native C FMUs when `ipcosim build --native` has built "

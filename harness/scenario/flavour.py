@@ -16,6 +16,9 @@ from ipcosim.errors import IpcosimError
 from ipcosim.harness.scenario.ssp import Parameter, ParameterSet, Scenario
 
 FLAVOURS = ("python", "native")
+#: ``--fmus`` of the studies: ``auto`` (the default) takes the native FMUs when they are built and
+#: can run the study, else the Python ones.
+STUDY_FLAVOURS = ("auto", *FLAVOURS)
 
 
 class FlavourError(IpcosimError, ValueError):

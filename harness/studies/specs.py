@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
 from ipcosim.errors import UsageError
-from ipcosim.harness.scenario.flavour import FLAVOURS
+from ipcosim.harness.scenario.flavour import STUDY_FLAVOURS
 from ipcosim.harness.studies.runners import PurePlantSpec, RunSpec
 
 #: Scenario names served without FMUs (pure-Python stand-ins, see ``ipcosim.harness.studies.runners``).
@@ -83,9 +83,6 @@ def for_executor(spec: RunSpec, executor: object) -> RunSpec:
     return portable() if callable(portable) else spec
 
 
-#: ``--fmus`` of the studies: ``auto`` (the default) takes the native FMUs when they are built and
-#: can run the study, else the Python ones.
-STUDY_FLAVOURS = ("auto", *FLAVOURS)
 
 
 def study_spec(scenario: str, fmus: str = "auto", names: Iterable[str] = (),

@@ -258,3 +258,46 @@ def test_the_cycle_check_sees_a_cycle() -> None:
     """The cycle finder itself: a two-module and a three-module cycle are found, a chain is not."""
     graph = {"a": {"b"}, "b": {"a"}, "c": {"d"}, "d": {"e"}, "e": {"c", "f"}, "f": set()}
     assert sorted(import_cycles(graph)) == [["a", "b"], ["c", "d", "e"]]
+
+
+#: What a plain simulation (no swap, no real time, no live view) must not load: the master stays
+#: generic, and the rooms above it are loaded only by the commands that use them.
+NOT_FOR_A_PLAIN_RUN = ("ipcosim.harness.hil", "ipcosim.fmus.hil", "ipcosim.harness.studies", "ipcosim.harness.live",
+                       "ipcosim.harness.native")
+
+_LOADED = """
+import os, sys, tempfile
+from ipcosim.harness.cli import main
+with tempfile.TemporaryDirectory() as tmp:
+    status = main(["run", "single-mass-lqr", "--stop-time", "0.05", "--quiet", "--out", os.path.join(tmp, "out"),
+                   *sys.argv[1:]])
+print(status, *sorted(m for m in sys.modules if m.startswith("ipcosim")))
+"""
+
+
+def _loaded_by_run(*args: str) -> tuple[int, set[str]]:
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _LOADED, *args], capture_output=True, text=True, timeout=300,
+                          cwd=ROOT)
+    status, *modules = done.stdout.split()
+    return int(status), set(modules)
+
+
+def _within(modules: set[str], packages: tuple[str, ...]) -> list[str]:
+    return sorted(m for m in modules if any(m == p or m.startswith(p + ".") for p in packages))
+
+
+def test_a_plain_run_loads_no_hil_study_or_live_code() -> None:
+    status, modules = _loaded_by_run()
+    assert status == 0
+    assert "ipcosim.harness.master.execution" in modules  # the probe did run the master
+    assert _within(modules, NOT_FOR_A_PLAIN_RUN) == []
+
+
+def test_a_hil_swap_still_finds_its_alias() -> None:
+    """The ``hil`` alias is registered when a swap asks for it (the run itself fails: no rig serves)."""
+    status, modules = _loaded_by_run("--swap", "plant=hil")
+    assert status == 1  # bound and run, stopped by the missing rig: not a usage error (2)
+    assert "ipcosim.harness.hil.swap" in modules
