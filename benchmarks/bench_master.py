@@ -53,7 +53,7 @@ def overhead(repeats: int = LOOP_REPEATS) -> list[str]:
 
     def ours(prepared: Any, loop: str) -> Callable[[], float]:
         def run() -> float:
-            meta = prepared.run(STOP, STEP, loop=loop).metadata
+            meta = prepared.run(stop_time=STOP, step=STEP, loop=loop).metadata
             if not meta["loop"].startswith(loop):
                 raise RuntimeError(f"asked for the {loop} loop, ran {meta['loop']}")
             return meta["loop_wall_time_s"]
@@ -63,7 +63,7 @@ def overhead(repeats: int = LOOP_REPEATS) -> list[str]:
         warnings.simplefilter("ignore")
         prepared = ipcosim.prepare("single-mass-lqr", fmus="native")
     with prepared:
-        prepared.run(STOP, STEP)  # warm-up: libraries loaded, the C loop compiled
+        prepared.run(stop_time=STOP, step=STEP)  # warm-up: libraries loaded, the C loop compiled
         m = _interleaved({"c": ours(prepared, "c"), "c floor": lambda: c_floor(prepared, STOP, STEP),
                           "python": ours(prepared, "python"),
                           "python floor": lambda: python_floor(prepared, STOP, STEP)}, repeats)
@@ -100,7 +100,7 @@ def other_masters(name: str, repeats: int = REPEATS) -> list[str]:
     def ours() -> float:
         t0 = time.perf_counter()
         with ipcosim.prepare(ssp, warn=False) as prepared:
-            prepared.run(STOP, STEP)
+            prepared.run(stop_time=STOP, step=STEP)
         return time.perf_counter() - t0
 
     def libcosim() -> float:

@@ -79,7 +79,7 @@ def _plan(prepared: Any, stop: float, step: float) -> Iterator[tuple[list[_Compo
     from fmpy.fmi2 import FMU2Slave
 
     system = prepared.system
-    execution = prepared.execution(stop, step)  # the order and step multiples of the master
+    execution = prepared.execution(stop_time=stop, step=step)  # the order and step multiples of the master
     order = [system.instances[i] for i in execution.order]
     comps: list[_Component] = []
     try:

@@ -16,6 +16,7 @@ Example::
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 import shutil
@@ -27,7 +28,7 @@ import zipfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.errors import IpcosimError, UsageError, closest
 from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, tasks_of
 from ipcosim.harness.grammar import strip_nominal
 from ipcosim.harness.master import signals
@@ -40,7 +41,7 @@ from ipcosim.harness.master.recorder import TaskMetrics
 from ipcosim.harness.master.results import Result, RunOutput, SimulationError, json_safe
 from ipcosim.harness.master.slave import LoadedSlaves
 from ipcosim.harness.master.system import System
-from ipcosim.harness.options import RunOptions
+from ipcosim.harness.options import RunOptions, run_options
 from ipcosim.harness.scenario.archive import member_path, safe_extract
 from ipcosim.harness.scenario.binding import bind, warn_all
 from ipcosim.harness.scenario.default_experiment import default_step, default_stop_time
@@ -304,19 +305,46 @@ class Prepared:
             self.unzip_dirs[inst.name] = by_file[path]
 
     # ------------------------------------------------------------------ running
-    def execution(self, stop_time: float | None = None, step: float | None = None,
-                  set: Mapping[str, Any] | None = None, *, start_time: float | None = None,
-                  algorithm: str | None = None, observers: Sequence[Observer] = (),
-                  manipulators: Sequence[Manipulator] = (), realtime: bool | None = None, progress: bool = False,
-                  record_every: int = 1, max_init_iterations: int = 20, loop: str = "auto",
-                  overrun_budget: float | None = None, out: str | os.PathLike[str] | None = None,
-                  variables: Sequence[str] | None = None, plot: bool = False,
-                  started: float | None = None) -> Execution:
-        """A ready :class:`Execution` (checked: step, stop time, the ``set`` start values, step multiples,
-        the ``variables``; ``out`` opened for its files); ``loop``: the stepping loop, ``auto``, ``c``
-        or ``python`` (see :class:`Execution`); ``overrun_budget``: a paced run's allowed overrun
-        fraction (:class:`~ipcosim.harness.master.realtime.RealtimePacer`); ``started``: when the
-        whole run began (:func:`time.perf_counter`), for its ``wall_time_s``."""
+    def options(self, options: RunOptions | None = None, **fields: Any) -> RunOptions:
+        """The options of one run of this scenario: ``options`` (default: every run option's
+        default) with ``fields`` in place, each a :class:`~ipcosim.harness.options.RunOptions`
+        field that a run takes (``stage="run"``: stop time, step, ``set``, ``out``, ``record``...).
+
+        Raises
+        ------
+        UsageError
+            A field that is not a run option, or one the scenario takes when it is prepared
+            (``swap``, ``parameter_set``...) or that only :func:`ipcosim.run` takes (``timeout``, ``live``...).
+        """
+        stages = {name: how.stage for name, how in run_options()}
+        for name in fields:
+            if name not in stages:
+                raise UsageError(f"{name}: not an option of a run; {closest(name, stages)}")
+            if stages[name] != "run":
+                where = "prepare()" if stages[name] == "load" else "ipcosim.run()"
+                raise UsageError(f"{name}: an option of {where}, not of each run of a prepared scenario")
+        if options is None:
+            return RunOptions(self.label, **fields)
+        if not isinstance(options, RunOptions):
+            raise UsageError(f"options {options!r}: expected a RunOptions (give the others by name, "
+                             f"e.g. stop_time=...)")
+        return dataclasses.replace(options, **fields) if fields else options
+
+    @property
+    def label(self) -> str:
+        """The scenario's name (what a run's options name as their scenario)."""
+        return getattr(self.scenario, "name", None) or "system"
+
+    def execution(self, options: RunOptions | None = None, *, observers: Sequence[Observer] = (),
+                  manipulators: Sequence[Manipulator] = (), started: float | None = None,
+                  **fields: Any) -> Execution:
+        """A ready :class:`Execution` of one run as ``options`` and ``fields`` say (:meth:`options`),
+        checked: step, stop time, the ``set`` start values (relative ones, ``"1.1*nominal"``,
+        resolved against the bound values), step multiples, the recorded columns; ``out`` opened
+        for its files. ``observers`` and ``manipulators`` plug into the master; ``started``: when
+        the whole run began (:func:`time.perf_counter`), for its ``wall_time_s``."""
+        options = self.options(options, **fields)
+        stop_time, step, start_time = options.stop_time, options.step, options.start_time
         stop, why_stop = (stop_time, "") if stop_time is not None else default_stop_time(self.system)
         h, why_step = (step, "") if step is not None else default_step(self.system)
         if stop is None:
@@ -325,32 +353,33 @@ class Prepared:
             raise StepSizeError(f"{why_step}; give --step")
         origin = self.scenario.origin
         start = self.scenario.experiment.start_time if start_time is None else start_time
-        check_times(start, stop, h, record_every, {
+        check_times(start, stop, h, options.record_every, {
             "start": "start_time" if start_time is not None else f"{origin}: DefaultExperiment startTime",
             "stop": "--stop-time" if stop_time is not None else why_stop,
             "step": "--step" if step is not None else (f"{origin}: osp:FixedStepAlgorithm baseStepSize"
                                                         if self.scenario.experiment.step_size is not None
                                                         else why_step)})
-        given = dict(set or {})
+        given = set = resolve_relative(self.system, options.set)
         if self.fmus == "native" and set:
             from ipcosim.harness.scenario.flavour import native_set
             set = native_set(self.system, set, self._python_values)
         _, values = with_set(self.system, set or {})
         observers = list(observers)
-        if progress:
+        if options.progress:
             observers.append(Progress())
+        realtime = options.realtime
         if realtime or (realtime is None and self.system.realtime):
-            observers += [RealtimePacer(overrun_budget=overrun_budget), _card_observer(overruns=True)]
+            observers += [RealtimePacer(overrun_budget=options.overrun_budget), _card_observer(overruns=True)]
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
             observers.append(_card_observer())
         metadata = self._run_metadata(values)
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
-                         algorithm=algorithm or self.algorithm, set=values, observers=observers,
+                         algorithm=self.algorithm, set=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._slaves,
                          unzip_dirs=self.unzip_dirs,
-                         record_every=record_every, max_init_iterations=max_init_iterations,
-                         task_metrics=self._run_task_metrics(values), loop=loop,
-                         output=RunOutput(Path(out) if out is not None else None, variables, plot,
+                         record_every=options.record_every, max_init_iterations=options.max_init_iterations,
+                         task_metrics=self._run_task_metrics(values), loop=options.loop,
+                         output=RunOutput(options.out, list(options.record) or None, options.plot,
                                           {**metadata, "set": given}, plot_run, started,
                                           {"voltage_limit_V": metadata["voltage_limit_V"]}))  # `ipcosim view` draws it
 
@@ -367,43 +396,44 @@ class Prepared:
         starts = {name: values.get(("plant", name), plant.start_value(name)) for name in plant.model.variables}
         return functools.partial(streamed_task_metrics, tasks=tasks_of(starts.get))
 
-    def run(self, stop_time: float | None = None, step: float | None = None,
-            set: Mapping[str, Any] | None = None, *, out: str | os.PathLike[str] | None = None,
-            variables: Sequence[str] | None = None, plot: bool = False, raise_on_error: bool = True,
-            **kwargs: Any) -> Result:
+    def run(self, options: RunOptions | None = None, *, observers: Sequence[Observer] = (),
+            manipulators: Sequence[Manipulator] = (), raise_on_error: bool = True, **fields: Any) -> Result:
         """Run once.
 
         Parameters
         ----------
-        stop_time, step : float, optional
-            [s]; default the scenario's DefaultExperiment (10 s at 1 ms for the project's scenarios).
-        set : mapping of ``"component.variable"`` to value, optional
-            Start values (``{"plant.Mp": 0.2, "controller.sample_period": 0.002}``), as ``ipcosim.run(set=...)``.
-        out : path, optional
-            Write ``results.csv``, ``metrics.json`` (and ``plot.png`` with ``plot``) there.
-        variables : sequence of str, optional
-            Columns of results.csv (names or patterns like ``plant.*``); default all connectors.
+        options : RunOptions, optional
+            The run's options (the scenario, swaps and other options a scenario is prepared with
+            are this object's own; default: each run option's default).
+        observers, manipulators : sequence, optional
+            What plugs into the master (:mod:`ipcosim.harness.master.observers`,
+            :mod:`ipcosim.harness.master.manipulators`).
         raise_on_error : bool
             Raise SimulationError on failure (after writing ``out``); else return the partial
             Result with ``error`` set.
-        **kwargs
-            ``realtime`` (None: only when a swapped-in component asks for it), ``progress``,
-            ``observers``, ``manipulators`` (:mod:`ipcosim.harness.master.observers`,
-            :mod:`ipcosim.harness.master.manipulators`), ``start_time``, ``record_every`` (record
-            every n-th communication point), ``loop`` (``auto``, ``c``, ``python``: the stepping
-            loop, :class:`~ipcosim.harness.master.execution.Execution`), ``overrun_budget`` (a
-            paced run's allowed overrun fraction).
+        **fields
+            Run options in place of those of ``options``, by their field names in
+            :class:`~ipcosim.harness.options.RunOptions`: ``stop_time`` and ``step`` [s] (default:
+            the scenario's DefaultExperiment, 10 s at 1 ms for the project's scenarios); ``set``
+            (``{"plant.Mp": 0.2, "controller.sample_period": 0.002}`` or ``"1.1*nominal"``);
+            ``out`` (write ``results.csv``, ``metrics.json`` and, with ``plot``, ``plot.png``
+            there); ``record`` (the columns of results.csv, names or patterns like ``plant.*``;
+            default all connectors); ``realtime`` (None: only when a swapped-in component asks for
+            it), ``overrun_budget``, ``progress``, ``loop``, ``start_time``, ``record_every``,
+            ``max_init_iterations``.
 
         Raises
         ------
+        UsageError
+            A field that is not an option of each run (:meth:`options`), or a bad value.
         SimulationError
             If the run failed and ``raise_on_error`` (``.result`` holds the partial result,
             already written to ``out`` when given).
         """
         started = time.perf_counter() - self.load_seconds  # the loading belongs to the first run
         self.load_seconds = 0.0
-        execution = self.execution(stop_time, step, set, out=out, variables=variables, plot=plot, started=started,
-                                   **kwargs)
+        execution = self.execution(options, observers=observers, manipulators=manipulators, started=started,
+                                   **fields)
         result = execution.run()  # results.csv streamed, metrics.json written at its end (out given)
         if result.error is not None and raise_on_error:
             raise SimulationError(result.error, result)
@@ -485,10 +515,10 @@ def prepare(scenario_or_path: str | os.PathLike[str] | Scenario, **kwargs: Any) 
 
 
 def prepare_with(options: RunOptions, *, warn: bool = True) -> Prepared:
-    """A :class:`Prepared` scenario for ``options`` (scenario, parameter set, swaps, FMU folders, algorithm)."""
-    return Prepared(options.scenario, parameter_set=options.parameter_set, swap=options.swap,
-                    fmu_dirs=options.fmu_dirs, algorithm=options.algorithm, warn=warn, fmus=options.fmus,
-                    strict=options.strict)
+    """A :class:`Prepared` scenario for ``options``: its fields of the ``load`` stage (scenario, parameter
+    set, swaps, FMU folders, flavour, algorithm, strictness) are :class:`Prepared`'s keywords."""
+    load = {name: getattr(options, name) for name, how in run_options() if how.stage == "load"}
+    return Prepared(load.pop("scenario"), warn=warn, **load)
 
 
 def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers: Sequence[Observer] = (),
@@ -515,17 +545,13 @@ def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers
         with prepare_with(options) as own:
             return run_with(options, own, observers=observers, manipulators=manipulators,
                             raise_on_error=raise_on_error)
-    values = resolve_relative(prepared.system, options.set)
-    live = open_live_view(options, prepared, values) if options.live else None
+    live = open_live_view(options, prepared, resolve_relative(prepared.system, options.set)) if options.live else None
     if live is not None:
         observers = [*observers, live.feed]
     try:
         with signals.deferred(timeout=options.timeout):  # a no-op inside the command line's own
-            result = prepared.run(options.stop_time, options.step, values, out=options.out,
-                                  variables=list(options.record) or None, plot=options.plot,
-                                  realtime=options.realtime, progress=options.progress, loop=options.loop,
-                                  observers=observers, overrun_budget=options.overrun_budget,
-                                  manipulators=manipulators, raise_on_error=raise_on_error)
+            result = prepared.run(options, observers=observers, manipulators=manipulators,
+                                  raise_on_error=raise_on_error)
     except BaseException as exc:
         if live is not None:
             partial = getattr(exc, "result", None)

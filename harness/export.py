@@ -86,7 +86,7 @@ def loop_spec(options: ExportOptions) -> ContainerSpec:
     IpcosimError
         An unknown scenario, or one the native flavour cannot run (one line).
     """
-    from ipcosim.harness.engine import Prepared, resolve_relative
+    from ipcosim.harness.engine import Prepared
     from ipcosim.harness.scenario.flavour import FlavourError
 
     try:
@@ -97,7 +97,7 @@ def loop_spec(options: ExportOptions) -> ContainerSpec:
     except FlavourError as exc:
         raise ExportError(f"{NATIVE_ONLY}: {exc}") from None
     with prepared:
-        execution = prepared.execution(set=resolve_relative(prepared.system, options.set))
+        execution = prepared.execution(set=options.set)
         spec = container_spec(prepared.system, [execution.instances[i].name for i in execution.order],
                               execution.multiples, execution.step_size,
                               options.model_identifier or identifier(prepared.scenario.name), execution.set)

@@ -90,6 +90,10 @@ class Option:
     command_default : callable, optional
         ``command_default(args)``: the command line's value when the flag is absent and the
         argument holds None (``--out``: ``out/<scenario>``).
+    stage : str
+        Who takes it (:data:`STAGES`): ``load``, the prepared scenario (:func:`~ipcosim.harness.engine.prepare`);
+        ``run``, each run of it (:meth:`~ipcosim.harness.engine.Prepared.run`); ``command``, the one
+        run of ``ipcosim run`` and :func:`ipcosim.run` around it (:func:`~ipcosim.harness.engine.run_with`).
     """
 
     flag: str
@@ -100,6 +104,11 @@ class Option:
     choices: tuple[str, ...] | None = None
     dest: str | None = None
     command_default: Callable[[argparse.Namespace], Any] | None = None
+    stage: str = "run"
+
+
+#: Who takes a run option: the prepared scenario, each run of it, or the command around one run.
+STAGES = ("load", "run", "command")
 
 
 def option(default: Any = None, *, flag: str = "", help: str,  # noqa: A002 -- argparse's word
@@ -169,7 +178,7 @@ class RunOptions:
     """
 
     scenario: str | os.PathLike[str] = option(
-        flag="scenario", metavar="SCENARIO|PATH", check=_scenario,
+        flag="scenario", metavar="SCENARIO|PATH", check=_scenario, stage="load",
         help="scenario name (see `ipcosim list`), scenario folder, SystemStructure.ssd or .ssp archive")
     stop_time: float | None = option(flag="--stop-time", metavar="S", check=seconds_option,
                                      help="simulated time [s] (default: the scenario's, 10 s)")
@@ -179,11 +188,11 @@ class RunOptions:
         flag="--set", action="append", metavar="COMP.VAR=VALUE", check=lambda flag, v: parse_set(v),
         help="override a parameter or input start value, e.g. --set plant.Mp=0.2 (repeatable)")
     swap: dict[str, Any] = option(  # type: ignore[assignment]
-        flag="--swap", action="append", metavar="COMPONENT=FMU_OR_ALIAS",
+        flag="--swap", action="append", metavar="COMPONENT=FMU_OR_ALIAS", stage="load",
         check=lambda flag, v: parse_pairs(flag, v, "COMPONENT=FMU_OR_ALIAS"),
         help="replace a component by another FMU with compatible connectors, e.g. --swap plant=hil")
     parameter_set: str | None = option(
-        flag="--parameter-set", metavar="NAME",
+        flag="--parameter-set", metavar="NAME", stage="load",
         help="bind this parameter set of the scenario (thesis, tuned...) instead of the default")
     realtime: bool | None = option(flag="--realtime", action="store_const", check=_realtime,
                                    help="pace the run to wall-clock time")
@@ -194,22 +203,22 @@ class RunOptions:
         flag="--record", action="append", metavar="VAR[,VAR...]", check=_columns,
         help="columns of results.csv: names or patterns like 'plant.*' (default: every connector)")
     algorithm: str = option(
-        ALGORITHMS[0], flag="--algorithm", choices=ALGORITHMS, check=_choice(ALGORITHMS),
+        ALGORITHMS[0], flag="--algorithm", choices=ALGORITHMS, check=_choice(ALGORITHMS), stage="load",
         help="co-simulation algorithm (default gauss-seidel, ordered by the FMUs' dependencies)")
     fmu_dirs: tuple[Path, ...] = option(  # type: ignore[assignment]
-        flag="--fmu-dir", action="append", metavar="DIR", dest="fmu_dir", check=_folders,
+        flag="--fmu-dir", action="append", metavar="DIR", dest="fmu_dir", check=_folders, stage="load",
         help=f"extra folder to look for FMUs in (also IPCOSIM_FMU_PATH); the built ones are in "
              f"{BUILD_FMU_DIR} (build/ of a source checkout, else the per-user cache)")
     save_baseline: Path | None = option(
-        flag="--save-baseline", metavar="FILE", check=_path,
+        flag="--save-baseline", metavar="FILE", check=_path, stage="command",
         help="also write the recorded columns (see --record) as a baseline CSV for assert_close_to")
     progress: bool = option(False, flag="--quiet", action="store_false", dest="quiet", check=_flag,
                             help="print nothing but errors")
-    fmus: str = option(FLAVOURS[0], flag="--fmus", choices=FLAVOURS, check=_choice(FLAVOURS, ""),
+    fmus: str = option(FLAVOURS[0], flag="--fmus", choices=FLAVOURS, check=_choice(FLAVOURS, ""), stage="load",
                        help=f"FMU flavour: python (default, in {BUILD_FMU_DIR}) or native (C, from `ipcosim "
                             f"build --native`, in {BUILD_DIR / 'fmus-native'})")
     timeout: float | None = option(
-        flag="--timeout", metavar="S", check=seconds_option,
+        flag="--timeout", metavar="S", check=seconds_option, stage="command",
         help="wall-clock limit [s]: stop the run there with its results so far (exit status 124)")
     loop: str = option(LOOPS[0], flag="--loop", choices=LOOPS, check=_choice(LOOPS),
                        help="the master's stepping loop: auto (default: compiled C where it can run, else "
@@ -218,21 +227,26 @@ class RunOptions:
         flag="--overrun-budget", metavar="FRACTION", check=fraction_option,
         help="a real-time run's allowed late steps, as a fraction of its steps (default: "
              "IPCOSIM_RT_OVERRUN_BUDGET, else 0.01); a run beyond it warns and exits with status 3")
-    strict: bool = option(False, flag="--strict", action="store_true",
+    strict: bool = option(False, flag="--strict", action="store_true", stage="load",
                           help="parameters of the scenario that a swapped-in FMU does not have are an error "
                                "(default: ignored, named in one warning line)")
     parameter_file: Path | None = option(flag="--parameter-file", metavar="FILE.ssv", check=_path,
                                          help=PARAMETER_FILE_HELP)
-    live: bool = option(False, flag="--live", action="store_true", check=_flag,
+    live: bool = option(False, flag="--live", action="store_true", check=_flag, stage="command",
                         help="serve a page showing the run as it happens, with a stop button (its address is "
                              "printed)")
-    live_host: str = option("127.0.0.1", flag="--live-host", metavar="ADDRESS",
+    live_host: str = option("127.0.0.1", flag="--live-host", metavar="ADDRESS", stage="command",
                             help="where the live page listens (default 127.0.0.1; another address needs "
                                  "--live-token)")
-    live_port: int = option(0, flag="--live-port", metavar="N", check=_port,
+    live_port: int = option(0, flag="--live-port", metavar="N", check=_port, stage="command",
                             help="the live page's port (default 0: any free port)")
-    live_token: str | None = option(flag="--live-token", metavar="TOKEN",
+    live_token: str | None = option(flag="--live-token", metavar="TOKEN", stage="command",
                                     help="access token the live page asks every request for")
+    # Options of the Python API only, checked by the execution (``check_times``) as it takes them:
+    start_time: float | None = option(help="the run's start time [s] (default: the scenario's)")
+    record_every: int = option(1, help="record every n-th communication point (default 1: each)")
+    max_init_iterations: int = option(20, help="the most passes that propagate the outputs to the "
+                                                              "inputs during initialization (default 20)")
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -264,6 +278,8 @@ class RunOptions:
         values = {}
         for f in dataclasses.fields(cls):
             how: Option = f.metadata["option"]
+            if not how.flag:  # an option of the Python API only: its default
+                continue
             value = getattr(args, how.dest or f.name)
             values[f.name] = how.command_default(args) if value is None and how.command_default else value
         return cls(**values)
@@ -305,7 +321,7 @@ def _attributes() -> str:
     """The numpydoc Attributes section of :class:`RunOptions`, from the fields' help."""
     lines = ["", "    Attributes", "    ----------"]
     for name, how in run_options():
-        given = how.flag if how.flag.startswith("-") else "positional"
+        given = how.flag if how.flag.startswith("-") else "positional" if how.flag else "Python API only"
         lines.append(f"    {name} : {given}" + (" (its inverse)" if how.action == "store_false" else ""))
         lines.append(f"        {how.help[0].upper()}{how.help[1:]}.")
     return "\n".join(lines) + "\n"

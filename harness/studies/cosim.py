@@ -183,7 +183,8 @@ class CosimSpec(RunSpec):
             if not holder:
                 raise RunFailure(f"{spec.name}: the runner was released")
             values = {**spec.set, **params}
-            return spec.row_of(holder[0].run(spec.stop_time, spec.step, values, raise_on_error=False))
+            return spec.row_of(holder[0].run(stop_time=spec.stop_time, step=spec.step, set=values,
+                                             raise_on_error=False))
 
         return run
 

@@ -22,8 +22,10 @@ from master_mocks import (
     system,
 )
 
+from ipcosim.errors import UsageError
 from ipcosim.harness.engine import Prepared
 from ipcosim.harness.master.algorithm import AlgebraicLoopError, StepSizeError, gauss_seidel_order
+from ipcosim.harness.master.execution import check_times
 from ipcosim.harness.master.manipulators import ScheduledValues
 from ipcosim.harness.master.observers import Observer, Progress
 from ipcosim.harness.scenario.binding import UnconnectedInputWarning
@@ -150,12 +152,14 @@ def test_sample_period_that_the_step_does_not_divide_is_rejected():
         run(loop_system(), loop_factory(), stop_time=1.0, step=0.02)  # period 0.01 < step
 
 
-@pytest.mark.parametrize("kw, match", [({"stop_time": 0.0}, "stop time"), ({"stop_time": -1.0}, "stop time"),
-                                       ({"step": 0.0}, "step size"), ({"step": -0.01}, "step size")])
+@pytest.mark.parametrize("kw, match", [({"stop_time": 0.0}, "--stop-time 0.0"),
+                                       ({"stop_time": -1.0}, "--stop-time -1.0"),
+                                       ({"step": 0.0}, "--step 0.0"), ({"step": -0.01}, "--step -0.01")])
 def test_bad_stop_time_or_step(kw, match):
+    """Refused as the run's options are made, with the command line's message, as ipcosim.run refuses them."""
     args = {"stop_time": 1.0, "step": H, **kw}
     f = loop_factory()
-    with pytest.raises(StepSizeError, match=match):
+    with pytest.raises(UsageError, match=f"^{match}: must be a positive number of seconds$"):
         run(loop_system(), f, **args)
     assert f.slaves == {}  # rejected before anything was instantiated
 
@@ -351,13 +355,27 @@ def test_overrides_are_applied_after_the_bindings():
     ("controller.k", "abc", "'abc' is not a valid Real"),
     ("plant.position", "1", "output/continuous and cannot be set"),
     ("controller.reference", "1", "connected to setpoint.reference"),
-    ("k", "1", "expected COMPONENT.VARIABLE"),
 ])
 def test_bad_overrides(key, value, match):
     f = loop_factory()
     with pytest.raises(BindingError, match=match):
         run(loop_system(), f, stop_time=0.1, step=H, set={key: value})
     assert f.slaves == {}
+
+
+def test_a_set_key_without_component_is_refused_as_the_command_line_refuses_it():
+    f = loop_factory()
+    with pytest.raises(UsageError, match=r"^--set k=1: expected COMPONENT\.VARIABLE=VALUE$"):
+        run(loop_system(), f, stop_time=0.1, step=H, set={"k": "1"})
+    assert f.slaves == {}
+
+
+@pytest.mark.parametrize("start, stop, step, match", [(0.0, 0.0, H, "stop time"), (0.0, 1.0, 0.0, "step size"),
+                                                      (0.0, 1.0, -H, "step size")])
+def test_the_master_checks_its_times_itself(start, stop, step, match):
+    """The master's own check, for a caller of the master without run options."""
+    with pytest.raises(StepSizeError, match=match):
+        check_times(start, stop, step)
 
 
 def test_unconnected_input_is_a_warning_naming_it():

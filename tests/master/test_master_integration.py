@@ -139,9 +139,9 @@ def test_prepared_runs_many_times_with_different_overrides(built):
     from ipcosim.harness.master.slave import FMUSlave
 
     with ipcosim.prepare(built / "ssp" / "single-mass-lqr.ssp") as prepared:
-        a = prepared.run(0.5, set={"plant.Mp": 0.2303})
-        b = prepared.run(0.5, set={"plant.Mp": 0.30})
-        c = prepared.run(0.5, set={"plant.Mp": 0.2303})
+        a = prepared.run(stop_time=0.5, set={"plant.Mp": 0.2303})
+        b = prepared.run(stop_time=0.5, set={"plant.Mp": 0.30})
+        c = prepared.run(stop_time=0.5, set={"plant.Mp": 0.2303})
         assert np.array_equal(a.data, c.data)  # runs are independent: nothing leaks from one to the next
         assert not np.array_equal(a["plant.pendulum_angle"], b["plant.pendulum_angle"])
         assert b.metadata["overrides"] == {"plant.Mp": 0.30}

@@ -39,7 +39,7 @@ def test_the_run_parser_holds_exactly_the_fields_flags() -> None:
     assert declared - parsed == set(), "a field's flag missing from `ipcosim run`"
 
 
-@pytest.mark.parametrize("name", [f.name for f in dataclasses.fields(RunOptions)])
+@pytest.mark.parametrize("name", [name for name, how in run_options() if how.flag])
 def test_each_argument_is_its_field_help_metavar_and_choices(name: str) -> None:
     how = RunOptions.__dataclass_fields__[name].metadata["option"]
     action = _arguments()[how.flag]
@@ -55,6 +55,42 @@ def test_ipcosim_run_takes_only_fields_of_run_options() -> None:
     create = inspect.signature(RunOptions.create).parameters
     assert [p.kind for p in create.values()] == [inspect.Parameter.POSITIONAL_OR_KEYWORD,
                                                  inspect.Parameter.VAR_KEYWORD]
+
+
+def test_a_prepared_run_spells_no_option_of_its_own() -> None:
+    """Prepared.run and Prepared.execution take a RunOptions and its fields by name; Prepared's keywords
+    that are options are the fields of the load stage, by the same names."""
+    for method, own in ((Prepared.run, {"observers", "manipulators", "raise_on_error"}),
+                        (Prepared.execution, {"observers", "manipulators", "started"})):
+        parameters = inspect.signature(method).parameters
+        assert set(parameters) == {"self", "options", "fields"} | own
+        assert parameters["fields"].kind == inspect.Parameter.VAR_KEYWORD
+    load = {name for name, how in run_options() if how.stage == "load"} - {"scenario"}
+    assert load <= set(inspect.signature(Prepared).parameters)
+
+
+@pytest.mark.parametrize(("name", "value", "message"), [
+    ("swap", {"plant": "hil"}, "swap: an option of prepare(), not of each run of a prepared scenario"),
+    ("timeout", 5, "timeout: an option of ipcosim.run(), not of each run of a prepared scenario"),
+    ("stoptime", 1.0, "stoptime: not an option of a run; did you mean"),
+    ("stop_time", -1, "--stop-time -1: must be a positive number of seconds")])
+def test_a_prepared_run_refuses_what_is_not_its_option(name: str, value: object, message: str) -> None:
+    factory = loop_factory()
+    with pytest.raises(UsageError) as refused:
+        Prepared(system=loop_system(), slave_factory=factory, warn=False).run(**{name: value})
+    assert str(refused.value).startswith(message)
+    assert factory.slaves == {}  # refused before anything was instantiated
+
+
+def test_a_prepared_run_takes_the_options_object(tmp_path) -> None:
+    options = RunOptions("loop", stop_time=0.05, step=0.01, record=["plant.*"], out=tmp_path / "given")
+    prepared = Prepared(system=loop_system(), slave_factory=loop_factory(), warn=False)
+    given = prepared.run(options)
+    overridden = prepared.run(options, stop_time=0.02, out=tmp_path / "overridden")
+    for folder in ("given", "overridden"):
+        header = (tmp_path / folder / "results.csv").read_text().splitlines()[0]
+        assert header == "time,plant.voltage,plant.position"  # the loop plant's connectors, in its order
+    assert (given.data["time"][-1], overridden.data["time"][-1]) == pytest.approx((0.05, 0.02))
 
 
 def test_every_option_ipcosim_run_documents_is_a_field() -> None:
