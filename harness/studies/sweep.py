@@ -61,11 +61,16 @@ from ipcosim.harness.studies.store import (
     sort_results,
 )
 
-__all__ = ["SweepResult", "SweepMismatchError", "run_sweep", "columns_for", "plan_hash"]
+__all__ = ["SweepResult", "SweepMismatchError", "SweepResultsGoneError", "run_sweep", "columns_for", "plan_hash"]
 
 
 class SweepMismatchError(IpcosimError, ValueError):
     """The output folder holds results of a different sweep."""
+
+
+class SweepResultsGoneError(IpcosimError, FileNotFoundError):
+    """The rows of a sweep with an output folder were asked for after its ``results.csv`` (or the whole
+    folder) was removed: they are read back from that file, not held in memory."""
 
 
 class Finished:
@@ -142,10 +147,23 @@ class SweepResult:
     @property
     def rows(self) -> list[dict[str, Any]]:
         """One flat row per run (``flatten``), sorted by index: read from ``path`` when the sweep wrote one
-        (a list of every row: for a large sweep, read the file a row at a time with ``store.iter_results``)."""
+        (a list of every row: for a large sweep, read the file a row at a time with ``store.iter_results``).
+
+        Raises
+        ------
+        SweepResultsGoneError
+            ``path`` was removed (with the sweep's folder) since the sweep wrote it."""
         if self.held is not None:
             return self.held
-        return read_results(self.path)[1] if self.path is not None else []
+        if self.path is None:
+            return []
+        try:
+            return read_results(self.path)[1]
+        except FileNotFoundError:
+            gone = "the sweep's folder is gone" if not self.path.parent.is_dir() else "the file is gone"
+            raise SweepResultsGoneError(
+                f"{self.path}: cannot read the sweep's rows back: {gone} (a sweep with an output folder keeps "
+                f"its rows there, not in memory: read them before the folder is removed)") from None
 
     @property
     def runs(self) -> int:

@@ -23,7 +23,7 @@ from ipcosim.harness.studies.executors import DaskExecutor, SchedulerError
 from ipcosim.harness.studies.robustness import summarize, wilson_interval
 from ipcosim.harness.studies.runners import PurePlantSpec, SyntheticSpec, classify_task
 from ipcosim.harness.studies.store import read_results
-from ipcosim.harness.studies.sweep import SweepMismatchError, run_sweep
+from ipcosim.harness.studies.sweep import SweepMismatchError, SweepResultsGoneError, run_sweep
 
 ROOT = Path(__file__).resolve().parents[2]
 PARAMS = {"plant.Mp": 0.2, "plant.K": 140.0, "controller.c1": 4.7}
@@ -201,6 +201,27 @@ def test_finished_sweep_is_not_redone(tmp_path):
     # ... unless asked to start afresh
     fresh = run_sweep(spec, other, out=tmp_path / "out", resume=False, workers=1)
     assert fresh.resumed == 0 and len(list(calls.iterdir())) == 12
+
+
+def test_rows_of_a_sweep_whose_folder_was_removed_is_one_clear_error(tmp_path):
+    """A sweep with an output folder holds no rows: they are read back from its results.csv, so once
+    the folder is gone asking for them is a project error naming the file, not a raw FileNotFoundError."""
+    import shutil
+
+    from ipcosim.errors import IpcosimError
+
+    spec = SyntheticSpec()
+    cases = make_cases(parse_all(["model.x=[0.5,1.5]"], spec.parameters), spec.parameters)
+    out = tmp_path / "out"
+    result = run_sweep(spec, cases, out=out, workers=1)
+    assert [r["model.x"] for r in result.rows] == [0.5, 1.5]  # read from the file while it is there
+    shutil.rmtree(out)
+    with pytest.raises(SweepResultsGoneError) as caught:
+        _ = result.rows
+    assert isinstance(caught.value, IpcosimError)
+    message = str(caught.value)
+    assert str(out / "results.csv") in message and "folder is gone" in message
+    assert len(message.splitlines()) == 1
 
 
 def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
