@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 from ipcosim.errors import IpcosimError, UsageError
+from ipcosim.harness.master import signals
 from ipcosim.harness.studies.cases import SweepCase
 from ipcosim.harness.studies.runners import Runner, RunSpec
 from ipcosim.harness.threads import single_threaded
@@ -154,8 +155,6 @@ def _worker_init() -> None:
 
 
 def _terminated(signum: int, frame: object) -> None:
-    from ipcosim.harness.master import signals
-
     signals.exit_now(128 + signum)
 
 
@@ -233,7 +232,11 @@ class LocalExecutor:
                     batch = list(itertools.islice(pending.values(), size))
                 pool = self._ensure_pool()
                 self._used += len(batch)
-                futures = {pool.submit(_tracked_execute, spec, c, str(track)): c for c in batch}
+                # Submitting spawns the pool's workers: a signal half-way through a spawn would leave a worker
+                # the pool does not know, blocked on its start-up pipe for ever; it is taken once they all are.
+                with signals.holding():
+                    futures = {pool.submit(_tracked_execute, spec, c, str(track)): c for c in batch}
+                signals.check()
                 broken = False
                 try:
                     for fut in cf.as_completed(futures):
@@ -317,12 +320,34 @@ def _stop_resource_tracker() -> None:
     if multiprocessing.active_children():
         return
     gc.collect()  # the pool's semaphores released and unregistered first: no "leaked semaphore" warning
-    stop = getattr(resource_tracker._resource_tracker, "_stop", None)  # noqa: SLF001 -- no public way
-    if stop is not None:
+    tracker = resource_tracker._resource_tracker  # noqa: SLF001 -- no public way
+    with tracker._lock:  # noqa: SLF001
+        fd, pid = getattr(tracker, "_fd", None), getattr(tracker, "_pid", None)
+        if fd is None or pid is None:
+            return
+        os.close(fd)  # closing its "alive" pipe ends the tracker, once no other process holds the pipe
+        tracker._fd = tracker._pid = None  # noqa: SLF001 -- started again if needed
+    _reap(pid, TRACKER_WAIT_S)
+
+
+#: Seconds the resource tracker is waited for once its pipe is closed: it ends at once, unless a process
+#: this one does not know of (a worker whose start a signal cut short) holds the pipe; it is then left to
+#: end with that process, instead of waiting for it for ever as multiprocessing's own stop would.
+TRACKER_WAIT_S = 2.0
+
+
+def _reap(pid: int, wait_s: float) -> bool:
+    """Wait up to ``wait_s`` for the child ``pid`` to end (and collect it); False if it is still running."""
+    deadline = time.monotonic() + wait_s
+    while True:
         try:
-            stop()
-        except Exception:  # noqa: BLE001 -- a tracker already gone
-            pass
+            if os.waitpid(pid, os.WNOHANG)[0]:
+                return True
+        except ChildProcessError:  # already collected
+            return True
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
 
 
 _ADDRESS = re.compile(r"^(tcp|tls|ws|wss|ucx|inproc)://\S+$")
