@@ -62,7 +62,6 @@ class _State:
     exit_after_critical: int | None = None
     temp_dirs: list[str] = []
     lock = threading.Lock()
-    done: threading.Event | None = None  # set when the active block ends (stops its wall-clock limit)
 
 
 def register_temp(path: str | os.PathLike[str]) -> None:
@@ -170,16 +169,6 @@ def holding() -> Iterator[None]:
         _State.holding -= 1
 
 
-def start_limit(timeout: float, grace: float = 2.0) -> None:
-    """Start the wall-clock limit of the active :func:`deferred` block now (as its ``timeout`` does at
-    its start): the command line enters the block before it has read ``--timeout``. Outside an active
-    block (or off the main thread) a no-op."""
-    if not _State.active or _State.done is None or threading.current_thread() is not threading.main_thread():
-        return
-    threading.Thread(target=_watchdog, args=(timeout, grace, _State.done), daemon=True,
-                     name="ipcosim-timeout").start()
-
-
 @contextlib.contextmanager
 def deferred(timeout: float | None = None, grace: float = 2.0, immediate: bool = False) -> Iterator[None]:
     """Defer SIGINT and SIGTERM to :func:`check` (main thread only; elsewhere a no-op).
@@ -208,11 +197,11 @@ def deferred(timeout: float | None = None, grace: float = 2.0, immediate: bool =
     previous = {s: signal.getsignal(s) for s in HANDLED}
     _State.active, _State.pending, _State.exit_after_critical = True, None, None
     _State.immediate, _State.holding, _State.kept = immediate, 0, None
-    done = _State.done = threading.Event()
+    done = threading.Event()
     for s in HANDLED:
         signal.signal(s, _handler)
     if timeout is not None:
-        start_limit(timeout, grace)
+        threading.Thread(target=_watchdog, args=(timeout, grace, done), daemon=True, name="ipcosim-timeout").start()
     try:
         yield
     finally:
