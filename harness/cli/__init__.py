@@ -194,12 +194,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except Exception as exc:  # noqa: BLE001 -- the CLI's one-line error contract
+        behind = _interruption_behind(exc)
+        if behind is not None:  # a library turned the signal into an error of its own
+            return _interrupted(args.command, behind, console, removed=_abandon_outputs())
         _abandon_outputs()
         if args.debug:
             raise
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         print(f"ipcosim {args.command}: error: {message}", file=sys.stderr)
         return EXIT_USAGE if isinstance(exc, UsageError) else EXIT_FAILURE
+
+
+def _interruption_behind(exc: BaseException) -> BaseException | None:
+    """The signal's :class:`~ipcosim.harness.master.signals.Interrupted` that ``exc`` was raised
+    from or while handling (its cause or context, at any depth), or None."""
+    from ipcosim.harness.master.signals import Interrupted
+
+    seen: set[int] = set()
+    link: BaseException | None = exc
+    while link is not None and id(link) not in seen:
+        if isinstance(link, Interrupted):
+            return link
+        seen.add(id(link))
+        link = link.__cause__ or link.__context__
+    return None
 
 
 def _abandon_outputs() -> list[Path]:

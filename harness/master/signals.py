@@ -14,6 +14,14 @@ terminated and freed, temporary folders removed. The command line then exits wit
 An FMU's own code (a Python FMU runs in the same interpreter) never
 sees an exception it did not raise.
 
+Nor is :class:`Interrupted` raised inside an import (a command loads its libraries as it goes):
+a compiled extension whose initialization is cut short turns the exception into
+``ImportError: initialization failed`` and has been seen to crash the interpreter at exit. A
+signal that arrives during an import is delivered again as soon as the import is over. The
+same holds for an :class:`Interrupted` that Python could not raise (one met inside a ``__del__``
+or a callback from C code, which Python reports as ignored): the signal is delivered again, so
+the command still stops.
+
 A second signal while the first is being handled forces the exit at once (status
 ``128 + signal number``): the temporary folders registered with :func:`register_temp` are
 removed, and a results chunk being written is completed first (:func:`critical`), so what is
@@ -32,7 +40,9 @@ import shutil
 import signal
 import sys
 import threading
-from typing import Iterator
+import time
+from types import FrameType
+from typing import Any, Iterator
 
 #: Exit status of a run stopped by its wall-clock limit (the one ``timeout(1)`` uses).
 TIMEOUT_STATUS = 124
@@ -62,6 +72,8 @@ class _State:
     exit_after_critical: int | None = None
     temp_dirs: list[str] = []
     lock = threading.Lock()
+    redelivering = False  # the next signal is the first one, delivered again (:func:`_deliver_again`)
+    previous_hook = staticmethod(sys.unraisablehook)
 
 
 def register_temp(path: str | os.PathLike[str]) -> None:
@@ -129,10 +141,46 @@ def exit_now(status: int) -> None:
     os._exit(status)
 
 
-def _handler(signum: int, frame: object) -> None:
-    if _State.pending is None:
-        _State.pending = signum
+#: Where the import system's frames come from: a signal is not raised while one is on the stack.
+_IMPORT_FILES = frozenset({"<frozen importlib._bootstrap>", "<frozen importlib._bootstrap_external>"})
+#: How often the main thread is looked at while a signal waits to be raised [s].
+RAISE_POLL_S = 0.01
+
+
+def _cannot_raise(frame: FrameType | None) -> bool:
+    """Whether an exception raised in ``frame`` could not reach the command: it or a caller is
+    the import system's (a module being loaded) or Python's report of an exception it could not
+    raise (:func:`_unraisable`)."""
+    while frame is not None:
+        code = frame.f_code
+        if code.co_filename in _IMPORT_FILES or code is _unraisable.__code__:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _deliver_again(signum: int) -> None:
+    """Send ``signum`` to the main thread again once it can be raised there (a thread of its own)."""
+    main = threading.main_thread().ident
+    while _State.active and _State.pending == signum:
+        if not _cannot_raise(sys._current_frames().get(main)):
+            _State.redelivering = True
+            signal.pthread_kill(main, signum)
+            return
+        time.sleep(RAISE_POLL_S)
+
+
+def _later(signum: int) -> None:
+    threading.Thread(target=_deliver_again, args=(signum,), daemon=True, name="ipcosim-signal").start()
+
+
+def _handler(signum: int, frame: FrameType | None) -> None:
+    if _State.pending is None or (_State.redelivering and _State.pending == signum):
+        _State.pending, _State.redelivering = signum, False
         if _State.immediate and not _State.holding:
+            if _cannot_raise(frame):
+                _later(signum)
+                return
             raise Interrupted(signum)
         return
     status = 128 + signum
@@ -140,6 +188,16 @@ def _handler(signum: int, frame: object) -> None:
         _State.exit_after_critical = status
     else:
         _force_exit(status)
+
+
+def _unraisable(unraisable: Any) -> None:
+    """``sys.unraisablehook`` inside :func:`deferred`: a swallowed :class:`Interrupted` is
+    delivered again; every other exception goes to the hook that was there before."""
+    exc = unraisable.exc_value
+    if isinstance(exc, Interrupted) and _State.active and _State.pending == exc.signum:
+        _later(exc.signum)
+        return
+    _State.previous_hook(unraisable)
 
 
 def _watchdog(timeout: float, grace: float, done: threading.Event) -> None:
@@ -200,6 +258,7 @@ def deferred(timeout: float | None = None, grace: float = 2.0, immediate: bool =
     done = threading.Event()
     for s in HANDLED:
         signal.signal(s, _handler)
+    _State.previous_hook, sys.unraisablehook = sys.unraisablehook, _unraisable
     if timeout is not None:
         threading.Thread(target=_watchdog, args=(timeout, grace, done), daemon=True, name="ipcosim-timeout").start()
     try:
@@ -208,5 +267,6 @@ def deferred(timeout: float | None = None, grace: float = 2.0, immediate: bool =
         done.set()
         for s, h in previous.items():
             signal.signal(s, h)
+        sys.unraisablehook = _State.previous_hook
         _State.active = _State.immediate = False
         _State.pending = None
