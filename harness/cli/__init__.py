@@ -158,30 +158,51 @@ def main(argv: Sequence[str] | None = None) -> int:
     out, and a library's exit handlers interrupted half-way have been seen to crash it.
     """
     from ipcosim.harness.master import signals
-    from ipcosim.harness.threads import single_threaded
 
     console = argv is None  # the `ipcosim` command itself, not a call from Python
+    command = ""
+    # Entered before the parser is built (the command modules load numpy: a moment in which the default
+    # disposition would end the process without a word), left only when the command has ended.
+    with signals.deferred(immediate=True):
+        try:
+            args = _parse(sys.argv[1:] if argv is None else argv)
+            command = args.command
+            return _command(args, console)
+        except signals.Interrupted as exc:  # while the parser was built, or while a failure was reported
+            return _interrupted(command, exc, console, removed=_abandon_outputs())
+
+
+def _parse(argv: Sequence[str]) -> argparse.Namespace:
+    """The command line's arguments (exits 2 with one line on an unknown option, as argparse does)."""
+    from ipcosim.harness.threads import single_threaded
+
     single_threaded()  # before the command modules load numpy
     parser = build_parser()
-    argv = _negative_values(parser, sys.argv[1:] if argv is None else argv)
+    argv = _negative_values(parser, argv)
     args, unknown = parser.parse_known_args(argv)
     if unknown:
         _unknown_option(parser, argv, unknown)
+    return args
+
+
+def _command(args: argparse.Namespace, console: bool) -> int:
+    """Run the parsed command inside :func:`main`'s signal handling; returns the exit status."""
+    from ipcosim.harness.master import signals
+
     try:
         limit = getattr(args, "timeout", None)
         if limit is not None:
             from ipcosim.harness.options import seconds_option
 
-            limit = seconds_option("--timeout", limit)
-        with signals.deferred(timeout=limit, immediate=True):
-            try:
-                status = int(args.func(args) or 0)
-                signals.check()  # a signal during the last writes: report it after them
-                if status:
-                    _abandon_outputs()
-                return status
-            except signals.Interrupted as exc:
-                return _interrupted(args.command, exc, console, removed=_abandon_outputs())
+            signals.start_limit(seconds_option("--timeout", limit))
+        try:
+            status = int(args.func(args) or 0)
+            signals.check()  # a signal during the last writes: report it after them
+            if status:
+                _abandon_outputs()
+            return status
+        except signals.Interrupted as exc:
+            return _interrupted(args.command, exc, console, removed=_abandon_outputs())
     except signals.Interrupted as exc:  # a signal during the report of the first one
         return _interrupted(args.command, exc, console, removed=_abandon_outputs())
     except KeyboardInterrupt:
@@ -247,7 +268,8 @@ def _interrupted(command: str, exc: BaseException, console: bool = False, remove
         kept = "nothing was written"
     if kept is None and partial is None:
         kept = "nothing was written"
-    print(f"ipcosim {command}: error: {text}" + (f"; {kept}" if kept else ""), file=sys.stderr)
+    print(f"ipcosim{' ' + command if command else ''}: error: {text}" + (f"; {kept}" if kept else ""),
+          file=sys.stderr)
     status = int(getattr(exc, "exit_status", 130))
     if console:
         sys.stdout.flush()

@@ -74,6 +74,7 @@ class _State:
     lock = threading.Lock()
     redelivering = False  # the next signal is the first one, delivered again (:func:`_deliver_again`)
     previous_hook = staticmethod(sys.unraisablehook)
+    done: threading.Event | None = None  # set when the active block ends (stops its wall-clock limit)
 
 
 def register_temp(path: str | os.PathLike[str]) -> None:
@@ -227,6 +228,16 @@ def holding() -> Iterator[None]:
         _State.holding -= 1
 
 
+def start_limit(timeout: float, grace: float = 2.0) -> None:
+    """Start the wall-clock limit of the active :func:`deferred` block now (as its ``timeout`` does at
+    its start): the command line enters the block before it has read ``--timeout``. Outside an active
+    block (or off the main thread) a no-op."""
+    if not _State.active or _State.done is None or threading.current_thread() is not threading.main_thread():
+        return
+    threading.Thread(target=_watchdog, args=(timeout, grace, _State.done), daemon=True,
+                     name="ipcosim-timeout").start()
+
+
 @contextlib.contextmanager
 def deferred(timeout: float | None = None, grace: float = 2.0, immediate: bool = False) -> Iterator[None]:
     """Defer SIGINT and SIGTERM to :func:`check` (main thread only; elsewhere a no-op).
@@ -255,12 +266,12 @@ def deferred(timeout: float | None = None, grace: float = 2.0, immediate: bool =
     previous = {s: signal.getsignal(s) for s in HANDLED}
     _State.active, _State.pending, _State.exit_after_critical = True, None, None
     _State.immediate, _State.holding, _State.kept = immediate, 0, None
-    done = threading.Event()
+    done = _State.done = threading.Event()
     for s in HANDLED:
         signal.signal(s, _handler)
     _State.previous_hook, sys.unraisablehook = sys.unraisablehook, _unraisable
     if timeout is not None:
-        threading.Thread(target=_watchdog, args=(timeout, grace, done), daemon=True, name="ipcosim-timeout").start()
+        start_limit(timeout, grace)
     try:
         yield
     finally:
