@@ -106,6 +106,11 @@ class Option:
     command_default: Callable[[argparse.Namespace], Any] | None = None
     stage: str = "run"
 
+    def __post_init__(self) -> None:
+        if self.stage not in STAGES:  # a field of no stage would be taken by nobody
+            raise ValueError(f"run option {self.flag or '(API only)'}: stage {self.stage!r}, "
+                             f"expected one of {', '.join(STAGES)}")
+
 
 #: Who takes a run option: the prepared scenario, each run of it, or the command around one run.
 STAGES = ("load", "run", "command")

@@ -69,6 +69,14 @@ def test_a_prepared_run_spells_no_option_of_its_own() -> None:
     assert load <= set(inspect.signature(Prepared).parameters)
 
 
+def test_an_option_of_no_stage_is_refused_where_it_is_declared() -> None:
+    from ipcosim.harness.options import STAGES, Option
+
+    assert {how.stage for _, how in run_options()} == set(STAGES)  # every stage takes some option
+    with pytest.raises(ValueError, match="--stop-time: stage 'runs', expected one of load, run, command"):
+        Option("--stop-time", "Stop time [s].", lambda flag, value: value, stage="runs")
+
+
 @pytest.mark.parametrize(("name", "value", "message"), [
     ("swap", {"plant": "hil"}, "swap: an option of prepare(), not of each run of a prepared scenario"),
     ("timeout", 5, "timeout: an option of ipcosim.run(), not of each run of a prepared scenario"),
