@@ -275,12 +275,13 @@ print(status, *sorted(m for m in sys.modules if m.startswith("ipcosim")))
 """
 
 
-def _loaded_by_run(*args: str) -> tuple[int, set[str]]:
+def _loaded_by_run(*args: str, env: dict[str, str] | None = None) -> tuple[int, set[str]]:
+    import os
     import subprocess
     import sys
 
     done = subprocess.run([sys.executable, "-c", _LOADED, *args], capture_output=True, text=True, timeout=300,
-                          cwd=ROOT)
+                          cwd=ROOT, env={**os.environ, **(env or {})})
     status, *modules = done.stdout.split()
     return int(status), set(modules)
 
@@ -297,7 +298,13 @@ def test_a_plain_run_loads_no_hil_study_or_live_code() -> None:
 
 
 def test_a_hil_swap_still_finds_its_alias() -> None:
-    """The ``hil`` alias is registered when a swap asks for it (the run itself fails: no rig serves)."""
-    status, modules = _loaded_by_run("--swap", "plant=hil")
+    """The ``hil`` alias is registered when a swap asks for it (the run itself fails: no rig serves
+    the port given, which this test holds bound without listening, so that nothing else can)."""
+    import socket
+
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        uri = f"q4:0@tcpip://127.0.0.1:{held.getsockname()[1]}"
+        status, modules = _loaded_by_run("--swap", "plant=hil", env={"IPCOSIM_HIL_URI": uri})
     assert status == 1  # bound and run, stopped by the missing rig: not a usage error (2)
     assert "ipcosim.harness.hil.swap" in modules
