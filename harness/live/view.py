@@ -136,13 +136,33 @@ def sweep_page(folder: Path) -> str:
     head = "".join(f"<th>{html.escape(c)}</th>" for c in rows[0])
     body = "\n".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>" for row in rows[1:])
     title = html.escape(f"sweep {folder.resolve().name}: {len(rows) - 1} runs")
+    made = html.escape(_made_by(folder))
     return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{title}</title><style>"
             "body{font:13px/1.3 system-ui,sans-serif;margin:14px;background:#fafafa}"
             "table{border-collapse:collapse;background:#fff}th,td{border:1px solid #ddd;padding:2px 6px;"
             "text-align:right;white-space:nowrap}th{background:#f0f0f0;position:sticky;top:0}"
             "tr:nth-child(even) td{background:#f7f7f7}</style></head>"
-            f"<body><h1 style=\"font-size:17px\">{title}</h1>\n<table id=\"sweep\"><thead><tr>{head}</tr></thead>"
+            f"<body><h1 style=\"font-size:17px\">{title}</h1>\n<p id=\"made\">{made}</p>\n"
+            f"<table id=\"sweep\"><thead><tr>{head}</tr></thead>"
             f"<tbody>\n{body}\n</tbody></table></body></html>\n")
+
+
+def _made_by(folder: Path) -> str:
+    """Where a sweep's table comes from (its metadata.json: scenario, start, the ipcosim that ran it)
+    and the ipcosim showing it."""
+    from ipcosim.harness.paths import distribution_version
+
+    shown = f"shown by ipcosim {distribution_version()}"
+    try:
+        meta = json.loads((folder / "metadata.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        return f"metadata.json not readable ({type(exc).__name__}): what made these runs is unknown; {shown}"
+    if not isinstance(meta, dict):
+        return f"metadata.json holds no object: what made these runs is unknown; {shown}"
+    packages = meta.get("packages") if isinstance(meta.get("packages"), dict) else {}
+    made = ", ".join(f"{label} {meta[key]}" for key, label in (("scenario", "scenario"), ("started", "started"))
+                     if key in meta)
+    return f"{made + '; ' if made else ''}run by ipcosim {packages.get('ipcosim', '(not recorded)')}; {shown}"
 
 
 def view_server(folder: str | Path, host: str = "127.0.0.1", port: int = 0, token: str | None = None) -> LiveServer:

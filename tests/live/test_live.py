@@ -28,7 +28,7 @@ from ipcosim.fmus.hil.tcpip import TcpipCard
 from ipcosim.harness.live.feed import STOP_MESSAGE, SampleRing
 from ipcosim.harness.live.scene import scene
 from ipcosim.harness.live.server import LiveServer, page
-from ipcosim.harness.live.view import Table, view_server
+from ipcosim.harness.live.view import Table, sweep_page, view_server
 from ipcosim.harness.master.signals import Interrupted
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -233,6 +233,15 @@ def test_view_shows_a_finished_run_from_its_folder(tmp_path: Path) -> None:
         server.close()
 
 
+def _installed_version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("ipcosim")
+    except metadata.PackageNotFoundError:
+        return "dev"
+
+
 def test_view_shows_a_sweep_folder_as_its_table(tmp_path: Path) -> None:
     (tmp_path / "results.csv").write_text("run,plant.Mp,upright,settling_time_s\n0,0.10,True,2.1\n"
                                           "1,0.12,True,2.4\n2,<b>0.14</b>,False,\n")
@@ -244,8 +253,18 @@ def test_view_shows_a_sweep_folder_as_its_table(tmp_path: Path) -> None:
         assert status == 200 and "3 runs" in html
         assert html.count("<tr>") == 4 and "<th>plant.Mp</th>" in html
         assert "&lt;b&gt;0.14&lt;/b&gt;" in html and "<b>0.14" not in html
+        shown = f"shown by ipcosim {_installed_version()}"
+        assert f'<p id="made">run by ipcosim (not recorded); {shown}</p>' in html
     finally:
         server.close()
+    (tmp_path / "metadata.json").write_text(json.dumps({"scenario": "single-mass-lqr", "runs": 3,
+                                                        "started": "2026-12-04T10:00:00+0000",
+                                                        "packages": {"ipcosim": "0.9.1", "numpy": "2.1.0"}}))
+    assert ('<p id="made">scenario single-mass-lqr, started 2026-12-04T10:00:00+0000; run by ipcosim 0.9.1; '
+            f"{shown}</p>") in sweep_page(tmp_path)
+    (tmp_path / "metadata.json").write_text("[1, 2")
+    assert f'<p id="made">metadata.json not readable (JSONDecodeError): what made these runs is unknown; {shown}' \
+        in sweep_page(tmp_path)
     (tmp_path / "empty").mkdir()
     with pytest.raises(ipcosim.IpcosimError, match="no results.csv"):
         view_server(tmp_path / "empty")
