@@ -62,6 +62,26 @@ def test_a_signal_during_an_import_is_raised_once_the_module_is_loaded_whole(tmp
     assert seen["loaded"] is True, seen  # the import was not cut short: the module is whole, and in sys.modules
 
 
+def test_a_command_run_from_a_modules_own_import_still_stops(tmp_path):
+    # the handling begins inside an import: only imports begun after it hold the signal back
+    (tmp_path / "runs_at_import.py").write_text(textwrap.dedent("""
+        import os, signal, time
+        from ipcosim.harness.master import signals
+        with signals.deferred(immediate=True):
+            try:
+                os.kill(os.getpid(), signal.SIGTERM)
+                for _ in range(400):  # 2 s: the signal is raised in here, not once this import is over
+                    time.sleep(0.005)
+                RAISED = False
+            except signals.Interrupted as exc:
+                RAISED = exc.signum
+    """))
+    script = f"import sys; sys.path.insert(0, {str(tmp_path)!r}); import runs_at_import; print(runs_at_import.RAISED)"
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=CHILD_S)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == str(int(signal.SIGTERM)), proc.stdout
+
+
 def test_a_library_that_turns_an_import_failure_into_its_own_error_never_sees_the_signal(tmp_path):
     # what a compiled extension's initialization does with any exception: ImportError from it
     seen = _child(tmp_path, """
