@@ -275,7 +275,7 @@ def deferred(timeout: float | None = None, grace: float = 2.0, immediate: bool =
             yield
         return
     previous = {s: signal.getsignal(s) for s in HANDLED}
-    _State.active, _State.pending, _State.exit_after_critical = True, None, None
+    _State.active, _State.pending, _State.exit_after_critical, _State.redelivering = True, None, None, False
     _State.immediate, _State.holding, _State.kept = immediate, 0, None
     _State.imports_at_start = _imports(sys._getframe())
     done = _State.done = threading.Event()
