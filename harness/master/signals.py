@@ -14,13 +14,13 @@ terminated and freed, temporary folders removed. The command line then exits wit
 An FMU's own code (a Python FMU runs in the same interpreter) never
 sees an exception it did not raise.
 
-Nor is :class:`Interrupted` raised inside an import the command started (it loads its libraries as it goes):
-a compiled extension whose initialization is cut short turns the exception into
-``ImportError: initialization failed`` and has been seen to crash the interpreter at exit. A
-signal that arrives during an import is delivered again as soon as the import is over. The
-same holds for an :class:`Interrupted` that Python could not raise (one met inside a ``__del__``
-or a callback from C code, which Python reports as ignored): the signal is delivered again, so
-the command still stops.
+Nor is :class:`Interrupted` raised inside a compiled module's initialization (a command loads
+its libraries as it goes): one cut short turns the exception into ``ImportError: initialization
+failed`` and has been seen to crash the interpreter at exit. A signal that arrives there is
+delivered again as soon as that initialization is over (milliseconds, as a rule). The same holds
+for an :class:`Interrupted` that Python could not raise (one met inside a ``__del__`` or a callback
+from C code, which Python reports as ignored): the signal is delivered again, so the command still
+stops.
 
 A second signal while the first is being handled forces the exit at once (status
 ``128 + signal number``): the temporary folders registered with :func:`register_temp` are
@@ -41,6 +41,7 @@ import signal
 import sys
 import threading
 import time
+from importlib.machinery import ExtensionFileLoader
 from types import FrameType
 from typing import Any, Iterator
 
@@ -74,7 +75,6 @@ class _State:
     lock = threading.Lock()
     redelivering = False  # the next signal is the first one, delivered again (:func:`_deliver_again`)
     previous_hook = staticmethod(sys.unraisablehook)
-    imports_at_start = 0  # the import frames on the stack when the active block began
     done: threading.Event | None = None  # set when the active block ends (stops its wall-clock limit)
 
 
@@ -143,32 +143,23 @@ def exit_now(status: int) -> None:
     os._exit(status)
 
 
-#: Where the import system's frames come from: a signal is not raised while an import is under way.
-_IMPORT_FILES = frozenset({"<frozen importlib._bootstrap>", "<frozen importlib._bootstrap_external>"})
+#: The import system's calls that run a compiled module's initialization: a signal is not raised
+#: while one is on the stack.
+_EXTENSION_INIT = frozenset({ExtensionFileLoader.create_module.__code__, ExtensionFileLoader.exec_module.__code__})
 #: How often the main thread is looked at while a signal waits to be raised [s].
 RAISE_POLL_S = 0.01
 
 
-def _imports(frame: FrameType | None) -> int:
-    """How many of ``frame`` and its callers are the import system's."""
-    count = 0
-    while frame is not None:
-        count += frame.f_code.co_filename in _IMPORT_FILES
-        frame = frame.f_back
-    return count
-
-
 def _cannot_raise(frame: FrameType | None) -> bool:
-    """Whether an exception raised in ``frame`` could not reach the command: a module is being
-    loaded that was not when :func:`deferred` began (a command run from a module's own import
-    still stops), or the frame is inside Python's report of an exception it could not raise
-    (:func:`_unraisable`)."""
-    caller = frame
-    while caller is not None:
-        if caller.f_code is _unraisable.__code__:
+    """Whether an exception raised in ``frame`` would not reach the command as itself: it or a
+    caller is a compiled module's initialization (:data:`_EXTENSION_INIT`) or Python's report of
+    an exception it could not raise (:func:`_unraisable`)."""
+    while frame is not None:
+        code = frame.f_code
+        if code in _EXTENSION_INIT or code is _unraisable.__code__:
             return True
-        caller = caller.f_back
-    return _imports(frame) > _State.imports_at_start
+        frame = frame.f_back
+    return False
 
 
 def _deliver_again(signum: int) -> None:
@@ -277,7 +268,6 @@ def deferred(timeout: float | None = None, grace: float = 2.0, immediate: bool =
     previous = {s: signal.getsignal(s) for s in HANDLED}
     _State.active, _State.pending, _State.exit_after_critical, _State.redelivering = True, None, None, False
     _State.immediate, _State.holding, _State.kept = immediate, 0, None
-    _State.imports_at_start = _imports(sys._getframe())
     done = _State.done = threading.Event()
     for s in HANDLED:
         signal.signal(s, _handler)
