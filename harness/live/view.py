@@ -160,8 +160,7 @@ def _made_by(folder: Path) -> str:
     if not isinstance(meta, dict):
         return f"metadata.json holds no object: what made these runs is unknown; {shown}"
     packages = meta.get("packages") if isinstance(meta.get("packages"), dict) else {}
-    made = ", ".join(f"{label} {meta[key]}" for key, label in (("scenario", "scenario"), ("started", "started"))
-                     if key in meta)
+    made = ", ".join(f"{key} {meta[key]}" for key in ("scenario", "started") if key in meta)
     return f"{made + '; ' if made else ''}run by ipcosim {packages.get('ipcosim', '(not recorded)')}; {shown}"
 
 
