@@ -25,6 +25,8 @@ EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_REALTIME_DEGRADED, EXIT_TIMEOUT = 0, 1, 
 #: Sub-command modules, in the order ``ipcosim --help`` lists them.
 COMMAND_MODULES = ("build", "list_", "describe", "run", "export", "linearize", "analyze", "rig", "compare", "sweep",
                    "tune", "identify", "view")
+#: Each command's name on the command line (``list``), by its module's name (``list_``).
+COMMANDS = {module.rstrip("_"): module for module in COMMAND_MODULES}
 
 
 def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
@@ -71,8 +73,14 @@ class _Version(argparse.Action):
         parser.exit()
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The top-level parser with every available sub-command registered."""
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The top-level parser with every sub-command registered (``only=None``), or with the command
+    ``only`` registered whole and every other one by its name and one line of help.
+
+    A command registers its options in its module's ``register``, which may load what the options
+    are made of (the run options load numpy); its one line of help is the module's ``HELP``. So
+    ``ipcosim --version`` (``only=""``) and each command load only what that command runs.
+    """
     parser = Parser(
         prog="ipcosim",
         description="FMI co-simulation of the Quanser IP02 inverted pendulum (single and double mass).",
@@ -81,8 +89,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action=_Version, help="print the installed ipcosim's version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in COMMAND_MODULES:
-        importlib.import_module(f"ipcosim.harness.cli.{name}").register(sub)
+    for name, module_name in COMMANDS.items():
+        module = importlib.import_module(f"ipcosim.harness.cli.{module_name}")
+        if only is None or name == only:
+            module.register(sub)
+        else:
+            sub.add_parser(name, help=module.HELP)
     for each in parsers(parser):
         each.allow_abbrev = False  # options are never abbreviated: `--token` is not `--token-file`
     return parser
@@ -160,24 +172,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     from ipcosim.harness.master import signals
 
     console = argv is None  # the `ipcosim` command itself, not a call from Python
-    command = ""
-    # Entered before the parser is built (the command modules load numpy: a moment in which the default
+    argv = sys.argv[1:] if argv is None else argv
+    command = command_named(argv)
+    # Entered before the parser is built (a command's options may load numpy: a moment in which the default
     # disposition would end the process without a word), left only when the command has ended.
     with signals.deferred(immediate=True):
         try:
-            args = _parse(sys.argv[1:] if argv is None else argv)
-            command = args.command
+            args = _parse(argv, command)
             return _command(args, console)
         except signals.Interrupted as exc:  # while the parser was built, or while a failure was reported
             return _interrupted(command, exc, console, removed=_abandon_outputs())
 
 
-def _parse(argv: Sequence[str]) -> argparse.Namespace:
-    """The command line's arguments (exits 2 with one line on an unknown option, as argparse does)."""
+def command_named(argv: Sequence[str]) -> str:
+    """The command ``argv`` names (its first word that is not an option: the top-level options take no
+    value), or ``""`` when it names none of :data:`COMMANDS` (``--version``, ``--help``, a misspelt
+    command, which the parser then answers)."""
+    word = next((a for a in argv if not a.startswith("-")), "")
+    return word if word in COMMANDS else ""
+
+
+def _parse(argv: Sequence[str], command: str) -> argparse.Namespace:
+    """The command line's arguments (exits 2 with one line on an unknown option, as argparse does),
+    with only ``command``'s options built (:func:`build_parser`)."""
     from ipcosim.harness.threads import single_threaded
 
-    single_threaded()  # before the command modules load numpy
-    parser = build_parser()
+    single_threaded()  # before a command's options load numpy
+    parser = build_parser(command)
     argv = _negative_values(parser, argv)
     args, unknown = parser.parse_known_args(argv)
     if unknown:

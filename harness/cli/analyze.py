@@ -6,9 +6,12 @@ import json
 
 from ipcosim.harness.cli import add_parameter_file_option
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "linear analysis of a scenario's loop (margins, sensitivity, Bode/Nyquist)"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("analyze", help="linear analysis of a scenario's loop (margins, sensitivity, Bode/Nyquist)",
+    p = sub.add_parser("analyze", help=HELP,
                        description="Break the scenario's loop at the plant input and report gain, phase and delay "
                                    "margins, the sensitivity peak, the sampled-data closed-loop poles and the limit "
                                    "that the plant's right-half-plane zero and pole put on a position-only "

@@ -4,9 +4,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "build the FMUs (and SSP archives) into build/"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("build", help="build the FMUs (and SSP archives) into build/",
+    p = sub.add_parser("build", help=HELP,
                        description="Build every FMU script (fmus/fmu_*.py, controllers/fmu_*.py) into OUT/fmus/ "
                                    "and pack the SSP scenarios into OUT/ssp/. Unchanged FMUs are not rebuilt.")
     from ipcosim.harness.paths import BUILD_DIR

@@ -3,9 +3,12 @@ from __future__ import annotations
 
 import argparse
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "a scenario's components, variables, units and start values"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("describe", help="a scenario's components, variables, units and start values",
+    p = sub.add_parser("describe", help=HELP,
                        description="List the components of a scenario, their FMUs in each flavour and every "
                                    "variable with causality, type, unit, start value (after the scenario's "
                                    "parameter sets), description, and the flavours in which --set may change it.")

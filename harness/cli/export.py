@@ -4,11 +4,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "write a scenario's closed loop as one FMU"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     from ipcosim.harness.paths import BUILD_DIR
 
-    p = sub.add_parser("export", help="write a scenario's closed loop as one FMU",
+    p = sub.add_parser("export", help=HELP,
                        description="Write the whole closed loop of a scenario (setpoint, controller, plant) as one "
                                    "FMI 2.0 (or, with --fmi 3, FMI 3.0) co-simulation FMU built from the native "
                                    "components (`ipcosim build --native` first): input `reference` (added to the "

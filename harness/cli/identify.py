@@ -9,10 +9,14 @@ import sys
 EXIT_NOT_VALID = 4
 
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "estimate the plant's parameters from a run's log (with 95 %% intervals)"
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     from ipcosim.fmus.params import KINDS
 
-    p = sub.add_parser("identify", help="estimate the plant's parameters from a run's log (with 95 %% intervals)",
+    p = sub.add_parser("identify", help=HELP,
                        description="Replay the logged voltage through the plant model, fit the named parameters to "
                                    "the logged encoder readings (output error, scipy least squares) and report each "
                                    "estimate with its 95 % interval and the fit (1 - NRMSE) per output on the "

@@ -4,11 +4,12 @@ from __future__ import annotations
 import argparse
 import json
 
-import numpy as np
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "linear state-space model of a plant about upright"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("linearize", help="linear state-space model of a plant about upright",
+    p = sub.add_parser("linearize", help=HELP,
                        description="Linearize a plant preset about the upright equilibrium.")
     from ipcosim.fmus.params import KINDS
 
@@ -23,6 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from ipcosim.fmus.linearize import linearize
     from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, ParameterError, preset
 

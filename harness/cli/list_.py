@@ -3,9 +3,12 @@ from __future__ import annotations
 
 import argparse
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "list the scenarios"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("list", help="list the scenarios", description="List the SSP scenarios of ssp/, one line each.")
+    p = sub.add_parser("list", help=HELP, description="List the SSP scenarios of ssp/, one line each.")
     p.set_defaults(func=main)
 
 

@@ -4,9 +4,12 @@ from __future__ import annotations
 import argparse
 import sys
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "the virtual IP02 rig (serve, reset, status)"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("rig", help="the virtual IP02 rig (serve, reset, status)",
+    p = sub.add_parser("rig", help=HELP,
                        description="The virtual IP02 + Q4 rig for hardware-in-the-loop runs without hardware. "
                                    "See docs/hil.md.")
     rs = p.add_subparsers(dest="rig_command", metavar="ACTION")

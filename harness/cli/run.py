@@ -24,10 +24,14 @@ def task_verdict(m: dict, bound: float | None) -> str:
     return status + (f" (amplitude bound {1e3 * bound:.3g} mm)" if bound else "") + cycle
 
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "co-simulate a scenario (SSP folder or archive)"
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     from ipcosim.harness.options import add_run_arguments
 
-    p = sub.add_parser("run", help="co-simulate a scenario (SSP folder or archive)",
+    p = sub.add_parser("run", help=HELP,
                        description="Run an SSP scenario with the fmpy-based master and write DIR/results.csv "
                                    "(time, then component.variable), DIR/metrics.json and, with --plot, DIR/plot.png.")
     add_run_arguments(p)  # every option of a run, from the fields of RunOptions

@@ -15,10 +15,13 @@ import sys
 from ipcosim.fmus.instruments import REALISM
 from ipcosim.harness.cli import add_parameter_file_option, add_study_fmus_option
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "robustness sweep: many runs of a scenario with varied parameters"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "sweep", help="robustness sweep: many runs of a scenario with varied parameters",
+        "sweep", help=HELP,
         description="Run a scenario many times with parameters drawn or stepped by --vary, in parallel "
                     "(local processes or a Dask cluster), and report the success rate (upright and settled "
                     "within the +-2 % band) and the distribution of every metric.",

@@ -17,10 +17,13 @@ import sys
 
 from ipcosim.harness.cli import add_study_fmus_option
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "tune controller gains by differential evolution over parallel runs"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "tune", help="tune controller gains by differential evolution over parallel runs",
+        "tune", help=HELP,
         description="Minimise J = ITAE(cart position error) + w_angle ITAE(angle) + w_voltage ISE(voltage) "
                     "(infinite when the pendulum falls) over the given parameters with scipy's differential "
                     "evolution; each generation runs in parallel on the sweep engine.")

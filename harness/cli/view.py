@@ -4,9 +4,12 @@ from __future__ import annotations
 import argparse
 import sys
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "a finished run (or a sweep's table) in the browser"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("view", help="a finished run (or a sweep's table) in the browser",
+    p = sub.add_parser("view", help=HELP,
                        description="Serve the live page of a finished run (DIR/results.csv and DIR/metrics.json of "
                                    "`ipcosim run --out DIR`), or the table of a sweep (DIR/results.csv of "
                                    "`ipcosim sweep --out DIR`), on localhost until Ctrl-C. The address is printed.")

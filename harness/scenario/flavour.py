@@ -10,10 +10,12 @@ from __future__ import annotations
 import dataclasses
 import shutil
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 from ipcosim.errors import IpcosimError
-from ipcosim.harness.scenario.ssp import Parameter, ParameterSet, Scenario
+
+if TYPE_CHECKING:  # the command line reads the flavours' names without loading the SSP reader
+    from ipcosim.harness.scenario.ssp import Scenario
 
 FLAVOURS = ("python", "native")
 #: ``--fmus`` of the studies: ``auto`` (the default) takes the native FMUs when they are built and
@@ -49,6 +51,7 @@ def to_native(scenario: Scenario) -> tuple[Scenario, dict[str, dict[str, Any]]]:
         A component whose FMU is not a native ipcosim FMU, or a binding the redesign rejects.
     """
     from ipcosim.harness.native.redesign import native_info, redesign
+    from ipcosim.harness.scenario.ssp import Parameter, ParameterSet
 
     components = []
     python_values: dict[str, dict[str, Any]] = {}

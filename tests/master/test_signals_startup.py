@@ -1,6 +1,6 @@
 """A signal that reaches the ``ipcosim`` command while it is still starting (building its parser, which
-loads numpy and every command module: a few hundred milliseconds, more on a loaded machine) ends it
-as any other signal does: one line on stderr naming the signal, exit status 128 + signal number.
+loads every command module and the named command's options: numpy for a run) ends it as any other
+signal does: one line on stderr naming the command and the signal, exit status 128 + signal number.
 Under Python's default SIGTERM disposition the process would instead vanish without a word (status
 -15) -- what a sweep resumed and stopped at once by a supervisor's ``kill`` showed.
 
@@ -28,9 +28,9 @@ SCRIPT = textwrap.dedent("""
 
     build = cli.build_parser
 
-    def build_parser():
+    def build_parser(*args, **kwargs):
         os.kill(os.getpid(), signal.{name})  # arrives while the command modules are being loaded
-        return build()
+        return build(*args, **kwargs)
 
     cli.build_parser = build_parser
     sys.argv = ["ipcosim", "sweep", "pure:single-mass-lqr", "--vary", "plant.Mp=[1]", "--out", {out!r}]
@@ -46,5 +46,6 @@ def test_a_signal_while_the_command_starts_is_one_line_and_128_plus_its_number(t
     number = int(getattr(signal, name))
     assert done.returncode == 128 + number, (done.returncode, done.stderr)
     lines = done.stderr.splitlines()
-    assert lines == [f"ipcosim: error: interrupted by {name}; nothing was written"], done.stderr
+    # the command is named although its parser was not built yet: it is read from the words given
+    assert lines == [f"ipcosim sweep: error: interrupted by {name}; nothing was written"], done.stderr
     assert not out.exists()  # nothing of the sweep was started
