@@ -18,10 +18,13 @@ from typing import Any, Callable, Sequence
 
 from ipcosim.harness.cli import add_study_fmus_option
 
+#: The one line ``ipcosim --help`` shows for this command.
+HELP = "run every scenario and write the controller comparison report"
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "compare", help="run every scenario and write the controller comparison report",
+        "compare", help=HELP,
         description="Run every plant x controller scenario and write a Markdown and a self-contained HTML "
                     "report: metrics table and overlaid time series per plant.")
     p.add_argument("--out", default="out/compare", help="report folder (default out/compare)")
@@ -46,15 +49,17 @@ def main(args: argparse.Namespace, claims: Callable[[Any], Sequence[Any]] | None
     """Co-simulate every scenario once (one sweep over the scenarios), optionally a robustness
     sweep of each, then write the report, ``metrics.csv`` and ``metrics.json``
     (``ipcosim.harness.studies.compare``); ``claims`` judges claims on the results for the report."""
-    from ipcosim.errors import IpcosimError
     from ipcosim.harness.master import signals
+
+    # said before the studies load (a second or more on a loaded machine), so a signal then says it too
+    signals.keep(f"robustness runs finished so far are kept under {Path(args.out) / 'robustness'} and reused by "
+                 f"the same command" if args.robustness else "no report written")
+    from ipcosim.errors import IpcosimError
     from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.compare import comparison
     from ipcosim.harness.studies.executors import open_executor
 
     claim_output(args.out, "compare")  # before any run
-    signals.keep(f"robustness runs finished so far are kept under {Path(args.out) / 'robustness'} and reused by "
-                 f"the same command" if args.robustness else "no report written")
     names = [s.strip() for s in args.scenarios.split(",") if s.strip()] if args.scenarios else None
     study = comparison(names, args.out, fmus=args.fmus, parameter_set=args.parameter_set, stop_time=args.stop_time,
                        robustness=args.robustness, samples=args.samples, seed=args.seed, progress=not args.quiet)
