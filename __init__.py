@@ -31,7 +31,7 @@ _EXPORTS = {
     "RunOptions": "ipcosim.harness.options",
     "prepare": "ipcosim.harness.engine", "Prepared": "ipcosim.harness.engine",
     "Result": "ipcosim.harness.master.results", "SimulationError": "ipcosim.harness.master.results",
-    "load_scenario": "ipcosim.harness.scenario.ssp", "scenario_names": "ipcosim.harness.scenario.ssp",
+    "load_scenario": "ipcosim.harness.scenario.ssp", "scenario_names": "ipcosim.harness.scenario.locations",
     "IpcosimError": "ipcosim.errors", "UsageError": "ipcosim.errors",
     "assert_upright": "ipcosim.harness.testing", "assert_settles": "ipcosim.harness.testing",
     "assert_steady_state": "ipcosim.harness.testing", "assert_close_to": "ipcosim.harness.testing",

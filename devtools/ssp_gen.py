@@ -19,6 +19,7 @@ from typing import Any, Mapping
 from xml.sax.saxutils import quoteattr
 
 from ipcosim.harness.paths import SCENARIO_DIR
+from ipcosim.harness.scenario.files import NS
 from ipcosim.harness.scenario.scenarios import (
     AMPLITUDE,
     CONTROLLERS,
@@ -30,7 +31,7 @@ from ipcosim.harness.scenario.scenarios import (
     UNITS,
     VARIANTS,
 )
-from ipcosim.harness.scenario.ssp import NS, ssv_text
+from ipcosim.harness.scenario.ssv import ssv_text
 
 
 def plant_signals(plant: str) -> tuple[list[str], list[str]]:

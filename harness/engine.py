@@ -45,7 +45,8 @@ from ipcosim.harness.options import RunOptions, run_options
 from ipcosim.harness.scenario.archive import member_path, safe_extract
 from ipcosim.harness.scenario.binding import bind, warn_all
 from ipcosim.harness.scenario.default_experiment import default_step, default_stop_time
-from ipcosim.harness.scenario.ssp import Scenario, load_scenario, select_parameter_set
+from ipcosim.harness.scenario.ssp import load_scenario
+from ipcosim.harness.scenario.structure import Scenario, select_parameter_set
 from ipcosim.harness.scenario.swaps import SwapTarget
 from ipcosim.harness.scenario.values import with_set
 
@@ -498,14 +499,14 @@ def build_missing(scenario: Scenario) -> list[str]:
     if scenario.location.is_file() or all(c.fmu is not None for c in scenario.components):
         return []  # an .ssp archive carries its FMUs; every FMU found
     from ipcosim.fmus.pybuild import build_all, model_scripts
-    from ipcosim.harness.scenario import ssp
+    from ipcosim.harness.scenario import locations
 
     scripts = model_scripts()
     missing = sorted({Path(c.source).stem for c in scenario.components if c.fmu is None} & set(scripts))
     if missing:
-        print(f"ipcosim: building the FMUs {scenario.name} needs ({', '.join(missing)}) into {ssp.BUILD_FMU_DIR}, "
-              f"once", file=sys.stderr, flush=True)
-        build_all(ssp.BUILD_FMU_DIR, scripts=[scripts[m] for m in missing])
+        print(f"ipcosim: building the FMUs {scenario.name} needs ({', '.join(missing)}) into "
+              f"{locations.BUILD_FMU_DIR}, once", file=sys.stderr, flush=True)
+        build_all(locations.BUILD_FMU_DIR, scripts=[scripts[m] for m in missing])
     return missing
 
 

@@ -351,7 +351,7 @@ def with_parameter_file(path: str | os.PathLike[str] | None, values: Mapping[str
     (the ``--set`` values win), for ``run``, ``sweep`` and ``analyze`` alike."""
     if path is None:
         return dict(values)
-    from ipcosim.harness.scenario.ssp import read_parameter_file
+    from ipcosim.harness.scenario.ssv import read_parameter_file
 
     return {**read_parameter_file(path), **values}
 

@@ -130,7 +130,8 @@ def scenarios() -> list[ScenarioInfo]:
     >>> info.stop_time, info.step
     (10.0, 0.001)
     """
-    from ipcosim.harness.scenario.ssp import load_scenario, scenario_names
+    from ipcosim.harness.scenario.locations import scenario_names
+    from ipcosim.harness.scenario.ssp import load_scenario
 
     out = []
     for name in scenario_names():

@@ -10,7 +10,7 @@ from py_slave import PySlave
 from ipcosim.harness.master.slave import DISCARD, ERROR, OK
 from ipcosim.harness.master.system import Instance, Model, System, Variable
 from ipcosim.harness.scenario.binding import bind
-from ipcosim.harness.scenario.ssp import Component, Connection, Connector, Experiment, Scenario
+from ipcosim.harness.scenario.structure import Component, Connection, Connector, Experiment, Scenario
 
 
 def model(name: str, inputs: Sequence[str] = (), outputs: Sequence[str] = (),
@@ -37,7 +37,7 @@ def system(components: Sequence[tuple[str, Model]], connections: Sequence[tuple[
            stop_time: float = 1.0, step: float = 0.01,
            bindings: dict[str, dict[str, float]] | None = None, units: dict | None = None) -> System:
     """A System of mock models; ``connections`` as ("a.y", "b.u") pairs."""
-    from ipcosim.harness.scenario.ssp import Parameter, ParameterSet
+    from ipcosim.harness.scenario.structure import Parameter, ParameterSet
 
     comps = []
     for name, m in components:

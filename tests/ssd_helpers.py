@@ -5,7 +5,7 @@ import shutil
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
-from ipcosim.harness.scenario.ssp import NS
+from ipcosim.harness.scenario.files import NS
 
 HEAD = (f'<?xml version="1.0" encoding="UTF-8"?>\n<ssd:SystemStructureDescription xmlns:ssd="{NS["ssd"]}" '
         f'xmlns:ssc="{NS["ssc"]}" xmlns:ssv="{NS["ssv"]}" xmlns:osp="{NS["osp"]}" version="1.0" name="{{name}}">\n')

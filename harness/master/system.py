@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping
 
 if TYPE_CHECKING:  # type-only: a System remembers the scenario it was bound from
-    from ipcosim.harness.scenario.ssp import Scenario, Unit
+    from ipcosim.harness.scenario.structure import Scenario, Unit
 
 #: SSP 1.0 connector type of every FMI 2.0 / 3.0 variable type the master carries.
 SSP_TYPE = {"Real": "Real", "Float64": "Real", "Float32": "Real",

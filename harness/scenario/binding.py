@@ -22,18 +22,11 @@ from typing import Any, Mapping
 from ipcosim.errors import closest
 from ipcosim.harness.master.system import SSP_TYPE, Instance, Link, Model, System, Variable, value_type_of
 from ipcosim.harness.scenario.checks import check_connector, check_types, unmatched_names
+from ipcosim.harness.scenario.elements import SIGNAL_KINDS
 from ipcosim.harness.scenario.errors import BindingError, FMUNotFoundError
 from ipcosim.harness.scenario.model_description import read_model
 from ipcosim.harness.scenario.rebuild import rebuild_hint
-from ipcosim.harness.scenario.ssp import (
-    SIGNAL_KINDS,
-    Component,
-    Connection,
-    Parameter,
-    ParameterLink,
-    ParameterSet,
-    Scenario,
-)
+from ipcosim.harness.scenario.structure import Component, Connection, Parameter, ParameterLink, ParameterSet, Scenario
 from ipcosim.harness.scenario.swaps import SwapTarget, resolve_swap
 from ipcosim.harness.scenario.transformations import (
     after_unit_conversion,

@@ -8,7 +8,7 @@ from typing import Any, Mapping
 
 from ipcosim.harness.master.system import SSP_TYPE, TRANSFORMATION_TYPES, Instance, System, Variable
 from ipcosim.harness.scenario.errors import BindingError
-from ipcosim.harness.scenario.ssp import Connector, Scenario, Unit
+from ipcosim.harness.scenario.structure import Connector, Scenario, Unit
 from ipcosim.harness.scenario.units import unit_conversion
 
 

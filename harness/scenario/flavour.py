@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 from ipcosim.errors import IpcosimError
 
 if TYPE_CHECKING:  # the command line reads the flavours' names without loading the SSP reader
-    from ipcosim.harness.scenario.ssp import Scenario
+    from ipcosim.harness.scenario.structure import Scenario
 
 FLAVOURS = ("python", "native")
 #: ``--fmus`` of the studies: ``auto`` (the default) takes the native FMUs when they are built and
@@ -51,7 +51,7 @@ def to_native(scenario: Scenario) -> tuple[Scenario, dict[str, dict[str, Any]]]:
         A component whose FMU is not a native ipcosim FMU, or a binding the redesign rejects.
     """
     from ipcosim.harness.native.redesign import native_info, redesign
-    from ipcosim.harness.scenario.ssp import Parameter, ParameterSet
+    from ipcosim.harness.scenario.structure import Parameter, ParameterSet
 
     components = []
     python_values: dict[str, dict[str, Any]] = {}

@@ -9,7 +9,7 @@ from typing import Any, Mapping
 
 from ipcosim.harness.master.system import Model, Variable, value_type_of
 from ipcosim.harness.scenario.errors import BindingError
-from ipcosim.harness.scenario.ssp import BASE_UNITS, Unit
+from ipcosim.harness.scenario.structure import BASE_UNITS, Unit
 
 _MODEL_CACHE: dict[tuple[str, float, int], Model] = {}
 

@@ -14,7 +14,9 @@ from pathlib import Path
 from lxml import etree
 
 from ipcosim.harness.paths import SCENARIO_DIR
-from ipcosim.harness.scenario.ssp import NS, SSD_NAME, load_scenario, parse_xml, scenario_names
+from ipcosim.harness.scenario.files import NS, SSD_NAME, parse_xml
+from ipcosim.harness.scenario.locations import scenario_names
+from ipcosim.harness.scenario.ssp import load_scenario
 
 #: The SSP versions an archive can declare (``ipcosim build --ssp-version``).
 SSP_VERSIONS = ("1.0", "2.0")

@@ -11,7 +11,8 @@ from typing import Any, Callable, Mapping
 from ipcosim.errors import closest
 from ipcosim.harness.master.system import Model
 from ipcosim.harness.scenario.errors import BindingError, SwapFileNotFoundError
-from ipcosim.harness.scenario.ssp import Scenario, fmu_search_path
+from ipcosim.harness.scenario.locations import fmu_search_path
+from ipcosim.harness.scenario.structure import Scenario
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from typing import Any
 
 from ipcosim.harness.master.system import Model, Variable, value_type_of
 from ipcosim.harness.scenario.errors import BindingError
-from ipcosim.harness.scenario.ssp import Connection, Parameter, Transform
+from ipcosim.harness.scenario.structure import Connection, Parameter, Transform
 
 
 def after_unit_conversion(factor: float, offset: float, conversion: tuple[float, float]) -> tuple[float, float]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Mapping
 
 from ipcosim.harness.master.system import Model, Variable
-from ipcosim.harness.scenario.ssp import Scenario, Unit
+from ipcosim.harness.scenario.structure import Scenario, Unit
 
 
 def unit_table(scenario: Scenario, *models: Model) -> dict[str, Unit]:

@@ -122,7 +122,8 @@ def scenario_loop(scenario: str, parameter_set: str | None = None,
     """
     from pathlib import PurePosixPath
 
-    from ipcosim.harness.scenario.ssp import load_scenario, select_parameter_set
+    from ipcosim.harness.scenario.ssp import load_scenario
+    from ipcosim.harness.scenario.structure import select_parameter_set
 
     sc = load_scenario(scenario)
     if parameter_set:

@@ -721,7 +721,7 @@ def write_identified(result: Identification, out: Path) -> list[Path]:
     list of Path
         The files written (the plot only where matplotlib is installed).
     """
-    from ipcosim.harness.scenario.ssp import ssv_text
+    from ipcosim.harness.scenario.ssv import ssv_text
 
     out.mkdir(parents=True, exist_ok=True)
     written = []

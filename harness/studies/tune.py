@@ -385,7 +385,8 @@ def tuned_parameter_set(scenario: str, best: Mapping[str, float],
     if len(components) == 1:
         component = components.pop()
         try:
-            from ipcosim.harness.scenario.ssp import load_scenario, select_parameter_set
+            from ipcosim.harness.scenario.ssp import load_scenario
+            from ipcosim.harness.scenario.structure import select_parameter_set
 
             sc = load_scenario(scenario)
             if parameter_set:
@@ -577,7 +578,7 @@ class TuneStudy:
     def write(self, res: TuneResult) -> TunedFiles:
         """Write every run (``evaluations.csv``), the tuned parameter set (``ssv``, and ``install`` when
         given; :func:`tuned_parameter_set`) and the report ``tune.md``."""
-        from ipcosim.harness.scenario.ssp import ssv_text
+        from ipcosim.harness.scenario.ssv import ssv_text
 
         files = TunedFiles(self.ssv, self.install, self.out / "tune.md", self.out / "evaluations.csv",
                            before_after_markdown(res, f"{self.parameter_set} gains" if self.parameter_set

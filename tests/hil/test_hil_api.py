@@ -170,7 +170,7 @@ def test_swap_alias_picks_the_adapter_by_plant_kind(tmp_path, monkeypatch):
 
     from ipcosim.fmus.kinds import plant_kind
     from ipcosim.harness.hil.swap import HilSwapError, card_clock, find_adapter, resolve_hil
-    from ipcosim.harness.scenario.ssp import fmu_search_path
+    from ipcosim.harness.scenario.locations import fmu_search_path
 
     assert plant_kind("x", "IP02SingleMass", set()) == "single-mass"
     assert plant_kind("x", "IP02DoubleMass", set()) == "double-mass"

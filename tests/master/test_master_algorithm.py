@@ -393,7 +393,7 @@ def test_unconnected_input_is_a_warning_naming_it():
 
 
 def test_units_convert_through_their_definitions_and_mismatches_are_refused():
-    from ipcosim.harness.scenario.ssp import Unit
+    from ipcosim.harness.scenario.structure import Unit
 
     m = Unit("m", (0, 1, 0, 0, 0, 0, 0, 0))
     mm = Unit("mm", (0, 1, 0, 0, 0, 0, 0, 0), factor=1e-3)

@@ -68,7 +68,7 @@ def test_records_equal_the_python_loops(algorithm, case):
 
 
 def test_transfers_with_factor_and_offset_and_negative_zero():
-    from ipcosim.harness.scenario.ssp import Unit
+    from ipcosim.harness.scenario.structure import Unit
 
     degc = Unit("degC", (0, 0, 0, 1, 0, 0, 0, 0), factor=1.0, offset=273.15)
     kelvin = Unit("K", (0, 0, 0, 1, 0, 0, 0, 0))

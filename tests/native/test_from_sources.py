@@ -97,7 +97,7 @@ def native_scenarios(native_dir: Path) -> dict[str, np.ndarray]:
     """Every scenario the native flavour runs, STOP seconds on the FMUs in ``native_dir``."""
     import ipcosim
     from ipcosim.harness.scenario.flavour import FlavourError
-    from ipcosim.harness.scenario.ssp import scenario_names
+    from ipcosim.harness.scenario.locations import scenario_names
 
     runs = {}
     for name in scenario_names():

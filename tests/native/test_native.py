@@ -207,7 +207,7 @@ NATIVE_UNSUPPORTED = {"single-mass-identify": "ExcitationSingleMass has no nativ
 def test_every_scenario_trajectory_agrees_between_flavours(native_fmus: tuple[Path, Path]) -> None:
     import ipcosim
     from ipcosim.harness.scenario.flavour import FlavourError
-    from ipcosim.harness.scenario.ssp import scenario_names
+    from ipcosim.harness.scenario.locations import scenario_names
 
     python, native = native_fmus
     names = [n for n in scenario_names() if n.startswith(("single-mass-", "double-mass-"))]

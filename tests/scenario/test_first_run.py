@@ -6,14 +6,17 @@ from pathlib import Path
 import pytest
 
 import ipcosim
-from ipcosim.harness.scenario import ssp
+from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
+from ipcosim.harness.scenario import locations
+from ipcosim.harness.scenario.files import SSD_NAME
+from ipcosim.harness.scenario.ssp import load_scenario
 
 
 @pytest.mark.integration
 def test_first_run_builds_the_missing_fmus_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     cache = tmp_path / "cache" / "fmus"
-    monkeypatch.setattr(ssp, "BUILD_FMU_DIR", cache)   # an empty user cache, as after `pip install`
+    monkeypatch.setattr(locations, "BUILD_FMU_DIR", cache)   # an empty user cache, as after `pip install`
     monkeypatch.delenv("IPCOSIM_FMU_PATH", raising=False)
     first = ipcosim.run("single-mass-lqr", stop_time=0.05)
     err = capsys.readouterr().err
@@ -32,11 +35,11 @@ def test_fmus_of_other_makers_are_not_built(tmp_path: Path, monkeypatch: pytest.
 
     folder = tmp_path / "mine"
     folder.mkdir()
-    text = (ssp.SCENARIO_DIR / "single-mass-lqr" / ssp.SSD_NAME).read_text().replace("LQRSingleMass", "TheirLaw")
-    (folder / ssp.SSD_NAME).write_text(text)
-    for f in (ssp.SCENARIO_DIR / "single-mass-lqr").glob("*.ssv"):
+    text = (SCENARIO_DIR / "single-mass-lqr" / SSD_NAME).read_text().replace("LQRSingleMass", "TheirLaw")
+    (folder / SSD_NAME).write_text(text)
+    for f in (SCENARIO_DIR / "single-mass-lqr").glob("*.ssv"):
         (folder / f.name).write_text(f.read_text())
-    scenario = ssp.load_scenario(folder)
+    scenario = load_scenario(folder)
     assert build_missing(scenario) == []
     with pytest.raises(ipcosim.IpcosimError, match="TheirLaw.fmu"):
         ipcosim.run(folder, stop_time=0.01)
@@ -50,9 +53,9 @@ def test_packing_is_incremental(tmp_path: Path) -> None:
     from ipcosim.harness.scenario.ssp_pack import pack_all
 
     root = tmp_path / "ssp"
-    shutil.copytree(ssp.SCENARIO_DIR / "single-mass-lqr", root / "single-mass-lqr")
+    shutil.copytree(SCENARIO_DIR / "single-mass-lqr", root / "single-mass-lqr")
     (tmp_path / "out").mkdir()
-    (tmp_path / "out" / "fmus").symlink_to(ssp.BUILD_FMU_DIR)
+    (tmp_path / "out" / "fmus").symlink_to(BUILD_FMU_DIR)
     archive = tmp_path / "out" / "ssp" / "single-mass-lqr.ssp"
     assert pack_all(tmp_path / "out", root) == [archive]
     before = archive.stat().st_mtime_ns

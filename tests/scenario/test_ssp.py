@@ -12,14 +12,11 @@ from ssd_helpers import component, connection, connector, ssd, ssv, write_scenar
 
 from devtools.ssp_gen import CONTROLLERS, PLANTS, ssd_text
 from ipcosim.harness.scenario.errors import ScenarioError, ScenarioNotFoundError
-from ipcosim.harness.scenario.ssp import (
-    NS,
-    Unit,
-    load_scenario,
-    scenario_names,
-    select_parameter_set,
-)
+from ipcosim.harness.scenario.files import NS
+from ipcosim.harness.scenario.locations import scenario_names
+from ipcosim.harness.scenario.ssp import load_scenario
 from ipcosim.harness.scenario.ssp_pack import pack
+from ipcosim.harness.scenario.structure import Unit, select_parameter_set
 from ipcosim.harness.scenario.units import unit_conversion
 
 ROOT = Path(__file__).resolve().parents[2]

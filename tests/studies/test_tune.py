@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ipcosim.harness.cli import main as cli_main
-from ipcosim.harness.scenario.ssp import read_ssv, ssv_text
+from ipcosim.harness.scenario.ssv import read_ssv, ssv_text
 from ipcosim.harness.studies import cost as costmod
 from ipcosim.harness.studies.executors import LocalExecutor
 from ipcosim.harness.studies.runners import PurePlantSpec

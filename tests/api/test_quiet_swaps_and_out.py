@@ -8,11 +8,10 @@ from pathlib import Path
 import pytest
 
 from ipcosim.harness.cli import main
-from ipcosim.harness.paths import SCENARIO_DIR
-from ipcosim.harness.scenario import ssp
+from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
 
 pytestmark = pytest.mark.integration
-PID = ssp.BUILD_FMU_DIR / "PIDSingleMass.fmu"
+PID = BUILD_FMU_DIR / "PIDSingleMass.fmu"
 
 
 def _run(tmp_path: Path, *extra: str) -> list[str]:
