@@ -16,7 +16,7 @@ The public Python API is re-exported here lazily, so ``import ipcosim`` stays ch
     ipcosim.assert_settles(result, within_s=3.0)
 
 See docs/api.md; the pytest plugin (fixtures ``cosim``, ``ipcosim_fmus``) is
-``ipcosim.harness.pytest_plugin``.
+``ipcosim.harness.testing.pytest_plugin``.
 """
 from __future__ import annotations
 
@@ -25,11 +25,12 @@ from typing import Any
 __version__ = "0.2.0"
 
 _EXPORTS = {
-    "run": "ipcosim.harness.public", "scenarios": "ipcosim.harness.public", "build": "ipcosim.harness.public",
-    "build_fmu": "ipcosim.harness.public", "ScenarioInfo": "ipcosim.harness.public",
-    "FMUBuildError": "ipcosim.harness.public", "linearize": "ipcosim.harness.public",
-    "RunOptions": "ipcosim.harness.options",
-    "prepare": "ipcosim.harness.engine", "Prepared": "ipcosim.harness.engine",
+    "run": "ipcosim.harness.api.public", "scenarios": "ipcosim.harness.api.public",
+    "build": "ipcosim.harness.api.public", "build_fmu": "ipcosim.harness.api.public",
+    "ScenarioInfo": "ipcosim.harness.api.public",
+    "FMUBuildError": "ipcosim.harness.api.public", "linearize": "ipcosim.harness.api.public",
+    "RunOptions": "ipcosim.harness.api.options",
+    "prepare": "ipcosim.harness.api.engine", "Prepared": "ipcosim.harness.api.engine",
     "Result": "ipcosim.harness.master.results", "SimulationError": "ipcosim.harness.master.results",
     "load_scenario": "ipcosim.harness.scenario.ssp", "scenario_names": "ipcosim.harness.scenario.locations",
     "IpcosimError": "ipcosim.errors", "UsageError": "ipcosim.errors",
@@ -37,8 +38,8 @@ _EXPORTS = {
     "assert_steady_state": "ipcosim.harness.testing", "assert_close_to": "ipcosim.harness.testing",
     "assert_succeeds": "ipcosim.harness.testing",
     "settling_time": "ipcosim.harness.testing", "cases": "ipcosim.harness.testing", "Case": "ipcosim.harness.testing",
-    "CheckFailed": "ipcosim.harness.testing", "save_baseline": "ipcosim.harness.baseline",
-    "load_baseline": "ipcosim.harness.baseline",
+    "CheckFailed": "ipcosim.harness.testing", "save_baseline": "ipcosim.harness.testing.baseline",
+    "load_baseline": "ipcosim.harness.testing.baseline",
 }
 
 __all__ = sorted(_EXPORTS)

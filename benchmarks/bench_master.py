@@ -91,7 +91,7 @@ def other_masters(name: str, repeats: int = REPEATS) -> list[str]:
     """Ours against libcosim and fmpy on the same archive, extraction included on every side."""
     import ipcosim
     from evidence.crosscheck import run_fmpy_ssp, run_libcosim
-    from ipcosim.harness.paths import BUILD_SSP_DIR
+    from ipcosim.harness.support.paths import BUILD_SSP_DIR
 
     ssp = BUILD_SSP_DIR / f"{name}.ssp"
     if not ssp.is_file():

@@ -85,7 +85,7 @@ def _cycles(python: Path, native: Path, tmp: Path) -> dict[str, float]:
 
 def _libcosim_rtf(folder: Path, step_ns: int = 1_000_000) -> float:
     """Median of three real-time factors of libcosim's ``simulate_until`` over 10 s (1 ms steps by default)."""
-    from ipcosim.harness.extras import require
+    from ipcosim.harness.support.extras import require
 
     require("libcosimpy")
     from libcosimpy.CosimExecution import CosimExecution
@@ -145,7 +145,7 @@ def _sweep(runs: int = SWEEP_RUNS) -> dict[str, float]:
 def _libcosim(tmp: Path, native: Path) -> dict[str, float]:
     """libcosim's real-time factors on the native FMUs: the scenario's folder, one trivial FMU alone
     (libcosim's own per-step cost), the scenario exported as one FMU at 1 ms and at 10 ms steps."""
-    from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.api.export import ExportOptions, export
     from ipcosim.harness.scenario.flavour import write_native_folder
 
     out = {"scenario": _libcosim_rtf(write_native_folder(SCENARIO, tmp / "ssp")),
@@ -158,8 +158,8 @@ def _libcosim(tmp: Path, native: Path) -> dict[str, float]:
 
 def run() -> list[str]:
     """Lines for ``make bench``."""
-    from ipcosim.harness.paths import BUILD_DIR
     from ipcosim.harness.scenario.flavour import native_fmu_dir
+    from ipcosim.harness.support.paths import BUILD_DIR
 
     native, python = native_fmu_dir(), Path(BUILD_DIR) / "fmus"
     for folder in (native, python):

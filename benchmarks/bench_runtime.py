@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Sequence
 
 from benchmarks.targets import figure, least_disturbed, target
-from ipcosim.harness.threads import single_threaded
+from ipcosim.harness.support.threads import single_threaded
 
 COLD_RUNS = int(os.environ.get("IPCOSIM_BENCH_COLD_RUNS", "5"))
 INIT_RUNS = int(os.environ.get("IPCOSIM_BENCH_INIT_RUNS", "3"))
@@ -74,7 +74,7 @@ INIT_TARGET_MS = 60.0
 LOOP_TARGET_RTF = 41.0
 
 #: The environment of every timed process: one BLAS thread, as ``ipcosim`` asks for itself
-#: (:mod:`ipcosim.harness.threads`), so that neither side's CPU time counts an idle BLAS worker
+#: (:mod:`ipcosim.harness.support.threads`), so that neither side's CPU time counts an idle BLAS worker
 #: spinning beside the main thread (it doubled the CPU time of an FMU's initialization).
 CHILD_ENV = dict(os.environ)
 single_threaded(CHILD_ENV)
@@ -136,8 +136,8 @@ def process(cmd: Sequence[str]) -> tuple[float, float, float]:
 
 def whole_runs(tmp: Path) -> dict[str, dict[str, float]]:
     """Wall, CPU (the least disturbed of ``COLD_RUNS`` alternating rounds) and peak memory of the four whole runs."""
-    from ipcosim.harness.export import ExportOptions, export
-    from ipcosim.harness.paths import BUILD_SSP_DIR
+    from ipcosim.harness.api.export import ExportOptions, export
+    from ipcosim.harness.support.paths import BUILD_SSP_DIR
 
     ssp = BUILD_SSP_DIR / "single-mass-lqr.ssp"
     if not ssp.is_file():
@@ -280,7 +280,7 @@ def _cycle_lines(cycles: dict[str, dict[str, float]]) -> list[str]:
 def run() -> list[str]:
     """Lines for ``make bench``."""
     from ipcosim.fmus.pybuild import ROOT
-    from ipcosim.harness.paths import BUILD_SSP_DIR
+    from ipcosim.harness.support.paths import BUILD_SSP_DIR
 
     fmu_dir = ROOT / "build" / "fmus"
     with tempfile.TemporaryDirectory(prefix="ipcosim-bench-") as tmp:

@@ -48,7 +48,7 @@ def measure(spec: Any, runs: int = RUNS, repeats: int = REPEATS) -> dict[str, fl
     The three are measured in turn, ``repeats`` times, on pools kept warm; each figure is the
     best of its repeats (the least disturbed by other load on the machine).
     """
-    from ipcosim.harness.grammar import parse_all
+    from ipcosim.harness.api.grammar import parse_all
     from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.executors import LocalExecutor
     from ipcosim.harness.studies.sweep import run_sweep

@@ -18,7 +18,7 @@ DOC = Path(__file__).resolve().parents[1] / "docs" / "api.md"
 def python_call(function: object, name: str) -> str:
     """``name(args) -> returns`` from ``function``'s signature (annotations left out but the return's);
     :func:`ipcosim.run`'s ``**more`` is written out as the other fields of :class:`ipcosim.RunOptions`."""
-    from ipcosim.harness.options import RunOptions
+    from ipcosim.harness.api.options import RunOptions
 
     sig = inspect.signature(function)  # type: ignore[arg-type]
     params = list(sig.parameters.values())
@@ -41,11 +41,11 @@ def python_call(function: object, name: str) -> str:
 
 def _rows() -> list[tuple[str, str, str]]:
     import ipcosim
-    from ipcosim.harness.describe import describe
+    from ipcosim.harness.api.describe import describe
 
     return [(python_call(ipcosim.run, "ipcosim.run"), command_line(), "one run"),
             (python_call(ipcosim.scenarios, "ipcosim.scenarios"), "ipcosim list", "the shipped scenarios"),
-            (python_call(describe, "ipcosim.harness.describe.describe"), "ipcosim describe SCENARIO [--json]",
+            (python_call(describe, "ipcosim.harness.api.describe.describe"), "ipcosim describe SCENARIO [--json]",
              "components, variables, units, start values, what --set may change"),
             (python_call(ipcosim.build, "ipcosim.build"), "ipcosim build",
              "the project's FMUs (unchanged ones are kept)"),

@@ -30,7 +30,10 @@ ROOMS = {
     "evidence": ("evidence", True),
     "harness/cli": ("harness/cli", True),
     "harness/live": ("harness/live", True),
-    "harness (top-level modules)": ("harness", False),
+    "harness/support": ("harness/support", True),
+    "harness/api": ("harness/api", True),
+    "harness/testing": ("harness/testing", True),
+    "harness (the facade)": ("harness", False),
     "benchmarks": ("benchmarks", True),
     "devtools": ("devtools", True),
 }

@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any, Mapping
 from xml.sax.saxutils import quoteattr
 
-from ipcosim.harness.paths import SCENARIO_DIR
 from ipcosim.harness.scenario.files import NS
 from ipcosim.harness.scenario.scenarios import (
     AMPLITUDE,
@@ -32,6 +31,7 @@ from ipcosim.harness.scenario.scenarios import (
     VARIANTS,
 )
 from ipcosim.harness.scenario.ssv import ssv_text
+from ipcosim.harness.support.paths import SCENARIO_DIR
 
 
 def plant_signals(plant: str) -> tuple[list[str], list[str]]:

@@ -45,7 +45,7 @@ FOLDERS: dict[str, tuple[str, ...]] = {
     "live": ("harness/live",),
     "evidence": ("evidence",),
     "project": ("devtools", "benchmarks"),
-    "api": (".", "harness"),
+    "api": (".", "harness", "harness/api", "harness/testing", "harness/support"),
     "cli": ("harness/cli",),
 }
 #: Folders whose imports count only when a file imports no other room: the ways in.

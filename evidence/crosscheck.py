@@ -39,7 +39,7 @@ def run_libcosim(ssp: str | os.PathLike[str], stop_time: float, step: float,
     wall : float
         Seconds spent in ``simulate_until`` (the simulation proper, including initialization).
     """
-    from ipcosim.harness.extras import require
+    from ipcosim.harness.support.extras import require
 
     require("libcosimpy")
     from libcosimpy.CosimEnums import CosimVariableType

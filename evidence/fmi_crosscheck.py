@@ -98,7 +98,7 @@ def write_tree(out: Path, flavours: dict[str, Path], version: str) -> tuple[int,
 
 def main(argv: list[str] | None = None) -> int:
     """Command line (see the module docstring)."""
-    from ipcosim.harness.paths import BUILD_DIR
+    from ipcosim.harness.support.paths import BUILD_DIR
 
     p = argparse.ArgumentParser(prog="python -m evidence.fmi_crosscheck", allow_abbrev=False)
     p.add_argument("out", nargs="?", default=str(Path(BUILD_DIR) / "crosscheck"))

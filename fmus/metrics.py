@@ -1,6 +1,6 @@
 """The IP02 task and its metrics: what a run of the pendulum is judged by.
 
-The master knows nothing of pendulums: ``ipcosim.harness.engine`` gives the execution
+The master knows nothing of pendulums: ``ipcosim.harness.api.engine`` gives the execution
 :func:`streamed_task_metrics` as its ``task_metrics`` plug-in, which it calls on the recorded
 rows a chunk at a time; :func:`task_metrics` computes the same on a whole result. Both read the
 plant's columns named by :data:`POSITION_COLUMNS`, :data:`ANGLE_COLUMNS`,

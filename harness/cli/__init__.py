@@ -41,8 +41,8 @@ def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
 
 def add_parameter_file_option(p: argparse.ArgumentParser) -> None:
     """``--parameter-file`` of sweep and analyze, as ``ipcosim run`` has it
-    (``ipcosim.harness.options.with_parameter_file``)."""
-    from ipcosim.harness.options import PARAMETER_FILE_HELP
+    (``ipcosim.harness.api.options.with_parameter_file``)."""
+    from ipcosim.harness.api.options import PARAMETER_FILE_HELP
 
     p.add_argument("--parameter-file", metavar="FILE.ssv", help=PARAMETER_FILE_HELP)
 
@@ -67,7 +67,7 @@ class _Version(argparse.Action):
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
                  option_string: str | None = None) -> None:
-        from ipcosim.harness.paths import distribution_version
+        from ipcosim.harness.support.paths import distribution_version
 
         print(f"ipcosim {distribution_version()}")
         parser.exit()
@@ -195,7 +195,7 @@ def command_named(argv: Sequence[str]) -> str:
 def _parse(argv: Sequence[str], command: str) -> argparse.Namespace:
     """The command line's arguments (exits 2 with one line on an unknown option, as argparse does),
     with only ``command``'s options built (:func:`build_parser`)."""
-    from ipcosim.harness.threads import single_threaded
+    from ipcosim.harness.support.threads import single_threaded
 
     single_threaded()  # before a command's options load numpy
     parser = build_parser(command)
@@ -213,7 +213,7 @@ def _command(args: argparse.Namespace, console: bool) -> int:
     try:
         limit = getattr(args, "timeout", None)
         if limit is not None:
-            from ipcosim.harness.options import seconds_option
+            from ipcosim.harness.api.options import seconds_option
 
             signals.start_limit(seconds_option("--timeout", limit))
         try:

@@ -12,7 +12,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("build", help=HELP,
                        description="Build every FMU script (fmus/fmu_*.py, controllers/fmu_*.py) into OUT/fmus/ "
                                    "and pack the SSP scenarios into OUT/ssp/. Unchanged FMUs are not rebuilt.")
-    from ipcosim.harness.paths import BUILD_DIR
+    from ipcosim.harness.support.paths import BUILD_DIR
 
     p.add_argument("--out", default=BUILD_DIR, type=Path,
                    help=f"output folder (default: {BUILD_DIR})")

@@ -4,7 +4,7 @@
                     [--workers W] [--scheduler ADDR] [--seed S]
 
 FMUs missing from the build folder (``build/fmus`` of a source checkout, else the per-user cache:
-``ipcosim.harness.paths``) are built first, as ``ipcosim build`` does.
+``ipcosim.harness.support.paths``) are built first, as ``ipcosim build`` does.
 Writes ``DIR/report.md``, ``DIR/report.html`` (self-contained), ``DIR/figures/<plant>.png``,
 ``DIR/metrics.csv`` / ``metrics.json`` and, with ``--robustness``, one resumable sweep per
 scenario under ``DIR/robustness/<scenario>/``.

@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     import json
 
-    from ipcosim.harness.describe import describe, describe_text
+    from ipcosim.harness.api.describe import describe, describe_text
     from ipcosim.harness.master.results import json_safe
 
     info = describe(args.scenario, parameter_set=args.parameter_set)

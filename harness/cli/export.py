@@ -9,7 +9,7 @@ HELP = "write a scenario's closed loop as one FMU"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ipcosim.harness.paths import BUILD_DIR
+    from ipcosim.harness.support.paths import BUILD_DIR
 
     p = sub.add_parser("export", help=HELP,
                        description="Write the whole closed loop of a scenario (setpoint, controller, plant) as one "
@@ -36,8 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ipcosim.harness.export import ExportOptions, export
-    from ipcosim.harness.options import RunOptions
+    from ipcosim.harness.api.export import ExportOptions, export
+    from ipcosim.harness.api.options import RunOptions
 
     values = RunOptions.create(args.scenario, set=args.set).set  # the --set grammar of `ipcosim run`
     out = export(ExportOptions(args.scenario, args.out, args.parameter_set, args.model_identifier,

@@ -13,10 +13,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ipcosim.harness.paths import SCENARIO_DIR
     from ipcosim.harness.scenario.errors import ScenarioError
     from ipcosim.harness.scenario.locations import scenario_names
     from ipcosim.harness.scenario.ssp import load_scenario
+    from ipcosim.harness.support.paths import SCENARIO_DIR
 
     names = scenario_names()
     if not names:

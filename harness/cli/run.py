@@ -29,7 +29,7 @@ HELP = "co-simulate a scenario (SSP folder or archive)"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ipcosim.harness.options import add_run_arguments
+    from ipcosim.harness.api.options import add_run_arguments
 
     p = sub.add_parser("run", help=HELP,
                        description="Run an SSP scenario with the fmpy-based master and write DIR/results.csv "
@@ -41,11 +41,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     import warnings
 
-    from ipcosim.harness.engine import prepare_with, run_with
+    from ipcosim.harness.api.engine import prepare_with, run_with
+    from ipcosim.harness.api.options import RunOptions
     from ipcosim.harness.master import signals
     from ipcosim.harness.master.realtime import budget_warning
     from ipcosim.harness.master.results import json_safe
-    from ipcosim.harness.options import RunOptions
 
     options = RunOptions.from_args(args)
     out = options.out

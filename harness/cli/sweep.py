@@ -55,9 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def main(args: argparse.Namespace) -> int:
     """Run the sweep and write its summary and figures (``ipcosim.harness.studies.robustness.sweep_study``)."""
     from ipcosim.errors import IpcosimError
-    from ipcosim.harness.grammar import parse_set
+    from ipcosim.harness.api.grammar import parse_set
+    from ipcosim.harness.api.options import with_parameter_file
     from ipcosim.harness.master import signals
-    from ipcosim.harness.options import with_parameter_file
     from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.robustness import summary_line, sweep_study
 

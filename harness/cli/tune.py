@@ -70,7 +70,7 @@ def main(args: argparse.Namespace) -> int:
     """Tune the named parameters of a scenario (differential evolution on the cost J over a run
     budget), then write the evaluations, the tuned parameter set and the report
     (``ipcosim.harness.studies.tune.tune_study``)."""
-    from ipcosim.harness.grammar import parse_set
+    from ipcosim.harness.api.grammar import parse_set
     from ipcosim.harness.master import signals
     from ipcosim.harness.studies.executors import open_executor
     from ipcosim.harness.studies.tune import tune_study

@@ -5,7 +5,7 @@ reference, the cart positions, the pendulum angle and the voltage, the cart that
 pendulum and the pendulum's length, the limits to draw (each cart's software limit and the track's
 end stops, the pendulum's limit, the voltage limit) and the columns that carry a card's status.
 The scene comes from the plant kind (:func:`ipcosim.fmus.kinds.plant_kind`) and the run plot's own
-names for the positions (:data:`ipcosim.harness.plot.POSITIONS`), so the live view and
+names for the positions (:data:`ipcosim.harness.api.plot.POSITIONS`), so the live view and
 ``plot.png`` draw the same signals; a scenario of another kind gets its Real columns plotted
 and no animation.
 """
@@ -15,7 +15,7 @@ from typing import Any, Callable, Sequence
 
 from ipcosim.fmus import instruments
 from ipcosim.fmus.kinds import PENDULUM_CART, plant_kind
-from ipcosim.harness.plot import POSITIONS
+from ipcosim.harness.api.plot import POSITIONS
 
 #: Columns that can hold the reference and the voltage, in the order the run plot looks for them.
 REFERENCES = ("setpoint.reference", "controller.reference")

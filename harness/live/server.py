@@ -31,7 +31,7 @@ from typing import Any, Protocol
 from urllib.parse import parse_qs, quote, urlsplit
 
 from ipcosim.errors import UsageError
-from ipcosim.harness.paths import distribution_version
+from ipcosim.harness.support.paths import distribution_version
 
 #: Most rows one ``/samples`` answer carries (a page catching up takes several).
 MAX_ROWS = 5000

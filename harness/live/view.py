@@ -150,7 +150,7 @@ def sweep_page(folder: Path) -> str:
 def _made_by(folder: Path) -> str:
     """Where a sweep's table comes from (its metadata.json: scenario, start, the ipcosim that ran it)
     and the ipcosim showing it."""
-    from ipcosim.harness.paths import distribution_version
+    from ipcosim.harness.support.paths import distribution_version
 
     shown = f"shown by ipcosim {distribution_version()}"
     try:

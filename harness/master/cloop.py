@@ -7,7 +7,7 @@ Everything that differs between runs of the same structure (instance handles, FM
 value-reference and value arrays, step sizes, tick count, time base, record addresses,
 factors and offsets) travels in four arrays filled from Python at run time, so one compiled
 library serves every run, scenario and sweep worker with the same wiring. The library lives in
-``loops/<hash>.so`` of the build folder (:data:`ipcosim.harness.paths.LOOP_DIR`), written
+``loops/<hash>.so`` of the build folder (:data:`ipcosim.harness.support.paths.LOOP_DIR`), written
 under a temporary name and renamed into place (parallel workers may compile the same one).
 
 Calls, arguments, their order and the floating-point operations are those of the Python loop
@@ -210,7 +210,7 @@ def library(source: str, cache: Path | None = None) -> Any:
     LoopUnavailable
         No C compiler, or the compile failed (its first error line).
     """
-    from ipcosim.harness.paths import LOOP_DIR
+    from ipcosim.harness.support.paths import LOOP_DIR
 
     cc = find_compiler()
     if cc is None:

@@ -21,7 +21,7 @@ from ipcosim.harness.master.algorithm import TimeBase
 from ipcosim.harness.master.layout import Layout
 from ipcosim.harness.master.plan import TypedRecord
 from ipcosim.harness.master.results import Result, RowWriter, SimulationError
-from ipcosim.harness.paths import distribution_version
+from ipcosim.harness.support.paths import distribution_version
 
 if TYPE_CHECKING:  # pragma: no cover
     from ipcosim.harness.master.execution import Execution
@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # pragma: no cover
 #: The task's metrics of a run: ``task_metrics(chunks, names) -> dict``, where ``chunks()``
 #: iterates over the recorded rows (structured arrays, a chunk at a time; it may be called more
 #: than once) and ``names`` are the fields. Given by whoever knows the scenario (the master
-#: knows no task): ``ipcosim.harness.engine`` gives ``ipcosim.fmus.metrics.streamed_task_metrics``.
+#: knows no task): ``ipcosim.harness.api.engine`` gives ``ipcosim.fmus.metrics.streamed_task_metrics``.
 TaskMetrics = Callable[[Callable[[], Iterable[np.ndarray]], Sequence[str]], Mapping[str, Any]]
 
 

@@ -51,7 +51,7 @@ class Result:
     plotter : callable, optional
         ``plotter(result, path)`` draws the run's figure (``path`` None: return it; else write
         a PNG there and return the path); set by whoever knows what the run is
-        (``ipcosim.harness.engine``: :func:`ipcosim.harness.plot.plot`).
+        (``ipcosim.harness.api.engine``: :func:`ipcosim.harness.api.plot.plot`).
     """
 
     data: np.ndarray

@@ -15,7 +15,7 @@ table reaches each component only through its prefixed FMI functions; the contai
 ``fmi2Xxx`` (``container.c``) are the only unprefixed ones.
 
 This module knows nothing of scenarios: :class:`ContainerSpec` says what to put together
-(``ipcosim.harness.export`` builds it from a scenario the way the master would run it).
+(``ipcosim.harness.api.export`` builds it from a scenario the way the master would run it).
 """
 from __future__ import annotations
 

@@ -52,7 +52,7 @@ def replay_library(name: str, source: str, cache: Path | None = None) -> Path:
         No C compiler, or the compiler failed on the sources (its first line).
     """
     from ipcosim.fmus.pybuild import build_cached
-    from ipcosim.harness.paths import REPLAY_DIR
+    from ipcosim.harness.support.paths import REPLAY_DIR
 
     cc = find_compiler()
     if cc is None:
@@ -106,7 +106,7 @@ class NativeReplay:
 
     def __init__(self, kind: str, fmu_dir: Path | None = None) -> None:
         from ipcosim.fmus.pybuild import build_all, model_scripts
-        from ipcosim.harness.paths import BUILD_FMU_DIR
+        from ipcosim.harness.support.paths import BUILD_FMU_DIR
 
         self.kind = kind
         self.name = next(n for n, k in PLANT_MODELS.items() if k == kind)

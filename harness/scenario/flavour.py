@@ -29,7 +29,7 @@ class FlavourError(IpcosimError, ValueError):
 
 def native_fmu_dir() -> Path:
     """Where ``ipcosim build --native`` puts the native FMUs."""
-    from ipcosim.harness.paths import BUILD_DIR
+    from ipcosim.harness.support.paths import BUILD_DIR
     return Path(BUILD_DIR) / "fmus-native"
 
 

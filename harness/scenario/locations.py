@@ -9,9 +9,9 @@ from pathlib import Path, PurePosixPath
 from typing import Sequence
 
 from ipcosim.errors import closest
-from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
 from ipcosim.harness.scenario.errors import ScenarioNotFoundError
 from ipcosim.harness.scenario.files import SSD_NAME, ScenarioFiles
+from ipcosim.harness.support.paths import BUILD_FMU_DIR, SCENARIO_DIR
 
 
 # --------------------------------------------------------------------------- resolution

@@ -10,7 +10,7 @@ from ipcosim.harness.master.system import Model
 def rebuild_command(folder: Path) -> str | None:
     """The command that rebuilds ``folder`` if it is one of the project's build folders, else None."""
     from ipcosim.harness.native.cbuild import OUT_DIRS
-    from ipcosim.harness.paths import BUILD_DIR
+    from ipcosim.harness.support.paths import BUILD_DIR
 
     folder = folder.resolve()
     if not folder.is_relative_to(Path(BUILD_DIR).resolve()):

@@ -13,10 +13,10 @@ from pathlib import Path
 
 from lxml import etree
 
-from ipcosim.harness.paths import SCENARIO_DIR
 from ipcosim.harness.scenario.files import NS, SSD_NAME, parse_xml
 from ipcosim.harness.scenario.locations import scenario_names
 from ipcosim.harness.scenario.ssp import load_scenario
+from ipcosim.harness.support.paths import SCENARIO_DIR
 
 #: The SSP versions an archive can declare (``ipcosim build --ssp-version``).
 SSP_VERSIONS = ("1.0", "2.0")

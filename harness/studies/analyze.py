@@ -544,7 +544,7 @@ def statement(result: Mapping[str, Any]) -> str:
 def plot_loop(loop: Loop, result: Mapping[str, Any], out: str | Path, title: str) -> dict[str, str]:
     """Write ``bode.png`` (:func:`_plot_bode`) and ``nyquist.png`` (:func:`_plot_nyquist`) of the loop's
     frequency response into ``out``; returns their paths."""
-    from ipcosim.harness.extras import require
+    from ipcosim.harness.support.extras import require
 
     require("matplotlib")
     import matplotlib
@@ -716,7 +716,7 @@ def analyze(scenario: str, *, parameter_set: str | None = None, set: Mapping[str
 
     result = {**info, **analyze_loop(loop)}
     if out is not None:
-        from ipcosim.harness.extras import optional_figure
+        from ipcosim.harness.support.extras import optional_figure
 
         title = f"{info['scenario']} ({info['parameter_set']}): loop at the plant input"
         result["figures"] = optional_figure(lambda: plot_loop(loop, result, out, title),

@@ -1,6 +1,6 @@
 """The runs of a sweep: :class:`SweepCase` (index, parameter values, seed) and their expansion from
 parsed ``--vary`` expressions (:func:`make_cases`, a lazy :class:`CaseStream`; the grammar is
-:mod:`ipcosim.harness.grammar`).
+:mod:`ipcosim.harness.api.grammar`).
 """
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any, Iterator, Mapping, Sequence, overload
 
 import numpy as np
 
-from ipcosim.harness.grammar import Vary, VaryError
+from ipcosim.harness.api.grammar import Vary, VaryError
 
 
 @dataclass(frozen=True)

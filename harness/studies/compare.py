@@ -22,9 +22,9 @@ from ipcosim.errors import IpcosimError, UsageError
 def available_scenarios() -> list[str]:
     """The plant x controller scenarios of the project, in report order, plus any other folder
     that is not one of the generator's variants (swing-up, tap, lab: they pose other tasks)."""
-    from ipcosim.harness.paths import SCENARIO_DIR
     from ipcosim.harness.scenario.scenarios import VARIANTS
     from ipcosim.harness.studies.report import SCENARIOS
+    from ipcosim.harness.support.paths import SCENARIO_DIR
 
     found = sorted(p.name for p in SCENARIO_DIR.iterdir() if (p / "SystemStructure.ssd").exists()) \
         if SCENARIO_DIR.is_dir() else []
@@ -125,7 +125,7 @@ class Comparison:
     def _robustness(self, name: str, spec: Any, executor: Any, progress: bool) -> dict[str, Any]:
         """A resumable robustness sweep of one scenario (masses, friction, stiffness within +-20 %) on the
         flavour its comparison run took, under ``out/robustness/<scenario>/``, summarized."""
-        from ipcosim.harness.grammar import parse_all
+        from ipcosim.harness.api.grammar import parse_all
         from ipcosim.harness.studies import robustness as rob
         from ipcosim.harness.studies.cases import make_cases
         from ipcosim.harness.studies.specs import for_executor, spec_for
@@ -243,7 +243,7 @@ def comparison(scenarios: Sequence[str] | None = None, out: Path | str = "out/co
     study = Comparison(names, Path(out), parameter_set, stop_time, robustness, samples, seed, log=log)
     study.out.mkdir(parents=True, exist_ok=True)
     for name in names:
-        try:  # FMUs not built yet are built on first use (ipcosim.harness.engine.build_missing)
+        try:  # FMUs not built yet are built on first use (ipcosim.harness.api.engine.build_missing)
             spec, flavour = study_spec(name, fmus, stop_time=stop_time, series=True,
                                        parameter_set=_pset(name, parameter_set))
             if progress:

@@ -83,7 +83,7 @@ class CosimSpec(RunSpec):
             Unknown scenario, unreadable SSD/FMU, unknown ``--set`` names (one line each).
         """
         from ipcosim.fmus.metrics import METRIC_KEYS, PASSIVE_RESIDUAL_KEYS
-        from ipcosim.harness.engine import Prepared
+        from ipcosim.harness.api.engine import Prepared
         from ipcosim.harness.scenario.values import with_set
         from ipcosim.harness.studies.cost import COST_TERMS
 
@@ -150,7 +150,7 @@ class CosimSpec(RunSpec):
 
     def build(self) -> Runner:
         """Load the scenario and extract its FMUs (once per worker); return the run function."""
-        from ipcosim.harness.engine import Prepared
+        from ipcosim.harness.api.engine import Prepared
 
         location = self.location
         if self.archive is not None:  # the archive's bytes travelled with the spec: a local copy

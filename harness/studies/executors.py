@@ -29,7 +29,7 @@ from ipcosim.errors import IpcosimError, UsageError
 from ipcosim.harness.master import signals
 from ipcosim.harness.studies.cases import SweepCase
 from ipcosim.harness.studies.runners import Runner, RunSpec
-from ipcosim.harness.threads import single_threaded
+from ipcosim.harness.support.threads import single_threaded
 
 #: Dask retries of a run whose worker died (the local pool re-runs such runs alone instead).
 MAX_WORKER_DEATHS = 2
@@ -291,7 +291,7 @@ class LocalExecutor:
                 p.kill()
                 p.join(timeout=1.0)
         pool.shutdown(wait=True)  # its futures fail as broken: cancelling them races the pool's own thread
-        from ipcosim.harness.engine import remove_stale_extractions
+        from ipcosim.harness.api.engine import remove_stale_extractions
 
         remove_stale_extractions()  # the FMU folders of workers killed before their clean-up
 
@@ -365,7 +365,7 @@ class DaskExecutor:
     """
 
     def __init__(self, scheduler: Any, timeout: float = 5.0) -> None:
-        from ipcosim.harness.extras import require
+        from ipcosim.harness.support.extras import require
 
         require("distributed")
         from distributed import Client

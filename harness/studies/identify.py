@@ -731,7 +731,7 @@ def write_identified(result: Identification, out: Path) -> list[Path]:
         ssv.write_text(ssv_text(values, name="identified", description=f"{result.plant} plant identified from "
                                                                        f"{result.source}"))
         written.append(ssv)
-    from ipcosim.harness.extras import optional_figure, require
+    from ipcosim.harness.support.extras import optional_figure, require
 
     if optional_figure(lambda: require("matplotlib") or True, "identified.png") is None:
         return written

@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.fmus.params import KINDS
-from ipcosim.harness.extras import optional_figure
 from ipcosim.harness.studies.robustness import fmt
+from ipcosim.harness.support.extras import optional_figure
 
 CONTROLLERS = ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")
 CONTROLLER_LABELS = {"pid": "PID", "cascade-pid": "cascade PID", "lqr": "LQR + observer", "hsmc": "HSMC",
@@ -72,7 +72,7 @@ def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
     """Thesis-style overlaid time series of every controller on one plant: cart position with the
     reference, pendulum angle and voltage, one line per controller; a run whose pendulum fell ends
     at the fall (an x marks it: what follows is no controller's doing). None if no series."""
-    from ipcosim.harness.extras import require
+    from ipcosim.harness.support.extras import require
 
     require("matplotlib")
     import matplotlib

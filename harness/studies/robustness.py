@@ -185,7 +185,7 @@ def write_summary(rows: Sequence[Mapping[str, Any]] | Path, spec: Any, varied: S
     summary.update({"scenario": spec.name, **(extra or {})})
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     md = summary_markdown(summary, title=f"Robustness of {spec.name}")
-    from ipcosim.harness.extras import optional_figure
+    from ipcosim.harness.support.extras import optional_figure
 
     sample = f" (a random {len(drawn)} of {total} runs)" if len(drawn) < total else ""
     figures = optional_figure(lambda: plot_distributions(drawn, spec.metric_names, out / "figures",
@@ -234,7 +234,7 @@ class SweepStudy:
     flavour : str
         Which FMUs run it, and why (``ipcosim.harness.studies.specs.study_spec``).
     varies : list of Vary
-        The variations (``ipcosim.harness.grammar.parse_all``).
+        The variations (``ipcosim.harness.api.grammar.parse_all``).
     cases : list of SweepCase
         The runs.
     out : Path
@@ -286,7 +286,7 @@ def sweep_study(scenario: str, vary: Sequence[str], *, set: Mapping[str, float] 
     scenario : str
         Scenario name or path, or ``pure:single-mass-lqr``.
     vary : sequence of str
-        ``COMP.VAR=FORM`` variations (``ipcosim.harness.grammar.FORMS_HELP``).
+        ``COMP.VAR=FORM`` variations (``ipcosim.harness.api.grammar.FORMS_HELP``).
     set : mapping, optional
         Fixed ``component.variable`` values in every run (``--set``).
     samples : int, optional
@@ -307,7 +307,7 @@ def sweep_study(scenario: str, vary: Sequence[str], *, set: Mapping[str, float] 
         Run every case on this bench (:func:`realism_values`; ``set`` wins over its values); the plant
         kind comes from the scenario's name.
     """
-    from ipcosim.harness.grammar import parse_all
+    from ipcosim.harness.api.grammar import parse_all
     from ipcosim.harness.master.results import claim_output
     from ipcosim.harness.studies.cases import make_cases
     from ipcosim.harness.studies.specs import default_out, study_spec
@@ -350,10 +350,10 @@ def _bench(scenario: str, realism: str) -> dict[str, float]:
 def histogram(xg: np.ndarray, xb: np.ndarray, name: str, title: str = "") -> Any:
     """The figure of one metric's distribution: successful (``xg``) and failed (``xb``) runs
     stacked, its x tick labels apart (:func:`_readable_ticks`). A few runs far outside the rest
-    (:func:`ipcosim.harness.plot.axis_limits`) are counted in the legend instead of stretching the axis."""
+    (:func:`ipcosim.harness.api.plot.axis_limits`) are counted in the legend instead of stretching the axis."""
     import matplotlib.pyplot as plt
 
-    from ipcosim.harness.plot import axis_limits
+    from ipcosim.harness.api.plot import axis_limits
 
     fig, ax = plt.subplots(figsize=(5.0, 3.2), dpi=100)
     allx = np.concatenate([xg, xb])
@@ -396,7 +396,7 @@ def plot_distributions(rows: Sequence[Mapping[str, Any]], metric_names: Sequence
     list of Path
         The written figures, ``out_dir/<metric>.png``.
     """
-    from ipcosim.harness.extras import require
+    from ipcosim.harness.support.extras import require
 
     require("matplotlib")
     import matplotlib
@@ -466,7 +466,7 @@ def plot_parameters(rows: Sequence[Mapping[str, Any]], parameters: Sequence[str]
                     title: str = "") -> Path | None:
     """Which parameter values fail: one panel per varied parameter, ``metric`` against the
     parameter's value, each run coloured by its status. Written to ``out_dir/parameters.png``."""
-    from ipcosim.harness.extras import require
+    from ipcosim.harness.support.extras import require
 
     require("matplotlib")
     import matplotlib
@@ -574,7 +574,7 @@ def factor_runs(kind: str, factors: Sequence[str]) -> tuple[list[str], dict[str,
 def factor_cases(spec: Any, kind: str, factors: Sequence[str], samples: int, seed: int = 0) -> list[Any]:
     """The runs of ``factors`` together on ``spec``'s scenario: ``samples`` draws, or one run when nothing is
     drawn (a deterministic bench: repeating it would count one outcome many times)."""
-    from ipcosim.harness.grammar import parse_all
+    from ipcosim.harness.api.grammar import parse_all
     from ipcosim.harness.studies.cases import make_cases
 
     vary, fixed = factor_runs(kind, factors)

@@ -445,7 +445,7 @@ def _scenario_dir(scenario: str) -> Path | None:
         return path
     if path.suffix == ".ssp" and path.exists():
         return path.parent
-    from ipcosim.harness.paths import SCENARIO_DIR
+    from ipcosim.harness.support.paths import SCENARIO_DIR
 
     candidate = SCENARIO_DIR / scenario
     return candidate if candidate.is_dir() else None
@@ -454,7 +454,7 @@ def _scenario_dir(scenario: str) -> Path | None:
 def install_path(scenario: str) -> Path:
     """Where ``--install`` puts a tuned set: ``autotuned.ssv`` in the scenario's folder (beside its other
     sets); for a scenario shipped in an installed wheel, in the user's copy of it
-    (``ipcosim.harness.paths.user_scenario_dir``, made by :func:`install`), never in site-packages.
+    (``ipcosim.harness.support.paths.user_scenario_dir``, made by :func:`install`), never in site-packages.
 
     Raises
     ------
@@ -464,7 +464,7 @@ def install_path(scenario: str) -> Path:
     folder = _scenario_dir(scenario)
     if folder is None or Path(scenario).suffix == ".ssp":
         raise UsageError(f"--install: scenario {scenario!r} has no folder to install a parameter set into")
-    from ipcosim.harness.paths import SCENARIO_DIR, in_checkout, user_scenario_dir
+    from ipcosim.harness.support.paths import SCENARIO_DIR, in_checkout, user_scenario_dir
 
     if not in_checkout() and folder.resolve().is_relative_to(SCENARIO_DIR.resolve()):
         return user_scenario_dir() / folder.name / "autotuned.ssv"

@@ -13,8 +13,8 @@ import pytest
 
 import ipcosim
 from ipcosim.harness import cli
-from ipcosim.harness.baseline import BaselineError, load_baseline, save_baseline
-from ipcosim.harness.options import RunOptions
+from ipcosim.harness.api.options import RunOptions
+from ipcosim.harness.testing.baseline import BaselineError, load_baseline, save_baseline
 
 
 def _cli_options(argv: list[str]) -> RunOptions:
@@ -88,7 +88,7 @@ def test_task_metrics_and_the_plotter_come_from_the_api_not_the_master():
     result draws its figure only through the plotter the API set on it."""
     from ipcosim.errors import UsageError
     from ipcosim.fmus.metrics import METRIC_KEYS
-    from ipcosim.harness.engine import Prepared
+    from ipcosim.harness.api.engine import Prepared
 
     def count_rows(chunks, names):
         return {"rows_seen": sum(len(c) for c in chunks()), "fields": len(names)}
@@ -152,7 +152,7 @@ def test_cases_span_plants_times_values():
 
 
 @pytest.mark.integration
-@pytest.mark.parametrize("module", ["ipcosim.harness.public", "ipcosim.harness.testing"])
+@pytest.mark.parametrize("module", ["ipcosim.harness.api.public", "ipcosim.harness.testing"])
 def test_docstring_examples_run(module):
     result = doctest.testmod(importlib.import_module(module), optionflags=doctest.ELLIPSIS, verbose=False)
     assert result.attempted > 5 and result.failed == 0

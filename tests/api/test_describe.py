@@ -6,8 +6,8 @@ import json
 import pytest
 
 from ipcosim.errors import closest
+from ipcosim.harness.api.describe import describe, describe_text
 from ipcosim.harness.cli import main
-from ipcosim.harness.describe import describe, describe_text
 
 
 def _variables(info: dict, component: str) -> dict[str, dict]:

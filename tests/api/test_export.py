@@ -29,7 +29,7 @@ PLANT_OUTPUTS = {
 
 @pytest.fixture(scope="module")
 def exported(native_fmus: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.api.export import ExportOptions, export
 
     out = tmp_path_factory.mktemp("export")
     return {sc: export(ExportOptions(sc, out / f"{sc}.fmu", fmu_dirs=(native_fmus[1],))) for sc in SCENARIOS}
@@ -100,8 +100,8 @@ def test_model_description_validates_and_carries_the_scenarios_values(exported: 
     from fmpy import read_model_description
     from fmpy.validation import validate_fmu
 
-    from ipcosim.harness.engine import Prepared
-    from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.api.engine import Prepared
+    from ipcosim.harness.api.export import ExportOptions, export
 
     for sc, fmu in exported.items():
         assert validate_fmu(str(fmu)) == [], sc
@@ -290,7 +290,7 @@ def test_multi_rate_loop_equals_the_scenario_run(native_fmus: tuple[Path, Path],
     from fmpy import read_model_description
 
     import ipcosim
-    from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.api.export import ExportOptions, export
 
     values = {"controller.sample_period": 0.002}
     fmu = export(ExportOptions("single-mass-lqr", tmp_path / "mr.fmu", fmu_dirs=(native_fmus[1],), set=values))

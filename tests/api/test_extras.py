@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from ipcosim.harness.extras import MissingExtraError, require
+from ipcosim.harness.support.extras import MissingExtraError, require
 
 
 def test_present_module_passes() -> None:

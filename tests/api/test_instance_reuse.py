@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ipcosim.harness.engine import Prepared
+from ipcosim.harness.api.engine import Prepared
 
 pytestmark = pytest.mark.integration
 

@@ -1,10 +1,10 @@
-"""Plot axes that a single spike cannot squash (``ipcosim.harness.plot``)."""
+"""Plot axes that a single spike cannot squash (``ipcosim.harness.api.plot``)."""
 from __future__ import annotations
 
 import numpy as np
 
+from ipcosim.harness.api.plot import axis_limits, plot_result
 from ipcosim.harness.master.results import Result
-from ipcosim.harness.plot import axis_limits, plot_result
 
 
 def test_a_single_spike_does_not_set_the_axis():

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ipcosim.harness.api.plot import figure
 from ipcosim.harness.master.results import Result
-from ipcosim.harness.plot import figure
 
 pytest.importorskip("matplotlib")
 

@@ -65,7 +65,7 @@ def test_on_the_rig(ipcosim_rig):
 
 def test_plugin_is_inert_in_a_session_that_does_not_use_it(pytester):
     pytester.makepyfile(test_plain="import sys\n\n\ndef test_plain():\n"
-                                   "    assert 'ipcosim.harness.engine' not in sys.modules\n")
+                                   "    assert 'ipcosim.harness.api.engine' not in sys.modules\n")
     result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--strict-markers")
     result.assert_outcomes(passed=1)
 

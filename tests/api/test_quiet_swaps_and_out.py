@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from ipcosim.harness.cli import main
-from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
+from ipcosim.harness.support.paths import BUILD_FMU_DIR, SCENARIO_DIR
 
 pytestmark = pytest.mark.integration
 PID = BUILD_FMU_DIR / "PIDSingleMass.fmu"

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 import ipcosim
-from ipcosim.harness.engine import EXTRACT_PREFIX, remove_stale_extractions
+from ipcosim.harness.api.engine import EXTRACT_PREFIX, remove_stale_extractions
 
 
 @pytest.mark.integration

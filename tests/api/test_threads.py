@@ -1,11 +1,11 @@
-"""One BLAS thread per ipcosim command unless the user asks for more (ipcosim.harness.threads)."""
+"""One BLAS thread per ipcosim command unless the user asks for more (ipcosim.harness.support.threads)."""
 from __future__ import annotations
 
 import os
 import subprocess
 import sys
 
-from ipcosim.harness.threads import SINGLE_THREAD_ENV, single_threaded
+from ipcosim.harness.support.threads import SINGLE_THREAD_ENV, single_threaded
 
 PROBE = ("import contextlib, io, os, sys; from ipcosim.harness.cli import main\n"
          "assert 'numpy' not in sys.modules, 'numpy loaded before the thread count is set'\n"

@@ -13,7 +13,7 @@ import pytest
 from ipcosim.harness import cli
 
 #: What a command's one line of help never needs: numpy (the run options' grammar), the SSP reader.
-HEAVY = ("numpy", "lxml", "ipcosim.harness.scenario.ssp", "ipcosim.harness.options")
+HEAVY = ("numpy", "lxml", "ipcosim.harness.scenario.ssp", "ipcosim.harness.api.options")
 
 PROBE = """
 import json, sys
@@ -42,8 +42,8 @@ def test_help_and_version_load_nothing_heavy(argv: list[str]) -> None:
 
 def test_a_command_builds_its_own_options_only() -> None:
     loaded = _loaded(["describe", "--help"])
-    assert "ipcosim.harness.options" not in loaded  # run's options are not built for describe
-    assert "ipcosim.harness.options" in _loaded(["run", "--help"])  # run's are, for run
+    assert "ipcosim.harness.api.options" not in loaded  # run's options are not built for describe
+    assert "ipcosim.harness.api.options" in _loaded(["run", "--help"])  # run's are, for run
 
 
 def test_every_command_is_listed_by_help_whichever_is_built() -> None:

@@ -20,7 +20,7 @@ import ssp_text as t
 import ipcosim
 from ipcosim.errors import IpcosimError
 from ipcosim.harness import cli
-from ipcosim.harness.describe import describe
+from ipcosim.harness.api.describe import describe
 from ipcosim.harness.scenario.errors import BindingError
 
 pytestmark = [pytest.mark.skipif(shutil.which("gcc") is None and shutil.which("cc") is None,

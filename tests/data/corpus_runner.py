@@ -11,7 +11,8 @@ import os
 import signal
 import sys
 
-from ipcosim.harness import cli, engine
+from ipcosim.harness import cli
+from ipcosim.harness.api import engine
 from ipcosim.harness.master import results
 from ipcosim.harness.master.slave import FMU2Slave, FMUSlave
 

@@ -67,7 +67,7 @@ def test_every_native_fmu_runs_with_fmpys_defaults(native_fmus, native_fmus3, fm
 
 
 def test_an_exported_loop_runs_with_fmpys_defaults(native_fmus, tmp_path):
-    from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.api.export import ExportOptions, export
 
     out = export(ExportOptions("single-mass-lqr", tmp_path / "Loop.fmu", None, None, (native_fmus[1],), {}, "2"))
     exp, _ = _experiment(out)

@@ -23,7 +23,7 @@ from master_mocks import (
 )
 
 from ipcosim.errors import UsageError
-from ipcosim.harness.engine import Prepared
+from ipcosim.harness.api.engine import Prepared
 from ipcosim.harness.master.algorithm import AlgebraicLoopError, StepSizeError, gauss_seidel_order
 from ipcosim.harness.master.execution import check_times
 from ipcosim.harness.master.manipulators import ScheduledValues

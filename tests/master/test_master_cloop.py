@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from master_mocks import DISCARD, ERROR, OK, Factory, loop_factory, loop_system, model, system
 
-from ipcosim.harness.engine import Prepared
+from ipcosim.harness.api.engine import Prepared
 from ipcosim.harness.master import cloop
 from ipcosim.harness.master.slave import TERMINATE
 from ipcosim.toolchain import find_compiler
@@ -155,7 +155,7 @@ def test_a_failed_compile_runs_the_python_loop_and_says_why(tmp_path, monkeypatc
     cc.write_text("#!/bin/sh\necho 'broken-cc: error: out of licences' >&2\nexit 1\n")
     cc.chmod(0o755)
     monkeypatch.setenv("CC", str(cc))
-    monkeypatch.setattr("ipcosim.harness.paths.LOOP_DIR", tmp_path / "loops")
+    monkeypatch.setattr("ipcosim.harness.support.paths.LOOP_DIR", tmp_path / "loops")
     monkeypatch.setattr("ipcosim.harness.master.execution.python_functions", lambda blocks: [])
     r = run(loop_system(), loop_factory, "auto", stop_time=0.1, step=H)
     assert r.ok and r.metadata["loop"] == "python (C compile failed: broken-cc: error: out of licences)"
@@ -163,7 +163,7 @@ def test_a_failed_compile_runs_the_python_loop_and_says_why(tmp_path, monkeypatc
 
 
 def test_the_library_is_keyed_by_the_structure_alone(tmp_path, monkeypatch):
-    monkeypatch.setattr("ipcosim.harness.paths.LOOP_DIR", tmp_path)
+    monkeypatch.setattr("ipcosim.harness.support.paths.LOOP_DIR", tmp_path)
     runs = [({"stop_time": 1.0, "step": H}, "a"),
             ({"stop_time": 2.5, "step": 0.002, "start_time": 0.5, "set": {"controller.sample_period": 0.002}},
              "a"),
@@ -219,7 +219,7 @@ def test_the_generated_c_compiles_warning_free_as_c99(tmp_path):
 
 def test_the_loop_option_is_checked_where_the_command_line_checks_it():
     from ipcosim.errors import UsageError
-    from ipcosim.harness.options import RunOptions
+    from ipcosim.harness.api.options import RunOptions
 
     assert RunOptions.create("single-mass-lqr", loop="c").loop == "c"
     with pytest.raises(UsageError, match=r"^--loop fast: expected one of auto, c, python$"):

@@ -14,9 +14,9 @@ from master_mocks import loop_factory, loop_system
 import ipcosim
 from ipcosim.errors import UsageError
 from ipcosim.harness import cli
-from ipcosim.harness.engine import Prepared
+from ipcosim.harness.api.engine import Prepared
+from ipcosim.harness.api.options import RunOptions, run_options
 from ipcosim.harness.master.results import Result
-from ipcosim.harness.options import RunOptions, run_options
 
 #: The parameters of ipcosim.run that are not options of a run: the master's extension points and **more.
 EXTENSION_POINTS = {"observers", "manipulators", "more"}
@@ -70,7 +70,7 @@ def test_a_prepared_run_spells_no_option_of_its_own() -> None:
 
 
 def test_an_option_of_no_stage_is_refused_where_it_is_declared() -> None:
-    from ipcosim.harness.options import STAGES, Option
+    from ipcosim.harness.api.options import STAGES, Option
 
     assert {how.stage for _, how in run_options()} == set(STAGES)  # every stage takes some option
     with pytest.raises(ValueError, match="--stop-time: stage 'runs', expected one of load, run, command"):
@@ -163,7 +163,7 @@ def test_metrics_json_is_written_once_with_the_final_figures(tmp_path, monkeypat
 
 
 def test_a_sweep_loads_and_binds_its_scenario_once_and_parses_vary_once(tmp_path, monkeypatch) -> None:
-    from ipcosim.harness import engine, grammar
+    from ipcosim.harness.api import engine, grammar
     from ipcosim.harness.studies.robustness import sweep_study
 
     calls = {"bind": 0, "parse_all": 0}

@@ -10,7 +10,7 @@ import types
 import pytest
 from master_mocks import loop_factory, loop_system
 
-from ipcosim.harness.engine import Prepared
+from ipcosim.harness.api.engine import Prepared
 from ipcosim.harness.master import observers
 from ipcosim.harness.master.observers import Progress
 

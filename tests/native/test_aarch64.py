@@ -67,7 +67,7 @@ def _machine(library: bytes) -> int:
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_closed_loop_aarch64_libraries_equal_linux64(scenario: str, fmi: str, hosts, native_fmus, native_fmus3,
                                                      tmp_path: Path) -> None:
-    from ipcosim.harness.export import ExportOptions, loop_spec
+    from ipcosim.harness.api.export import ExportOptions, loop_spec
 
     spec = loop_spec(ExportOptions(scenario, tmp_path / "unused.fmu", fmu_dirs=(native_fmus[1],)))
     assert len(spec.components) == 3
@@ -87,7 +87,7 @@ def test_closed_loop_aarch64_libraries_equal_linux64(scenario: str, fmi: str, ho
 
 @pytest.mark.parametrize("fmi", ("2", "3"))
 def test_exported_loop_aarch64_library_equals_linux64(fmi: str, hosts, native_fmus, tmp_path: Path) -> None:
-    from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.api.export import ExportOptions, export
 
     fmu = export(ExportOptions("double-mass-lqr", tmp_path / "loop.fmu", fmu_dirs=(native_fmus[1],), fmi=fmi))
     with zipfile.ZipFile(fmu) as z:

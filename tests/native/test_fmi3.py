@@ -72,7 +72,7 @@ def test_fmi3_variables_are_the_fmi2_ones(native_fmus: tuple[Path, Path], native
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_master_runs_fmi3_like_fmi2(scenario: str, native_fmus: tuple[Path, Path], native_fmus3: Path) -> None:
     import ipcosim
-    from ipcosim.harness.engine import Prepared
+    from ipcosim.harness.api.engine import Prepared
 
     with Prepared(scenario, fmus="native", fmu_dirs=[native_fmus3], warn=False) as prepared:
         assert {i.model.fmi_version for i in prepared.system.instances} == {"3.0"}
@@ -100,7 +100,7 @@ def test_exported_loop_fmi3_like_fmi2(native_fmus: tuple[Path, Path], tmp_path: 
     import fmpy
     from fmpy.validation import validate_fmu
 
-    from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.api.export import ExportOptions, export
 
     fmus = {"2": export(ExportOptions("single-mass-lqr", tmp_path / "loop2.fmu", fmu_dirs=(native_fmus[1],))),
             "3": tmp_path / "loop3.fmu"}

@@ -59,7 +59,7 @@ def strict_hosts(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str
 @pytest.fixture(scope="session")
 def exported_loops3(native_fmus: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """``ipcosim export SCENARIO --fmi 3`` of one loop per plant."""
-    from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.api.export import ExportOptions, export
 
     out = tmp_path_factory.mktemp("loops3")
     return {s: export(ExportOptions(s, out / f"{s}.fmu", fmu_dirs=(native_fmus[1],), fmi="3")) for s in LOOPS}

@@ -110,7 +110,7 @@ def native_scenarios(native_dir: Path) -> dict[str, np.ndarray]:
 
 @pytest.fixture(scope="module")
 def exported(native_fmus: tuple[Path, Path], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.api.export import ExportOptions, export
 
     out = tmp_path_factory.mktemp("exported")
     return {fmi: export(ExportOptions("single-mass-lqr", out / f"SingleMassLqrLoop{fmi}.fmu",

@@ -48,7 +48,7 @@ def hosts(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_closed_loop_win64_dlls_equal_linux64(scenario: str, fmi: str, hosts, native_fmus, native_fmus3,
                                               tmp_path: Path) -> None:
-    from ipcosim.harness.export import ExportOptions, loop_spec
+    from ipcosim.harness.api.export import ExportOptions, loop_spec
 
     spec = loop_spec(ExportOptions(scenario, tmp_path / "unused.fmu", fmu_dirs=(native_fmus[1],)))
     assert [c.fmu.stem for c in spec.components][0] == "Setpoint" and len(spec.components) == 3
@@ -70,7 +70,7 @@ def test_closed_loop_win64_dlls_equal_linux64(scenario: str, fmi: str, hosts, na
 
 @pytest.mark.parametrize("fmi", ("2", "3"))
 def test_exported_loop_win64_dll_equals_linux64(fmi: str, hosts, native_fmus, tmp_path: Path) -> None:
-    from ipcosim.harness.export import ExportOptions, export
+    from ipcosim.harness.api.export import ExportOptions, export
 
     fmu = export(ExportOptions("double-mass-lqr", tmp_path / "loop.fmu", fmu_dirs=(native_fmus[1],), fmi=fmi))
     results = {}

@@ -9,15 +9,15 @@ below it, never one above:
                                                clients, wire format, virtual rig, adapter glue)
     controllers                                control-law design, discrete laws, the pure closed loop,
                                                controller FMU glue
-    harness.paths, harness.extras              where things are found and built; the missing-extra check
+    harness.support                            where things are found and built; the missing-extra check
     harness.native                             the C generator, over the plants and the laws
     harness.master                             the generic master (knows no plant, law or generator)
     harness.scenario                           SSP read, validate, bind, pack, flavours
     harness.hil                                the rig server and service, the card observer, the
                                                ``hil`` swap alias
-    ipcosim, harness (the facade)              the lazy public names, options, grammar, engine, public,
-                                               export, testing helpers, baselines, plots, pytest plugin,
-                                               the live view
+    ipcosim, harness (the facade),             the lazy public names; the run API (options, grammar, engine,
+    harness.api, harness.testing,              public, describe, plots, export); the test support (checks,
+    harness.live                               baselines, pytest plugin); the live view
     harness.studies                            the generic study engine
     harness.cli                                the command line
 
@@ -41,14 +41,12 @@ ROOMS: tuple[tuple[str, ...], ...] = (
     ("errors", "toolchain"),
     ("fmus",),
     ("controllers",),
-    ("harness.paths", "harness.extras", "harness.threads"),
+    ("harness.support",),
     ("harness.native",),
     ("harness.master",),
     ("harness.scenario",),
     ("harness.hil",),
-    ("", "harness", "harness.options", "harness.grammar", "harness.engine", "harness.public", "harness.export",
-     "harness.testing", "harness.baseline", "harness.plot", "harness.pytest_plugin", "harness.describe",
-     "harness.live"),
+    ("", "harness", "harness.api", "harness.testing", "harness.live"),
     ("harness.studies",),
     ("harness.cli",),
 )
@@ -238,12 +236,12 @@ def test_the_checks_see_a_forbidden_edge(tmp_path) -> None:
     a module string, and a type-only import and a string that is no module are not."""
     path = tmp_path / "physics.py"
     path.write_text("from typing import TYPE_CHECKING\nimport importlib\nif TYPE_CHECKING:\n"
-                    "    from ipcosim.harness.engine import run_with\n"
+                    "    from ipcosim.harness.api.engine import run_with\n"
                     "TOOL = 'ipcosim.fmus.gone'\n"
                     "def f():\n    from ipcosim.harness.master.results import Result\n"
                     "def g(name):\n    return importlib.import_module(f'ipcosim.harness.cli.{name}')\n"
                     "PLUGIN = 'ipcosim.harness.studies.sweep:run_sweep'\n")
-    mods = {"fmus.physics": path, "fmus": path, "harness.master.results": path, "harness.engine": path,
+    mods = {"fmus.physics": path, "fmus": path, "harness.master.results": path, "harness.api.engine": path,
             "harness.cli": path, "harness.studies.sweep": path}
     found = _imports("fmus.physics", path, mods)
     assert found == {"harness.master.results", "harness.cli", "harness.studies.sweep"}

@@ -43,7 +43,7 @@ def _made_up(tmp_path: Path, name: str, source: str) -> Path:
     ("test_lqr_gains.py", "controllers"),        # controllers/laws/lqr.py, a room's sub-folder
     ("test_rig_watchdog.py", "hil"),             # fmus/hil/rig.py before fmus
     ("test_ssp_archive_errors.py", "scenario"),  # harness/scenario/ssp.py
-    ("test_plot_axes.py", "api"),                # harness/plot.py, a top-level module of the harness
+    ("test_plot_axes.py", "api"),                # harness/api/plot.py, a top-level module of the harness
     ("test_ssp_gen_rows.py", "project"),         # devtools/ssp_gen.py (not harness/scenario/ssp.py)
     ("test_run_exit_status.py", "master"),       # harness/cli/run.py names no room: the imports decide
 ])

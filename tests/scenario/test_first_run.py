@@ -6,10 +6,10 @@ from pathlib import Path
 import pytest
 
 import ipcosim
-from ipcosim.harness.paths import BUILD_FMU_DIR, SCENARIO_DIR
 from ipcosim.harness.scenario import locations
 from ipcosim.harness.scenario.files import SSD_NAME
 from ipcosim.harness.scenario.ssp import load_scenario
+from ipcosim.harness.support.paths import BUILD_FMU_DIR, SCENARIO_DIR
 
 
 @pytest.mark.integration
@@ -31,7 +31,7 @@ def test_first_run_builds_the_missing_fmus_once(tmp_path: Path, monkeypatch: pyt
 
 def test_fmus_of_other_makers_are_not_built(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A scenario naming an FMU this project does not make still fails with binding's one line."""
-    from ipcosim.harness.engine import build_missing
+    from ipcosim.harness.api.engine import build_missing
 
     folder = tmp_path / "mine"
     folder.mkdir()

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from ipcosim.harness import paths
 from ipcosim.harness.master.system import Model
 from ipcosim.harness.scenario.rebuild import rebuild_hint
+from ipcosim.harness.support import paths
 
 
 def _model(path: Path) -> Model:

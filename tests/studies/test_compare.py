@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from evidence.claims import CLAIMS, on_comparison
-from ipcosim.harness.grammar import parse_all
+from ipcosim.harness.api.grammar import parse_all
 from ipcosim.harness.studies import report
 from ipcosim.harness.studies.robustness import DEFAULT_UNCERTAINTY, default_vary, summarize
 

@@ -139,7 +139,7 @@ def test_without_matplotlib_analyze_keeps_its_margins(tmp_path, monkeypatch, cap
     from ipcosim.harness.cli import main as cli_main
 
     real = importlib.util.find_spec
-    from ipcosim.harness import extras
+    from ipcosim.harness.support import extras
 
     monkeypatch.setattr(extras, "_said", set())  # each skip is said once a process: once in this test
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "matplotlib" else real(name, *a))

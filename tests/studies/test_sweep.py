@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ipcosim.harness.api.grammar import VaryError, parse_all, parse_vary
 from ipcosim.harness.cli import main as cli_main
-from ipcosim.harness.grammar import VaryError, parse_all, parse_vary
 from ipcosim.harness.studies.cases import SweepCase, case_seed, make_cases
 from ipcosim.harness.studies.executors import DaskExecutor, SchedulerError
 from ipcosim.harness.studies.robustness import summarize, wilson_interval
@@ -151,7 +151,7 @@ def test_closing_one_pool_while_another_lives_returns(tmp_path):
     """Two local pools share multiprocessing's resource tracker, whose pipe every worker holds: closing
     the first while the second's workers live must not wait for that tracker to end (it never would)."""
     script = textwrap.dedent("""
-        from ipcosim.harness.grammar import parse_all
+        from ipcosim.harness.api.grammar import parse_all
         from ipcosim.harness.studies.cases import make_cases
         from ipcosim.harness.studies.executors import LocalExecutor
         from ipcosim.harness.studies.runners import SyntheticSpec
@@ -232,7 +232,7 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
         import signal
         import sys
         from ipcosim.harness.studies.sweep import run_sweep
-        from ipcosim.harness.grammar import parse_all
+        from ipcosim.harness.api.grammar import parse_all
         from ipcosim.harness.studies.cases import make_cases
         from ipcosim.harness.studies.runners import SyntheticSpec
         if __name__ == "__main__":

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from ssd_helpers import component, connection, connector, ssd, write_scenario
 
-from ipcosim.harness.grammar import parse_all
+from ipcosim.harness.api.grammar import parse_all
 from ipcosim.harness.studies.cases import SweepCase, case_seed, make_cases
 from ipcosim.harness.studies.executors import RECYCLE_RUNS, LocalExecutor
 from ipcosim.harness.studies.runners import SyntheticSpec, stable_hash

@@ -7,8 +7,8 @@ import tracemalloc
 
 import pytest
 
+from ipcosim.harness.api.grammar import VaryError, parse_all
 from ipcosim.harness.cli import main as cli_main
-from ipcosim.harness.grammar import VaryError, parse_all
 from ipcosim.harness.studies.cases import MAX_RUNS, make_cases, sweep_size
 
 NOMINAL = {"plant.Mp": 0.127, "plant.Beq": 4.3}

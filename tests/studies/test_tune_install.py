@@ -2,9 +2,9 @@
 never the package's folder (site-packages)."""
 from __future__ import annotations
 
-from ipcosim.harness import paths
 from ipcosim.harness.scenario.ssp import load_scenario
 from ipcosim.harness.studies import tune
+from ipcosim.harness.support import paths
 
 
 def test_install_from_a_wheel_goes_to_the_users_scenario_folder(tmp_path, monkeypatch):

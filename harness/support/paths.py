@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 
 #: The ``ipcosim`` package folder (the source checkout in an editable install).
-PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 #: The scenarios shipped with the package: one folder each.
 SCENARIO_DIR = PACKAGE_ROOT / "ssp"
 

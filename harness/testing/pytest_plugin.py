@@ -58,7 +58,7 @@ class Cosim:
         """:func:`ipcosim.run` with ``out`` under the test's ``tmp_path`` (see its parameters)."""
         __tracebackhide__ = True
         import ipcosim
-        from ipcosim.harness.options import scenario_label
+        from ipcosim.harness.api.options import scenario_label
 
         out = self.tmp_path / f"run-{len(self.runs) + 1:02d}-{scenario_label(scenario)}"
         options.setdefault("out", out)

@@ -4,7 +4,7 @@ scenario's parameter sets) and description (``ipcosim describe``).
 
 Example::
 
-    from ipcosim.harness.describe import describe, describe_text
+    from ipcosim.harness.api.describe import describe, describe_text
 
     info = describe("single-mass-lqr")
     [v["name"] for v in info["components"][2]["variables"] if "python" in v["set"]]
@@ -16,7 +16,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from ipcosim.harness.engine import Prepared
+from ipcosim.harness.api.engine import Prepared
 from ipcosim.harness.master.system import Instance, Model, System
 from ipcosim.harness.scenario.flavour import native_fmu_dir
 from ipcosim.harness.scenario.model_description import read_model

@@ -108,7 +108,7 @@ def figure(result: "Result", title: str | None = None, backend: str | None = Non
     Each panel's axis comes from :func:`axis_limits`: isolated spikes do not squash it; they are
     marked with red triangles on its edge and their count and range are written in the panel.
     """
-    from ipcosim.harness.extras import require
+    from ipcosim.harness.support.extras import require
 
     require("matplotlib")
     import matplotlib

@@ -200,7 +200,7 @@ def assert_close_to(result: "Result", reference_csv: str | os.PathLike[str], col
     >>> ipcosim.assert_close_to(r, base, tol={"plant.cart_position": 1e-6, "plant.pendulum_angle": 1e-6})
     """
     __tracebackhide__ = True
-    from ipcosim.harness.baseline import BaselineError, compare, load_baseline, plot_difference
+    from ipcosim.harness.testing.baseline import BaselineError, compare, load_baseline, plot_difference
 
     baseline = load_baseline(reference_csv)
     try:
@@ -266,7 +266,7 @@ def cases(plants: Sequence[str] = KINDS, vary: Mapping[str, str | Sequence[float
     """
     import itertools
 
-    from ipcosim.harness.grammar import parse_vary
+    from ipcosim.harness.api.grammar import parse_vary
 
     for p in plants:
         if p not in KINDS:

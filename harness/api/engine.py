@@ -30,7 +30,8 @@ from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError, UsageError, closest
 from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, tasks_of
-from ipcosim.harness.grammar import strip_nominal
+from ipcosim.harness.api.grammar import strip_nominal
+from ipcosim.harness.api.options import RunOptions, run_options
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, check_times
@@ -41,7 +42,6 @@ from ipcosim.harness.master.recorder import TaskMetrics
 from ipcosim.harness.master.results import Result, RunOutput, SimulationError, json_safe
 from ipcosim.harness.master.slave import LoadedSlaves
 from ipcosim.harness.master.system import System
-from ipcosim.harness.options import RunOptions, run_options
 from ipcosim.harness.scenario.archive import member_path, safe_extract
 from ipcosim.harness.scenario.binding import bind, warn_all
 from ipcosim.harness.scenario.default_experiment import default_step, default_stop_time
@@ -98,8 +98,8 @@ def check_binary(fmu: Path, model: Any, where: str) -> None:
 
 def plot_run(result: Result, path: Path | None = None) -> Any:
     """The figure of a pendulum run (:attr:`Result.plotter` of the results made here): the
-    matplotlib Figure, or with ``path`` the PNG written there (see :mod:`ipcosim.harness.plot`)."""
-    from ipcosim.harness.plot import figure, plot_result
+    matplotlib Figure, or with ``path`` the PNG written there (see :mod:`ipcosim.harness.api.plot`)."""
+    from ipcosim.harness.api.plot import figure, plot_result
 
     return figure(result) if path is None else plot_result(result, path)
 
@@ -308,7 +308,7 @@ class Prepared:
     # ------------------------------------------------------------------ running
     def options(self, options: RunOptions | None = None, **fields: Any) -> RunOptions:
         """The options of one run of this scenario: ``options`` (default: every run option's
-        default) with ``fields`` in place, each a :class:`~ipcosim.harness.options.RunOptions`
+        default) with ``fields`` in place, each a :class:`~ipcosim.harness.api.options.RunOptions`
         field that a run takes (``stage="run"``: stop time, step, ``set``, ``out``, ``record``...).
 
         Raises
@@ -414,7 +414,7 @@ class Prepared:
             Result with ``error`` set.
         **fields
             Run options in place of those of ``options``, by their field names in
-            :class:`~ipcosim.harness.options.RunOptions`: ``stop_time`` and ``step`` [s] (default:
+            :class:`~ipcosim.harness.api.options.RunOptions`: ``stop_time`` and ``step`` [s] (default:
             the scenario's DefaultExperiment, 10 s at 1 ms for the project's scenarios); ``set``
             (``{"plant.Mp": 0.2, "controller.sample_period": 0.002}`` or ``"1.1*nominal"``);
             ``out`` (write ``results.csv``, ``metrics.json`` and, with ``plot``, ``plot.png``
@@ -442,7 +442,7 @@ class Prepared:
 
     def _run_metadata(self, values: Mapping[tuple[str, str], Any]) -> dict[str, Any]:
         """What a run's figure and metadata say beyond the master's account: the voltage limit it
-        draws (:mod:`ipcosim.harness.plot`), the parameter set, the swaps and the success criterion's
+        draws (:mod:`ipcosim.harness.api.plot`), the parameter set, the swaps and the success criterion's
         amplitude bound, from the values the run starts with (``values`` over the bound ones)."""
         def start(component: str, variable: str) -> Any:
             return _start(self.system, values, component, variable)
@@ -487,7 +487,7 @@ def _start(system: System, values: Mapping[tuple[str, str], Any], component: str
 
 def build_missing(scenario: Scenario) -> list[str]:
     """Build the project's FMUs that ``scenario`` names but cannot find (the first run after a
-    wheel install) into the build folder (:mod:`ipcosim.harness.paths`: the user cache for an
+    wheel install) into the build folder (:mod:`ipcosim.harness.support.paths`: the user cache for an
     installed wheel), saying so in one line on stderr; they are found there from then on.
 
     Returns
@@ -564,7 +564,7 @@ def run_with(options: RunOptions, prepared: Prepared | None = None, *, observers
         live.finished(json_safe(result.metrics))
         live.close()
     if options.save_baseline is not None:
-        from ipcosim.harness.baseline import save_baseline
+        from ipcosim.harness.testing.baseline import save_baseline
 
         result.metadata.setdefault("files", {})["baseline"] = str(
             save_baseline(result, options.save_baseline, list(options.record) or None))
@@ -576,10 +576,10 @@ def open_live_view(options: RunOptions, prepared: Prepared, values: Mapping[str,
     plant kind, the rig's status from a monitor session (opened by the page's serving process) when a HIL
     adapter drives a virtual rig (:func:`ipcosim.harness.hil.observer.rig_monitor`). Returns the
     :class:`~ipcosim.harness.live.session.LiveSession` whose ``feed`` the run observes with."""
+    from ipcosim.harness.api.options import scenario_label
     from ipcosim.harness.hil.observer import rig_monitor
     from ipcosim.harness.live.scene import scene
     from ipcosim.harness.live.session import open_live
-    from ipcosim.harness.options import scenario_label
 
     def start(component: str, variable: str) -> Any:
         if f"{component}.{variable}" in values:

@@ -1,8 +1,8 @@
 """The public Python API, re-exported at the top of the package: ``ipcosim.run``,
 ``ipcosim.scenarios``, ``ipcosim.build`` and ``ipcosim.build_fmu``.
 
-A thin layer over :mod:`ipcosim.harness.engine`: the keywords become one
-:class:`~ipcosim.harness.options.RunOptions`, the object the command line builds from its
+A thin layer over :mod:`ipcosim.harness.api.engine`: the keywords become one
+:class:`~ipcosim.harness.api.options.RunOptions`, the object the command line builds from its
 arguments, so ``ipcosim.run(...)`` and ``ipcosim run ...`` check and do the same thing and
 fail with the same one-line message (an :class:`ipcosim.IpcosimError`).
 """
@@ -15,10 +15,10 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError
+from ipcosim.harness.api.options import RunOptions
 from ipcosim.harness.master.manipulators import Manipulator
 from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.results import Result
-from ipcosim.harness.options import RunOptions
 
 
 class FMUBuildError(IpcosimError, RuntimeError):
@@ -56,7 +56,7 @@ def run(scenario: str | os.PathLike[str], *, swap: Mapping[str, Any] | None = No
         The other options of ``ipcosim run``: ``plot``, ``record``, ``algorithm``,
         ``fmu_dirs``, ``save_baseline``, ``timeout``, ``loop``, ``parameter_file``, ``live``
         (and ``live_host``, ``live_port``, ``live_token``: the run in the browser as it happens,
-        docs/live.md) (see :class:`~ipcosim.harness.options.RunOptions`).
+        docs/live.md) (see :class:`~ipcosim.harness.api.options.RunOptions`).
         SIGINT and SIGTERM during the run, and ``timeout``, stop it between FMU calls with its
         results so far written: :class:`ipcosim.harness.master.signals.Interrupted` (a
         KeyboardInterrupt) is raised after every FMU is freed.
@@ -87,7 +87,7 @@ def run(scenario: str | os.PathLike[str], *, swap: Mapping[str, Any] | None = No
     ...
     ipcosim.errors.UsageError: --stop-time -1: must be a positive number of seconds
     """
-    from ipcosim.harness.engine import run_with
+    from ipcosim.harness.api.engine import run_with
 
     options = RunOptions(scenario, swap=swap, set=set, stop_time=stop_time, step=step,  # type: ignore[arg-type]
                          parameter_set=parameter_set, realtime=True if realtime else None, out=out, **more)
@@ -167,8 +167,8 @@ def build(out: str | os.PathLike[str] | None = None, *, force: bool = False, ssp
     ['AdaptiveHSMCDoubleMass.fmu', 'AdaptiveHSMCSingleMass.fmu']
     """
     from ipcosim.fmus.pybuild import build_all
-    from ipcosim.harness.paths import BUILD_DIR
     from ipcosim.harness.scenario.ssp_pack import SSP_VERSIONS, pack_all
+    from ipcosim.harness.support.paths import BUILD_DIR
 
     root = Path(out) if out is not None else BUILD_DIR
     if ssp_version not in SSP_VERSIONS:

@@ -5,7 +5,7 @@ command-line flag, its help, and the check that turns a given value (text from t
 or a Python value) into the field's value. The command line's parser is built from the fields
 (:func:`add_run_arguments`), its arguments become the object (:meth:`RunOptions.from_args`), and
 :func:`ipcosim.run`'s keywords become the same object through the same checks; both hand it to
-:func:`ipcosim.harness.engine.run_with`. A check that fails names the option the way the command
+:func:`ipcosim.harness.api.engine.run_with`. A check that fails names the option the way the command
 line spells it (``--stop-time -1: must be a positive number of seconds``), so the API raises the
 same one-line message the command line prints.
 """
@@ -20,11 +20,11 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 from ipcosim.errors import UsageError
-from ipcosim.harness.grammar import parse_pairs, parse_set
+from ipcosim.harness.api.grammar import parse_pairs, parse_set
 from ipcosim.harness.master.algorithm import ALGORITHMS
 from ipcosim.harness.master.cloop import LOOPS
-from ipcosim.harness.paths import BUILD_DIR, BUILD_FMU_DIR
 from ipcosim.harness.scenario.flavour import FLAVOURS
+from ipcosim.harness.support.paths import BUILD_DIR, BUILD_FMU_DIR
 
 
 def seconds_option(option: str, value: Any) -> float | None:
@@ -91,9 +91,9 @@ class Option:
         ``command_default(args)``: the command line's value when the flag is absent and the
         argument holds None (``--out``: ``out/<scenario>``).
     stage : str
-        Who takes it (:data:`STAGES`): ``load``, the prepared scenario (:func:`~ipcosim.harness.engine.prepare`);
-        ``run``, each run of it (:meth:`~ipcosim.harness.engine.Prepared.run`); ``command``, the one
-        run of ``ipcosim run`` and :func:`ipcosim.run` around it (:func:`~ipcosim.harness.engine.run_with`).
+        Who takes it (:data:`STAGES`): ``load``, the prepared scenario (:func:`~ipcosim.harness.api.engine.prepare`);
+        ``run``, each run of it (:meth:`~ipcosim.harness.api.engine.Prepared.run`); ``command``, the one
+        run of ``ipcosim run`` and :func:`ipcosim.run` around it (:func:`~ipcosim.harness.api.engine.run_with`).
     """
 
     flag: str

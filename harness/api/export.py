@@ -2,7 +2,7 @@
 
 The loop is built from the scenario's native components (``ipcosim build --native``), bound and
 ordered exactly as ``ipcosim run SCENARIO --fmus native`` runs it (the same
-:class:`~ipcosim.harness.engine.Prepared` binding and redesign, the master's
+:class:`~ipcosim.harness.api.engine.Prepared` binding and redesign, the master's
 ``gauss_seidel_order`` and ``step_multiples``), and compiled into one FMU by
 :mod:`ipcosim.harness.native.container`. Its variables:
 
@@ -86,7 +86,7 @@ def loop_spec(options: ExportOptions) -> ContainerSpec:
     IpcosimError
         An unknown scenario, or one the native flavour cannot run (one line).
     """
-    from ipcosim.harness.engine import Prepared
+    from ipcosim.harness.api.engine import Prepared
     from ipcosim.harness.scenario.flavour import FlavourError
 
     try:
