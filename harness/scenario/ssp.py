@@ -138,6 +138,8 @@ class Component:
     step_size_hint: float | None = None
     #: Nesting level of the component's system (0: the top-level system).
     depth: int = 0
+    #: The SSD's ``implementation`` attribute (``any``, ``CoSimulation``, ``ModelExchange``; None: not given).
+    implementation: str | None = None
 
     def connector(self, name: str) -> Connector | None:
         """The connector called ``name``, or None."""
@@ -190,6 +192,9 @@ class Experiment:
     start_time: float = 0.0
     stop_time: float | None = None
     step_size: float | None = None
+    #: Relative tolerance of the solver that integrates model-exchange components (OMSimulator's
+    #: ``oms:VariableStepSolver relativeTolerance`` annotation; None: not given).
+    relative_tolerance: float | None = None
 
 
 @dataclass(frozen=True)
@@ -777,9 +782,9 @@ class _Flattener:
         if source.startswith("#"):
             raise ScenarioError(f"{where}: component {full!r} references system {source!r} of this SSD; systems "
                                 f"instantiated by reference are not supported")
-        if xml.get("implementation") not in (None, "any", "CoSimulation"):
+        if xml.get("implementation") not in (None, "any", "CoSimulation", "ModelExchange"):
             raise ScenarioError(f"{where}: component {full!r} asks for implementation={xml.get('implementation')!r}; "
-                                f"the master runs co-simulation FMUs only")
+                                f"expected any, CoSimulation or ModelExchange")
         connectors = tuple(_connector(c, self.display) for c in xml.findall("ssd:Connectors/ssd:Connector", NS))
         names = [c.name for c in connectors]
         dup = {n for n in names if names.count(n) > 1}
@@ -795,7 +800,8 @@ class _Flattener:
                 hint = _positive(h.get("value"), f"{self.display}:{h.sourceline}: osp:StepSizeHint value")
         self.components.append(Component(name=full, source=source, fmu=_resolve_fmu(source, self.src, self.fmu_dirs),
                                          connectors=connectors, bindings=tuple(self.bindings(xml, self.display)),
-                                         step_size_hint=hint, depth=depth))
+                                         step_size_hint=hint, depth=depth,
+                                         implementation=xml.get("implementation")))
 
     # ------------------------------------------------------------------ connections
     def _role(self, node: str, other: str, scope: str, line: str) -> str:
@@ -913,7 +919,23 @@ def _experiment(root: etree._Element, ssd_display: str) -> Experiment:
         if stop is not None and not stop > start:
             raise ScenarioError(f"{ssd_display}:{exp.sourceline}: DefaultExperiment stopTime {stop:g} s must be "
                                 f"after startTime {start:g} s")
-    return Experiment(start, stop, step)
+    return Experiment(start, stop, step, _relative_tolerance(root, ssd_display))
+
+
+def _relative_tolerance(root: etree._Element, ssd_display: str) -> float | None:
+    """The ``relativeTolerance`` of an OMSimulator ``VariableStepSolver`` annotation (type
+    ``org.openmodelica``) of the top-level system or of the DefaultExperiment, or None."""
+    for parent in (root.find("ssd:System", NS), root.find("ssd:DefaultExperiment", NS)):
+        if parent is None:
+            continue
+        for ann in parent.findall("ssd:Annotations/ssc:Annotation", NS):
+            if ann.get("type") != "org.openmodelica":
+                continue
+            for solver in ann.iter("{*}VariableStepSolver"):
+                if solver.get("relativeTolerance") is not None:
+                    return _positive(solver.get("relativeTolerance"),
+                                     f"{ssd_display}:{solver.sourceline}: VariableStepSolver relativeTolerance")
+    return None
 
 
 def _map_entries(xml: etree._Element, type_: str, line: str) -> tuple[tuple[Any, Any], ...]:
