@@ -189,3 +189,35 @@ def test_model_exchange_plant_with_a_co_simulation_controller(algorithm, tmp_pat
         x.append(a * x[n] + b * u)
     assert np.max(np.abs(r["plant.x"] - np.array(x))) < AGREE * max(abs(v) for v in x)
     assert abs(r["plant.x"][-1]) < 0.01  # the loop decays at about k - gain = 3 per second
+
+
+def test_an_ssp_archive_with_a_model_exchange_component_runs_from_the_command_line(tmp_path, capsys):
+    """As easySSP and OMSimulator write it: an ``.ssp`` archive, the FMUs under ``resources/``, the
+    component asking ``implementation="ModelExchange"``, the solver's tolerance in a tool annotation."""
+    import zipfile
+
+    from ipcosim.harness import cli
+
+    spec = cfmu.BOUNCING_BALL_ME
+    _, folder = _single(tmp_path, spec, (("h", "Real"), ("bounces", "Integer")))
+    archive = tmp_path / "ball.ssp"
+    with zipfile.ZipFile(archive, "w") as zf:
+        for path in sorted(folder.rglob("*")):
+            if path.is_file():
+                zf.write(path, path.relative_to(folder).as_posix())
+    out = tmp_path / "out"
+    assert cli.main(["run", str(archive), "--out", str(out), "--quiet"]) == 0
+    rows = np.genfromtxt(out / "results.csv", delimiter=",", names=True)
+    assert rows["mbounces"][-1] == len(_bounce_instants(1.0, 9.81, 0.7, spec.stop))
+    assert cli.main(["describe", str(archive)]) == 0
+    assert "model exchange, integrated by the master (CVODE, relative tolerance 1e-08)" in capsys.readouterr().out
+
+
+def test_a_tolerance_that_is_not_a_positive_number_is_refused_in_one_line(tmp_path):
+    fmu, folder = _single(tmp_path, cfmu.DECAY, (("x", "Real"),))
+    ssd = folder / "SystemStructure.ssd"
+    ssd.write_text(ssd.read_text().replace(f'relativeTolerance="{RTOL!r}"', 'relativeTolerance="-1e-6"'))
+    with pytest.raises(ipcosim.IpcosimError) as err:
+        ipcosim.run(folder, step=0.01)
+    message = str(err.value)
+    assert "\n" not in message and "SystemStructure.ssd" in message and "relativeTolerance" in message
