@@ -181,7 +181,7 @@ STAIRCASE = Spec("Staircase", "staircase.c", "2.0", (
     _par("period", "Real", "r", 0, "0.15"),
     _out("height", "Real", "r", 1, (), variability="discrete"),
     _out("last_tick", "Real", "r", 2, (), variability="discrete"),
-    _out("counter", "Integer", "i", 0, (), variability="discrete"),
+    _out("counter", "Integer", "i", 0, (), variability="discrete"), _par("limit", "Integer", "i", 1, "0"),
 ), step=0.1, stop=1.0, interfaces=("me",))
 
 _FMI3_TYPES = {"Real": "Float64", "Integer": "Int32"}

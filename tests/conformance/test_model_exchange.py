@@ -94,12 +94,15 @@ def test_van_der_pol_agrees_with_fmpy(fmi, tmp_path):
 
 
 def _bounce_instants(h0: float, g: float, e: float, stop: float) -> list[float]:
-    """The closed form: the first impact at sqrt(2 h0 / g), then flights of 2 e^k v1 / g."""
+    """The closed form: the first impact at sqrt(2 h0 / g), then flights of 2 e^k v1 / g, until the
+    speed after an impact is below 0.1 m/s (the model's ball then rests)."""
     t, v = math.sqrt(2 * h0 / g), math.sqrt(2 * g * h0)
     out = []
     while t < stop:
         out.append(t)
         v *= e
+        if v < 0.1:
+            break
         t += 2 * v / g
     return out
 
@@ -134,6 +137,33 @@ def test_staircase_steps_at_its_time_events(fmi, tmp_path):
     assert np.allclose(r["m.last_tick"], (expected - 1) * 0.15, rtol=0, atol=1e-12)
     reference = _fmpy(fmu, spec)
     assert np.array_equal(r["m.counter"], reference["counter"])
+
+
+@pytest.mark.parametrize("fmi", ["2.0", "3.0"])
+def test_the_fmu_ends_the_simulation_in_an_event(fmi, tmp_path):
+    """``terminateSimulation`` from the event iteration at the time event where the counter reaches
+    ``limit`` = 4, t = 3 * 0.15 s = 0.45 s, inside the step from 0.4 s: the run ends normally, recorded
+    up to that time (the FMU's last successful time)."""
+    spec = FMI[fmi](cfmu.STAIRCASE)
+    fmu = cfmu.build(spec, tmp_path)
+    comp = t.component("m", spec.name, _connectors(("counter", "output", "Integer"), ("limit", "parameter", "Integer")),
+                       binding=t.bindings(t.inline({"limit": 4}, "1.0")), extra=' implementation="ModelExchange"')
+    r = ipcosim.run(_scenario(tmp_path / "s", [comp], {spec.name: fmu}), step=spec.step)
+    assert r.ok and r.metadata["terminated_by"]["component"] == "m"
+    assert r["time"][-1] == pytest.approx(0.45, abs=1e-12) and r["m.counter"][-1] == 4
+    assert list(r["m.counter"][:-1]) == [1, 1, 2, 3, 3]  # t = 0 ... 0.4 s
+
+
+@pytest.mark.parametrize("fmi", ["2.0", "3.0"])
+def test_a_prepared_model_exchange_scenario_runs_again_alike(fmi, tmp_path):
+    spec = FMI[fmi](cfmu.BOUNCING_BALL_ME)
+    _, folder = _single(tmp_path, spec, (("h", "Real"), ("bounces", "Integer")))
+    with ipcosim.prepare(folder) as prepared:
+        first = prepared.run(step=spec.step)
+        other = prepared.run(step=spec.step, set={"m.e": 0.5})
+        again = prepared.run(step=spec.step)
+    assert np.array_equal(first["m.h"], again["m.h"]) and np.array_equal(first["m.bounces"], again["m.bounces"])
+    assert other["m.bounces"][-1] == len(_bounce_instants(1.0, 9.81, 0.5, spec.stop)) == 6
 
 
 def test_implementation_any_takes_co_simulation_and_model_exchange_where_asked(tmp_path):
