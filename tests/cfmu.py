@@ -8,6 +8,10 @@ Models (see each C file): ``Stair`` (Integer counter that ends the simulation it
 type), ``BouncingBall`` (events inside the step), ``Counter`` (multi-rate: counts its steps,
 integrates its input), ``PassThrough3`` and ``Source3`` (FMI 3.0 with the sized types), ``Ints3``
 (FMI 3.0: every integer type from Int8 to UInt64, in and out, and 64-bit parameters).
+
+Model exchange (``me_model.h``, glue ``fmi2_me.h`` / ``fmi3_me.h``; :func:`fmi3_variant` for FMI 3.0):
+``Decay`` (``x' = -k x + u``, also co-simulation), ``VanDerPol``, ``BouncingBallME`` (an event
+indicator per impact) and ``Staircase`` (time events, and the end of the simulation at a limit).
 """
 from __future__ import annotations
 

@@ -166,6 +166,27 @@ def test_a_prepared_model_exchange_scenario_runs_again_alike(fmi, tmp_path):
     assert other["m.bounces"][-1] == len(_bounce_instants(1.0, 9.81, 0.5, spec.stop)) == 6
 
 
+def test_a_shorter_last_step_is_taken_in_model_exchange(tmp_path):
+    """The FMU's co-simulation cannot take a shorter last step (canHandleVariableCommunicationStepSize
+    false); integrated by the master, it can: the run of 0.995 s at 0.01 s ends at 0.995 s."""
+    import dataclasses
+
+    from ipcosim.harness.master.algorithm import StepSizeError
+
+    spec = dataclasses.replace(cfmu.DECAY, can_handle_variable_step=False)
+    fmu = cfmu.build(spec, tmp_path)
+    for implementation in ("CoSimulation", "ModelExchange"):
+        comp = t.component("m", "Decay", _connectors(("x", "output", "Real")),
+                           extra=f' implementation="{implementation}"')
+        folder = _scenario(tmp_path / implementation, [comp], {"Decay": fmu})
+        if implementation == "CoSimulation":
+            with pytest.raises(StepSizeError, match="canHandleVariableCommunicationStepSize"):
+                ipcosim.run(folder, step=0.01, stop_time=0.995)
+        else:
+            r = ipcosim.run(folder, step=0.01, stop_time=0.995)
+            assert r["time"][-1] == 0.995 and abs(r["m.x"][-1] / math.exp(-0.995) - 1) < AGREE
+
+
 def test_implementation_any_takes_co_simulation_and_model_exchange_where_asked(tmp_path):
     fmu = cfmu.build(cfmu.DECAY, tmp_path)
     conns = _connectors(("x", "output", "Real"))
