@@ -187,6 +187,18 @@ def test_a_shorter_last_step_is_taken_in_model_exchange(tmp_path):
             assert r["time"][-1] == 0.995 and abs(r["m.x"][-1] / math.exp(-0.995) - 1) < AGREE
 
 
+def test_the_exported_loop_refuses_a_model_exchange_component_in_one_line(tmp_path):
+    from ipcosim.harness.export import ExportError, container_spec
+    from ipcosim.harness.scenario.binding import bind
+    from ipcosim.harness.scenario.ssp import load_scenario
+
+    _, folder = _single(tmp_path, cfmu.DECAY, (("x", "Real"),))
+    system = bind(load_scenario(folder))
+    with pytest.raises(ExportError) as err:
+        container_spec(system, ["m"], {"m": 1}, 0.01, "Loop")
+    assert "\n" not in str(err.value) and "component m: runs as model exchange" in str(err.value)
+
+
 def test_implementation_any_takes_co_simulation_and_model_exchange_where_asked(tmp_path):
     fmu = cfmu.build(cfmu.DECAY, tmp_path)
     conns = _connectors(("x", "output", "Real"))
