@@ -104,12 +104,14 @@ class ModelExchange:
         self._completed_step_needed = bool(md.modelExchange.needsCompletedIntegratorStep)
         fmu = self._fmu
         span = (self._stop if self._stop is not None else self._start + 1.0) - self._start
-        return CVodeSolver(nx=md.numberOfContinuousStates, nz=md.numberOfEventIndicators,
-                           get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
-                           get_dx=self._derivatives(), get_z=fmu.getEventIndicators,
-                           get_nominals=fmu.getNominalsOfContinuousStates, set_time=fmu.setTime,
-                           input=_HeldInputs(), startTime=self._start, maxStep=span / 50.0,
-                           relativeTolerance=self.tolerance)
+        solver = CVodeSolver(nx=md.numberOfContinuousStates, nz=md.numberOfEventIndicators,
+                             get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
+                             get_dx=self._derivatives(), get_z=fmu.getEventIndicators,
+                             get_nominals=fmu.getNominalsOfContinuousStates, set_time=fmu.setTime,
+                             input=_HeldInputs(), startTime=self._start, maxStep=span / 50.0,
+                             relativeTolerance=self.tolerance)
+        _errors_to_the_solver_only(solver)
+        return solver
 
     def free(self) -> None:
         self._solver = None  # CVODE's memory before the instance
@@ -150,8 +152,15 @@ class ModelExchange:
         try:
             return self._advance(t, t + h)
         except Exception as exc:  # noqa: BLE001 -- an FMI call or CVODE failed: a status for the loop
-            self._log(None, None, ERROR, None, f"{type(exc).__name__}: {exc}".encode())  # type: ignore[attr-defined]
+            info = getattr(self._solver, "error_info", None)
+            text = f"CVODE: {info[3]}" if isinstance(exc, RuntimeError) and info else f"{type(exc).__name__}: {exc}"
+            self._log(None, None, ERROR, None, text.encode())  # type: ignore[attr-defined]
             return ERROR
+
+    def fail(self, function: str, status: int, time: float | None = None) -> SlaveError:
+        if function == "fmi2DoStep":  # the loop's name for the step: here the master's integration
+            function = "the model-exchange step (CVODE and the FMU's events)"
+        return super().fail(function, status, time)  # type: ignore[misc]
 
     def _advance(self, t: float, t_end: float) -> int:
         """Integrate from ``t`` to ``t_end`` with the events in between (see the module documentation)."""
@@ -268,6 +277,19 @@ class ME3Slave(ModelExchange, FMU3Slave):
         types = {v.vr: v.type for v in self.instance.model.variables.values()}
         get_real, set_real = self._real_io(types)
         return self._fmu.component, self._me_step, get_real, self._held(set_real)
+
+
+def _errors_to_the_solver_only(solver: Any) -> None:
+    """CVODE's errors to the solver's own handler only (it keeps them for the message), not also
+    printed by SUNDIALS' default handler on stderr."""
+    import ctypes
+
+    from fmpy.sundials.sundials_context import SUNContext, SUNContext_PushErrHandler, sundials_core
+
+    clear = sundials_core.SUNContext_ClearErrHandlers
+    clear.argtypes, clear.restype = [SUNContext], ctypes.c_int
+    clear(solver.sunctx)
+    SUNContext_PushErrHandler(solver.sunctx, solver.ehfun_, None)
 
 
 def slave_of(instance: Instance, unzip_dir: Path, logging_on: bool = True, library: Any = None) -> FMUSlave:

@@ -284,3 +284,16 @@ def test_a_tolerance_that_is_not_a_positive_number_is_refused_in_one_line(tmp_pa
         ipcosim.run(folder, step=0.01)
     message = str(err.value)
     assert "\n" not in message and "SystemStructure.ssd" in message and "relativeTolerance" in message
+
+
+def test_a_solver_failure_is_one_line_naming_the_component_and_keeps_the_results(tmp_path, capsys):
+    """``k`` = -1e300: ``x' = 1e300 x`` overflows at once; CVODE gives up. One line on stderr (CVODE's
+    own printing silenced), exit 1, results.csv and metrics.json written."""
+    from ipcosim.harness import cli
+
+    _, folder = _single(tmp_path, cfmu.DECAY, (("x", "Real"),))
+    out = tmp_path / "out"
+    assert cli.main(["run", str(folder), "--out", str(out), "--quiet", "--set", "m.k=-1e300", "--step", "0.01"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "component m (Decay)" in err and "CVODE" in err and "t = 0 s" in err
+    assert (out / "results.csv").is_file() and (out / "metrics.json").is_file()
