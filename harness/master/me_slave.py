@@ -255,7 +255,11 @@ class ME3Slave(ModelExchange, FMU3Slave):
     def instantiate(self) -> None:
         if self._fmu is None:
             self._fmu = load_me_library(self.instance, self.unzip_dir)
-        super().instantiate()
+        try:
+            super().instantiate()  # fmpy's FMU3Model.instantiate: fmi3InstantiateModelExchange
+        except SlaveError as exc:
+            name = "fmi3InstantiateModelExchange"
+            raise SlaveError(str(exc).replace("fmi3InstantiateCoSimulation", name), self.name, name) from None
 
     def setup_experiment(self, start_time: float, stop_time: float | None) -> None:
         self._me_setup(start_time, stop_time)

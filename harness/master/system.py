@@ -77,7 +77,7 @@ class Model:
     fmi_version: str = "2.0"
     units: Mapping[str, Unit] = field(default_factory=dict)
     can_handle_variable_step: bool = True
-    #: The FMU's DefaultExperiment stepSize and stopTime [s] (None when it gives none).
+    #: The FMU's DefaultExperiment stepSize and stopTime [s], and tolerance (None when it gives none).
     default_step: float | None = None
     default_stop: float | None = None
     default_tolerance: float | None = None
