@@ -8,6 +8,10 @@ Models (see each C file): ``Stair`` (Integer counter that ends the simulation it
 type), ``BouncingBall`` (events inside the step), ``Counter`` (multi-rate: counts its steps,
 integrates its input), ``PassThrough3`` and ``Source3`` (FMI 3.0 with the sized types), ``Ints3``
 (FMI 3.0: every integer type from Int8 to UInt64, in and out, and 64-bit parameters).
+
+Model exchange (``me_model.h``, glue ``fmi2_me.h`` / ``fmi3_me.h``; :func:`fmi3_variant` for FMI 3.0):
+``Decay`` (``x' = -k x + u``, also co-simulation), ``VanDerPol``, ``BouncingBallME`` (an event
+indicator per impact) and ``Staircase`` (time events, and the end of the simulation at a limit).
 """
 from __future__ import annotations
 
@@ -38,6 +42,7 @@ class Var:
     variability: str | None = None
     initial: str | None = None
     depends: tuple[str, ...] | None = None  # outputs: direct dependencies (None: none)
+    derivative: str | None = None  # the state this variable is the derivative of (model exchange)
 
 
 @dataclass(frozen=True)
@@ -49,6 +54,16 @@ class Spec:
     can_handle_variable_step: bool = True
     step: float | None = None
     stop: float | None = None
+    #: The interfaces offered: ``cs`` co-simulation, ``me`` model exchange (fmi2_me.h, fmi3_me.h).
+    interfaces: tuple[str, ...] = ("cs",)
+    #: Model exchange: the event indicator variables, in the order of the model's INDICATORS.
+    indicators: tuple[str, ...] = ()
+    tolerance: float | None = None
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        """The continuous states, in the order of their derivatives (the model's STATES)."""
+        return tuple(v.derivative for v in self.variables if v.derivative)
 
 
 def _out(name: str, type_: str, array: str, index: int, depends: tuple[str, ...] | None = None,
@@ -58,6 +73,10 @@ def _out(name: str, type_: str, array: str, index: int, depends: tuple[str, ...]
 
 def _in(name: str, type_: str, array: str, index: int, start: str) -> Var:
     return Var(name, type_, "input", array, index, start)
+
+
+def _local(name: str, array: str, index: int, derivative: str | None = None) -> Var:
+    return Var(name, "Real", "local", array, index, derivative=derivative)
 
 
 def _par(name: str, type_: str, array: str, index: int, start: str) -> Var:
@@ -140,13 +159,54 @@ STAIR3 = Spec("Stair3", "stair.c", "3.0", (
 ), step=0.1, stop=2.0)
 
 
+#: Model exchange (me_model.h): x' = -k x + u, also as co-simulation (its exact step).
+DECAY = Spec("Decay", "decay.c", "2.0", (
+    _out("x", "Real", "r", 0, (), initial="exact", start="1.0"), _par("k", "Real", "r", 1, "1.0"),
+    _in("u", "Real", "r", 2, "0.0"), _local("der(x)", "r", 3, "x"),
+), step=0.01, stop=2.0, interfaces=("cs", "me"))
+
+VANDERPOL = Spec("VanDerPol", "vanderpol.c", "2.0", (
+    _out("x0", "Real", "r", 0, (), initial="exact", start="2.0"),
+    _out("x1", "Real", "r", 1, (), initial="exact", start="0.0"), _par("mu", "Real", "r", 2, "1.0"),
+    _local("der(x0)", "r", 3, "x0"), _local("der(x1)", "r", 4, "x1"),
+), step=0.01, stop=10.0, interfaces=("me",))
+
+BOUNCING_BALL_ME = Spec("BouncingBallME", "ball_me.c", "2.0", (
+    _out("h", "Real", "r", 0, (), initial="exact", start="1.0"),
+    _out("v", "Real", "r", 1, (), initial="exact", start="0.0"),
+    _par("g", "Real", "r", 2, "9.81"), _par("e", "Real", "r", 3, "0.7"),
+    _local("der(h)", "r", 4, "h"), _local("der(v)", "r", 5, "v"), _local("impact", "r", 6),
+    _out("last_bounce", "Real", "r", 7, (), variability="discrete"),
+    _out("bounces", "Integer", "i", 0, (), variability="discrete"),
+    _out("resting", "Boolean", "b", 0, (), variability="discrete"),
+), step=0.01, stop=2.0, interfaces=("me",), indicators=("impact",))
+
+STAIRCASE = Spec("Staircase", "staircase.c", "2.0", (
+    _par("period", "Real", "r", 0, "0.15"),
+    _out("height", "Real", "r", 1, (), variability="discrete"),
+    _out("last_tick", "Real", "r", 2, (), variability="discrete"),
+    _out("counter", "Integer", "i", 0, (), variability="discrete"), _par("limit", "Integer", "i", 1, "0"),
+), step=0.1, stop=1.0, interfaces=("me",))
+
+_FMI3_TYPES = {"Real": "Float64", "Integer": "Int32"}
+
+
+def fmi3_variant(spec: Spec) -> Spec:
+    """The FMI 3.0 variant of an FMI 2.0 model-exchange test model (same C model, name + ``3``)."""
+    variables = tuple(Var(v.name, _FMI3_TYPES.get(v.type, v.type), v.causality, v.array, v.index, v.start,
+                          v.variability, v.initial, v.depends, v.derivative) for v in spec.variables)
+    return Spec(spec.name + "3", spec.source, "3.0", variables, spec.can_handle_variable_step, spec.step, spec.stop,
+                spec.interfaces, spec.indicators, spec.tolerance)
+
+
 # --------------------------------------------------------------------------- model descriptions
 def _vr(spec: Spec, v: Var) -> int:
     return v.index if spec.fmi == "2.0" else FMI3_BASE[v.array] + v.index
 
 
 def _experiment(spec: Spec) -> str:
-    attrs = "".join(f' {k}="{x!r}"' for k, x in (("stopTime", spec.stop), ("stepSize", spec.step)) if x is not None)
+    attrs = "".join(f' {k}="{x!r}"' for k, x in (("stopTime", spec.stop), ("stepSize", spec.step),
+                                                 ("tolerance", spec.tolerance)) if x is not None)
     return f"  <DefaultExperiment startTime=\"0.0\"{attrs}/>\n" if attrs else ""
 
 
@@ -154,9 +214,12 @@ def model_description2(spec: Spec, guid: str) -> str:
     flag = "true" if spec.can_handle_variable_step else "false"
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<fmiModelDescription fmiVersion="2.0" modelName="{spec.name}" guid="{guid}" '
-             f'variableNamingConvention="flat" numberOfEventIndicators="0">',
-             f'  <CoSimulation modelIdentifier="{spec.name}" canHandleVariableCommunicationStepSize="{flag}"/>',
+             f'variableNamingConvention="flat" numberOfEventIndicators="{len(spec.indicators)}">',
+             f'  <ModelExchange modelIdentifier="{spec.name}"/>' if "me" in spec.interfaces else "",
+             f'  <CoSimulation modelIdentifier="{spec.name}" canHandleVariableCommunicationStepSize="{flag}"/>'
+             if "cs" in spec.interfaces else "",
              _experiment(spec).rstrip("\n"), "  <ModelVariables>"]
+    index = {v.name: k for k, v in enumerate(spec.variables, start=1)}
     outputs = []
     for k, v in enumerate(spec.variables, start=1):
         attrs = f'name="{v.name}" valueReference="{_vr(spec, v)}" causality="{v.causality}"'
@@ -166,19 +229,26 @@ def model_description2(spec: Spec, guid: str) -> str:
         if v.initial:
             attrs += f' initial="{v.initial}"'
         start = f' start="{escape(v.start)}"' if v.start is not None and (v.causality != "output" or v.initial) else ""
+        if v.derivative:
+            start += f' derivative="{index[v.derivative]}"'
         lines.append(f"    <ScalarVariable {attrs}><{v.type}{start}/></ScalarVariable>")
         if v.causality == "output":
             outputs.append((k, v))
     lines.append("  </ModelVariables>")
     lines.append("  <ModelStructure>")
+    derivatives = [k for k, v in enumerate(spec.variables, start=1) if v.derivative]
     if outputs:
         lines.append("    <Outputs>")
-        index = {v.name: k for k, v in enumerate(spec.variables, start=1)}
         for k, v in outputs:
             deps = " ".join(str(index[d]) for d in (v.depends or ()))
             lines.append(f'      <Unknown index="{k}" dependencies="{deps}"/>')
         lines.append("    </Outputs>")
-        calculated = [k for k, v in outputs if v.initial != "exact"]
+    if derivatives:
+        lines.append("    <Derivatives>")
+        lines.extend(f'      <Unknown index="{k}"/>' for k in derivatives)
+        lines.append("    </Derivatives>")
+    if outputs or derivatives:
+        calculated = sorted([k for k, v in outputs if v.initial != "exact"] + derivatives)
         if calculated:
             lines.append("    <InitialUnknowns>")
             lines.extend(f'      <Unknown index="{k}" dependencies=""/>' for k in calculated)
@@ -192,8 +262,9 @@ def model_description3(spec: Spec, token: str) -> str:
     flag = "true" if spec.can_handle_variable_step else "false"
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<fmiModelDescription fmiVersion="3.0" modelName="{spec.name}" instantiationToken="{token}">',
+             f'  <ModelExchange modelIdentifier="{spec.name}"/>' if "me" in spec.interfaces else "",
              f'  <CoSimulation modelIdentifier="{spec.name}" canHandleVariableCommunicationStepSize="{flag}" '
-             f'hasEventMode="false"/>',
+             f'hasEventMode="false"/>' if "cs" in spec.interfaces else "",
              _experiment(spec).rstrip("\n"), "  <ModelVariables>",
              '    <Float64 name="time" valueReference="999" causality="independent" variability="continuous"/>']
     for v in spec.variables:
@@ -203,12 +274,15 @@ def model_description3(spec: Spec, token: str) -> str:
         attrs += f' variability="{variability}"'
         if v.initial:
             attrs += f' initial="{v.initial}"'
+        if v.derivative:
+            attrs += f' derivative="{_vr(spec, next(s for s in spec.variables if s.name == v.derivative))}"'
         if v.type == "String":
             given = v.start is not None and v.causality != "output"
             start = f'><Start value="{escape(v.start)}"/></String>' if given else "/>"
             lines.append(f"    <String {attrs}{start}")
         else:
-            start = f' start="{v.start}"' if v.start is not None and v.causality != "output" else ""
+            given = v.start is not None and (v.causality != "output" or v.initial == "exact")
+            start = f' start="{v.start}"' if given else ""
             lines.append(f"    <{v.type} {attrs}{start}/>")
     lines.append("  </ModelVariables>")
     lines.append("  <ModelStructure>")
@@ -217,8 +291,14 @@ def model_description3(spec: Spec, token: str) -> str:
             deps = " ".join(str(_vr(spec, d)) for d in spec.variables if d.name in (v.depends or ()))
             lines.append(f'    <Output valueReference="{_vr(spec, v)}" dependencies="{deps}"/>')
     for v in spec.variables:
-        if v.causality == "output" and v.initial != "exact":
+        if v.derivative:
+            lines.append(f'    <ContinuousStateDerivative valueReference="{_vr(spec, v)}"/>')
+    for v in spec.variables:
+        if v.causality == "output" and v.initial != "exact" or v.derivative:
             lines.append(f'    <InitialUnknown valueReference="{_vr(spec, v)}" dependencies=""/>')
+    for name in spec.indicators:
+        vr = _vr(spec, next(v for v in spec.variables if v.name == name))
+        lines.append(f'    <EventIndicator valueReference="{vr}"/>')
     lines.append("  </ModelStructure>")
     lines.append("</fmiModelDescription>")
     return "\n".join(x for x in lines if x) + "\n"
@@ -235,10 +315,10 @@ def headers() -> Path:
 _IMPLEMENTED3 = re.compile(r"^(?:const char \*|fmi3Status |fmi3Instance |void )(fmi3\w+)\(", re.M)
 
 
-def fmi3_stubs() -> str:
-    """C stubs (returning fmi3Error) for every FMI 3.0 function fmi3_glue.c does not define:
-    loaders such as FMPy resolve every symbol of the standard."""
-    glue = (SOURCES / "fmi3_glue.c").read_text()
+def fmi3_stubs(model_exchange: bool = False) -> str:
+    """C stubs (returning fmi3Error) for every FMI 3.0 function fmi3_glue.c (and, for a model-exchange
+    model, fmi3_me.h) does not define: loaders such as FMPy resolve every symbol of the standard."""
+    glue = (SOURCES / "fmi3_glue.c").read_text() + ((SOURCES / "fmi3_me.h").read_text() if model_exchange else "")
     done = set(_IMPLEMENTED3.findall(glue))
     for kind in ("Float64", "Float32", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64",
                  "Boolean"):
@@ -264,11 +344,12 @@ def build(spec: Spec, out_dir: Path) -> Path:
     glue = SOURCES / ("fmi2_glue.c" if spec.fmi == "2.0" else "fmi3_glue.c")
     sources = [str(glue)]
     if spec.fmi == "3.0":
-        (work / "stubs.c").write_text(fmi3_stubs())
+        (work / "stubs.c").write_text(fmi3_stubs("me" in spec.interfaces))
         sources.append(str(work / "stubs.c"))
     library = work / f"{spec.name}.so"
     cmd = [compiler, "-shared", "-fPIC", "-O1", f"-I{headers()}", f"-I{SOURCES}",
-           f'-DMODEL_FILE="{spec.source}"', *sources, "-o", str(library), "-lm"]
+           f'-DMODEL_FILE="{spec.source}"', f'-DHAS_ME={int("me" in spec.interfaces)}',
+           f'-DHAS_CS={int("cs" in spec.interfaces)}', *sources, "-o", str(library), "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"compiling {spec.name} failed:\n{proc.stderr}")
@@ -279,6 +360,7 @@ def build(spec: Spec, out_dir: Path) -> Path:
     with zipfile.ZipFile(fmu, "w") as zf:
         zf.writestr("modelDescription.xml", md)
         zf.write(library, f"binaries/{platform}/{spec.name}.so")
-        for src in (glue, SOURCES / "model.h", SOURCES / spec.source):
+        extra = ("me_model.h", "fmi2_me.h" if spec.fmi == "2.0" else "fmi3_me.h") if "me" in spec.interfaces else ()
+        for src in (glue, SOURCES / "model.h", *(SOURCES / x for x in extra), SOURCES / spec.source):
             zf.write(src, f"sources/{src.name}")
     return fmu

@@ -75,7 +75,17 @@ def _component(system: System, inst: Instance) -> dict[str, Any]:
     extra = [n for n, v in (native.variables.items() if native else ()) if n not in inst.model.variables
              and v.settable and system.link_into(inst.name, n) is None]
     return {"name": inst.name, "model": inst.model.name, "fmus": fmus, "variables": variables,
-            "native_only": extra}
+            "native_only": extra, "interface": _interface(inst)}
+
+
+def _interface(inst: Instance) -> str:
+    """The FMU interface the component runs, with the solver when the master integrates it."""
+    if inst.interface != "ModelExchange":
+        return "co-simulation"
+    from ipcosim.harness.master.me_slave import DEFAULT_TOLERANCE
+
+    tolerance = inst.tolerance or DEFAULT_TOLERANCE
+    return f"model exchange, integrated by the master (CVODE, relative tolerance {tolerance:g})"
 
 
 def _native_model(model: Model) -> Model | None:
@@ -94,7 +104,8 @@ def describe_text(info: dict[str, Any]) -> str:
              f"{_value(exp['stop_time_s'])} s, step {_value(exp['step_s'])} s", ""]
     for comp in info["components"]:
         native = comp["fmus"]["native"] or "not built (`ipcosim build --native`)"
-        lines += [f"component {comp['name']}: {comp['model']}", f"  python FMU  {comp['fmus']['python']}",
+        lines += [f"component {comp['name']}: {comp['model']} ({comp['interface']})",
+                  f"  python FMU  {comp['fmus']['python']}",
                   f"  native FMU  {native}"]
         rows = [("variable", "causality", "type", "unit", "start", "--set", "description")]
         rows += [(v["name"], v["causality"], v["type"], v["unit"] or "-", _value(v["start"]),

@@ -36,6 +36,7 @@ from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, check_times
 from ipcosim.harness.master.manipulators import Manipulator
+from ipcosim.harness.master.me_slave import library_of, slave_of
 from ipcosim.harness.master.observers import Observer, Progress
 from ipcosim.harness.master.realtime import RealtimePacer
 from ipcosim.harness.master.recorder import TaskMetrics
@@ -212,7 +213,8 @@ class Prepared:
         self._tmp: Path | None = None
         self._finalizer: Any = None
         self.unzip_dirs: dict[str, Path] = {}
-        self._slaves = LoadedSlaves(self.unzip_dirs, reuse=reuse_instances)  # loaded once, for every run
+        # loaded once, for every run
+        self._slaves = LoadedSlaves(self.unzip_dirs, reuse=reuse_instances, make=slave_of, load=library_of)
         self._libraries, self._kept = self._slaves.libraries, self._slaves.kept
         if system is not None:
             self.system = system

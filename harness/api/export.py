@@ -143,6 +143,9 @@ def _component(inst: Instance, system: System, multiple: int, setpoints: set[str
                values: dict[str, Any]) -> ComponentSpec:
     if inst.model.path is None:
         raise ExportError(f"component {inst.name}: no FMU file")
+    if inst.interface != "CoSimulation":
+        raise ExportError(f"component {inst.name}: runs as model exchange (integrated by the master); the exported "
+                          "loop steps co-simulation FMUs only")
     for v in inst.connectors:
         if v.type != "Real":
             raise ExportError(f"component {inst.name}: connector {v.name} is of type {v.type}; the exported loop "

@@ -38,12 +38,13 @@ from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_f
 from ipcosim.harness.master.integers import CarryError
 from ipcosim.harness.master.layout import Layout
 from ipcosim.harness.master.manipulators import Manipulator, SetValues
+from ipcosim.harness.master.me_slave import slave_of
 from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.plan import Block
 from ipcosim.harness.master.pyloop import compile_loop
 from ipcosim.harness.master.recorder import Recorder, TaskMetrics, TickFailure, timing_metrics
 from ipcosim.harness.master.results import Result, RowWriter, RunOutput, open_output, select_columns
-from ipcosim.harness.master.slave import DISCARD, TERMINATE, Slave, fmu_slave
+from ipcosim.harness.master.slave import DISCARD, TERMINATE, Slave
 from ipcosim.harness.master.system import Instance, System, value_type_of
 
 SlaveFactory = Callable[[Instance], Slave]
@@ -115,7 +116,7 @@ class Execution:
     observers, manipulators : sequences
         See :mod:`ipcosim.harness.master.observers`, :mod:`ipcosim.harness.master.manipulators`.
     slave_factory : callable, optional
-        ``factory(instance) -> Slave``; default :func:`~ipcosim.harness.master.slave.fmu_slave` on ``unzip_dirs``.
+        ``factory(instance) -> Slave``; default :func:`~ipcosim.harness.master.me_slave.slave_of` on ``unzip_dirs``.
     unzip_dirs : mapping of component name to Path
         Extracted FMUs (for the default factory).
     record_every : int
@@ -226,7 +227,7 @@ class Execution:
         return self.system.instance(comp).start_value(var)
 
     def _fmu_slave(self, instance: Instance) -> Slave:
-        return fmu_slave(instance, self.unzip_dirs[instance.name])
+        return slave_of(instance, self.unzip_dirs[instance.name])
 
     # ------------------------------------------------------------------ manipulation API
     def set_start(self, component: str, variable: str, value: Any) -> None:

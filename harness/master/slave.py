@@ -294,7 +294,7 @@ class FMU2Slave(FMUSlave):
         addLoggerProxy(ctypes.byref(callbacks))
         self._callbacks = callbacks
         f = self._fmu._functions
-        self._do_step, self._get_real, self._set_real = f["fmi2DoStep"], f["fmi2GetReal"], f["fmi2SetReal"]
+        self._do_step, self._get_real, self._set_real = f.get("fmi2DoStep"), f["fmi2GetReal"], f["fmi2SetReal"]
         try:
             self._fmu.instantiate(callbacks=callbacks, loggingOn=self.logging_on)
         except Exception as exc:  # noqa: BLE001
@@ -573,11 +573,17 @@ class LoadedSlaves:
         The extracted FMUs (read when a component's slave is first asked for).
     reuse : bool
         Keep each component's instance between runs.
+    make, load : callable
+        The slave of an instance and the library it is made from (default :func:`fmu_slave`,
+        :func:`load_library`: co-simulation).
     """
 
-    def __init__(self, unzip_dirs: Mapping[str, Path], reuse: bool = False) -> None:
+    def __init__(self, unzip_dirs: Mapping[str, Path], reuse: bool = False,
+                 make: Callable[..., FMUSlave] | None = None, load: Callable[[Instance, Path], Any] | None = None
+                 ) -> None:
         self.unzip_dirs = unzip_dirs
         self.reuse = reuse
+        self.make, self.load = make or fmu_slave, load or load_library
         self.libraries: dict[str, Any] = {}  # component -> its loaded library
         self.kept: dict[str, FMUSlave] = {}  # component -> its instance between runs (reuse)
 
@@ -587,8 +593,8 @@ class LoadedSlaves:
             return kept
         lib = self.libraries.get(instance.name)
         if lib is None:
-            lib = self.libraries[instance.name] = load_library(instance, self.unzip_dirs[instance.name])
-        slave = fmu_slave(instance, self.unzip_dirs[instance.name], library=lib)
+            lib = self.libraries[instance.name] = self.load(instance, self.unzip_dirs[instance.name])
+        slave = self.make(instance, self.unzip_dirs[instance.name], library=lib)
         if self.reuse:
             slave.reusable = True
             self.kept[instance.name] = slave

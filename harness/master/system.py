@@ -77,11 +77,16 @@ class Model:
     fmi_version: str = "2.0"
     units: Mapping[str, Unit] = field(default_factory=dict)
     can_handle_variable_step: bool = True
-    #: The FMU's DefaultExperiment stepSize and stopTime [s] (None when it gives none).
+    #: The FMU's DefaultExperiment stepSize and stopTime [s], and tolerance (None when it gives none).
     default_step: float | None = None
     default_stop: float | None = None
+    default_tolerance: float | None = None
     #: The items (name -> value) of each Enumeration variable's type, by variable name.
     enumerations: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
+    #: Whether the FMU offers co-simulation, and its model-exchange model identifier (None: no
+    #: model exchange).
+    co_simulation: bool = True
+    model_exchange_identifier: str | None = None
 
     def inputs(self) -> list[Variable]:
         return [v for v in self.variables.values() if v.causality == "input"]
@@ -113,6 +118,10 @@ class Instance:
     step_size_hint: float | None = None
     swapped_from: str | None = None
     realtime: bool = False
+    #: The FMU interface the component runs: ``CoSimulation``, or ``ModelExchange`` (integrated
+    #: by the master, :mod:`~ipcosim.harness.master.me_slave`) with the solver's relative tolerance.
+    interface: str = "CoSimulation"
+    tolerance: float | None = None
 
     @property
     def inputs(self) -> tuple[Variable, ...]:

@@ -143,8 +143,25 @@ def _bind_component(scenario: Scenario, comp: Component, swap: Mapping[str, Any]
             raise BindingError(f"--swap {comp.name}: the swapped-in FMU has no settable variable {name!r}; "
                                f"{closest(name, (n for n, v in model.variables.items() if v.settable))}")
         params.append((var, convert_value(var, value, f"--swap {comp.name}: {name}")))
+    interface = _interface(comp, model, where)
+    if interface == "ModelExchange":  # the master integrates it to any point: a shorter last step too
+        model = replace(model, can_handle_variable_step=True)
     return Instance(name=comp.name, model=model, connectors=tuple(connectors), parameters=tuple(params),
-                    step_size_hint=comp.step_size_hint, swapped_from=swapped_from, realtime=realtime)
+                    step_size_hint=comp.step_size_hint, swapped_from=swapped_from, realtime=realtime,
+                    interface=interface, tolerance=scenario.experiment.relative_tolerance or model.default_tolerance)
+
+
+def _interface(comp: Component, model: Model, where: str) -> str:
+    """The FMU interface a component runs: the one its SSD ``implementation`` asks for, else
+    co-simulation where the FMU offers it, else model exchange."""
+    has = {"CoSimulation": model.co_simulation, "ModelExchange": model.model_exchange_identifier is not None}
+    asked = comp.implementation
+    if asked in has:
+        if not has[asked]:
+            offered = "co-simulation" if has["CoSimulation"] else "model exchange"
+            raise BindingError(f"{where}: implementation={asked!r}, but the FMU offers {offered} only")
+        return asked
+    return "CoSimulation" if has["CoSimulation"] else "ModelExchange"
 
 
 def _bind_connectors(scenario: Scenario, comp: Component, model: Model, where: str, swapped_from: str | None,

@@ -166,7 +166,23 @@ def parse_experiment(root: etree._Element, ssd_display: str) -> Experiment:
         if stop is not None and not stop > start:
             raise ScenarioError(f"{ssd_display}:{exp.sourceline}: DefaultExperiment stopTime {stop:g} s must be "
                                 f"after startTime {start:g} s")
-    return Experiment(start, stop, step)
+    return Experiment(start, stop, step, _relative_tolerance(root, ssd_display))
+
+
+def _relative_tolerance(root: etree._Element, ssd_display: str) -> float | None:
+    """The ``relativeTolerance`` of an OMSimulator ``VariableStepSolver`` annotation (type
+    ``org.openmodelica``) of the top-level system or of the DefaultExperiment, or None."""
+    for parent in (root.find("ssd:System", NS), root.find("ssd:DefaultExperiment", NS)):
+        if parent is None:
+            continue
+        for ann in parent.findall("ssd:Annotations/ssc:Annotation", NS):
+            if ann.get("type") != "org.openmodelica":
+                continue
+            for solver in ann.iter("{*}VariableStepSolver"):
+                if solver.get("relativeTolerance") is not None:
+                    return parse_positive(solver.get("relativeTolerance"),
+                                          f"{ssd_display}:{solver.sourceline}: VariableStepSolver relativeTolerance")
+    return None
 
 
 def _map_entries(xml: etree._Element, type_: str, line: str) -> tuple[tuple[Any, Any], ...]:

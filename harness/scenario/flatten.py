@@ -188,9 +188,9 @@ class Flattener:
         if source.startswith("#"):
             raise ScenarioError(f"{where}: component {full!r} references system {source!r} of this SSD; systems "
                                 f"instantiated by reference are not supported")
-        if xml.get("implementation") not in (None, "any", "CoSimulation"):
+        if xml.get("implementation") not in (None, "any", "CoSimulation", "ModelExchange"):
             raise ScenarioError(f"{where}: component {full!r} asks for implementation={xml.get('implementation')!r}; "
-                                f"the master runs co-simulation FMUs only")
+                                f"expected any, CoSimulation or ModelExchange")
         connectors = tuple(parse_connector(c, self.display) for c in xml.findall("ssd:Connectors/ssd:Connector", NS))
         names = [c.name for c in connectors]
         dup = {n for n in names if names.count(n) > 1}
@@ -206,7 +206,8 @@ class Flattener:
                 hint = parse_positive(h.get("value"), f"{self.display}:{h.sourceline}: osp:StepSizeHint value")
         self.components.append(Component(name=full, source=source, fmu=resolve_fmu(source, self.src, self.fmu_dirs),
                                          connectors=connectors, bindings=tuple(self.bindings(xml, self.display)),
-                                         step_size_hint=hint, depth=depth))
+                                         step_size_hint=hint, depth=depth,
+                                         implementation=xml.get("implementation")))
 
     # ------------------------------------------------------------------ connections
     def _role(self, node: str, other: str, scope: str, line: str) -> str:

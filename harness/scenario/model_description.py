@@ -20,7 +20,7 @@ def read_model(path: Path, display: str | None = None) -> Model:
     Raises
     ------
     BindingError
-        If the file is not a readable FMI 2.0 co-simulation FMU.
+        If the file is not a readable FMI 2.0 or 3.0 FMU with co-simulation or model exchange.
     """
     path = Path(path)
     stat = path.stat()
@@ -30,19 +30,25 @@ def read_model(path: Path, display: str | None = None) -> Model:
     md = _model_description(path, display or os.fspath(path))
     variables = _variables(md)
     model = Model(name=md.modelName, variables=variables, feedthrough=_feedthrough(md, variables),
-                  path=path.resolve(), guid=md.guid, model_identifier=md.coSimulation.modelIdentifier,
+                  path=path.resolve(), guid=md.guid,
+                  model_identifier=(md.coSimulation or md.modelExchange).modelIdentifier,
                   fmi_version=md.fmiVersion, units=_units(md),
-                  can_handle_variable_step=bool(md.coSimulation.canHandleVariableCommunicationStepSize),
+                  can_handle_variable_step=md.coSimulation is None
+                  or bool(md.coSimulation.canHandleVariableCommunicationStepSize),
                   default_step=_positive_or_none(md.defaultExperiment, "stepSize"),
                   default_stop=_positive_or_none(md.defaultExperiment, "stopTime"),
+                  default_tolerance=_positive_or_none(md.defaultExperiment, "tolerance"),
                   enumerations={v.name: {i.name: int(i.value) for i in v.declaredType.items}
-                                for v in md.modelVariables if v.type == "Enumeration" and v.declaredType})
+                                for v in md.modelVariables if v.type == "Enumeration" and v.declaredType},
+                  co_simulation=md.coSimulation is not None,
+                  model_exchange_identifier=md.modelExchange.modelIdentifier if md.modelExchange else None)
     _MODEL_CACHE[key] = model
     return model
 
 
 def _model_description(path: Path, display: str) -> Any:
-    """fmpy's model description of an FMI 2.0 or 3.0 co-simulation FMU; else one line naming ``display``."""
+    """fmpy's model description of an FMI 2.0 or 3.0 FMU (co-simulation or model exchange); else one
+    line naming ``display``."""
     from fmpy import read_model_description
 
     try:
@@ -52,8 +58,8 @@ def _model_description(path: Path, display: str) -> Any:
         raise BindingError(f"{display}: not a readable FMU ({reason!r})") from None
     if md.fmiVersion not in ("2.0", "3.0"):
         raise BindingError(f"{display}: FMI {md.fmiVersion} FMU; FMI 2.0 and 3.0 are supported")
-    if md.coSimulation is None:
-        raise BindingError(f"{display}: does not support co-simulation")
+    if md.coSimulation is None and md.modelExchange is None:
+        raise BindingError(f"{display}: offers neither co-simulation nor model exchange")
     return md
 
 

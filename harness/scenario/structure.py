@@ -107,6 +107,8 @@ class Component:
     step_size_hint: float | None = None
     #: Nesting level of the component's system (0: the top-level system).
     depth: int = 0
+    #: The SSD's ``implementation`` attribute (``any``, ``CoSimulation``, ``ModelExchange``; None: not given).
+    implementation: str | None = None
 
     def connector(self, name: str) -> Connector | None:
         """The connector called ``name``, or None."""
@@ -159,6 +161,9 @@ class Experiment:
     start_time: float = 0.0
     stop_time: float | None = None
     step_size: float | None = None
+    #: Relative tolerance of the solver that integrates model-exchange components (OMSimulator's
+    #: ``oms:VariableStepSolver relativeTolerance`` annotation; None: not given).
+    relative_tolerance: float | None = None
 
 
 @dataclass(frozen=True)

@@ -357,7 +357,7 @@ def test_ssp_as_component_is_refused_by_name(version, fmus, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("version", VERSIONS)
-def test_model_exchange_component_is_refused_by_name(version, fmus, tmp_path, capsys):
+def test_model_exchange_asked_of_a_co_simulation_fmu_is_refused_by_name(version, fmus, tmp_path, capsys):
     comp = t.component("A", "Adder", t.adder_connectors(version), extra=' implementation="ModelExchange"')
     msg = _refusal(version, t.system("root", [comp]), fmus, tmp_path, capsys)
     assert "component 'A'" in msg and "ModelExchange" in msg and "co-simulation" in msg

@@ -6,6 +6,12 @@
 #include <stdio.h>
 #include "fmi2Functions.h"
 #include MODEL_FILE
+#ifndef HAS_ME
+#define HAS_ME 0 /* 1: model exchange too (fmi2_me.h) */
+#endif
+#ifndef HAS_CS
+#define HAS_CS 1 /* 0: model exchange only */
+#endif
 
 typedef struct {
     Model m;
@@ -25,7 +31,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const 
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String res,
                               const fmi2CallbackFunctions *cb, fmi2Boolean visible, fmi2Boolean logging) {
     Instance *c;
-    if (type != fmi2CoSimulation) return NULL;
+    if (!((type == fmi2CoSimulation && HAS_CS) || (type == fmi2ModelExchange && HAS_ME))) return NULL;
     c = (Instance *)calloc(1, sizeof(Instance));
     c->cb = *cb;
     strncpy(c->name, name ? name : "", sizeof(c->name) - 1);
@@ -98,12 +104,16 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
     Instance *inst = (Instance *)c;
+#if !HAS_CS
+    return fmi2Error;
+#else
     if (inst->m.terminated) { logf2(inst, fmi2Error, "doStep after the simulation ended"); return fmi2Error; }
     if (model_step(&inst->m, t, h)) return fmi2Discard;
     inst->m.time = t + h;
     inst->m.last_time = t + h;
     model_calculate(&inst->m);
     return fmi2OK;
+#endif
 }
 fmi2Status fmi2CancelStep(fmi2Component c) { return fmi2Error; }
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *v) { return fmi2Discard; }
@@ -135,6 +145,9 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
                                        const fmi2Integer order[], const fmi2Real v[]) { return fmi2Error; }
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                                         const fmi2Integer order[], fmi2Real v[]) { return fmi2Error; }
+#if HAS_ME
+#include "fmi2_me.h"
+#else
 /* model exchange functions: exported so that loaders resolving every symbol succeed */
 fmi2Status fmi2EnterEventMode(fmi2Component c) { return fmi2Error; }
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *e) { return fmi2Error; }
@@ -146,3 +159,4 @@ fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real d[], size_t n) { return 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real e[], size_t n) { return fmi2Error; }
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t n) { return fmi2Error; }
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x[], size_t n) { return fmi2Error; }
+#endif

@@ -8,6 +8,12 @@
 #include <string.h>
 #include "fmi3Functions.h"
 #include MODEL_FILE
+#ifndef HAS_ME
+#define HAS_ME 0 /* 1: model exchange too (fmi3_me.h) */
+#endif
+#ifndef HAS_CS
+#define HAS_CS 1 /* 0: model exchange only */
+#endif
 
 typedef struct {
     Model m;
@@ -102,6 +108,9 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
     *event = fmi3False;
     *early = fmi3False;
     *terminate = fmi3False;
+#if !HAS_CS
+    return fmi3Error;
+#else
     if (inst->m.terminated) return fmi3Error;
     if (model_step(&inst->m, t, h)) {
         *terminate = inst->m.terminated ? fmi3True : fmi3False;
@@ -112,4 +121,8 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
     *last = t + h;
     model_calculate(&inst->m);
     return fmi3OK;
+#endif
 }
+#if HAS_ME
+#include "fmi3_me.h"
+#endif
