@@ -1,0 +1,155 @@
+"""The host's floor: how many steps of a bare 1 kHz loop start late on this host, now.
+
+``benchmarks/host_floor.c`` paces a loop that does no work on ``clock_nanosleep`` to absolute
+deadlines and counts the steps that start :data:`~ipcosim.harness.master.realtime.LATE_S` or more
+after theirs, the threshold of a paced run's own late fraction
+(:func:`~ipcosim.harness.master.realtime.late_fraction`). Whatever the host does to that loop (a
+shared VM's stalls, another tenant, the CPU governor) it does to every paced run beside it, so a
+real-time figure is read against the floor measured in the same minutes, never against an
+absolute fraction: the HIL bench (``benchmarks/bench_hil.py``) and the tests that pace use
+:func:`measure` and :func:`allowance`.
+
+The probe is compiled at first use with the system's C compiler (``cc``, or ``$CC``) into the
+temporary directory; :class:`FloorUnavailable` says why it cannot run (no compiler, a compile
+error), for a bench to report and a test to skip with.
+
+``python -m benchmarks.host_floor [--period S] [--steps N] [--priority P]`` prints one measurement.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from ipcosim.errors import IpcosimError
+from ipcosim.harness.master.realtime import LATE_S
+
+SOURCE = Path(__file__).resolve().parent / "host_floor.c"
+#: Steps of one measurement: 5 s at 1 kHz, as many as the bench's and the tests' paced runs.
+STEPS = 5000
+
+
+class FloorUnavailable(IpcosimError, RuntimeError):
+    """The probe cannot be built or run here; the message says why, in one line."""
+
+
+@dataclass(frozen=True)
+class Floor:
+    """One measurement of the host's floor (fractions of steps; seconds)."""
+
+    late_fraction: float
+    late: int
+    steps: int
+    period: float
+    lateness_p99: float
+    lateness_max: float
+    sched_fifo: str
+
+
+def probe_binary() -> Path:
+    """The compiled probe (built once per version of its source, in the temporary directory).
+
+    Raises
+    ------
+    FloorUnavailable
+        No C compiler on PATH, or the probe does not compile.
+    """
+    cc = os.environ.get("CC") or shutil.which("cc")
+    if not cc or not shutil.which(cc):
+        raise FloorUnavailable("no C compiler (cc) on PATH to build the host's floor probe benchmarks/host_floor.c")
+    digest = hashlib.sha256(SOURCE.read_bytes()).hexdigest()[:12]
+    exe = Path(tempfile.gettempdir()) / f"ipcosim-host-floor-{digest}" / "host_floor"
+    if exe.is_file():
+        return exe
+    exe.parent.mkdir(parents=True, exist_ok=True)
+    tmp = exe.with_name(f"host_floor.{os.getpid()}")
+    built = subprocess.run([cc, "-O2", "-o", str(tmp), str(SOURCE)], capture_output=True, text=True)
+    if built.returncode:
+        first = (built.stderr.strip().splitlines() or [f"exit status {built.returncode}"])[0]
+        raise FloorUnavailable(f"{SOURCE.name} does not compile with {cc}: {first}")
+    tmp.replace(exe)
+    return exe
+
+
+def measure(period: float = 1e-3, steps: int = STEPS, priority: int | None = None) -> Floor:
+    """Run the probe once: ``steps`` steps of ``period`` seconds (the same threshold as the runs).
+
+    Parameters
+    ----------
+    period : float
+        Step period [s].
+    steps : int
+        Number of steps.
+    priority : int, optional
+        SCHED_FIFO priority of the probe (None: the default policy); a refusal is in ``sched_fifo``.
+
+    Returns
+    -------
+    Floor
+        The late fraction and the lateness of the probe's steps.
+    """
+    cmd = [str(probe_binary()), "--period-ns", str(round(period * 1e9)), "--steps", str(steps),
+           "--late-ns", str(round(LATE_S * 1e9)), "--priority", str(priority or 0)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60 + 2 * steps * period)
+    if done.returncode:
+        raise FloorUnavailable(f"the host's floor probe failed: {done.stderr.strip() or done.returncode}")
+    out = json.loads(done.stdout)
+    return Floor(late_fraction=out["late_fraction"], late=out["late"], steps=out["steps"], period=period,
+                 lateness_p99=out["lateness_p99_ns"] * 1e-9, lateness_max=out["lateness_max_ns"] * 1e-9,
+                 sched_fifo=out["sched_fifo"])
+
+
+def allowance(floors: Sequence[float], steps: int = STEPS, factor: float = 3.0) -> float:
+    """The late fraction a paced run may have beside ``floors`` (the floor's fractions measured with it).
+
+    ``factor`` times the largest of them, and never less than ``factor`` times one step in ``steps``:
+    a floor of no late step says only that the host delayed fewer than one step in that many.
+
+    Parameters
+    ----------
+    floors : sequence of float
+        Late fractions of the host's floor, measured interleaved with the run.
+    steps : int
+        Steps of one floor measurement (its resolution).
+    factor : float
+        How many times the floor the run may be late.
+
+    Returns
+    -------
+    float
+        The largest late fraction within the floor.
+    """
+    return factor * max(max(floors, default=0.0), 1.0 / steps)
+
+
+def ratio(late: float, floor: float, steps: int = STEPS) -> float:
+    """``late`` over ``floor`` (both late fractions), a floor of no late step counting as one in ``steps``."""
+    return late / max(floor, 1.0 / steps)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Print one measurement as JSON (exit status 1 with one line when the probe cannot run)."""
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.host_floor", description=__doc__.splitlines()[0])
+    parser.add_argument("--period", type=float, default=1e-3, help="step period [s] (default 0.001)")
+    parser.add_argument("--steps", type=int, default=STEPS, help=f"steps (default {STEPS})")
+    parser.add_argument("--priority", type=int, default=None, help="SCHED_FIFO priority (default: none)")
+    args = parser.parse_args(argv)
+    try:
+        floor = measure(args.period, args.steps, args.priority)
+    except FloorUnavailable as exc:
+        print(f"host_floor: {exc}", file=sys.stderr)
+        return 1
+    print(json.dumps(floor.__dict__))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

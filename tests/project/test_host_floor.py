@@ -1,0 +1,62 @@
+"""The host's floor (``benchmarks/host_floor.c``, ``benchmarks/host_floor.py``) and a run's late fraction
+(``harness/master/realtime.py``) count the same steps: those starting 0.5 ms or more after their deadline."""
+from __future__ import annotations
+
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+from benchmarks import host_floor
+from ipcosim.harness.master.realtime import LATE_S, late_fraction, lateness_histogram
+
+
+def test_late_means_half_a_millisecond_or_more_after_the_deadline():
+    """DESIGN's definition, on made-up lateness: 0.5 ms exactly is late, a nanosecond less is not."""
+    assert LATE_S == 0.5e-3
+    late_ns = np.array([0, 120_000, 499_999, 500_000, 900_000, 3_000_000, 20_000_000, 0])
+    metrics = {"lateness_histogram": lateness_histogram(late_ns), "realtime_steps": len(late_ns)}
+    assert late_fraction(metrics) == 4 / 8
+    assert late_fraction({"lateness_histogram": lateness_histogram(np.zeros(0)), "realtime_steps": 0}) == 0.0
+
+
+def test_the_allowance_is_the_floor_times_the_factor_and_never_below_one_step():
+    assert host_floor.allowance([0.001, 0.004, 0.002]) == pytest.approx(0.012)
+    assert host_floor.allowance([0.0, 0.0], steps=5000) == pytest.approx(3 / 5000)
+    assert host_floor.ratio(0.006, 0.002) == pytest.approx(3.0)
+    assert host_floor.ratio(0.001, 0.0, steps=1000) == pytest.approx(1.0)
+
+
+def test_the_probe_paces_to_its_deadlines_and_reports_its_steps():
+    """A loop paced to absolute deadlines cannot finish before its last deadline; every figure it prints
+    describes the steps it ran, with the run's threshold."""
+    try:
+        host_floor.probe_binary()
+    except host_floor.FloorUnavailable as exc:
+        pytest.skip(str(exc))
+    t0 = time.monotonic()
+    floor = host_floor.measure(period=2e-3, steps=200)
+    assert time.monotonic() - t0 >= 200 * 2e-3
+    assert floor.steps == 200 and 0 <= floor.late <= 200 and floor.late_fraction == floor.late / 200
+    assert 0 <= floor.lateness_p99 <= floor.lateness_max and floor.sched_fifo == "not requested"
+    if floor.lateness_max < LATE_S:
+        assert floor.late == 0
+
+
+def test_a_bad_option_of_the_probe_is_one_line_and_status_2():
+    try:
+        exe = host_floor.probe_binary()
+    except host_floor.FloorUnavailable as exc:
+        pytest.skip(str(exc))
+    for argv, words in ((["--steps", "0"], "--steps 0: expected an integer"), (["--period-ns", "x"], "--period-ns x"),
+                        (["--colour"], "unknown option --colour"), (["--priority"], "--priority needs a value")):
+        done = subprocess.run([str(exe), *argv], capture_output=True, text=True, timeout=10)
+        assert done.returncode == 2 and done.stdout == "", argv
+        assert done.stderr.count("\n") == 1 and words in done.stderr, done.stderr
+
+
+def test_no_compiler_is_one_reason(monkeypatch, tmp_path):
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+    with pytest.raises(host_floor.FloorUnavailable, match="no C compiler"):
+        host_floor.probe_binary()
