@@ -27,7 +27,7 @@ import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.realtime import LATE_S
@@ -52,6 +52,19 @@ class Floor:
     lateness_p99: float
     lateness_max: float
     sched_fifo: str
+
+
+def rt_refusal(priority: int) -> str | None:
+    """Why this host refuses SCHED_FIFO at ``priority`` (None: it permits it; tried on this process and undone)."""
+    if not hasattr(os, "sched_setscheduler"):
+        return "the OS has no SCHED_FIFO"
+    policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:
+        return f"SCHED_FIFO priority {priority} refused: {exc.strerror or exc} (needs CAP_SYS_NICE or rtprio)"
+    os.sched_setscheduler(0, policy, param)
+    return None
 
 
 def probe_binary() -> Path:
@@ -133,6 +146,66 @@ def allowance(floors: Sequence[float], steps: int = STEPS, factor: float = 3.0) 
 def ratio(late: float, floor: float, steps: int = STEPS) -> float:
     """``late`` over ``floor`` (both late fractions), a floor of no late step counting as one in ``steps``."""
     return late / max(floor, 1.0 / steps)
+
+
+@dataclass(frozen=True)
+class Beside:
+    """A paced run's late fraction beside the floors measured before and after it (:func:`beside_floor`)."""
+
+    late: float
+    floors: tuple[float, ...]
+    limit: float
+    attempts: int
+
+    @property
+    def within(self) -> bool:
+        """Whether the run was late no more than its :func:`allowance`."""
+        return self.late <= self.limit
+
+    def __str__(self) -> str:
+        floors = ", ".join(f"{100 * f:.2f} %" for f in self.floors)
+        return (f"{100 * self.late:.2f} % of the run's steps late (>= {1e3 * LATE_S:g} ms), the host's floor "
+                f"{floors} beside it: allowed {100 * self.limit:.2f} % (attempt {self.attempts})")
+
+
+def beside_floor(paced: Callable[[], float], *, period: float = 1e-3, priority: int | None = None,
+                 factor: float = 3.0, attempts: int = 2) -> Beside:
+    """Run ``paced`` between two measurements of the floor and judge it against them.
+
+    A run outside its allowance is run again (with its floors) up to ``attempts`` times: one burst
+    of the host's stalls can land on the run and miss both floors, two in a row seldom do.
+
+    Parameters
+    ----------
+    paced : callable
+        Runs the paced loop once and returns its late fraction
+        (:func:`~ipcosim.harness.master.realtime.late_fraction` of its metrics).
+    period : float
+        The loop's step period [s]; the floor paces the same.
+    priority : int, optional
+        SCHED_FIFO priority of the floor, as the run's.
+    factor, attempts
+        :func:`allowance`'s factor; how many times the run may be tried.
+
+    Returns
+    -------
+    Beside
+        The last attempt (the first within its allowance, or the last outside it).
+
+    Raises
+    ------
+    FloorUnavailable
+        The floor cannot be measured here (for a test to skip with).
+    """
+    probe_binary()
+    for attempt in range(1, attempts + 1):
+        before = measure(period, STEPS, priority).late_fraction
+        late = paced()
+        floors = (before, measure(period, STEPS, priority).late_fraction)
+        judged = Beside(late, floors, allowance(floors, STEPS, factor), attempt)
+        if judged.within:
+            break
+    return judged
 
 
 def main(argv: Sequence[str] | None = None) -> int:

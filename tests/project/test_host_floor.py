@@ -60,3 +60,45 @@ def test_no_compiler_is_one_reason(monkeypatch, tmp_path):
     monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
     with pytest.raises(host_floor.FloorUnavailable, match="no C compiler"):
         host_floor.probe_binary()
+
+
+def _samples(*late: float) -> list:
+    from benchmarks.bench_hil_floor import Sample
+
+    return [Sample(x, upright=x == x) for x in late]
+
+
+def test_the_hil_bench_judges_the_walkthrough_against_its_floor_and_the_in_process_rig(monkeypatch):
+    """The walkthrough's targets on made-up repetitions: medians compared, a failed run (no late fraction)
+    misses, each run at most 1 % late only on a quiet host (the floor at most 0.3 %), and a loaded RT run
+    judged by its worst against max(0.5 %, 3 x the floor's worst)."""
+    from benchmarks import bench_hil_floor as bench
+    from benchmarks import targets
+
+    def judged(tcp, inproc, floor, rt_tcp=(0.001,) * 5, rt_floor=(0.0,) * 5, khz=(0.002,) * 5, khz_floor=(0.001,) * 5):
+        monkeypatch.setattr(targets, "FIGURES", {})
+        got = {("TCP", "quiet", False): _samples(*tcp), ("in-process", "quiet", False): _samples(*inproc),
+               ("floor", "quiet", False): _samples(*floor), ("TCP", "loaded", True): _samples(*rt_tcp),
+               ("floor", "loaded", True): _samples(*rt_floor), ("TCP", "2 kHz", False): _samples(*khz),
+               ("floor", "2 kHz", False): _samples(*khz_floor)}
+        bench.judge(got, rt_done=True)
+        return {k.removeprefix("hil_floor.target_"): f.get("met") for k, f in targets.FIGURES.items()}
+
+    fine = judged(tcp=(0.002, 0.003, 0.004, 0.009, 0.0), inproc=(0.002,) * 5, floor=(0.001, 0.002, 0.0, 0.5, 0.001))
+    assert fine == {"walkthrough_over_inproc": True, "walkthrough_over_floor": True,
+                    "walkthrough_quiet_upright": True, "walkthrough_quiet_worst_pct": True,
+                    "loaded_rt_tcp_worst_pct": True, "loaded_rt_tcp_upright": True, "2khz_tcp_median_pct": True}
+    one_late = judged(tcp=(0.002, 0.003, 0.004, 0.02, 0.0), inproc=(0.002,) * 5, floor=(0.001,) * 5)
+    assert one_late["walkthrough_quiet_worst_pct"] is False and one_late["walkthrough_over_floor"] is True
+    loud = judged(tcp=(0.02,) * 5, inproc=(0.02,) * 5, floor=(0.01,) * 5)    # not a quiet host: ratios only
+    assert loud["walkthrough_over_floor"] is True and "walkthrough_quiet_worst_pct" not in loud
+    assert judged(tcp=(0.005,) * 5, inproc=(0.002,) * 5, floor=(0.002,) * 5)["walkthrough_over_inproc"] is False
+    assert judged(tcp=(0.004,) * 5, inproc=(0.004,) * 5, floor=(0.001,) * 5)["walkthrough_over_floor"] is False
+    failed = judged(tcp=(0.001, 0.001, float("nan"), 0.001, 0.001), inproc=(0.002,) * 5, floor=(0.002,) * 5)
+    assert failed["walkthrough_over_inproc"] is False and failed["walkthrough_over_floor"] is False
+    assert judged((0.0,) * 5, (0.0,) * 5, (0.0,) * 5, rt_tcp=(0.004, 0.006))["loaded_rt_tcp_worst_pct"] is False
+    assert judged((0.0,) * 5, (0.0,) * 5, (0.0,) * 5, rt_tcp=(0.004, 0.006),
+                  rt_floor=(0.0, 0.003))["loaded_rt_tcp_worst_pct"] is True       # 3 x 0.3 % above 0.5 %
+    assert judged((0.0,) * 5, (0.0,) * 5, (0.0,) * 5, khz=(0.02,) * 5)["2khz_tcp_median_pct"] is False
+    loud_2khz = judged((0.0,) * 5, (0.0,) * 5, (0.0,) * 5, khz=(0.02,) * 5, khz_floor=(0.004,) * 5)
+    assert loud_2khz["2khz_tcp_median_pct"] is None         # a floor above 0.3 %: printed, not judged
