@@ -67,7 +67,7 @@ STOP_TIME = 5.0
 REPETITIONS = 5
 QUICK_REPETITIONS = 2
 #: The targets of the module doc.
-OVER_INPROC, OVER_FLOOR, RT_LOADED_PCT, KHZ2_PCT, QUIET_FLOOR_PCT = 2.0, 3.0, 0.5, 1.0, 0.3
+OVER_INPROC, OVER_FLOOR, RT_LOADED_PCT, KHZ2_PCT = 2.0, 3.0, 0.5, 1.0
 #: On a quiet host, every walkthrough run at most this late [%] (the run's default budget) and upright.
 WALKTHROUGH_PCT = 1.0
 
@@ -248,7 +248,7 @@ def _walkthrough_target(got: dict[Cell, list[Sample]]) -> str:
             + target("hil_floor.target_walkthrough_over_floor", host_floor.ratio(tcp, floor), OVER_FLOOR, "x",
                      what=f"{what} the floor's (a floor of no late step: one in 5000)"))
     upright, what = sum(bool(s.upright) for s in runs), "README walkthrough (TCP, no RT priority), quiet host"
-    if floor > QUIET_FLOOR_PCT / 100:
+    if floor > host_floor.QUIET:
         return line + f"; upright {upright} of {len(runs)}, not judged: the floor's median is above 0.3 %"
     return (line + f"; upright {upright} of {len(runs)} "
             + target("hil_floor.target_walkthrough_quiet_upright", upright, len(runs), at_most=False,
@@ -274,7 +274,7 @@ def _rt_loaded_target(got: dict[Cell, list[Sample]]) -> str:
 def _2khz_target(got: dict[Cell, list[Sample]]) -> str:
     tcp, floor = median(got[("TCP", "2 kHz", False)]), median(got[("floor", "2 kHz", False)])
     key, what = "hil_floor.target_2khz_tcp_median_pct", "2 kHz walkthrough (TCP, no RT priority): median late fraction"
-    if floor <= QUIET_FLOOR_PCT / 100:
+    if floor <= host_floor.QUIET:
         verdict = target(key, 100 * tcp, KHZ2_PCT, "%", what=f"{what} (floor <= 0.3 %)")
         return f"2 kHz over TCP: median {fmt(100 * tcp)} % {verdict}"
     shown = figure(key, 100 * tcp, "%", what=what, anchor="not judged: the floor's median above 0.3 %")

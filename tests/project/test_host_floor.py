@@ -28,6 +28,17 @@ def test_the_allowance_is_the_floor_times_the_factor_and_never_below_one_step():
     assert host_floor.ratio(0.001, 0.0, steps=1000) == pytest.approx(1.0)
 
 
+def test_a_miss_without_rt_priority_on_a_host_that_is_not_quiet_is_not_judged():
+    def beside(late, *floors):
+        return host_floor.Beside(late, floors, host_floor.allowance(floors), 1)
+
+    assert beside(0.5, 0.01, 0.02).unjudged(priority=None)                      # loud host, no RT: not judged
+    assert beside(0.5, 0.01, 0.02).unjudged(priority=20) is None                # under RT: the miss stands
+    assert beside(0.05, 0.001, 0.002).unjudged(priority=None) is None           # quiet host: the miss stands
+    assert beside(0.001, 0.01, 0.02).unjudged(priority=None) is None            # within: nothing to excuse
+    assert not beside(0.05, 0.001, 0.002).within and beside(0.005, 0.001, 0.002).within
+
+
 def test_the_probe_paces_to_its_deadlines_and_reports_its_steps():
     """A loop paced to absolute deadlines cannot finish before its last deadline; every figure it prints
     describes the steps it ran, with the run's threshold."""
