@@ -12,9 +12,9 @@ more late (:data:`~ipcosim.harness.master.realtime.LATE_S`: the run's own histog
 Each in four conditions: without and with real-time priority (SCHED_FIFO 50 for every process of the
 subject: ``IPCOSIM_RT_PRIORITY``, ``rig serve --rt-priority``, the probe's ``--priority``; skipped,
 with the reason, where the OS refuses it), on the quiet host and with two CPU hogs (two busy-loop
-processes at the default priority). Every repetition runs every subject in every condition, the
-subjects' order rotating from one repetition to the next, so the floor is measured interleaved with
-the runs and shares the host's drift. A 2 kHz row (the walkthrough with ``--step 0.0005 --set
+processes under the default policy, at the bench's nice value). Every repetition runs every subject
+in every condition, the subjects' order rotating from one repetition to the next, so the floor is
+measured interleaved with the runs and shares the host's drift. A 2 kHz row (the walkthrough with ``--step 0.0005 --set
 controller.sample_period=0.0005``, beside the floor at 2 kHz) ends each repetition. Figures: the
 median and the worst late fraction of each cell, and each run's median as a ratio to the floor's.
 
@@ -90,7 +90,8 @@ def cli(command: str) -> list[str]:
 
 @contextmanager
 def hogs(n: int) -> Iterator[None]:
-    """``n`` busy-loop processes at the default priority while the block runs (ended by their ids)."""
+    """``n`` busy-loop processes under the default policy (the bench's nice value) while the block runs
+    (ended by their ids)."""
     procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
     try:
         time.sleep(0.5 if n else 0.0)
@@ -193,10 +194,10 @@ def _pct(s: Sample) -> str:
 def _gist(error: str) -> str:
     """The first clause of a run's error line (what tripped), for the table."""
     words = error.removeprefix("ipcosim run: error: ").split(": ")
-    if words[0].startswith("component ") and len(words) > 2:      # component X: fmi2DoStep returned ...: what
-        words = words[2:]
-    head = words[0].split(" at ")[0]
-    return f"{head}: {words[1].split(' at ')[0]}" if head.endswith("refused") and len(words) > 1 else head[:100]
+    if not (words[0].startswith("component ") and len(words) > 2):
+        return ": ".join(words[:2])[:100]
+    head = words[2].split(" at ")[0]                 # component X: fmi2DoStep returned ... at t = T: what tripped
+    return f"{head}: {words[3].split(' at ')[0]}" if head.endswith("refused") and len(words) > 3 else head[:100]
 
 
 def median(samples: list[Sample]) -> float:

@@ -1,27 +1,23 @@
-"""The walkthrough's run on the in-process wallclock rig (``q4:0@inproc://...?clock=wallclock``) is as
-steady as the host's floor: its late steps (>= 0.5 ms) judged against a bare C loop on ``clock_nanosleep``
-measured just before and after it (``benchmarks/host_floor.py``), never against an absolute fraction.
-Both under SCHED_FIFO where the OS permits it (as the other real-time tests of this shared machine run),
-otherwise both without, and then a miss on a host that is not quiet is skipped with its figures
-(``Beside.unjudged``: without real-time priority a run's lateness over the floor's grows with the load)."""
+"""The README's HIL walkthrough (``ipcosim rig serve`` and ``ipcosim run single-mass-lqr --swap plant=hil`` in
+two processes) and the same run on the in-process wallclock rig are as steady as the host's floor: their
+late steps (>= 0.5 ms) judged against a bare C loop on ``clock_nanosleep`` measured just before and after
+each (``benchmarks/host_floor.py``), never against an absolute fraction. The runs are the HIL bench's own
+(``benchmarks/bench_hil_floor.py``), 5 s each. Run and floor under SCHED_FIFO where the OS permits it (as
+the other real-time tests of this shared machine run), otherwise both without, and then a miss on a host
+that is not quiet is skipped with its figures (``Beside.unjudged``: without real-time priority a run's
+lateness over the floor's grows with the load)."""
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from benchmarks import bench_hil_floor as bench
 from benchmarks import host_floor
-from ipcosim.harness.master.realtime import late_fraction
 
 ROOT = Path(__file__).resolve().parents[2]
 
 pytestmark = pytest.mark.integration
-#: SCHED_FIFO priority of the run and its floor, where permitted.
-RT_PRIORITY = 20
 
 
 @pytest.fixture(scope="module")
@@ -36,23 +32,17 @@ def hil_fmus(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def test_the_in_process_rig_is_as_steady_as_the_hosts_floor(hil_fmus, tmp_path):
-    env = dict(os.environ, IPCOSIM_FMU_PATH=str(hil_fmus), PYTHONPATH=str(ROOT),
-               IPCOSIM_HIL_URI="q4:0@inproc://floor?clock=wallclock")
-    priority = None if host_floor.rt_refusal(RT_PRIORITY) else RT_PRIORITY
-    env.pop("IPCOSIM_RT_PRIORITY", None)
-    env.update({"IPCOSIM_RT_PRIORITY": str(RT_PRIORITY)} if priority else {})
+@pytest.mark.parametrize("subject", ["in-process", "TCP"])
+def test_the_walkthrough_is_as_steady_as_the_hosts_floor(subject, hil_fmus, monkeypatch):
+    monkeypatch.setenv("IPCOSIM_FMU_PATH", str(hil_fmus))
+    rt = host_floor.rt_refusal(bench.RT_PRIORITY) is None
 
     def paced() -> float:
-        out = tmp_path / f"run{len(list(tmp_path.iterdir()))}"
-        run = subprocess.run([sys.executable, "-m", "ipcosim.harness.cli", "run", "single-mass-lqr", "--swap",
-                              "plant=hil", "--stop-time", "5", "--out", str(out), "--quiet", "--overrun-budget", "1"],
-                             capture_output=True, text=True, timeout=300, cwd=ROOT, env=env)
-        assert run.returncode == 0, run.stderr
-        metrics = json.loads((out / "metrics.json").read_text())
-        assert metrics["upright"] is True and metrics["realtime_steps"] == 5000
-        return late_fraction(metrics)
+        run = bench.measure(subject, rt)
+        assert run.error is None and run.upright, run.error
+        return run.late
 
+    priority = bench.RT_PRIORITY if rt else None
     try:
         judged = host_floor.beside_floor(paced, priority=priority)
     except host_floor.FloorUnavailable as exc:
