@@ -40,6 +40,8 @@ BLOCKS: dict[str, tuple[str, ...]] = {
     "controllers": ("controllers.",),
     "sweep": ("sweep.",),
     "hil": ("hil.",),
+    "hil-floor-targets": ("hil_floor.target_",),
+    "hil-floor": ("hil_floor.quiet_", "hil_floor.loaded_", "hil_floor.2khz_"),
     "identify": ("identify.",),
     "robustness": ("robustness.",),
 }

@@ -140,8 +140,18 @@ class RealtimeStats:
                 f"{self.overruns} overruns; worst step {self.worst_step_time * us:.0f} us")
 
 
+#: A step is *late* when it starts this long or more after its deadline [s]: the one threshold of
+#: every late fraction, a run's (:func:`late_fraction`) and the host's floor measured beside it
+#: (a bare C loop on ``clock_nanosleep``, docs/hil.md). An edge of the lateness histogram's bins.
+LATE_S = 500e-6
 #: Upper edges of the lateness histogram's bins [us] (the last bin is open).
-LATENESS_BINS_US = (50, 100, 250, 500, 1000, 2000, 5000)
+LATENESS_BINS_US = (50, 100, 250, round(LATE_S * 1e6), 1000, 2000, 5000)
+
+
+def _bin_labels() -> list[str]:
+    """The histogram's keys, in the order of its bins."""
+    edges = LATENESS_BINS_US
+    return [f"<{edges[0]}us"] + [f"{a}-{b}us" for a, b in zip(edges, edges[1:])] + [f">={edges[-1]}us"]
 
 
 def lateness_histogram(late_ns: np.ndarray) -> dict[str, int]:
@@ -149,9 +159,25 @@ def lateness_histogram(late_ns: np.ndarray) -> dict[str, int]:
     edges = np.asarray(LATENESS_BINS_US, dtype=np.int64) * 1000
     counts = np.bincount(np.searchsorted(edges, np.asarray(late_ns, dtype=np.int64), side="right"),
                          minlength=len(edges) + 1)
-    labels = [f"<{LATENESS_BINS_US[0]}us"] + [f"{a}-{b}us" for a, b in zip(LATENESS_BINS_US, LATENESS_BINS_US[1:])]
-    labels.append(f">={LATENESS_BINS_US[-1]}us")
-    return {label: int(n) for label, n in zip(labels, counts)}
+    return {label: int(n) for label, n in zip(_bin_labels(), counts)}
+
+
+def late_fraction(metrics: dict[str, Any]) -> float:
+    """The fraction of a paced run's steps that started :data:`LATE_S` or more late.
+
+    Parameters
+    ----------
+    metrics : dict
+        A paced run's metrics (``lateness_histogram`` and ``realtime_steps``).
+
+    Returns
+    -------
+    float
+        Late steps / steps, from the run's own histogram (its bins from :data:`LATE_S` on).
+    """
+    first = LATENESS_BINS_US.index(round(LATE_S * 1e6)) + 1
+    late = sum(metrics["lateness_histogram"].get(label, 0) for label in _bin_labels()[first:])
+    return late / metrics["realtime_steps"] if metrics["realtime_steps"] else 0.0
 
 
 class Pacer:

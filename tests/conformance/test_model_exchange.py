@@ -17,7 +17,7 @@ import pytest
 import ssp_text as t
 
 import ipcosim
-from ipcosim.harness.describe import describe
+from ipcosim.harness.api.describe import describe
 from ipcosim.harness.scenario.errors import BindingError
 
 pytestmark = [pytest.mark.skipif(shutil.which("gcc") is None and shutil.which("cc") is None,
@@ -188,7 +188,7 @@ def test_a_shorter_last_step_is_taken_in_model_exchange(tmp_path):
 
 
 def test_the_exported_loop_refuses_a_model_exchange_component_in_one_line(tmp_path):
-    from ipcosim.harness.export import ExportError, container_spec
+    from ipcosim.harness.api.export import ExportError, container_spec
     from ipcosim.harness.scenario.binding import bind
     from ipcosim.harness.scenario.ssp import load_scenario
 
