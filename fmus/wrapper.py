@@ -66,7 +66,7 @@ naming the pinned version. The win64 binary is left as pythonfmu ships it.
    Compiling the stub at every instantiation also interns its identifier-like constants: it names the
    script in one constant that is not an identifier (:func:`module_stub`), and every other name it holds
    stays alive in the process, so an instantiation takes no new slot of the interpreter's table of
-   interned strings (the FMU glue holds the private package's name, ``ipcosim.fmus.fmi._PACKAGE``).
+   interned strings (the FMU glue holds the private package's name, ``ipcosim.fmus.fmi_fixes._PACKAGE``).
 """
 from __future__ import annotations
 

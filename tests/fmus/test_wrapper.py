@@ -157,7 +157,7 @@ def test_instantiate_and_free_again_and_again_gives_back_what_it_takes(model: st
                                                                        host_own_cycle) -> None:
     """pythonfmu 0.7.0's wrapper evaluates the FMU module again at every instantiation and kept every class that
     made (ipcosim.fmus.wrapper, section 3): 8.5-8.7 KB of the Python heap per cycle, in this host, before the module
-    stub; the sys.path string it inserts and keeps a reference to (ipcosim.fmus.fmi._one_path_entry) about 80 B."""
+    stub; the sys.path string it inserts and keeps a reference to (ipcosim.fmus.fmi_fixes.one_path_entry) about 80 B."""
     measured = _cycles(cycled_fmus[model])
     own = measured["traced_per_cycle"] - host_own_cycle["traced_per_cycle"]
     print(f"{model}: {measured}; the host with a C FMU: {host_own_cycle}; the FMU's own {own:.0f} B per cycle")
