@@ -231,9 +231,7 @@ def tapped_state(kind: str, x: Sequence[Any], p: PlantParams, force_impulse: Any
     entry = kinds.get(kind)
     names = entry.states
     th = x[names.index("pendulum_angle")]
-    ml = 0.5 * p.Mp * p.Lp
-    m11 = entry.pendulum_cart_mass(p) + p.Mp
-    dv, dw = tap_velocity_change((m11, -ml * math.cos(th), p.Mp * p.Lp * p.Lp / 3.0), force_impulse, torque_impulse)
+    dv, dw = tap_velocity_change(entry.pendulum_mass_matrix(th, p), force_impulse, torque_impulse)
     out = list(x)
     out[names.index(entry.carts[-1].velocity)] += dv
     out[names.index("pendulum_velocity")] += dw

@@ -22,8 +22,12 @@ from ipcosim.errors import IpcosimError, closest
 from ipcosim.fmus.kinds import double_mass, single_mass
 from ipcosim.fmus.kinds.common import Cart, InternalForm, PlantKind
 
-__all__ = ["Cart", "InternalForm", "PlantKind", "UnknownKindError", "ByKind", "KindNames", "names", "get", "of_params",
-           "of_model", "registered", "plant_kind", "PLANT_MODELS", "PENDULUM_CART"]
+__all__ = ["Cart", "InternalForm", "PlantKind", "KindError", "UnknownKindError", "register", "ByKind", "KindNames",
+           "names", "get", "of_params", "of_model", "registered", "plant_kind", "PLANT_MODELS", "PENDULUM_CART"]
+
+
+class KindError(IpcosimError, ValueError):
+    """A plant kind that cannot be registered."""
 
 
 class UnknownKindError(IpcosimError, KeyError):
@@ -33,14 +37,12 @@ class UnknownKindError(IpcosimError, KeyError):
         return str(self.args[0]) if self.args else ""
 
 
-_REGISTRY: dict[str, PlantKind] = {}
+#: The registry: every kind by name, in the order its module is listed (adding a kind: its module, listed here).
+_REGISTRY: dict[str, PlantKind] = {module.KIND.name: module.KIND for module in (single_mass, double_mass)}
 
 
 def _load() -> dict[str, PlantKind]:
-    """The registry, its kind modules imported on the first question (one line per kind)."""
-    if not _REGISTRY:
-        for module in (single_mass, double_mass):
-            _REGISTRY.setdefault(module.KIND.name, module.KIND)
+    """The registry (kinds registered at run time included: :func:`register`)."""
     return _REGISTRY
 
 
@@ -84,17 +86,30 @@ def of_model(model: str) -> PlantKind | None:
     return next((k for k in _load().values() if k.model == model), None)
 
 
+def register(kind: PlantKind) -> PlantKind:
+    """Register a kind of one's own at run time, after the listed ones (a kind's module is listed in
+    ``_REGISTRY`` instead when it belongs to the project).
+
+    Raises
+    ------
+    KindError
+        If a kind of that name or model is registered already.
+    """
+    clash = [k.name for k in _REGISTRY.values() if kind.name == k.name or kind.model == k.model]
+    if clash:
+        raise KindError(f"plant kind {kind.name!r} ({kind.model}): {clash[0]!r} is registered already")
+    _REGISTRY[kind.name] = kind
+    return kind
+
+
 @contextmanager
 def registered(kind: PlantKind) -> Iterator[PlantKind]:
-    """Register ``kind`` for the duration of a ``with`` block (a kind of one's own, a test's)."""
-    registry = _load()
-    if kind.name in registry:
-        raise UnknownKindError(f"plant kind {kind.name!r} is registered already")
-    registry[kind.name] = kind
+    """Register ``kind`` (:func:`register`) for the duration of a ``with`` block."""
+    register(kind)
     try:
         yield kind
     finally:
-        del registry[kind.name]
+        del _REGISTRY[kind.name]
 
 
 class ByKind(Mapping[str, Any]):

@@ -65,9 +65,9 @@ class PlantKind:
     folded_rhs : callable
         ``folded_rhs(p)``: ``f(*z, vA)``, the integrator's right-hand side with the parameters folded into
         constants and the voltage clipped and amplified (on ``internal``'s state when there is one).
-    pendulum_cart_mass : callable
-        ``pendulum_cart_mass(p)``: the mass [kg] of the cart carrying the pendulum, without the pendulum
-        (the taps' mass matrix).
+    pendulum_mass_matrix : callable
+        ``pendulum_mass_matrix(th, p)``: ``(m11, m12, m22)``, the mass matrix of the cart carrying the pendulum
+        and the pendulum at angle ``th`` (the taps' velocity jumps).
     internal : InternalForm or None
         The state the integrator advances, None: the plant state itself.
     kernels : mapping
@@ -85,7 +85,7 @@ class PlantKind:
     rhs: Callable[..., tuple[Any, ...]]
     applied_forces: Callable[..., tuple[Any, ...]]
     folded_rhs: Callable[[Any], Callable[..., tuple[Any, ...]]]
-    pendulum_cart_mass: Callable[[Any], Any]
+    pendulum_mass_matrix: Callable[[Any, Any], tuple[Any, Any, Any]]
     internal: InternalForm | None = None
     kernels: Mapping[str, Callable[..., tuple[Any, ...]]] = field(default_factory=dict)
 

@@ -109,6 +109,13 @@ def double_mass_applied_forces(x: Sequence[float], p: DoubleMassParams) -> tuple
     return p.force_per_amp * i - p.Ba * xad + p.Bf * xcd - spring, r1 - m12 * r2 / m22
 
 
+def double_mass_pendulum_mass_matrix(th: float, p: DoubleMassParams) -> tuple[float, float, float]:
+    """``(m11, m12, m22)``: the mass matrix of the passive cart and the pendulum at angle ``th`` (the taps)."""
+    ml = 0.5 * p.Mp * p.Lp
+    m11 = p.Mc + p.Mp
+    return m11, -ml * math.cos(th), p.Mp * p.Lp * p.Lp / 3.0
+
+
 KIND = PlantKind(
     name="double-mass", suffix="DoubleMass", description="double-mass (spring-coupled) carts", params=DoubleMassParams,
     presets={
@@ -126,6 +133,6 @@ KIND = PlantKind(
     rhs=double_mass_rhs,
     applied_forces=double_mass_applied_forces,
     folded_rhs=double_mass_internal_rhs,
-    pendulum_cart_mass=lambda p: p.Mc,
+    pendulum_mass_matrix=double_mass_pendulum_mass_matrix,
     kernels={"double_mass_rhs": double_mass_rhs},
 )

@@ -146,6 +146,13 @@ def single_mass_output_map(p: SingleMassParams) -> Callable[[Sequence[float]], t
     return out
 
 
+def single_mass_pendulum_mass_matrix(th: float, p: SingleMassParams) -> tuple[float, float, float]:
+    """``(m11, m12, m22)``: the mass matrix of the cart and the pendulum at angle ``th`` (the taps)."""
+    ml = 0.5 * p.Mp * p.Lp
+    m11 = p.Meq + p.Mp
+    return m11, -ml * math.cos(th), p.Mp * p.Lp * p.Lp / 3.0
+
+
 KIND = PlantKind(
     name="single-mass", suffix="SingleMass", description="single-mass cart", params=SingleMassParams,
     presets={
@@ -165,7 +172,7 @@ KIND = PlantKind(
     rhs=single_mass_rhs,
     applied_forces=lambda x, p: (single_mass_applied_force(x, p),),
     folded_rhs=single_mass_internal_rhs,
-    pendulum_cart_mass=lambda p: p.Meq,
+    pendulum_mass_matrix=single_mass_pendulum_mass_matrix,
     internal=InternalForm(single_mass_to_momentum, single_mass_momentum_rhs, single_mass_output_map),
     kernels={"single_mass_rhs": single_mass_rhs, "single_mass_momentum_rhs": single_mass_momentum_rhs},
 )
