@@ -72,6 +72,8 @@ class PlantKind:
         The state the integrator advances, None: the plant state itself.
     kernels : mapping
         Stand-alone native kernels: C function name -> physics function ``(x, v, p)``.
+    identified : tuple of str
+        The parameters an identification estimates by default (``ipcosim.harness.studies.identify``).
     """
 
     name: str
@@ -88,6 +90,7 @@ class PlantKind:
     pendulum_mass_matrix: Callable[[Any, Any], tuple[Any, Any, Any]]
     internal: InternalForm | None = None
     kernels: Mapping[str, Callable[..., tuple[Any, ...]]] = field(default_factory=dict)
+    identified: tuple[str, ...] = ()
 
     @property
     def model(self) -> str:

@@ -135,4 +135,5 @@ KIND = PlantKind(
     folded_rhs=double_mass_internal_rhs,
     pendulum_mass_matrix=double_mass_pendulum_mass_matrix,
     kernels={"double_mass_rhs": double_mass_rhs},
+    identified=("Ma", "Mc", "K", "Ba", "Bf", "b1", "b2", "Kt"),
 )

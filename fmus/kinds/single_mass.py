@@ -175,4 +175,5 @@ KIND = PlantKind(
     pendulum_mass_matrix=single_mass_pendulum_mass_matrix,
     internal=InternalForm(single_mass_to_momentum, single_mass_momentum_rhs, single_mass_output_map),
     kernels={"single_mass_rhs": single_mass_rhs, "single_mass_momentum_rhs": single_mass_momentum_rhs},
+    identified=("Mc", "Beq", "Bp", "b", "Kt"),
 )
