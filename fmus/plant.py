@@ -31,7 +31,7 @@ CARTS = kinds.ByKind(lambda k: k.cart_indices)
 
 def coulomb_forces(p: PlantParams) -> tuple[float, ...]:
     """The Coulomb (breakaway) force of each cart [N], ``CARTS`` order."""
-    return tuple(getattr(p, cart.coulomb) for cart in kinds.of_params(p).carts)
+    return kinds.of_params(p).coulomb_forces(p)
 
 
 def stick(before: Sequence[float], after: Sequence[float], p: PlantParams) -> tuple[list[float], float]:
@@ -46,7 +46,7 @@ def stick(before: Sequence[float], after: Sequence[float], p: PlantParams) -> tu
     kind = kinds.of_params(p)
     band = p.coulomb_velocity
     stuck = 0.0
-    for k, ((ip, iv), b) in enumerate(zip(kind.cart_indices, coulomb_forces(p))):
+    for k, ((ip, iv), b) in enumerate(zip(kind.cart_indices, kind.coulomb_forces(p))):
         if not b:
             continue
         v0, v1 = before[iv], x[iv]

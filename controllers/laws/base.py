@@ -199,7 +199,7 @@ class DiscreteLaw:
         return float(y[0])
 
     def _pendulum_cart(self, y: Sequence[float]) -> float:
-        return float(y[self.measured.index(kinds.get(self.kind).carts[-1].position)])
+        return float(y[kinds.get(self.kind).pendulum_cart_reading])
 
     def _angle(self, y: Sequence[float]) -> float:
         return float(y[-1])

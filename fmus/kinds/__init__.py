@@ -39,6 +39,8 @@ class UnknownKindError(IpcosimError, KeyError):
 
 #: The registry: every kind by name, in the order its module is listed (adding a kind: its module, listed here).
 _REGISTRY: dict[str, PlantKind] = {module.KIND.name: module.KIND for module in (single_mass, double_mass)}
+#: The registered kinds by their parameter class.
+_BY_PARAMS: dict[type, PlantKind] = {k.params: k for k in _REGISTRY.values()}
 
 
 def _load() -> dict[str, PlantKind]:
@@ -74,9 +76,9 @@ def of_params(params: Any) -> PlantKind:
     UnknownKindError
         If no registered kind declares that class.
     """
-    for kind in _load().values():
-        if type(params) is kind.params:
-            return kind
+    kind = _BY_PARAMS.get(type(params))
+    if kind is not None:
+        return kind
     raise UnknownKindError(f"no plant kind has parameters of type {type(params).__name__}; "
                            f"registered: {', '.join(_load())}")
 
@@ -95,10 +97,11 @@ def register(kind: PlantKind) -> PlantKind:
     KindError
         If a kind of that name or model is registered already.
     """
-    clash = [k.name for k in _REGISTRY.values() if kind.name == k.name or kind.model == k.model]
+    clash = [k.name for k in _REGISTRY.values() if kind.name == k.name or kind.model == k.model or
+             kind.params is k.params]
     if clash:
         raise KindError(f"plant kind {kind.name!r} ({kind.model}): {clash[0]!r} is registered already")
-    _REGISTRY[kind.name] = kind
+    _REGISTRY[kind.name] = _BY_PARAMS[kind.params] = kind
     return kind
 
 
@@ -109,7 +112,7 @@ def registered(kind: PlantKind) -> Iterator[PlantKind]:
     try:
         yield kind
     finally:
-        del _REGISTRY[kind.name]
+        del _REGISTRY[kind.name], _BY_PARAMS[kind.params]
 
 
 class ByKind(Mapping[str, Any]):

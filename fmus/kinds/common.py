@@ -7,6 +7,8 @@ Pure Python, standard library only; imports no kind (the kinds import it).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
+from operator import attrgetter
 from typing import Any, Callable, Mapping, Sequence
 
 
@@ -107,10 +109,21 @@ class PlantKind:
         """The default preset's name (the first of ``presets``)."""
         return next(iter(self.presets))
 
-    @property
+    @cached_property
     def cart_indices(self) -> tuple[tuple[int, int], ...]:
         """(position, velocity) state indices of each cart."""
         return tuple((self.states.index(c.position), self.states.index(c.velocity)) for c in self.carts)
+
+    @cached_property
+    def pendulum_cart_reading(self) -> int:
+        """Index in ``measured`` of the position of the cart carrying the pendulum."""
+        return self.measured.index(self.carts[-1].position)
+
+    @cached_property
+    def coulomb_forces(self) -> Callable[[Any], tuple[float, ...]]:
+        """``coulomb_forces(p)``: the Coulomb (breakaway) force of each cart [N] in parameter set ``p``."""
+        get = attrgetter(*(c.coulomb for c in self.carts))
+        return get if len(self.carts) > 1 else lambda p: (get(p),)
 
 
 def _p(default: float, unit: str, doc: str, source: str, positive: bool = False,
