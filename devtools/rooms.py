@@ -20,6 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 ROOMS = {
     "ipcosim (top-level modules)": (".", False),
     "fmus": ("fmus", False),
+    "fmus/kinds": ("fmus/kinds", True),
     "fmus/hil": ("fmus/hil", True),
     "harness/native": ("harness/native", True),
     "controllers": ("controllers", True),

@@ -29,9 +29,10 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass, fields
-from typing import Sequence
+from typing import Iterator, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError, closest
+from ipcosim.fmus import kinds
 
 #: IP02 encoders: 4096 counts/rev; cart through the 1.48 cm position pinion, pendulum direct.
 CART_M_PER_COUNT = 2.275e-5
@@ -194,16 +195,32 @@ def end_stop_state(x: Sequence[float], carts: Sequence[tuple[int, int]], stop: f
     return out if hits else None
 
 
+class Bench(Mapping[str, object]):
+    """One option set: ``["instruments"]`` its instrument options, ``[kind]`` its plant-parameter overrides for
+    plant ``kind`` (every cart's Coulomb force ``coulomb`` [N], then ``voltage_limit`` [V])."""
+
+    def __init__(self, instruments: Instruments, coulomb: float, voltage_limit: float) -> None:
+        self.instruments, self.coulomb, self.voltage_limit = instruments, coulomb, voltage_limit
+
+    def __getitem__(self, key: str) -> object:
+        if key == "instruments":
+            return self.instruments
+        carts = kinds.get(key).carts
+        return {**{cart.coulomb: self.coulomb for cart in carts}, "voltage_limit": self.voltage_limit}
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(("instruments", *kinds.names()))
+
+    def __len__(self) -> int:
+        return 1 + len(kinds.names())
+
+
 #: The two option sets (instrument options and plant-parameter overrides per plant kind).
-REALISM: dict[str, dict[str, object]] = {
-    "ideal": {"instruments": Instruments(),
-              "single-mass": {"b": 0.0, "voltage_limit": 1000.0},
-              "double-mass": {"b1": 0.0, "b2": 0.0, "voltage_limit": 1000.0}},
-    "lab": {"instruments": Instruments(cart_resolution=CART_M_PER_COUNT, pendulum_resolution=PENDULUM_RAD_PER_COUNT,
-                                       noise_counts=0.0, end_stop=END_STOP_M, input_delay=LAB_SAMPLE_PERIOD,
-                                       voltage_resolution=DAC_V_PER_CODE),
-            "single-mass": {"b": 0.1047, "voltage_limit": 10.0},
-            "double-mass": {"b1": 0.1047, "b2": 0.1047, "voltage_limit": 10.0}},
+REALISM: dict[str, Bench] = {
+    "ideal": Bench(Instruments(), coulomb=0.0, voltage_limit=1000.0),
+    "lab": Bench(Instruments(cart_resolution=CART_M_PER_COUNT, pendulum_resolution=PENDULUM_RAD_PER_COUNT,
+                             noise_counts=0.0, end_stop=END_STOP_M, input_delay=LAB_SAMPLE_PERIOD,
+                             voltage_resolution=DAC_V_PER_CODE), coulomb=0.1047, voltage_limit=10.0),
 }
 
 LAB_SOURCES = {

@@ -10,7 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
-from ipcosim.fmus.params import DoubleMassParams, PlantParams, plant_kind_of
+from ipcosim.fmus import kinds
+from ipcosim.fmus.params import PlantParams, plant_kind_of
 from ipcosim.fmus.physics import MEASURED, rhs_for, rhs_no_inductance, state_names
 
 if TYPE_CHECKING:
@@ -59,8 +60,7 @@ def _jacobian(f: Any, n: int, eps: float = 1e-6) -> tuple[list[list[float]], lis
 
 
 #: The Coulomb friction of each cart: (plant parameter, the cart's velocity state), per plant kind.
-COULOMB_CARTS = {"single-mass": (("b", "cart_velocity"),),
-                 "double-mass": (("b1", "active_cart_velocity"), ("b2", "passive_cart_velocity"))}
+COULOMB_CARTS = kinds.ByKind(lambda k: tuple((cart.coulomb, cart.velocity) for cart in k.carts))
 
 
 def force_columns(params: PlantParams) -> list[tuple[str, list[float]]]:
@@ -91,11 +91,8 @@ def linear_matrices(params: PlantParams, inductance: bool = True
     ``B`` is the single input column as a list; the outputs are the measured positions (``C``
     selects them).
     """
-    if isinstance(params, DoubleMassParams):
-        p = replace(params, b1=0.0, b2=0.0)
-    else:
-        p = replace(params, b=0.0)
-    kind = plant_kind_of(p)
+    kind = plant_kind_of(params)
+    p = replace(params, **{name: 0.0 for name, _ in COULOMB_CARTS[kind]})
     names = state_names(kind)
     if inductance:
         rhs = rhs_for(p)

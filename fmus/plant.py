@@ -6,6 +6,7 @@ from dataclasses import replace
 from typing import Any, Callable, Sequence
 
 from ipcosim.errors import IpcosimError
+from ipcosim.fmus import kinds
 from ipcosim.fmus.instruments import (
     Instruments,
     Readout,
@@ -16,100 +17,21 @@ from ipcosim.fmus.instruments import (
     tap_velocity_change,
 )
 from ipcosim.fmus.integrator import FastETDRK4, shared_etdrk4
-from ipcosim.fmus.params import DoubleMassParams, PlantParams, SingleMassParams, plant_kind_of, validate
-from ipcosim.fmus.physics import (
-    MEASURED,
-    double_mass_applied_forces,
-    karnopp,
-    rhs_for,
-    single_mass_applied_force,
-    single_mass_momentum_rhs,
-    single_mass_to_momentum,
-    state_names,
-)
+from ipcosim.fmus.params import PlantParams, validate
+from ipcosim.fmus.physics import MEASURED
 
 
 class PlantStepError(IpcosimError, FloatingPointError):
     """The plant state became non-finite during a step (reported with time and state)."""
 
 
-def single_mass_internal_rhs(p: SingleMassParams) -> Callable[..., tuple[float, ...]]:
-    """``f(xc, p1, th, p2, i, vA)``: ``ipcosim.fmus.physics.single_mass_momentum_rhs`` with the parameters folded
-    into constants and the voltage already clipped (same arithmetic; checked equal in the tests)."""
-    sin, cos = math.sin, math.cos
-    ml = 0.5 * p.Mp * p.Lp
-    m11 = p.Meq + p.Mp
-    m22 = p.Mp * p.Lp * p.Lp / 3.0
-    mlg = ml * p.g
-    kf, ke, beq, bp, ra, la = p.force_per_amp, p.emf_per_velocity, p.Beq, p.Bp, p.Ra, p.La
-    b, cv = p.b, p.coulomb_velocity
-
-    def f(xc: float, p1: float, th: float, p2: float, i: float, vA: float) -> tuple[float, ...]:
-        s = sin(th)
-        m12 = -ml * cos(th)
-        det = m11 * m22 - m12 * m12
-        xd = (m22 * p1 - m12 * p2) / det
-        thd = (m11 * p2 - m12 * p1) / det
-        fric = karnopp(xd, kf * i - ml * thd * thd * s - beq * xd - m12 * (mlg * s - bp * thd) / m22, b, cv) \
-            if b else 0.0
-        return (xd, kf * i - beq * xd - fric, thd, mlg * s - bp * thd + ml * s * thd * xd,
-                (vA - ra * i - ke * xd) / la)
-    return f
-
-
-def single_mass_output_map(p: SingleMassParams) -> Callable[[Sequence[float]], tuple[float, ...]]:
-    """``ipcosim.fmus.physics.single_mass_from_momentum`` with the parameters folded into constants
-    (same arithmetic, so the same numbers)."""
-    cos = math.cos
-    ml = 0.5 * p.Mp * p.Lp
-    m11 = p.Meq + p.Mp
-    m22 = p.Mp * p.Lp * p.Lp / 3.0
-
-    def out(z: Sequence[float]) -> tuple[float, ...]:
-        xc, p1, th, p2, i = z
-        m12 = -ml * cos(th)
-        det = m11 * m22 - m12 * m12
-        return (xc, (m22 * p1 - m12 * p2) / det, th, (m11 * p2 - m12 * p1) / det, i)
-    return out
-
-
-def double_mass_internal_rhs(p: DoubleMassParams) -> Callable[..., tuple[float, ...]]:
-    """``f(xa, xa', xc, xc', th, th', i, vA)``: ``ipcosim.fmus.physics.double_mass_rhs`` with the parameters folded
-    into constants and the voltage already clipped (same arithmetic; checked equal in the tests)."""
-    sin, cos = math.sin, math.cos
-    K, kf, ke, ra, la = p.K, p.force_per_amp, p.emf_per_velocity, p.Ra, p.La
-    Ba, Bf, Bc, Bp, Ma_eq = p.Ba, p.Bf, p.Bc, p.Bp, p.Ma_eq
-    b1, b2, cv = p.b1, p.b2, p.coulomb_velocity
-    ml = 0.5 * p.Mp * p.Lp
-    m11 = p.Mc + p.Mp
-    m22 = p.Mp * p.Lp * p.Lp / 3.0
-    mlg = ml * p.g
-    bfc = Bf + Bc
-
-    def f(xa: float, xad: float, xc: float, xcd: float, th: float, thd: float, i: float,
-          vA: float) -> tuple[float, ...]:
-        spring = K * (xa - xc)
-        s = sin(th)
-        m12 = -ml * cos(th)
-        r2 = mlg * s - Bp * thd
-        fa = karnopp(xad, kf * i - Ba * xad + Bf * xcd - spring, b1, cv) if b1 else 0.0
-        fc = karnopp(xcd, Bf * xad - bfc * xcd + spring - ml * thd * thd * s - m12 * r2 / m22, b2, cv) \
-            if b2 else 0.0
-        xadd = (kf * i - Ba * xad + Bf * xcd - spring - fa) / Ma_eq
-        r1 = Bf * xad - bfc * xcd + spring - ml * thd * thd * s - fc
-        det = m11 * m22 - m12 * m12
-        return (xad, xadd, xcd, (m22 * r1 - m12 * r2) / det, thd, (m11 * r2 - m12 * r1) / det,
-                (vA - ra * i - ke * xad) / la)
-    return f
-
-
-#: (position, velocity) state indices of each cart, per plant kind.
-CARTS = {"single-mass": ((0, 1),), "double-mass": ((0, 1), (2, 3))}
+#: (position, velocity) state indices of each cart, per plant kind (``ipcosim.fmus.kinds``).
+CARTS = kinds.ByKind(lambda k: k.cart_indices)
 
 
 def coulomb_forces(p: PlantParams) -> tuple[float, ...]:
     """The Coulomb (breakaway) force of each cart [N], ``CARTS`` order."""
-    return (p.b1, p.b2) if isinstance(p, DoubleMassParams) else (p.b,)  # type: ignore[union-attr]
+    return kinds.of_params(p).coulomb_forces(p)
 
 
 def stick(before: Sequence[float], after: Sequence[float], p: PlantParams) -> tuple[list[float], float]:
@@ -121,17 +43,17 @@ def stick(before: Sequence[float], after: Sequence[float], p: PlantParams) -> tu
     the start's (a stuck cart does not move). Plain arithmetic and comparisons (the native plant traces it).
     """
     x = list(after)
-    single = isinstance(p, SingleMassParams)
+    kind = kinds.of_params(p)
     band = p.coulomb_velocity
     stuck = 0.0
-    for k, ((ip, iv), b) in enumerate(zip(CARTS["single-mass" if single else "double-mass"], coulomb_forces(p))):
+    for k, ((ip, iv), b) in enumerate(zip(kind.cart_indices, kind.coulomb_forces(p))):
         if not b:
             continue
         v0, v1 = before[iv], x[iv]
         if -band < v1 < band or v0 * v1 < 0.0:
             rest = list(x)
             rest[iv] = 0.0
-            applied = single_mass_applied_force(rest, p) if single else double_mass_applied_forces(rest, p)[k]
+            applied = kind.applied_forces(rest, p)[k]
             if -b <= applied <= b:
                 rest[ip] = before[ip] if v0 == 0.0 else rest[ip]
                 x = rest
@@ -143,7 +65,7 @@ def constrain(before: Sequence[float], after: Sequence[float], p: PlantParams, e
     """``[*state, carts stuck, carts stopped]`` after a step's constraints: :func:`stick`, then the end stops
     (``ipcosim.fmus.instruments.stop_carts``)."""
     x, stuck = stick(before, after, p)
-    x, stopped = stop_carts(x, CARTS[plant_kind_of(p)], end_stop)
+    x, stopped = stop_carts(x, kinds.of_params(p).cart_indices, end_stop)
     return [*x, stuck, stopped]
 
 
@@ -169,19 +91,19 @@ class Plant:
 
     def __init__(self, params: PlantParams, x0: Sequence[float] | None = None, t0: float = 0.0) -> None:
         self.params = validate(params)
-        self.kind = plant_kind_of(params)
-        self.state_names = state_names(self.kind)
-        self._rhs = rhs_for(params)
-        if self.kind == "single-mass":
-            self._irhs = single_mass_momentum_rhs
-            self._to_int = single_mass_to_momentum
-            self._f = single_mass_internal_rhs(params)
-            self._out: Callable[[Sequence[float]], Sequence[float]] | None = single_mass_output_map(params)
+        kind = kinds.of_params(params)
+        self.kind = kind.name
+        self.state_names = kind.states
+        self._rhs = kind.rhs
+        self._f = kind.folded_rhs(params)
+        if kind.internal is not None:
+            self._irhs = kind.internal.rhs
+            self._to_int = kind.internal.to_internal
+            self._out: Callable[[Sequence[float]], Sequence[float]] | None = kind.internal.output_map(params)
         else:
             self._out = None
             self._irhs = self._rhs
             self._to_int = lambda x, p: tuple(x)
-            self._f = double_mass_internal_rhs(params)
         self._L = self._circuit_part(self._internal_jacobian())
         self._steppers: dict[float, FastETDRK4] = {}
         self._limit = params.voltage_limit
@@ -306,14 +228,12 @@ def tapped_state(kind: str, x: Sequence[Any], p: PlantParams, force_impulse: Any
     double mass's passive cart) and ``torque_impulse`` [N m s] on the pendulum, as velocity jumps of the
     cart-pendulum mass matrix at the current angle (``ipcosim.fmus.instruments.tap_velocity_change``).
     Pure arithmetic: the native plant traces it too."""
-    names = state_names(kind)
-    cart = "cart" if kind == "single-mass" else "passive_cart"
+    entry = kinds.get(kind)
+    names = entry.states
     th = x[names.index("pendulum_angle")]
-    ml = 0.5 * p.Mp * p.Lp
-    m11 = (p.Meq if kind == "single-mass" else p.Mc) + p.Mp  # type: ignore[union-attr]
-    dv, dw = tap_velocity_change((m11, -ml * math.cos(th), p.Mp * p.Lp * p.Lp / 3.0), force_impulse, torque_impulse)
+    dv, dw = tap_velocity_change(entry.pendulum_mass_matrix(th, p), force_impulse, torque_impulse)
     out = list(x)
-    out[names.index(f"{cart}_velocity")] += dv
+    out[names.index(entry.carts[-1].velocity)] += dv
     out[names.index("pendulum_velocity")] += dw
     return out
 

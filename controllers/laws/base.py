@@ -14,6 +14,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from ipcosim.controllers.errors import ControllerParameterError, DesignError
 from ipcosim.errors import IpcosimError, closest
+from ipcosim.fmus import kinds
 from ipcosim.fmus.expm import Matrix, as_matrix, expm
 from ipcosim.fmus.linearize import linear_matrices
 from ipcosim.fmus.params import (
@@ -198,7 +199,7 @@ class DiscreteLaw:
         return float(y[0])
 
     def _pendulum_cart(self, y: Sequence[float]) -> float:
-        return float(y[0] if self.kind == "single-mass" else y[1])
+        return float(y[kinds.get(self.kind).pendulum_cart_reading])
 
     def _angle(self, y: Sequence[float]) -> float:
         return float(y[-1])
@@ -238,7 +239,8 @@ class CurrentEstimatorLaw(DiscreteLaw):
 
 # ============================================================================ the flat parameters
 
-PLANT_SUFFIX = {"single-mass": "SingleMass", "double-mass": "DoubleMass"}
+#: The FMU model names' suffix of each plant kind (``ipcosim.fmus.kinds``).
+PLANT_SUFFIX = kinds.ByKind(lambda k: k.suffix)
 
 #: Physical constants that do not enter the design model (no inductance, no Coulomb friction, no limit).
 NOT_IN_DESIGN = {"La", "voltage_limit", "coulomb_velocity", "b", "b1", "b2"}

@@ -23,6 +23,7 @@ from ipcosim.controllers.laws.base import (
     unit_div,
 )
 from ipcosim.controllers.linear import Builder, Lin, lsum
+from ipcosim.fmus.kinds import get, plant_kind
 from ipcosim.fmus.linearize import LinearModel, linear_matrices
 
 
@@ -109,7 +110,7 @@ class HSMC(DiscreteLaw):
     def __init__(self, kind: str, gains: HSMCGains, models: Sequence[SubsystemModel],
                  sample_period: float = 1e-3, voltage_limit: float = 10.0) -> None:
         super().__init__(kind, sample_period, voltage_limit)
-        n_layers = 2 if kind == "single-mass" else 3
+        n_layers = len(subsystem_rows(kind))
         self.n_layers = n_layers
         n_states = 2 * n_layers
         if len(gains.c) != n_layers:
@@ -305,9 +306,7 @@ class AdaptiveHSMC(HSMC):
 
 def subsystem_rows(kind: str) -> tuple[str, ...]:
     """Design-model state whose derivative each subsystem's ``f_i + b_i u`` gives (layer order)."""
-    if kind == "single-mass":
-        return ("pendulum_velocity", "cart_velocity")
-    return ("pendulum_velocity", "passive_cart_velocity", "active_cart_velocity")
+    return ("pendulum_velocity", *(cart.velocity for cart in reversed(get(kind).carts)))
 
 
 def subsystem_models(model: LinearModel) -> list[SubsystemModel]:
@@ -316,9 +315,8 @@ def subsystem_models(model: LinearModel) -> list[SubsystemModel]:
 
 
 def _subsystems(A, B, states) -> list[SubsystemModel]:  # noqa: ANN001 -- lists or arrays
-    kind = "single-mass" if "cart_position" in states else "double-mass"
     out = []
-    for row in subsystem_rows(kind):
+    for row in subsystem_rows(plant_kind(connectors=states) or ""):
         i = states.index(row)
         out.append(SubsystemModel(a=tuple(float(v) for v in A[i]), b=float(B[i])))
     return out
@@ -433,7 +431,7 @@ TUNED_ADAPTIVE: dict[str, tuple[HSMCGains, AdaptiveSchedules]] = {
 # ============================================================================ parameters and sets
 
 def _hsmc_specs(kind: str) -> list[ParamSpec]:
-    n = 2 if kind == "single-mass" else 3
+    n = len(subsystem_rows(kind))
     subsystem = (("pendulum", "cart") if n == 2 else ("pendulum", "passive cart", "active cart"))
     specs = [ParamSpec(f"c{i + 1}", 1.0, "1/s", f"slope of the {subsystem[i]} sliding surface "
                                                f"s{i + 1} = c{i + 1} position + velocity", "positive")
@@ -480,7 +478,7 @@ def _hsmc_specs(kind: str) -> list[ParamSpec]:
 
 def _adaptive_specs(kind: str) -> list[ParamSpec]:
     """The HSMC's parameters, the first-layer gains and a schedule of every gain."""
-    n = 2 if kind == "single-mass" else 3
+    n = len(subsystem_rows(kind))
     specs = _hsmc_specs(kind)
     specs += [ParamSpec("k1", 0.0, "1/s", "first-layer reaching gain: the top layer's law adds "
                                           "lambda1 (k1 S1 + KI1 int S1) (thesis App. A.6 deltaKP, KP1)",
@@ -557,7 +555,7 @@ def _adaptive_set(kind: str, parameter_set: str) -> dict[str, Any]:
 def _gains_and_models(kind: str, v: Mapping[str, Any]) -> tuple[HSMCGains, list[SubsystemModel]]:
     """The HSMC gains of the checked values ``v`` and the subsystem models (the thesis's coefficients or
     designed)."""
-    n = 2 if kind == "single-mass" else 3
+    n = len(subsystem_rows(kind))
     c = tuple(float(v[f"c{i + 1}"]) for i in range(n))
     if kind == "single-mass":
         lam, top = (float(v["lambda1"]),), float(v["lambda2"])

@@ -38,6 +38,7 @@ from ipcosim.controllers.thesis import (
     THESIS_SINGLE_MASS_R,
 )
 from ipcosim.fmus.expm import as_matrix
+from ipcosim.fmus.kinds import ByKind, get
 from ipcosim.fmus.linearize import linear_matrices
 from ipcosim.fmus.physics import MEASURED
 
@@ -268,7 +269,7 @@ def _lqg_specs(kind: str) -> list[ParamSpec]:
 
 
 #: The LQG's Coulomb friction compensation, one force per cart (the plant's names b; b1, b2 after "friction_").
-LQG_FRICTION = {"single-mass": ("friction_b",), "double-mass": ("friction_b1", "friction_b2")}
+LQG_FRICTION = ByKind(lambda k: tuple(f"friction_{cart.coulomb}" for cart in k.carts))
 
 
 def _lab_lqg(kind: str) -> dict[str, float]:
@@ -281,7 +282,7 @@ def _lab_lqg(kind: str) -> dict[str, float]:
 
 def _lqg_friction_specs(kind: str) -> list[ParamSpec]:
     """The LQG parameters that act at run time only (no redesign): friction compensation, integrator dead band."""
-    carts = ("cart",) if kind == "single-mass" else ("active cart", "passive cart")
+    carts = [cart.position.removesuffix("_position").replace("_", " ") for cart in get(kind).carts]
     specs = [ParamSpec(name, 0.0, "N", f"Coulomb force the law compensates on the {cart} (0 = no compensation; "
                                        "the lab set: the lab bench's fitted value)", "nonnegative")
              for name, cart in zip(LQG_FRICTION[kind], carts)]

@@ -178,7 +178,7 @@ class RigConfig:
     def checked(self) -> "RigConfig":
         """Validate; raises ``ValueError`` naming the offending field."""
         if self.plant not in DEFAULT_PRESET:
-            raise ValueError(f"rig plant {self.plant!r}: expected single-mass or double-mass")
+            raise ValueError(f"rig plant {self.plant!r}: expected {' or '.join(DEFAULT_PRESET)}")
         if self.clock not in CLOCKS:
             raise ValueError(f"rig clock {self.clock!r}: expected lockstep or wallclock")
         name = self.preset or DEFAULT_PRESET[self.plant]
@@ -376,9 +376,8 @@ class VirtualRig:
         self._phase = cfg.encoder_phase
         self._encoders: dict[int, tuple[int, float]] = {CART_ENCODER: (cart, cfg.cart_m_per_count),
                                                         PENDULUM_ENCODER: (pend, cfg.pendulum_rad_per_count)}
-        if self.kind == "double-mass":
-            self._encoders[PASSIVE_CART_ENCODER] = (self.plant.state_names.index("passive_cart_position"),
-                                                    cfg.cart_m_per_count)
+        for name in [n for n in MEASURED[self.kind][1:] if n != "pendulum_angle"][:1]:  # a second cart
+            self._encoders[PASSIVE_CART_ENCODER] = (self.plant.state_names.index(name), cfg.cart_m_per_count)
         self._carts = [(i, i + 1, n) for i, n in enumerate(self.plant.state_names) if n.endswith("cart_position")]
         self._history: collections.deque[tuple[int, np.ndarray]] = collections.deque()
         # wallclock: keep 0.2 s of physics so that a sample is taken at its instant even if the

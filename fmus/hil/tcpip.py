@@ -46,6 +46,7 @@ from ipcosim.fmus.hil.protocol import (
     pack_ints,
     pack_text,
 )
+from ipcosim.fmus.params import KINDS
 
 NS = 1_000_000_000
 
@@ -108,7 +109,7 @@ class TcpipCard(Card):
         self.info = CardInfo(card_type=card_type, card_id=card_id, analog_outputs=n_ao, encoder_inputs=n_enc,
                              dac_bits=bits, analog_min=lo, analog_max=hi, counts_per_rev=cpr,
                              clock="lockstep" if clock == 0 else "wallclock", tick=tick_ns / NS,
-                             plant="single-mass" if plant == 0 else "double-mass", protocol_version=version)
+                             plant=KINDS[plant] if plant < len(KINDS) else "", protocol_version=version)
         OPEN_CARDS.add(self)
 
     # --- transport -----------------------------------------------------------------------------

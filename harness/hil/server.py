@@ -64,6 +64,7 @@ from ipcosim.fmus.hil.protocol import (
     reply_payload,
 )
 from ipcosim.fmus.hil.rig import NS, VirtualRig
+from ipcosim.fmus.params import KINDS
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 18920
@@ -549,7 +550,7 @@ class RigServer:
             self.log(f"rig: controlling session opened by {name} at {session.peer}")
         session.role = role
         info = self.rig.info()
-        body = HELLO_REPLY.pack(0 if info.plant == "single-mass" else 1, 0 if info.clock == "lockstep" else 1,
+        body = HELLO_REPLY.pack(KINDS.index(info.plant), 0 if info.clock == "lockstep" else 1,
                                 info.analog_outputs, info.encoder_inputs, info.dac_bits, info.counts_per_rev,
                                 info.analog_min, info.analog_max, int(round(info.tick * NS)), PROTOCOL_VERSION)
         self._send(conn, frame, ErrorCode.OK, body)

@@ -16,10 +16,11 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from ipcosim.fmus.hil import DEFAULT_URI, HILError, parse_card_uri
-from ipcosim.fmus.kinds import plant_kind
+from ipcosim.fmus.kinds import ByKind, plant_kind
 from ipcosim.harness.scenario.swaps import SwapRequest, register_swap_alias
 
-ADAPTERS = {"single-mass": "IP02HILSingleMass", "double-mass": "IP02HILDoubleMass"}
+#: The HIL adapter FMU's model name of each plant kind.
+ADAPTERS = ByKind(lambda k: k.hil_model)
 
 
 class HilSwapError(HILError):

@@ -11,10 +11,12 @@ from typing import Any, Callable
 from ipcosim.harness.native import tracer
 from ipcosim.harness.native.tracer import leaf
 
-#: kernel name -> (physics function name, plant kind)
-KERNELS = {"single_mass_rhs": ("single_mass_rhs", "single-mass"),
-           "double_mass_rhs": ("double_mass_rhs", "double-mass"),
-           "single_mass_momentum_rhs": ("single_mass_momentum_rhs", "single-mass")}
+
+def kernels() -> dict[str, tuple[Callable[..., Any], str]]:
+    """Kernel name -> (physics function, plant kind): every registered kind's ``kernels``."""
+    from ipcosim.fmus import kinds
+
+    return {name: (fn, k) for k in kinds.names() for name, fn in kinds.get(k).kernels.items()}
 
 
 def param_names(kind: str) -> list[str]:
@@ -28,8 +30,7 @@ def kernel_source(name: str) -> str:
     from ipcosim.fmus import physics
     from ipcosim.fmus.params import PLANT_KINDS
 
-    fn_name, kind = KERNELS[name]
-    fn: Callable[..., Any] = getattr(physics, fn_name)
+    fn, kind = kernels()[name]
     names = param_names(kind)
     n = len(physics.state_names(kind))
 
@@ -48,4 +49,4 @@ def kernel_source(name: str) -> str:
 
 def kernels_source() -> str:
     """Every kernel in one C file."""
-    return "#include <math.h>\n\n" + "\n".join(kernel_source(k) for k in KERNELS)
+    return "#include <math.h>\n\n" + "\n".join(kernel_source(k) for k in kernels())

@@ -213,12 +213,13 @@ class _PlantTrace:
     state), the outputs, then (a step only) the delay buffer and ``x`` (the constrained state)."""
 
     def __init__(self, kind: str, cls: type) -> None:
-        from ipcosim.fmus import instruments, physics
+        from ipcosim.fmus import instruments, kinds, physics
         from ipcosim.fmus import plant as plant_mod
 
         self.kind, self.cls = kind, cls
         self.states = physics.state_names(kind)
-        self.single = kind == "single-mass"
+        self.entry = kinds.get(kind)
+        self.internal = self.entry.internal
         self.quantize = tracer.local(instruments.quantize)
         self.resolutions = [leaf("V:pendulum_resolution" if s == "pendulum_angle" else "V:cart_resolution")
                             for s in physics.MEASURED[kind]]
@@ -265,25 +266,25 @@ class _PlantTrace:
         due = tracer.select(leaf(TAPPED) < 0.5, tracer.select(leaf("S:time") > leaf("V:tap_time"),
                                                               force * force + torque * torque > 0.0, False), False)
         x = self._plant.tapped_state(self.kind, before, p, force, torque)
-        zx = self._physics.single_mass_to_momentum(x, p) if self.single else x
+        zx = self.internal.to_internal(x, p) if self.internal else x
         return (tracer.select(due, 1.0, leaf(TAPPED)), [tracer.select(due, a, b) for a, b in zip(x, before)],
                 [tracer.select(due, a, b) for a, b in zip(zx, z)])
 
     def step(self, shapes: list[tuple[int, int]], nonzero: set[str]) -> list[Any]:
         """One step: ``z`` after it, the outputs, the delay buffer shifted, the constrained state ``x``, the
         tapped flag."""
-        n, plant_mod = len(self.states), self._plant
+        n = len(self.states)
         p = self.params()
-        f = tracer.local((plant_mod.single_mass_internal_rhs if self.single else plant_mod.double_mass_internal_rhs)(p))
+        f = tracer.local(self.entry.folded_rhs(p))
         buffer = [leaf(f"S:d{k}") for k in range(NATIVE_MAX_DELAY_STEPS)]
         v, vA = self.voltage(p, buffer)
         # the state after the last step's constraints, then the taps
         tapped, before, z0 = self.tap(p, [leaf(f"S:x{i}") for i in range(n)], [leaf(f"S:z{i}") for i in range(n)])
         z = sym_stages(z0, f, (vA,), shapes, nonzero)
-        x = plant_mod.single_mass_output_map(p)(z) if self.single else list(z)
+        x = self.internal.output_map(p)(z) if self.internal else list(z)
         x, held = self.constrain(p, before, x)
-        if self.single:
-            zx = self._physics.single_mass_to_momentum(x, p)
+        if self.internal:
+            zx = self.internal.to_internal(x, p)
             z = [tracer.select(held > 0.0, a, b) for a, b in zip(zx, z)]
         else:
             z = x
@@ -292,7 +293,7 @@ class _PlantTrace:
     def start(self) -> list[Any]:
         """The start: ``z`` from the initial values, the outputs, the initial state."""
         x0 = [leaf(f"V:initial_{s}") for s in self.states]
-        z0 = self._physics.single_mass_to_momentum(x0, self.params()) if self.single else x0
+        z0 = self.internal.to_internal(x0, self.params()) if self.internal else x0
         return list(z0) + self.outputs(x0) + x0
 
 

@@ -4,11 +4,10 @@ variants beyond them (``ssp/<name>/``). The scenarios' files in ``ssp/`` are wri
 tasks, from it."""
 from __future__ import annotations
 
-PLANTS = {
-    "single-mass": {"model": "IP02SingleMass", "suffix": "SingleMass", "description": "single-mass cart"},
-    "double-mass": {"model": "IP02DoubleMass", "suffix": "DoubleMass",
-                    "description": "double-mass (spring-coupled) carts"},
-}
+from ipcosim.fmus.kinds import ByKind
+
+#: The plants (``ipcosim.fmus.kinds``): kind -> its plant FMU's model name, model-name suffix and description.
+PLANTS = ByKind(lambda k: {"model": k.model, "suffix": k.suffix, "description": k.description})
 CONTROLLERS = {
     "pid": ("PID", "the thesis's single-loop PID on the cart position"),
     "cascade-pid": ("CascadePID", "cascade PID: inner loop on the pendulum angle, outer loop on the cart position"),

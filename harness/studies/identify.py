@@ -41,6 +41,7 @@ import numpy as np
 
 from ipcosim.errors import UsageError, closest
 from ipcosim.fmus.instruments import Instruments, quantize, realism
+from ipcosim.fmus.kinds import ByKind
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, PRESETS, preset
 from ipcosim.fmus.physics import MEASURED, state_names
 from ipcosim.fmus.plant import replay
@@ -50,8 +51,7 @@ from ipcosim.fmus.plant import replay
 #: stands for the force per volt ``amplifier_gain N Kt / (rg Ra)`` (Kt and Ra are not separable at all: they enter
 #: as Kt / Ra and as the armature's time constant La / Ra, 0.07 ms; the amplifier gain and Kb only through that
 #: time constant, so they are options).
-DEFAULT_FIT = {"single-mass": ("Mc", "Beq", "Bp", "b", "Kt"),
-               "double-mass": ("Ma", "Mc", "K", "Ba", "Bf", "b1", "b2", "Kt")}
+DEFAULT_FIT = ByKind(lambda k: k.identified)
 #: The motor and amplifier constants that enter the motion (about) only through the force per volt; a fit of one of
 #: them with the others at the preset makes it carry the others' errors (``Identification.parameters[...]["note"]``).
 FORCE_PER_VOLT = ("Kt", "Ra", "amplifier_gain")

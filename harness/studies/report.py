@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from ipcosim.fmus.kinds import ByKind, get
 from ipcosim.fmus.params import KINDS
 from ipcosim.harness.studies.robustness import fmt
 from ipcosim.harness.support.extras import optional_figure
@@ -23,7 +24,7 @@ from ipcosim.harness.support.extras import optional_figure
 CONTROLLERS = ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")
 CONTROLLER_LABELS = {"pid": "PID", "cascade-pid": "cascade PID", "lqr": "LQR + observer", "hsmc": "HSMC",
                      "adaptive-hsmc": "adaptive HSMC"}
-PLANT_LABELS = {"single-mass": "single mass", "double-mass": "double mass"}
+PLANT_LABELS = ByKind(lambda k: k.name.replace("-", " "))
 CONTROLLER_COLORS = {"pid": "tab:gray", "cascade-pid": "tab:purple", "lqr": "tab:orange", "hsmc": "tab:blue",
                      "adaptive-hsmc": "tab:green"}
 #: Colours of the laws outside CONTROLLER_COLORS (an LQG, a discrete LQR), in table order.
@@ -103,7 +104,7 @@ def plot_plant(plant: str, results: Results, path: Path) -> Path | None:
                     color=color, zorder=1 if failed else 2)
             if fell is not None and len(s["time"]):
                 ax.plot(s["time"][-1], s[key][-1], "x", color=color, markersize=7)
-    cart = "active cart position [m]" if plant == "double-mass" else "cart position [m]"
+    cart = f"{get(plant).carts[0].position.replace('_', ' ')} [m]"
     axes[0].set_ylabel(cart)
     axes[1].set_ylabel("pendulum angle [rad]")
     axes[2].set_ylabel("voltage [V]")

@@ -14,12 +14,22 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from ipcosim.fmus.kinds import ByKind, PlantKind
+
+#: The plant parameters of each kind of physical quantity, by their unit (masses, viscous dampings, springs).
+QUANTITY_UNITS = {"masses": ("kg",), "dampings": ("N.s/m", "N.m.s/rad"), "spring": ("N/m",)}
+
+
+def quantities(kind: PlantKind, *groups: str) -> tuple[str, ...]:
+    """``plant.<name>`` of each parameter of ``kind`` whose unit is one of ``groups``' (``QUANTITY_UNITS``),
+    in the parameter class's order."""
+    units = {u for g in groups for u in QUANTITY_UNITS[g]}
+    return tuple(f"plant.{f.name}" for f in kind.params.__dataclass_fields__.values() if f.metadata["unit"] in units)
+
+
 #: Default uncertainty of ``compare --robustness``: masses, friction (viscous damping) and the
 #: spring stiffness, each uniform within +-20 % of its nominal value.
-DEFAULT_UNCERTAINTY = {
-    "single-mass": ("plant.Mc", "plant.Mp", "plant.Beq", "plant.Bp"),
-    "double-mass": ("plant.Ma", "plant.Mc", "plant.Mp", "plant.Ba", "plant.Bc", "plant.Bf", "plant.K", "plant.Bp"),
-}
+DEFAULT_UNCERTAINTY = ByKind(lambda k: quantities(k, "masses", "dampings", "spring"))
 DEFAULT_SPREAD = 0.2
 
 
@@ -516,13 +526,12 @@ def plot_parameters(rows: Sequence[Mapping[str, Any]], parameters: Sequence[str]
 
 #: The factors of :func:`factor_study`, in table order: the plant parameters each draws (uniform within
 #: +-``FACTOR_SPREAD`` of nominal, per plant kind), or, for ``lab bench`` and ``delay``, a change of the bench.
-FACTORS: dict[str, dict[str, tuple[str, ...]]] = {
-    "masses": {"single-mass": ("plant.Mc", "plant.Mp"), "double-mass": ("plant.Ma", "plant.Mc", "plant.Mp")},
-    "dampings": {"single-mass": ("plant.Beq", "plant.Bp"),
-                 "double-mass": ("plant.Ba", "plant.Bc", "plant.Bf", "plant.Bp")},
-    "spring": {"double-mass": ("plant.K",)},
-    "pendulum length": {"single-mass": ("plant.Lp",), "double-mass": ("plant.Lp",)},
-    "motor Kt, Ra": {"single-mass": ("plant.Kt", "plant.Ra"), "double-mass": ("plant.Kt", "plant.Ra")},
+FACTORS: dict[str, Mapping[str, tuple[str, ...]]] = {
+    "masses": ByKind(lambda k: quantities(k, "masses")),
+    "dampings": ByKind(lambda k: quantities(k, "dampings")),
+    "spring": ByKind(lambda k: quantities(k, "spring"), only=lambda k: bool(quantities(k, "spring"))),
+    "pendulum length": ByKind(lambda k: ("plant.Lp",)),
+    "motor Kt, Ra": ByKind(lambda k: ("plant.Kt", "plant.Ra")),
     "lab bench": {},
     "delay": {},
 }

@@ -13,9 +13,11 @@ from scipy.linalg import expm
 from ipcosim.fmus.expm import SingularMatrixError, solve
 from ipcosim.fmus.expm import expm as pure_expm
 from ipcosim.fmus.integrator import ETDRK4, FastETDRK4, etdrk4_f_form
+from ipcosim.fmus.kinds.double_mass import double_mass_internal_rhs
+from ipcosim.fmus.kinds.single_mass import single_mass_internal_rhs
 from ipcosim.fmus.params import preset
 from ipcosim.fmus.physics import double_mass_rhs, rhs_for, single_mass_momentum_rhs, single_mass_to_momentum
-from ipcosim.fmus.plant import Plant, double_mass_internal_rhs, single_mass_internal_rhs
+from ipcosim.fmus.plant import Plant
 
 H = 1e-3
 #: Open-loop experiment: 2 s, a +5 V pulse from 0.1 s to 0.3 s (edges on the 1 ms grid).

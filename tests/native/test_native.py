@@ -95,10 +95,10 @@ def kernels(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
 def test_generated_rhs_agrees_with_python(kernels: ctypes.CDLL, name: str) -> None:
     from ipcosim.fmus import physics
     from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, make
-    from ipcosim.harness.native.kernels import KERNELS, param_names
+    from ipcosim.harness.native.kernels import kernels as kernel_table
+    from ipcosim.harness.native.kernels import param_names
 
-    fn_name, kind = KERNELS[name]
-    py = getattr(physics, fn_name)
+    py, kind = kernel_table()[name]
     names = param_names(kind)
     n = len(physics.state_names(kind))
     base = make(kind, **dict(PRESETS[DEFAULT_PRESET[kind]][1]))
