@@ -210,7 +210,7 @@ def test_rig_stops_answering_mid_run(env, tmp_path):
     assert proc.returncode != 0
     errors = error_lines(proc.stderr)
     assert len(errors) == 1 and "did not answer STEP" in errors[0] \
-        and "within 1 s of its sample instant" in errors[0], proc.stderr
+        and "within 1 s" in errors[0], proc.stderr
     rows = (out / "results.csv").read_text().splitlines()
     assert len(rows) - 1 == 301                              # t = 0 ... 0.3 s: the results so far
     assert json.loads((out / "metrics.json").read_text())["wall_time_s"] > 0
