@@ -61,6 +61,9 @@ from ipcosim.fmus.hil.protocol import (
 )
 
 NS = 1_000_000_000
+#: How long before a sample instant :meth:`TcpipCard.step` stops sleeping and reads the clock [ns]: short,
+#: as a paced run's own wait follows at once (a spin costs a loaded host the CPU the rig needs).
+WAIT_SPIN_NS = 50_000
 
 #: Open tcpip cards of this process (diagnostics and fault-injection tests).
 OPEN_CARDS: "weakref.WeakSet[TcpipCard]" = weakref.WeakSet()
@@ -280,7 +283,7 @@ class TcpipCard(Card):
         self.last_wait_ns = 0
         if self.info.clock == "wallclock":   # the reading is the sample instant's: not before it
             began = time.monotonic_ns()
-            now = max(now, wait_until_ns(self.rig_now_ns, until_ns))
+            now = max(now, wait_until_ns(self.rig_now_ns, until_ns, spin_ns=WAIT_SPIN_NS))
             self.last_wait_ns = time.monotonic_ns() - began
         return StepResult(counts=counts, reloaded=bool(reloaded), time=now / NS, late=late_ns / NS,
                           status=self._flags_status())
