@@ -187,6 +187,25 @@ class Plant:
         """The state as a list of floats (a copy), ``state_names`` order."""
         return list(self._xl)
 
+    def snapshot(self) -> tuple:
+        """Everything a step starts from; :meth:`restore` returns to it exactly (a step repeated from it
+        gives the same numbers, which :meth:`set_state` does not promise: it rebuilds the internal state)."""
+        return list(self._z), list(self._xl), self.t, self.voltage, self.end_stop_hits
+
+    def restore(self, snap: tuple) -> None:
+        """Return to a :meth:`snapshot`."""
+        z, xl, self.t, self.voltage, self.end_stop_hits = snap
+        self._z, self._xl = list(z), list(xl)
+
+    def prepare_steps(self, sizes: Sequence[float], shared: dict | None = None) -> None:
+        """Make the steppers of the step sizes ``sizes`` [s] now, not at their first step (each costs
+        ~10 ms once). ``shared``: a dict in which plants of equal parameters keep one table of steppers."""
+        if shared is not None:
+            self._steppers = shared.setdefault(tuple(tuple(row) for row in self._L), self._steppers)
+        for h in sizes:
+            if h not in self._steppers:
+                self._steppers[h] = shared_etdrk4(self._L, h)
+
     def _internal_jacobian(self, eps: float = 1e-6) -> list[list[float]]:
         """Jacobian of the internal right-hand side at the upright equilibrium (the stiff linear part)."""
         n = len(self.state_names)

@@ -33,11 +33,15 @@ Quanser's package, or the virtual rig), at volts-and-counts level:
 
 Status outputs: ``watchdog_expired``, ``limit_tripped`` (Boolean), ``overruns`` (Integer:
 steps whose request reached a real-time card after their sample instant), ``last_error``
-(String, empty when all is well).
+(String, empty when all is well). What the adapter itself costs a step, as locals (from the
+second step on, the start-up step left out): ``step_time_mean`` and ``step_time_p99`` [s] (from
+``doStep``'s call to its return, less the wait for the sample instant) and
+``round_trips_per_step`` (requests to a card that counts them, e.g. the virtual rig over TCP).
 """
 from __future__ import annotations
 
 import math
+import time
 import weakref
 from typing import Any
 
@@ -126,6 +130,7 @@ class HilFmu(FmuBase):
                         description="steps whose request reached the card after their sample instant")
         self.add_output("last_error", start="", type_=str, depends_on=(), initial_depends_on=(),
                         description="the fault that stopped the adapter (empty when all is well)")
+        self._declare_costs()
         self.add_parameter("card_uri", start=DEFAULT_CARD_URI, type_=str, check=_valid_uri,
                            description="card as [TYPE:]ID: q4:0 (Quanser package), "
                                        "q4:0@tcpip://HOST:PORT (virtual rig), q4:0@inproc://NAME")
@@ -162,6 +167,17 @@ class HilFmu(FmuBase):
         self._armed = False
         self._raw: list[int] = []
         self._unwrapped: list[int] = []
+        self._times_ns: list[int] = []
+        self._requests = [0, 0]      # the card's request count after the first step, and now
+
+    def _declare_costs(self) -> None:
+        """The locals that say what the adapter costs a step (see the module docstring)."""
+        self.add_local("step_time_mean", unit="s", getter=lambda: self._step_time(0.0),
+                       description="time the adapter takes a step, less the wait for the sample instant: mean")
+        self.add_local("step_time_p99", unit="s", getter=lambda: self._step_time(0.99),
+                       description="time the adapter takes a step, less the wait for the sample instant: p99")
+        self.add_local("round_trips_per_step", unit="1", getter=self._round_trips,
+                       description="requests to the card per step (a card that counts them; else 0)")
 
     # --- lifecycle ---------------------------------------------------------------------------------
 
@@ -177,6 +193,7 @@ class HilFmu(FmuBase):
             # may take seconds, so the connection is opened again by the first step.
             _close_quietly(self._holder)
         self._armed = False
+        self._times_ns = []
         self._unwrapped = [0] * len(self._enc)
         self._pos = [0.0] * len(self._enc)
         self._base_ns = None
@@ -230,7 +247,33 @@ class HilFmu(FmuBase):
         self._armed = True
         return card
 
+    def _step_time(self, quantile: float) -> float:
+        """The mean (``quantile`` 0) or a quantile of the steps' own times [s]."""
+        times = self._times_ns
+        if not times:
+            return 0.0
+        if not quantile:
+            return sum(times) / len(times) / 1e9
+        ordered = sorted(times)
+        return ordered[min(len(ordered) - 1, math.ceil(quantile * len(ordered)) - 1)] / 1e9
+
+    def _round_trips(self) -> float:
+        steps = len(self._times_ns)
+        return (self._requests[1] - self._requests[0]) / steps if steps else 0.0
+
     def step(self, t: float, h: float) -> None:
+        began = time.monotonic_ns()
+        first = not self._armed
+        self._card_step(t, h)
+        card = self._holder.get("card")
+        requests = getattr(card, "requests", 0)
+        if first:
+            self._requests[0] = self._requests[1] = requests
+        else:
+            self._times_ns.append(time.monotonic_ns() - began - getattr(card, "last_wait_ns", 0))
+            self._requests[1] = requests
+
+    def _card_step(self, t: float, h: float) -> None:
         from ipcosim.fmus.hil import ErrorCode, HILError, count_difference
 
         card = self._arm() if not self._armed else self._holder.get("card")

@@ -47,7 +47,7 @@ import math
 import numbers
 import time
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 from ipcosim.errors import IpcosimError
 
@@ -191,6 +191,22 @@ def wrap_int32(value: int) -> int:
 def count_difference(new: int, old: int) -> int:
     """Signed difference of two 32-bit counter readings, correct across one wrap-around."""
     return wrap_int32(int(new) - int(old))
+
+
+def wait_until_ns(clock_ns: Callable[[], int], deadline_ns: int, spin_ns: int = 200_000,
+                  abort: Callable[[], bool] = lambda: False) -> int:
+    """Sleep (in slices of at most 1 ms), then spin, until ``clock_ns() >= deadline_ns`` or ``abort()``.
+
+    Sleeping ends ``spin_ns`` before the deadline (the OS wakes a sleeper late by tens of
+    microseconds); the rest is spent reading the clock. Returns the clock at the end.
+    """
+    now = clock_ns()
+    while deadline_ns - now > spin_ns and not abort():
+        time.sleep(min(deadline_ns - now - spin_ns, 1_000_000) / 1e9)
+        now = clock_ns()
+    while now < deadline_ns and not abort():
+        now = clock_ns()
+    return now
 
 
 class Card:

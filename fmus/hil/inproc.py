@@ -96,6 +96,8 @@ class VirtualCard(Card):
         self.rig = rig
         self.info = rig.info(card_type, card_id)
         self._closed = False
+        #: How long the last :meth:`step` waited for its sample instant [ns].
+        self.last_wait_ns = 0
         rig.start_clock()
         rig.new_session(who)
 
@@ -139,7 +141,9 @@ class VirtualCard(Card):
 
     def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
              until: float, reload: bool = True) -> StepResult:
-        return self._check().step(analog_channels, volts, encoder_channels, to_ns(until), reload)
+        res = self._check().step(analog_channels, volts, encoder_channels, to_ns(until), reload)
+        self.last_wait_ns = self.rig.last_wait_ns
+        return res
 
     def advance(self, dt: float) -> None:
         """Lockstep: advance the rig by ``dt`` seconds."""

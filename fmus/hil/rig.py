@@ -29,12 +29,19 @@ FMUs step). Around it the rig models what a controller meets on the real bench:
   seconds before it was taken.
 
 Clocks. ``lockstep``: the rig's time advances only when asked (:meth:`VirtualRig.advance`,
-:meth:`VirtualRig.step`), in sub-steps of at most ``tick``; deterministic, for CI.
-``wallclock``: the rig's time is the host's monotonic clock since :meth:`start_clock`;
-the physics runs on a fixed grid of ``tick`` seconds, kept up to date by a background
-thread and by every request. Time is kept in integer nanoseconds (never accumulated
-floats); the clock is a :class:`RigClock`, the background thread a :class:`Ticker`. The rig
-is thread-safe (one re-entrant lock).
+:meth:`VirtualRig.step`); deterministic, for CI. ``wallclock``: the rig's time is the host's
+monotonic clock since :meth:`start_clock`, counted in steps of the clock's ``resolution``
+(10 us). Neither ticks: the physics is computed when a request comes (or a status is asked),
+exactly from where it was to the request's instant with the voltage held -- a DAC holds its
+value, an encoder is read when asked --, in sub-steps of at most ``tick``. Inside such an
+interval the rig locates what happens on its own: a watchdog's expiry at its deadline, a
+software limit's trip at the first instant (to the clock's resolution) its encoder reading is
+beyond the limit; either latches at that instant. A STEP to a sample instant ``until`` is
+answered at once with the reading at ``until``: the voltage it writes is held to then, and
+the client waits for ``until`` before it acts again (:meth:`VirtualRig.exchange`). So a
+wall-clock run's physics is the lockstep replay of its own requests. Time is kept in integer
+nanoseconds (never accumulated floats); the clock is a :class:`RigClock`. The rig is
+thread-safe (one re-entrant lock).
 """
 from __future__ import annotations
 
@@ -57,6 +64,7 @@ from ipcosim.fmus.hil.api import (
     StepResult,
     as_channels,
     as_finite,
+    wait_until_ns,
     wrap_int32,
 )
 from ipcosim.fmus.instruments import end_stop_state
@@ -81,6 +89,11 @@ PENDULUM_LIMIT_RAD = instruments.PENDULUM_LIMIT_RAD
 END_STOP_M = 0.407
 CLOCKS = ("lockstep", "wallclock")
 DEFAULT_TICK = {"lockstep": 1e-3, "wallclock": 5e-4}
+#: The clock's resolution [s]: a wall-clock request's instant is counted in these steps, so that every
+#: sub-step the physics takes is a whole number of them and its stepper is made once, before the run.
+DEFAULT_RESOLUTION = {"lockstep": 1e-9, "wallclock": 1e-5}
+#: How finely a limit trip is located in a lockstep rig (whose clock counts nanoseconds) [ns].
+LOCATE_NS = 10_000
 
 NS = 1_000_000_000
 #: Longest stretch of rig time one request may ask for (STEP to an instant, ADVANCE) [ns]: a
@@ -88,6 +101,8 @@ NS = 1_000_000_000
 MAX_REQUEST_SPAN_NS = 10 * NS
 #: Longest watchdog timeout a client may set [s].
 MAX_WATCHDOG_TIMEOUT = 10.0
+#: The plants' steppers by step size, one table per plant parameters, shared by every rig of this process.
+_STEPPERS: dict = {}
 
 
 #: Experiments the rig can be set up for (``ipcosim rig serve --experiment NAME``): the pose it starts
@@ -139,7 +154,7 @@ class RigConfig:
     clock : str
         ``lockstep`` or ``wallclock``.
     tick : float, optional
-        Physics step [s]: the largest sub-step in lockstep, the fixed grid in wallclock.
+        Physics step [s]: the largest sub-step the physics takes.
     cart_limit, pendulum_limit : float or None
         Software limits [m], [rad]; None disables one.
     end_stop : float
@@ -157,6 +172,9 @@ class RigConfig:
         no bias); 0: an edge at the zero (the reading is up to one count below).
     cart_m_per_count, pendulum_rad_per_count : float
         Encoder resolutions (default: the thesis's IP02 encoders).
+    resolution : float, optional
+        The clock's resolution [s] (default: 1 ns lockstep, 10 us wallclock); ``tick`` is a
+        whole number of it. A lockstep replay of a wall-clock run takes the wall clock's.
     """
 
     plant: str = "single-mass"
@@ -174,6 +192,7 @@ class RigConfig:
     encoder_phase: float = 0.5
     cart_m_per_count: float = CART_M_PER_COUNT
     pendulum_rad_per_count: float = PENDULUM_RAD_PER_COUNT
+    resolution: float | None = None
 
     def checked(self) -> "RigConfig":
         """Validate; raises ``ValueError`` naming the offending field."""
@@ -184,9 +203,14 @@ class RigConfig:
         name = self.preset or DEFAULT_PRESET[self.plant]
         if name in PRESETS and PRESETS[name][0] != self.plant:
             raise ValueError(f"rig preset {name!r} is a {PRESETS[name][0]} preset, not {self.plant}")
-        for label, value, lo in (("tick", self.tick_s, 1e-6), ("end_stop", self.end_stop, 0.0)):
+        for label, value, lo in (("tick", self.tick_s, 1e-6), ("end_stop", self.end_stop, 0.0),
+                                 ("resolution", self.resolution_s, 0.0)):
             if not (math.isfinite(value) and value > lo):
                 raise ValueError(f"rig {label} = {value}: must be a finite number > {lo:g}")
+        res_ns = max(1, to_ns(self.resolution_s))
+        if to_ns(self.tick_s) % res_ns:
+            raise ValueError(f"rig tick = {self.tick_s} s: must be a whole number of the clock's resolution "
+                             f"({self.resolution_s:g} s)")
         if not (math.isfinite(self.encoder_phase) and 0 <= self.encoder_phase < 1):
             raise ValueError(f"rig encoder_phase = {self.encoder_phase}: must be in [0, 1) counts")
         for label, value in (("cart_m_per_count", self.cart_m_per_count),
@@ -205,6 +229,11 @@ class RigConfig:
     def tick_s(self) -> float:
         """The physics step [s] (the clock's default if not given)."""
         return float(self.tick) if self.tick is not None else DEFAULT_TICK[self.clock]
+
+    @property
+    def resolution_s(self) -> float:
+        """The clock's resolution [s] (the clock's default if not given)."""
+        return float(self.resolution) if self.resolution is not None else DEFAULT_RESOLUTION[self.clock]
 
 
 @dataclass(frozen=True)
@@ -303,33 +332,6 @@ class RigClock:
         return self.clock_ns() - self.wall0_ns
 
 
-class Ticker:
-    """A daemon thread calling ``tick()`` every ``period`` seconds until :meth:`stop`."""
-
-    def __init__(self, period: float, tick: Callable[[], None], name: str = "rig-ticker") -> None:
-        self.period, self.tick, self.name = period, tick, name
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
-
-    def start(self) -> None:
-        """Start the thread (if not running)."""
-        if self._thread is None:
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._loop, name=self.name, daemon=True)
-            self._thread.start()
-
-    def stop(self) -> None:
-        """Stop the thread and wait for it (at most 5 s)."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-            self._thread = None
-
-    def _loop(self) -> None:
-        while not self._stop.wait(self.period):
-            self.tick()
-
-
 class VirtualRig:
     """The virtual IP02 + Q4 rig (see the module docstring).
 
@@ -349,15 +351,21 @@ class VirtualRig:
         self.clock = RigClock(self.config.clock, clock_ns)
         self.lock = threading.RLock()
         self.tick_ns = max(1, to_ns(self.config.tick_s))
-        self.latency_ns = to_ns(self.config.latency)
+        self.res_ns = max(1, to_ns(self.config.resolution_s))
+        self.latency_ns = self._on_clock(to_ns(self.config.latency))
         self.plant = Plant(self.params)
+        if self.res_ns > 1:   # every sub-step is a whole number of resolutions: make their steppers now
+            self.plant.prepare_steps([m * self.res_ns / NS for m in range(1, self.tick_ns // self.res_ns + 1)],
+                                     _STEPPERS)
+        else:
+            self.plant.prepare_steps([], _STEPPERS)
         self._x0 = self._initial_state()
         self.plant.set_state(self._x0)
         self._rng = np.random.default_rng(self.config.seed)
         self._t_ns = 0                      # time of the physics state
-        self._ticker = Ticker(max(self.tick_ns / NS, 1e-3), self._tick)
         self._halted = threading.Event()
-        self._last_step_ns = -NS              # rig time of the last STEP (the ticker rests while they come)
+        #: How long the last wall-clock :meth:`step` waited for its sample instant [ns].
+        self.last_wait_ns = 0
         self.events: collections.deque[RigEvent] = collections.deque(maxlen=1000)
         self.event_count = 0
         self.counters: collections.Counter[str] = collections.Counter()
@@ -379,10 +387,8 @@ class VirtualRig:
         for name in [n for n in MEASURED[self.kind][1:] if n != "pendulum_angle"][:1]:  # a second cart
             self._encoders[PASSIVE_CART_ENCODER] = (self.plant.state_names.index(name), cfg.cart_m_per_count)
         self._carts = [(i, i + 1, n) for i, n in enumerate(self.plant.state_names) if n.endswith("cart_position")]
+        # with a transport latency the encoders show the past: the states of the last ``latency``
         self._history: collections.deque[tuple[int, np.ndarray]] = collections.deque()
-        # wallclock: keep 0.2 s of physics so that a sample is taken at its instant even if the
-        # request is served late (the physics may already be past it)
-        self._history_ns = 0 if self.lockstep else 200_000_000
         self._record_history()
 
     # --- construction helpers ----------------------------------------------------------------
@@ -421,37 +427,27 @@ class VirtualRig:
         """True for the ``lockstep`` clock."""
         return self.clock.lockstep
 
-    def start_clock(self, ticker: bool = True) -> None:
-        """Wallclock: set rig time 0 to now and (optionally) start the background ticker."""
+    def start_clock(self) -> None:
+        """Wallclock: set rig time 0 to now (once)."""
         if self.lockstep:
             return
         with self.lock:
             self.clock.start(self._t_ns)
-        if ticker:
-            self._ticker.start()
 
     def stop_clock(self) -> None:
-        """Stop the background ticker (wallclock)."""
-        self._ticker.stop()
-
-    def _tick(self) -> None:
-        # Requests sync the physics themselves; the ticker keeps an idle rig (watchdog!) going.
-        # Every event still happens at its grid instant: a late ticker only computes it later.
-        if self.now_ns() - self._last_step_ns < 2 * self._ticker.period * NS:
-            return    # a controller is stepping: its requests keep the physics up to date
-        try:
-            with self.lock:
-                self.sync()
-        except HILError:
-            pass  # a plant fault is recorded as an event; keep the clock running
+        """Nothing runs in the background to stop (kept for the server's shutdown sequence)."""
 
     def now_ns(self) -> int:
         """The rig's clock [ns]: simulated (lockstep) or host time since start_clock (wallclock)."""
         if self.lockstep:
             return self._t_ns
         if self.clock.wall0_ns is None:
-            self.start_clock(ticker=False)
+            self.start_clock()
         return self.clock.now_ns(self._t_ns)
+
+    def _on_clock(self, t_ns: int) -> int:
+        """``t_ns`` rounded up to the clock's resolution."""
+        return -(-t_ns // self.res_ns) * self.res_ns
 
     def time(self) -> float:
         """The rig's clock [s]."""
@@ -460,12 +456,13 @@ class VirtualRig:
             return self.now_ns() / NS
 
     def sync(self) -> None:
-        """Wallclock: run the physics up to the last grid point not after now. Lockstep: nothing."""
-        if self.lockstep:
-            return
-        target = (self.now_ns() // self.tick_ns) * self.tick_ns
-        while self._t_ns < target:
-            self._substep(self.tick_ns)
+        """Wallclock: compute the physics up to now (to the clock's resolution), unless it is there or
+        beyond (a STEP computes it to its sample instant at once). Lockstep: nothing."""
+        if self.lockstep or self._halted.is_set():
+            return      # a halted rig's physics stands still
+        target = self.now_ns() // self.res_ns * self.res_ns
+        if target > self._t_ns:
+            self._advance_to(target)
 
     def advance(self, dt: float) -> None:
         """Lockstep: advance the rig by ``dt`` seconds (sub-steps of at most ``tick``). Wallclock: sync."""
@@ -479,15 +476,34 @@ class VirtualRig:
             self._advance_to(self._t_ns + to_ns(dt))
 
     def _advance_to(self, target_ns: int) -> None:
-        interval = target_ns - self._t_ns
-        if interval <= 0:
-            return
+        """Compute the physics to ``target_ns``, in pieces that end where something is due inside the
+        interval (a watchdog deadline, a delayed write reaching the amplifier)."""
+        while self._t_ns < target_ns:
+            self._piece(min(target_ns, self._next_due(target_ns)))
+
+    def _next_due(self, horizon_ns: int) -> int:
+        """The first instant after now and before ``horizon_ns`` at which something is due (else the horizon)."""
+        t, out = self._t_ns, horizon_ns
+        wd = self.watchdog
+        if wd.running and not wd.expired and t < wd.deadline_ns < out:
+            out = wd.deadline_ns
+        if self._pending and t < self._pending[0][0] < out:
+            out = self._pending[0][0]
+        return out
+
+    def _piece(self, end_ns: int) -> None:
+        """From now to ``end_ns`` in ``ceil(interval / tick)`` sub-steps as equal as the clock's resolution
+        allows (a lockstep rig: as equal as nanoseconds allow)."""
+        interval = end_ns - self._t_ns
+        q = self.res_ns if interval % self.res_ns == 0 else 1
+        units = interval // q
         n = -(-interval // self.tick_ns)
         done = 0
+        halted = self._halted.is_set
         for k in range(1, n + 1):
-            if self._halted.is_set():
+            if halted():
                 raise HILError(ErrorCode.CONNECTION, "the rig is shutting down")
-            upto = interval * k // n
+            upto = units * k // n * q
             self._substep(upto - done)
             done = upto
 
@@ -501,6 +517,22 @@ class VirtualRig:
         if self.watchdog.due(t_ns):
             self._expire_watchdog(t_ns)
         v = AMPLIFIER_GAIN * self._applied[MOTOR_CHANNEL] if self.amplifier_enabled else 0.0
+        armed = self.amplifier_enabled and self.limits_armed
+        start = self.plant.snapshot() if armed and not self.latency_ns else None
+        self._plant_step(t_ns, dt_ns, v)
+        if not armed:
+            return
+        beyond = self._beyond_limit()
+        if beyond is None:
+            return
+        if start is not None:
+            beyond = self._locate_trip(start, t_ns, dt_ns, v, beyond)
+        self._trip(*beyond)
+        if self._t_ns < t_ns + dt_ns:      # the rest of the sub-step with the amplifier off
+            self._substep(t_ns + dt_ns - self._t_ns)
+
+    def _plant_step(self, t_ns: int, dt_ns: int, v: float) -> None:
+        """One step of the plant from ``t_ns`` (the hard end stops after it)."""
         try:
             self.plant.do_step(t_ns / NS, dt_ns / NS, v)
         except (PlantStepError, ValueError) as exc:
@@ -511,7 +543,31 @@ class VirtualRig:
         self._t_ns = t_ns + dt_ns
         self._end_stops()
         self._record_history()
-        self._check_limits()
+
+    def _locate_trip(self, start: tuple, t_ns: int, dt_ns: int, v: float,
+                     beyond: tuple[int, float, float]) -> tuple[int, float, float]:
+        """The first instant of the sub-step from ``t_ns`` (state ``start``) at which a reading is beyond
+        its limit, by bisection on the clock's resolution (``LOCATE_NS`` on a lockstep clock): the
+        plant is left there, with what is beyond."""
+        q = self.res_ns if self.res_ns > 1 else LOCATE_NS
+        lo, hi = 0, dt_ns
+        end = self.plant.snapshot()
+        while True:
+            mid = (lo + (hi - lo) // 2) // q * q
+            if mid <= lo:
+                mid = lo + q
+            if mid >= hi:
+                break
+            self.plant.restore(start)
+            self._plant_step(t_ns, mid, v)
+            found = self._beyond_limit()
+            if found is None:
+                lo = mid
+            else:
+                hi, beyond, end = mid, found, self.plant.snapshot()
+        self.plant.restore(end)
+        self._t_ns = t_ns + hi
+        return beyond
 
     def _end_stops(self) -> None:
         x = self.plant.state
@@ -524,15 +580,18 @@ class VirtualRig:
         self.plant.set_state(stopped)
 
     def _record_history(self) -> None:
-        self._history.append((self._t_ns, self.plant.x.copy()))
-        keep_from = self._t_ns - self.latency_ns - self._history_ns
+        """With a transport latency: keep the states the encoders may still show."""
+        if not self.latency_ns:
+            return
+        self._history.append((self._t_ns, self.plant.state))
+        keep_from = self._t_ns - self.latency_ns
         while len(self._history) > 1 and self._history[1][0] <= keep_from:
             self._history.popleft()
 
-    def _sensed_state(self, at_ns: int | None = None) -> np.ndarray:
+    def _sensed_state(self, at_ns: int | None = None) -> Sequence[float]:
         """The state the encoders show at rig time ``at_ns`` (default: now), i.e. ``latency`` earlier."""
-        if not self.latency_ns and at_ns is None:
-            return self.plant.x
+        if not self.latency_ns:
+            return self.plant.state
         when = (self._t_ns if at_ns is None else at_ns) - self.latency_ns
         chosen = self._history[0][1]
         for t, x in reversed(self._history):
@@ -541,33 +600,35 @@ class VirtualRig:
                 break
         return chosen
 
-    def _position_counts(self, channel: int, x: np.ndarray) -> int:
+    def _position_counts(self, channel: int, x: Sequence[float]) -> int:
         if channel not in self._encoders:
             return 0
         index, res = self._encoders[channel]
         return math.floor(x[index] / res + self._phase)
 
-    def _check_limits(self) -> None:
-        if not self.amplifier_enabled or not self.limits_armed:
-            return
+    def _beyond_limit(self) -> tuple[int, float, float] | None:
+        """``(encoder channel, reading, limit)`` of the first reading beyond its software limit, or None."""
         x = self._sensed_state()
         cfg = self.config
         for ch, (index, res) in self._encoders.items():
-            name = self.plant.state_names[index]
-            value = math.floor(x[index] / res + self._phase) * res
             limit = cfg.pendulum_limit if ch == PENDULUM_ENCODER else cfg.cart_limit
-            if limit is None or abs(value) <= limit:
-                continue
-            unit = "rad" if ch == PENDULUM_ENCODER else "m"
-            extra = f" ({math.degrees(value):+.2f} deg, limit +-{math.degrees(limit):.0f} deg)" \
-                if ch == PENDULUM_ENCODER else ""
-            self.amplifier_enabled = False
-            self.limit_message = (f"{'pendulum' if ch == PENDULUM_ENCODER else 'cart'} limit tripped: "
-                                  f"{name} = {value:+.4f} {unit} beyond +-{limit:.4g} {unit}{extra} "
-                                  f"at rig time {self._t_ns / NS:.4f} s; amplifier latched off until reset")
-            self.counters["limit_trips"] += 1
-            self._event(self._t_ns, "limit", self.limit_message)
-            return
+            value = math.floor(x[index] / res + self._phase) * res
+            if limit is not None and abs(value) > limit:
+                return ch, value, limit
+        return None
+
+    def _trip(self, ch: int, value: float, limit: float) -> None:
+        """Latch the amplifier off now: the reading of encoder ``ch`` is ``value``, beyond ``limit``."""
+        name = self.plant.state_names[self._encoders[ch][0]]
+        unit = "rad" if ch == PENDULUM_ENCODER else "m"
+        extra = f" ({math.degrees(value):+.2f} deg, limit +-{math.degrees(limit):.0f} deg)" \
+            if ch == PENDULUM_ENCODER else ""
+        self.amplifier_enabled = False
+        self.limit_message = (f"{'pendulum' if ch == PENDULUM_ENCODER else 'cart'} limit tripped: "
+                              f"{name} = {value:+.4f} {unit} beyond +-{limit:.4g} {unit}{extra} "
+                              f"at rig time {self._t_ns / NS:.4f} s; amplifier latched off until reset")
+        self.counters["limit_trips"] += 1
+        self._event(self._t_ns, "limit", self.limit_message)
 
     def _expire_watchdog(self, t_ns: int) -> None:
         wd = self.watchdog
@@ -608,34 +669,41 @@ class VirtualRig:
         """Write analog outputs [V] (DAC-quantized; refused after a watchdog expiry)."""
         with self.lock:
             self.sync()
-            chans = self._check_ao(channels)
-            values = as_finite(volts, len(chans), "write_analog")
-            if self.watchdog.expired:
-                raise HILError(ErrorCode.WATCHDOG_EXPIRED,
-                               f"write_analog refused: the watchdog expired at rig time "
-                               f"{(self.watchdog.expired_at_ns or 0) / NS:.4f} s and was not cleared")
-            for c, v in zip(chans, values):
-                q = dac_quantize(v)
-                self._ao[c] = q
-                if self.latency_ns:
-                    self._pending.append((self._t_ns + self.latency_ns, c, q))
-                else:
-                    self._applied[c] = q
+            self._write(channels, volts)
+
+    def _write(self, channels: Sequence[int], volts: Sequence[float]) -> None:
+        """:meth:`write_analog` at the rig's time as it stands."""
+        chans = self._check_ao(channels)
+        values = as_finite(volts, len(chans), "write_analog")
+        if self.watchdog.expired:
+            raise HILError(ErrorCode.WATCHDOG_EXPIRED,
+                           f"write_analog refused: the watchdog expired at rig time "
+                           f"{(self.watchdog.expired_at_ns or 0) / NS:.4f} s and was not cleared")
+        for c, v in zip(chans, values):
+            q = dac_quantize(v)
+            self._ao[c] = q
+            if self.latency_ns:
+                self._pending.append((self._t_ns + self.latency_ns, c, q))
+            else:
+                self._applied[c] = q
 
     def read_encoder(self, channels: Sequence[int], at_ns: int | None = None) -> np.ndarray:
         """Encoder counts (int32), as of now or of the rig time ``at_ns`` (a recent instant)."""
         with self.lock:
             self.sync()
-            chans = self._check_enc(channels)
-            x = self._sensed_state(at_ns)
-            sigma = self.config.noise_counts
-            out = []
-            for c in chans:
-                n = self._enc_offset[c] + self._position_counts(c, x)
-                if sigma and c in self._encoders:
-                    n += int(round(self._rng.normal(0.0, sigma)))
-                out.append(wrap_int32(n))
-            return np.array(out, dtype=np.int32)
+            return np.array(self._counts(self._check_enc(channels), at_ns), dtype=np.int32)
+
+    def _counts(self, chans: list[int], at_ns: int | None) -> list[int]:
+        """The counters ``chans`` as of rig time ``at_ns`` (None: now), with the encoders' noise."""
+        x = self._sensed_state(at_ns)
+        sigma = self.config.noise_counts
+        out = []
+        for c in chans:
+            n = self._enc_offset[c] + self._position_counts(c, x)
+            if sigma and c in self._encoders:
+                n += int(round(self._rng.normal(0.0, sigma)))
+            out.append(wrap_int32(n))
+        return out
 
     def set_encoder_counts(self, channels: Sequence[int], counts: Sequence[int]) -> None:
         """Load the counters."""
@@ -668,13 +736,13 @@ class VirtualRig:
             if not (math.isfinite(timeout) and 0 < timeout <= MAX_WATCHDOG_TIMEOUT):
                 raise HILError(ErrorCode.INVALID_ARGUMENT, f"watchdog_start: timeout = {timeout} s must be in "
                                                            f"(0, {MAX_WATCHDOG_TIMEOUT:g}] s")
-            self.watchdog.start(max(1, to_ns(timeout)), self.now_ns())
+            self.watchdog.start(max(self.res_ns, self._on_clock(to_ns(timeout))), self._t_ns)
 
     def watchdog_reload(self) -> bool:
         """Reload; False if the watchdog had expired."""
         with self.lock:
             self.sync()
-            return self.watchdog.reload(self.now_ns())
+            return self.watchdog.reload(self._t_ns)
 
     def watchdog_is_expired(self) -> bool:
         """Whether the watchdog expired and was not cleared."""
@@ -686,7 +754,7 @@ class VirtualRig:
         """Clear an expiry (outputs stay at their expiration states until written)."""
         with self.lock:
             self.sync()
-            self.watchdog.clear(self.now_ns())
+            self.watchdog.clear(self._t_ns)
 
     def watchdog_stop(self) -> None:
         """Stop the timer (an expiry stays until cleared)."""
@@ -694,12 +762,15 @@ class VirtualRig:
             self.sync()
             self.watchdog.stop()
 
-    def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
-             until_ns: int, reload: bool = True) -> StepResult:
-        """One sample period (see :meth:`ipcosim.fmus.hil.api.Card.step`); ``until_ns`` is rig time.
+    def exchange(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
+                 until_ns: int, reload: bool = True) -> tuple[bool, int, list[int]]:
+        """One sample period's request, answered at once: ``(reloaded, lateness [ns], counts)``.
 
-        Lockstep: advance to ``until_ns`` (an instant before the rig's time is an error).
-        Wallclock: wait (outside the lock) until the rig's clock reaches ``until_ns``.
+        At the request's instant (wallclock: its arrival; lockstep: the rig's time) the watchdog is
+        reloaded and the outputs written; the physics runs on with them held to the sample instant
+        ``until_ns`` (rig time), where the encoders are read. The client waits for ``until_ns`` before it
+        acts again (:meth:`step`, ``TcpipCard.step``), so nothing can change the outputs before then. A
+        request that arrives after its sample instant is read at its arrival, and counted late.
         """
         with self.lock:
             self.sync()
@@ -711,29 +782,37 @@ class VirtualRig:
                 raise HILError(ErrorCode.INVALID_ARGUMENT, f"step: sample instant {until_ns / NS:.6f} s is more "
                                                            f"than {MAX_REQUEST_SPAN_NS / NS:g} s after the rig's "
                                                            f"time {arrival / NS:.6f} s")
-            reloaded = self.watchdog_reload() if reload else True
-            self.write_analog(analog_channels, volts)
+            reloaded = self.watchdog.reload(self._t_ns) if reload else True   # one instant for all of it
+            self._write(analog_channels, volts)
             enc = self._check_enc(encoder_channels)
-            if self.lockstep:
-                self._advance_to(until_ns)
-        if not self.lockstep:
-            self._last_step_ns = arrival
-            # compute the physics up to shortly before the instant while waiting, so that at the
-            # instant itself at most a tick or two remain to be computed before the reply
-            wait_until_ns(self.now_ns, until_ns - STEP_SPIN_NS, spin_ns=0, abort=self._halted.is_set)
-            with self.lock:
-                self.sync()
-            wait_until_ns(self.now_ns, until_ns, spin_ns=STEP_SPIN_NS, abort=self._halted.is_set)
-            if self._halted.is_set():
-                raise HILError(ErrorCode.CONNECTION, "the rig is shutting down")
-        with self.lock:
-            self.sync()
-            counts = self.read_encoder(enc, at_ns=until_ns)
+            self._advance_to(self._on_clock(until_ns))
             late = max(0, arrival - until_ns)
             if late:
                 self.counters["late_samples"] += 1
-            return StepResult(counts=counts, reloaded=reloaded, time=self._t_ns / NS, late=late / NS,
-                              status=self.status())
+            return reloaded, late, self._counts(enc, self._t_ns)
+
+    def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
+             until_ns: int, reload: bool = True) -> StepResult:
+        """One sample period (see :meth:`ipcosim.fmus.hil.api.Card.step`); ``until_ns`` is rig time.
+
+        :meth:`exchange`, then (wallclock) a wait until the rig's clock reaches ``until_ns``.
+        """
+        reloaded, late, counts = self.exchange(analog_channels, volts, encoder_channels, until_ns, reload)
+        self.last_wait_ns = 0
+        if not self.lockstep:
+            began = time.monotonic_ns()
+            wait_until_ns(self.now_ns, until_ns, abort=self._halted.is_set)
+            self.last_wait_ns = time.monotonic_ns() - began
+            if self._halted.is_set():
+                raise HILError(ErrorCode.CONNECTION, "the rig is shutting down")
+        with self.lock:
+            return StepResult(counts=np.array(counts, dtype=np.int32), reloaded=reloaded,
+                              time=max(self._t_ns, self.now_ns()) / NS, late=late / NS, status=self._status())
+
+    def flags(self) -> tuple[bool, bool, bool, bool]:
+        """``(amplifier enabled, limit tripped, watchdog expired, watchdog running)`` as they stand."""
+        return (self.amplifier_enabled, bool(self.limit_message) and not self.amplifier_enabled,
+                self.watchdog.expired, self.watchdog.running)
 
     # --- lab operations ----------------------------------------------------------------------------
 
@@ -806,13 +885,16 @@ class VirtualRig:
         """Safety status, the clock and the counters."""
         with self.lock:
             self.sync()
-            return RigStatus(amplifier_enabled=self.amplifier_enabled,
-                             limit_tripped=bool(self.limit_message) and not self.amplifier_enabled,
-                             watchdog_expired=self.watchdog.expired, watchdog_running=self.watchdog.running,
-                             limit_message=self.limit_message, time=self.now_ns() / NS,
-                             motor_voltage=(AMPLIFIER_GAIN * self._applied[MOTOR_CHANNEL]
-                                            if self.amplifier_enabled else 0.0),
-                             counters=dict(self.counters))
+            return self._status()
+
+    def _status(self) -> RigStatus:
+        """:meth:`status` as the physics stands (nothing computed for it)."""
+        return RigStatus(amplifier_enabled=self.amplifier_enabled,
+                         limit_tripped=bool(self.limit_message) and not self.amplifier_enabled,
+                         watchdog_expired=self.watchdog.expired, watchdog_running=self.watchdog.running,
+                         limit_message=self.limit_message, time=self.now_ns() / NS,
+                         motor_voltage=AMPLIFIER_GAIN * self._applied[MOTOR_CHANNEL] if self.amplifier_enabled else 0.0,
+                         counters=dict(self.counters))
 
     def true_state(self) -> dict[str, float]:
         """The plant's true state by name (for tests and diagnostics; a controller never sees it)."""
@@ -821,21 +903,4 @@ class VirtualRig:
             return self.plant.values()
 
 
-#: How long before a sample instant the rig stops sleeping and polls its clock [ns].
-STEP_SPIN_NS = 150_000
 
-
-def wait_until_ns(clock_ns: Callable[[], int], deadline_ns: int, spin_ns: int = 300_000,
-                  abort: Callable[[], bool] = lambda: False) -> int:
-    """Sleep (in slices of at most 1 ms), then poll, until ``clock_ns() >= deadline_ns`` or ``abort()``.
-
-    The last ``spin_ns`` before the deadline are spent polling with ``time.sleep(0)`` between
-    readings, which hands the GIL to the rig's other threads while keeping the wake-up
-    within tens of microseconds of the deadline. Returns the clock at the end.
-    """
-    now = clock_ns()
-    while now < deadline_ns and not abort():
-        remaining = deadline_ns - now
-        time.sleep(min(remaining - spin_ns, 1_000_000) / NS if remaining > spin_ns else 0)
-        now = clock_ns()
-    return now

@@ -2,20 +2,33 @@
 
 Card id ``N@tcpip://HOST:PORT`` (e.g. ``0@tcpip://127.0.0.1:18920``). Every call is one
 request/reply exchange of :mod:`ipcosim.fmus.hil.protocol`; a reply that does not come within
-``timeout`` seconds raises ``HILError(TIMEOUT)`` naming the request.
+``timeout`` seconds raises ``HILError(TIMEOUT)`` naming the request. The socket blocks with its
+timeouts in the kernel (``SO_RCVTIMEO``, ``SO_SNDTIMEO``) and ``TCP_NODELAY``: a request is one
+write, its reply (as a rule) one read. A wall-clock rig answers a STEP at once with the reading
+at its sample instant; :meth:`TcpipCard.step` then waits on the host for that instant, as a
+card's own step does.
 """
 from __future__ import annotations
 
 import numbers
 import os
-import select
 import socket
 import struct
 import time
 import weakref
 from typing import Sequence
 
-from ipcosim.fmus.hil.api import Card, CardInfo, ErrorCode, HILError, RigStatus, StepResult, as_channels, as_finite
+from ipcosim.fmus.hil.api import (
+    Card,
+    CardInfo,
+    ErrorCode,
+    HILError,
+    RigStatus,
+    StepResult,
+    as_channels,
+    as_finite,
+    wait_until_ns,
+)
 from ipcosim.fmus.hil.protocol import (
     ADVANCE_REQUEST,
     COUNT,
@@ -49,6 +62,9 @@ from ipcosim.fmus.hil.protocol import (
 from ipcosim.fmus.params import KINDS
 
 NS = 1_000_000_000
+#: How long before a sample instant :meth:`TcpipCard.step` stops sleeping and reads the clock [ns]: short,
+#: as a paced run's own wait follows at once (a spin costs a loaded host the CPU the rig needs).
+WAIT_SPIN_NS = 50_000
 
 #: Open tcpip cards of this process (diagnostics and fault-injection tests).
 OPEN_CARDS: "weakref.WeakSet[TcpipCard]" = weakref.WeakSet()
@@ -89,13 +105,18 @@ class TcpipCard(Card):
         self._last_rig_ns = 0
         self._last_host_ns = time.monotonic_ns()
         self.last_flags = 0
+        #: Requests made (each one round trip).
+        self.requests = 0
+        #: How long the last :meth:`step` waited for its sample instant [ns].
+        self.last_wait_ns = 0
+        self._applied_timeout = 0.0
         try:
             sock = socket.create_connection((host, port), timeout=max(self.timeout, 2.0))
         except OSError as exc:
             raise HILError(ErrorCode.CONNECTION, f"cannot connect to the virtual rig at {self.where}: "
                                                  f"{exc.strerror or exc} (is `ipcosim rig serve` running?)") from exc
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        sock.setblocking(False)
+        sock.settimeout(None)
         self._sock = sock
         try:
             if token is None:
@@ -123,36 +144,42 @@ class TcpipCard(Card):
                 pass
             self._sock = None
 
-    def _request(self, msg: Msg, payload: bytes = b"", timeout: float | None = None,
-                 after: str = "") -> Reader:
+    def _set_timeout(self, seconds: float) -> None:
+        """The socket's read and write timeouts (set only when they change: no call per request)."""
+        seconds = max(seconds, 1e-3)          # 0 would mean no timeout
+        if seconds != self._applied_timeout and self._sock is not None:
+            whole = int(seconds)
+            tv = struct.pack("ll", whole, int(round((seconds - whole) * 1e6)))
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, tv)
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, tv)
+            self._applied_timeout = seconds
+
+    def _request(self, msg: Msg, payload: bytes = b"", timeout: float | None = None) -> Reader:
         if self._sock is None:
             raise HILError(ErrorCode.NOT_OPEN, f"card {self.card_id} is closed")
         self._seq += 1
+        self.requests += 1
         seq = self._seq
         limit = self.timeout if timeout is None else timeout
+        self._set_timeout(limit)
         try:
-            self._send_all(encode_frame(msg, seq, payload), limit)
+            self._sock.sendall(encode_frame(msg, seq, payload))
+        except (socket.timeout, BlockingIOError):
+            raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} does not take data") from None
         except OSError as exc:
             self._abort()
             raise HILError(ErrorCode.CONNECTION, f"lost the virtual rig at {self.where} sending {msg.name}: "
                                                  f"{exc.strerror or exc}") from exc
         deadline = time.monotonic() + limit
         while True:
-            remaining = max(0.0, deadline - time.monotonic())
-            try:  # a last look with no wait once the deadline passed (this process may have stalled)
-                ready, _, _ = select.select([self._sock], [], [], remaining)
-            except (OSError, ValueError) as exc:
-                self._abort()
-                raise HILError(ErrorCode.CONNECTION, f"lost the virtual rig at {self.where}: {exc}") from exc
-            if not ready:
-                if time.monotonic() >= deadline:
-                    within = f"{self.timeout:g} s {after}" if after else f"{limit:g} s"
-                    raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} did not answer "
-                                                      f"{msg.name} (seq {seq}) within {within}")
-                continue
             try:
                 data = self._sock.recv(65536)
-            except BlockingIOError:
+            except (socket.timeout, BlockingIOError):
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} did not answer "
+                                                      f"{msg.name} (seq {seq}) within {limit:g} s") from None
+                self._set_timeout(remaining)
                 continue
             except OSError as exc:
                 self._abort()
@@ -168,19 +195,9 @@ class TcpipCard(Card):
                     continue
                 return self._parse_reply(msg, frame.payload)
 
-    def _send_all(self, data: bytes, limit: float) -> None:
-        assert self._sock is not None
-        view = memoryview(data)
-        deadline = time.monotonic() + limit
-        while view:
-            try:
-                n = self._sock.send(view)
-                view = view[n:]
-            except BlockingIOError:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    raise HILError(ErrorCode.TIMEOUT, f"the virtual rig at {self.where} does not take data") from None
-                select.select([], [self._sock], [], remaining)
+    def rig_now_ns(self) -> int:
+        """The rig's clock [ns] as this host reckons it: the last reply's time plus the host time since."""
+        return self._last_rig_ns + (time.monotonic_ns() - self._last_host_ns)
 
     def _parse_reply(self, msg: Msg, payload: bytes) -> Reader:
         r = Reader(payload)
@@ -260,15 +277,16 @@ class TcpipCard(Card):
         until_ns = int(round(until * NS))
         payload = (STEP_REQUEST.pack(until_ns, 1 if reload else 0) + pack_channels(ao)
                    + pack_doubles(as_finite(volts, len(ao), "step")) + pack_channels(enc))
-        wait = 0.0
-        if self.info.clock == "wallclock":
-            est_now = self._last_rig_ns + (time.monotonic_ns() - self._last_host_ns)
-            wait = max(0.0, (until_ns - est_now) / NS)
-        r = self._request(Msg.STEP, payload, timeout=self.timeout + wait,
-                          after="of its sample instant" if self.info.clock == "wallclock" else "")
+        r = self._request(Msg.STEP, payload)
         reloaded, late_ns, n = self._body(r, STEP_REPLY, "STEP")
         counts = list(self._body(r, f"{n}i", "STEP"))  # int32 on the wire
-        return StepResult(counts=counts, reloaded=bool(reloaded), time=self._last_rig_ns / NS, late=late_ns / NS,
+        now = self._last_rig_ns
+        self.last_wait_ns = 0
+        if self.info.clock == "wallclock":   # the reading is the sample instant's: not before it
+            began = time.monotonic_ns()
+            now = max(now, wait_until_ns(self.rig_now_ns, until_ns, spin_ns=WAIT_SPIN_NS))
+            self.last_wait_ns = time.monotonic_ns() - began
+        return StepResult(counts=counts, reloaded=bool(reloaded), time=now / NS, late=late_ns / NS,
                           status=self._flags_status())
 
     def _flags_status(self) -> RigStatus:

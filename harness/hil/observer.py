@@ -6,7 +6,10 @@ answering or went away) is recorded in metrics.json as ``rig_fault`` (the messag
 ``upright`` false, whatever the last recorded sample says: the step that tripped is never
 recorded. In a paced run it also records ``card_overruns``: the sum of the ``overruns``
 outputs of the components that have one (steps whose request reached the card after their
-sample instant), read after the last step.
+sample instant), read after the last step, and what the adapter costs a step, from its
+locals: ``adapter_step_mean_us`` and ``adapter_step_p99_us`` (from its ``doStep``'s call to
+its return, less the wait for the sample instant, in microseconds) and
+``card_round_trips_per_step`` (requests to the card per step, for a card that counts them).
 
 :class:`CardObserver` is a master observer
 (:class:`ipcosim.harness.master.observers.Observer`).
@@ -30,6 +33,7 @@ class CardObserver(Observer):
         self.fault: str | None = None
         self._last_tick: int | None = None
         self._card_overruns: int | None = None
+        self._adapter: dict[str, float] = {}
 
     def start(self, execution: Execution) -> None:
         """Note the run's last tick (the overruns are read there)."""
@@ -50,6 +54,7 @@ class CardObserver(Observer):
                 total = (total or 0) + int(slave.get_values([var])[0])
             except Exception:  # noqa: BLE001 -- statistics must not fail a run
                 pass
+            self._adapter = adapter_costs(inst, slave)
         self._card_overruns = total
 
     def finish(self, execution: Execution, error: BaseException | None) -> None:
@@ -61,10 +66,31 @@ class CardObserver(Observer):
         out: dict[str, Any] = {}
         if self._card_overruns is not None:
             out["card_overruns"] = self._card_overruns
+        out.update(self._adapter)
         if self.fault is not None:
             out["upright"] = False
             out["rig_fault"] = self.fault
         return out
+
+
+#: The adapter's locals of what it costs a step -> (metrics.json key, scale).
+ADAPTER_COSTS = {"step_time_mean": ("adapter_step_mean_us", 1e6), "step_time_p99": ("adapter_step_p99_us", 1e6),
+                 "round_trips_per_step": ("card_round_trips_per_step", 1.0)}
+
+
+def adapter_costs(inst: Any, slave: Any) -> dict[str, float]:
+    """What a card-driving component (a HIL adapter) says it costs a step: the metrics of
+    ``ADAPTER_COSTS`` that it has (none when it has not, or cannot be asked)."""
+    out = {}
+    for name, (key, scale) in ADAPTER_COSTS.items():
+        var = inst.model.variables.get(name)
+        if var is None:
+            continue
+        try:
+            out[key] = round(float(slave.get_values([var])[0]) * scale, 3)
+        except Exception:  # noqa: BLE001 -- statistics must not fail a run
+            pass
+    return out
 
 
 def card_fault(execution: Execution, error: BaseException | None) -> str | None:

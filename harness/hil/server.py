@@ -30,6 +30,7 @@ import gc
 import hmac
 import ipaddress
 import socket
+import struct
 import threading
 import time
 from typing import Callable
@@ -75,6 +76,12 @@ DROP_LOG_INTERVAL = 1.0           # [s] at most one drop summary per connection 
 _CLOSE = object()
 _ANSWERED = object()
 _POLL = 0.1                       # [s] how often a connection thread looks at the stop flag
+
+
+def _timeval(seconds: float) -> bytes:
+    """A ``struct timeval`` for SO_RCVTIMEO / SO_SNDTIMEO."""
+    whole = int(seconds)
+    return struct.pack("ll", whole, int(round((seconds - whole) * 1e6)))
 
 
 class RigAccessError(HILError, ValueError):
@@ -290,6 +297,8 @@ class RigServer:
 
     def _relay_events(self, wait: float = 0.05) -> None:
         # never blocks for long: a request may hold the rig (stopping must not wait for it)
+        if self.rig.event_count == self._events_seen:
+            return      # nothing new: the rig's lock is not touched (a step may be in progress)
         if not self.rig.lock.acquire(timeout=wait):
             return
         try:
@@ -325,6 +334,10 @@ class RigServer:
                 conn.close()
                 continue
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            # blocking, with the timeouts in the kernel: a request is one read, its reply one write
+            conn.settimeout(None)
+            conn.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, _timeval(_POLL))
+            conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, _timeval(self.io_timeout))
             t = threading.Thread(target=self._serve_connection, args=(conn, peer), name=f"rig-{peer}",
                                  daemon=True)
             t.start()
@@ -337,7 +350,6 @@ class RigServer:
         session = _Session(peer)
         seen = dict(decoder.counters)
         reason = "connection closed"
-        conn.settimeout(_POLL)
         try:
             reason = self._receive(conn, session, decoder, seen)
         except _WriteTimeout:
@@ -363,7 +375,7 @@ class RigServer:
                 decoder.discard_partial()       # read timeout: a frame begun was not completed
             try:
                 data = conn.recv(65536)
-            except socket.timeout:
+            except (socket.timeout, BlockingIOError):
                 continue
             except OSError as exc:
                 reason = f"connection lost: {exc}"
@@ -445,22 +457,20 @@ class RigServer:
     # --- requests ------------------------------------------------------------------------------
 
     def _send(self, conn: socket.socket, frame: Frame, code: int, body: bytes = b"", message: str = "") -> None:
-        st = self.rig.status()
-        flags = ((FLAG_AMPLIFIER if st.amplifier_enabled else 0) | (FLAG_LIMIT if st.limit_tripped else 0)
-                 | (FLAG_WD_EXPIRED if st.watchdog_expired else 0) | (FLAG_WD_RUNNING if st.watchdog_running else 0))
-        payload = reply_payload(code, flags, int(round(st.time * NS)), body, message)
+        """One reply: the rig's flags and clock as they stand (nothing is computed for them), one write."""
+        rig = self.rig
+        with rig.lock:
+            amplifier, limit, expired, running = rig.flags()
+            now = rig.now_ns()
+        flags = ((FLAG_AMPLIFIER if amplifier else 0) | (FLAG_LIMIT if limit else 0)
+                 | (FLAG_WD_EXPIRED if expired else 0) | (FLAG_WD_RUNNING if running else 0))
         try:
-            conn.settimeout(self.io_timeout)
-            conn.sendall(encode_frame(frame.type | REPLY_BIT, frame.seq, payload))
-        except socket.timeout:
+            conn.sendall(encode_frame(frame.type | REPLY_BIT, frame.seq,
+                                      reply_payload(code, flags, now, body, message)))
+        except (socket.timeout, BlockingIOError):
             raise _WriteTimeout() from None
         except OSError:
             pass  # the receive loop notices the loss
-        finally:
-            try:
-                conn.settimeout(_POLL)
-            except OSError:
-                pass
 
     def _drop(self, counter: str, session: _Session, frame: Frame, why: str) -> None:
         self._note_drop(session, counter)
@@ -667,9 +677,8 @@ class RigServer:
             self.log(f"rig: fault injection: no longer answering {session.peer} "
                      f"(after {self.stall_after_steps} steps)")
             return None
-        res = self.rig.step(ao, volts, enc, until, reload)
-        return (STEP_REPLY.pack(1 if res.reloaded else 0, int(round(res.late * NS)), len(res.counts))
-                + pack_ints([int(c) for c in res.counts]))
+        reloaded, late, counts = self.rig.exchange(ao, volts, enc, until, reload)
+        return STEP_REPLY.pack(1 if reloaded else 0, late, len(counts)) + pack_ints(counts)
 
     def _status_body(self) -> bytes:
         """STATUS: motor voltage, watchdog times [ns] (-1: none), the limit message and the rig's

@@ -171,9 +171,9 @@ class ServeOptions:
 
 
 def dedicate() -> None:
-    """Tune the interpreter for a process that only serves a rig: the GIL handed over quickly between the
-    connection and ticker threads, start-up objects frozen, and no collection pauses while a controller
-    steps (the server collects between sessions, ``RigServer._release``)."""
+    """Tune the interpreter for a process that only serves a rig: the GIL handed over quickly between its
+    threads (the connection's and the housekeeping ones), start-up objects frozen, and no collection pauses
+    while a controller steps (the server collects between sessions, ``RigServer._release``)."""
     import gc
 
     sys.setswitchinterval(1e-4)

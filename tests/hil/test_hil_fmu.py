@@ -273,7 +273,7 @@ def test_rig_that_stops_answering_is_reported_and_the_motor_goes_to_zero(hil_fmu
             if status != OK:
                 break
         assert status == DISCARD and k == 40
-        assert "did not answer STEP" in hil.text() and "within 1 s of its sample instant" in hil.text()
+        assert "did not answer STEP" in hil.text() and "within 1 s" in hil.text()
         assert hil.slave.getString([hil.vr["last_error"]])[0]
         free(hil)
         for _ in range(300):                        # bounded: the adapter closed its connection

@@ -278,30 +278,89 @@ class FakeClock:
         return self.ns
 
 
-def test_wallclock_runs_the_physics_on_a_fixed_grid_of_real_time():
+def fine(plant: Plant, t0: float, t1: float, volts: float, h: float = 1e-5) -> None:
+    """``plant`` from ``t0`` to ``t1`` in steps of about ``h`` (an independent, finer integration)."""
+    n = max(1, round((t1 - t0) / h))
+    for k in range(n):
+        plant.do_step(t0 + k * (t1 - t0) / n, (t1 - t0) / n, volts)
+
+
+def test_wallclock_computes_the_physics_exactly_to_the_request_without_ticking():
     clock = FakeClock()
     r = VirtualRig(RigConfig(clock="wallclock", tick=5e-4), clock_ns=clock)
-    r.start_clock(ticker=False)
+    r.start_clock()
     r.write_analog([0], [2.0])
-    clock.ns += 10_300_000                       # 10.3 ms of real time
+    clock.ns += 10_300_000                       # 10.3 ms of real time: not on any 0.5 ms grid
+    assert r._t_ns == 0                          # nothing was computed while nobody asked
     assert r.time() == pytest.approx(0.0103)
-    assert r._t_ns == 10_000_000                 # physics on the 0.5 ms grid
+    assert r._t_ns == 10_300_000                 # the physics is at the request, not at the last tick
     plant = Plant(preset("thesis-ch3"))
-    for k in range(20):
-        plant.do_step(k * 5e-4, 5e-4, dac_quantize(2.0))
-    assert np.allclose(r.plant.x, plant.x, rtol=0, atol=1e-15)
+    fine(plant, 0.0, 0.0103, dac_quantize(2.0))
+    assert np.allclose(r.plant.x, plant.x, rtol=0, atol=1e-6)     # the integrator's own accuracy
+    tick_grid = Plant(preset("thesis-ch3"))
+    fine(tick_grid, 0.0, 0.0100, dac_quantize(2.0))
+    assert not np.allclose(r.plant.x, tick_grid.x, rtol=0, atol=1e-6)   # a grid would lag by 0.3 ms
 
 
-def test_wallclock_watchdog_expires_on_real_time_without_any_request():
+def test_wallclock_watchdog_expires_at_its_deadline_without_any_request():
     clock = FakeClock()
     r = VirtualRig(RigConfig(clock="wallclock", tick=5e-4), clock_ns=clock)
-    r.start_clock(ticker=False)
+    r.start_clock()
+    clock.ns += 370_000                          # armed 0.37 ms in: the deadline is off every tick grid
     r.watchdog_start(0.05)
     r.write_analog([0], [6.0])
     clock.ns += 200_000_000                      # the client went silent for 0.2 s
     st = r.status()
     assert st.watchdog_expired and st.motor_voltage == 0.0
-    assert r.watchdog.expired_at_ns == 50_000_000      # at the first grid point at the timeout
+    assert r.watchdog.expired_at_ns == 50_370_000      # at the deadline itself
+
+
+def test_watchdog_expiry_inside_a_long_interval_switches_the_motor_off_at_its_deadline():
+    r = rig(cart_limit=None, pendulum_limit=None)
+    r.watchdog_start(0.0503)                     # lockstep ticks are 1 ms: the deadline lies between two
+    r.write_analog([0], [5.0])
+    r.advance(0.2)
+    assert r.watchdog.expired_at_ns == 50_300_000
+    exact = Plant(preset("thesis-ch3"))
+    fine(exact, 0.0, 0.0503, dac_quantize(5.0))
+    fine(exact, 0.0503, 0.2, 0.0)
+    late = Plant(preset("thesis-ch3"))          # what latching at the next tick (51 ms) would give
+    fine(late, 0.0, 0.051, dac_quantize(5.0))
+    fine(late, 0.051, 0.2, 0.0)
+    off_exact, off_late = np.max(np.abs(r.plant.x - exact.x)), np.max(np.abs(r.plant.x - late.x))
+    assert off_exact < 1e-5 and off_late > 100 * off_exact    # 1 ms steps against 10 us ones
+
+
+def first_trip(x0: dict, limit: float, t_end: float, h: float = 1e-5) -> float:
+    """When the pendulum's encoder reading first exceeds ``limit`` with the motor at 0 V, by fine steps."""
+    p = Plant(preset("thesis-ch3"))
+    p.set_state([x0.get(n, 0.0) for n in p.state_names])
+    k = 0
+    while k * h < t_end:
+        p.do_step(k * h, h, 0.0)
+        k += 1
+        if abs(nearest(p.values()["pendulum_angle"] / PENDULUM_RAD_PER_COUNT) * PENDULUM_RAD_PER_COUNT) > limit:
+            return k * h
+    raise AssertionError("no trip")
+
+
+@pytest.mark.parametrize("clock", ["lockstep", "wallclock"])
+def test_a_limit_crossing_inside_a_long_interval_is_latched_at_the_instant_it_happens(clock):
+    x0 = {"pendulum_angle": 0.2}
+    fake = FakeClock()
+    r = VirtualRig(RigConfig(clock=clock, initial_state=x0, cart_limit=None), clock_ns=fake)
+    r.start_clock()
+    if clock == "lockstep":
+        r.advance(1.0)                           # one request across the whole fall
+    else:
+        fake.ns += 1_000_000_000
+        r.status()
+    trip = [e for e in r.events if e.topic == "limit"]
+    assert len(trip) == 1
+    expected = first_trip(x0, math.radians(20), 1.0)
+    assert abs(trip[0].time - expected) <= 1e-5 + 1e-12      # to the 10 us the rig locates to
+    # after the trip the motor was off: the written voltage never reached the plant
+    assert r.motor_voltage() == 0.0
 
 
 def test_config_errors_name_the_field():
