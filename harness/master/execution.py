@@ -34,6 +34,7 @@ from ipcosim.harness.master.algorithm import (
     gauss_seidel_order,
     step_multiples,
 )
+from ipcosim.harness.master.clocks import clock_multiples
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
 from ipcosim.harness.master.integers import CarryError
 from ipcosim.harness.master.layout import Layout
@@ -172,6 +173,7 @@ class Execution:
         self.instances = list(system.instances)
         self.index = {inst.name: i for i, inst in enumerate(self.instances)}
         self.multiples = step_multiples(system, self._planned_value, self.timebase.step)
+        self.multiples.update(clock_multiples(system, self.timebase))
         check_last_steps(self.timebase, self.multiples, self.instances)
         if algorithm == GAUSS_SEIDEL:
             self.order = [self.index[n] for n in gauss_seidel_order(system)]

@@ -557,6 +557,12 @@ class FMU3Slave(FMUSlave):
 def fmu_slave(instance: Instance, unzip_dir: Path, logging_on: bool = True, library: Any = None) -> FMUSlave:
     """The slave of one extracted FMU: an :class:`FMU3Slave` for an FMI 3.0 model, else an
     :class:`FMU2Slave` (the arguments are :class:`FMUSlave`'s)."""
+    from ipcosim.harness.master.clocks import clocking  # an FMU with clocks runs them (clocked.ClockedSlave)
+
+    clocks = clocking(instance.model.path, instance.model.fmi_version, instance.name)
+    if clocks is not None:
+        from ipcosim.harness.master.clocked import ClockedSlave
+        return ClockedSlave(instance, unzip_dir, clocks, logging_on=logging_on, library=library)
     cls = FMU3Slave if instance.model.fmi_version.startswith("3") else FMU2Slave
     return cls(instance, unzip_dir, logging_on=logging_on, library=library)
 
