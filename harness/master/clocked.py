@@ -67,6 +67,9 @@ class ClockedSlave(FMU3Slave):
         super().setup_experiment(start_time, stop_time)
         self._start = exact_seconds(start_time)
         self._next = [c.tick(0, self._start) for c in self.clocking.inputs()]
+        self._next_f = [float(x) for x in self._next]
+        self._tol = [1e-9 * float(c.interval) for c in self.clocking.inputs()]
+        self._plans: dict[tuple[int, ...], Any] = {}
 
     def exit_initialization_mode(self) -> None:
         self._call("fmi3ExitInitializationMode")
@@ -96,8 +99,11 @@ class ClockedSlave(FMU3Slave):
                 return status
             if term.value:
                 return TERMINATE
-            status = self._event(t + h, entered=False)
-            return status
+            end = t + h
+            for nxt, tol in zip(self._next_f, self._tol):
+                if abs(end - nxt) <= tol:
+                    return self._event(end, entered=False)
+            return OK
 
         def get(c: Any, vrs: Any, n: int, out: Any) -> int:
             if self.state != "stepping":
@@ -131,71 +137,89 @@ class ClockedSlave(FMU3Slave):
     # ---------------------------------------------------------------- events
     def _due(self, t: float) -> list[int]:
         """The input clocks (indices) ticking at ``t`` (a tick's correctly rounded time, within rounding)."""
-        due = []
-        for k, (clock, nxt) in enumerate(zip(self.clocking.inputs(), self._next)):
-            if abs(t - float(nxt)) <= 1e-9 * float(clock.interval):
-                due.append(k)
-        return due
+        return [k for k, (nxt, tol) in enumerate(zip(self._next_f, self._tol)) if abs(t - nxt) <= tol]
+
+    def _plan(self, due: tuple[int, ...]) -> tuple[list[tuple[str, tuple]], list[int], Any, Any, Any]:
+        """The calls of an event where the clocks ``due`` tick, made once: SetClock's arguments, the
+        clocked inputs (value references), their value buffer, and the outputs to read and their buffer."""
+        clocks = self.clocking.inputs()
+        vrs = [clocks[k].vr for k in due]
+        active = set(vrs)
+        ins = [v.vr for v in self._clocked_vars("input") if set(self.clocking.clocked[v.vr]) & active]
+        outs = [v.vr for v in self._clocked_vars("output") if set(self.clocking.clocked[v.vr]) & active]
+        in_buf = (ctypes.c_double * max(len(ins), 1))()
+        calls = [("fmi3SetClock", ((ctypes.c_uint * len(vrs))(*vrs), len(vrs), (ctypes.c_bool * len(vrs))(*([True] * len(vrs)))))]
+        if ins:
+            calls.append(("fmi3SetFloat64", ((ctypes.c_uint * len(ins))(*ins), len(ins), in_buf, len(ins))))
+        return calls, ins, in_buf, (ctypes.c_uint * max(len(outs), 1))(*outs), outs
 
     def _event(self, t: float, entered: bool) -> int:
         """Event Mode at ``t`` if a clock ticks there (always on leaving initialization)."""
-        due = self._due(t)
+        due = tuple(self._due(t))
         if not due and not entered:
             return OK
         f = self._fmu._functions
         c = self._fmu.component
-        clocks = self.clocking.inputs()
-        calls = [] if entered else [("fmi3EnterEventMode", ())]
-        if due:
-            vrs = [clocks[k].vr for k in due]
-            calls.append(("fmi3SetClock", ((ctypes.c_uint * len(vrs))(*vrs), len(vrs),
-                                           (ctypes.c_bool * len(vrs))(*([True] * len(vrs))))))
-            ins = [vr for vr in self._pending if set(self.clocking.clocked[vr]) & set(vrs)]
-            if ins:
-                calls.append(("fmi3SetFloat64", ((ctypes.c_uint * len(ins))(*ins), len(ins),
-                                                 (ctypes.c_double * len(ins))(*[self._pending[v] for v in ins]),
-                                                 len(ins))))
-        for name, args in calls:
-            status = f[name](c, *args)
+        if not entered:
+            status = f["fmi3EnterEventMode"](c)
             if status > WARNING:
-                self._failed = name
+                self._failed = "fmi3EnterEventMode"
                 return status
-        status = self._read_outputs({clocks[k].vr for k in due})
-        if status > WARNING:
-            return status
+        if due:
+            plan = self._plans.get(due) or self._plans.setdefault(due, self._plan(due))
+            calls, ins, in_buf, out_vrs, outs = plan
+            for i, vr in enumerate(ins):
+                in_buf[i] = self._pending.get(vr, 0.0)
+            for name, args in calls:
+                status = f[name](c, *args)
+                if status > WARNING:
+                    self._failed = name
+                    return status
+            status = self._read_outputs(out_vrs, outs)
+            if status > WARNING:
+                return status
         status = self._update()
         if status > WARNING:
             return status
+        clocks = self.clocking.inputs()
         for k in due:
             self.ticks[k] += 1
             self._next[k] = clocks[k].tick(self.ticks[k], self._start)
+            self._next_f[k] = float(self._next[k])
         self.events.append((t, tuple(clocks[k].name for k in due)))
         status = f["fmi3EnterStepMode"](c)
         if status > WARNING:
             self._failed = "fmi3EnterStepMode"
         return status
 
-    def _read_outputs(self, active: set[int]) -> int:
-        """The clocked outputs of the active input clocks and of the output clocks that tick."""
+    def _read_outputs(self, out_vrs: Any, outs: list[int]) -> int:
+        """The clocked outputs of the active input clocks, then those of the output clocks that tick."""
         f = self._fmu._functions
         c = self._fmu.component
-        outs = self.clocking.outputs()
         if outs:
-            state = (ctypes.c_bool * len(outs))()
-            status = f["fmi3GetClock"](c, (ctypes.c_uint * len(outs))(*[o.vr for o in outs]), len(outs), state)
+            buf = (ctypes.c_double * len(outs))()
+            status = f["fmi3GetFloat64"](c, out_vrs, len(outs), buf, len(outs))
             if status > WARNING:
-                self._failed = "fmi3GetClock"
+                self._failed = "fmi3GetFloat64"
                 return status
-            active = active | {o.vr for o, on in zip(outs, state) if on}
-        vrs = [v.vr for v in self._clocked_vars("output") if set(self.clocking.clocked[v.vr]) & active]
-        if not vrs:
+            self._held.update(zip(outs, buf))
+        clocks = self.clocking.outputs()
+        if not clocks:
             return OK
-        buf = (ctypes.c_double * len(vrs))()
-        status = f["fmi3GetFloat64"](c, (ctypes.c_uint * len(vrs))(*vrs), len(vrs), buf, len(vrs))
+        state = (ctypes.c_bool * len(clocks))()
+        status = f["fmi3GetClock"](c, (ctypes.c_uint * len(clocks))(*[o.vr for o in clocks]), len(clocks), state)
         if status > WARNING:
-            self._failed = "fmi3GetFloat64"
+            self._failed = "fmi3GetClock"
             return status
-        self._held.update(zip(vrs, buf))
+        ticking = {o.vr for o, on in zip(clocks, state) if on}
+        vrs = [v.vr for v in self._clocked_vars("output") if set(self.clocking.clocked[v.vr]) & ticking]
+        if vrs:
+            buf = (ctypes.c_double * len(vrs))()
+            status = f["fmi3GetFloat64"](c, (ctypes.c_uint * len(vrs))(*vrs), len(vrs), buf, len(vrs))
+            if status > WARNING:
+                self._failed = "fmi3GetFloat64"
+                return status
+            self._held.update(zip(vrs, buf))
         return OK
 
     def _update(self, limit: int = 100) -> int:
