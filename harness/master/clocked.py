@@ -148,7 +148,8 @@ class ClockedSlave(FMU3Slave):
         ins = [v.vr for v in self._clocked_vars("input") if set(self.clocking.clocked[v.vr]) & active]
         outs = [v.vr for v in self._clocked_vars("output") if set(self.clocking.clocked[v.vr]) & active]
         in_buf = (ctypes.c_double * max(len(ins), 1))()
-        calls = [("fmi3SetClock", ((ctypes.c_uint * len(vrs))(*vrs), len(vrs), (ctypes.c_bool * len(vrs))(*([True] * len(vrs)))))]
+        on = (ctypes.c_bool * len(vrs))(*([True] * len(vrs)))
+        calls = [("fmi3SetClock", ((ctypes.c_uint * len(vrs))(*vrs), len(vrs), on))]
         if ins:
             calls.append(("fmi3SetFloat64", ((ctypes.c_uint * len(ins))(*ins), len(ins), in_buf, len(ins))))
         return calls, ins, in_buf, (ctypes.c_uint * max(len(outs), 1))(*outs), outs
