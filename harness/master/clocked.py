@@ -20,11 +20,21 @@ holds), and the clocked inputs wait for the next one. Ticks are compared with ex
 from __future__ import annotations
 
 import ctypes
+import math
 from fractions import Fraction
 from typing import Any, Sequence
 
-from ipcosim.harness.master.clocks import Clocking, exact_seconds
-from ipcosim.harness.master.slave import OK, TERMINATE, WARNING, FMU3Slave, SlaveError, load_library
+from ipcosim.harness.master.clocks import Clocking, clocking, exact_seconds
+from ipcosim.harness.master.clockstep import FAILED
+from ipcosim.harness.master.slave import (
+    OK,
+    SPECIAL_SLAVES,
+    TERMINATE,
+    WARNING,
+    FMU3Slave,
+    SlaveError,
+    load_library,
+)
 from ipcosim.harness.master.system import Variable
 
 
@@ -36,13 +46,15 @@ class ClockedSlave(FMU3Slave):
         super().__init__(instance, unzip_dir, logging_on=logging_on, library=library)
         self.clocking = clocking
         self._start = Fraction(0)
-        self._next: list[Fraction] = []  # next tick of each input clock, exact
+        self._exact: list[tuple[int, int, int]] = []  # each input clock's ticks as integers (see setup)
+        self._next_f: list[float] = []  # the time of each input clock's next tick
         self._pending: dict[int, float] = {}  # clocked input vr -> value for the next tick
         self._held: dict[int, float] = {}  # clocked output vr -> value read at the last tick
         self.ticks = [0] * len(clocking.inputs())
-        #: Every Event Mode the slave held: (time, names of the clocks active there).
-        self.events: list[tuple[float, tuple[str, ...]]] = []
+        self._events = 0  # Event Modes held by the Python calls (the C record counts its own)
         self._failed = ""
+        self._record: Any = None  # the C record (clockstep) when the C functions serve this FMU
+        self._lib: Any = None
 
     # ---------------------------------------------------------------- life cycle
     def instantiate(self) -> None:
@@ -66,15 +78,21 @@ class ClockedSlave(FMU3Slave):
     def setup_experiment(self, start_time: float, stop_time: float | None) -> None:
         super().setup_experiment(start_time, stop_time)
         self._start = exact_seconds(start_time)
-        self._next = [c.tick(0, self._start) for c in self.clocking.inputs()]
-        self._next_f = [float(x) for x in self._next]
+        # tick i of clock k is (first[k] + i * every[k]) / scale[k] exactly (integers: no drift), and the
+        # true division of two Python integers is its correctly rounded floating-point time
+        self._exact = [_integers(c.tick(0, self._start), c.interval) for c in self.clocking.inputs()]
+        self._next_f = [first / scale for first, _, scale in self._exact]
         self._tol = [1e-9 * float(c.interval) for c in self.clocking.inputs()]
         self._plans: dict[tuple[int, ...], Any] = {}
 
     def exit_initialization_mode(self) -> None:
         self._call("fmi3ExitInitializationMode")
         self.state = "stepping"
-        status = self._event(float(self._start), entered=True)
+        if self._record is not None:
+            status = self._lib.ipcosim_clocked_event(ctypes.byref(self._record), float(self._start), 1)
+            self._failed = FAILED[self._record.failed]
+        else:
+            status = self._event(float(self._start), entered=True)
         if status > WARNING and status != TERMINATE:
             raise self.fail(self._failed, status, float(self._start))
 
@@ -84,6 +102,54 @@ class ClockedSlave(FMU3Slave):
                 if v.causality == causality and v.vr in self.clocking.clocked]
 
     def raw(self) -> tuple[Any, Any, Any, Any]:
+        compiled = self._compiled()
+        if compiled is not None:
+            return compiled
+        return self._python_raw()
+
+    def _compiled(self) -> tuple[Any, Any, Any, Any] | None:
+        """The C functions of :mod:`~ipcosim.harness.master.clockstep` over this FMU, or None where they
+        cannot serve it (no compiler, output clocks, too many clocks or variables, ticks beyond 2^53)."""
+        from ipcosim.harness.master import clockstep
+
+        clocks = self.clocking.inputs()
+        ins, outs = self._clocked_vars("input"), self._clocked_vars("output")
+        if (self.clocking.outputs() or len(clocks) > clockstep.MAX_CLOCKS or len(ins) > clockstep.MAX_VARS
+                or len(outs) > clockstep.MAX_VARS or any(max(x) >= 2 ** 40 for x in self._exact)):
+            return None
+        lib = clockstep.functions()
+        if lib is None:
+            return None
+        f = self._fmu._functions
+        rec = clockstep.Record()
+        rec.inst = self._fmu.component
+        for field, name in (("do_step", "DoStep"), ("enter_event", "EnterEventMode"), ("enter_step", "EnterStepMode"),
+                            ("set_clock", "SetClock"), ("set", "SetFloat64"), ("get", "GetFloat64"),
+                            ("update", "UpdateDiscreteStates")):
+            setattr(rec, field, ctypes.cast(f[f"fmi3{name}"], ctypes.c_void_p).value)
+        rec.nclocks = len(clocks)
+        bit = {c.vr: 1 << k for k, c in enumerate(clocks)}
+        for k, (c, (first, every, scale)) in enumerate(zip(clocks, self._exact)):
+            rec.clock_vr[k], rec.first[k], rec.every[k], rec.scale[k] = c.vr, first, every, scale
+            rec.next[k], rec.tol[k] = self._next_f[k], self._tol[k]
+        for count, vr_field, mask_field, variables in (("nin", "in_vr", "in_mask", ins),
+                                                        ("nout", "out_vr", "out_mask", outs)):
+            setattr(rec, count, len(variables))
+            for j, v in enumerate(variables):
+                getattr(rec, vr_field)[j] = v.vr
+                getattr(rec, mask_field)[j] = sum(bit.get(c, 0) for c in self.clocking.clocked[v.vr])
+        for j, v in enumerate(ins):
+            rec.pending[j] = self._pending.get(v.vr, 0.0)
+        self._record, self._lib = rec, lib
+        return (ctypes.c_void_p(ctypes.addressof(rec)), lib.ipcosim_clocked_do_step, lib.ipcosim_clocked_get,
+                lib.ipcosim_clocked_set)
+
+    @property
+    def event_count(self) -> int:
+        """How many Event Modes the slave held (leaving initialization included)."""
+        return int(self._record.events) if self._record is not None else self._events
+
+    def _python_raw(self) -> tuple[Any, Any, Any, Any]:
         handle, do_step, get_real, set_real = super().raw()
         f = self._fmu._functions
         ds = f["fmi3DoStep"]
@@ -92,6 +158,8 @@ class ClockedSlave(FMU3Slave):
         pending, held = self._pending, self._held
         clocked_in = {v.vr for v in self._clocked_vars("input")}
         clocked_out = {v.vr for v in self._clocked_vars("output")}
+        all_in: dict[int, bool] = {}  # value-reference array -> all of them clocked inputs (outputs)
+        all_out: dict[int, bool] = {}
 
         def step(c: Any, t: float, h: float, flag: int) -> int:
             status = ds(c, t, h, True, *refs)
@@ -108,6 +176,10 @@ class ClockedSlave(FMU3Slave):
         def get(c: Any, vrs: Any, n: int, out: Any) -> int:
             if self.state != "stepping":
                 return get_real(c, vrs, n, out)
+            if all_out.get(id(vrs)):
+                out[:n] = [held.get(vr, 0.0) for vr in vrs[:n]]
+                return OK
+            all_out[id(vrs)] = all(vrs[i] in clocked_out for i in range(n))
             for i in range(n):
                 vr = vrs[i]
                 if vr in clocked_out:
@@ -121,6 +193,10 @@ class ClockedSlave(FMU3Slave):
             return OK
 
         def put(c: Any, vrs: Any, n: int, values: Any) -> int:
+            if self.state == "stepping" and all_in.get(id(vrs)):
+                pending.update(zip(vrs[:n], values[:n]))
+                return OK
+            all_in[id(vrs)] = all(vrs[i] in clocked_in for i in range(n))
             for i in range(n):
                 if vrs[i] in clocked_in:
                     pending[vrs[i]] = values[i]
@@ -182,12 +258,11 @@ class ClockedSlave(FMU3Slave):
         status = self._update()
         if status > WARNING:
             return status
-        clocks = self.clocking.inputs()
         for k in due:
             self.ticks[k] += 1
-            self._next[k] = clocks[k].tick(self.ticks[k], self._start)
-            self._next_f[k] = float(self._next[k])
-        self.events.append((t, tuple(clocks[k].name for k in due)))
+            first, every, scale = self._exact[k]
+            self._next_f[k] = (first + self.ticks[k] * every) / scale
+        self._events += 1
         status = f["fmi3EnterStepMode"](c)
         if status > WARNING:
             self._failed = "fmi3EnterStepMode"
@@ -244,3 +319,20 @@ class ClockedSlave(FMU3Slave):
         for var, value in zip(variables, values):
             if var.vr in self.clocking.clocked and var.causality == "input":
                 self._pending[var.vr] = value
+
+
+def _integers(first: Fraction, interval: Fraction) -> tuple[int, int, int]:
+    """``(a, b, d)`` with ``first = a / d`` and ``interval = b / d``: tick ``i`` is ``(a + i b) / d``."""
+    scale = first.denominator * interval.denominator // math.gcd(first.denominator, interval.denominator)
+    return int(first * scale), int(interval * scale), scale
+
+
+def clocked_slave(instance: Any, unzip_dir: Any, logging_on: bool, library: Any) -> ClockedSlave | None:
+    """The :class:`ClockedSlave` of an FMI 3.0 FMU with clocks, else None (the plain slaves serve it)."""
+    found = clocking(instance.model.path, instance.model.fmi_version, instance.name)
+    if found is None:
+        return None
+    return ClockedSlave(instance, unzip_dir, found, logging_on=logging_on, library=library)
+
+
+SPECIAL_SLAVES.append(clocked_slave)

@@ -23,7 +23,10 @@ import time as _time
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from ipcosim.harness.master import signals
+from ipcosim.harness.master import (
+    clocked,  # noqa: F401 -- registers the slave of FMUs with clocks
+    signals,
+)
 from ipcosim.harness.master.algorithm import (
     ALGORITHMS,
     GAUSS_SEIDEL,
