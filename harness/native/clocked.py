@@ -27,12 +27,20 @@ SUFFIX = "Clocked"
 #: The clock's name in every clocked controller.
 CLOCK = "sample_clock"
 GLUE = "fmi3clocked.c"
+#: Sources sampled by a clock of their own (no sample period to take it from): model -> interval [s].
+#: The setpoint at 100 Hz is the reference task of the multi-rate example (a 1 kHz law beside it).
+SOURCES = {"Setpoint": "0.01"}
 
 
 def clocked_names() -> list[str]:
     """The unclocked model of every clocked controller (every law with a native flavour, both plants)."""
     from ipcosim.controllers.catalog import model_name
     return [model_name(kind, law) for law, kind in cbuild._laws()]
+
+
+def all_names() -> list[str]:
+    """Every model with a clocked variant: the laws (:func:`clocked_names`), then :data:`SOURCES`."""
+    return [*clocked_names(), *SOURCES]
 
 
 def period_text(model: models.NativeModel) -> str:
@@ -53,7 +61,7 @@ def model_description(fmi2_xml: bytes, name: str, interval: str, shift: str = "0
     time_vr = int(next(v for v in mv if v.get("causality") == "independent").get("valueReference"))
     clock_vr = str(time_vr + 1)
     for var in mv:
-        if var.get("causality") in ("input", "output"):
+        if var.get("causality") in ("input", "output") and var.tag != "Clock":
             var.set("clocks", clock_vr)
             var.set("variability", "discrete")  # a clocked variable changes only at its clock's ticks
     clock = ElementTree.Element("Clock", {
@@ -92,7 +100,7 @@ def build_one(name: str, python_dir: Path, out_dir: Path, compilers: cbuild.Comp
     reset_table()
     model = cbuild.native_model(name, python_dir)
     clocked = name + SUFFIX
-    interval, shift = period_text(model), "0"
+    interval, shift = SOURCES.get(name) or period_text(model), "0"
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         src = root / "sources"
@@ -122,6 +130,6 @@ def build_one(name: str, python_dir: Path, out_dir: Path, compilers: cbuild.Comp
 
 def build_clocked(python_dir: Path | str, out_dir: Path | str, names: list[str] | None = None
                   ) -> list[cbuild.NativeResult]:
-    """Build the clocked controller FMUs (of every law in :func:`clocked_names` by default) into ``out_dir``."""
+    """Build the clocked FMUs (of every model in :func:`all_names` by default) into ``out_dir``."""
     compilers = cbuild.Compilers.find()
-    return [build_one(n, Path(python_dir), Path(out_dir), compilers) for n in (names or clocked_names())]
+    return [build_one(n, Path(python_dir), Path(out_dir), compilers) for n in (names or all_names())]

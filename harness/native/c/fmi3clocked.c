@@ -169,7 +169,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
         c->phase = ST_ERROR;
         return fmi3Error;
     }
-    period = c->v[c->m->period_index];
+    period = c->m->period_index >= 0 ? c->v[c->m->period_index] : CLOCK_INTERVAL; /* a source has none */
     if (period != CLOCK_INTERVAL) {
         clocked_log(k, fmi3Error, "%s: parameter sample_period = %g s differs from the interval of its constant "
                     "clock sample_clock, %g s (take the unclocked variant for another sample period)",
