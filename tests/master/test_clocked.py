@@ -267,3 +267,15 @@ def test_the_master_holds_one_event_mode_per_tick(native_fmus: tuple[Path, Path]
                              swap={"controller": str(clocked_fmus / "LQRSingleMassClocked.fmu")})
         assert result.error is None and len(made) == 1
         assert made[0].event_count == 301
+
+
+def test_jacobi_runs_the_clocked_law_like_the_unclocked_one(native_fmus: tuple[Path, Path], native_fmus3: Path,
+                                                            clocked_fmus: Path) -> None:
+    """Jacobi: the law samples the values of the start of its period in both variants."""
+    runs = [ipcosim.run("single-mass-lqr", fmus="native", fmu_dirs=[native_fmus[1]], stop_time=0.5,
+                        algorithm="jacobi", swap={"controller": str(fmu)})
+            for fmu in (native_fmus3 / "LQRSingleMass.fmu", clocked_fmus / "LQRSingleMassClocked.fmu")]
+    assert runs[0].error is None and runs[1].error is None
+    for name in runs[0].data.dtype.names:
+        assert np.array_equal(runs[0].data[name], runs[1].data[name]), name
+    assert np.ptp(runs[1].data["plant.cart_position"]) > 1e-3
