@@ -45,11 +45,13 @@ test: fmus vdmcheck lint
 # Every benchmark, then benchmarks/last.json; `python -m benchmarks.docs --update` writes the docs' figures from it.
 bench: fmus
 	$(BIN)/ipcosim build --native
+	$(BIN)/ipcosim build --native --fmi 3
 	$(BIN)/python -m benchmarks.bench
 
 # The FMUs of both flavours with reference results in the FMI cross-check layout, checked by fmpy.cross_check.
 crosscheck: $(STAMP)
 	$(BIN)/ipcosim build --native
+	$(BIN)/ipcosim build --native --fmi 3
 	$(BIN)/python -m evidence.fmi_crosscheck build/crosscheck
 
 clean:

@@ -38,7 +38,8 @@ def describe(scenario: str | os.PathLike[str], *, parameter_set: str | None = No
         ``{"scenario", "description", "origin", "parameter_sets": {"bound", "available"},
         "experiment": {"start_time_s", "stop_time_s", "step_s"}, "components": [{"name", "model",
         "fmus": {flavour: path or None}, "variables": [{"name", "causality", "type", "unit",
-        "start", "description", "set": [flavours a --set may change it in]}]}]}``. ``fmus``'s
+        "start", "description", "set": [flavours a --set may change it in]}], "clocks": [one line per FMI 3.0
+        clock: name, kind, period]}]}``. ``fmus``'s
         ``native`` is None where the native FMU is not built (or the model has none).
 
     Raises
@@ -74,8 +75,12 @@ def _component(system: System, inst: Instance) -> dict[str, Any]:
                           "start": inst.start_value(var.name), "description": var.description, "set": flavours})
     extra = [n for n, v in (native.variables.items() if native else ()) if n not in inst.model.variables
              and v.settable and system.link_into(inst.name, n) is None]
+    from ipcosim.harness.master.clocks import clocking
+
+    found = clocking(inst.model.path, inst.model.fmi_version, inst.name)
     return {"name": inst.name, "model": inst.model.name, "fmus": fmus, "variables": variables,
-            "native_only": extra, "interface": _interface(inst)}
+            "native_only": extra, "interface": _interface(inst),
+            "clocks": [c.describe() for c in (found.clocks if found else ())]}
 
 
 def _interface(inst: Instance) -> str:
@@ -112,6 +117,7 @@ def describe_text(info: dict[str, Any]) -> str:
                   ",".join(v["set"]) or "-", v["description"]) for v in comp["variables"]]
         widths = [max(len(r[i]) for r in rows) for i in range(6)]
         lines += ["  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)) + "  " + r[6] for r in rows]
+        lines += [f"  clock {text}" for text in comp.get("clocks", ())]
         if comp["native_only"]:
             lines.append(f"  native flavour only (--fmus native --set): {', '.join(comp['native_only'])}")
         lines.append("")

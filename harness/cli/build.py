@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also build the native (C source-code) FMUs into OUT/fmus-native/")
     p.add_argument("--fmi", choices=("2", "3"), default="2",
                    help="with --native: the FMI version of the native FMUs, 2 (into OUT/fmus-native/, default) or 3 "
-                        "(FMI 3.0, into OUT/fmus-native-fmi3/)")
+                        "(FMI 3.0, into OUT/fmus-native-fmi3/, and the clocked controllers into OUT/fmus-clocked/)")
     p.add_argument("--force", action="store_true", help="rebuild every FMU even if its sources are unchanged")
     from ipcosim.harness.scenario.ssp_pack import SSP_VERSIONS
 
@@ -48,4 +48,9 @@ def main(args: argparse.Namespace) -> int:
         for native in build_native(out / "fmus", out / OUT_DIRS[args.fmi], fmi=args.fmi):
             binaries = " + ".join(native.platforms) if native.binary else "sources only"
             print(f"built (native FMI {args.fmi}.0, {binaries}): {native.fmu}")
+        if args.fmi == "3":
+            from ipcosim.harness.native.clocked import OUT_DIR, build_clocked
+            for clocked in build_clocked(out / "fmus", out / OUT_DIR):
+                print(f"built (native FMI 3.0, clocked, {' + '.join(clocked.platforms) or 'sources only'}): "
+                      f"{clocked.fmu}")
     return 0

@@ -23,7 +23,10 @@ import time as _time
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from ipcosim.harness.master import signals
+from ipcosim.harness.master import (
+    clocked,  # noqa: F401 -- registers the slave of FMUs with clocks
+    signals,
+)
 from ipcosim.harness.master.algorithm import (
     ALGORITHMS,
     GAUSS_SEIDEL,
@@ -34,6 +37,7 @@ from ipcosim.harness.master.algorithm import (
     gauss_seidel_order,
     step_multiples,
 )
+from ipcosim.harness.master.clocks import clock_multiples
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
 from ipcosim.harness.master.integers import CarryError
 from ipcosim.harness.master.layout import Layout
@@ -173,6 +177,7 @@ class Execution:
         self.instances = list(system.instances)
         self.index = {inst.name: i for i, inst in enumerate(self.instances)}
         self.multiples = step_multiples(system, self._planned_value, self.timebase.step)
+        self.multiples.update(clock_multiples(system, self.timebase))
         check_last_steps(self.timebase, self.multiples, self.instances)
         if algorithm == GAUSS_SEIDEL:
             self.order = [self.index[n] for n in gauss_seidel_order(system)]

@@ -554,9 +554,18 @@ class FMU3Slave(FMUSlave):
         return value if math.isfinite(value) else None
 
 
+#: Makers of the slave of an FMU that needs more than :class:`FMU2Slave` or :class:`FMU3Slave`, asked in
+#: turn by :func:`fmu_slave`: ``maker(instance, unzip_dir, logging_on, library)`` -> a slave, or None.
+SPECIAL_SLAVES: list[Callable[[Instance, Path, bool, Any], "FMUSlave | None"]] = []
+
+
 def fmu_slave(instance: Instance, unzip_dir: Path, logging_on: bool = True, library: Any = None) -> FMUSlave:
     """The slave of one extracted FMU: an :class:`FMU3Slave` for an FMI 3.0 model, else an
     :class:`FMU2Slave` (the arguments are :class:`FMUSlave`'s)."""
+    for special in SPECIAL_SLAVES:  # e.g. an FMU with clocks (ipcosim.harness.master.clocked)
+        slave = special(instance, unzip_dir, logging_on, library)
+        if slave is not None:
+            return slave
     cls = FMU3Slave if instance.model.fmi_version.startswith("3") else FMU2Slave
     return cls(instance, unzip_dir, logging_on=logging_on, library=library)
 

@@ -53,11 +53,12 @@ def resolve_location(scenario_or_path: str | os.PathLike[str]) -> Path:
 
 def fmu_search_path(extra: Sequence[str | os.PathLike[str]] | None = None) -> list[Path]:
     """Directories searched for an FMU a folder scenario does not carry itself: ``extra``, then
-    ``IPCOSIM_FMU_PATH`` (os.pathsep-separated), then ``build/fmus``."""
+    ``IPCOSIM_FMU_PATH`` (os.pathsep-separated), then ``build/fmus`` and ``build/fmus-clocked``."""
     dirs = [Path(d) for d in (extra or [])]
     env = os.environ.get("IPCOSIM_FMU_PATH", "")
     dirs += [Path(d) for d in env.split(os.pathsep) if d]
     dirs.append(BUILD_FMU_DIR)
+    dirs.append(BUILD_FMU_DIR.parent / "fmus-clocked")  # the clocked controllers (`ipcosim build --native --fmi 3`)
     return dirs
 
 
