@@ -38,7 +38,9 @@ class Result:
     ----------
     data : numpy structured array
         Field ``time`` [s], then one field ``component.variable`` per recorded connector
-        (SI units), one row per recorded communication point (row 0 is the initial state).
+        (SI units), then one per other variable the run's ``record`` names (a parameter, a local:
+        :func:`~ipcosim.harness.master.layout.named_variables`), one row per recorded
+        communication point (row 0 is the initial state).
     metrics : dict
         ``metrics.json`` content (see docs/metrics.md): the task metrics, ``wall_time_s`` (the whole
         run: load, instantiate, initialize, step, write), ``real_time_factor`` (simulated /
