@@ -19,7 +19,6 @@ A run that names none has exactly the connectors' vectors and columns.
 from __future__ import annotations
 
 import ctypes
-import fnmatch
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
@@ -28,6 +27,7 @@ from ipcosim.errors import UsageError, closest
 from ipcosim.harness.master import integers
 from ipcosim.harness.master.algorithm import GAUSS_SEIDEL
 from ipcosim.harness.master.plan import Block, Channel
+from ipcosim.harness.master.results import matching
 from ipcosim.harness.master.slave import Slave
 from ipcosim.harness.master.system import System, Variable, value_type_of
 
@@ -55,9 +55,9 @@ def named_variables(system: System, patterns: Sequence[str] | None) -> list[tupl
               and all(v.name != c.name for c in i.connectors)}
     named: dict[str, tuple[str, Variable]] = {}
     for p in patterns or ():
-        if any(fnmatch.fnmatchcase(c, p) for c in connectors):
+        if matching(connectors, p):
             continue
-        hits = [name for name in others if fnmatch.fnmatchcase(name, p)]
+        hits = matching(list(others), p)
         if not hits:
             raise UsageError(f"--record {p}: no such variable; {closest(p, connectors[1:] + list(others), listing=40)}")
         named.update((name, others[name]) for name in hits)

@@ -164,6 +164,14 @@ class RunOutput:
     metrics: Mapping[str, Any] = field(default_factory=dict)
 
 
+def matching(names: Sequence[str], pattern: str) -> list[str]:
+    """The ``names`` (columns, variables) ``pattern`` selects: the name itself where it is one (also
+    one with brackets, ``x[1]``), else every name the shell pattern matches (``plant.*``)."""
+    if pattern in names:
+        return [pattern]
+    return [n for n in names if fnmatch.fnmatchcase(n, pattern)]
+
+
 def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> list[str]:
     """Names of ``columns`` matching ``patterns`` (see :meth:`Result.select`)."""
     cols = list(columns)
@@ -171,7 +179,7 @@ def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> li
         return cols
     chosen = {"time"}
     for p in patterns:
-        hits = [c for c in cols if fnmatch.fnmatchcase(c, p)]
+        hits = matching(cols, p)
         if not hits:
             raise UsageError(f"--record {p}: no such variable; {closest(p, cols[1:], listing=40)}")
         chosen.update(hits)

@@ -167,3 +167,12 @@ def test_an_unknown_name_is_refused_with_the_closest_variables(tmp_path, capsys)
     assert cli.main(["run", str(folder), "--record", "addP.k3", "--out", str(tmp_path / "out")]) == 2
     err = [line for line in capsys.readouterr().err.splitlines() if "error" in line]  # not the unconnected inputs'
     assert len(err) == 1 and "--record addP.k3: no such variable" in err[0] and "'addP.k1'" in err[0], err
+
+
+def test_a_name_with_brackets_is_recorded_as_it_is_written():
+    """FMI 2.0 names array elements ``x[1]`` (2.2.9, ``variableNamingConvention="structured"``): given
+    whole, such a name selects its own column, not what ``[1]`` would be as a shell pattern."""
+    data = np.zeros(2, dtype=[("time", "f8"), ("p.x[1]", "f8"), ("p.x[2]", "f8"), ("p.x1", "f8")])
+    result = ipcosim.Result(data=data)
+    assert result.select(["p.x[1]"]) == ["time", "p.x[1]"]
+    assert result.select(["p.x[[]*"]) == ["time", "p.x[1]", "p.x[2]"]
