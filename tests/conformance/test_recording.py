@@ -25,6 +25,7 @@ import ssp_text as t
 import ipcosim
 from ipcosim.errors import UsageError
 from ipcosim.harness import cli
+from ipcosim.harness.describe import describe
 
 pytestmark = [pytest.mark.skipif(shutil.which("gcc") is None and shutil.which("cc") is None,
                                  reason="needs a C compiler to build the test FMUs"),
@@ -83,7 +84,7 @@ def test_record_of_a_bound_parameter_shows_the_system_level_value(version, algor
     """``--record addP.k1`` of a parameter bound at component level (10) and at system level (-200):
     every row shows -200, as the FMU reports it; the calculated parameter ``k_sum = k1 + k2`` and the
     local ``twice_y = 2 y`` beside it, from the same bound values. Without ``--record`` the columns
-    are the connectors' alone, as before."""
+    are the connectors' alone, as before; ``describe`` lists the three with their causality."""
     folder, (comp_k1, comp_k2, sys_k1) = _bound_adder(tmp_path, version)
     out = tmp_path / "out"
     assert cli.main(["run", str(folder), "--stop-time", "0.3", "--step", "0.1", "--algorithm", algorithm,
@@ -99,6 +100,9 @@ def test_record_of_a_bound_parameter_shows_the_system_level_value(version, algor
     default = ipcosim.run(folder, stop_time=0.3, step=0.1, algorithm=algorithm)
     assert default.columns == ["time", "addP.u1", "addP.u2", "addP.y"]
     assert ipcosim.run(folder, stop_time=0.3, step=0.1, record=["addP.*"]).columns == default.columns
+    listed = {v["name"]: (v["causality"], v["start"]) for v in describe(folder)["components"][0]["variables"]}
+    assert listed["k1"] == ("parameter", sys_k1) and listed["k_sum"][0] == "calculatedParameter"
+    assert listed["twice_y"][0] == "local"
 
 
 def test_a_recorded_parameter_is_the_fmus_value_not_the_bound_one(tmp_path):
