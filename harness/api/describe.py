@@ -122,7 +122,8 @@ def describe_text(info: dict[str, Any]) -> str:
             lines.append(f"  native flavour only (--fmus native --set): {', '.join(comp['native_only'])}")
         lines.append("")
     lines.append("Set a start value with `ipcosim run SCENARIO --set COMPONENT.VARIABLE=VALUE` (--set column: the "
-                 "flavours that accept it; '-': an output, or an input fed by a connection).")
+                 "flavours that accept it; '-': an output, or an input fed by a connection). Every variable is "
+                 "recordable by name with --record COMPONENT.VARIABLE (the connectors are recorded by default).")
     return "\n".join(line.rstrip() for line in lines)
 
 

@@ -421,7 +421,8 @@ class Prepared:
             (``{"plant.Mp": 0.2, "controller.sample_period": 0.002}`` or ``"1.1*nominal"``);
             ``out`` (write ``results.csv``, ``metrics.json`` and, with ``plot``, ``plot.png``
             there); ``record`` (the columns of results.csv, names or patterns like ``plant.*``;
-            default all connectors); ``realtime`` (None: only when a swapped-in component asks for
+            default all connectors; a parameter or local named, ``plant.Mp``, is recorded in the
+            Result too); ``realtime`` (None: only when a swapped-in component asks for
             it), ``overrun_budget``, ``progress``, ``loop``, ``start_time``, ``record_every``,
             ``max_init_iterations``.
 

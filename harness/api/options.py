@@ -206,7 +206,8 @@ class RunOptions:
     plot: bool = option(False, flag="--plot", action="store_true", help="also write DIR/plot.png")
     record: tuple[str, ...] = option(  # type: ignore[assignment]
         flag="--record", action="append", metavar="VAR[,VAR...]", check=_columns,
-        help="columns of results.csv: names or patterns like 'plant.*' (default: every connector)")
+        help="columns of results.csv: names or patterns like 'plant.*' (default: every connector); a "
+             "parameter or local by name, e.g. plant.Mp, is read from the FMU after every step")
     algorithm: str = option(
         ALGORITHMS[0], flag="--algorithm", choices=ALGORITHMS, check=_choice(ALGORITHMS), stage="load",
         help="co-simulation algorithm (default gauss-seidel, ordered by the FMUs' dependencies)")

@@ -40,7 +40,7 @@ from ipcosim.harness.master.algorithm import (
 from ipcosim.harness.master.clocks import clock_multiples
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
 from ipcosim.harness.master.integers import CarryError
-from ipcosim.harness.master.layout import Layout
+from ipcosim.harness.master.layout import Layout, named_variables
 from ipcosim.harness.master.manipulators import Manipulator, SetValues
 from ipcosim.harness.master.me_slave import slave_of
 from ipcosim.harness.master.observers import Observer
@@ -184,13 +184,13 @@ class Execution:
         else:
             self.order = list(range(len(self.instances)))
         self.init_order = self.order
-        self.layout = Layout(system, self._planned_value)
+        self.output = output or RunOutput()
+        self.layout = Layout(system, self._planned_value, named_variables(system, self.output.variables))
         # the buffer holds at most a chunk of rows
         self.recorder = Recorder(self.layout, self.timebase, record_every, self.order,
                                  capacity=CHUNK // record_every + 2, flush_seconds=CHUNK_SECONDS)
         self.slaves: list[Slave] = []
         self.blocks: list[Block] = []
-        self.output = output or RunOutput()
         if writer is None and self.output.folder is not None:  # unknown columns fail before the folder is touched
             columns = select_columns(self.row_names(), self.output.variables)
             writer = RowWriter(self.row_fields(), open_output(self.output.folder) / "results.csv", columns)
@@ -259,7 +259,7 @@ class Execution:
     # ------------------------------------------------------------------ run
     def row_names(self) -> list[str]:
         """Field names of the recorded rows: ``time``, then ``component.variable`` (every
-        connector of every type, in SSD order)."""
+        connector of every type, in SSD order, then the other variables ``output`` names)."""
         return list(self.layout.column_types)
 
     def row_fields(self) -> list[tuple[str, str]]:
@@ -509,13 +509,17 @@ class Execution:
                     changed.append(f"{b.name}.{ins[k].name}")
 
     def _get_outputs(self, b: Block, t: float | None) -> None:
-        if b.n_out:
-            status = b.get_real(b.handle, b.out_vrs, b.n_out, b.out_values)
+        """Read ``b``'s outputs into the value vectors; ``t`` None: in initialization mode, the
+        output connectors alone (not the recorded variables that are not connectors)."""
+        n = b.n_out if t is not None else b.n_out - b.n_named
+        if n:
+            status = b.get_real(b.handle, b.out_vrs, n, b.out_values)
             if status > 1:
                 raise self.slaves[b.index].fail("fmi2GetReal", status, t if t is not None else self.start_time)
         for ch in b.channels:
-            if ch.n_out:
-                status = ch.get(ch.out_values)
+            get = ch.get if t is not None else ch.init_get
+            if ch.n_out and get is not None:
+                status = get(ch.out_values)
                 if status > 1:
                     raise self.slaves[b.index].fail(f"fmi2Get{ch.value_type.capitalize()}", status,
                                                     t if t is not None else self.start_time)

@@ -10,17 +10,24 @@ inputs, boolean outputs, inputs), which holds every FMI integer type exactly
 :class:`~ipcosim.harness.master.plan.Block` is one component's view of these vectors with its
 raw FMI functions, a :class:`~ipcosim.harness.master.plan.Channel` its connectors of one
 non-Real value type. The layout also names the record's columns (:attr:`Layout.column_types`).
+
+Variables that are not connectors (parameters, calculated parameters, locals) are recorded when a
+run names them (:func:`named_variables`): each takes a place after its component's outputs of its
+type, so the batched get of every step reads it with them, and its column follows the connectors'.
+A run that names none has exactly the connectors' vectors and columns.
 """
 from __future__ import annotations
 
 import ctypes
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from ipcosim.errors import UsageError, closest
 from ipcosim.harness.master import integers
 from ipcosim.harness.master.algorithm import GAUSS_SEIDEL
 from ipcosim.harness.master.plan import Block, Channel
+from ipcosim.harness.master.results import matching
 from ipcosim.harness.master.slave import Slave
 from ipcosim.harness.master.system import System, Variable, value_type_of
 
@@ -29,6 +36,32 @@ COLUMN_DTYPE = {"real": "f8", "integer": "i4", "boolean": "?", "string": "O"}
 
 #: ``start_value(component, variable)``: the value a connector starts the run with.
 StartValue = Callable[[str, str], Any]
+
+
+def named_variables(system: System, patterns: Sequence[str] | None) -> list[tuple[str, Variable]]:
+    """The variables beyond the connectors that ``--record`` names: for each name or shell pattern
+    (``addP.k1``, ``plant.*``) that matches no connector, every variable ``component.variable``
+    it matches that is not a connector, of a type the master carries, in the order named (each once).
+
+    Raises
+    ------
+    UsageError
+        A pattern that matches no variable at all, with the closest names.
+    """
+    connectors = ["time"] + [f"{i.name}.{v.name}" for i in system.instances for v in i.connectors
+                             if value_type_of(v.type) is not None]
+    others = {f"{i.name}.{v.name}": (i.name, v) for i in system.instances for v in i.model.variables.values()
+              if value_type_of(v.type) is not None and v.causality != "independent"
+              and all(v.name != c.name for c in i.connectors)}
+    named: dict[str, tuple[str, Variable]] = {}
+    for p in patterns or ():
+        if matching(connectors, p):
+            continue
+        hits = matching(list(others), p)
+        if not hits:
+            raise UsageError(f"--record {p}: no such variable; {closest(p, connectors[1:] + list(others), listing=40)}")
+        named.update((name, others[name]) for name in hits)
+    return list(named.values())
 
 
 class Layout:
@@ -41,12 +74,18 @@ class Layout:
     start_value : callable
         ``start_value(component, variable)``: an input's value before the run (its ``set``
         value, else its bound start), put into the vectors here.
+    recorded : sequence of (str, Variable)
+        Further variables to record, by component (:func:`named_variables`): read after every
+        step with the component's outputs, but not in initialization mode, where FMI 2.0 lets
+        an importer get only outputs, states and derivatives.
     """
 
-    def __init__(self, system: System, start_value: StartValue) -> None:
+    def __init__(self, system: System, start_value: StartValue,
+                 recorded: Sequence[tuple[str, Variable]] = ()) -> None:
         self.system = system
         self.instances = list(system.instances)
         self.index = {inst.name: i for i, inst in enumerate(self.instances)}
+        self.recorded = list(recorded)
         self._place_reals(start_value)
         self._place_typed(start_value)
         self._name_columns()
@@ -55,10 +94,15 @@ class Layout:
         """Place every Real connector in the value vector, inputs at their start values."""
         self.real_outputs: list[list[Variable]] = []
         self.real_inputs: list[list[Variable]] = []
+        #: Per component, how many of its outputs (the last ones) are recorded variables, not connectors.
+        self.real_named: list[int] = []
         offsets = []
         pos = 0
         for inst in self.instances:
             outs = [v for v in inst.outputs if value_type_of(v.type) == "real"]
+            named = self._named(inst.name, "real")
+            self.real_named.append(len(named))
+            outs += named
             ins = [v for v in inst.inputs if value_type_of(v.type) == "real"]
             self.real_outputs.append(outs)
             self.real_inputs.append(ins)
@@ -78,7 +122,7 @@ class Layout:
                 start = start_value(inst.name, v.name)
                 self.values[self.in_offset[k] + j] = float(start) if start is not None else 0.0
         self.output_slots = np.array([self.out_offset[k] + j for k in range(len(self.instances))
-                                      for j in range(len(self.real_outputs[k]))], dtype=int)
+                                      for j in range(len(self.real_outputs[k]) - self.real_named[k])], dtype=int)
 
     def _place_typed(self, start_value: StartValue) -> None:
         """Place the Integer and Boolean connectors in one ``c_int64`` vector (per component:
@@ -88,6 +132,8 @@ class Layout:
         self.int_offset: dict[tuple[int, str], int] = {}
         self.strings: dict[int, tuple[list[bytes], list[bytes]]] = {}
         self.tslot: dict[tuple[str, str], tuple[str, int]] = {}  # (value type, int slot or string index)
+        #: How many of a component's outputs of a type (the last ones) are recorded variables, by (index, type).
+        self.typed_named: dict[tuple[int, str], int] = {}
         #: The sized type (``integers.RANGE``) and ``component.variable`` of each Integer slot.
         self.int_types: dict[int, tuple[str, str]] = {}
         self.string_slots: list[tuple[list[bytes], int]] = []
@@ -96,9 +142,12 @@ class Layout:
             groups = {}
             for value_type in ("integer", "boolean", "string"):
                 outs = [v for v in inst.outputs if value_type_of(v.type) == value_type]
+                named = self._named(inst.name, value_type)
+                outs += named
                 ins = [v for v in inst.inputs if value_type_of(v.type) == value_type]
                 if not (outs or ins):
                     continue
+                self.typed_named[(k, value_type)] = len(named)
                 groups[value_type] = (outs, ins)
                 if value_type == "string":
                     self._place_strings(k, outs, ins)
@@ -118,6 +167,10 @@ class Layout:
             if self.instances[self.index[comp]].model.variables[var].causality == "input":
                 self.store(value_type, slot, start_value(comp, var))
 
+    def _named(self, component: str, value_type: str) -> list[Variable]:
+        """The recorded variables of ``component`` that are not connectors, of ``value_type``."""
+        return [v for c, v in self.recorded if c == component and value_type_of(v.type) == value_type]
+
     def _place_strings(self, k: int, outs: list[Variable], ins: list[Variable]) -> None:
         """Component ``k``'s String outputs and inputs: one list each, numbered in ``string_slots``."""
         lists: tuple[list[bytes], list[bytes]] = ([b""] * len(outs), [b""] * len(ins))
@@ -128,7 +181,8 @@ class Layout:
                 self.string_slots.append((lst, j))
 
     def _name_columns(self) -> None:
-        """The record columns: ``time``, then every connector in SSD order. A connected input's
+        """The record columns: ``time``, then every connector in SSD order, then the other recorded
+        variables in the order named. A connected input's
         column is the transformed source value (what the connection delivers at that time):
         ``columns`` (Real: name, slot, (source slot, factor, offset) or None), ``typed_columns``
         (name, value_type, slot, (source slot, mapping) or None) and the value type of every column,
@@ -156,6 +210,19 @@ class Layout:
                         self.column_dtypes[name] = integers.DTYPE[self.int_types[slot][0]]
                     typed = (self.tslot[(link.src, link.src_var.name)][1], dict(link.mapping)) if link else None
                     self.typed_columns.append((name, value_type, slot, typed))
+        for comp, v in self.recorded:
+            value_type = value_type_of(v.type)
+            assert value_type is not None  # named_variables names only variables of a carried type
+            name = f"{comp}.{v.name}"
+            self.column_types[name] = value_type
+            self.column_dtypes[name] = COLUMN_DTYPE[value_type]
+            if value_type == "real":
+                self.columns.append((name, self.slot[(comp, v.name)], None))
+                continue
+            slot = self.tslot[(comp, v.name)][1]
+            if value_type == "integer":
+                self.column_dtypes[name] = integers.DTYPE[self.int_types[slot][0]]
+            self.typed_columns.append((name, value_type, slot, None))
 
     def row_fields(self) -> list[tuple[str, str]]:
         """Name and numpy type of every recorded field: ``time``, then ``component.variable``
@@ -243,6 +310,7 @@ class Layout:
                                 in_vrs=(ctypes.c_uint * max(n_in, 1))(*[v.vr for v in ins]),
                                 out_values=out_values, in_values=in_values, n_out=n_out, n_in=n_in,
                                 multiple=m, private_out=private, transfers=tuple(transfers),
+                                n_named=self.real_named[k],
                                 channels=self._channels(k, slave, m > 1 and algorithm != GAUSS_SEIDEL)))
         return blocks
 
@@ -270,7 +338,11 @@ class Layout:
                 own = [b""] * len(outs) if value_type == "string" else (ctypes.c_int64 * len(outs))()
             get = slave.channel(value_type, outs)[0] if outs else None
             put = slave.channel(value_type, ins)[1] if ins else None
-            out.append(Channel(value_type, get, put, o_vals, i_vals, len(outs), len(ins), tuple(transfers), own))
+            named = self.typed_named[(k, value_type)]
+            connectors = outs[:len(outs) - named]
+            init_get = get if not named else (slave.channel(value_type, connectors)[0] if connectors else None)
+            out.append(Channel(value_type, get, put, o_vals, i_vals, len(outs), len(ins), tuple(transfers), own,
+                               init_get))
         return tuple(out)
 
     def _carrier(self, value_type: str, link: Any) -> integers.Carrier | None:

@@ -39,6 +39,9 @@ class Channel:
     n_in: int
     transfers: tuple[tuple[int, int, int, dict[int, int] | None, Any], ...] = ()
     private_out: Any = None  # Jacobi multi-rate: outputs are read here and published later
+    #: The get of the output connectors alone, for initialization mode (None: there are none);
+    #: ``get`` also reads the recorded variables that are not connectors, placed after them.
+    init_get: Callable[[Any], int] | None = None
 
 
 @dataclass
@@ -63,6 +66,9 @@ class Block:
     transfers: tuple[tuple[int, int, int, float, float], ...] = ()
     #: Integer, Boolean and String connectors (none in a Real-only system: the loop is then unchanged).
     channels: tuple[Channel, ...] = ()
+    #: How many of the outputs, the last ones, are recorded variables that are not connectors (not
+    #: read in initialization mode).
+    n_named: int = 0
 
 
 @dataclass

@@ -38,7 +38,9 @@ class Result:
     ----------
     data : numpy structured array
         Field ``time`` [s], then one field ``component.variable`` per recorded connector
-        (SI units), one row per recorded communication point (row 0 is the initial state).
+        (SI units), then one per other variable the run's ``record`` names (a parameter, a local:
+        :func:`~ipcosim.harness.master.layout.named_variables`), one row per recorded
+        communication point (row 0 is the initial state).
     metrics : dict
         ``metrics.json`` content (see docs/metrics.md): the task metrics, ``wall_time_s`` (the whole
         run: load, instantiate, initialize, step, write), ``real_time_factor`` (simulated /
@@ -162,6 +164,14 @@ class RunOutput:
     metrics: Mapping[str, Any] = field(default_factory=dict)
 
 
+def matching(names: Sequence[str], pattern: str) -> list[str]:
+    """The ``names`` (columns, variables) ``pattern`` selects: the name itself where it is one (also
+    one with brackets, ``x[1]``), else every name the shell pattern matches (``plant.*``)."""
+    if pattern in names:
+        return [pattern]
+    return [n for n in names if fnmatch.fnmatchcase(n, pattern)]
+
+
 def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> list[str]:
     """Names of ``columns`` matching ``patterns`` (see :meth:`Result.select`)."""
     cols = list(columns)
@@ -169,7 +179,7 @@ def select_columns(columns: Sequence[str], patterns: Sequence[str] | None) -> li
         return cols
     chosen = {"time"}
     for p in patterns:
-        hits = [c for c in cols if fnmatch.fnmatchcase(c, p)]
+        hits = matching(cols, p)
         if not hits:
             raise UsageError(f"--record {p}: no such variable; {closest(p, cols[1:], listing=40)}")
         chosen.update(hits)

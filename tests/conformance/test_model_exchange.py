@@ -82,6 +82,21 @@ def test_linear_decay_follows_its_closed_form_and_fmpy(fmi, tmp_path):
 
 
 @pytest.mark.parametrize("fmi", ["2.0", "3.0"])
+def test_a_recorded_parameter_and_derivative_of_a_model_exchange_component(fmi, tmp_path):
+    """``record=["m.k", "m.der(x)"]`` on the decay the master integrates: ``k`` as set, and the local
+    ``der(x) = -k x = -k exp(-k t)`` at every communication point, as the FMU computes it there."""
+    spec = FMI[fmi](cfmu.DECAY)
+    _, folder = _single(tmp_path, spec, (("x", "Real"),))
+    k = 2.0
+    r = ipcosim.run(folder, step=spec.step, set={"m.k": k}, record=["m.k", "m.der(x)"])
+    assert r.columns == ["time", "m.x", "m.k", "m.der(x)"]
+    assert np.all(r["m.k"] == k)
+    exact = -k * np.exp(-k * _times(spec))
+    assert np.max(np.abs(r["m.der(x)"] - exact)) < AGREE * k  # of its amplitude: x decays to 0.02
+    assert np.array_equal(r["m.der(x)"], -k * r["m.x"])
+
+
+@pytest.mark.parametrize("fmi", ["2.0", "3.0"])
 def test_van_der_pol_agrees_with_fmpy(fmi, tmp_path):
     spec = FMI[fmi](cfmu.VANDERPOL)
     fmu, folder = _single(tmp_path, spec, (("x0", "Real"), ("x1", "Real")))

@@ -366,6 +366,25 @@ def test_c_loop_on_c_fmus_and_fmi3_adapters_equals_the_python_loop(tmp_path, fmu
     assert _loops(alone, algorithm=algorithm)["auto"].metadata["loop"] == "c"
 
 
+@pytest.mark.parametrize("algorithm", ["gauss-seidel", "jacobi"])
+def test_a_variable_recorded_by_name_equals_its_column_as_a_connector(tmp_path, fmus, algorithm):
+    """Counter's outputs ``integral`` (Real) and ``steps`` (Integer) left out of the SSD's connectors and
+    named with ``record``: the same values as their columns when they are connectors, on a component
+    stepping every 0.3 s with a partial last period (Jacobi: read into its private outputs, published
+    at the end of the period), on the C and the Python loop alike."""
+    declared = scenario(tmp_path, fmus, [comp("c", "Counter", hint=0.3)], stop=0.95, step=0.1, name="declared")
+    named = scenario(tmp_path, fmus, [comp("c", "Counter", hint=0.3, only=("reached",))], stop=0.95, step=0.1,
+                     name="named")
+    reference = ipcosim.run(declared, algorithm=algorithm, set={"c.u": 2.0})
+    real = _loops(named, algorithm=algorithm, set={"c.u": 2.0}, record=["c.reached", "c.integral"])["c"]
+    assert real.columns == ["time", "c.reached", "c.integral"]
+    typed = ipcosim.run(named, algorithm=algorithm, set={"c.u": 2.0}, record=["c.reached", "c.integral", "c.steps"])
+    assert reference["c.steps"][-1] == 4 and reference["c.integral"][-1] == pytest.approx(2.0 * 0.95, abs=1e-12)
+    for r in (real, typed):
+        for name in r.columns:
+            assert np.array_equal(r[name], reference[name]), name
+
+
 @pytest.mark.parametrize("model", ["Stair", "Stair3"])
 def test_c_loop_ends_where_the_fmu_ends_the_simulation_or_fails_as_the_python_loop(tmp_path, fmus, model):
     folder = scenario(tmp_path, fmus, [comp("stair", model, only=("height",))], stop=2.0)
