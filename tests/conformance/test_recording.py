@@ -25,7 +25,7 @@ import ssp_text as t
 import ipcosim
 from ipcosim.errors import UsageError
 from ipcosim.harness import cli
-from ipcosim.harness.describe import describe
+from ipcosim.harness.api.describe import describe
 
 pytestmark = [pytest.mark.skipif(shutil.which("gcc") is None and shutil.which("cc") is None,
                                  reason="needs a C compiler to build the test FMUs"),
