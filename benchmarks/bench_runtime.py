@@ -190,7 +190,7 @@ def _init_ms(fmu: Path, unzip: Path) -> tuple[float, float]:
     """One fresh process: (wall, CPU) milliseconds from instantiate to initialized (a HIL adapter
     against a lockstep virtual rig served by this process)."""
     from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-    from ipcosim.harness.hil.server import RigServer
+    from ipcosim.fmus.hil.server import RigServer
 
     uri, server = "", None
     if fmu.stem.startswith("IP02HIL"):

@@ -11,9 +11,13 @@ Backends: ``quanser`` (:mod:`.quanser`), ``tcpip`` (:mod:`.tcpip`, served by
 ``ipcosim rig serve``), in-process (:mod:`.inproc`). The virtual rig is :mod:`.rig`, its
 wire protocol :mod:`.protocol`.
 
-This package holds what the HIL adapter FMU runs (its glue is :mod:`.adapter`); the rig's
-server, the ``--swap plant=hil`` alias and the observer of a run's cards sit above the master,
-in :mod:`ipcosim.harness.hil`. Nothing here imports the master or the scenarios: they call in.
+The HIL is this one room: the card side (the card API :mod:`.api`, its clients, the wire protocol,
+the adapter FMU's glue :mod:`.adapter`) and the rig side (the virtual rig :mod:`.rig`, its network
+server :mod:`.server` and the service behind ``ipcosim rig serve``, :mod:`.service`). The adapter FMU
+carries only what its script imports (the build's test checks that no server is packed). Only
+what plugs the room into the master sits above it, in :mod:`ipcosim.harness.hil`: the ``--swap
+plant=hil`` alias and the observer of a run's cards. Nothing here imports the master or the
+scenarios: they call in.
 """
 from __future__ import annotations
 

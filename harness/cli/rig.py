@@ -74,8 +74,8 @@ def _token_options(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """``serve``, or the operator's ``reset``/``status`` of a running rig (``ipcosim.harness.hil.service``)."""
-    from ipcosim.harness.hil.service import operate, read_token
+    """``serve``, or the operator's ``reset``/``status`` of a running rig (``ipcosim.fmus.hil.service``)."""
+    from ipcosim.fmus.hil.service import operate, read_token
 
     if args.rig_command == "serve":
         return serve(args)

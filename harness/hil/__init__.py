@@ -1,11 +1,8 @@
-"""Hardware-in-the-loop above the master: the virtual rig's network server and service
-(``ipcosim rig serve``, :mod:`.server`, :mod:`.service`), the observer of a run's cards
+"""What plugs the hardware-in-the-loop room (:mod:`ipcosim.fmus.hil`: card API, wire protocol, adapter
+FMU, in-process card, virtual rig and its server) into the master: the observer of a run's cards
 (:mod:`.observer`, a master :class:`~ipcosim.harness.master.observers.Observer`) and the
-``--swap plant=hil`` alias (:mod:`.swap`, registered with the scenario binding when this
-package is imported).
-
-What runs inside the HIL adapter FMU (the card API, its clients, the wire format, the virtual
-rig an in-process card drives) stays in :mod:`ipcosim.fmus.hil`: the FMU carries it.
+``--swap plant=hil`` alias (:mod:`.swap`, registered with the scenario binding when this package is
+imported). A plain simulation loads none of it.
 """
 from __future__ import annotations
 

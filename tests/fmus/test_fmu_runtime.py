@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.harness.hil.server import RigServer
+from ipcosim.fmus.hil.server import RigServer
 
 pytestmark = pytest.mark.integration
 

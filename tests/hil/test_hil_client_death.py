@@ -13,7 +13,7 @@ import pytest
 from fmi_helpers import wait_for
 
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.harness.hil.server import RigServer
+from ipcosim.fmus.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[2]
 TIMEOUT = 0.5   # [s] long enough that a stall of a loaded VM does not trip it before the test does

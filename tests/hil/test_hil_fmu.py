@@ -19,7 +19,7 @@ from fmpy.validation import validate_fmu
 
 from ipcosim.fmus.hil.inproc import register_rig, unregister_rig
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.harness.hil.server import RigServer
+from ipcosim.fmus.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[2]
 CART_RES, PEND_RES = 2.275e-5, 1.534e-3        # thesis-data.md, encoders
@@ -140,7 +140,8 @@ def test_adapter_passes_validate_fmu(kind, hil_fmus):
     assert private_resource(names, "fmus/hil/api.py")
     assert not any("/harness/" in n for n in names), names  # nothing of the master side
     assert all(n.endswith(".pyc") for n in names if "__pycache__" in n)  # only the build's checked bytecode
-    assert not private_resource(names, "harness/hil/server.py")
+    assert not private_resource(names, "fmus/hil/server.py")  # the rig side, in the same room: not imported
+    assert not private_resource(names, "fmus/hil/service.py")
     assert not private_resource(names, "harness/cli/__init__.py")
 
 

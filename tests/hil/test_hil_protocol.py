@@ -24,8 +24,8 @@ from ipcosim.fmus.hil.protocol import (
     pack_text,
 )
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
+from ipcosim.fmus.hil.server import RigServer
 from ipcosim.fmus.hil.tcpip import TcpipCard
-from ipcosim.harness.hil.server import RigServer
 
 # --- framing (pure) -----------------------------------------------------------------------------
 

@@ -21,8 +21,8 @@ from fmi_helpers import wait_for
 from ipcosim.fmus.hil import ErrorCode, HILError
 from ipcosim.fmus.hil.protocol import HEADER, MAGIC, MAX_PAYLOAD, Msg, encode_frame, pack_channels, pack_text
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
+from ipcosim.fmus.hil.server import RigAccessError, RigServer, escape
 from ipcosim.fmus.hil.tcpip import TcpipCard
-from ipcosim.harness.hil.server import RigAccessError, RigServer, escape
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -332,7 +332,7 @@ def test_fuzzing_clients_cannot_stop_the_server_answering_a_well_behaved_one(ser
 
 
 def test_the_log_is_rate_limited_and_says_how_many_lines_it_held_back():
-    from ipcosim.harness.hil.server import RateLimitedLog
+    from ipcosim.fmus.hil.server import RateLimitedLog
 
     now = [0.0]
     lines: list[str] = []

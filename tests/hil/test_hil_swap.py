@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
-from ipcosim.harness.hil.server import RigServer
+from ipcosim.fmus.hil.server import RigServer
 
 ROOT = Path(__file__).resolve().parents[2]
 CART_RES, PEND_RES = 2.275e-5, 1.534e-3          # thesis-data.md, encoders

@@ -5,16 +5,15 @@ below it, never one above:
 
     errors, toolchain                          the base exceptions, the C-compiler rule
     fmus                                       physics, plant FMU glue, task metrics, the Python FMU
-                                               build, what the HIL adapter FMU runs (card API, card
-                                               clients, wire format, virtual rig, adapter glue)
+                                               build, the HIL's one room (card API, card clients, wire
+                                               format, adapter glue; virtual rig, its server and service)
     controllers                                control-law design, discrete laws, the pure closed loop,
                                                controller FMU glue
     harness.support                            where things are found and built; the missing-extra check
     harness.native                             the C generator, over the plants and the laws
     harness.master                             the generic master (knows no plant, law or generator)
     harness.scenario                           SSP read, validate, bind, pack, flavours
-    harness.hil                                the rig server and service, the card observer, the
-                                               ``hil`` swap alias
+    harness.hil                                the card observer and the ``hil`` swap alias
     ipcosim, harness (the facade),             the lazy public names; the run API (options, grammar, engine,
     harness.api, harness.testing,              public, describe, plots, export); the test support (checks,
     harness.live                               baselines, pytest plugin); the live view

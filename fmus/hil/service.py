@@ -18,9 +18,7 @@ from typing import Callable, Mapping
 from ipcosim.errors import IpcosimError, UsageError, closest
 from ipcosim.fmus.hil.protocol import MAX_TOKEN, TOKEN_ENV
 from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig, experiment_config
-from ipcosim.fmus.params import PLANT_KINDS
-from ipcosim.fmus.physics import state_names
-from ipcosim.harness.hil.server import (
+from ipcosim.fmus.hil.server import (
     DEFAULT_HOST,
     DEFAULT_IDLE_TIMEOUT,
     DEFAULT_IO_TIMEOUT,
@@ -29,6 +27,8 @@ from ipcosim.harness.hil.server import (
     RigServer,
     escape,
 )
+from ipcosim.fmus.params import PLANT_KINDS
+from ipcosim.fmus.physics import state_names
 
 #: Ranges the options of ``ipcosim rig serve`` are held to: (option, attribute, low, high).
 RANGES = (("--tick", "tick", 1e-5, 0.01), ("--latency", "latency", 0.0, 1.0),
