@@ -49,13 +49,13 @@ def test_every_drawing_command_keeps_its_numbers_without_matplotlib(tmp_path: Pa
 
 def test_analyze_keeps_its_margins_when_the_figures_cannot_be_drawn(tmp_path, monkeypatch, capsys):
     from ipcosim.harness.cli import main
-    from ipcosim.harness.studies import analyze
+    from ipcosim.harness.studies import analyze_plots
     from ipcosim.harness.support.extras import MissingExtraError
 
     def no_plot(*args, **kwargs):
         raise MissingExtraError("matplotlib is not installed (plots need it): pip install 'ipcosim[plot]'")
 
-    monkeypatch.setattr(analyze, "plot_loop", no_plot)
+    monkeypatch.setattr(analyze_plots, "plot_loop", no_plot)
     from ipcosim.harness.support import extras
 
     monkeypatch.setattr(extras, "_said", set())  # each skip is said once a process: once in this test
