@@ -49,6 +49,15 @@ def test_plants_offer_both_interfaces_and_validate(native_fmus: tuple[Path, Path
         assert md.numberOfEventIndicators == 2 * (1 if "Single" in fmu.stem else 2), fmu
 
 
+def test_plants_pass_vdmcheck(native_fmus: tuple[Path, Path]) -> None:
+    """VDMCheck2 (the FMI 2.0 static rules, model exchange's included: states, derivatives, initial
+    unknowns) finds nothing in either plant."""
+    from fmi_helpers import assert_vdmcheck_clean
+
+    for name in PLANTS:
+        assert_vdmcheck_clean(native_fmus[1] / f"{name}.fmu")
+
+
 def _state_names(model: str) -> tuple[str, ...]:
     from ipcosim.fmus.physics import state_names
 
