@@ -30,7 +30,7 @@ from ipcosim.toolchain import CROSS_COMPILERS, find_compiler, find_cross_compile
 
 C_DIR = Path(__file__).resolve().parent / "c"
 #: The hand-written glue every native FMU carries (``fmi2shared.h``: what it shares with the loop container).
-GLUE_FILES = ("fmi2glue.c", "model.h", "fmi2shared.h")
+GLUE_FILES = ("fmi2glue.c", "model.h", "fmi2shared.h", "fmi2me.h")
 #: The warnings and the floating-point flags every binary is compiled with (every platform alike).
 #: Floating-point contraction off: no fused multiply-add where the source has a product and a sum
 #: (aarch64 has the instruction, baseline x86-64 has not), so every platform rounds the same.
@@ -62,7 +62,7 @@ class Variant:
 VARIANTS = {
     "2": Variant("2", "fmi2glue.c", "container.c", (), FMI_HEADERS,
                  {"linux64": "linux64", "win64": "win64", "aarch64": "aarch64-linux"}),
-    "3": Variant("3", "fmi3glue.c", "fmi3container.c", ("fmi3adapter.h",), FMI_HEADERS + FMI3_HEADERS,
+    "3": Variant("3", "fmi3glue.c", "fmi3container.c", ("fmi3adapter.h", "fmi3me.h"), FMI_HEADERS + FMI3_HEADERS,
                  {"linux64": "x86_64-linux", "win64": "x86_64-windows", "aarch64": "aarch64-linux"}),
 }
 #: Where ``ipcosim build --native --fmi N`` writes (below the build folder).

@@ -5,16 +5,19 @@ traced functions; ``fmi2glue.c`` + ``model.h`` (hand-written, shared) do the res
 """
 from __future__ import annotations
 
+import copy
 import uuid
 from typing import Any
 from xml.etree import ElementTree
 
 from ipcosim.fmus.experiment import default_experiment
 from ipcosim.harness.native import tracer
+from ipcosim.harness.native.exchange import NEXT_EVENT
 from ipcosim.harness.native.models import NativeModel
 
 _TIMING = {"plant": "MODEL_KIND_PLANT", "sampled": "MODEL_KIND_SAMPLED", "source": "MODEL_KIND_SOURCE"}
-_BASE_UNITS = {"s": {"s": "1"}, "1": {}}
+_BASE_UNITS = {"s": {"s": "1"}, "1": {}, "A/s": {"A": "1", "s": "-1"}, "m/s2": {"m": "1", "s": "-2"},
+               "rad/s2": {"rad": "1", "s": "-2"}}
 _TYPE = {"Real": "VAR_REAL", "Integer": "VAR_INTEGER", "Boolean": "VAR_BOOLEAN"}
 
 
@@ -61,6 +64,9 @@ def model_c(model: NativeModel) -> tuple[str, str]:
     body = _function("model_initialize", "double *v, double start_time", model.initialize, slots, "start_time")
     body += _function("model_step", "double *v, double time, double step", model.step, slots,
                       "(time + step)")
+    if model.exchange is not None:
+        body += _function("model_me_evaluate", "double *v, double time", model.exchange.evaluate, slots, "time")
+        body += _function("model_me_update", "double *v, double time", model.exchange.update, slots, "time")
     core = "\n".join(body)
     gid = guid(model, core + str(start))
     tables, sizes = _tables(model, slots)
@@ -78,6 +84,7 @@ def model_c(model: NativeModel) -> tuple[str, str]:
         "",
         *tables,
         core,
+        *_exchange_info(model, slots),
         *_model_info(model, slots, gid, sizes),
     ]
     return "\n".join(lines), gid
@@ -125,7 +132,29 @@ def _model_info(model: NativeModel, slots: dict[str, int], gid: str, sizes: dict
         f'    "{model.name}", "{gid}", {_TIMING[model.timing]}, NV, start_values, variables, {sizes["variables"]},',
         f"    checked, {sizes['checked']}, {slots[period] if period else -1}, "
         f"{slots['S:tick'] if 'S:tick' in slots else -1}, checks, {sizes['checks']}, by_vr, {sizes['by_vr']},",
-        "    model_initialize, model_step};",
+        f"    model_initialize, model_step, {'&exchange_info' if model.exchange is not None else 'NULL'}}};",
+        "",
+    ]
+
+
+def _exchange_info(model: NativeModel, slots: dict[str, int]) -> list[str]:
+    """A plant's ``exchange_info`` (``model.h``'s ``ModelExchangeInfo``) and its slot tables; nothing for a
+    co-simulation-only model."""
+    me = model.exchange
+    if me is None:
+        return []
+
+    def table(name: str, keys: list[str]) -> str:
+        return f"static const int {name}[{len(keys)}] = {{{', '.join(str(slots[k]) for k in keys)}}};"
+
+    off = [f'    {{{slots["V:" + name]}, CHECK_ZERO, "{name}"}},' for name in me.off]
+    return [
+        table("me_states", me.states), table("me_derivatives", me.derivatives),
+        table("me_indicators", me.indicators), table("me_discrete", me.discrete),
+        f"static const ParameterCheck me_off[{len(off)}] = {{", *off, "};",
+        "static const ModelExchangeInfo exchange_info = {",
+        f"    {len(me.states)}, me_states, me_derivatives, {len(me.indicators)}, me_indicators, {len(me.discrete)},",
+        f"    me_discrete, {slots[NEXT_EVENT]}, me_off, {len(off)}, model_me_evaluate, model_me_update}};",
         "",
     ]
 
@@ -184,9 +213,12 @@ def model_description(model: NativeModel, gid: str, sources: list[str]) -> bytes
                 raise ValueError(f"{model.name}: unit {name!r} has no definition")
             unit = ElementTree.SubElement(ud, "Unit", {"name": name})
             ElementTree.SubElement(unit, "BaseUnit", _BASE_UNITS[name])
+    if model.exchange is not None:
+        model_exchange(root, model.name, len(model.exchange.indicators))
     log_categories(root)
     period = next((v.start for v in model.variables if v.name == "sample_period" and v.start is not None), None)
     ElementTree.SubElement(root, "DefaultExperiment", default_experiment(period))
+    derivative_of = _derivatives(model)
     mv = ElementTree.SubElement(root, "ModelVariables")
     for v in model.variables:
         attrs = {"name": v.name, "valueReference": str(v.vr), "causality": v.causality, "variability": v.variability}
@@ -200,9 +232,34 @@ def model_description(model: NativeModel, gid: str, sources: list[str]) -> bytes
             tattrs["start"] = _fmt(v.start, v.type)
         if v.unit and v.type == "Real":
             tattrs["unit"] = v.unit
+        if v.name in derivative_of:
+            tattrs["derivative"] = str(derivative_of[v.name])
         ElementTree.SubElement(sv, v.type, tattrs)
     _structure(root, model)
     return xml_bytes(root)
+
+
+def model_exchange(root: ElementTree.Element, identifier: str, indicators: int) -> None:
+    """Add ``<ModelExchange>`` (before ``<CoSimulation>``, as the schema orders them, with the same source
+    files) and the number of event indicators to a model description's root."""
+    cs = root.find("CoSimulation")
+    me = ElementTree.Element("ModelExchange", {
+        "modelIdentifier": identifier, "completedIntegratorStepNotNeeded": "true",
+        "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
+        "canGetAndSetFMUstate": "false", "canSerializeFMUstate": "false"})
+    files = cs.find("SourceFiles") if cs is not None else None
+    if files is not None:
+        me.append(copy.deepcopy(files))
+    root.insert(list(root).index(cs) if cs is not None else 0, me)
+    root.set("numberOfEventIndicators", str(indicators))
+
+
+def _derivatives(model: NativeModel) -> dict[str, int]:
+    """``{derivative variable: index of its state}`` (model exchange; empty without it)."""
+    if model.exchange is None:
+        return {}
+    index = {f"V:{v.name}": i + 1 for i, v in enumerate(model.variables)}
+    return {d[2:]: index[s] for s, d in zip(model.exchange.states, model.exchange.derivatives)}
 
 
 def _structure(root: ElementTree.Element, model: NativeModel) -> None:
@@ -212,8 +269,17 @@ def _structure(root: ElementTree.Element, model: NativeModel) -> None:
     for v in model.variables:
         if v.causality == "output":
             _unknown(out_el, index, v.name, v.depends_on)
+    derivatives = _derivatives(model)
+    if derivatives:
+        der_el = ElementTree.SubElement(ms, "Derivatives")
+        for name in derivatives:
+            _unknown(der_el, index, name, None)
     init = [v for v in model.variables if v.causality == "output" and v.initial in (None, "calculated", "approx")]
     init += [v for v in model.variables if v.causality == "calculatedParameter"]
+    if derivatives:  # the continuous states and their derivatives (FMI 2.0, section 3.3.1)
+        states = {model.variables[i - 1].name for i in derivatives.values()}
+        init += [v for v in model.variables if v.name in states or v.name in derivatives]
+        init.sort(key=lambda v: index[v.name])
     if init:
         iu = ElementTree.SubElement(ms, "InitialUnknowns")
         for v in init:

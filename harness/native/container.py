@@ -35,7 +35,7 @@ from xml.etree import ElementTree
 from ipcosim.errors import IpcosimError
 from ipcosim.harness.native import cbuild, cgen, tracer
 
-CONTAINER_FILES = ("container.c", "container.h", "fmi2glue.c", "model.h", "fmi2shared.h")
+CONTAINER_FILES = ("container.c", "container.h", "fmi2glue.c", "model.h", "fmi2shared.h", "fmi2me.h")
 _TYPE = {"Real": "VAR_REAL", "Integer": "VAR_INTEGER", "Boolean": "VAR_BOOLEAN"}
 _FUNCTIONS = ("Instantiate", "FreeInstance", "SetupExperiment", "EnterInitializationMode",
               "ExitInitializationMode", "Terminate", "Reset", "GetReal", "SetReal", "SetInteger", "SetBoolean",

@@ -16,6 +16,7 @@ from __future__ import annotations
 from xml.etree import ElementTree
 
 from ipcosim.harness.native import cgen
+from ipcosim.harness.native.exchange import INDICATOR_PREFIX
 
 #: FMI 2.0 type element -> FMI 3.0 variable element.
 TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
@@ -33,6 +34,12 @@ def model_description(fmi2_xml: bytes) -> bytes:
     attrs = {"fmiVersion": "3.0", **{a: src.get(a) for a in _ROOT_ATTRIBUTES if src.get(a) is not None},
              "instantiationToken": src.get("guid", "")}
     root = ElementTree.Element("fmiModelDescription", attrs)
+    me = src.find("ModelExchange")
+    if me is not None:  # FMI 3.0 says "needs" where FMI 2.0 said "not needed"
+        ElementTree.SubElement(root, "ModelExchange", {
+            **{_CS_ATTRIBUTES[k]: v for k, v in me.attrib.items() if k in _CS_ATTRIBUTES},
+            "needsCompletedIntegratorStep": "false" if me.get("completedIntegratorStepNotNeeded") == "true"
+            else "true"})
     cs = src.find("CoSimulation")
     ElementTree.SubElement(root, "CoSimulation", {_CS_ATTRIBUTES[k]: v for k, v in cs.attrib.items()
                                                   if k in _CS_ATTRIBUTES})
@@ -52,15 +59,23 @@ def model_description(fmi2_xml: bytes) -> bytes:
         if typed.tag not in TYPES:
             raise ValueError(f"{src.get('modelName')}: variable {sv.get('name')} of type {typed.tag} has no FMI 3.0 "
                              "type here")
-        ElementTree.SubElement(mv, TYPES[typed.tag], {**sv.attrib, **typed.attrib})
+        attrs = {**sv.attrib, **typed.attrib}
+        if "derivative" in attrs:  # a state's index in FMI 2.0, its value reference in FMI 3.0
+            attrs["derivative"] = vr_of_index[int(attrs["derivative"])]
+        ElementTree.SubElement(mv, TYPES[typed.tag], attrs)
     ms = ElementTree.SubElement(root, "ModelStructure")
     fmi2_ms = src.find("ModelStructure")
-    for group, tag in (("Outputs", "Output"), ("InitialUnknowns", "InitialUnknown")):
+    for group, tag in (("Outputs", "Output"), ("Derivatives", "ContinuousStateDerivative"),
+                       ("InitialUnknowns", "InitialUnknown")):
         for unknown in fmi2_ms.iterfind(f"{group}/Unknown"):
             attrs = {"valueReference": vr_of_index[int(unknown.get("index"))]}
             if unknown.get("dependencies") is not None:
                 attrs["dependencies"] = " ".join(vr_of_index[int(i)] for i in unknown.get("dependencies").split())
             ElementTree.SubElement(ms, tag, attrs)
+    if me is not None:  # FMI 3.0 names the event indicators' variables (FMI 2.0 only counts them)
+        for sv in scalars:
+            if sv.get("name", "").startswith(INDICATOR_PREFIX):
+                ElementTree.SubElement(ms, "EventIndicator", {"valueReference": sv.get("valueReference")})
     return cgen.xml_bytes(root)
 
 

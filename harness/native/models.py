@@ -28,7 +28,7 @@ from typing import Any, Callable, Mapping
 from xml.etree import ElementTree
 
 from ipcosim.errors import IpcosimError
-from ipcosim.harness.native import tracer
+from ipcosim.harness.native import exchange, tracer
 from ipcosim.harness.native.leaves import c_name, numbers
 from ipcosim.harness.native.tracer import Node, leaf, select
 
@@ -72,6 +72,7 @@ class NativeModel:
     meta: dict[str, Any] = field(default_factory=dict)     # {"role": plant|law|source, "law", "plant"}
     checks: dict[str, str] = field(default_factory=dict)   # parameter -> finite | positive | nonnegative | zero
     unit_definitions: list[ElementTree.Element] = field(default_factory=list)
+    exchange: Any = None                                   # model exchange (plants: exchange.Exchange)
 
     def variable(self, name: str) -> NativeVariable:
         for v in self.variables:
@@ -175,13 +176,14 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
     stepped, started = _trace_plant(kind, cls, [(len(m), len(m[0])) for m in stages], set(coefficients))
     zkeys = [f"S:z{i}" for i in range(n)]
     dkeys = [f"S:d{k}" for k in range(NATIVE_MAX_DELAY_STEPS)]
-    xkeys = [f"S:x{i}" for i in range(n)]
+    xkeys = [exchange.state_key(s) for s in states]
     _append(variables, _plant_parameters(step, coefficients))
+    _append(variables, exchange.variables(kind))
     present = {v.name for v in variables}
     off = [name for name in NATIVE_INSTRUMENTS_OFF if name in present]
     return NativeModel(
         name=name, timing="plant", description=description, variables=variables, unit_definitions=units,
-        states={k: 0.0 for k in zkeys + dkeys + xkeys + [TAPPED]},
+        states={k: 0.0 for k in zkeys + dkeys + [TAPPED]} | exchange.discrete_starts(kind),
         initialize=list(zip(zkeys, started[:n])) + [(f"V:{s}", v) for s, v in zip(states, started[n:2 * n])]
         + [(k, tracer.const(0.0)) for k in dkeys + [TAPPED]] + list(zip(xkeys, started[2 * n:])),
         step=list(zip(zkeys, stepped[:n])) + [(f"V:{s}", v) for s, v in zip(states, stepped[n:2 * n])]
@@ -194,7 +196,8 @@ def plant_model(name: str, kind: str, python_fmu: Path, step: float = 1e-3) -> N
                             "nonnegative" if f.metadata.get("nonnegative") else "finite")
                    for f in cls.__dataclass_fields__.values()},
                 **{f"initial_{s}": "finite" for s in states}, "integrator_step": "positive",
-                **{name: "zero" for name in off}})
+                **{name: "zero" for name in off}},
+        exchange=exchange.exchange(kind, _PlantTrace(kind, cls)))
 
 
 def _trace_plant(kind: str, cls: type, shapes: list[tuple[int, int]], nonzero: set[str]
@@ -279,7 +282,8 @@ class _PlantTrace:
         buffer = [leaf(f"S:d{k}") for k in range(NATIVE_MAX_DELAY_STEPS)]
         v, vA = self.voltage(p, buffer)
         # the state after the last step's constraints, then the taps
-        tapped, before, z0 = self.tap(p, [leaf(f"S:x{i}") for i in range(n)], [leaf(f"S:z{i}") for i in range(n)])
+        tapped, before, z0 = self.tap(p, [leaf(exchange.state_key(s)) for s in self.states],
+                                      [leaf(f"S:z{i}") for i in range(n)])
         z = sym_stages(z0, f, (vA,), shapes, nonzero)
         x = self.internal.output_map(p)(z) if self.internal else list(z)
         x, held = self.constrain(p, before, x)

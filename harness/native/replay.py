@@ -32,7 +32,7 @@ from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.fmus.params import plant_kind_of
 from ipcosim.fmus.physics import MEASURED, state_names
 from ipcosim.fmus.plant import PlantStepError
-from ipcosim.harness.native import cbuild, cgen, redesign, tracer
+from ipcosim.harness.native import cbuild, cgen, exchange, redesign, tracer
 from ipcosim.toolchain import find_compiler
 
 DRIVER = "replay.c"
@@ -120,8 +120,7 @@ class NativeReplay:
             tracer.reset_table()
         self.slots = cgen.layout(model)
         self.info = {"model": self.name, **model.meta}
-        states = state_names(kind)
-        self._out = np.array([self.slots[f"S:x{states.index(m)}"] for m in MEASURED[kind]], dtype=np.intc)
+        self._out = np.array([self.slots[exchange.state_key(m)] for m in MEASURED[kind]], dtype=np.intc)
         lib = ctypes.CDLL(str(replay_library(self.name, source)))
         fn = lib.ipcosim_replay
         ip, dp = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)

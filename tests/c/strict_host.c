@@ -13,6 +13,8 @@
  *                            UInt32, Int64, UInt64, Boolean or String
  *   time VR                  the independent variable (a Float64, also listed with var)
  *   run START H STEPS        start time, communication step size [s], number of steps: runs the FMU
+ *   set VR VALUE             a Float64 to set in Initialization Mode of the next `me` run
+ *   me START H STEPS         runs the FMU through its model exchange instead (run_me below)
  * What it checks for each FMU, a failure ending that FMU's run with one line "error: ..." (then
  * the next FMU; exit status 1 at the end):
  *   - fmi3InstantiateCoSimulation with eventModeUsed = fmi3True returns NULL and logs an error
@@ -201,6 +203,127 @@ static int run_fmu(const char *path, const char *token, double start, double h, 
     return 0;
 }
 
+/* Model exchange (FMI 3.0 chapter 3): instantiated with fmi3InstantiateModelExchange, the `set` values
+ * given in Initialization Mode, then STEPS explicit Euler steps of H as the simplest importer
+ * integrates: states and derivatives got, the time and the new states set, fmi3CompletedIntegratorStep;
+ * where an event indicator changed sign, Event Mode and the event iteration (fmi3UpdateDiscreteStates
+ * until no update is needed, at most 64 passes). Every variable is read in Instantiated, Initialization
+ * Mode, Event Mode after initialization ("event0"), Continuous-Time Mode after each step ("ctN"), Event
+ * Mode at each event ("eventN") and Terminated; time is the time set (the start time until the first
+ * fmi3SetTime); fmi3GetNumberOfContinuousStates and fmi3GetNumberOfEventIndicators answer. */
+#define MAX_STATES 64
+static fmi3ValueReference set_vrs[MAX_VARS];
+static double set_values[MAX_VARS];
+static size_t nsets;
+
+typedef struct {
+    fmi3UpdateDiscreteStatesTYPE *update;
+    fmi3EnterContinuousTimeModeTYPE *enter_ct;
+    fmi3EnterEventModeTYPE *enter_event;
+    fmi3GetEventIndicatorsTYPE *indicators;
+} EventCalls;
+
+/* Event Mode at `t`, every variable read, the event iteration, back to Continuous-Time Mode. */
+static int handle_event(fmi3Instance c, const EventCalls *e, const char *state, double t, int enter) {
+    int pass;
+    fmi3Boolean more = fmi3True, stop, nominals, values, defined;
+    fmi3Float64 next;
+    if (enter && e->enter_event(c) != fmi3OK) return fail("%s: fmi3EnterEventMode failed", state);
+    if (check_state(c, state, t)) return 1;
+    for (pass = 0; more; pass++) {
+        if (pass == 64) return fail("%s: the event iteration did not settle in 64 passes", state);
+        if (e->update(c, &more, &stop, &nominals, &values, &defined, &next) != fmi3OK)
+            return fail("%s: fmi3UpdateDiscreteStates failed", state);
+    }
+    return e->enter_ct(c) != fmi3OK ? fail("%s: fmi3EnterContinuousTimeMode failed", state) : 0;
+}
+
+static int run_me(const char *path, const char *token, double start, double h, long steps) {
+    Library lib = open_library(path);
+    fmi3InstantiateModelExchangeTYPE *instantiate;
+    fmi3EnterInitializationModeTYPE *enter_init;
+    fmi3ExitInitializationModeTYPE *exit_init;
+    fmi3SetFloat64TYPE *set_float64;
+    fmi3SetTimeTYPE *set_time;
+    fmi3GetContinuousStatesTYPE *get_x;
+    fmi3SetContinuousStatesTYPE *set_x;
+    fmi3GetContinuousStateDerivativesTYPE *get_dx;
+    fmi3GetNumberOfContinuousStatesTYPE *number_of_states;
+    fmi3GetNumberOfEventIndicatorsTYPE *number_of_indicators;
+    fmi3CompletedIntegratorStepTYPE *completed;
+    fmi3TerminateTYPE *terminate;
+    fmi3FreeInstanceTYPE *free_instance;
+    EventCalls e;
+    fmi3Instance c;
+    double x[MAX_STATES], dx[MAX_STATES], z[MAX_STATES], z0[MAX_STATES], t = start, ignored;
+    size_t nx = MAX_STATES + 1, nz = MAX_STATES + 1, i;
+    long n;
+    int k;
+    printf("fmu %s\n", path);
+    if (lib == NULL) return fail("cannot load %s", path);
+    LOAD(instantiate, "fmi3InstantiateModelExchange");
+    LOAD(enter_init, "fmi3EnterInitializationMode");
+    LOAD(exit_init, "fmi3ExitInitializationMode");
+    LOAD(set_float64, "fmi3SetFloat64");
+    LOAD(set_time, "fmi3SetTime");
+    LOAD(get_x, "fmi3GetContinuousStates");
+    LOAD(set_x, "fmi3SetContinuousStates");
+    LOAD(get_dx, "fmi3GetContinuousStateDerivatives");
+    LOAD(number_of_states, "fmi3GetNumberOfContinuousStates");
+    LOAD(number_of_indicators, "fmi3GetNumberOfEventIndicators");
+    LOAD(completed, "fmi3CompletedIntegratorStep");
+    LOAD(terminate, "fmi3Terminate");
+    LOAD(free_instance, "fmi3FreeInstance");
+    LOAD(e.update, "fmi3UpdateDiscreteStates");
+    LOAD(e.enter_ct, "fmi3EnterContinuousTimeMode");
+    LOAD(e.enter_event, "fmi3EnterEventMode");
+    LOAD(e.indicators, "fmi3GetEventIndicators");
+    for (k = 0; k < NTYPES; k++) {
+        char name[64];
+        snprintf(name, sizeof name, "fmi3Get%s", TYPE_NAMES[k]);
+        LOAD(getters[k], name);
+    }
+    c = instantiate("strict", token, NULL, fmi3False, fmi3True, NULL, logger);
+    if (c == NULL) return fail("fmi3InstantiateModelExchange returned NULL");
+    if (read_all(c, "instantiated", &ignored)) return 1;
+    if (number_of_states(c, &nx) != fmi3OK || number_of_indicators(c, &nz) != fmi3OK || nx > MAX_STATES ||
+        nz > MAX_STATES)
+        return fail("fmi3GetNumberOfContinuousStates / EventIndicators failed (or above %d)", MAX_STATES);
+    if (enter_init(c, fmi3False, 0.0, start, fmi3True, start + (double)steps * h) != fmi3OK)
+        return fail("fmi3EnterInitializationMode failed");
+    if (nsets > 0 && set_float64(c, set_vrs, nsets, set_values, nsets) != fmi3OK) return fail("fmi3SetFloat64 failed");
+    if (check_state(c, "initialization", start)) return 1;
+    if (exit_init(c) != fmi3OK) return fail("fmi3ExitInitializationMode failed");
+    if (handle_event(c, &e, "event0", start, 0)) return 1;
+    if (e.indicators(c, z0, nz) != fmi3OK) return fail("fmi3GetEventIndicators failed");
+    for (n = 1; n <= steps; n++) {
+        fmi3Boolean enter = fmi3True, stop = fmi3True;
+        char state[64];
+        if (get_x(c, x, nx) != fmi3OK || get_dx(c, dx, nx) != fmi3OK)
+            return fail("t = %.17g: fmi3GetContinuousStates or fmi3GetContinuousStateDerivatives failed", t);
+        for (i = 0; i < nx; i++) x[i] += h * dx[i];
+        t = start + (double)n * h;
+        if (set_time(c, t) != fmi3OK || set_x(c, x, nx) != fmi3OK)
+            return fail("t = %.17g: fmi3SetTime or fmi3SetContinuousStates failed", t);
+        if (completed(c, fmi3True, &enter, &stop) != fmi3OK || stop)
+            return fail("t = %.17g: fmi3CompletedIntegratorStep failed or asked to stop", t);
+        snprintf(state, sizeof state, "ct%ld", n);
+        if (check_state(c, state, t)) return 1;
+        if (e.indicators(c, z, nz) != fmi3OK) return fail("t = %.17g: fmi3GetEventIndicators failed", t);
+        for (i = 0; i < nz && !enter; i++) enter = (z0[i] > 0.0) != (z[i] > 0.0);
+        if (enter) {
+            snprintf(state, sizeof state, "event%ld", n);
+            if (handle_event(c, &e, state, t, 1) || e.indicators(c, z, nz) != fmi3OK) return 1;
+        }
+        memcpy(z0, z, nz * sizeof z[0]);
+    }
+    if (terminate(c) != fmi3OK) return fail("fmi3Terminate failed");
+    if (check_state(c, "terminated", t)) return 1;
+    free_instance(c);
+    printf("ok\n");
+    return 0;
+}
+
 int main(int argc, char **argv) {
     char line[8192], word[64], path[4096], token[1024];
     int failed = 0, k;
@@ -215,13 +338,14 @@ int main(int argc, char **argv) {
     while (fgets(line, sizeof line, plan) != NULL) {
         char type[64];
         unsigned vr;
-        double start, h;
+        double start, h, value;
         long steps;
         if (sscanf(line, "%63s", word) != 1) continue;
         if (strcmp(word, "fmu") == 0) {
             if (sscanf(line, "fmu %4095s %1023s", path, token) != 2) fatal("bad plan line: %s", line);
             for (k = 0; k < NTYPES; k++) nvrs[k] = 0;
             has_time = 0;
+            nsets = 0;
         } else if (strcmp(word, "var") == 0) {
             if (sscanf(line, "var %63s %u", type, &vr) != 2 || (k = type_index(type)) < 0 || nvrs[k] >= MAX_VARS)
                 fatal("bad plan line: %s", line);
@@ -234,6 +358,15 @@ int main(int argc, char **argv) {
             if (sscanf(line, "run %lf %lf %ld", &start, &h, &steps) != 3 || path[0] == 0)
                 fatal("bad plan line: %s", line);
             failed |= run_fmu(path, token, start, h, steps);
+            fflush(stdout);
+        } else if (strcmp(word, "set") == 0) {
+            if (sscanf(line, "set %u %lf", &vr, &value) != 2 || nsets >= MAX_VARS) fatal("bad plan line: %s", line);
+            set_vrs[nsets] = vr;
+            set_values[nsets++] = value;
+        } else if (strcmp(word, "me") == 0) {
+            if (sscanf(line, "me %lf %lf %ld", &start, &h, &steps) != 3 || path[0] == 0)
+                fatal("bad plan line: %s", line);
+            failed |= run_me(path, token, start, h, steps);
             fflush(stdout);
         } else {
             fatal("unknown plan command %s", word);

@@ -3,6 +3,7 @@
  * Hand-written and model-independent: instance life cycle, get/set by value reference, the
  * three stepping policies (plant, sampled law, time source) and error reporting. A failed
  * step is reported through the logger and returns fmi2Discard with the state kept at t.
+ * A plant also offers model exchange (fmi2me.h, included at the end).
  */
 #include <math.h>
 #include <stdarg.h>
@@ -16,7 +17,8 @@
 #define TICK_TOLERANCE 1e-6
 #define STEP_TOLERANCE 1e-9
 
-typedef enum { ST_INSTANTIATED, ST_INIT, ST_STEP, ST_TERMINATED, ST_ERROR } Phase;
+/* ST_EVENT, ST_CONTINUOUS: model exchange's Event Mode and Continuous-Time Mode (fmi2me.h) */
+typedef enum { ST_INSTANTIATED, ST_INIT, ST_STEP, ST_TERMINATED, ST_ERROR, ST_EVENT, ST_CONTINUOUS } Phase;
 
 typedef struct {
     const ModelInfo *m;
@@ -28,6 +30,10 @@ typedef struct {
     int logging;
     Phase phase;
     double t0;
+    int exchange;   /* instantiated for model exchange */
+    double time;    /* model exchange: the time the host set */
+    int fresh;      /* model exchange: derivatives, event indicators and outputs are those of v */
+    int iterations; /* model exchange: passes of the event iteration at this event */
 } Instance;
 
 static void report(Instance *c, fmi2Status status, const char *category, const char *fmt, ...) {
@@ -61,7 +67,12 @@ static void reset_values(Instance *c) {
     memcpy(c->v, c->m->start, (size_t)c->m->nv * sizeof(double));
     c->phase = ST_INSTANTIATED;
     c->t0 = 0.0;
+    c->time = 0.0;
+    c->fresh = 0;
 }
+
+static fmi2Status exchange_start(Instance *c); /* fmi2me.h */
+static void refresh(Instance *c, const fmi2ValueReference vr[], size_t n);
 
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String location,
                               const fmi2CallbackFunctions *functions, fmi2Boolean visible, fmi2Boolean logging) {
@@ -70,11 +81,13 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     fmi2ComponentEnvironment env = functions != NULL ? functions->componentEnvironment : NULL;
     (void)location;
     (void)visible;
-    if (type != fmi2CoSimulation || guid == NULL || strcmp(guid, model_info.guid) != 0) {
+    int exchange = type == fmi2ModelExchange && model_info.exchange != NULL;
+    if ((type != fmi2CoSimulation && !exchange) || guid == NULL || strcmp(guid, model_info.guid) != 0) {
         if (logger != NULL)
             logger(env, name != NULL ? name : "?", fmi2Error, "logStatusError",
                    "%s: %s", model_info.identifier,
-                   type != fmi2CoSimulation ? "only co-simulation is supported" : "GUID does not match the model");
+                   type != fmi2CoSimulation && !exchange ? "only co-simulation is supported"
+                                                         : "GUID does not match the model");
         return NULL;
     }
     c = (Instance *)calloc(1, sizeof(Instance));
@@ -94,6 +107,7 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     c->logger = logger;
     c->env = env;
     c->logging = logging ? 1 : 0;
+    c->exchange = exchange;
     reset_values(c);
     return c;
 }
@@ -160,6 +174,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
             return fmi2Error;
         }
     }
+    if (c->exchange) return exchange_start(c);
     c->m->initialize(c->v, c->t0);
     c->phase = ST_STEP;
     return fmi2OK;
@@ -242,4 +257,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h, fmi2Boolean no
 }
 
 #define FMI2_SHARED_INSTANCE Instance
+#define FMI2_SHARED_BEFORE_GET(c, vr, n) refresh(c, vr, n)
+#define FMI2_SHARED_AFTER_SET(c) ((c)->fresh = 0)
 #include "fmi2shared.h"
+#include "fmi2me.h"

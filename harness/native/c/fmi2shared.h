@@ -10,6 +10,9 @@ static fmi2Status get_values(FMI2_SHARED_INSTANCE *c, const fmi2ValueReference v
                              void *out) {
     size_t i;
     if (c == NULL || (n > 0 && (vr == NULL || out == NULL))) return fmi2Error;
+#ifdef FMI2_SHARED_BEFORE_GET
+    FMI2_SHARED_BEFORE_GET(c, vr, n); /* values computed on demand */
+#endif
     for (i = 0; i < n; i++) {
         const ModelVariable *var = lookup(c, vr[i]);
         double x;
@@ -48,6 +51,9 @@ static fmi2Status set_values(FMI2_SHARED_INSTANCE *c, const fmi2ValueReference v
         else x = ((const fmi2Boolean *)in)[i] ? 1.0 : 0.0;
         c->v[var->index] = x;
     }
+#ifdef FMI2_SHARED_AFTER_SET
+    FMI2_SHARED_AFTER_SET(c); /* what was computed from the values is out of date */
+#endif
     return fmi2OK;
 }
 

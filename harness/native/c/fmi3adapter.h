@@ -9,9 +9,10 @@
  *   fmi3Get/SetFloat64, Int32, Boolean -> fmi2Get/SetReal, Integer, Boolean
  *   fmi3DoStep                       -> fmi2DoStep (no event mode, no early return)
  * so the stepping, the checks and the messages are those of the FMI 2.0 variant. The log
- * messages go to the FMI 3.0 callback. What the native FMUs do not have (event mode, clocks,
- * FMU state, derivatives, model exchange, other variable types) answers fmi3Error, except a
- * get or set of no variables.
+ * messages go to the FMI 3.0 callback. Model exchange (a plant's) is fmi3me.h over the FMI 2.0
+ * model exchange (fmi2me.h), the same way. What the native FMUs do not have (clocks, FMU state,
+ * directional derivatives, other variable types) answers fmi3Error, except a get or set of no
+ * variables.
  *
  * FMI 3.0 asks for an independent variable, which FMI 2.0 does not have: the model description
  * declares `time` (Float64, value reference IPCOSIM_TIME_VR, one past the largest of the FMI 2.0
@@ -242,13 +243,6 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
 #pragma GCC diagnostic ignored "-Wunused-parameter"
 #endif
 
-fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
-                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
-                                          fmi3InstanceEnvironment instanceEnvironment,
-                                          fmi3LogMessageCallback logMessage) {
-    return NULL;
-}
-
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
                                                fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                                fmi3InstanceEnvironment instanceEnvironment,
@@ -293,7 +287,6 @@ fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], si
     return instance != NULL && nvr == 0 ? fmi3OK : fmi3Error;
 }
 
-fmi3Status fmi3EnterEventMode(fmi3Instance instance) { return fmi3Error; }
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance, fmi3ValueReference valueReference,
                                                size_t *nDependencies) {
     return fmi3Error;
@@ -364,6 +357,18 @@ fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference 
     return fmi3Error;
 }
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) { return fmi3Error; }
+/* Model exchange: a native plant's (fmi3me.h, where the including file defines IPCOSIM_EXCHANGE), else none. */
+#ifdef IPCOSIM_EXCHANGE
+#include "fmi3me.h"
+#else
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage) {
+    return NULL;
+}
+
+fmi3Status fmi3EnterEventMode(fmi3Instance instance) { return fmi3Error; }
 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
                                     fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
                                     fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
@@ -396,6 +401,7 @@ fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 
 }
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) { return fmi3Error; }
 fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nContinuousStates) { return fmi3Error; }
+#endif
 fmi3Status fmi3EnterStepMode(fmi3Instance instance) { return fmi3Error; }
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                     const fmi3Int32 orders[], fmi3Float64 values[], size_t nValues) {

@@ -8,4 +8,6 @@
 #include "fmi2glue.c"
 /* time: one past the largest value reference of the FMI 2.0 variant (harness/native/fmi3.py) */
 #define IPCOSIM_TIME_VR ((fmi3ValueReference)model_info.nby_vr)
+/* model exchange where the model has it (a plant): fmi3me.h */
+#define IPCOSIM_EXCHANGE (model_info.exchange)
 #include "fmi3adapter.h"

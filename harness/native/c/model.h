@@ -39,6 +39,26 @@ typedef struct {
     const char *name;
 } ParameterCheck;
 
+/* Model exchange of a plant (harness/native/exchange.py; the glue: fmi2me.h). Between events the
+ * host sets the time, the states and the inputs, and evaluate(v, time) writes the derivatives, the
+ * event indicators and the outputs into their slots; at an event, update(v, time) is one pass of the
+ * event iteration (states, discrete states, the next time event), repeated until no discrete state
+ * and no state changes. */
+typedef struct {
+    int nx;                        /* continuous states */
+    const int *states;             /* their slots */
+    const int *derivatives;        /* the slots of their derivatives */
+    int nz;                        /* event indicators */
+    const int *indicators;         /* their slots */
+    int ndiscrete;                 /* discrete states (the carts' modes, the taps) */
+    const int *discrete;           /* their slots */
+    int next_event;                /* slot of the next time event (-1.0 in it: none) */
+    const ParameterCheck *off;     /* parameters that must be 0 in model exchange (what it does not model) */
+    int noff;
+    void (*evaluate)(double *v, double time);
+    void (*update)(double *v, double time);
+} ModelExchangeInfo;
+
 typedef struct {
     const char *identifier;
     const char *guid;
@@ -57,6 +77,7 @@ typedef struct {
     int nby_vr;
     void (*initialize)(double *v, double t0);
     void (*step)(double *v, double t, double h);
+    const ModelExchangeInfo *exchange; /* NULL: co-simulation only */
 } ModelInfo;
 
 extern const ModelInfo model_info;
