@@ -65,6 +65,7 @@ PLACED: dict[str, str] = {
     "test_from_sources.py": "native",         # the native FMUs compiled from their sources/
     "test_rebuild_hint.py": "scenario",       # harness/scenario/binding.py's hint
     "test_margins.py": "studies",             # the margins of `ipcosim analyze`
+    "test_plant_model_exchange.py": "native",  # the native plants' model exchange (over fmus/hybrid.py)
 }
 
 
