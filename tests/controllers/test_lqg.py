@@ -1,4 +1,4 @@
-"""The discrete LQG laws (``ipcosim.controllers.lqg``, ``laws.LQG``) and the LQR's ``discrete`` set.
+"""The discrete LQG laws (``ipcosim.controllers.lqg_design``, ``laws.LQG``) and the LQR's ``discrete`` set.
 
 Design checks: the margins the project's analysis measures meet the targets of the LQG scenarios,
 the closed loop's poles lie inside the unit circle, the Kalman gain is the one of the stated noises,
