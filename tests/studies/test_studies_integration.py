@@ -66,7 +66,7 @@ def test_compare_report_on_two_scenarios(fmu_env, tmp_path, capsys):
     captured = capsys.readouterr()
     assert code == 0, captured.err
     md = (out / "report.md").read_text()
-    assert "| single mass | LQR + observer |" in md and "| single mass | HSMC |" in md
+    assert "| single mass | LQR |" in md and "| single mass | HSMC |" in md
     assert (out / "figures" / "single-mass.png").stat().st_size > 5000
     page = (out / "report.html").read_text()
     assert "data:image/png;base64," in page
