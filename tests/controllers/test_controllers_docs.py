@@ -4,6 +4,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import pytest
+
 from evidence.controllers_table import BEGIN, END, document
 from ipcosim.controllers.laws.hsmc import TUNED_HSMC
 from ipcosim.controllers.laws.pid import TUNED_CASCADE
@@ -37,6 +39,7 @@ def _same_table(shown: str, computed: str) -> bool:
     return True
 
 
+@pytest.mark.slow
 def test_evidence_table_in_the_docs_is_current() -> None:
     expected = document().strip()
     for doc in (DOC,):

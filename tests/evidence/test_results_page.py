@@ -31,6 +31,7 @@ def test_every_table_between_the_markers_is_the_rendering_of_the_committed_data(
     assert generated.group(1) == render(data)
 
 
+@pytest.mark.slow
 def test_the_margins_are_those_the_analysis_gives_now(data: dict) -> None:
     now = margin_rows()
     assert [(r["scenario"], r["set"]) for r in now] == [(r["scenario"], r["set"]) for r in data["margins"]]
