@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 VDMCHECK_VERSION := 1.1.3
 VDMCHECK_DIR := tools/vdmcheck
 
-.PHONY: all venv fmus demo test lint bench vdmcheck crosscheck clean
+.PHONY: all venv fmus demo test test-fast lint bench vdmcheck crosscheck clean
 
 all: test
 
@@ -39,8 +39,21 @@ demo: fmus
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
+# The tests run on every core (pytest-xdist; --dist loadfile keeps a file's tests on one worker, so its module
+# fixtures are made once); the FMUs are built here once and the tests' own build reuses them (tests/conftest.py).
+XDIST := -n auto --dist loadfile
+
+# What CI runs: every test. The real-time tests (marker realtime: runs paced at 1 kHz, judged by how late their
+# steps start) run after the parallel pass, serially, so that no other worker's load is on the cores they
+# are judged on. Both passes always run; the target fails if either did.
 test: fmus vdmcheck lint
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest $(XDIST) -m "not realtime" --durations=20; parallel=$$?; \
+	$(BIN)/python -m pytest -m realtime --durations=20; serial=$$?; \
+	test $$parallel -eq 0 -a $$serial -eq 0
+
+# Before each commit: every test but the slow, real-time and cross-platform ones, on every core.
+test-fast: fmus
+	$(BIN)/python -m pytest $(XDIST) -m "not slow and not realtime and not cross" --durations=20
 
 # Every benchmark, then benchmarks/last.json; `python -m benchmarks.docs --update` writes the docs' figures from it.
 bench: fmus

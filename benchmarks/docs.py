@@ -1,6 +1,6 @@
 """The speed and memory figures of the docs, written from one ``make bench`` run: ``python -m benchmarks.docs``.
 
-Every such figure in ``README.md`` and ``docs/*.md`` sits in a marked block::
+Every such figure in ``README.md`` and ``docs/*.md`` sits in a marked block (``devtools.docblocks``)::
 
     <!-- bench:NAME -->
     (written here)
@@ -10,8 +10,9 @@ rendered from ``benchmarks/last.json`` (``make bench`` writes it) as a table of 
 :data:`BLOCKS` lists for ``NAME``: what was measured, the figure, its target (and whether it was met)
 or, for a reference figure, the anchor it is read against; under it the machine, its load average
 and the date of the run. ``--update`` rewrites the blocks; without it the stale blocks are listed
-and the exit status is 1. ``tests/project/test_bench_docs.py`` checks the committed docs against the
-committed JSON, and that no speed figure is written anywhere else (:func:`stray_figures`).
+and the exit status is 1. ``tests/project/test_docblocks.py`` checks the committed docs against the
+committed JSON, ``tests/project/test_bench_docs.py`` that no speed figure is written anywhere else
+(:func:`stray_figures`).
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from typing import Any, Iterator, Sequence
 
 from benchmarks.bench import LAST_JSON
 from benchmarks.targets import fmt
+from devtools import docblocks
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Block name -> the figure keys it shows (a key ending in "." takes every figure of that prefix, in
@@ -45,7 +47,6 @@ BLOCKS: dict[str, tuple[str, ...]] = {
     "identify": ("identify.",),
     "robustness": ("robustness.",),
 }
-BEGIN = re.compile(r"^<!-- bench:([\w-]+) -->$", re.M)
 #: A speed or memory figure written as prose: a time in us, a time per step / tick / run / cycle,
 #: a memory size, any "Nx" (real-time factors, "Nx faster", ratios of times; other multiples are
 #: written "N times").
@@ -118,40 +119,26 @@ def render(name: str, data: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def documents(root: Path = ROOT) -> list[Path]:
-    """README.md and the pages of docs/."""
-    return [root / "README.md", *sorted((root / "docs").glob("*.md"))]
+documents = docblocks.documents
 
 
-def rewrite(text: str, data: dict[str, Any], origin: str = "") -> str:
-    """``text`` with every marked block rendered from ``data``."""
-    out, pos = [], 0
-    for m in BEGIN.finditer(text):
-        end = f"<!-- /bench:{m.group(1)} -->"
-        stop = text.find(end, m.end())
-        if stop < 0:
-            raise ValueError(f"{origin}: block {m.group(1)!r} has no closing {end}")
-        try:
-            body = render(m.group(1), data)
-        except KeyError as exc:
-            raise ValueError(f"{origin}: {exc.args[0]}") from None
-        out += [text[pos:m.end()], "\n", body]
-        pos = stop
-    return "".join(out) + text[pos:]
+def block(name: str) -> str:
+    """The text of the block ``bench:<name>`` (``devtools.docblocks``), from the committed bench run."""
+    return render(name, load())
 
 
 def stray_figures(text: str) -> list[tuple[int, str]]:
-    """``(line number, figure)`` of every speed or memory figure outside the marked blocks, code
-    fences, inline code and the generated results block of docs/results.md."""
+    """``(line number, figure)`` of every speed or memory figure outside the generated blocks (bench figures,
+    the results page's tables: ``devtools.docblocks``), code fences and inline code."""
     found, fence, block = [], False, False
     for n, line in enumerate(text.splitlines(), 1):
         stripped = line.strip()
         if stripped.startswith("```"):
             fence = not fence
             continue
-        if BEGIN.match(stripped) or stripped == "<!-- results:begin -->":
+        if docblocks.OPEN.match(stripped):
             block = True
-        elif re.match(r"^<!-- (/bench:[\w-]+|results:end) -->$", stripped):
+        elif re.match(r"^<!-- /[\w-]+:[\w-]+ -->$", stripped):
             block = False
             continue
         if fence or block or line.startswith("    "):
@@ -163,22 +150,14 @@ def stray_figures(text: str) -> list[tuple[int, str]]:
 
 def main(argv: Sequence[str]) -> int:
     """``--update``: rewrite the blocks; else list the stale ones (exit status 1 if any)."""
-    data = load()
-    stale = []
-    for doc in documents():
-        text = doc.read_text()
-        try:
-            new = rewrite(text, data, str(doc.relative_to(ROOT)))
-        except ValueError as exc:
-            print(f"benchmarks.docs: {exc}", file=sys.stderr)
-            return 1
-        if new != text:
-            stale.append(doc.relative_to(ROOT))
-            if "--update" in argv:
-                doc.write_text(new)
+    try:
+        stale = docblocks.update(documents(), tools=("bench",), write_back="--update" in argv)
+    except docblocks.BlockError as exc:
+        print(f"benchmarks.docs: {exc}", file=sys.stderr)
+        return 1
     verb = "rewrote" if "--update" in argv else "stale (run with --update)"
     for doc in stale:
-        print(f"{verb}: {doc}")
+        print(f"{verb}: {doc.relative_to(ROOT)}")
     return 0 if ("--update" in argv or not stale) else 1
 
 

@@ -1,12 +1,11 @@
 """``docs/api.md``'s table of the Python API beside the command line, generated from the functions'
 signatures and from the ``ipcosim run`` parser, so the reference cannot fall behind the code:
-``python -m devtools.apidoc --update`` rewrites the block between the ``api:run`` markers.
+``python -m devtools.apidoc --update`` rewrites its ``api:run`` block (``devtools.docblocks``).
 """
 from __future__ import annotations
 
 import argparse
 import inspect
-import re
 import sys
 from pathlib import Path
 
@@ -81,14 +80,18 @@ def render() -> str:
     return "\n".join(lines) + "\n"
 
 
+def block(part: str) -> str:
+    """The text of the block ``api:<part>`` (``devtools.docblocks``): ``run``, the table."""
+    if part != "run":
+        raise KeyError(f"no api block {part!r} (the one block is {BLOCK})")
+    return render()
+
+
 def update(doc: Path = DOC) -> bool:
     """Rewrite the block in ``doc``; True if it changed."""
-    text = doc.read_text(encoding="utf-8")
-    new = re.sub(rf"(<!-- {BLOCK} -->\n).*?(<!-- /{BLOCK} -->)", lambda m: m.group(1) + render() + m.group(2),
-                 text, flags=re.S)
-    if new != text:
-        doc.write_text(new, encoding="utf-8")
-    return new != text
+    from devtools.docblocks import write
+
+    return write(doc, BLOCK, render())
 
 
 def main(argv: list[str] | None = None) -> int:

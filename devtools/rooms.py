@@ -4,9 +4,9 @@ For each room (docs/architecture.md) its modules (``.py`` files), the non-blank 
 files, its longest function (``def`` to last line, docstring included) and the import cycles its
 modules take part in, and the number of import cycles between all the package's modules (the graph
 of ``tests/project/test_architecture.py``). Prints a Markdown table; with ``--write`` it also replaces the
-table in docs/architecture.md (between the ``rooms`` markers), which ``tests/project/test_rooms_figures.py``
-compares with what this module computes from the tree. Not a benchmark of speed: it reads source
-files only and runs nothing of them.
+table in docs/architecture.md (its ``rooms:table`` block, ``devtools.docblocks``), which
+``tests/project/test_docblocks.py`` compares with what this module computes from the tree. Not a benchmark
+of speed: it reads source files only and runs nothing of them.
 """
 from __future__ import annotations
 
@@ -38,7 +38,9 @@ ROOMS = {
     "benchmarks": ("benchmarks", True),
     "devtools": ("devtools", True),
 }
-BEGIN, END = "<!-- rooms:begin -->", "<!-- rooms:end -->"
+#: The block of docs/architecture.md that holds the table (``devtools.docblocks``).
+BLOCK = "rooms:table"
+DOC = ROOT / "docs" / "architecture.md"
 
 
 def room_files(folder: str, deep: bool) -> list[Path]:
@@ -97,29 +99,20 @@ def table() -> str:
     return "\n".join(rows) + "\n"
 
 
-def written(doc: Path) -> str | None:
-    """The text between the markers of ``doc`` as ``--write`` writes it, or None without markers."""
-    page = doc.read_text()
-    if BEGIN not in page or END not in page:
-        return None
-    return page.split(BEGIN, 1)[1].split(END, 1)[0].removeprefix("\n")
-
-
-def write(doc: Path, text: str) -> None:
-    """Replace the text between the markers of ``doc`` with ``text``."""
-    page = doc.read_text()
-    if BEGIN not in page or END not in page:
-        raise SystemExit(f"{doc}: no {BEGIN} ... {END} markers to write the table between")
-    head, rest = page.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    doc.write_text(f"{head}{BEGIN}\n{text}{END}{tail}")
+def block(part: str) -> str:
+    """The text of the block ``rooms:<part>`` (``devtools.docblocks``): ``table``, the rooms table."""
+    if part != "table":
+        raise KeyError(f"no rooms block {part!r} (the one block is rooms:table)")
+    return table()
 
 
 def main(argv: list[str]) -> int:
+    from devtools.docblocks import write
+
     text = table()
     print(text, end="")
     if "--write" in argv:
-        write(ROOT / "docs" / "architecture.md", text)
+        write(DOC, BLOCK, text)
     return 0
 
 

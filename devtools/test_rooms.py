@@ -66,6 +66,8 @@ PLACED: dict[str, str] = {
     "test_rebuild_hint.py": "scenario",       # harness/scenario/binding.py's hint
     "test_margins.py": "studies",             # the margins of `ipcosim analyze`
     "test_plant_model_exchange.py": "native",  # the native plants' model exchange (over fmus/hybrid.py)
+    "test_exit_crash.py": "fmus",             # the FMUs' wrapper at a host's exit (FMUs from tests/conftest.py)
+    "test_fmu_runtime.py": "fmus",            # the FMU runtime's imports (FMUs from tests/conftest.py)
 }
 
 

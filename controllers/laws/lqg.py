@@ -1,5 +1,5 @@
 """The LQG: discrete LQG with integral action and a one-sample computation delay (Kalman filter, design in
-``ipcosim.controllers.lqg``), with Coulomb friction compensation; its parameters and sets, its gains as
+``ipcosim.controllers.lqg_design``), with Coulomb friction compensation; its parameters and sets, its gains as
 parameters, its linear model and its registry entry."""
 from __future__ import annotations
 
@@ -48,7 +48,7 @@ class LQGCoefficients:
     """Everything the LQG law computes with, as plain floats (design-model state order).
 
     ``K`` (n), ``K_voltage``, ``K_integral``: the feedback ``u = -K (x^ - x_r r) - K_voltage v -
-    K_integral q`` (``ipcosim.controllers.lqg``); ``M`` (n x p): the Kalman current-estimator gain;
+    K_integral q`` (``ipcosim.controllers.lqg_design``); ``M`` (n x p): the Kalman current-estimator gain;
     ``Ad`` (n x n), ``Bd`` (n): the zero-order-hold model; ``C`` (p x n): the measured rows;
     ``reference_states`` (n): ``x_r``. The Coulomb friction model of each cart (``coulomb_model``; empty:
     none): ``friction_states`` the index of its velocity state, ``friction_columns`` (n) what a force of
@@ -75,7 +75,7 @@ class LQGCoefficients:
 
     @classmethod
     def from_design(cls, design: Any) -> LQGCoefficients:
-        """The coefficients of an ``ipcosim.controllers.lqg.LQGDesign``."""
+        """The coefficients of an ``ipcosim.controllers.lqg_design.LQGDesign``."""
         def rows(m: Any) -> tuple[tuple[float, ...], ...]:
             return tuple(tuple(float(v) for v in row) for row in as_matrix(m))
         n = len(design.model.states)
@@ -108,7 +108,7 @@ def dead_zone(e: float, band: float) -> float:
 
 
 class LQG(CurrentEstimatorLaw):
-    """Discrete LQG with integral action and a one-sample computation delay (``ipcosim.controllers.lqg``).
+    """Discrete LQG with integral action and a one-sample computation delay (``ipcosim.controllers.lqg_design``).
 
     At instant k the law outputs the voltage ``v[k]`` it computed at instant k - 1 (0 V at the first
     instant), corrects its estimate with the measurements of instant k, and computes the voltage
@@ -211,7 +211,7 @@ class LQG(CurrentEstimatorLaw):
 
 # ============================================================================ parameters and sets
 
-#: LQG weights (``ipcosim.controllers.lqg``; docs/controllers.md, "LQG", says how they were chosen): the
+#: LQG weights (``ipcosim.controllers.lqg_design``; docs/controllers.md, "LQG", says how they were chosen): the
 #: thesis's state weights (the double mass's passive-cart position weighted 40 instead of 19), Q_integral on
 #: the integral of the motor-cart error, R on the voltage, and the Kalman filter's input-disturbance standard
 #: deviation process_noise [V] and acceleration disturbance acceleration_noise [m/s^2]. The double mass's
@@ -323,12 +323,12 @@ def lqg_weight_parameters(kind: str) -> tuple[str, ...]:
 # ============================================================================ design and gains
 
 def lqg_design_from(kind: str, v: Mapping[str, Any], backend: str = "control"):
-    """The LQG design the flat values describe (``ipcosim.controllers.lqg.design_lqg``; the design stack
+    """The LQG design the flat values describe (``ipcosim.controllers.lqg_design.design_lqg``; the design stack
     is imported here)."""
     import numpy as np  # noqa: PLC0415 -- the design stack, imported only to design
 
     from ipcosim.controllers.design import design_model  # noqa: PLC0415
-    from ipcosim.controllers.lqg import design_lqg  # noqa: PLC0415
+    from ipcosim.controllers.lqg_design import design_lqg  # noqa: PLC0415
 
     Q = np.diag([float(v[f"Q_{s}"]) for s in design_states(kind)])
     try:
@@ -441,7 +441,7 @@ def linear_lqg(law: LQG, b: Builder) -> tuple[Lin, list[str]]:
     return applied, notes
 
 
-# not in the thesis: discrete LQG with integral action (ipcosim.controllers.lqg), weights TUNED_LQG;
+# not in the thesis: discrete LQG with integral action (ipcosim.controllers.lqg_design), weights TUNED_LQG;
 # lab: the same design with the Coulomb friction compensation of LAB_LQG (for a plant with friction);
 # lab-soft: the lab set with the voltage weight of LAB_SOFT_LQG
 LQG_LAW = LawEntry("LQG", {"single-mass": ("tuned", "lab"), "double-mass": ("tuned", "lab", "lab-soft")},

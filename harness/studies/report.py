@@ -18,12 +18,13 @@ from typing import Any, Mapping, Sequence
 
 from ipcosim.fmus.kinds import ByKind, get
 from ipcosim.fmus.params import KINDS
+from ipcosim.harness.scenario.scenarios import CONTROLLERS as SCENARIO_CONTROLLERS
 from ipcosim.harness.studies.robustness import fmt
 from ipcosim.harness.support.extras import optional_figure
 
 CONTROLLERS = ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")
-CONTROLLER_LABELS = {"pid": "PID", "cascade-pid": "cascade PID", "lqr": "LQR + observer", "hsmc": "HSMC",
-                     "adaptive-hsmc": "adaptive HSMC"}
+#: Each scenario controller's name in the tables and figures: its law's name in the law registry (``LQR``).
+CONTROLLER_LABELS = {slug: law for slug, (law, _) in SCENARIO_CONTROLLERS.items()}
 PLANT_LABELS = ByKind(lambda k: k.name.replace("-", " "))
 CONTROLLER_COLORS = {"pid": "tab:gray", "cascade-pid": "tab:purple", "lqr": "tab:orange", "hsmc": "tab:blue",
                      "adaptive-hsmc": "tab:green"}

@@ -34,6 +34,7 @@ def test_on_the_rig(cosim, ipcosim_rig):
 
 
 @pytest.mark.integration
+@pytest.mark.slow
 def test_user_tests_pass_fail_and_skip_with_readable_messages(pytester):
     pytester.makepyfile(test_user=USER_TESTS)
     result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "-rs")

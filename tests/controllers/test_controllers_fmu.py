@@ -28,13 +28,9 @@ H = 1e-3
 
 
 @pytest.fixture(scope="session")
-def controller_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Every controller FMU and Setpoint, built for this session: ``{model name: path}``."""
-    from ipcosim.fmus.pybuild import build_all
-
-    out = tmp_path_factory.mktemp("controller-fmus")
-    results = build_all(out, scripts=sorted((ROOT / "controllers").glob("fmu_*.py")))
-    return {r.fmu.stem: r.fmu for r in results}
+def controller_fmus(project_fmus: dict[str, Path]) -> dict[str, Path]:
+    """Every controller FMU and Setpoint of this run's build: ``{model name: path}``."""
+    return {fmu.stem: fmu for key, fmu in project_fmus.items() if key.startswith("controllers/")}
 
 
 def plant_kind_of(model: str) -> str:
@@ -102,6 +98,7 @@ def test_fmpy_validation_has_no_problems(controller_fmus, model: str) -> None:
 
 
 @pytest.mark.parametrize("model", MODELS + ["Setpoint"])
+@pytest.mark.slow
 def test_vdmcheck_reports_no_errors(controller_fmus, model: str) -> None:
     assert_vdmcheck_clean(controller_fmus[model])
 

@@ -1,4 +1,4 @@
-"""The discrete LQG laws (``ipcosim.controllers.lqg``, ``laws.LQG``) and the LQR's ``discrete`` set.
+"""The discrete LQG laws (``ipcosim.controllers.lqg_design``, ``laws.LQG``) and the LQR's ``discrete`` set.
 
 Design checks: the margins the project's analysis measures meet the targets of the LQG scenarios,
 the closed loop's poles lie inside the unit circle, the Kalman gain is the one of the stated noises,
@@ -137,25 +137,17 @@ def test_integral_action_removes_a_constant_disturbance() -> None:
     assert lqg.metrics["steady_state_error_m"] < 1e-5 < 1e-3 < lqr.metrics["steady_state_error_m"]
 
 
-def test_fmu_redesigns_for_a_changed_weight() -> None:
-    from pathlib import Path
-
+def test_fmu_redesigns_for_a_changed_weight(project_fmus) -> None:
     from fmi_helpers import instantiate
 
-    from ipcosim.fmus.pybuild import build_all
-
-    root = Path(__file__).resolve().parents[2]
-    import tempfile
-    with tempfile.TemporaryDirectory() as tmp:
-        (fmu,) = [r.fmu for r in build_all(Path(tmp), scripts=[root / "controllers" / "fmu_lqg_single_mass.py"])]
-        f = instantiate(fmu)
-        f.slave.setupExperiment(startTime=0.0)
-        f.slave.enterInitializationMode()
-        f.slave.setReal([f.vr["R"]], [0.1])
-        f.slave.exitInitializationMode()
-        got = f.get("K_cart_position", "K_pendulum_angle", "K_voltage", "K_integral")
-        f.slave.terminate()
-        f.slave.freeInstance()
+    f = instantiate(project_fmus["controllers/fmu_lqg_single_mass.py"])
+    f.slave.setupExperiment(startTime=0.0)
+    f.slave.enterInitializationMode()
+    f.slave.setReal([f.vr["R"]], [0.1])
+    f.slave.exitInitializationMode()
+    got = f.get("K_cart_position", "K_pendulum_angle", "K_voltage", "K_integral")
+    f.slave.terminate()
+    f.slave.freeInstance()
     law = make_law("single-mass", "LQG", R=0.1)
     c = law.coefficients
     assert np.allclose(got, [c.K[0], c.K[2], c.K_voltage, c.K_integral], rtol=1e-9)

@@ -62,15 +62,9 @@ def test_swing_up_parameters_are_checked() -> None:
 
 
 @pytest.fixture(scope="module")
-def fmu_env(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from ipcosim.fmus.pybuild import build_all
-
-    out = tmp_path_factory.mktemp("extra-fmus")
-    scripts = [ROOT / "controllers" / f for f in ("fmu_setpoint.py", "fmu_swing_up_single_mass.py",
-                                                  "fmu_lqr_single_mass.py", "fmu_hsmc_double_mass.py")]
-    scripts += [ROOT / "fmus" / f for f in ("fmu_ip02_single_mass.py", "fmu_ip02_double_mass.py")]
-    build_all(out, scripts=scripts)
-    return out
+def fmu_env(project_fmu_dir: Path) -> Path:
+    """The FMUs of the extra scenarios (Setpoint, SwingUp, LQR, HSMC, the plants): this run's build."""
+    return project_fmu_dir
 
 
 @pytest.mark.integration
@@ -81,6 +75,7 @@ def fmu_env(tmp_path_factory: pytest.TempPathFactory) -> Path:
     # its default binding is the robust tuned set: < 1 mm over 20 s on the lab bench (the thesis's set: 15 mm)
     ("double-mass-hsmc-lab", lambda m: m["upright"] and m["steady_state_error_m"] < 1e-3),
 ])
+@pytest.mark.slow
 def test_extra_scenarios_through_the_master(scenario, check, fmu_env, tmp_path, monkeypatch) -> None:
     from ipcosim.harness.cli import main as cli_main
 
@@ -92,6 +87,7 @@ def test_extra_scenarios_through_the_master(scenario, check, fmu_env, tmp_path, 
 
 
 @pytest.mark.integration
+@pytest.mark.slow
 def test_swing_up_fmu_validates(fmu_env) -> None:
     from fmi_helpers import assert_vdmcheck_clean
     from fmpy.validation import validate_fmu

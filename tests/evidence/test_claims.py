@@ -20,6 +20,7 @@ def test_oscillation_is_the_rms_above_the_cutoff() -> None:
     assert oscillation(t, slow) < 1e-4
 
 
+@pytest.mark.slow
 def test_lqr_falls_between_the_analysed_delay_margin_and_the_search_result() -> None:
     """analyze: delay margin 6.2 ms; the nonlinear loop stays up with a 5 ms delay and falls with 8 ms."""
     from ipcosim.harness.studies.analyze import analyze_loop, scenario_loop
@@ -30,12 +31,14 @@ def test_lqr_falls_between_the_analysed_delay_margin_and_the_search_result() -> 
     assert not _lqr_case(input_delay=8e-3).metrics["upright"]
 
 
+@pytest.mark.slow
 def test_results_margins_table_is_current() -> None:
     from evidence.results_page import margins_table
 
     assert margins_table() in (ROOT / "docs" / "results.md").read_text()
 
 
+@pytest.mark.slow
 def test_judge_gives_a_verdict_per_claim_on_both_plants() -> None:
     """Short runs: every claim gets a verdict and evidence on both plants; the PID claims hold on both."""
     from evidence.claims import CLAIMS, judge

@@ -41,14 +41,13 @@ pytestmark = pytest.mark.integration
 
 
 @pytest.fixture(scope="module")
-def loop_args(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
-    """The FMU arguments of both loops (``DIR:MODEL_IDENTIFIER:GUID:IN_VRS:OUT_VRS``), FMUs built and unzipped once."""
+def loop_args(tmp_path_factory: pytest.TempPathFactory, project_fmus: dict[str, Path]) -> list[str]:
+    """The FMU arguments of both loops (``DIR:MODEL_IDENTIFIER:GUID:IN_VRS:OUT_VRS``), FMUs of this run's build
+    unzipped once."""
     from fmpy import extract, read_model_description
 
-    from ipcosim.fmus.pybuild import build_all
-
     out = tmp_path_factory.mktemp("exit-fmus")
-    built = {r.fmu.stem: r.fmu for r in build_all(out / "fmus", scripts=[ROOT / s for s in MODELS.values()])}
+    built = {model: project_fmus[script] for model, script in MODELS.items()}
 
     def spec(model: str, inputs: tuple[str, ...], outputs: tuple[str, ...]) -> str:
         md = read_model_description(str(built[model]))
@@ -134,16 +133,19 @@ def _commands(host: list[str], loop_args: list[str], stop: str, env: dict[str, s
     return [(host + (["--keep"] if k % 2 else []) + [stop, "0.001"] + loop_args, env) for k in range(RUNS)]
 
 
+@pytest.mark.slow
 def test_fifty_fmpy_processes_exit_cleanly(loop_args: list[str]) -> None:
     results = _run_all(_commands([sys.executable, str(HOSTS / "fmpy_host.py")], loop_args, "0.05", None))
     _assert_all_exit_cleanly(results, "fmpy host")
 
 
+@pytest.mark.slow
 def test_fifty_c_host_processes_exit_cleanly(c_host: Path, loop_args: list[str]) -> None:
     results = _run_all(_commands([str(c_host)], loop_args, "0.05", c_host_env(libpython())))
     _assert_all_exit_cleanly(results, "C host")
 
 
+@pytest.mark.slow
 def test_c_host_matches_fmpy(c_host: Path, loop_args: list[str]) -> None:
     c_run, py_run = _run_all([([str(c_host), "10", "0.001"] + loop_args, c_host_env(libpython())),
                               ([sys.executable, str(HOSTS / "fmpy_host.py"), "10", "0.001"] + loop_args, None)])

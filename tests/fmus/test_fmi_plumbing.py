@@ -247,6 +247,7 @@ def test_messages_need_logging_on(probe_fmu: Path, probe_dir: Path) -> None:
 
 
 @pytest.mark.integration
+@pytest.mark.slow
 def test_probe_passes_vdmcheck(probe_fmu: Path) -> None:
     assert_vdmcheck_clean(probe_fmu)
 

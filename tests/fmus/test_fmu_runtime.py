@@ -32,17 +32,15 @@ LQR_GAINS = [f"K_{s}" for s in ("cart_position", "cart_velocity", "pendulum_angl
 
 
 @pytest.fixture(scope="module")
-def unzipped_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Every FMU of the project, built and extracted: ``{model: folder}``."""
-    from ipcosim.fmus.pybuild import build_all
-
+def unzipped_fmus(tmp_path_factory: pytest.TempPathFactory, project_fmus: dict[str, Path]) -> dict[str, Path]:
+    """Every FMU of the project (this run's build), extracted: ``{model: folder}``."""
     out = tmp_path_factory.mktemp("runtime-fmus")
     folders = {}
-    for result in build_all(out / "fmus"):
-        folder = out / result.fmu.stem
-        with zipfile.ZipFile(result.fmu) as z:
+    for fmu in project_fmus.values():
+        folder = out / fmu.stem
+        with zipfile.ZipFile(fmu) as z:
             z.extractall(folder)
-        folders[result.fmu.stem] = folder
+        folders[fmu.stem] = folder
     return folders
 
 
@@ -59,6 +57,7 @@ def both(folder: Path, spec: dict, tmp: Path) -> tuple[dict, dict]:
     return drive(folder, spec, True, tmp), drive(folder, spec, False, tmp)
 
 
+@pytest.mark.slow
 def test_every_fmu_runs_on_the_standard_library_alone(unzipped_fmus, tmp_path: Path) -> None:
     models = sorted(m for m in unzipped_fmus if not m.startswith("IP02HIL"))
     from ipcosim.fmus.pybuild import model_scripts
@@ -121,9 +120,9 @@ def test_gains_set_directly_need_no_design_stack(unzipped_fmus, tmp_path: Path) 
     assert "parameters R and K_" in conflict["error"]
 
 
-def test_cli_run_imports_no_analysis_stack(unzipped_fmus, tmp_path: Path) -> None:
+def test_cli_run_imports_no_analysis_stack(project_fmu_dir, tmp_path: Path) -> None:
     """``ipcosim run`` without --plot loads neither the plotting, design nor cluster stacks (cold-start cost)."""
-    fmu_dir = next(iter(unzipped_fmus.values())).parent / "fmus"
+    fmu_dir = project_fmu_dir
     code = ("import sys\nfrom ipcosim.harness.cli import main\n"
             f"rc = main(['run', 'single-mass-lqr', '--stop-time', '0.05', '--quiet', '--fmu-dir', {str(fmu_dir)!r}, "
             f"'--out', {str(tmp_path / 'out')!r}])\n"
@@ -136,14 +135,14 @@ def test_cli_run_imports_no_analysis_stack(unzipped_fmus, tmp_path: Path) -> Non
     assert metrics["wall_time_s"] > 0 and metrics["loop_real_time_factor"] > metrics["real_time_factor"] > 0
 
 
-def test_redesign_after_the_first_extraction_is_gone(unzipped_fmus, tmp_path: Path) -> None:
+def test_redesign_after_the_first_extraction_is_gone(project_fmu_dir, tmp_path: Path) -> None:
     """One FMU build loaded from two extraction folders shares one private package; when the first
     folder is deleted, the second instance's lazily imported design modules come from its own folder."""
     import shutil
 
     from fmi_helpers import instantiate
 
-    fmu = unzipped_fmus["LQRDoubleMass"].parent / "fmus" / "LQRDoubleMass.fmu"
+    fmu = project_fmu_dir / "LQRDoubleMass.fmu"
     first = instantiate(fmu, tmp_path / "first")
     first.slave.setupExperiment(startTime=0.0)
     first.slave.enterInitializationMode()
@@ -161,7 +160,7 @@ def test_redesign_after_the_first_extraction_is_gone(unzipped_fmus, tmp_path: Pa
     second.slave.freeInstance()
 
 
-def test_build_in_a_process_that_loaded_the_same_build_from_a_deleted_folder(unzipped_fmus, tmp_path: Path) -> None:
+def test_build_in_a_process_that_loaded_the_same_build_from_a_deleted_folder(project_fmu_dir, tmp_path: Path) -> None:
     """The build imports its staged sources, not the copy of the same private package an FMU loaded
     earlier in this process from a folder that is gone."""
     import shutil
@@ -170,7 +169,7 @@ def test_build_in_a_process_that_loaded_the_same_build_from_a_deleted_folder(unz
 
     from ipcosim.fmus.pybuild import build_all
 
-    fmu = unzipped_fmus["LQRSingleMass"].parent / "fmus" / "LQRSingleMass.fmu"
+    fmu = project_fmu_dir / "LQRSingleMass.fmu"
     loaded = instantiate(fmu, tmp_path / "loaded")
     loaded.slave.setupExperiment(startTime=0.0)
     loaded.slave.enterInitializationMode()

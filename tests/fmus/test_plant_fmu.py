@@ -57,6 +57,7 @@ def test_fmpy_validation_has_no_problems(plant_fmus: dict[str, Path], kind: str)
 
 
 @pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.slow
 def test_vdmcheck_reports_no_errors(plant_fmus: dict[str, Path], kind: str) -> None:
     assert_vdmcheck_clean(plant_fmus[kind])
 

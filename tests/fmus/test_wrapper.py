@@ -92,12 +92,10 @@ def host_own_cycle(tmp_path_factory: pytest.TempPathFactory) -> dict[str, float]
 
 
 @pytest.fixture(scope="module")
-def cycled_fmus(plant_fmus, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """A plant and a controller (Python flavour)."""
-    from ipcosim.fmus.pybuild import build_all
-
-    (lqr,) = build_all(tmp_path_factory.mktemp("lqr"), scripts=[ROOT / "controllers" / "fmu_lqr_single_mass.py"])
-    return {"IP02SingleMass": plant_fmus["single-mass"], "LQRSingleMass": lqr.fmu}
+def cycled_fmus(plant_fmus, project_fmus) -> dict[str, Path]:
+    """A plant and a controller (Python flavour), of this run's build."""
+    return {"IP02SingleMass": plant_fmus["single-mass"],
+            "LQRSingleMass": project_fmus["controllers/fmu_lqr_single_mass.py"]}
 
 
 #: A host that instantiates an FMU twice, then prints which strings an instantiation interns are not interned
@@ -153,6 +151,7 @@ def test_an_instantiation_interns_no_string_it_then_frees(model: str, cycled_fmu
 
 @pytest.mark.integration
 @pytest.mark.parametrize("model", ("IP02SingleMass", "LQRSingleMass"))
+@pytest.mark.slow
 def test_instantiate_and_free_again_and_again_gives_back_what_it_takes(model: str, cycled_fmus,
                                                                        host_own_cycle) -> None:
     """pythonfmu 0.7.0's wrapper evaluates the FMU module again at every instantiation and kept every class that

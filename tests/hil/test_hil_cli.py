@@ -38,6 +38,7 @@ def rig_process():
         p.wait(timeout=30)
 
 
+@pytest.mark.slow
 def test_serve_status_reset_and_clean_stop(rig_process):
     proc, port = rig_process("--plant", "double-mass", "--clock", "lockstep", "--initial", "pendulum_angle=0.3")
     card = open_card("q4", f"0@tcpip://127.0.0.1:{port}")
@@ -66,6 +67,7 @@ def test_serve_refuses_a_second_controller(rig_process):
     first.close()
 
 
+@pytest.mark.slow
 def test_bad_options_are_one_line_errors():
     out = ipcosim("rig", "serve", "--port", "0", "--set", "Mp=-1", "--duration", "1")
     assert out.returncode == 1 and out.stderr.count("\n") == 1 and "Mp" in out.stderr

@@ -34,13 +34,10 @@ pytestmark = pytest.mark.integration
 
 
 @pytest.fixture(scope="session")
-def hil_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    from ipcosim.fmus.pybuild import build_all
-
-    out = tmp_path_factory.mktemp("hil-fmus")
-    scripts = [ROOT / "fmus" / "fmu_ip02_hil_single_mass.py", ROOT / "fmus" / "fmu_ip02_hil_double_mass.py"]
-    fmus = {r.fmu.stem: r.fmu for r in build_all(out, scripts=scripts)}
-    return {"single-mass": fmus["IP02HILSingleMass"], "double-mass": fmus["IP02HILDoubleMass"]}
+def hil_fmus(project_fmus: dict[str, Path]) -> dict[str, Path]:
+    """The HIL adapter FMUs of this run's build."""
+    return {"single-mass": project_fmus["fmus/fmu_ip02_hil_single_mass.py"],
+            "double-mass": project_fmus["fmus/fmu_ip02_hil_double_mass.py"]}
 
 
 @pytest.fixture(scope="session")
@@ -146,6 +143,7 @@ def test_adapter_passes_validate_fmu(kind, hil_fmus):
 
 
 @pytest.mark.parametrize("kind", ["single-mass", "double-mass"])
+@pytest.mark.slow
 def test_adapter_passes_vdmcheck(kind, hil_fmus):
     assert_vdmcheck_clean(hil_fmus[kind])
 

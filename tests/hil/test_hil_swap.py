@@ -38,13 +38,9 @@ pytestmark = [pytest.mark.integration,
 
 
 @pytest.fixture(scope="session")
-def fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Every FMU of the project, built for this session."""
-    from ipcosim.fmus.pybuild import build_all
-
-    out = tmp_path_factory.mktemp("all-fmus")
-    build_all(out)
-    return out
+def fmu_dir(project_fmu_dir: Path) -> Path:
+    """Every FMU of the project (this run's build)."""
+    return project_fmu_dir
 
 
 @pytest.fixture
@@ -168,6 +164,7 @@ def test_with_ideal_encoders_the_hil_run_reproduces_the_simulation(scenario, env
 
 # --- pacing ----------------------------------------------------------------------------------------
 
+@pytest.mark.realtime
 def test_a_hil_run_on_a_real_time_rig_is_paced_by_itself(env, tmp_path, monkeypatch):
     import ipcosim.harness
 
@@ -189,6 +186,7 @@ def test_a_hil_run_on_a_real_time_rig_is_paced_by_itself(env, tmp_path, monkeypa
     assert 0 < m["adapter_step_mean_us"] <= m["adapter_step_p99_us"] <= m["worst_step_time_s"] * 1e6
 
 
+@pytest.mark.realtime
 def test_realtime_flag_paces_a_simulated_run(env, tmp_path):
     import ipcosim.harness
 

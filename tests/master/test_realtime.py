@@ -266,6 +266,7 @@ def test_realtime_setup_reports_each_option_as_applied_or_not(monkeypatch):
 
 
 @pytest.mark.integration
+@pytest.mark.realtime
 def test_a_paced_run_writes_its_rows_a_few_at_a_time_and_its_timeline_when_asked(tmp_path, monkeypatch, capsys):
     """results.csv costs about 10 us a row: a paced run hands rows to the writer every
     ``PACED_WRITE_SECONDS``, not 0.2 s of them at once (which made the steps after them start late);

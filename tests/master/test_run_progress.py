@@ -42,6 +42,7 @@ def test_a_short_run_in_a_pipe_writes_no_line() -> None:
 
 
 @pytest.mark.integration
+@pytest.mark.slow
 def test_the_run_command_with_stderr_piped_reports_progress_in_lines_and_quiet_silences_it(tmp_path) -> None:
     # paced to wall time, so the run lasts its 3 s however fast the machine (a loaded one may exceed the
     # overrun budget: status 3, still a finished run with its progress)

@@ -31,6 +31,7 @@ QEMU = shutil.which("qemu-aarch64")
 SYSROOT = Path(os.environ.get("QEMU_LD_PREFIX", "/usr/aarch64-linux-gnu"))
 pytestmark = [
     pytest.mark.integration,
+    pytest.mark.cross,
     pytest.mark.skipif(CC is None, reason="no C compiler (set CC or install gcc)"),
     pytest.mark.skipif(ARM_CC is None, reason="no aarch64 cross compiler (install gcc-aarch64-linux-gnu)"),
     pytest.mark.skipif(not (SYSROOT / "lib" / "libc.so.6").is_file(),

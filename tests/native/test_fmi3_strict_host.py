@@ -143,7 +143,7 @@ def _expected_times(step: float) -> list[float]:
     return times + [t]
 
 
-@pytest.mark.parametrize("platform", ("linux64", "win64"))
+@pytest.mark.parametrize("platform", ("linux64", pytest.param("win64", marks=pytest.mark.cross)))
 @pytest.mark.parametrize("model", sorted(model_names()))
 def test_native_fmi3_fmu_in_a_strict_host(model: str, platform: str, strict_runs, native_fmus3: Path) -> None:
     fmu = native_fmus3 / f"{model}.fmu"
@@ -153,7 +153,7 @@ def test_native_fmi3_fmu_in_a_strict_host(model: str, platform: str, strict_runs
     assert [float(r[1]) for r in rows[1:]] == _expected_times(step)
 
 
-@pytest.mark.parametrize("platform", ("linux64", "win64"))
+@pytest.mark.parametrize("platform", ("linux64", pytest.param("win64", marks=pytest.mark.cross)))
 @pytest.mark.parametrize("scenario", LOOPS)
 def test_exported_fmi3_loop_in_a_strict_host(scenario: str, platform: str, strict_runs, exported_loops3) -> None:
     fmu = exported_loops3[scenario]

@@ -22,6 +22,7 @@ from ipcosim.toolchain import find_compiler
 CC = find_compiler()
 pytestmark = [
     pytest.mark.integration,
+    pytest.mark.cross,
     pytest.mark.skipif(CC is None, reason="no C compiler (set CC or install gcc)"),
     pytest.mark.skipif(MINGW is None, reason="no mingw-w64 cross compiler (install gcc-mingw-w64-x86-64)"),
     pytest.mark.skipif(WINE is None, reason="wine is not installed (install wine64)"),

@@ -1,16 +1,11 @@
 """The speed and memory figures of the docs are written by ``python -m benchmarks.docs --update`` from
-the committed ``benchmarks/last.json``, and none is typed by hand elsewhere (``benchmarks/docs.py``)."""
+the committed ``benchmarks/last.json`` (that the blocks are current is tests/project/test_docblocks.py's), and
+none is typed by hand elsewhere (``benchmarks/docs.py``)."""
 from __future__ import annotations
 
 import pytest
 
-from benchmarks.docs import BLOCKS, ROOT, documents, load, render, rewrite, stray_figures
-
-
-@pytest.mark.parametrize("doc", documents(), ids=lambda p: str(p.relative_to(ROOT)))
-def test_marked_blocks_are_what_the_committed_json_renders(doc):
-    text = doc.read_text()
-    assert rewrite(text, load(), str(doc)) == text, f"{doc}: run `python -m benchmarks.docs --update`"
+from benchmarks.docs import BLOCKS, ROOT, documents, load, render, stray_figures
 
 
 @pytest.mark.parametrize("doc", documents(), ids=lambda p: str(p.relative_to(ROOT)))
@@ -33,13 +28,3 @@ def test_the_figure_detector_finds_figures_and_spares_blocks_and_code():
     spared = ("<!-- bench:native -->\n2356x\n<!-- /bench:native -->\n", "```\n4.99 us\n```\n",
               "the step `0.5 us`\n", "a step of 1 ms and a watchdog of 0.5 s\n")
     assert not any(stray_figures(text) for text in spared)
-
-
-def test_a_stale_block_is_rewritten_and_a_missing_figure_named():
-    data = load()
-    stale = "intro\n<!-- bench:plant -->\nold figures\n<!-- /bench:plant -->\nafter\n"
-    new = rewrite(stale, data)
-    assert new.startswith("intro\n<!-- bench:plant -->\n") and new.endswith("<!-- /bench:plant -->\nafter\n")
-    assert "old figures" not in new and new == rewrite(new, data)
-    with pytest.raises(ValueError, match="no bench block 'plnt' \\(closest: plant\\)"):
-        rewrite("<!-- bench:plnt -->\n<!-- /bench:plnt -->\n", data, "x.md")

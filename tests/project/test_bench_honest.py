@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -23,6 +25,7 @@ def _bench(tmp_path: Path, body: str, name: str) -> subprocess.CompletedProcess:
                           timeout=60)
 
 
+@pytest.mark.slow
 def test_missed_target_fails_after_printing_everything(tmp_path):
     _bench(tmp_path, "from benchmarks.targets import target\n"
                      "def run():\n    return ['fast ' + target('a.speed', 2.0, 1.0, 'x', what='a speed'),\n"
@@ -43,6 +46,7 @@ def test_missed_target_fails_after_printing_everything(tmp_path):
     assert last["bench_b_fine"]["figures"]["b.lib"]["anchor"] == "their floor"
 
 
+@pytest.mark.slow
 def test_all_targets_met_exits_zero(tmp_path):
     proc = _bench(tmp_path, "from benchmarks.targets import target\n"
                             "def run():\n    return [target('c.rate', 30.0, 20.0, 'x', at_most=False,\n"
@@ -57,6 +61,7 @@ def test_a_bench_that_cannot_run_its_subject_fails(tmp_path):
     assert "bench: failed: benchmarks.bench_broken" in proc.stdout
 
 
+@pytest.mark.slow
 def test_a_target_not_measured_is_missed(tmp_path):
     proc = _bench(tmp_path, "from benchmarks.targets import target\n"
                             "def run():\n    return [target('d.p99', float('nan'), 1.0, 'us', what='d p99')]\n", "nan")

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from devtools.docblocks import splice
 from ipcosim.harness.cli import build_parser, parsers
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,7 +43,7 @@ def _exists(ref: str, base: Path) -> bool:
 
 def _prose(text: str) -> str:
     """A doc without its generated snapshot blocks (``python -m devtools.rooms --write``: room labels)."""
-    return re.sub(r"<!-- rooms:begin -->.*?<!-- rooms:end -->", "", text, flags=re.S)
+    return splice(text, lambda block: "" if block.tool == "rooms" else None)
 
 
 def test_every_named_file_exists() -> None:
@@ -137,15 +138,6 @@ def test_no_hint_names_an_option_its_command_does_not_take() -> None:
         for line, text in _string_literals(path):
             bad += _bad_uses(_code(text, markdown=False), f"{path.relative_to(ROOT)}:{line}", commands)
     assert not bad, bad
-
-
-def test_the_api_table_is_the_signature() -> None:
-    from devtools.apidoc import BLOCK, render
-
-    text = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
-    block = re.search(rf"<!-- {BLOCK} -->\n(.*?)<!-- /{BLOCK} -->", text, re.S)
-    assert block, f"docs/api.md has no <!-- {BLOCK} --> block"
-    assert block.group(1) == render(), "run `python -m devtools.apidoc --update`"
 
 
 @pytest.mark.parametrize("option", ["--fmus", "--overrun-budget", "--strict", "--timeout", "--loop", "--quiet"])

@@ -42,6 +42,7 @@ def test_every_non_python_file_the_code_reads_is_package_data() -> None:
 
 
 @pytest.mark.integration
+@pytest.mark.slow
 def test_the_wheel_holds_the_kit_not_the_evidence_or_the_tooling(tmp_path) -> None:
     """The built wheel: the package's modules under ``ipcosim/`` only, none of the thesis's evidence
     (``evidence/``), the repository's tooling (``devtools/``) or their former places in the package."""

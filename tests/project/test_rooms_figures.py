@@ -1,28 +1,20 @@
-"""docs/architecture.md's figures are the tree's: the rooms table between its ``rooms`` markers is
-what ``python -m devtools.rooms`` computes now (modules, lines, longest function, import cycles per
-room), every source file is counted in exactly one room, and the page states no other count of the
-code outside the markers, where nothing would keep it true."""
+"""docs/architecture.md's figures are the tree's: the rooms table (its ``rooms:table`` block, which
+tests/project/test_docblocks.py checks is what ``python -m devtools.rooms`` computes now) counts every
+source file in exactly one room, and the page states no other count of the code outside the table, where
+nothing would keep it true."""
 from __future__ import annotations
 
 import re
 from pathlib import Path
 
 from devtools import rooms
+from devtools.docblocks import splice
 
 #: The clone: the folder above this test that holds pyproject.toml (the test may sit in a sub-folder of tests/).
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
 DOC = ROOT / "docs" / "architecture.md"
 #: The folders whose files the table counts: the installed package's and the clone's own tooling.
 COUNTED = ("fmus", "controllers", "harness", "evidence", "benchmarks", "devtools")
-
-
-def test_the_rooms_table_is_the_trees() -> None:
-    committed = rooms.written(DOC)
-    assert committed is not None, f"{DOC}: no {rooms.BEGIN} ... {rooms.END} markers"
-    now = rooms.table()
-    assert committed == now, (
-        "docs/architecture.md's rooms table differs from the tree: run `python -m devtools.rooms --write` "
-        "and commit docs/architecture.md\n--- committed\n" + committed + "--- now\n" + now)
 
 
 def test_every_source_file_is_in_one_room() -> None:
@@ -43,9 +35,8 @@ RULE = "about 60 lines"
 
 
 def counts_outside_the_markers(page: str) -> list[str]:
-    head, _, rest = page.partition(rooms.BEGIN)
-    _, _, tail = rest.partition(rooms.END)
-    return [m.group(0) for m in COUNT.finditer((head + tail).replace(RULE, ""))]
+    outside = splice(page, lambda block: "" if block.name == rooms.BLOCK else None)
+    return [m.group(0) for m in COUNT.finditer(outside.replace(RULE, ""))]
 
 
 def test_no_count_of_the_code_outside_the_table() -> None:
@@ -55,6 +46,6 @@ def test_no_count_of_the_code_outside_the_table() -> None:
 
 
 def test_the_count_check_sees_a_count() -> None:
-    page = (f"The master has 16 modules and 3,839 lines, {RULE}.\n{rooms.BEGIN}\n| x | 12 lines |\n{rooms.END}\n"
-            "Import cycles: 0 cycles.\n")
+    page = (f"The master has 16 modules and 3,839 lines, {RULE}.\n<!-- {rooms.BLOCK} -->\n| x | 12 lines |\n"
+            f"<!-- /{rooms.BLOCK} -->\nImport cycles: 0 cycles.\n")
     assert counts_outside_the_markers(page) == ["16 modules", "3,839 lines", "0 cycles"]

@@ -463,6 +463,7 @@ def subprocess_outcomes(tmp_path_factory, corpus_fmus) -> dict[str, Outcome]:
 
 
 @pytest.mark.parametrize("name", sorted(SUBPROCESS_CASES))
+@pytest.mark.slow
 def test_subprocess_case(name, subprocess_outcomes):
     case, got = SUBPROCESS_CASES[name], subprocess_outcomes.get(name)
     assert got is not None, f"{name} did not finish in time"

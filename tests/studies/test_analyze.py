@@ -93,6 +93,7 @@ def test_position_only_limit(name: str, zero: float, pole: float) -> None:
     assert law.measured == ("cart_position", "pendulum_angle")
 
 
+@pytest.mark.slow
 def test_thesis_pid_loop_is_unstable_and_no_pid_stabilizes() -> None:
     r = analyze_loop(scenario_loop("single-mass-pid")[0])
     assert not r["closed_loop_stable"] and r["gain_margin"] is None and r["peak_sensitivity"] is None
@@ -121,6 +122,7 @@ def test_delay_margin_of_the_thesis_lqr_in_samples() -> None:
     assert np.allclose(sorted(abs(closed_loop_poles(loop))), sorted(p["z_abs"] for p in r["closed_loop_poles"]))
 
 
+@pytest.mark.slow
 def test_cli_json_and_figures(tmp_path, capsys) -> None:
     assert cli_main(["analyze", "double-mass-lqr", "--json", "--out", str(tmp_path)]) == 0
     r = json.loads(capsys.readouterr().out)

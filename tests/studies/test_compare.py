@@ -96,8 +96,8 @@ def test_render_markdown_html_and_figures(tmp_path):
     lines = [line for line in md.splitlines() if line.startswith("| single mass") or line.startswith("| double mass")]
     assert len(lines) == 9
     assert lines[0].startswith("| single mass | PID | - | fell |")
-    assert lines[1].startswith("| single mass | cascade PID | - | error |")
-    lqr = next(line for line in lines if "| LQR + observer |" in line and line.startswith("| single"))
+    assert lines[1].startswith("| single mass | CascadePID | - | error |")
+    lqr = next(line for line in lines if "| LQR |" in line and line.startswith("| single"))
     assert "| 75 % (4 runs, CI" in lqr and "| 12 |" in lqr
     assert "10 confirmed, 0 not confirmed, 0 not measured" in md
     assert "could not load Setpoint.fmu" in md

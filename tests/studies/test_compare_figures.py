@@ -35,14 +35,14 @@ def test_every_law_of_the_table_is_in_the_figure(tmp_path, monkeypatch) -> None:
     fig, = closed
     _, rows = report._table(results, None)
     listed = [row[1] for row in rows if row[0] == "single mass"]
-    assert len(listed) == 6 and "lqg" in listed, listed
+    assert len(listed) == 6 and "LQG" in listed, listed
     legend = [text.get_text() for text in fig.axes[0].get_legend().get_texts()]
     for law in listed:
         assert any(entry == law or entry.startswith(f"{law} (") or entry.startswith(f"{law}:") for entry in legend), \
             (law, legend)
     assert "HSMC: no time series (error)" in legend, "the law that did not run is named, not silently dropped"
     lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
-    assert len(lines["lqg"].get_xdata()) == 201, "the LQG's cart position is drawn"
+    assert len(lines["LQG"].get_xdata()) == 201, "the LQG's cart position is drawn"
     drawn = [line.get_color() for label, line in lines.items() if label in listed]
     assert len(set(drawn)) == len(drawn), "each law its own colour"
     monkeypatch.undo()

@@ -16,17 +16,14 @@ pytestmark = pytest.mark.integration
 
 
 @pytest.fixture(scope="session")
-def study_fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Every FMU of the project (setpoint, controllers, plants), built for this session."""
-    from ipcosim.fmus.pybuild import build_all, discover
+def study_fmu_dir(request: pytest.FixtureRequest) -> Path:
+    """Every FMU of the project (setpoint, controllers, plants): this run's build."""
+    from ipcosim.fmus.pybuild import discover
 
-    scripts = discover(ROOT)
-    names = {p.name for p in scripts}
+    names = {p.name for p in discover(ROOT)}
     if not any(n.startswith("fmu_") and "setpoint" in n for n in names):
         pytest.skip("the Setpoint/controller FMU scripts are not part of this tree")
-    out = tmp_path_factory.mktemp("study-fmus")
-    build_all(out, scripts=scripts)
-    return out
+    return request.getfixturevalue("project_fmu_dir")
 
 
 @pytest.fixture
@@ -35,6 +32,7 @@ def fmu_env(study_fmu_dir: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return study_fmu_dir
 
 
+@pytest.mark.slow
 def test_sweep_on_the_cosimulation(fmu_env, tmp_path, capsys):
     out = tmp_path / "sweep"
     code = cli_main(["sweep", "single-mass-lqr", "--vary", "plant.Mp=[0.2303,0.25]", "--vary",
@@ -59,6 +57,7 @@ def test_sweep_unknown_parameter_of_a_real_scenario(fmu_env, capsys):
     assert "unknown parameter 'plant.Mq'" in err[0] and "Mp" in err[0]
 
 
+@pytest.mark.slow
 def test_compare_report_on_two_scenarios(fmu_env, tmp_path, capsys):
     out = tmp_path / "compare"
     code = cli_main(["compare", "--scenarios", "single-mass-lqr,single-mass-hsmc", "--stop-time", "3",
@@ -66,7 +65,7 @@ def test_compare_report_on_two_scenarios(fmu_env, tmp_path, capsys):
     captured = capsys.readouterr()
     assert code == 0, captured.err
     md = (out / "report.md").read_text()
-    assert "| single mass | LQR + observer |" in md and "| single mass | HSMC |" in md
+    assert "| single mass | LQR |" in md and "| single mass | HSMC |" in md
     assert (out / "figures" / "single-mass.png").stat().st_size > 5000
     page = (out / "report.html").read_text()
     assert "data:image/png;base64," in page
@@ -74,6 +73,7 @@ def test_compare_report_on_two_scenarios(fmu_env, tmp_path, capsys):
     assert "not measured" not in md and "| confirmed |" not in md
 
 
+@pytest.mark.slow
 def test_tune_writes_into_out_and_installs_beside_the_scenario_on_request(fmu_env, tmp_path, capsys):
     scenario = tmp_path / "single-mass-lqr"
     shutil.copytree(ROOT / "ssp" / "single-mass-lqr", scenario)
@@ -110,6 +110,7 @@ def test_tune_writes_into_out_and_installs_beside_the_scenario_on_request(fmu_en
     assert result.ok and math.isfinite(result.metrics["max_abs_angle_rad"])
 
 
+@pytest.mark.slow
 def test_cosimulation_sweep_on_dask_ships_the_scenario_and_matches_the_pool(fmu_env, tmp_path, capsys):
     distributed = pytest.importorskip("distributed")
     common = ["sweep", "single-mass-hsmc", "--vary", "plant.Mp=uniform(0.8,1.2)*nominal", "--samples", "3",

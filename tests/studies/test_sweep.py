@@ -224,6 +224,7 @@ def test_rows_of_a_sweep_whose_folder_was_removed_is_one_clear_error(tmp_path):
     assert len(message.splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
     out, calls1, calls2 = tmp_path / "out", tmp_path / "c1", tmp_path / "c2"
     calls1.mkdir()
@@ -279,6 +280,7 @@ def test_interrupted_sweep_resumes_without_redoing_finished_runs(tmp_path):
 # ----------------------------------------------------------------------------- dask
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_gives_the_same_rows_as_the_process_pool(tmp_path):
     distributed = pytest.importorskip("distributed")
     spec = PurePlantSpec(stop_time=2.0)
@@ -337,6 +339,7 @@ def test_cli_bad_vary_exits_nonzero_with_one_line(vary, fragment, capsys, tmp_pa
     assert not (tmp_path / "results.csv").exists()
 
 
+@pytest.mark.slow
 def test_cli_sweep_writes_results_summary_and_figures(tmp_path, capsys):
     out = tmp_path / "sw"
     code = cli_main(["sweep", "pure:single-mass-lqr", "--vary", "plant.Mp=uniform(0.8,1.2)*nominal",

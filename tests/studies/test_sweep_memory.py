@@ -24,6 +24,7 @@ from ipcosim.harness.studies.sweep import plan_hash
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 
+@pytest.mark.slow
 def test_local_pool_is_replaced_after_its_share_of_runs(tmp_path):
     spec = SyntheticSpec(calls_dir=str(tmp_path))
     executor = LocalExecutor(1, recycle_runs=5)
@@ -92,6 +93,7 @@ def _stream_peak(runs: int, iterate: int) -> int:
         tracemalloc.stop()
 
 
+@pytest.mark.slow
 def test_making_and_iterating_the_cases_takes_memory_independent_of_the_sweep_size():
     _stream_peak(1000, 100)  # first-call allocations (numpy's generators) out of the way
     small, large = _stream_peak(1_000, 1_000), _stream_peak(100_000, 1_000)
@@ -196,6 +198,7 @@ def _sweep_peak(tmp_path: Path, runs: int) -> tuple[int, dict]:
             setattr(module, name, value)
 
 
+@pytest.mark.slow
 def test_a_sweeps_memory_does_not_grow_with_its_runs(tmp_path):
     """Eight times the runs, the same peak, once what is held by the chunk or by the number (rows sorted or read
     at a time, values summarized at a time, runs drawn in the figures, seeds listed in the metadata) is made

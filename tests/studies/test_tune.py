@@ -81,6 +81,7 @@ def test_ssv_round_trip(tmp_path):
     assert "<ssv:Integer value=\"3\"/>" in path.read_text() and "<ssv:Boolean value=\"true\"/>" in path.read_text()
 
 
+@pytest.mark.slow
 def test_tune_improves_on_the_nominal_gains_within_budget():
     # 2.5 s: the success criterion reads the last half of a run this short, which must be past the step's
     # transient (the best loop settles at 0.87 s; over 0.75-1.5 s its cart still moves 2.2 mm)

@@ -16,6 +16,7 @@ import pytest
 pytestmark = pytest.mark.integration
 
 
+@pytest.mark.slow
 def test_every_drawing_command_keeps_its_numbers_without_matplotlib(tmp_path: Path):
     commands = {
         "run": ["run", "single-mass-lqr", "--stop-time", "2", "--plot", "--out", str(tmp_path / "run")],
