@@ -202,44 +202,72 @@ def robustness_table(rows: list[dict[str, Any]]) -> str:
 
 #: The all-together lab-bench cell is measured with these seeds (two for the law the target names, each set).
 VERDICT_SEEDS = {"double-mass-lqg": (0, 1)}
+#: Rows of the verdict table on a changed bench: (scenario, set, seed, what changed, the values set).
+VERDICT_VARIANTS = [("double-mass-lqg", "lab", 0, "8,192-count pendulum encoder",
+                     {"plant.pendulum_resolution": 2 * math.pi / 8192})]
 
 
-def verdict_rows(samples: int = ROBUST_SAMPLES, workers: int = 2) -> list[dict[str, Any]]:
+def verdict_cells() -> list[tuple[str, str, int, str | None, dict[str, float]]]:
+    """Every row of the verdict table: (scenario, set, seed, bench change or None, its values)."""
+    cells: list[tuple[str, str, int, str | None, dict[str, float]]] = []
+    for name, pset in ROBUST_SCENARIOS:
+        for lab in ROBUST_LAB_SETS.get(name, (pset,)):
+            cells += [(name, lab, seed, None, {}) for seed in VERDICT_SEEDS.get(name, (0,))]
+    return cells + [(n, s, seed, what, dict(v)) for n, s, seed, what, v in VERDICT_VARIANTS]
+
+
+def verdict_rows(samples: int = ROBUST_SAMPLES, workers: int = 2,
+                 only: Sequence[tuple[str, str, int, str | None]] | None = None) -> list[dict[str, Any]]:
     """The success criterion's table: every ``ROBUST_SCENARIOS`` loop with every factor together (the lab
-    bench with every spread), ``samples`` runs per seed (:data:`VERDICT_SEEDS`; else seed 0), summarized with
-    the motor cart's residual amplitude and mean error."""
+    bench with every spread), ``samples`` runs per seed (:data:`VERDICT_SEEDS`; else seed 0) and the
+    :data:`VERDICT_VARIANTS`, summarized with the motor cart's residual amplitude and mean error (``only``: the
+    cells of :func:`verdict_cells` with these keys)."""
     from ipcosim.harness.studies.executors import open_executor
-    from ipcosim.harness.studies.robustness import FACTORS, factor_cases, factor_runs
-    from ipcosim.harness.studies.specs import for_executor, study_spec
-    from ipcosim.harness.studies.sweep import run_sweep
 
     executor = open_executor(workers)
     rows = []
     try:
-        for name, pset in ROBUST_SCENARIOS:
-            kind = name.split("-")[0] + "-mass"
-            vary, fixed = factor_runs(kind, tuple(FACTORS))
-            for lab in ROBUST_LAB_SETS.get(name, (pset,)):
-                spec = study_spec(name, "auto", names=[v.partition("=")[0] for v in vary] + list(fixed),
-                                  stop_time=ROBUST_STOP_TIME, parameter_set=lab)[0]
-                spec = for_executor(spec, executor)
-                for seed in VERDICT_SEEDS.get(name, (0,)):
-                    print(f"results: {name} ({lab}), every factor together, seed {seed}", file=sys.stderr, flush=True)
-                    result = run_sweep(spec, factor_cases(spec, kind, tuple(FACTORS), samples, seed),
-                                       executor=executor)
-                    rows.append({"scenario": name, "set": lab, "seed": seed, **verdict_summary(result.rows)})
+        for name, lab, seed, what, values in verdict_cells():
+            if only is not None and (name, lab, seed, what) not in only:
+                continue
+            print(f"results: {name} ({lab}{', ' + what if what else ''}), every factor together, seed {seed}",
+                  file=sys.stderr, flush=True)
+            result = verdict_sweep(name, lab, seed, samples, executor, values)
+            rows.append({"scenario": name, "set": lab, "seed": seed, "bench_change": what,
+                         **verdict_summary(result.rows)})
     finally:
         executor.close()
     return rows
 
 
+def verdict_sweep(name: str, parameter_set: str, seed: int, samples: int, executor: Any,
+                  values: dict[str, float] | None = None) -> Any:
+    """One cell of the verdict table: ``samples`` runs of ``name`` with every factor together (``values`` set in
+    every run beside the lab bench's)."""
+    from ipcosim.harness.grammar import parse_all
+    from ipcosim.harness.studies.cases import make_cases
+    from ipcosim.harness.studies.robustness import FACTORS, factor_runs
+    from ipcosim.harness.studies.specs import for_executor, study_spec
+    from ipcosim.harness.studies.sweep import run_sweep
+
+    kind = name.split("-")[0] + "-mass"
+    vary, fixed = factor_runs(kind, tuple(FACTORS))
+    fixed = {**fixed, **(values or {})}
+    spec = study_spec(name, "auto", names=[v.partition("=")[0] for v in vary] + list(fixed),
+                      stop_time=ROBUST_STOP_TIME, parameter_set=parameter_set)[0]
+    spec = for_executor(spec, executor)
+    cases = make_cases(parse_all(vary, spec.parameters), spec.parameters, samples=samples, seed=seed, fixed=fixed)
+    return run_sweep(spec, cases, executor=executor)
+
+
 def verdict_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Success with its Wilson interval, the counts per status, the upright fraction and the distributions of
-    the motor cart's residual peak-to-peak, |mean error| and amplitude bound over the upright runs."""
+    the motor cart's residual peak-to-peak, |mean error| and amplitude bound over the upright runs; the same
+    success under the friction bound 2 mm + 2 b2 / K (``old``), and how many runs fell back on it."""
     import numpy as np
 
-    from ipcosim.fmus.metrics import amplitude_bound
-    from ipcosim.harness.studies.robustness import summarize
+    from ipcosim.fmus.metrics import amplitude_bound, success_status
+    from ipcosim.harness.studies.robustness import summarize, wilson_interval
 
     s = summarize(rows, ())
     up = [r for r in rows if r.get("upright") is True]
@@ -247,15 +275,20 @@ def verdict_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     for key, values in (("cart_peak_to_peak_m", [r.get("cart_peak_to_peak_m") for r in up]),
                         ("abs_mean_error_m", [abs(r["cart_mean_error_m"]) for r in up
                                               if r.get("cart_mean_error_m") is not None]),
-                        ("amplitude_bound_m", [amplitude_bound(float(r.get("plant.b2") or 0.0),
-                                                               float(r.get("plant.K") or 0.0)) for r in up])):
+                        ("amplitude_bound_m", [r.get("amplitude_bound_m") for r in up]),
+                        ("old_amplitude_bound_m", [amplitude_bound(float(r.get("plant.b2") or 0.0),
+                                                                   float(r.get("plant.K") or 0.0)) for r in up])):
         x = np.asarray([v for v in values if v is not None], float)
         dist[key] = ({"median": float(np.median(x)), "p90": float(np.percentile(x, 90))} if x.size else {})
+    old_ok = sum(1 for r in rows if r["status"] != "error" and success_status(r, amplitude_bound(
+        float(r.get("plant.b2") or 0.0), float(r.get("plant.K") or 0.0))) == "ok")
+    fallback = sum(1 for r in rows if str(r.get("amplitude_bound_from") or "").startswith("friction bound"))
     return {"runs": s["runs"], "counts": s["counts"], "success_rate": s["success_rate"],
             "success_ci95": s["success_ci95"], "upright": len(up) / len(rows) if rows else math.nan,
             "mean_error_ok": sum(1 for r in up if r.get("cart_mean_error_m") is not None
                                  and abs(r["cart_mean_error_m"]) <= 1e-3) / len(rows) if rows else math.nan,
-            "distributions": dist}
+            "distributions": dist, "old_success_rate": old_ok / len(rows) if rows else math.nan,
+            "old_success_ci95": list(wilson_interval(old_ok, len(rows))), "fallback_runs": fallback}
 
 
 def verdict_table(rows: list[dict[str, Any]]) -> str:

@@ -103,7 +103,8 @@ def loop_from(plant_continuous: Any, controller: LinearLaw, law: str = "", kind:
     return Loop(law, kind, controller.T, pd, plant_continuous, controller, L, law_object, dict(plant_values or {}))
 
 
-def _binding_values(component) -> dict[str, Any]:
+def binding_values(component) -> dict[str, Any]:
+    """The values a scenario's parameter bindings give a component, by parameter name."""
     values: dict[str, Any] = {}
     for pset in component.bindings:
         for p in pset.parameters:
@@ -120,13 +121,22 @@ def scenario_loop(scenario: str, parameter_set: str | None = None,
     (Loop, dict)
         The loop and a description (scenario, law, kind, parameter set, plant parameters set).
     """
-    from pathlib import PurePosixPath
-
     from ipcosim.harness.scenario.ssp import load_scenario, select_parameter_set
 
     sc = load_scenario(scenario)
     if parameter_set:
         sc = select_parameter_set(sc, parameter_set)
+    loop, info, _ = loop_of_scenario(sc, set)
+    info["parameter_set"] = parameter_set or (sc.bound_sets[0] if sc.bound_sets else "default")
+    return loop, info
+
+
+def loop_of_scenario(sc: Any, set: Mapping[str, Any] | None = None,
+                     law_overrides: Mapping[str, Any] | None = None) -> tuple[Loop, dict[str, Any], dict[str, Any]]:
+    """The loop of a parsed scenario's ``controller`` and ``plant`` (its bound values, then ``set``, then the
+    law's ``law_overrides``): ``(loop, description, every plant value bound or set)``."""
+    from pathlib import PurePosixPath
+
     try:
         ctrl, plant = sc.component("controller"), sc.component("plant")
     except KeyError as exc:
@@ -141,21 +151,21 @@ def scenario_loop(scenario: str, parameter_set: str | None = None,
         raise AnalysisError(f"{sc.origin}: plant {plant_model!r} is not a plant model analyze knows "
                             f"({', '.join(PLANT_MODELS)})")
     law_name, kind = found[0]
-    law_values, plant_values = _binding_values(ctrl), _binding_values(plant)
+    law_values, plant_values = binding_values(ctrl), binding_values(plant)
     for key, value in (set or {}).items():
         comp, _, var = key.partition(".")
         if comp not in ("controller", "plant"):
             raise UsageError(f"--set {key}: analyze uses the controller's and plant's parameters only")
         (law_values if comp == "controller" else plant_values)[var] = value
+    law_values.update(law_overrides or {})
     phys = {f for f in PLANT_KINDS[kind_plant].__dataclass_fields__}
     plant_phys = {k: float(v) for k, v in plant_values.items() if k in phys}
     try:
         loop = make_loop(law_name, kind, law_values, plant_phys)
     except ParameterError as exc:
         raise AnalysisError(f"{sc.origin}: plant: {exc}") from None
-    used = parameter_set or (sc.bound_sets[0] if sc.bound_sets else "default")
     return loop, {"scenario": sc.name, "law": law_name, "kind": kind, "controller": ctrl_model,
-                  "parameter_set": used, "plant_parameters": plant_phys}
+                  "plant_parameters": plant_phys}, plant_values
 
 
 # ----------------------------------------------------------------------------- frequency response
