@@ -473,9 +473,9 @@ class Prepared:
                     "predicted_cart_peak_to_peak_m": None}
         from ipcosim.harness.studies.residual_cycle import run_bound
 
-        key = json.dumps(given, sort_keys=True, default=repr)
+        key = json.dumps([given, b2, K], sort_keys=True, default=repr)
         if key not in self._bounds:
-            self._bounds[key] = run_bound(self._python_scenario, given)
+            self._bounds[key] = run_bound(self._python_scenario, given, amplitude_bound(b2, K))
         return dict(self._bounds[key])
 
     def close(self) -> None:

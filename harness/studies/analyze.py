@@ -28,6 +28,7 @@ Not part of the FMU runtime: it needs python-control, numpy and, for the figures
 from __future__ import annotations
 
 import cmath
+import functools
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -86,11 +87,26 @@ def make_loop(law_name: str, kind: str, law_values: Mapping[str, Any], plant_val
     ControllerParameterError, ParameterError
         A bad law or plant parameter (naming it).
     """
-    law = build_law(kind, law_name, dict(law_values))
+    law, lin = _law_and_model(kind, law_name, tuple(sorted(dict(law_values).items(), key=lambda kv: kv[0])))
     params = preset(DEFAULT_PRESET[kind], **dict(plant_values))
     model = linearize(params, inductance=True)
     pc = control.ss(model.A, model.B, model.C, model.D)
-    return loop_from(pc, linear_law(law), law_name, kind, law, dict(plant_values))
+    return loop_from(pc, lin, law_name, kind, law, dict(plant_values))
+
+
+def _law_and_model(kind: str, law_name: str, values: tuple) -> tuple[Any, LinearLaw]:
+    """The law and its linear model (kept for the last few sets of values: a sweep's runs share their law)."""
+    try:
+        return _cached_law(kind, law_name, values)
+    except TypeError:   # a value that cannot be a key (a list): built each time
+        law = build_law(kind, law_name, dict(values))
+        return law, linear_law(law)
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_law(kind: str, law_name: str, values: tuple) -> tuple[Any, LinearLaw]:
+    law = build_law(kind, law_name, dict(values))
+    return law, linear_law(law)
 
 
 def loop_from(plant_continuous: Any, controller: LinearLaw, law: str = "", kind: str = "",
@@ -724,6 +740,10 @@ def analyze(scenario: str, *, parameter_set: str | None = None, set: Mapping[str
     loop, info = scenario_loop(scenario, parameter_set, set)
 
     result = {**info, **analyze_loop(loop)}
+    if loop.kind in KINDS:   # the IP02's friction and counts together, by the describing functions
+        from ipcosim.harness.studies import residual_cycle
+
+        result["residual_cycle"] = residual_cycle.report(scenario, parameter_set, set)
     if out is not None:
         from ipcosim.harness.extras import optional_figure
 

@@ -59,6 +59,8 @@ COMPENSATION_POINTS = 64
 #: below 1 just under each threshold (0.80 at 1.5 counts, 0.91 at 2.5, 0.94 at 3.5: a loop that tolerates
 #: little less gain on that signal balances there, a dip the grid would step over).
 THRESHOLDS_SEARCHED = 30
+#: Halvings of the grid step (in log s) that locate the crossing: 2^-32 of a grid step.
+BISECTIONS = 32
 #: Ratio iterations (fixed point) before the prediction gives up.
 MAX_ITERATIONS = 60
 #: The ratios have settled when none moves by more than this (relative).
@@ -227,7 +229,7 @@ def _last_crossing(ql: QuasiLinearLoop, ratios: np.ndarray) -> float:
         raise NoCycle("the loop is unstable even at the largest amplitudes (its linear loop is not stable)")
     for a, b in zip(grid, grid[1:]):
         if _critical(ql.at(b * ratios))[0] >= 1.0:
-            for _ in range(50):       # bisection in log s: stable at a, not at b
+            for _ in range(BISECTIONS):       # bisection in log s: stable at a, not at b
                 mid = math.sqrt(a * b)
                 a, b = (mid, b) if _critical(ql.at(mid * ratios))[0] < 1.0 else (a, mid)
             return math.sqrt(a * b)
@@ -405,14 +407,14 @@ def scenario_prediction(sc: Any, set: Mapping[str, Any] | None = None) -> dict[s
     dict
         :func:`predict_lab_cycle`'s result (``found`` False with the ``reason`` where it cannot treat the run).
     """
-    from ipcosim.harness.studies.analyze import loop_of_scenario
+    from ipcosim.harness.studies.analyze import binding_values, loop_of_scenario
     from ipcosim.harness.studies.limit_cycle import plant_of
 
     given = {k: v for k, v in (set or {}).items() if k.partition(".")[0] in ("controller", "plant")}
-    loop, _, plant_values = loop_of_scenario(sc, given)
-    left_out = {k: 0.0 for k in LEFT_OUT_LAW_TERMS if getattr(loop.law_object, k, 0.0)}
-    if left_out:
-        loop = loop_of_scenario(sc, given, left_out)[0]
+    law_values = {**binding_values(sc.component("controller")),
+                  **{k.partition(".")[2]: v for k, v in given.items() if k.startswith("controller.")}}
+    left_out = {k: 0.0 for k in LEFT_OUT_LAW_TERMS if float(law_values.get(k) or 0.0)}
+    loop, _, plant_values = loop_of_scenario(sc, given, left_out)
     params = plant_of(loop)
     forces = {name: float(getattr(params, name)) for name, _ in COULOMB_CARTS[loop.kind]}
     res = {s: float(plant_values.get("pendulum_resolution" if s == "pendulum_angle" else "cart_resolution") or 0.0)
@@ -423,12 +425,13 @@ def scenario_prediction(sc: Any, set: Mapping[str, Any] | None = None) -> dict[s
     return out
 
 
-def run_bound(sc: Any, set: Mapping[str, Any] | None = None) -> dict[str, Any]:
+def run_bound(sc: Any, set: Mapping[str, Any] | None = None, friction_bound: float | None = None) -> dict[str, Any]:
     """The success criterion's amplitude bound of one run, before it runs (``docs/metrics.md``).
 
     The predicted motor-cart peak-to-peak (:func:`scenario_prediction`) plus
     ``ipcosim.fmus.metrics.AMPLITUDE_MARGIN_M``; where the prediction cannot treat the run, the friction bound
-    ``ipcosim.fmus.metrics.amplitude_bound`` of the run's own ``b2`` and ``K``, and why.
+    ``ipcosim.fmus.metrics.amplitude_bound`` of the run's own ``b2`` and ``K`` (``friction_bound``, else from
+    ``set`` over the scenario's values over its plant kind's default preset), and why.
 
     Returns
     -------
@@ -446,18 +449,54 @@ def run_bound(sc: Any, set: Mapping[str, Any] | None = None) -> dict[str, Any]:
     if p["found"]:
         return {"amplitude_bound_m": predicted_amplitude_bound(p["motor_cart_peak_to_peak_m"]),
                 "amplitude_bound_from": "prediction", "predicted_cart_peak_to_peak_m": p["motor_cart_peak_to_peak_m"]}
-    values = _plant_starts(sc, set)
-    return {"amplitude_bound_m": amplitude_bound(values.get("b2", 0.0), values.get("K", 0.0)),
+    if friction_bound is None:
+        values = _plant_starts(sc, set)
+        friction_bound = amplitude_bound(values["b2"], values["K"])
+    return {"amplitude_bound_m": friction_bound,
             "amplitude_bound_from": f"friction bound: {reason}", "predicted_cart_peak_to_peak_m": None}
 
 
 def _plant_starts(sc: Any, set: Mapping[str, Any] | None) -> dict[str, float]:
-    """The plant's ``b2`` and ``K`` of the run: ``set``, else the scenario's bound values (0 where neither)."""
+    """The plant's ``b2`` and ``K`` of the run: ``set``, else the scenario's bound values, else its plant kind's
+    default preset (0 where none has it)."""
+    from ipcosim.fmus.params import DEFAULT_PRESET, preset
     from ipcosim.harness.studies.analyze import binding_values
 
     try:
         values = binding_values(sc.component("plant"))
-    except KeyError:
-        values = {}
+        defaults = preset(DEFAULT_PRESET[_kind_of(sc)])
+    except (KeyError, LookupError):
+        values, defaults = {}, None
     values.update({k.partition(".")[2]: v for k, v in (set or {}).items() if k.startswith("plant.")})
-    return {k: float(values.get(k) or 0.0) for k in ("b2", "K")}
+    return {k: float(values.get(k, getattr(defaults, k, 0.0)) or 0.0) for k in ("b2", "K")}
+
+
+def report(scenario: str, parameter_set: str | None = None, set: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The ``residual_cycle`` entry of ``ipcosim analyze``: :func:`scenario_prediction` of the scenario with its
+    ``--set`` values, on its own bench where its plant has Coulomb friction or encoder counts, else on the lab
+    bench's (``ipcosim.harness.studies.robustness.realism_values``), and which bench that was."""
+    from ipcosim.harness.scenario.ssp import load_scenario, select_parameter_set
+    from ipcosim.harness.studies.analyze import binding_values
+    from ipcosim.harness.studies.robustness import realism_values
+
+    sc = load_scenario(scenario)
+    if parameter_set:
+        sc = select_parameter_set(sc, parameter_set)
+    values = {f"plant.{k}": v for k, v in binding_values(sc.component("plant")).items()}
+    values.update(set or {})
+    names = ("b", "b1", "b2", "cart_resolution", "pendulum_resolution")
+    own = any(float(values.get(f"plant.{n}") or 0.0) > 0.0 for n in names)
+    if not own:
+        values = {**realism_values("lab", _kind_of(sc)), **(set or {})}
+    out = scenario_prediction(sc, values)
+    out["bench"] = "on the plant's own bench" if own else "on the lab bench: the plant has neither friction nor counts"
+    return out
+
+
+def _kind_of(sc: Any) -> str:
+    """The plant kind of a parsed scenario's ``plant`` component."""
+    from pathlib import PurePosixPath
+
+    from ipcosim.fmus.kinds import PLANT_MODELS
+
+    return PLANT_MODELS[PurePosixPath(sc.component("plant").source).stem]
