@@ -111,7 +111,8 @@ def test_the_success_table_rates_follow_from_the_counts_and_the_target_law_has_t
     rows = data["verdict"]
     assert {r["scenario"] for r in rows} == {name for name, _ in ROBUST_SCENARIOS}
     for lab in ROBUST_LAB_SETS["double-mass-lqg"]:
-        seeds = sorted(r["seed"] for r in rows if r["scenario"] == "double-mass-lqg" and r["set"] == lab)
+        seeds = sorted(r["seed"] for r in rows if r["scenario"] == "double-mass-lqg" and r["set"] == lab
+                       and not r.get("bench_change"))
         assert seeds == list(VERDICT_SEEDS["double-mass-lqg"]), lab
     for r in rows:
         ok = r["counts"].get("ok", 0)
@@ -122,6 +123,11 @@ def test_the_success_table_rates_follow_from_the_counts_and_the_target_law_has_t
         assert r["upright"] == pytest.approx(1 - r["counts"].get("fell", 0) / r["runs"])
         amp = r["distributions"]["cart_peak_to_peak_m"]
         assert amp["median"] <= amp["p90"]
+        if "old_success_rate" in r:   # measured with each run's bound: the friction bound's figures beside
+            old = round(r["old_success_rate"] * r["runs"])
+            assert r["old_success_ci95"] == pytest.approx(list(wilson_interval(old, r["runs"])))
+            assert r["old_success_rate"] <= r["mean_error_ok"]
+            assert 0 <= r["fallback_runs"] <= r["runs"]
 
 
 def test_each_comparison_verdict_is_the_success_criterion_of_its_measurements(data: dict) -> None:
