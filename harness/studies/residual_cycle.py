@@ -168,24 +168,29 @@ class QuasiLinearLoop:
             out = n + m
         else:
             out = None
-        self.voltage_row, self.voltage_col, self.u_now = out, Bd[:, :1], u_now
-        self.Dc = Dc
+        self.voltage_row, self.voltage_col, self.Dc = out, Bd[:, :1], Dc
         if out is None:
             self.base[:n] += Bd[:, :1] @ u_now
         else:
             self.base[out] += u_now[0]
         self.nonlinearities: list[_Nonlinearity] = []
         self.friction_in: dict[str, np.ndarray] = {}
-        for j, (name, velocity) in enumerate(COULOMB_CARTS[loop.kind]):
+        self._add_nonlinearities(model, Bd, forces, resolutions, compensation or {})
+
+    def _add_nonlinearities(self, model: Any, Bd: np.ndarray, forces: Mapping[str, float],
+                            resolutions: Mapping[str, float], compensation: Mapping[str, tuple[float, float]]) -> None:
+        """Each cart with a Coulomb force (its velocity in, a force on it out) and each encoder with a step."""
+        pad = np.zeros(self.size - self.n)
+        for j, (name, velocity) in enumerate(COULOMB_CARTS[self.kind]):
             if forces.get(name, 0.0) > 0.0:
-                row = np.zeros(size)
+                row = np.zeros(self.size)
                 row[model.states.index(velocity)] = 1.0
-                comp, threshold = (compensation or {}).get(name, (0.0, 0.0))
+                comp, threshold = compensation.get(name, (0.0, 0.0))
                 self.nonlinearities.append(_Nonlinearity(name, "friction", float(forces[name]), row, comp, threshold))
-                self.friction_in[name] = np.concatenate([Bd[:, 1 + j], np.zeros(size - n)])
+                self.friction_in[name] = np.concatenate([Bd[:, 1 + j], pad])
         for i, signal in enumerate(model.outputs):
             if resolutions.get(signal, 0.0) > 0.0:
-                row = np.concatenate([self.C[i], np.zeros(size - n)])
+                row = np.concatenate([self.C[i], pad])
                 self.nonlinearities.append(_Nonlinearity(signal, "encoder", float(resolutions[signal]), row))
 
     def matrix(self, gains: Mapping[str, float]) -> np.ndarray:
