@@ -341,6 +341,14 @@ MEAN_ERROR_LIMIT_M = 1e-3
 #: The residual peak-to-peak a successful run's motor cart may swing beyond what the plant forces [m]: the
 #: width of the +-1 mm band, so a loop with no forced cycle may hunt within the band and no further.
 AMPLITUDE_TOLERANCE_M = 2 * MEAN_ERROR_LIMIT_M
+#: What a successful run's motor cart may swing beyond the residual cycle predicted for its own plant and law
+#: (``ipcosim.harness.studies.residual_cycle.run_bound``) [m]: half the +-1 mm band, for what the prediction leaves
+#: out (the describing functions' harmonics, the DAC's codes, a count level the signal is not centred on).
+AMPLITUDE_MARGIN_M = 1e-3
+#: A run's amplitude bound as its metrics.json records it (``ipcosim.harness.api.engine``, before the run): the
+#: bound [m], where it comes from (``prediction``, or ``friction bound: <why the prediction could not treat the run>``) and
+#: the predicted motor-cart peak-to-peak [m] (None on the fallback).
+BOUND_KEYS = ("amplitude_bound_m", "amplitude_bound_from", "predicted_cart_peak_to_peak_m")
 #: Outcomes of :func:`success_status`; ``ok`` is a success.
 SUCCESS_STATUSES = ("ok", "fell", "unsettled", "hunting")
 
@@ -353,12 +361,19 @@ def amplitude_bound(b2: float = 0.0, K: float = 0.0) -> float:
     return AMPLITUDE_TOLERANCE_M + (2.0 * b2 / K if b2 > 0.0 and K > 0.0 else 0.0)
 
 
+def predicted_amplitude_bound(predicted_peak_to_peak: float) -> float:
+    """The amplitude bound of a run whose residual cycle was predicted [m]: the predicted motor-cart peak-to-peak
+    plus :data:`AMPLITUDE_MARGIN_M`."""
+    return float(predicted_peak_to_peak) + AMPLITUDE_MARGIN_M
+
+
 def success_status(metrics: Mapping[str, Any], bound: float | None = None) -> str:
     """The one success criterion of a run of the task (sweeps, robustness tables, pytest helpers).
 
     ``fell`` unless the pendulum stayed upright; ``unsettled`` when ``|cart_mean_error_m|`` over the final
     window exceeds ``MEAN_ERROR_LIMIT_M``; ``hunting`` when the motor cart's ``cart_peak_to_peak_m`` exceeds
-    ``bound`` (the run's :func:`amplitude_bound`; default: that of a plant with no forced cycle); else ``ok``.
+    ``bound`` (default: the run's own, ``metrics["amplitude_bound_m"]``, computed before it ran; without one,
+    :func:`amplitude_bound` of a plant with no forced cycle); else ``ok``.
 
     Examples
     --------
@@ -366,7 +381,8 @@ def success_status(metrics: Mapping[str, Any], bound: float | None = None) -> st
     >>> success_status(m, amplitude_bound(b2=0.1047, K=142.185)), success_status(m)
     ('ok', 'hunting')
     """
-    bound = amplitude_bound() if bound is None else bound
+    if bound is None:
+        bound = metrics.get("amplitude_bound_m") or amplitude_bound()
     if metrics.get("upright") is not True:
         return "fell"
     mean, p2p = metrics.get("cart_mean_error_m"), metrics.get("cart_peak_to_peak_m")

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import os
 import shutil
 import sys
@@ -29,7 +30,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError, UsageError, closest
-from ipcosim.fmus.metrics import amplitude_bound, streamed_task_metrics, tasks_of
+from ipcosim.fmus.metrics import BOUND_KEYS, amplitude_bound, streamed_task_metrics, tasks_of
 from ipcosim.harness.api.grammar import strip_nominal
 from ipcosim.harness.api.options import RunOptions, run_options
 from ipcosim.harness.master import signals
@@ -201,6 +202,7 @@ class Prepared:
         self.load_seconds = 0.0
         self.fmus = check_flavour(fmus)
         self._python_values: dict[str, dict[str, Any]] = {}
+        self._bounds: dict[str, dict[str, Any]] = {}   # the amplitude bound of each run's --set values
         if algorithm not in ALGORITHMS:
             raise UsageError(f"--algorithm {algorithm}: expected one of {', '.join(ALGORITHMS)}")
         self.algorithm = algorithm
@@ -218,7 +220,7 @@ class Prepared:
         self._libraries, self._kept = self._slaves.libraries, self._slaves.kept
         if system is not None:
             self.system = system
-            self.scenario = system.scenario
+            self.scenario = self._python_scenario = system.scenario
             return
         scenario = self._load(scenario_or_path, parameter_set, fmu_dirs)
         if not scenario.components:
@@ -227,6 +229,7 @@ class Prepared:
         work = self._workdir(workdir)
         try:
             archived = self._archive_members(scenario, work) if scenario.location.is_file() else {}
+            self._python_scenario = scenario  # the laws' own parameters: what the residual cycle is predicted from
             if fmus == "native":
                 scenario, self._python_values = to_native(_with_fmus(scenario, archived))
             self.scenario = scenario
@@ -375,13 +378,13 @@ class Prepared:
             observers += [RealtimePacer(overrun_budget=options.overrun_budget), _card_observer(overruns=True)]
         elif any(i.swapped_from for i in self.system.instances):     # e.g. a HIL adapter on a lockstep rig
             observers.append(_card_observer())
-        metadata = self._run_metadata(values)
+        metadata = self._run_metadata(values, given or {})
         return Execution(self.system, step=h, stop_time=stop, start_time=start_time,
                          algorithm=self.algorithm, set=values, observers=observers,
                          manipulators=manipulators, slave_factory=self.slave_factory or self._slaves,
                          unzip_dirs=self.unzip_dirs,
                          record_every=options.record_every, max_init_iterations=options.max_init_iterations,
-                         task_metrics=self._run_task_metrics(values), loop=options.loop,
+                         task_metrics=_with_bound(self._run_task_metrics(values), metadata), loop=options.loop,
                          output=RunOutput(options.out, list(options.record) or None, options.plot,
                                           {**metadata, "set": given}, plot_run, started,
                                           {"voltage_limit_V": metadata["voltage_limit_V"]}))  # `ipcosim view` draws it
@@ -443,10 +446,11 @@ class Prepared:
             raise SimulationError(result.error, result)
         return result
 
-    def _run_metadata(self, values: Mapping[tuple[str, str], Any]) -> dict[str, Any]:
+    def _run_metadata(self, values: Mapping[tuple[str, str], Any], given: Mapping[str, Any]) -> dict[str, Any]:
         """What a run's figure and metadata say beyond the master's account: the voltage limit it
         draws (:mod:`ipcosim.harness.api.plot`), the parameter set, the swaps and the success criterion's
-        amplitude bound, from the values the run starts with (``values`` over the bound ones)."""
+        amplitude bound (:meth:`_amplitude_bound`), from the values the run starts with (``values`` over the bound
+        ones; ``given``: the ``--set`` values as given)."""
         def start(component: str, variable: str) -> Any:
             return _start(self.system, values, component, variable)
 
@@ -454,7 +458,29 @@ class Prepared:
         return {"voltage_limit_V": next((v for v in (start(c, "voltage_limit") for c in ("controller", "plant"))
                                          if v), None),
                 "parameter_set": self.parameter_set or ",".join(self.scenario.bound_sets) or None,
-                "swaps": dict(self.swap), "amplitude_bound_m": amplitude_bound(float(b2 or 0.0), float(K or 0.0))}
+                "swaps": dict(self.swap), **self._amplitude_bound(given, float(b2 or 0.0), float(K or 0.0))}
+
+    def _amplitude_bound(self, given: Mapping[str, Any], b2: float, K: float) -> dict[str, Any]:
+        """The success criterion's amplitude bound of a run, before it runs: from the residual cycle predicted for
+        its plant and law (``ipcosim.harness.studies.residual_cycle.run_bound``) where the scenario has an IP02
+        ``plant`` and a ``controller``; else the friction bound of its ``b2`` and ``K``."""
+        from ipcosim.fmus.kinds import PLANT_MODELS
+
+        try:
+            plant = self._python_scenario.component("plant")
+            self._python_scenario.component("controller")
+        except KeyError:
+            plant = None
+        if plant is None or Path(str(plant.source)).stem not in PLANT_MODELS or self.swap:
+            why = "a swapped component" if self.swap else "no IP02 plant and controller to predict from"
+            return {"amplitude_bound_m": amplitude_bound(b2, K), "amplitude_bound_from": f"friction bound: {why}",
+                    "predicted_cart_peak_to_peak_m": None}
+        from ipcosim.harness.studies.residual_cycle import run_bound
+
+        key = json.dumps([given, b2, K], sort_keys=True, default=repr)
+        if key not in self._bounds:
+            self._bounds[key] = run_bound(self._python_scenario, given, amplitude_bound(b2, K))
+        return dict(self._bounds[key])
 
     def close(self) -> None:
         """Unload the FMUs' libraries and remove the extracted FMUs (if this object created the folder)."""
@@ -467,6 +493,19 @@ class Prepared:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+def _with_bound(task_metrics: TaskMetrics | None, metadata: Mapping[str, Any]) -> TaskMetrics | None:
+    """The task metrics with the run's amplitude bound beside them (``docs/metrics.md``), where there are any."""
+    if task_metrics is None:
+        return None
+    bound = {k: metadata[k] for k in BOUND_KEYS}
+
+    def measured(*args: Any, **kwargs: Any) -> dict[str, Any]:
+        out = dict(task_metrics(*args, **kwargs))
+        return {**out, **bound} if out else out
+
+    return measured
 
 
 def _card_observer(overruns: bool = False) -> Observer:

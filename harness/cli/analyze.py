@@ -48,6 +48,23 @@ def _cycle_lines(report: dict | None) -> list[str]:
     return lines
 
 
+def _residual_lines(p: dict | None) -> list[str]:
+    """The residual cycle of friction and counts together (``residual_cycle``), one line per signal."""
+    if p is None:
+        return []
+    head = f"residual cycle, friction and counts together ({p['bench']})"
+    if not p["found"]:
+        return [f"{head}: not predicted: {p['reason']}"]
+    if p["frequency_Hz"] is None:
+        return [f"{head}: none ({p['combined']})"]
+    lines = [f"{head}: {p['frequency_Hz']:.3g} Hz, {p['combined']}"]
+    for name, s in p["signals"].items():
+        unit, scale = ("mrad", 1e3) if name.endswith("angle") else ("mm", 1e3)
+        lines.append(f"  {name}: {s['peak_to_peak'] * scale:.3g} {unit} peak to peak "
+                     f"({s['reading_peak_to_peak'] * scale:.3g} {unit} as its encoder reads it)")
+    return lines
+
+
 def _margin_lines(r: dict) -> list[str]:
     """The disk margin at the plant input and each sensor's gain range and delay margin, one line each."""
     dm = r.get("disk_margin")
@@ -90,7 +107,7 @@ def main(args: argparse.Namespace) -> int:
     for line in _margin_lines(r):
         print(f"  {line}")
     print(f"  {r['statement']}")
-    for line in _cycle_lines(r["friction_limit_cycles"]):
+    for line in _cycle_lines(r["friction_limit_cycles"]) + _residual_lines(r.get("residual_cycle")):
         print(f"  {line}")
     if r["figures"]:
         print(f"  figures: {', '.join(r['figures'].values())}")

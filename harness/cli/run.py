@@ -11,8 +11,9 @@ NOT_REACHED = {"settling_time_s": "not settled", "recovery_time_s": "not recover
                "time_to_upright_s": "not upright at the end"}
 
 
-def task_verdict(m: dict, bound: float | None) -> str:
-    """One line: the success criterion's status of a run and, for a hunting loop, its cycle (docs/metrics.md)."""
+def task_verdict(m: dict, bound: float | None, source: str | None = None) -> str:
+    """One line: the success criterion's status of a run, its bound and where the bound came from (``source``:
+    ``prediction`` or the fallback's reason) and, for a hunting loop, its cycle (docs/metrics.md)."""
     from ipcosim.fmus.metrics import success_status
 
     status = success_status(m, bound)
@@ -21,7 +22,8 @@ def task_verdict(m: dict, bound: float | None) -> str:
         freq = m.get("cart_frequency_Hz") or m.get("angle_frequency_Hz") or 0.0
         cycle = (f"; limit cycle at {freq:.2f} Hz: cart {1e3 * (m.get('cart_peak_to_peak_m') or 0):.3g} mm, "
                  f"pendulum {1e3 * (m.get('angle_peak_to_peak_rad') or 0):.3g} mrad peak to peak")
-    return status + (f" (amplitude bound {1e3 * bound:.3g} mm)" if bound else "") + cycle
+    origin = "" if not source else (", the predicted cycle + 1 mm" if source == "prediction" else f", {source}")
+    return status + (f" (amplitude bound {1e3 * bound:.3g} mm{origin})" if bound else "") + cycle
 
 
 #: The one line ``ipcosim --help`` shows for this command.
@@ -73,7 +75,7 @@ def main(args: argparse.Namespace) -> int:
             shown = f"{value:.6g}" if isinstance(value, float) else value
             print(f"  {key:24s} {NOT_REACHED.get(key, 'none') if value is None else shown}")
         if "cart_mean_error_m" in m:
-            print(f"  {'task':24s} {task_verdict(m, meta.get('amplitude_bound_m'))}")
+            print(f"  {'task':24s} {task_verdict(m, meta.get('amplitude_bound_m'), meta.get('amplitude_bound_from'))}")
         plotted = options.plot and "plot_skipped" not in result.metadata
         print(f"results: {out / 'results.csv'}, {out / 'metrics.json'}" + (f", {out / 'plot.png'}" if plotted else "")
               + (f", baseline {options.save_baseline}" if options.save_baseline else ""))

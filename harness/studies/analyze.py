@@ -29,6 +29,7 @@ matplotlib.
 from __future__ import annotations
 
 import cmath
+import functools
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -87,11 +88,26 @@ def make_loop(law_name: str, kind: str, law_values: Mapping[str, Any], plant_val
     ControllerParameterError, ParameterError
         A bad law or plant parameter (naming it).
     """
-    law = build_law(kind, law_name, dict(law_values))
+    law, lin = _law_and_model(kind, law_name, tuple(sorted(dict(law_values).items(), key=lambda kv: kv[0])))
     params = preset(DEFAULT_PRESET[kind], **dict(plant_values))
     model = linearize(params, inductance=True)
     pc = control.ss(model.A, model.B, model.C, model.D)
-    return loop_from(pc, linear_law(law), law_name, kind, law, dict(plant_values))
+    return loop_from(pc, lin, law_name, kind, law, dict(plant_values))
+
+
+def _law_and_model(kind: str, law_name: str, values: tuple) -> tuple[Any, LinearLaw]:
+    """The law and its linear model (kept for the last few sets of values: a sweep's runs share their law)."""
+    try:
+        return _cached_law(kind, law_name, values)
+    except TypeError:   # a value that cannot be a key (a list): built each time
+        law = build_law(kind, law_name, dict(values))
+        return law, linear_law(law)
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_law(kind: str, law_name: str, values: tuple) -> tuple[Any, LinearLaw]:
+    law = build_law(kind, law_name, dict(values))
+    return law, linear_law(law)
 
 
 def loop_from(plant_continuous: Any, controller: LinearLaw, law: str = "", kind: str = "",
@@ -104,7 +120,8 @@ def loop_from(plant_continuous: Any, controller: LinearLaw, law: str = "", kind:
     return Loop(law, kind, controller.T, pd, plant_continuous, controller, L, law_object, dict(plant_values or {}))
 
 
-def _binding_values(component) -> dict[str, Any]:
+def binding_values(component) -> dict[str, Any]:
+    """The values a scenario's parameter bindings give a component, by parameter name."""
     values: dict[str, Any] = {}
     for pset in component.bindings:
         for p in pset.parameters:
@@ -121,14 +138,23 @@ def scenario_loop(scenario: str, parameter_set: str | None = None,
     (Loop, dict)
         The loop and a description (scenario, law, kind, parameter set, plant parameters set).
     """
-    from pathlib import PurePosixPath
-
     from ipcosim.harness.scenario.ssp import load_scenario
     from ipcosim.harness.scenario.structure import select_parameter_set
 
     sc = load_scenario(scenario)
     if parameter_set:
         sc = select_parameter_set(sc, parameter_set)
+    loop, info, _ = loop_of_scenario(sc, set)
+    info["parameter_set"] = parameter_set or (sc.bound_sets[0] if sc.bound_sets else "default")
+    return loop, info
+
+
+def loop_of_scenario(sc: Any, set: Mapping[str, Any] | None = None,
+                     law_overrides: Mapping[str, Any] | None = None) -> tuple[Loop, dict[str, Any], dict[str, Any]]:
+    """The loop of a parsed scenario's ``controller`` and ``plant`` (its bound values, then ``set``, then the
+    law's ``law_overrides``): ``(loop, description, every plant value bound or set)``."""
+    from pathlib import PurePosixPath
+
     try:
         ctrl, plant = sc.component("controller"), sc.component("plant")
     except KeyError as exc:
@@ -143,21 +169,21 @@ def scenario_loop(scenario: str, parameter_set: str | None = None,
         raise AnalysisError(f"{sc.origin}: plant {plant_model!r} is not a plant model analyze knows "
                             f"({', '.join(PLANT_MODELS)})")
     law_name, kind = found[0]
-    law_values, plant_values = _binding_values(ctrl), _binding_values(plant)
+    law_values, plant_values = binding_values(ctrl), binding_values(plant)
     for key, value in (set or {}).items():
         comp, _, var = key.partition(".")
         if comp not in ("controller", "plant"):
             raise UsageError(f"--set {key}: analyze uses the controller's and plant's parameters only")
         (law_values if comp == "controller" else plant_values)[var] = value
+    law_values.update(law_overrides or {})
     phys = {f for f in PLANT_KINDS[kind_plant].__dataclass_fields__}
     plant_phys = {k: float(v) for k, v in plant_values.items() if k in phys}
     try:
         loop = make_loop(law_name, kind, law_values, plant_phys)
     except ParameterError as exc:
         raise AnalysisError(f"{sc.origin}: plant: {exc}") from None
-    used = parameter_set or (sc.bound_sets[0] if sc.bound_sets else "default")
     return loop, {"scenario": sc.name, "law": law_name, "kind": kind, "controller": ctrl_model,
-                  "parameter_set": used, "plant_parameters": plant_phys}
+                  "plant_parameters": plant_phys}, plant_values
 
 
 # ----------------------------------------------------------------------------- frequency response
@@ -568,6 +594,10 @@ def analyze(scenario: str, *, parameter_set: str | None = None, set: Mapping[str
     loop, info = scenario_loop(scenario, parameter_set, set)
 
     result = {**info, **analyze_loop(loop)}
+    if loop.kind in KINDS:   # the IP02's friction and counts together, by the describing functions
+        from ipcosim.harness.studies import residual_cycle
+
+        result["residual_cycle"] = residual_cycle.report(scenario, parameter_set, set)
     if out is not None:
         from ipcosim.harness.studies.analyze_plots import plot_loop
         from ipcosim.harness.support.extras import optional_figure

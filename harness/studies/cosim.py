@@ -82,7 +82,7 @@ class CosimSpec(RunSpec):
         IpcosimError
             Unknown scenario, unreadable SSD/FMU, unknown ``--set`` names (one line each).
         """
-        from ipcosim.fmus.metrics import METRIC_KEYS, PASSIVE_RESIDUAL_KEYS
+        from ipcosim.fmus.metrics import BOUND_KEYS, METRIC_KEYS, PASSIVE_RESIDUAL_KEYS
         from ipcosim.harness.api.engine import Prepared
         from ipcosim.harness.scenario.values import with_set
         from ipcosim.harness.studies.cost import COST_TERMS
@@ -110,7 +110,7 @@ class CosimSpec(RunSpec):
                    gains=parameter_set or ",".join(prepared.scenario.bound_sets) or "FMU defaults",
                    name=prepared.scenario.name or Path(scenario).name,
                    scenario_hash=_hash_files(files), parameters=params,
-                   metric_names=tuple(METRIC_KEYS) + PASSIVE_RESIDUAL_KEYS + COST_TERMS + TIMING_METRICS,
+                   metric_names=tuple(METRIC_KEYS) + PASSIVE_RESIDUAL_KEYS + BOUND_KEYS + COST_TERMS + TIMING_METRICS,
                    fmu_files=fmu_files, fmus=fmus)
         return spec
 

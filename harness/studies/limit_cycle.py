@@ -37,7 +37,8 @@ LOWEST_RAD_S = 0.05
 GRID_POINTS = 4000
 
 
-def _plant(loop: Any) -> PlantParams:
+def plant_of(loop: Any) -> PlantParams:
+    """The plant of ``loop``: its kind's default preset with the loop's plant values."""
     return preset(DEFAULT_PRESET[loop.kind], **dict(loop.plant_values))
 
 
@@ -45,7 +46,7 @@ def closed_loop(loop: Any) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """The sampled closed loop of ``loop`` (``analyze.Loop``) with a force pushing each cart as input
     (:data:`~ipcosim.fmus.linearize.COULOMB_CARTS` order): ``(Phi, Gamma, plant state names)``; the first
     states of ``Phi`` are the plant's, then the law's."""
-    params = _plant(loop)
+    params = plant_of(loop)
     model = linearize(params, inductance=True)
     forces = force_columns(params)
     n = len(model.states)
@@ -68,7 +69,7 @@ def closed_loop(loop: Any) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
 def coulomb_forces(loop: Any) -> tuple[dict[str, float], str]:
     """The Coulomb force of each cart [N] the prediction uses and where it comes from: the plant's values
     where any is set, else the lab bench's (``ipcosim.fmus.instruments.realism('lab')``)."""
-    params, names = _plant(loop), [name for name, _ in COULOMB_CARTS[loop.kind]]
+    params, names = plant_of(loop), [name for name, _ in COULOMB_CARTS[loop.kind]]
     values = {n: float(getattr(params, n)) for n in names}
     if any(v > 0 for v in values.values()):
         return values, "the plant's parameters"

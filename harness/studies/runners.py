@@ -42,7 +42,9 @@ class RunFailure(IpcosimError, RuntimeError):
 def classify_task(metrics: Mapping[str, Any], params: Mapping[str, Any] | None = None) -> str:
     """Status of a closed-loop run of the thesis's task: :func:`ipcosim.fmus.metrics.success_status` (``ok``,
     ``fell``, ``unsettled``: mean error beyond 1 mm, ``hunting``: residual amplitude beyond its bound) with the
-    run's passive-cart friction and spring (``plant.b2``, ``plant.K`` of ``params``; absent: no forced cycle).
+    run's own amplitude bound (``amplitude_bound_m`` of its metrics, computed before it ran); a run without one is
+    held to the friction bound of its passive-cart friction and spring (``plant.b2``, ``plant.K`` of ``params``;
+    absent: no forced cycle).
     Metrics without the residual oscillation (a spec that does not measure it) fall back on the settling time.
     """
     from ipcosim.fmus.metrics import amplitude_bound, success_status
@@ -51,6 +53,8 @@ def classify_task(metrics: Mapping[str, Any], params: Mapping[str, Any] | None =
         return "fell" if metrics.get("upright") is not True else (
             "unsettled" if metrics.get("settling_time_s") is None else "ok")
     params = params or {}
+    if metrics.get("amplitude_bound_m") is not None:
+        return success_status(metrics)
     return success_status(metrics, amplitude_bound(float(params.get("plant.b2") or 0.0),
                                                    float(params.get("plant.K") or 0.0)))
 

@@ -129,8 +129,8 @@ def assert_settles(result: "Result", within_s: float, band: float = metrics.SETT
 def assert_succeeds(result: "Result") -> None:
     """Check the run meets the task's success criterion (:func:`ipcosim.fmus.metrics.success_status`, the one
     the sweeps and robustness tables count): upright, ``|mean error|`` of the motor cart over the final window
-    at most 1 mm, and its residual peak-to-peak within the run's bound (2 mm, plus ``2 b2 / K`` where the
-    passive cart's friction and the spring force a cycle; ``docs/metrics.md``).
+    at most 1 mm, and its residual peak-to-peak within the run's bound (the cycle predicted for its plant and law
+    plus 1 mm, else 2 mm plus ``2 b2 / K``; ``docs/metrics.md``).
 
     Examples
     --------

@@ -77,7 +77,10 @@ def test_assert_succeeds_is_the_sweeps_criterion_and_says_why_in_millimetres() -
     from ipcosim.fmus.metrics import success_status
 
     done = ipcosim.run("single-mass-lqr", stop_time=6.0)
-    assert done.metadata["amplitude_bound_m"] == pytest.approx(0.002)  # no spring, no friction: 2 mm
+    # no friction, exact readings: a linear loop, no predicted cycle, the bound is the 1 mm margin alone
+    assert done.metadata["amplitude_bound_m"] == pytest.approx(0.001)
+    assert done.metrics["amplitude_bound_m"] == done.metadata["amplitude_bound_m"]
+    assert done.metrics["amplitude_bound_from"] == "prediction"
     assert success_status(done.metrics, done.metadata["amplitude_bound_m"]) == "ok"
     ipcosim.assert_succeeds(done)
     early = ipcosim.run("single-mass-lqr", stop_time=1.0)  # the final half second is mid-step: far from 50 mm

@@ -1,0 +1,143 @@
+"""The residual cycle predicted against the simulated one, on the nominal lab bench (``docs/results.md``).
+
+For every law of the comparison (``evidence.comparison``) that stays upright on the lab bench, both plants: the
+describing function's cycle of the friction and the counts together
+(``ipcosim.harness.studies.residual_cycle.scenario_prediction``, from the run's plant and law) beside the step
+run's residual over its final 5 s (``docs/metrics.md``): each cart's and the pendulum's peak-to-peak and dominant
+frequency. The pendulum's simulated peak-to-peak is its encoder's reading (whole counts), so the prediction's is
+given as the reading of the predicted swing too. The motor cart's peak-to-peak is the target: within
+:data:`TOLERANCE` of the simulated one; where it is not, the row says which way and what the prediction leaves
+out there.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+#: The motor-cart peak-to-peak the prediction should come within, relative to the simulated one.
+TOLERANCE = 0.30
+#: Signals of each plant kind: (label, measured name, the step run's metric prefix).
+SIGNALS = {"single-mass": [("motor cart", "cart_position", "cart")],
+           "double-mass": [("motor cart", "active_cart_position", "cart"),
+                           ("passive cart", "passive_cart_position", "passive_cart")]}
+
+
+def check_rows(comparison: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per lab-bench law of ``comparison`` whose step run stayed upright: the prediction and the run."""
+    from ipcosim.harness.scenario.ssp import load_scenario
+    from ipcosim.harness.scenario.structure import select_parameter_set
+    from ipcosim.harness.studies.residual_cycle import scenario_prediction
+    from ipcosim.harness.studies.robustness import realism_values
+
+    rows = []
+    for r in comparison:
+        step = r["step"]
+        if r["bench"] != "lab" or step.get("upright") is not True:
+            continue
+        sc = select_parameter_set(load_scenario(r["scenario"]), r["set"])
+        p = scenario_prediction(sc, realism_values("lab", r["kind"]))
+        simulated = {name: {"peak_to_peak": step.get(f"{prefix}_peak_to_peak_m"),
+                            "frequency_Hz": step.get(f"{prefix}_frequency_Hz")}
+                     for _, name, prefix in SIGNALS[r["kind"]]}
+        simulated["pendulum_angle"] = {"peak_to_peak": step.get("angle_peak_to_peak_rad"),
+                                       "frequency_Hz": step.get("angle_frequency_Hz")}
+        rows.append({"scenario": r["scenario"], "kind": r["kind"], "set": r["set"], "simulated": simulated,
+                     "predicted": _compact(p), "dither_V": _dither(sc)})
+    return rows
+
+
+def _compact(p: dict[str, Any]) -> dict[str, Any]:
+    """What the table needs of a prediction (JSON: no arrays)."""
+    keep = {k: p.get(k) for k in ("found", "reason", "combined", "frequency_Hz", "signals",
+                                  "motor_cart_peak_to_peak_m", "law_terms_left_out")}
+    for part in ("friction", "counts"):
+        q = p.get(part)
+        keep[part] = None if q is None else {k: q.get(k) for k in ("found", "reason", "frequency_Hz",
+                                                                  "motor_cart_peak_to_peak_m")}
+    return keep
+
+
+def _dither(sc: Any) -> float:
+    """The law's dither amplitude [V] (0 for a law without)."""
+    from ipcosim.harness.studies.analyze import binding_values
+
+    return float(binding_values(sc.component("controller")).get("dither_amplitude") or 0.0)
+
+
+def error(row: dict[str, Any]) -> float | None:
+    """(predicted - simulated) / simulated of the motor cart's peak-to-peak; None without a prediction."""
+    p, sim = row["predicted"], row["simulated"][SIGNALS[row["kind"]][0][1]]["peak_to_peak"]
+    if not p["found"] or not sim:
+        return None
+    return (p["motor_cart_peak_to_peak_m"] - sim) / sim
+
+
+def why(row: dict[str, Any]) -> str:
+    """Within the tolerance, or which way the prediction misses and what it leaves out there."""
+    p = row["predicted"]
+    if not p["found"]:
+        return f"not predicted: {p['reason']} (the run falls back on the friction bound)"
+    e = error(row)
+    if e is None:
+        return "-"
+    if abs(e) <= TOLERANCE:
+        return f"within {100 * TOLERANCE:.0f} %"
+    notes = []
+    sim_f = row["simulated"][SIGNALS[row["kind"]][0][1]]["frequency_Hz"]
+    if sim_f and p["frequency_Hz"] and not 1 / 1.3 <= sim_f / p["frequency_Hz"] <= 1.3:
+        notes.append(f"the simulated cycle is another one ({sim_f:.2f} Hz against {p['frequency_Hz']:.2f} Hz "
+                     "predicted)")
+    if row["dither_V"]:
+        notes.append(f"the law's {row['dither_V']:g} V dither, left out, smooths the friction the prediction "
+                     "sees whole")
+    if not notes:
+        notes.append("the same cycle, its amplitude missed: the first harmonic alone of a count-sized swing")
+    return ("over" if e > 0 else "under") + f"-predicted by {100 * abs(e):.0f} %: " + "; ".join(notes)
+
+
+def _pp(v: float | None, scale: float) -> str:
+    return "-" if v is None else f"{v * scale:.3g}"
+
+
+def _hz(v: float | None) -> str:
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.2f}"
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    """The check as one Markdown table: per signal predicted / simulated peak-to-peak and frequency."""
+    head = ["plant", "law (set)", "how the cycles combine", "motor cart mm p-p, Hz (predicted / simulated)",
+            "passive cart mm p-p, Hz", "pendulum mrad p-p as read, Hz", "motor cart error", "verdict"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        p, sim = r["predicted"], r["simulated"]
+        cells = []
+        for _, name, _ in SIGNALS["double-mass"]:
+            if name not in sim:
+                cells.append("-")
+                continue
+            ps = (p.get("signals") or {}).get(name) or {}
+            cells.append(f"{_pp(ps.get('peak_to_peak'), 1e3)} / {_pp(sim[name]['peak_to_peak'], 1e3)}, "
+                         f"{_hz(p.get('frequency_Hz'))} / {_hz(sim[name]['frequency_Hz'])}")
+        if r["kind"] == "single-mass":
+            cells = [f"{_pp(((p.get('signals') or {}).get('cart_position') or {}).get('peak_to_peak'), 1e3)} / "
+                     f"{_pp(sim['cart_position']['peak_to_peak'], 1e3)}, {_hz(p.get('frequency_Hz'))} / "
+                     f"{_hz(sim['cart_position']['frequency_Hz'])}", "-"]
+        pend = (p.get("signals") or {}).get("pendulum_angle") or {}
+        cells.append(f"{_pp(pend.get('reading_peak_to_peak'), 1e3)} / {_pp(sim['pendulum_angle']['peak_to_peak'], 1e3)}"
+                     f", {_hz(p.get('frequency_Hz'))} / {_hz(sim['pendulum_angle']['frequency_Hz'])}")
+        e = error(r)
+        lines.append("| " + " | ".join([r["kind"], f"{r['scenario'].split('-mass-')[1]} ({r['set']})",
+                                        p.get("combined") or "-", *cells,
+                                        "-" if e is None else f"{100 * e:+.0f} %", why(r)]) + " |")
+    return "\n".join(lines)
+
+
+INTRO = (
+    "The nominal lab bench (encoder counts, stick-slip Coulomb friction 0.1047 N, end stops, DAC codes, the 1 ms "
+    "computation delay, +-10 V): for every law of the comparison that stays upright there, the residual cycle "
+    "the describing functions predict from its plant and law (`ipcosim analyze`, `residual_cycle`; "
+    "`ipcosim.harness.studies.residual_cycle`, docs/studies.md) against the step run's residual over its final "
+    f"5 s (one run: the nominal bench is deterministic). Target: the motor cart's peak-to-peak within "
+    f"{100 * TOLERANCE:.0f} % of the simulated one. The pendulum's simulated peak-to-peak is its encoder's "
+    "reading, whole counts of 1.53 mrad; the predicted one is the reading of the predicted swing. The predicted "
+    "frequency is the cycle's (for two cycles side by side, the one with the larger motor-cart swing).")
