@@ -346,8 +346,8 @@ AMPLITUDE_TOLERANCE_M = 2 * MEAN_ERROR_LIMIT_M
 #: out (the describing functions' harmonics, the DAC's codes, a count level the signal is not centred on).
 AMPLITUDE_MARGIN_M = 1e-3
 #: A run's amplitude bound as its metrics.json records it (``ipcosim.harness.api.engine``, before the run): the
-#: bound [m], where it comes from (``prediction``, or ``friction bound: <why the prediction could not treat the run>``) and
-#: the predicted motor-cart peak-to-peak [m] (None on the fallback).
+#: bound [m], where it comes from (``prediction``, or ``friction bound: <why the prediction could not treat the
+#: run>``) and the predicted motor-cart peak-to-peak [m] (None on the fallback).
 BOUND_KEYS = ("amplitude_bound_m", "amplitude_bound_from", "predicted_cart_peak_to_peak_m")
 #: Outcomes of :func:`success_status`; ``ok`` is a success.
 SUCCESS_STATUSES = ("ok", "fell", "unsettled", "hunting")
