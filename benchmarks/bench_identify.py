@@ -202,7 +202,7 @@ def lqr_margin_gap(kind: str, truth: dict[str, float], estimate: dict[str, float
     """(predicted, actual) phase margin [deg] of the thesis's LQR redesigned on the identified model:
     ``ipcosim analyze KIND-lqr`` with the plant and the design model both the estimate (the prediction),
     then with the design model the estimate and the plant the truth (what the law meets)."""
-    from ipcosim.harness.studies.analyze import analyze
+    from ipcosim.harness.analysis.scenario_analysis import analyze
 
     design = {f"controller.model_{k}": v for k, v in estimate.items() if not k.startswith("b")}
     predicted = analyze(f"{kind}-lqr", set={**design, **{f"plant.{k}": v for k, v in estimate.items()}})

@@ -26,6 +26,7 @@ ROOMS = {
     "controllers": ("controllers", True),
     "harness/master": ("harness/master", True),
     "harness/scenario": ("harness/scenario", True),
+    "harness/analysis": ("harness/analysis", True),
     "harness/hil": ("harness/hil", True),
     "harness/studies": ("harness/studies", True),
     "evidence": ("evidence", True),

@@ -41,7 +41,7 @@ FOLDERS: dict[str, tuple[str, ...]] = {
     "master": ("harness/master",),
     "scenario": ("harness/scenario",),
     "native": ("harness/native",),
-    "studies": ("harness/studies",),
+    "studies": ("harness/studies", "harness/analysis"),
     "live": ("harness/live",),
     "evidence": ("evidence",),
     "project": ("devtools", "benchmarks"),

@@ -68,7 +68,7 @@ def _run(scenario: str, pset: str, values: dict[str, float], stop_time: float) -
 def step_row(scenario: str, pset: str, bench: str, kind: str) -> dict[str, Any]:
     """The step run's figures (see the module docstring)."""
     from ipcosim.fmus.metrics import success_status
-    from ipcosim.harness.studies.robustness import realism_values
+    from ipcosim.harness.analysis.residual_cycle import realism_values
 
     r = _run(scenario, pset, realism_values(bench, kind), STOP_TIME)
     m = {k: v for k, v in r.metrics.items() if not isinstance(v, (dict, list))}
@@ -90,13 +90,12 @@ def _old_verdict(metrics: dict[str, Any], values: dict[str, float]) -> dict[str,
 
 def rejudge(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """``rows`` (what :func:`measure` wrote) with each step run judged by its own bound, computed from its plant and
-    law by the function the engine calls before a run (``ipcosim.harness.studies.residual_cycle.run_bound``), and
+    law by the function the engine calls before a run (``ipcosim.harness.analysis.residual_cycle.run_bound``), and
     by the friction bound beside it; the runs are not repeated (their metrics do not depend on the bound)."""
     from ipcosim.fmus.metrics import success_status
+    from ipcosim.harness.analysis.residual_cycle import realism_values, run_bound
     from ipcosim.harness.scenario.ssp import load_scenario
     from ipcosim.harness.scenario.structure import select_parameter_set
-    from ipcosim.harness.studies.residual_cycle import run_bound
-    from ipcosim.harness.studies.robustness import realism_values
 
     out = []
     for r in rows:
@@ -110,7 +109,7 @@ def rejudge(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def disturbance_row(scenario: str, pset: str, bench: str, kind: str, impulse: dict[str, float]) -> dict[str, Any]:
     """The push or tap run's figures: peak angle, the motor cart's largest excursion, recovery, upright."""
-    from ipcosim.harness.studies.robustness import realism_values
+    from ipcosim.harness.analysis.residual_cycle import realism_values
 
     values = {**realism_values(bench, kind), "setpoint.amplitude": 0.0, "plant.tap_time": PUSH_TIME, **impulse}
     r = _run(scenario, pset, values, PUSH_STOP_TIME)
@@ -127,7 +126,7 @@ def disturbance_row(scenario: str, pset: str, bench: str, kind: str, impulse: di
 def analysis_row(scenario: str, pset: str) -> dict[str, Any]:
     """Margins at the plant input, the predicted friction cycle of the motor cart, and the disk and
     worst-sensor margins where ``ipcosim analyze`` reports them (None where it does not)."""
-    from ipcosim.harness.studies.analyze import analyze_loop, scenario_loop
+    from ipcosim.harness.analysis.analyze import analyze_loop, scenario_loop
 
     a = analyze_loop(scenario_loop(scenario, parameter_set=pset)[0], pid_search=False)
     gm = a.get("gain_margin") or {}

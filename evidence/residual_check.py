@@ -2,7 +2,7 @@
 
 For every law of the comparison (``evidence.comparison``) that stays upright on the lab bench, both plants: the
 describing function's cycle of the friction and the counts together
-(``ipcosim.harness.studies.residual_cycle.scenario_prediction``, from the run's plant and law) beside the step
+(``ipcosim.harness.analysis.residual_cycle.scenario_prediction``, from the run's plant and law) beside the step
 run's residual over its final 5 s (``docs/metrics.md``): each cart's and the pendulum's peak-to-peak and dominant
 frequency. The pendulum's simulated peak-to-peak is its encoder's reading (whole counts), so the prediction's is
 given as the reading of the predicted swing too. The motor cart's peak-to-peak is the target: within
@@ -24,10 +24,9 @@ SIGNALS = {"single-mass": [("motor cart", "cart_position", "cart")],
 
 def check_rows(comparison: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per lab-bench law of ``comparison`` whose step run stayed upright: the prediction and the run."""
+    from ipcosim.harness.analysis.residual_cycle import realism_values, scenario_prediction
     from ipcosim.harness.scenario.ssp import load_scenario
     from ipcosim.harness.scenario.structure import select_parameter_set
-    from ipcosim.harness.studies.residual_cycle import scenario_prediction
-    from ipcosim.harness.studies.robustness import realism_values
 
     rows = []
     for r in comparison:
@@ -59,7 +58,7 @@ def _compact(p: dict[str, Any]) -> dict[str, Any]:
 
 def _dither(sc: Any) -> float:
     """The law's dither amplitude [V] (0 for a law without)."""
-    from ipcosim.harness.studies.analyze import binding_values
+    from ipcosim.harness.analysis.analyze import binding_values
 
     return float(binding_values(sc.component("controller")).get("dither_amplitude") or 0.0)
 
@@ -136,7 +135,7 @@ INTRO = (
     "The nominal lab bench (encoder counts, stick-slip Coulomb friction 0.1047 N, end stops, DAC codes, the 1 ms "
     "computation delay, +-10 V): for every law of the comparison that stays upright there, the residual cycle "
     "the describing functions predict from its plant and law (`ipcosim analyze`, `residual_cycle`; "
-    "`ipcosim.harness.studies.residual_cycle`, docs/studies.md) against the step run's residual over its final "
+    "`ipcosim.harness.analysis.residual_cycle`, docs/studies.md) against the step run's residual over its final "
     f"5 s (one run: the nominal bench is deterministic). Target: the motor cart's peak-to-peak within "
     f"{100 * TOLERANCE:.0f} % of the simulated one. The pendulum's simulated peak-to-peak is its encoder's "
     "reading, whole counts of 1.53 mrad; the predicted one is the reading of the predicted swing. The predicted "

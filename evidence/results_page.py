@@ -61,9 +61,9 @@ def breakaway_note() -> str:
 
 
 def margin_rows() -> list[dict[str, Any]]:
-    """Every scenario's loop (each of its parameter sets) through ``ipcosim.harness.studies.analyze``."""
+    """Every scenario's loop (each of its parameter sets) through ``ipcosim.harness.analysis.analyze``."""
+    from ipcosim.harness.analysis.analyze import analyze_loop, scenario_loop
     from ipcosim.harness.scenario.ssp import load_scenario
-    from ipcosim.harness.studies.analyze import analyze_loop, scenario_loop
 
     rows = []
     for name in SCENARIOS:
@@ -95,7 +95,7 @@ def margins_table(rows: list[dict[str, Any]] | None = None) -> str:
 
 def pid_statements() -> dict[str, str]:
     """The analysis's statement for the thesis PID (single and double mass)."""
-    from ipcosim.harness.studies.analyze import analyze_loop, scenario_loop
+    from ipcosim.harness.analysis.analyze import analyze_loop, scenario_loop
 
     return {name: analyze_loop(scenario_loop(name)[0])["statement"] for name in ("single-mass-pid", "double-mass-pid")}
 
@@ -384,7 +384,7 @@ def render(data: dict[str, Any]) -> str:
         "criterion of `docs/metrics.md` (`ipcosim.fmus.metrics.success_status`): upright, |mean error| of the motor "
         "cart <= 1 mm over the final 5 s, and its residual peak-to-peak within the run's bound, computed before the "
         "run from its own drawn plant (spring, friction, encoders) and its law: the predicted motor-cart "
-        "peak-to-peak plus 1 mm (`ipcosim.harness.studies.residual_cycle.run_bound`), or, where the prediction "
+        "peak-to-peak plus 1 mm (`ipcosim.harness.analysis.residual_cycle.run_bound`), or, where the prediction "
         "cannot treat the run, the friction bound 2 mm + 2 b2 / K (2 mm for the single mass; the runs on it are "
         "counted). Beside it, the same runs by the friction bound alone, the criterion before the predicted cycle. "
         "*hunting*: upright, mean error within 1 mm, amplitude beyond the bound; *offset*: mean error beyond 1 mm. "

@@ -342,9 +342,12 @@ MEAN_ERROR_LIMIT_M = 1e-3
 #: width of the +-1 mm band, so a loop with no forced cycle may hunt within the band and no further.
 AMPLITUDE_TOLERANCE_M = 2 * MEAN_ERROR_LIMIT_M
 #: What a successful run's motor cart may swing beyond the residual cycle predicted for its own plant and law
-#: (``ipcosim.harness.studies.residual_cycle.run_bound``) [m]: half the +-1 mm band, for what the prediction leaves
+#: (``ipcosim.harness.analysis.residual_cycle.run_bound``) [m]: half the +-1 mm band, for what the prediction leaves
 #: out (the describing functions' harmonics, the DAC's codes, a count level the signal is not centred on).
 AMPLITUDE_MARGIN_M = 1e-3
+#: The plant parameters that drive a residual cycle (``ipcosim.harness.analysis.residual_cycle``): each cart's
+#: Coulomb friction and each encoder's resolution. With all of them zero the loop is linear: no cycle.
+CYCLE_SOURCES = ("b", "b1", "b2", "cart_resolution", "pendulum_resolution")
 #: A run's amplitude bound as its metrics.json records it (``ipcosim.harness.api.engine``, before the run): the
 #: bound [m], where it comes from (``prediction``, or ``friction bound: <why the prediction could not treat the
 #: run>``) and the predicted motor-cart peak-to-peak [m] (None on the fallback).

@@ -30,7 +30,14 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError, UsageError, closest
-from ipcosim.fmus.metrics import BOUND_KEYS, amplitude_bound, streamed_task_metrics, tasks_of
+from ipcosim.fmus.metrics import (
+    BOUND_KEYS,
+    CYCLE_SOURCES,
+    amplitude_bound,
+    predicted_amplitude_bound,
+    streamed_task_metrics,
+    tasks_of,
+)
 from ipcosim.harness.api.grammar import strip_nominal
 from ipcosim.harness.api.options import RunOptions, run_options
 from ipcosim.harness.master import signals
@@ -455,15 +462,18 @@ class Prepared:
             return _start(self.system, values, component, variable)
 
         b2, K = (start("plant", n) for n in ("b2", "K"))
+        linear = not any(float(start("plant", n) or 0.0) > 0.0 for n in CYCLE_SOURCES)
         return {"voltage_limit_V": next((v for v in (start(c, "voltage_limit") for c in ("controller", "plant"))
                                          if v), None),
                 "parameter_set": self.parameter_set or ",".join(self.scenario.bound_sets) or None,
-                "swaps": dict(self.swap), **self._amplitude_bound(given, float(b2 or 0.0), float(K or 0.0))}
+                "swaps": dict(self.swap), **self._amplitude_bound(given, float(b2 or 0.0), float(K or 0.0), linear)}
 
-    def _amplitude_bound(self, given: Mapping[str, Any], b2: float, K: float) -> dict[str, Any]:
+    def _amplitude_bound(self, given: Mapping[str, Any], b2: float, K: float, linear: bool) -> dict[str, Any]:
         """The success criterion's amplitude bound of a run, before it runs: from the residual cycle predicted for
-        its plant and law (``ipcosim.harness.studies.residual_cycle.run_bound``) where the scenario has an IP02
-        ``plant`` and a ``controller``; else the friction bound of its ``b2`` and ``K``."""
+        its plant and law (``ipcosim.harness.analysis.residual_cycle.run_bound``) where the scenario has an IP02
+        ``plant`` and a ``controller``; else the friction bound of its ``b2`` and ``K``. A ``linear`` plant (no
+        Coulomb friction, no encoder counts) under a law with a linear model has no cycle: its bound is the
+        margin alone, without loading the analysis (what the prediction gives it too)."""
         from ipcosim.fmus.kinds import PLANT_MODELS
 
         try:
@@ -475,7 +485,10 @@ class Prepared:
             why = "a swapped component" if self.swap else "no IP02 plant and controller to predict from"
             return {"amplitude_bound_m": amplitude_bound(b2, K), "amplitude_bound_from": f"friction bound: {why}",
                     "predicted_cart_peak_to_peak_m": None}
-        from ipcosim.harness.studies.residual_cycle import run_bound
+        if linear and _has_linear_model(Path(str(self._python_scenario.component("controller").source)).stem):
+            return {"amplitude_bound_m": predicted_amplitude_bound(0.0), "amplitude_bound_from": "prediction",
+                    "predicted_cart_peak_to_peak_m": 0.0}
+        from ipcosim.harness.analysis.residual_cycle import run_bound
 
         key = json.dumps([given, b2, K], sort_keys=True, default=repr)
         if key not in self._bounds:
@@ -493,6 +506,15 @@ class Prepared:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+def _has_linear_model(model: str) -> bool:
+    """Whether the controller FMU ``model`` (``LQRSingleMass``) is a law of the registry with a linear model."""
+    from ipcosim.controllers.catalog import REGISTRY, model_name
+    from ipcosim.fmus.params import KINDS
+
+    return any(model == model_name(kind, law) and e.linear is not None for law, e in REGISTRY.items()
+               for kind in KINDS if kind in e.sets)
 
 
 def _with_bound(task_metrics: TaskMetrics | None, metadata: Mapping[str, Any]) -> TaskMetrics | None:

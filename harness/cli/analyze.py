@@ -84,10 +84,10 @@ def _margin_lines(r: dict) -> list[str]:
 
 
 def main(args: argparse.Namespace) -> int:
+    from ipcosim.harness.analysis.scenario_analysis import analyze
     from ipcosim.harness.api.grammar import parse_set
     from ipcosim.harness.api.options import with_parameter_file
     from ipcosim.harness.master.results import claim_output
-    from ipcosim.harness.studies.analyze import analyze
 
     out = claim_output(args.out or f"out/analyze/{args.scenario.rstrip('/').split('/')[-1]}", "analyze")
     values = with_parameter_file(args.parameter_file, parse_set(args.set, numbers=True))

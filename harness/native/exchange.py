@@ -83,7 +83,7 @@ def variables(kind: str) -> list[Any]:
     """The model-exchange variables of plant ``kind``: states, their derivatives, the event indicators
     (locals; value references are given by ``models._append``)."""
     from ipcosim.fmus.physics import STATE_UNITS, state_names
-    from ipcosim.harness.native.models import NativeVariable
+    from ipcosim.harness.native.variable import NativeVariable
 
     out = []
     for s in state_names(kind):
@@ -108,7 +108,7 @@ def _per_second(unit: str) -> str:
 def exchange(kind: str, plant: Any) -> Exchange:
     """The traced model exchange of plant ``kind`` (``plant``: the model's ``models._PlantTrace``)."""
     from ipcosim.fmus.physics import state_names
-    from ipcosim.harness.native.models import TAPPED
+    from ipcosim.harness.native.variable import TAPPED
 
     names = state_names(kind)
     carts = len(cart_names(kind))
@@ -146,7 +146,7 @@ def _update(kind: str, plant: Any, modes: list[str]) -> list[Any]:
     """One pass of the event iteration: the state and modes after it, the tapped flag, the next time event."""
     from ipcosim.fmus import hybrid
     from ipcosim.fmus.plant import tapped_state
-    from ipcosim.harness.native.models import TAPPED
+    from ipcosim.harness.native.variable import TAPPED
 
     p = plant.params()
     x = [leaf(state_key(s)) for s in plant.states]

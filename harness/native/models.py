@@ -31,28 +31,11 @@ from ipcosim.errors import IpcosimError
 from ipcosim.harness.native import exchange, tracer
 from ipcosim.harness.native.leaves import c_name, numbers
 from ipcosim.harness.native.tracer import Node, leaf, select
+from ipcosim.harness.native.variable import TAPPED, NativeVariable
 
 
 class NativeModelError(IpcosimError, RuntimeError):
     """A model cannot be generated (names the model and the reason)."""
-
-
-@dataclass
-class NativeVariable:
-    """One FMI scalar variable of a native model (``index`` = its slot in the value array)."""
-
-    name: str
-    vr: int
-    causality: str
-    variability: str
-    type: str = "Real"
-    start: float | None = None
-    initial: str | None = None
-    unit: str | None = None
-    description: str = ""
-    index: int = -1
-    depends_on: tuple[str, ...] | None = None
-    initial_depends_on: tuple[str, ...] | None = None
 
 
 @dataclass
@@ -121,8 +104,6 @@ def python_variables(fmu: Path) -> tuple[list[NativeVariable], list[ElementTree.
 #: model: each must stay 0 (off) in the native flavour. ``noise_seed`` acts only through it and may take any
 #: value. The lab bench's (encoders, end stops, DAC, computation delay) and the taps it models.
 NATIVE_INSTRUMENTS_OFF = ("noise_counts",)
-#: The native plant's state that says whether the taps have acted (0 before, 1 after).
-TAPPED = "S:tapped"
 #: Longest computation delay of the native plant, in integrator steps (its delay line's length).
 NATIVE_MAX_DELAY_STEPS = 32
 

@@ -342,10 +342,12 @@ def sweep_study(scenario: str, vary: Sequence[str], *, set: Mapping[str, float] 
 
 
 def _bench(scenario: str, realism: str) -> dict[str, float]:
-    """:func:`realism_values` for the plant kind the scenario's name says."""
+    """:func:`~ipcosim.harness.analysis.residual_cycle.realism_values` for the plant kind the scenario's name
+    says."""
     from ipcosim.errors import UsageError
     from ipcosim.fmus.kinds import plant_kind
     from ipcosim.fmus.params import KINDS
+    from ipcosim.harness.analysis.residual_cycle import realism_values
 
     kind = plant_kind(str(scenario))
     if kind is None:
@@ -543,17 +545,6 @@ EXTRA_DELAY = 1e-3
 FRICTION_SPREAD = 0.2
 
 
-def realism_values(name: str, kind: str) -> dict[str, float]:
-    """The ``plant.*`` values of the bench ``name`` (``ipcosim.fmus.instruments.realism``: ``ideal``, ``lab``) for
-    plant ``kind``: every instrument option that is on, then the plant-parameter overrides."""
-    from ipcosim.fmus.instruments import realism
-
-    inst, plant = realism(name, kind)
-    out = {f"plant.{f}": float(getattr(inst, f)) for f in inst.__dataclass_fields__ if getattr(inst, f)}
-    out.update({f"plant.{k}": float(v) for k, v in plant.items()})
-    return out
-
-
 def factor_runs(kind: str, factors: Sequence[str]) -> tuple[list[str], dict[str, float]]:
     """``(--vary expressions, fixed values)`` of the runs with ``factors`` acting together on plant ``kind``.
 
@@ -569,6 +560,8 @@ def factor_runs(kind: str, factors: Sequence[str]) -> tuple[list[str], dict[str,
         spread = FACTOR_SPREAD.get(factor, DEFAULT_SPREAD)
         vary += [f"{n}=uniform({1 - spread:g},{1 + spread:g})*nominal" for n in FACTORS[factor].get(kind, ())]
     if "lab bench" in factors:
+        from ipcosim.harness.analysis.residual_cycle import realism_values
+
         for name, value in realism_values("lab", kind).items():
             if name in ("plant.b", "plant.b1", "plant.b2"):
                 lo, hi = value * (1 - FRICTION_SPREAD), value * (1 + FRICTION_SPREAD)

@@ -118,7 +118,7 @@ class Robustness:
     --min-delay-margin --spread``).
 
     The loop limits are those of ``ipcosim analyze`` (loop broken at the plant input,
-    ``ipcosim.harness.studies.analyze.loop_limits``), checked before any run on the nominal plant and
+    ``ipcosim.harness.analysis.analyze.loop_limits``), checked before any run on the nominal plant and
     on every plant of the spread; a candidate that misses one is not run. The others run on the
     nominal plant and on every plant of the spread, and count with their worst run.
 
@@ -152,7 +152,7 @@ class Robustness:
         """``(how far the loop limits are missed, 0 = met; {worst peak_sensitivity, delay_margin_s,
         phase_margin_deg})`` of the candidate ``values`` over the nominal plant and the spread (inf when a loop
         is unstable)."""
-        from ipcosim.harness.studies.analyze import loop_limits, scenario_loop
+        from ipcosim.harness.analysis.analyze import loop_limits, scenario_loop
 
         if self.max_peak_sensitivity is None and self.min_delay_margin is None and self.min_phase_margin is None:
             return 0.0, {}

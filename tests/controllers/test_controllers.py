@@ -274,7 +274,7 @@ def test_tuned_cascade_meets_its_tuning_constraints() -> None:
 def test_tuned_double_mass_cascade_meets_its_robust_limits() -> None:
     """The double-mass set's search limits (docs/controllers.md) hold for the rounded gains the catalog ships: peak
     |S| <= 6, delay margin >= 3 ms and phase margin >= 30 deg on the nominal plant and the +-10 % spread."""
-    from ipcosim.harness.studies.analyze import scenario_loop
+    from ipcosim.harness.analysis.analyze import scenario_loop
     from ipcosim.harness.studies.robustness import DEFAULT_UNCERTAINTY
     from ipcosim.harness.studies.tune import Robustness, spread_plants
 

@@ -18,7 +18,7 @@ from ipcosim.controllers.laws.lqg import lqg_design_from
 from ipcosim.controllers.simulate import run_loop
 from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT
 from ipcosim.fmus.params import DEFAULT_PRESET, preset
-from ipcosim.harness.studies.analyze import analyze
+from ipcosim.harness.analysis.scenario_analysis import analyze
 
 KINDS = ("single-mass", "double-mass")
 
@@ -48,8 +48,8 @@ def test_closed_loop_poles_inside_the_unit_circle(kind: str) -> None:
     assert np.max(np.abs(d.estimator_poles)) < 1.0
     # the separation principle on the sampled design model: the loop of law and model has both sets
     law = build_law(kind, "LQG", defaults(kind, "LQG"))
-    from ipcosim.harness.studies.analyze import closed_loop_poles, loop_from
-    from ipcosim.harness.studies.linear_law import linear_law
+    from ipcosim.harness.analysis.analyze import closed_loop_poles, loop_from
+    from ipcosim.harness.analysis.linear_law import linear_law
 
     m = d.model
     loop = loop_from(control.ss(m.A, m.B, m.C, m.D), linear_law(law))
@@ -64,8 +64,8 @@ def test_double_mass_stays_stable_on_a_short_pendulum_and_stiff_spring_with_the_
     stable. The design with acceleration_noise 3 and the thesis's passive-cart weight lost a 4 Hz mode
     there (spectral radius 1.0011): its gain range at the pendulum encoder was too narrow."""
     from ipcosim.fmus.linearize import linearize
-    from ipcosim.harness.studies.analyze import loop_from
-    from ipcosim.harness.studies.linear_law import linear_law
+    from ipcosim.harness.analysis.analyze import loop_from
+    from ipcosim.harness.analysis.linear_law import linear_law
 
     nom = preset(DEFAULT_PRESET["double-mass"])
     m = linearize(preset(DEFAULT_PRESET["double-mass"], Lp=0.85 * nom.Lp, K=1.15 * nom.K, Mc=0.85 * nom.Mc),

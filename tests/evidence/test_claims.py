@@ -23,7 +23,7 @@ def test_oscillation_is_the_rms_above_the_cutoff() -> None:
 @pytest.mark.slow
 def test_lqr_falls_between_the_analysed_delay_margin_and_the_search_result() -> None:
     """analyze: delay margin 6.2 ms; the nonlinear loop stays up with a 5 ms delay and falls with 8 ms."""
-    from ipcosim.harness.studies.analyze import analyze_loop, scenario_loop
+    from ipcosim.harness.analysis.analyze import analyze_loop, scenario_loop
 
     dm = analyze_loop(scenario_loop("double-mass-lqr")[0])["delay_margin_s"]
     assert 5e-3 < dm < 8e-3

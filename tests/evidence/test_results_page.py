@@ -38,7 +38,7 @@ def test_the_margins_are_those_the_analysis_gives_now(data: dict) -> None:
 def test_the_lab_lqg_is_unstable_in_the_linearization_by_its_breakaway_term_alone(data: dict) -> None:
     """What breakaway_note() says of the double-mass LQG's lab row, measured."""
     from ipcosim.controllers.laws.lqg import LAB_LQG
-    from ipcosim.harness.studies.analyze import analyze_loop, scenario_loop
+    from ipcosim.harness.analysis.analyze import analyze_loop, scenario_loop
 
     gain = LAB_LQG["double-mass"]["friction_breakaway_gain"]
     assert gain > 0 and f"({gain:g})" in breakaway_note()
@@ -57,7 +57,7 @@ def test_the_soft_lab_lqg_is_the_lab_set_with_a_larger_voltage_weight_and_a_dela
     loop); like the lab set it has no linear margins with its breakaway term, and without it the loop tolerates
     far more delay than the lab bench's 2 ms (its computation sample and the rig's 1 ms)."""
     from ipcosim.controllers.catalog import set_values
-    from ipcosim.harness.studies.analyze import analyze_loop, scenario_loop
+    from ipcosim.harness.analysis.analyze import analyze_loop, scenario_loop
 
     lab, soft = set_values("double-mass", "LQG", "lab"), set_values("double-mass", "LQG", "lab-soft")
     assert {k for k in lab.keys() | soft.keys() if lab.get(k) != soft.get(k)} == {"R"} and soft["R"] > lab["R"]

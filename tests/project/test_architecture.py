@@ -13,6 +13,8 @@ below it, never one above:
     harness.native                             the C generator, over the plants and the laws
     harness.master                             the generic master (knows no plant, law or generator)
     harness.scenario                           SSP read, validate, bind, pack, flavours
+    harness.analysis                           the loop's linear analysis, its figures, the residual cycle
+                                               (a run's amplitude bound is predicted before it runs)
     harness.hil                                the card observer and the ``hil`` swap alias
     ipcosim, harness (the facade),             the lazy public names; the run API (options, grammar, engine,
     harness.api, harness.testing,              public, describe, plots, export); the test support (checks,
@@ -44,6 +46,7 @@ ROOMS: tuple[tuple[str, ...], ...] = (
     ("harness.native",),
     ("harness.master",),
     ("harness.scenario",),
+    ("harness.analysis",),
     ("harness.hil",),
     ("", "harness", "harness.api", "harness.testing", "harness.live"),
     ("harness.studies",),

@@ -11,8 +11,7 @@ import pytest
 
 from ipcosim.controllers.catalog import PARAMETER_SETS, make_law
 from ipcosim.fmus.params import preset
-from ipcosim.harness.cli import main as cli_main
-from ipcosim.harness.studies.analyze import (
+from ipcosim.harness.analysis.analyze import (
     analyze_loop,
     closed_loop_poles,
     is_stable,
@@ -20,7 +19,8 @@ from ipcosim.harness.studies.analyze import (
     position_only_limit,
     scenario_loop,
 )
-from ipcosim.harness.studies.linear_law import LinearizationError, LinearLaw, linear_law
+from ipcosim.harness.analysis.linear_law import LinearizationError, LinearLaw, linear_law
+from ipcosim.harness.cli import main as cli_main
 
 # the swing-up is nonlinear and the excitation a time signal: neither has a linear model
 CASES = [(law, kind, s) for law, per in PARAMETER_SETS.items() if law not in ("SwingUp", "Excitation")

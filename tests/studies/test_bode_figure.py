@@ -10,14 +10,9 @@ import pytest
 
 pytest.importorskip("matplotlib")
 
-from ipcosim.harness.studies.analyze import (  # noqa: E402
-    analyze_loop,
-    frequency_grid,
-    loop_from,
-    loop_response,
-)
-from ipcosim.harness.studies.analyze_plots import _plot_bode  # noqa: E402
-from ipcosim.harness.studies.linear_law import LinearLaw  # noqa: E402
+from ipcosim.harness.analysis.analyze import analyze_loop, frequency_grid, loop_from, loop_response  # noqa: E402
+from ipcosim.harness.analysis.analyze_plots import _plot_bode  # noqa: E402
+from ipcosim.harness.analysis.linear_law import LinearLaw  # noqa: E402
 
 K, T = 50.0, 0.01
 

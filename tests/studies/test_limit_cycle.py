@@ -1,4 +1,4 @@
-"""The describing function's Coulomb friction limit cycles (``ipcosim.harness.studies.limit_cycle``), checked
+"""The describing function's Coulomb friction limit cycles (``ipcosim.harness.analysis.limit_cycle``), checked
 against the force the plant's own equations give and against the nonlinear loop's hunting."""
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ from ipcosim.controllers.catalog import make_law
 from ipcosim.controllers.simulate import run_loop
 from ipcosim.fmus.linearize import force_columns
 from ipcosim.fmus.params import DEFAULT_PRESET, preset
-from ipcosim.harness.studies.analyze import analyze, scenario_loop
-from ipcosim.harness.studies.limit_cycle import predict
+from ipcosim.harness.analysis.analyze import scenario_loop
+from ipcosim.harness.analysis.limit_cycle import predict
+from ipcosim.harness.analysis.scenario_analysis import analyze
 
 
 def test_force_columns_are_the_carts_accelerations_per_newton() -> None:

@@ -14,7 +14,7 @@ from ipcosim.controllers.catalog import make_law
 from ipcosim.controllers.simulate import run_loop
 from ipcosim.fmus.params import preset
 from ipcosim.fmus.physics import MEASURED
-from ipcosim.harness.studies.analyze import (
+from ipcosim.harness.analysis.analyze import (
     closed_loop_poles,
     disk_margin,
     frequency_grid,

@@ -1,4 +1,4 @@
-"""The residual cycle of friction and counts together (``ipcosim.harness.studies.residual_cycle``), checked against
+"""The residual cycle of friction and counts together (``ipcosim.harness.analysis.residual_cycle``), checked against
 the first harmonic of the nonlinearities themselves, the Nyquist-crossing prediction of friction alone, the sensor
 gain margins of the linear loop, and the bound a run records before it runs."""
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 
 from ipcosim.controllers.laws.lqg import coulomb_estimate
 from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT, quantize
-from ipcosim.harness.studies import residual_cycle as rc
-from ipcosim.harness.studies.analyze import break_point_margins, frequency_grid, scenario_loop, sensor_loop
-from ipcosim.harness.studies.limit_cycle import plant_of, predict
+from ipcosim.harness.analysis import residual_cycle as rc
+from ipcosim.harness.analysis.analyze import break_point_margins, frequency_grid, scenario_loop, sensor_loop
+from ipcosim.harness.analysis.limit_cycle import plant_of, predict
 
 
 def _first_harmonic_gain(f, amplitude: float, n: int = 200_000) -> float:
@@ -80,9 +80,9 @@ def test_a_linear_loop_has_no_cycle_and_an_unstable_one_cannot_be_treated() -> N
 
 def test_distinct_cycles_add_and_the_bound_is_the_prediction_plus_the_margin() -> None:
     from ipcosim.fmus.metrics import AMPLITUDE_MARGIN_M
+    from ipcosim.harness.analysis.residual_cycle import realism_values
     from ipcosim.harness.scenario.ssp import load_scenario
     from ipcosim.harness.scenario.structure import select_parameter_set
-    from ipcosim.harness.studies.robustness import realism_values
 
     sc = select_parameter_set(load_scenario("single-mass-lqr"), "thesis")
     lab = realism_values("lab", "single-mass")
@@ -99,9 +99,9 @@ def test_distinct_cycles_add_and_the_bound_is_the_prediction_plus_the_margin() -
 
 def test_a_run_the_prediction_cannot_treat_falls_back_on_the_friction_bound_and_says_why() -> None:
     from ipcosim.fmus.metrics import amplitude_bound
+    from ipcosim.harness.analysis.residual_cycle import realism_values
     from ipcosim.harness.scenario.ssp import load_scenario
     from ipcosim.harness.scenario.structure import select_parameter_set
-    from ipcosim.harness.studies.robustness import realism_values
 
     sc = select_parameter_set(load_scenario("double-mass-adaptive-hsmc"), "thesis")
     values = {**realism_values("lab", "double-mass"), "plant.K": 120.0, "plant.b2": 0.12}
@@ -113,9 +113,9 @@ def test_a_run_the_prediction_cannot_treat_falls_back_on_the_friction_bound_and_
 
 
 def test_a_finer_pendulum_encoder_shrinks_the_predicted_cycle() -> None:
+    from ipcosim.harness.analysis.residual_cycle import realism_values
     from ipcosim.harness.scenario.ssp import load_scenario
     from ipcosim.harness.scenario.structure import select_parameter_set
-    from ipcosim.harness.studies.robustness import realism_values
 
     sc = select_parameter_set(load_scenario("double-mass-lqg"), "lab")
     lab = realism_values("lab", "double-mass")

@@ -55,7 +55,8 @@ def test_the_factor_that_breaks_a_loop_first_is_the_worst_alone_below_95_percent
 
 
 def test_a_sweep_on_the_lab_bench_sets_its_values_and_set_wins_over_them() -> None:
-    from ipcosim.harness.studies.robustness import realism_values, sweep_study
+    from ipcosim.harness.analysis.residual_cycle import realism_values
+    from ipcosim.harness.studies.robustness import sweep_study
 
     lab = realism_values("lab", "double-mass")
     inst, plant = realism("lab", "double-mass")

@@ -140,7 +140,7 @@ def test_cli_tune_install_needs_a_scenario_folder(tmp_path, capsys):
 def test_loop_limits_refuse_the_thesis_hsmc_and_measure_like_analyze():
     """The robust objective's limits are ``ipcosim analyze``'s peak |S| and delay margin; the thesis's double-mass
     HSMC (peak |S| 6.2, delay margin 0.4 ms) misses them, on the nominal plant and on the spread."""
-    from ipcosim.harness.studies.analyze import analyze
+    from ipcosim.harness.analysis.scenario_analysis import analyze
     from ipcosim.harness.studies.tune import Robustness, spread_plants
 
     full = analyze("double-mass-hsmc", parameter_set="thesis")
@@ -161,7 +161,7 @@ def test_phase_margin_limit_measures_like_analyze_and_refuses_a_bad_limit():
     the thesis's double-mass HSMC (9.9 deg) misses 20 deg by half and meets 5 deg; a limit of 180 deg or more is
     refused in one line naming the flag."""
     from ipcosim.errors import UsageError
-    from ipcosim.harness.studies.analyze import analyze
+    from ipcosim.harness.analysis.scenario_analysis import analyze
     from ipcosim.harness.studies.tune import Robustness, robustness_objective
 
     pm = abs(analyze("double-mass-hsmc", parameter_set="thesis")["phase_margin_deg"])

@@ -49,8 +49,8 @@ def test_every_drawing_command_keeps_its_numbers_without_matplotlib(tmp_path: Pa
 
 
 def test_analyze_keeps_its_margins_when_the_figures_cannot_be_drawn(tmp_path, monkeypatch, capsys):
+    from ipcosim.harness.analysis import analyze_plots
     from ipcosim.harness.cli import main
-    from ipcosim.harness.studies import analyze_plots
     from ipcosim.harness.support.extras import MissingExtraError
 
     def no_plot(*args, **kwargs):

@@ -11,7 +11,7 @@ Describing Functions*, 1968):
   ``(k - 1/2) q`` below ``A``, and 0 below the first threshold (:func:`quantizer_gain`): no reading changes, the
   law does not see the signal at all.
 
-The quasi-linear loop is the sampled loop of ``ipcosim.harness.studies.limit_cycle.closed_loop`` (the plant with
+The quasi-linear loop is the sampled loop of ``ipcosim.harness.analysis.limit_cycle.closed_loop`` (the plant with
 its inductance, zero-order hold, the law's linear transcription), with each friction gain a force on its cart
 against the cart's velocity, each quantizer gain in front of the law's reading of its signal, and the lab bench's
 computation delay (the voltage computed from one sample's readings acts from the next sample). The harmonic
@@ -412,8 +412,8 @@ def scenario_prediction(sc: Any, set: Mapping[str, Any] | None = None) -> dict[s
     dict
         :func:`predict_lab_cycle`'s result (``found`` False with the ``reason`` where it cannot treat the run).
     """
-    from ipcosim.harness.studies.analyze import binding_values, loop_of_scenario
-    from ipcosim.harness.studies.limit_cycle import plant_of
+    from ipcosim.harness.analysis.analyze import binding_values, loop_of_scenario
+    from ipcosim.harness.analysis.limit_cycle import plant_of
 
     given = {k: v for k, v in (set or {}).items() if k.partition(".")[0] in ("controller", "plant")}
     law_values = {**binding_values(sc.component("controller")),
@@ -465,7 +465,7 @@ def _plant_starts(sc: Any, set: Mapping[str, Any] | None) -> dict[str, float]:
     """The plant's ``b2`` and ``K`` of the run: ``set``, else the scenario's bound values, else its plant kind's
     default preset (0 where none has it)."""
     from ipcosim.fmus.params import DEFAULT_PRESET, preset
-    from ipcosim.harness.studies.analyze import binding_values
+    from ipcosim.harness.analysis.analyze import binding_values
 
     try:
         values = binding_values(sc.component("plant"))
@@ -479,19 +479,19 @@ def _plant_starts(sc: Any, set: Mapping[str, Any] | None) -> dict[str, float]:
 def report(scenario: str, parameter_set: str | None = None, set: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The ``residual_cycle`` entry of ``ipcosim analyze``: :func:`scenario_prediction` of the scenario with its
     ``--set`` values, on its own bench where its plant has Coulomb friction or encoder counts, else on the lab
-    bench's (``ipcosim.harness.studies.robustness.realism_values``), and which bench that was."""
+    bench's (:func:`realism_values`), and which bench that was."""
+    from ipcosim.harness.analysis.analyze import binding_values
     from ipcosim.harness.scenario.ssp import load_scenario
     from ipcosim.harness.scenario.structure import select_parameter_set
-    from ipcosim.harness.studies.analyze import binding_values
-    from ipcosim.harness.studies.robustness import realism_values
 
     sc = load_scenario(scenario)
     if parameter_set:
         sc = select_parameter_set(sc, parameter_set)
     values = {f"plant.{k}": v for k, v in binding_values(sc.component("plant")).items()}
     values.update(set or {})
-    names = ("b", "b1", "b2", "cart_resolution", "pendulum_resolution")
-    own = any(float(values.get(f"plant.{n}") or 0.0) > 0.0 for n in names)
+    from ipcosim.fmus.metrics import CYCLE_SOURCES
+
+    own = any(float(values.get(f"plant.{n}") or 0.0) > 0.0 for n in CYCLE_SOURCES)
     if not own:
         values = {**realism_values("lab", _kind_of(sc)), **(set or {})}
     out = scenario_prediction(sc, values)
@@ -506,3 +506,14 @@ def _kind_of(sc: Any) -> str:
     from ipcosim.fmus.kinds import PLANT_MODELS
 
     return PLANT_MODELS[PurePosixPath(sc.component("plant").source).stem]
+
+
+def realism_values(name: str, kind: str) -> dict[str, float]:
+    """The ``plant.*`` values of the bench ``name`` (``ipcosim.fmus.instruments.realism``: ``ideal``, ``lab``) for
+    plant ``kind``: every instrument option that is on, then the plant-parameter overrides."""
+    from ipcosim.fmus.instruments import realism
+
+    inst, plant = realism(name, kind)
+    out = {f"plant.{f}": float(getattr(inst, f)) for f in inst.__dataclass_fields__ if getattr(inst, f)}
+    out.update({f"plant.{k}": float(v) for k, v in plant.items()})
+    return out

@@ -3,7 +3,7 @@
 The loop is broken at the plant input (the voltage). The plant is the scenario's plant linearized
 about upright *with* the motor inductance (``ipcosim.fmus.linearize``), discretized exactly with a
 zero-order hold at the controller's sample period; the controller is the law of the scenario's
-controller component as a linear discrete system (``ipcosim.harness.studies.linear_law``). Their product
+controller component as a linear discrete system (``ipcosim.harness.analysis.linear_law``). Their product
 ``L(z) = -C(z) P(z)`` is the loop transfer function at the plant input of the sampled-data loop,
 exact at the sample instants, so ``L(e^{jwT})`` for ``0 < w < pi/T`` is its frequency response.
 
@@ -16,7 +16,7 @@ Reported (``analyze``):
 * phase margin at every gain crossover and the delay margin ``min (PM_i mod 2 pi) / w_i``;
 * peak of the sensitivity ``S = 1/(1 + L)`` and of ``T = L/(1 + L)`` over frequency;
 * the limit cycle each cart's Coulomb friction would drive, by the describing function
-  (``ipcosim.harness.studies.limit_cycle``): its frequency and the amplitude of every measured signal;
+  (``ipcosim.harness.analysis.limit_cycle``): its frequency and the amplitude of every measured signal;
 * the plant's right-half-plane zeros and poles from the voltage to the motor-cart position and
   the lower bound they put on ``||S||inf`` and ``||T||inf`` of *every* stabilizing controller
   that measures that position only (Skogestad & Postlethwaite, *Multivariable Feedback
@@ -32,7 +32,6 @@ import cmath
 import functools
 import math
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import control
@@ -44,8 +43,8 @@ from ipcosim.fmus.kinds import PLANT_MODELS
 from ipcosim.fmus.linearize import linearize
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PLANT_KINDS, ParameterError, preset
 from ipcosim.fmus.physics import MEASURED
-from ipcosim.harness.studies import limit_cycle
-from ipcosim.harness.studies.linear_law import LinearLaw, linear_law
+from ipcosim.harness.analysis import limit_cycle
+from ipcosim.harness.analysis.linear_law import LinearLaw, linear_law
 
 
 class AnalysisError(IpcosimError, ValueError):
@@ -565,46 +564,3 @@ def statement(result: Mapping[str, Any]) -> str:
                      f"{search['stabilizing']} cases (smallest spectral radius "
                      f"{search['smallest_spectral_radius']:.4g}).")
     return " ".join(parts)
-
-
-def figure_responses(loop: Loop, result: Mapping[str, Any]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """What ``analyze_plots.plot_loop`` draws: a frequency grid and the loop's response over it, broken at
-    the plant input and, when ``result`` has sensor margins, at each sensor."""
-    from ipcosim.harness.studies.analyze_plots import PLANT_INPUT
-
-    w = frequency_grid(loop.T, 3000)
-    breaks = {PLANT_INPUT: loop, **{name: sensor_loop(loop, j) for j, name in
-                                    enumerate(result.get("sensor_margins") or ())}}
-    return w, {name: loop_response(lp, w) for name, lp in breaks.items()}
-
-
-def analyze(scenario: str, *, parameter_set: str | None = None, set: Mapping[str, float] | None = None,
-            out: str | Path | None = None) -> dict[str, Any]:
-    """Analyse a scenario's loop (see the module docstring), with the ``--set`` values ``set``; with ``out``
-    also write the figures and ``analysis.json`` there.
-
-    Examples
-    --------
-    >>> r = analyze("single-mass-lqr")                       # doctest: +SKIP
-    >>> r["closed_loop_stable"], round(r["delay_margin_s"], 4)  # doctest: +SKIP
-    (True, 0.0179)
-    """
-    import json
-
-    loop, info = scenario_loop(scenario, parameter_set, set)
-
-    result = {**info, **analyze_loop(loop)}
-    if loop.kind in KINDS:   # the IP02's friction and counts together, by the describing functions
-        from ipcosim.harness.studies import residual_cycle
-
-        result["residual_cycle"] = residual_cycle.report(scenario, parameter_set, set)
-    if out is not None:
-        from ipcosim.harness.studies.analyze_plots import plot_loop
-        from ipcosim.harness.support.extras import optional_figure
-
-        title = f"{info['scenario']} ({info['parameter_set']}): loop at the plant input"
-        result["figures"] = optional_figure(lambda: plot_loop(*figure_responses(loop, result), result, out, title),
-                                            "the Bode, Nyquist and margin figures") or {}
-        Path(out).mkdir(parents=True, exist_ok=True)
-        (Path(out) / "analysis.json").write_text(json.dumps(result, indent=2))
-    return result

@@ -12,9 +12,9 @@ the friction force. What the prediction leaves out: the harmonics of the relay (
 keeps the first), static friction above the kinetic level (the plant's breakaway equals its kinetic
 force), the other carts' friction (each cart is taken alone), and whether the cycle is stable.
 
-The loop is ``ipcosim.harness.studies.analyze``'s: the plant linearized about upright with the motor
+The loop is ``ipcosim.harness.analysis.analyze``'s: the plant linearized about upright with the motor
 inductance, sampled with a zero-order hold at the law's period, closed by the law's linear transcription
-(``ipcosim.harness.studies.linear_law``). A law's own friction compensation is nonlinear and is not in that
+(``ipcosim.harness.analysis.linear_law``). A law's own friction compensation is nonlinear and is not in that
 transcription, so the prediction is that of the law without it.
 """
 from __future__ import annotations
@@ -95,7 +95,7 @@ def predict(loop: Any, forces: Mapping[str, float] | None = None) -> list[dict[s
 
     Examples
     --------
-    >>> from ipcosim.harness.studies.analyze import scenario_loop
+    >>> from ipcosim.harness.analysis.analyze import scenario_loop
     >>> loop, _ = scenario_loop("double-mass-lqg", "tuned")                 # doctest: +SKIP
     >>> [round(c["frequency_Hz"], 2) for c in predict(loop)]                # doctest: +SKIP
     [0.51, 0.55]
