@@ -27,14 +27,15 @@ from __future__ import annotations
 import copy
 from typing import Any, Sequence
 
+from ipcosim.fmus import kinds
 from ipcosim.fmus.params import PlantParams, plant_kind_of
-from ipcosim.fmus.physics import double_mass_applied_forces, rhs_for, single_mass_applied_force
+from ipcosim.fmus.physics import rhs_for
 from ipcosim.fmus.plant import CARTS, coulomb_forces
 
 #: The mode of a cart before the first event: taken from its velocity and the force on it (:func:`settle_cart`).
 UNKNOWN = 2.0
-#: The Coulomb friction parameter of each cart, ``CARTS`` order.
-COULOMB_FIELDS = {"single-mass": ("b",), "double-mass": ("b1", "b2")}
+#: The Coulomb friction parameter of each cart, ``CARTS`` order (the plant kind's, ``ipcosim.fmus.kinds``).
+COULOMB_FIELDS = kinds.ByKind(lambda k: tuple(cart.coulomb for cart in k.carts))
 
 
 def frictionless(p: PlantParams) -> PlantParams:
@@ -48,9 +49,7 @@ def frictionless(p: PlantParams) -> PlantParams:
 def applied_forces(kind: str, x: Sequence[Any], p: PlantParams) -> tuple[Any, ...]:
     """Force on each cart besides Coulomb friction [N] (``CARTS`` order), as ``ipcosim.fmus.physics``
     defines it: what its friction (or an end stop) must balance for it to stay at rest."""
-    if kind == "single-mass":
-        return (single_mass_applied_force(x, p),)  # type: ignore[arg-type]
-    return double_mass_applied_forces(x, p)  # type: ignore[arg-type]
+    return kinds.get(kind).applied_forces(x, p)
 
 
 def cart_force(mode: Any, applied: Any, b: Any) -> Any:
@@ -63,19 +62,18 @@ def friction_response(kind: str, x: Sequence[Any], p: PlantParams, forces: Seque
     """Change of the state derivative by the carts' friction ``forces`` [N] (each opposing the motion):
     through the inverse mass matrix of ``physics.single_mass_rhs`` / ``double_mass_rhs``, where each
     enters as ``-f`` in its cart's force balance."""
-    import math
-
-    th = x[2] if kind == "single-mass" else x[4]
-    ml = 0.5 * p.Mp * p.Lp
-    m11 = (p.Meq if kind == "single-mass" else p.Mc) + p.Mp  # type: ignore[union-attr]
-    m12 = -ml * math.cos(th)
-    m22 = p.Mp * p.Lp * p.Lp / 3.0
+    plant = kinds.get(kind)
+    names = plant.states
+    out: list[Any] = [0.0] * len(names)
+    *others, carrier = plant.carts  # the cart carrying the pendulum is the last
+    for cart, f in zip(others, forces):
+        out[names.index(cart.velocity)] = -f / getattr(p, cart.mass)
+    m11, m12, m22 = plant.pendulum_mass_matrix(x[names.index("pendulum_angle")], p)
     det = m11 * m22 - m12 * m12
-    if kind == "single-mass":
-        (f,) = forces
-        return [0.0, -(m22 * f) / det, 0.0, m12 * f / det, 0.0]
-    fa, fc = forces
-    return [0.0, -fa / p.Ma_eq, 0.0, -(m22 * fc) / det, 0.0, m12 * fc / det, 0.0]  # type: ignore[union-attr]
+    f = forces[-1]
+    out[names.index(carrier.velocity)] = -(m22 * f) / det
+    out[names.index("pendulum_velocity")] = m12 * f / det
+    return out
 
 
 def derivatives(x: Sequence[Any], v: Any, p: PlantParams, modes: Sequence[Any]) -> list[Any]:

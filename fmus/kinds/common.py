@@ -14,11 +14,13 @@ from typing import Any, Callable, Mapping, Sequence
 
 @dataclass(frozen=True)
 class Cart:
-    """One cart of a plant: its position and velocity states and its Coulomb-friction parameter."""
+    """One cart of a plant: its position and velocity states, its Coulomb-friction parameter and, for a cart
+    that does not carry the pendulum, the parameter of its equivalent mass (what a force on it accelerates)."""
 
     position: str
     velocity: str
     coulomb: str
+    mass: str = ""
 
 
 @dataclass(frozen=True)

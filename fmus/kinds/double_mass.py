@@ -128,7 +128,7 @@ KIND = PlantKind(
     states=("active_cart_position", "active_cart_velocity", "passive_cart_position", "passive_cart_velocity",
             "pendulum_angle", "pendulum_velocity", "motor_current"),
     measured=("active_cart_position", "passive_cart_position", "pendulum_angle"),
-    carts=(Cart("active_cart_position", "active_cart_velocity", "b1"),
+    carts=(Cart("active_cart_position", "active_cart_velocity", "b1", mass="Ma_eq"),
            Cart("passive_cart_position", "passive_cart_velocity", "b2")),
     rhs=double_mass_rhs,
     applied_forces=double_mass_applied_forces,

@@ -45,6 +45,7 @@ from typing import Any, Mapping
 import control
 import numpy as np
 
+from ipcosim.errors import IpcosimError
 from ipcosim.fmus.linearize import COULOMB_CARTS, force_columns, linearize
 from ipcosim.fmus.physics import MEASURED
 
@@ -74,7 +75,7 @@ LINEAR_QUANTIZER_COUNTS = 10_000
 SLOWEST_CYCLE_RAD_S = 0.05
 
 
-class NoCycle(Exception):
+class NoCycle(IpcosimError, ArithmeticError):
     """The harmonic balance finds no cycle for this loop (the message says why)."""
 
 

@@ -85,8 +85,8 @@ def main(args: argparse.Namespace) -> int:
 
 def serve(args: argparse.Namespace) -> int:
     """Serve a virtual rig until Ctrl-C, SIGTERM or ``--duration``."""
+    from ipcosim.fmus.hil import service
     from ipcosim.harness.api.grammar import parse_numbers
-    from ipcosim.harness.hil import service
     from ipcosim.harness.master.realtime import apply_cpu_affinity, apply_sched_fifo
 
     options = service.ServeOptions(
