@@ -33,8 +33,9 @@ def find_adapter(model: str, dirs: Sequence[Path | str]) -> Path:
         cand = Path(d) / f"{model}.fmu"
         if cand.is_file():
             return cand.resolve()
+    searched = dict.fromkeys(str(d) for d in dirs)  # each folder once, in search order
     raise HilSwapError(9, f"--swap ...=hil: adapter FMU {model}.fmu not found in "
-                          f"{', '.join(str(d) for d in dirs)} (run `ipcosim build`)")
+                          f"{', '.join(searched)} (run `ipcosim build`)")
 
 
 def card_clock(uri: str) -> str:

@@ -330,3 +330,12 @@ def test_master_dies_and_the_rigs_watchdog_puts_the_motor_at_zero(env, tmp_path)
         while not any(e.topic == "session" and "ended" in e.message for e in rig.events) and time.monotonic() < end:
             time.sleep(0.01)
         assert rig.motor_voltage() == 0.0 and not rig.watchdog.running
+
+
+def test_a_missing_adapter_names_each_folder_searched_once(tmp_path):
+    from ipcosim.harness.hil.swap import HilSwapError, find_adapter
+
+    a, b = tmp_path / "a", tmp_path / "b"
+    with pytest.raises(HilSwapError) as err:
+        find_adapter("IP02HILSingleMass", [a, a, b])
+    assert str(err.value).count(str(a)) == 1 and str(b) in str(err.value) and "ipcosim build" in str(err.value)
