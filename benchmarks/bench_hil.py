@@ -69,7 +69,15 @@ def rig(plant: str, rt: bool, tick: float = 2.5e-4, clock: str = "wallclock") ->
     """``ipcosim rig serve`` (any free port) in its own process; yields it and its card URI."""
     cmd = [sys.executable, "-m", "ipcosim.harness.cli", "rig", "serve", "--plant", plant, "--clock", clock,
            "--tick", str(tick), "--port", "0", "--duration", "600"]
-    cmd += ["--rt-priority", str(RT_PRIORITY)] if rt else []
+    with served(cmd, rt) as both:
+        yield both
+
+
+@contextmanager
+def served(cmd: list[str], rt: bool) -> Iterator[tuple[subprocess.Popen, str]]:
+    """The rig that ``cmd`` (an ``ipcosim rig serve`` on port 0) serves, with real-time priority when ``rt``;
+    yields its process and the card URI it prints; stopped with SIGTERM (killed after 10 s)."""
+    cmd = cmd + (["--rt-priority", str(RT_PRIORITY)] if rt else [])
     with tempfile.TemporaryFile("w+") as log:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
         line = proc.stdout.readline() if proc.stdout else ""

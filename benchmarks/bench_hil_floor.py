@@ -39,7 +39,6 @@ import argparse
 import json
 import os
 import shlex
-import signal
 import subprocess
 import sys
 import tempfile
@@ -53,6 +52,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from benchmarks import host_floor
+from benchmarks.bench_hil import RT_PRIORITY, served
 from benchmarks.targets import figure, fmt, target
 
 #: The README's walkthrough, as its reader types it (terminal 1, terminal 2).
@@ -61,7 +61,6 @@ WALKTHROUGH = ("ipcosim rig serve", "ipcosim run single-mass-lqr --swap plant=hi
 INPROC_URI = "q4:0@inproc://bench?clock=wallclock"
 SUBJECTS = ("floor", "in-process", "TCP")
 LOADS = ("quiet", "loaded")
-RT_PRIORITY = 50
 HOGS = 2
 STOP_TIME = 5.0
 REPETITIONS = 5
@@ -104,25 +103,9 @@ def hogs(n: int) -> Iterator[None]:
 
 @contextmanager
 def rig(rt: bool) -> Iterator[str]:
-    """The walkthrough's ``ipcosim rig serve`` on a free port; yields its card URI."""
-    cmd = cli(WALKTHROUGH[0]) + ["--port", "0", "--duration", "300"]
-    cmd += ["--rt-priority", str(RT_PRIORITY)] if rt else []
-    with tempfile.TemporaryFile("w+") as log:
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
-        try:
-            line = proc.stdout.readline() if proc.stdout else ""
-            if "card id" not in line:
-                log.seek(0)
-                raise RuntimeError(f"the rig did not start: {line.strip() or log.read().strip()}")
-            yield "q4:" + line.rsplit("card id", 1)[1].strip()
-        finally:
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGTERM)
-            try:
-                proc.communicate(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.communicate()
+    """The walkthrough's ``ipcosim rig serve`` on a free port (``bench_hil.served``); yields its card URI."""
+    with served(cli(WALKTHROUGH[0]) + ["--port", "0", "--duration", "300"], rt) as (_, uri):
+        yield uri
 
 
 def walkthrough(uri: str, rt: bool, period: float) -> Sample:
