@@ -6,6 +6,7 @@ Pure Python, standard library only; imports no kind (the kinds import it).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from operator import attrgetter
@@ -178,6 +179,14 @@ def clip_voltage(v: float, limit: float) -> float:
     """The D/A converter's range: the command clipped to +-limit (the amplifier then multiplies it by
     ``amplifier_gain``)."""
     return limit if v > limit else (-limit if v < -limit else v)
+
+
+def pendulum_cart_mass_matrix(cart_mass: float, th: float, p: Any) -> tuple[float, float, float]:
+    """``(m11, m12, m22)``: the mass matrix of a cart of equivalent mass ``cart_mass`` carrying the IP02's
+    pendulum (``p.Mp``, ``p.Lp``, a uniform rod pivoted at its end) upright at angle ``th`` (the taps)."""
+    ml = 0.5 * p.Mp * p.Lp
+    m11 = cart_mass + p.Mp
+    return m11, -ml * math.cos(th), p.Mp * p.Lp * p.Lp / 3.0
 
 
 def karnopp(v: float, applied: float, b: float, band: float) -> float:

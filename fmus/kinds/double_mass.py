@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
-from ipcosim.fmus.kinds.common import Cart, MotorParams, PlantKind, clip_voltage, karnopp
+from ipcosim.fmus.kinds.common import Cart, MotorParams, PlantKind, clip_voltage, karnopp, pendulum_cart_mass_matrix
 from ipcosim.fmus.kinds.common import param_field as _p
 
 
@@ -111,9 +111,7 @@ def double_mass_applied_forces(x: Sequence[float], p: DoubleMassParams) -> tuple
 
 def double_mass_pendulum_mass_matrix(th: float, p: DoubleMassParams) -> tuple[float, float, float]:
     """``(m11, m12, m22)``: the mass matrix of the passive cart and the pendulum at angle ``th`` (the taps)."""
-    ml = 0.5 * p.Mp * p.Lp
-    m11 = p.Mc + p.Mp
-    return m11, -ml * math.cos(th), p.Mp * p.Lp * p.Lp / 3.0
+    return pendulum_cart_mass_matrix(p.Mc, th, p)
 
 
 KIND = PlantKind(

@@ -10,7 +10,15 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
-from ipcosim.fmus.kinds.common import Cart, InternalForm, MotorParams, PlantKind, clip_voltage, karnopp
+from ipcosim.fmus.kinds.common import (
+    Cart,
+    InternalForm,
+    MotorParams,
+    PlantKind,
+    clip_voltage,
+    karnopp,
+    pendulum_cart_mass_matrix,
+)
 from ipcosim.fmus.kinds.common import param_field as _p
 
 
@@ -148,9 +156,7 @@ def single_mass_output_map(p: SingleMassParams) -> Callable[[Sequence[float]], t
 
 def single_mass_pendulum_mass_matrix(th: float, p: SingleMassParams) -> tuple[float, float, float]:
     """``(m11, m12, m22)``: the mass matrix of the cart and the pendulum at angle ``th`` (the taps)."""
-    ml = 0.5 * p.Mp * p.Lp
-    m11 = p.Meq + p.Mp
-    return m11, -ml * math.cos(th), p.Mp * p.Lp * p.Lp / 3.0
+    return pendulum_cart_mass_matrix(p.Meq, th, p)
 
 
 KIND = PlantKind(
