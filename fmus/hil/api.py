@@ -45,6 +45,7 @@ from __future__ import annotations
 import enum
 import math
 import numbers
+import os
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
@@ -193,13 +194,33 @@ def count_difference(new: int, old: int) -> int:
     return wrap_int32(int(new) - int(old))
 
 
-def wait_until_ns(clock_ns: Callable[[], int], deadline_ns: int, spin_ns: int = 200_000,
+#: How long before a deadline a wait stops sleeping and reads the clock, under a real-time policy [ns].
+RT_SPIN_NS = 200_000
+
+
+def policy_spin_ns() -> int:
+    """:data:`RT_SPIN_NS` when this thread runs under a real-time policy (SCHED_FIFO or SCHED_RR), else 0.
+
+    The OS wakes a sleeper tens of microseconds late, so a real-time process spins the rest (it takes
+    no one's share). Under the default policy a spin is paid for: a 1 kHz loop that spins 0.2 ms a step
+    spends its fair share of a CPU beside a busy neighbour and is then woken behind it, milliseconds late
+    (docs/hil.md, "What a host must give").
+    """
+    try:
+        return RT_SPIN_NS if os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR) else 0
+    except (AttributeError, OSError):     # no scheduling policies on this OS
+        return 0
+
+
+def wait_until_ns(clock_ns: Callable[[], int], deadline_ns: int, spin_ns: int | None = None,
                   abort: Callable[[], bool] = lambda: False) -> int:
     """Sleep (in slices of at most 1 ms), then spin, until ``clock_ns() >= deadline_ns`` or ``abort()``.
 
-    Sleeping ends ``spin_ns`` before the deadline (the OS wakes a sleeper late by tens of
-    microseconds); the rest is spent reading the clock. Returns the clock at the end.
+    Sleeping ends ``spin_ns`` before the deadline (default: :func:`policy_spin_ns`); the rest is spent
+    reading the clock. Returns the clock at the end.
     """
+    if spin_ns is None:
+        spin_ns = policy_spin_ns()
     now = clock_ns()
     while deadline_ns - now > spin_ns and not abort():
         time.sleep(min(deadline_ns - now - spin_ns, 1_000_000) / 1e9)

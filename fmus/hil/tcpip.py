@@ -62,9 +62,10 @@ from ipcosim.fmus.hil.protocol import (
 from ipcosim.fmus.params import KINDS
 
 NS = 1_000_000_000
-#: How long before a sample instant :meth:`TcpipCard.step` stops sleeping and reads the clock [ns]: short,
-#: as a paced run's own wait follows at once (a spin costs a loaded host the CPU the rig needs).
-WAIT_SPIN_NS = 50_000
+#: A wallclock STEP whose sample instant is at most this far ahead [ns] sleeps to the instant before it
+#: reads the reply (the rig answers meanwhile: one wake-up a step, the timer's); a farther one reads the
+#: reply first, so that a refusal is never waited for.
+OVERLAP_NS = 50_000_000
 
 #: Open tcpip cards of this process (diagnostics and fault-injection tests).
 OPEN_CARDS: "weakref.WeakSet[TcpipCard]" = weakref.WeakSet()
@@ -155,6 +156,11 @@ class TcpipCard(Card):
             self._applied_timeout = seconds
 
     def _request(self, msg: Msg, payload: bytes = b"", timeout: float | None = None) -> Reader:
+        """One round trip: send ``msg``, then wait for its reply (see :meth:`_send`, :meth:`_receive`)."""
+        return self._receive(msg, *self._send(msg, payload, timeout))
+
+    def _send(self, msg: Msg, payload: bytes = b"", timeout: float | None = None) -> tuple[int, float]:
+        """Send one request; returns its sequence number and the reply's time limit [s]."""
         if self._sock is None:
             raise HILError(ErrorCode.NOT_OPEN, f"card {self.card_id} is closed")
         self._seq += 1
@@ -170,6 +176,12 @@ class TcpipCard(Card):
             self._abort()
             raise HILError(ErrorCode.CONNECTION, f"lost the virtual rig at {self.where} sending {msg.name}: "
                                                  f"{exc.strerror or exc}") from exc
+        return seq, limit
+
+    def _receive(self, msg: Msg, seq: int, limit: float) -> Reader:
+        """The reply to request ``seq`` (``msg``), within ``limit`` seconds of now."""
+        assert self._sock is not None
+        self._set_timeout(limit)
         deadline = time.monotonic() + limit
         while True:
             try:
@@ -277,14 +289,18 @@ class TcpipCard(Card):
         until_ns = int(round(until * NS))
         payload = (STEP_REQUEST.pack(until_ns, 1 if reload else 0) + pack_channels(ao)
                    + pack_doubles(as_finite(volts, len(ao), "step")) + pack_channels(enc))
-        r = self._request(Msg.STEP, payload)
+        wallclock = self.info.clock == "wallclock"
+        sent = self._send(Msg.STEP, payload)
+        began = time.monotonic_ns()
+        if wallclock and until_ns - self.rig_now_ns() <= OVERLAP_NS:   # sleep to the sample instant while
+            wait_until_ns(self.rig_now_ns, until_ns)                      # the rig answers
+        r = self._receive(Msg.STEP, *sent)
         reloaded, late_ns, n = self._body(r, STEP_REPLY, "STEP")
         counts = list(self._body(r, f"{n}i", "STEP"))  # int32 on the wire
         now = self._last_rig_ns
         self.last_wait_ns = 0
-        if self.info.clock == "wallclock":   # the reading is the sample instant's: not before it
-            began = time.monotonic_ns()
-            now = max(now, wait_until_ns(self.rig_now_ns, until_ns, spin_ns=WAIT_SPIN_NS))
+        if wallclock:   # not before the sample instant, as the reply dates the rig's clock
+            now = max(now, wait_until_ns(self.rig_now_ns, until_ns))
             self.last_wait_ns = time.monotonic_ns() - began
         return StepResult(counts=counts, reloaded=bool(reloaded), time=now / NS, late=late_ns / NS,
                           status=self._flags_status())

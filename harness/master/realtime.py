@@ -4,8 +4,11 @@
 earlier than its deadline ``t0 + n*h``, computed from integer nanoseconds every time
 (never by adding periods, so no drift accumulates, and a late step does not shift the
 following deadlines). Waiting is "sleep, then spin": sleep until ``spin`` before the
-deadline (the OS wakes us up late by tens of microseconds), then busy-wait on the
-clock to the deadline itself.
+deadline, then busy-wait on the clock to the deadline itself. The spin is 0.2 ms under a
+real-time policy (the OS wakes a sleeper tens of microseconds late; a real-time process
+takes no one's share by spinning) and none under the default policy, where a process that
+spins spends its fair share of a CPU and is then woken behind a busy neighbour (see
+:func:`default_spin`); there the timer slack is cut to 1 us instead (:func:`realtime_setup`).
 
 Statistics (:meth:`Pacer.metrics`, the keys ``ipcosim run --realtime`` adds to
 metrics.json):
@@ -78,6 +81,22 @@ from ipcosim.errors import IpcosimError
 from ipcosim.harness.master.observers import Observer
 
 NS = 1_000_000_000
+
+
+#: The spin before a deadline under a real-time policy [s].
+RT_SPIN = 200e-6
+
+
+def default_spin() -> float:
+    """:data:`RT_SPIN` when this thread runs under a real-time policy (SCHED_FIFO or SCHED_RR), else 0 [s].
+
+    Measured at 1 kHz beside two CPU hogs (docs/hil.md): a run that spun 0.2 ms a step under the
+    default policy had up to ten times the late steps of one that slept to the deadline.
+    """
+    try:
+        return RT_SPIN if os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR) else 0.0
+    except (AttributeError, OSError):     # no scheduling policies on this OS
+        return 0.0
 
 
 def wait_until(deadline_ns: int, clock_ns: Callable[[], int] = time.monotonic_ns,
@@ -193,21 +212,21 @@ class Pacer:
         Monotonic clock [ns] (injectable for tests).
     sleep : callable
         ``sleep(seconds)`` (injectable for tests).
-    spin : float
-        Busy-wait this long before each deadline [s].
+    spin : float, optional
+        Busy-wait this long before each deadline [s] (default :func:`default_spin`).
     tolerance : float, optional
         Lateness beyond which a step counts as an overrun [s] (default ``period / 2``).
     """
 
     def __init__(self, period: float, *, clock_ns: Callable[[], int] = time.monotonic_ns,
-                 sleep: Callable[[float], None] = time.sleep, spin: float = 200e-6,
+                 sleep: Callable[[float], None] = time.sleep, spin: float | None = None,
                  tolerance: float | None = None) -> None:
         if not (math.isfinite(period) and period > 0):
             raise ValueError(f"real-time period = {period} s must be positive")
         self.period_ns = int(round(period * NS))
         self.clock_ns = clock_ns
         self.sleep = sleep
-        self.spin_ns = int(round(spin * NS))
+        self.spin_ns = int(round((default_spin() if spin is None else spin) * NS))
         self.tolerance_ns = int(round((period / 2 if tolerance is None else tolerance) * NS))
         self.t0_ns: int | None = None
         self._first_tick = 0
@@ -332,7 +351,7 @@ def realtime_setup() -> tuple[dict[str, str], Callable[[], None]]:
     Returns
     -------
     report : dict
-        ``{"gc": ..., "cpu_affinity": ..., "sched_fifo": ...}``, each ``applied ...`` or
+        ``{"gc": ..., "cpu_affinity": ..., "sched_fifo": ..., "timer_slack": ...}``, each ``applied ...`` or
         ``not applied: why`` (``not requested`` when the option is not set).
     undo : callable
         Restores what was changed (called when the run ends).
@@ -352,6 +371,7 @@ def realtime_setup() -> tuple[dict[str, str], Callable[[], None]]:
     report["gc"] = "applied: collected and frozen before the loop, disabled during it"
     report["cpu_affinity"] = apply_cpu_affinity(cpu, undo)
     report["sched_fifo"] = apply_sched_fifo(priority, undo)
+    report["timer_slack"] = apply_timer_slack(TIMER_SLACK_NS, undo)
 
     def restore() -> None:
         for fn in reversed(undo):
@@ -392,6 +412,29 @@ def apply_sched_fifo(priority: int | None, undo: list[Callable[[], None]]) -> st
     return f"applied: SCHED_FIFO priority {priority}"
 
 
+#: The timer slack of a paced process under the default policy [ns] (Linux's default is 50 us; a
+#: real-time policy has none).
+TIMER_SLACK_NS = 1_000
+_PR_SET_TIMERSLACK, _PR_GET_TIMERSLACK = 29, 30
+
+
+def apply_timer_slack(slack_ns: int, undo: list[Callable[[], None]]) -> str:
+    """Linux's timer slack of this thread cut to ``slack_ns`` (a sleep may end that much after its
+    deadline, 50 us by default); appends the undo to ``undo``; returns the outcome."""
+    if not sys.platform.startswith("linux"):
+        return "not applied: Linux only"
+    import ctypes
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+        before = prctl(_PR_GET_TIMERSLACK, 0, 0, 0, 0)
+        if before < 0 or prctl(_PR_SET_TIMERSLACK, slack_ns, 0, 0, 0) != 0:
+            return f"not applied: prctl: {os.strerror(ctypes.get_errno())}"
+    except (OSError, AttributeError) as exc:
+        return f"not applied: {exc}"
+    undo.append(lambda: prctl(_PR_SET_TIMERSLACK, before, 0, 0, 0))
+    return f"applied: {slack_ns} ns (was {before} ns)"
+
+
 #: A paced run hands its rows to the writer this often [s] (wall clock = simulated time): 20 rows at
 #: 1 kHz cost 0.25-0.45 ms (measured), inside a step's slack, where 0.2 s of rows took 1-5 ms.
 PACED_WRITE_SECONDS = 0.02
@@ -409,8 +452,9 @@ class RealtimePacer(Observer):
 
     Parameters
     ----------
-    spin : float
-        Busy-wait this long before each deadline [s].
+    spin : float, optional
+        Busy-wait this long before each deadline [s] (default: :func:`default_spin` once the
+        real-time setup is in force).
     tolerance : float, optional
         Overrun tolerance [s] (default half a step).
     overrun_budget : float, optional
@@ -418,7 +462,7 @@ class RealtimePacer(Observer):
         :data:`DEFAULT_OVERRUN_BUDGET`).
     """
 
-    def __init__(self, spin: float = 200e-6, tolerance: float | None = None,
+    def __init__(self, spin: float | None = None, tolerance: float | None = None,
                  overrun_budget: float | None = None) -> None:
         self.spin = spin
         self.tolerance = tolerance

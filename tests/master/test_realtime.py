@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import random
+import sys
 import time
 
 import numpy as np
@@ -33,7 +34,7 @@ class SimClock:
 
 def test_deadlines_never_drift():
     sim = SimClock()
-    pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep)
+    pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep, spin=200e-6)
     rng = random.Random(3)
     pacer.start()
     t0 = pacer.t0_ns
@@ -64,7 +65,7 @@ def test_sleeps_then_spins():
 
 def test_a_long_step_counts_overruns_and_later_deadlines_hold():
     sim = SimClock()
-    pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep)
+    pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep, spin=200e-6)
     pacer.start()
     t0 = pacer.t0_ns
     for n in range(20):
@@ -82,7 +83,7 @@ def test_a_long_step_counts_overruns_and_later_deadlines_hold():
 
 def test_metrics_keys():
     sim = SimClock()
-    pacer = Pacer(2e-3, clock_ns=sim.clock, sleep=sim.sleep)
+    pacer = Pacer(2e-3, clock_ns=sim.clock, sleep=sim.sleep, spin=200e-6)
     for n in range(10):
         pacer.begin(n)
         pacer.end(n)
@@ -106,7 +107,7 @@ def test_bad_period():
 def test_a_constant_offset_of_the_cards_clock_is_not_counted_as_lateness():
     """HIL: the adapter returns at the card's sample instants, 0.7 ms after the pacer's deadlines."""
     sim = SimClock()
-    pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep)
+    pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep, spin=200e-6)
     pacer.start()
     t0 = pacer.t0_ns
     for n in range(200):
@@ -145,7 +146,7 @@ def paced(observer, sim: SimClock, late_steps: set[int]) -> None:
     """Run the observer's hooks over 20 simulated steps, steps in ``late_steps`` taking 3 periods."""
     from ipcosim.harness.master.realtime import Pacer
 
-    observer.pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep)
+    observer.pacer = Pacer(1e-3, clock_ns=sim.clock, sleep=sim.sleep, spin=200e-6)
     observer.pacer.start(0)
     observer.pacer.begin(0)
     observer._open = True
@@ -253,9 +254,13 @@ def test_realtime_setup_reports_each_option_as_applied_or_not(monkeypatch):
         assert report["gc"].startswith("applied") and not gc.isenabled()
         assert report["cpu_affinity"].startswith("applied: CPU")
         assert report["sched_fifo"].startswith("not requested")
+        if sys.platform.startswith("linux"):
+            assert report["timer_slack"].startswith("applied: 1000 ns") and _timer_slack() == 1000
     finally:
         restore()
     assert gc.isenabled() and os.sched_getaffinity(0) == before
+    if sys.platform.startswith("linux"):
+        assert _timer_slack() == int(report["timer_slack"].split("was ")[1].split()[0])
     monkeypatch.setenv("IPCOSIM_RT_CPU", "4000")
     report, restore = realtime_setup()
     restore()
@@ -263,6 +268,41 @@ def test_realtime_setup_reports_each_option_as_applied_or_not(monkeypatch):
     monkeypatch.setenv("IPCOSIM_RT_PRIORITY", "nan")
     with pytest.raises(RealtimeSetupError, match="IPCOSIM_RT_PRIORITY=nan"):
         realtime_setup()
+
+
+def _timer_slack() -> int:
+    import ctypes
+    return ctypes.CDLL(None).prctl(30, 0, 0, 0, 0)      # PR_GET_TIMERSLACK
+
+
+def test_the_spin_before_a_deadline_is_only_taken_under_a_realtime_policy():
+    """Under the default policy the pacer and the card sleep to the deadline; under SCHED_FIFO they spin
+    its last 0.2 ms (checked in a thread of its own, where the OS permits SCHED_FIFO)."""
+    import os
+    import threading
+
+    from ipcosim.fmus.hil.api import RT_SPIN_NS, policy_spin_ns
+    from ipcosim.harness.master.realtime import RT_SPIN, default_spin
+
+    if os.sched_getscheduler(0) != os.SCHED_OTHER:
+        pytest.skip("this test process itself runs under a real-time policy")
+    assert default_spin() == 0.0 and policy_spin_ns() == 0 and Pacer(1e-3).spin_ns == 0
+    got: list = []
+
+    def under_fifo() -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+        except OSError as exc:
+            got.append(exc)
+            return
+        got.extend([default_spin(), policy_spin_ns(), Pacer(1e-3).spin_ns])
+
+    t = threading.Thread(target=under_fifo)
+    t.start()
+    t.join()
+    if got and isinstance(got[0], OSError):
+        pytest.skip(f"SCHED_FIFO refused here: {got[0]}")
+    assert got == [RT_SPIN, RT_SPIN_NS, RT_SPIN_NS] and RT_SPIN_NS == 200_000
 
 
 @pytest.mark.integration
