@@ -87,7 +87,7 @@ def serve(args: argparse.Namespace) -> int:
     """Serve a virtual rig until Ctrl-C, SIGTERM or ``--duration``."""
     from ipcosim.fmus.hil import service
     from ipcosim.harness.api.grammar import parse_numbers
-    from ipcosim.harness.master.realtime import apply_cpu_affinity, apply_sched_fifo
+    from ipcosim.harness.master.realtime import apply_cpu_affinity, apply_sched_fifo, apply_sched_slice, slice_request
 
     options = service.ServeOptions(
         plant=args.plant, host=args.host, port=args.port, clock=args.clock, tick=args.tick, preset=args.preset,
@@ -106,6 +106,7 @@ def serve(args: argparse.Namespace) -> int:
     service.dedicate()
     undo: list = []
     setup = {"cpu": apply_cpu_affinity(args.cpu, undo), "sched_fifo": apply_sched_fifo(args.rt_priority, undo)}
+    setup["sched_slice"] = apply_sched_slice(slice_request(), undo)
     for what, outcome in setup.items():
         if not outcome.startswith("not requested"):
             log(f"ipcosim rig: {what}: {outcome}")
