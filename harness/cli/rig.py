@@ -106,7 +106,9 @@ def serve(args: argparse.Namespace) -> int:
     service.dedicate()
     undo: list = []
     setup = {"cpu": apply_cpu_affinity(args.cpu, undo), "sched_fifo": apply_sched_fifo(args.rt_priority, undo)}
-    setup["sched_slice"] = apply_sched_slice(slice_request(), undo)
+    asked = slice_request()
+    slice_outcome = apply_sched_slice(asked, undo)     # said only when asked for: the default is silent
+    setup.update({"sched_slice": slice_outcome} if asked is not None else {})
     for what, outcome in setup.items():
         if not outcome.startswith("not requested"):
             log(f"ipcosim rig: {what}: {outcome}")
