@@ -9,12 +9,15 @@ more late (:data:`~ipcosim.harness.master.realtime.LATE_S`: the run's own histog
   (``IPCOSIM_HIL_URI=q4:0@inproc://bench?clock=wallclock``);
 * ``TCP``: the README's walkthrough, ``ipcosim rig serve`` in a second process and the same run on it.
 
-Each in four conditions: without and with real-time priority (SCHED_FIFO 50 for every process of the
-subject: ``IPCOSIM_RT_PRIORITY``, ``rig serve --rt-priority``, the probe's ``--priority``; skipped,
-with the reason, where the OS refuses it), on the quiet host and with two CPU hogs (two busy-loop
-processes under the default policy, at the bench's nice value). Every repetition runs every subject
-in every condition, the subjects' order rotating from one repetition to the next, so the floor is
-measured interleaved with the runs and shares the host's drift. A 2 kHz row (the walkthrough with ``--step 0.0005 --set
+Each in four conditions: without and with real-time priority (SCHED_FIFO 50 for every process of
+the subject: ``IPCOSIM_RT_PRIORITY``, ``rig serve --rt-priority``, the probe's ``--priority``;
+skipped, with the reason, where the OS refuses it), on the quiet host and with two CPU hogs (two
+busy-loop processes under the default policy, at the bench's nice value). A reference cell,
+``loaded, own slice``, runs the loaded no-RT runs again with ``IPCOSIM_RT_SLICE_US=0`` (both
+processes on the fair scheduler's own slice instead of the 0.7 ms they ask for by default), beside
+the same floor. Every repetition runs every subject in every condition, the subjects' order
+rotating from one repetition to the next, so the floor is measured interleaved with the runs and
+shares the host's drift. A 2 kHz row (the walkthrough with ``--step 0.0005 --set
 controller.sample_period=0.0005``, beside the floor at 2 kHz) ends each repetition. Figures: the
 median and the worst late fraction of each cell, and each run's median as a ratio to the floor's.
 
@@ -159,11 +162,33 @@ def collect(repetitions: int, rt_modes: Sequence[bool]) -> dict[Cell, list[Sampl
                         got[(subject, load, rt)].append(measure(subject, rt))
                     print(f"   repetition {rep + 1}, {load}, {_rt(rt)}: "
                           + ", ".join(f"{s} {_pct(got[(s, load, rt)][-1])}" for s in SUBJECTS), flush=True)
+                if load == "loaded":
+                    _own_slice(got, rep)
         for subject in rotated(("floor", "TCP"), rep):
             got[(subject, "2 kHz", False)].append(measure(subject, False, 5e-4))
         print(f"   repetition {rep + 1}, 2 kHz: floor {_pct(got[('floor', '2 kHz', False)][-1])}, "
               f"TCP {_pct(got[('TCP', '2 kHz', False)][-1])}", flush=True)
     return got
+
+
+#: The reference cell: loaded, no RT priority, each process left on the fair scheduler's own slice.
+OWN_SLICE = "loaded, own slice"
+
+
+def _own_slice(got: dict[Cell, list[Sample]], rep: int) -> None:
+    """The loaded no-RT runs again with ``IPCOSIM_RT_SLICE_US=0`` (the scheduler's own slice, for both
+    processes), beside the same floor: what the slice request buys."""
+    got[("floor", OWN_SLICE, False)].append(got[("floor", "loaded", False)][-1])
+    before = os.environ.get("IPCOSIM_RT_SLICE_US")
+    os.environ["IPCOSIM_RT_SLICE_US"] = "0"
+    try:
+        for subject in rotated(SUBJECTS[1:], rep):
+            got[(subject, OWN_SLICE, False)].append(measure(subject, False))
+    finally:
+        os.environ.pop("IPCOSIM_RT_SLICE_US")
+        os.environ.update({} if before is None else {"IPCOSIM_RT_SLICE_US": before})
+    print(f"   repetition {rep + 1}, {OWN_SLICE}, no RT priority: "
+          + ", ".join(f"{s} {_pct(got[(s, OWN_SLICE, False)][-1])}" for s in SUBJECTS[1:]), flush=True)
 
 
 def _rt(rt: bool) -> str:
@@ -195,7 +220,8 @@ def worst(samples: list[Sample]) -> float:
 
 def cell_figures(got: dict[Cell, list[Sample]], load: str, rt: bool) -> str:
     """The row of one condition, its figures recorded: median / worst of each subject, the runs' ratio."""
-    key, label = f"hil_floor.{load.replace(' ', '').lower()}_{'rt' if rt else 'plain'}", f"{load}, {_rt(rt)}"
+    cell = "".join(c for c in load.lower() if c.isalnum())
+    key, label = f"hil_floor.{cell}_{'rt' if rt else 'plain'}", f"{load}, {_rt(rt)}"
     floor = median(got[("floor", load, rt)])
     parts = []
     for subject in (s for s in SUBJECTS if (s, load, rt) in got):
@@ -285,7 +311,7 @@ def run() -> list[str]:
     got = collect(reps, rt_modes)
     lines = ["late steps per cell: median / worst of the runs (the runs' median over the floor's median)"]
     lines += [cell_figures(got, load, rt) for load in LOADS for rt in rt_modes]
-    lines.append(cell_figures(got, "2 kHz", False))
+    lines += [cell_figures(got, OWN_SLICE, False), cell_figures(got, "2 kHz", False)]
     return lines + judge(got, refusal is None)
 
 
