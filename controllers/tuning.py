@@ -30,8 +30,9 @@ import scipy.linalg
 from scipy.optimize import minimize
 
 from ipcosim.controllers.laws.base import G
-from ipcosim.controllers.laws.hsmc import HSMCGains, SubsystemModel
+from ipcosim.controllers.laws.hsmc import HSMCGains, SubsystemModel, subsystem_positions, subsystem_rows
 from ipcosim.controllers.laws.pid import CascadeGains
+from ipcosim.fmus.kinds import Cart, get, plant_kind
 from ipcosim.fmus.linearize import LinearModel
 from ipcosim.fmus.params import KINDS
 
@@ -49,12 +50,19 @@ def _index(model: LinearModel, name: str) -> int:
     return model.states.index(name)
 
 
-def _motor(model: LinearModel) -> str:
-    return "cart" if "cart_position" in model.states else "active_cart"
+def _kind(model: LinearModel) -> str:
+    """The plant kind of a design model (its states name its carts)."""
+    return get(plant_kind(connectors=model.states) or "").name
 
 
-def _pend_cart(model: LinearModel) -> str:
-    return "cart" if "cart_position" in model.states else "passive_cart"
+def _motor(model: LinearModel) -> Cart:
+    """The cart the motor drives."""
+    return get(_kind(model)).carts[0]
+
+
+def _pend_cart(model: LinearModel) -> Cart:
+    """The cart carrying the pendulum."""
+    return get(_kind(model)).carts[-1]
 
 
 def cascade_feedback(model: LinearModel, g: CascadeGains) -> tuple[np.ndarray, np.ndarray]:
@@ -69,9 +77,9 @@ def cascade_feedback(model: LinearModel, g: CascadeGains) -> tuple[np.ndarray, n
     m, p = _motor(model), _pend_cart(model)
     F[_index(model, "pendulum_angle")] += g.Kp_th
     F[_index(model, "pendulum_velocity")] += g.Kd_th
-    F[_index(model, f"{p}_position")] += -g.Kp_th * g.Kp_x / G
-    F[_index(model, f"{p}_velocity")] += -g.Kp_th * g.Kd_x / G
-    F[_index(model, f"{m}_velocity")] += g.Kv_m
+    F[_index(model, p.position)] += -g.Kp_th * g.Kp_x / G
+    F[_index(model, p.velocity)] += -g.Kp_th * g.Kd_x / G
+    F[_index(model, m.velocity)] += g.Kv_m
     # theta_ref = -(Kp_x e + Ki_x z - Kd_x v)/g enters u as +Kp_th theta_ref, so u = ... - (Kp_th Ki_x / g) z
     Fz = np.array([g.Kp_th * g.Ki_x / G])
     return F, Fz
@@ -84,12 +92,8 @@ def hsmc_feedback(model: LinearModel, g: HSMCGains, models: Sequence[SubsystemMo
     The smooth switching term is linearized, eta tanh(g S) ~ eta g S.
     """
     n = model.A.shape[0]
-    if "cart_position" in model.states:
-        pos = [_index(model, "pendulum_angle"), _index(model, "cart_position")]
-    else:
-        pos = [_index(model, "pendulum_angle"), _index(model, "passive_cart_position"),
-               _index(model, "active_cart_position")]
-    vel = [i + 1 for i in pos]
+    pos = [_index(model, s) for s in subsystem_positions(_kind(model))]
+    vel = [_index(model, s) for s in subsystem_rows(_kind(model))]
     alpha, c = g.alphas(), np.asarray(g.c, dtype=float)
     Srow, num = np.zeros(n), np.zeros(n)
     for a, ci, p, v, mdl in zip(alpha, c, pos, vel, models):
@@ -124,7 +128,7 @@ def step_cost(model: LinearModel, F: np.ndarray, Fz: float, zrow: np.ndarray,
         return np.inf, ev
     n = model.A.shape[0]
     w = np.zeros(n + 1)
-    w[_index(model, f"{_motor(model)}_position")] = 1 / POSITION_SCALE ** 2
+    w[_index(model, _motor(model).position)] = 1 / POSITION_SCALE ** 2
     w[_index(model, "pendulum_angle")] = 1 / ANGLE_SCALE ** 2
     Fa = np.concatenate([F, np.ravel(Fz)])
     Qa = np.diag(w) + np.outer(Fa, Fa) / VOLTAGE_SCALE ** 2
@@ -183,7 +187,7 @@ def tune_cascade(model: LinearModel, base: CascadeGains, with_motor_damping: boo
     """Tuned (Kp_th, Kd_th, Kp_x, Kd_x, Ki_x[, Kv_m]) minimizing the step cost."""
     names = ["Kp_th", "Kd_th", "Kp_x", "Kd_x", "Ki_x"] + (["Kv_m"] if with_motor_damping else [])
     zrow = np.zeros(model.A.shape[0])
-    zrow[_index(model, f"{_motor(model)}_position")] = -1.0
+    zrow[_index(model, _motor(model).position)] = -1.0
 
     def evaluate(p: np.ndarray, margin: float = TUNING_MARGIN) -> tuple[float, np.ndarray]:
         if np.any(p[:5] < 0):
@@ -225,12 +229,13 @@ def tune_hsmc(model: LinearModel, base: HSMCGains, models: Sequence[SubsystemMod
 def main() -> None:  # pragma: no cover - documentation aid
     from ipcosim.controllers.catalog import default_preset
     from ipcosim.controllers.design import design_model
-    from ipcosim.controllers.laws.hsmc import subsystem_models, thesis_hsmc_gains
+    from ipcosim.controllers.laws.hsmc import TUNED_HSMC_ON_THESIS_COEFFICIENTS, subsystem_models, thesis_hsmc_gains
     from ipcosim.fmus.params import preset
     for kind in KINDS:
         model = design_model(preset(default_preset(kind)))
-        print(kind, "cascade:", tune_cascade(model, CascadeGains(), with_motor_damping=kind == "double-mass"))
-        if kind == "single-mass":
+        motor_cart_apart = len(get(kind).carts) > 1  # the motor's cart is not the pendulum's: damp it
+        print(kind, "cascade:", tune_cascade(model, CascadeGains(), with_motor_damping=motor_cart_apart))
+        if kind not in TUNED_HSMC_ON_THESIS_COEFFICIENTS:  # tuned on the design model's subsystems
             print(kind, "hsmc:", tune_hsmc(model, thesis_hsmc_gains(kind), subsystem_models(model)))
 
 

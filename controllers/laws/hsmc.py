@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from ipcosim.controllers.laws.base import (
     DiscreteLaw,
@@ -17,6 +17,7 @@ from ipcosim.controllers.laws.base import (
     check_nonneg,
     check_positive,
     design_params_from,
+    design_states,
     dot,
     model_specs,
     state_dim,
@@ -149,6 +150,7 @@ class HSMC(DiscreteLaw):
         self._c = tuple(float(ci) for ci in gains.c)
         tau = gains.derivative_time_constant
         self._d = [FilteredDerivative(self.sample_period, tau) for _ in range(n_layers)]
+        self._reads, self._order = subsystem_readings(kind)
         self.reset()
 
     @staticmethod
@@ -187,14 +189,9 @@ class HSMC(DiscreteLaw):
     def _state(self, y: Sequence[float], r: float) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
         """Design-model state estimate in error coordinates (ipcosim.fmus.physics order without the current),
         and the (positions, velocities) of the subsystems: pendulum, pendulum cart, (motor cart)."""
-        d = self._d
-        if self.kind == "single-mass":
-            xc, th = float(y[0]) - r, float(y[1])
-            xcd, thd = d[1].update(float(y[0])), d[0].update(th)
-            return (xc, xcd, th, thd), (th, xc), (thd, xcd)
-        xa, xc, th = float(y[0]) - r, float(y[1]) - r, float(y[2])
-        xad, xcd, thd = d[2].update(float(y[0])), d[1].update(float(y[1])), d[0].update(th)
-        return (xa, xad, xc, xcd, th, thd), (th, xc, xa), (thd, xcd, xad)
+        pos = tuple(float(y[j]) - r if cart else float(y[j]) for j, cart in self._reads)
+        vel = tuple(d.update(float(y[j])) for d, (j, _) in zip(self._d, self._reads))
+        return tuple((vel if v else pos)[i] for i, v in self._order), pos, vel
 
     def _lower_layer_terms(self, c: tuple[float, ...], pos: tuple[float, ...], vel: tuple[float, ...]) -> float:
         """Reaching terms of the first layer added to the top layer's (0 for HSMC; see AdaptiveHSMC)."""
@@ -309,6 +306,29 @@ def subsystem_rows(kind: str) -> tuple[str, ...]:
     return ("pendulum_velocity", *(cart.velocity for cart in reversed(get(kind).carts)))
 
 
+def subsystem_positions(kind: str) -> tuple[str, ...]:
+    """Design-model state of each subsystem's position (layer order): the pendulum's angle, then the carts
+    from the one carrying the pendulum to the motor's."""
+    return ("pendulum_angle", *(cart.position for cart in reversed(get(kind).carts)))
+
+
+def subsystem_readings(kind: str) -> tuple[tuple[tuple[int, bool], ...], tuple[tuple[int, bool], ...]]:
+    """Where the law finds each subsystem in the kind's measured signals, and each design-model state.
+
+    Returns
+    -------
+    reads : tuple of (int, bool)
+        Per layer: the index of its position in the measured signals, and whether it is a cart's (taken
+        relative to the reference).
+    order : tuple of (int, bool)
+        Per design-model state: its layer, and whether it is that layer's velocity (else its position).
+    """
+    measured, positions, rows = get(kind).measured, subsystem_positions(kind), subsystem_rows(kind)
+    reads = tuple((measured.index(p), p != "pendulum_angle") for p in positions)
+    order = tuple((rows.index(s), True) if s in rows else (positions.index(s), False) for s in design_states(kind))
+    return reads, order
+
+
 def subsystem_models(model: LinearModel) -> list[SubsystemModel]:
     """``f_i = A[row_i] . x``, ``b_i = B[row_i]`` from a design model (no inductance)."""
     return _subsystems(model.A, [row[0] for row in model.B], model.states)
@@ -346,20 +366,114 @@ THESIS_B5 = dict(a1=47.85834769, a2=-0.5471372821, a3=-637.3052461, a4=-9.882719
                  a16=-14.70083144, b1=0.0, b2=0.0, b3=1.57670963)
 
 
+def _a5_gains() -> HSMCGains:
+    """App. A.5's surface and reaching-law constants."""
+    t = THESIS_A5
+    return HSMCGains(c=(0.93 * abs(t["a1"] + t["a2"] + t["a5"]), 0.19 * abs(t["a3"] + t["a4"] + t["a6"])),
+                     lam=(-0.35,), top_weight=1.0, k=0.4, eta=0.0005, KI=240.0)
+
+
+def _b5_gains() -> HSMCGains:
+    """App. B.5's surface and reaching-law constants."""
+    t = THESIS_B5
+    s1 = sum(t[f"a{i}"] for i in range(1, 7))
+    s2 = sum(t[f"a{i}"] for i in range(7, 13))
+    s3 = sum(t[f"a{i}"] for i in range(13, 17))
+    return HSMCGains(c=(0.1 * abs(s1), 0.7 * abs(s2) - 0.2, 0.2 * abs(s3)), lam=(-1.0, -50.0), k=8.0, eta=17.0,
+                     KI=0.0)
+
+
+def _a6_adaptive() -> tuple[HSMCGains, AdaptiveSchedules]:
+    """App. A.6's schedules (docs/controllers.md: the inferred mapping of its names).
+
+    c1 = 43.9911 + 3 e^-0.1t, c2 = 0.1766 + 10 e^-150t, k2 = K2 + dKP2 e^-KP2 t = 0.5 + 15 e^-0.1t,
+    KI = 320 (1 - dKI2 e^-KI2 t) = 320 - 320 e^-0.3t, eta2 = 0.0005; the first layer's by the same
+    forms: k1 = K1 + dKP e^-KP1 t = 14 e^-0.1t (no K1 in the listing), KI1 = 320 (1 - dKI e^-KI1 t).
+    """
+    g = replace(_a5_gains(), c=(43.9911, 0.1766), k=0.5, eta=0.0005, KI=320.0)
+    return g, AdaptiveSchedules(k=Schedule(0.5, 15.0, 0.1), KI=Schedule(320.0, -320.0, 0.3),
+                                c=(Schedule(43.9911, 3.0, 0.1), Schedule(0.1766, 10.0, 150.0)),
+                                k1=Schedule(0.0, 14.0, 0.1), KI1=Schedule(320.0, -320.0, 4.0))
+
+
+def _b6_adaptive() -> tuple[HSMCGains, AdaptiveSchedules]:
+    """App. B.6's schedules: k3 = 9 + 11.5 e^-t, eta3 = 17 + 1.1 e^-2t, c2 = 0.6506 - 0.5 e^-3t, KI = 0."""
+    base = _b5_gains()
+    c = list(base.c)
+    c[1] = 0.7 * abs(sum(THESIS_B5[f"a{i}"] for i in range(7, 13)))  # B.6: 0.6506, without the -0.2
+    g = replace(base, c=tuple(c), k=9.0, eta=17.0, KI=0.0)
+    return g, AdaptiveSchedules(k=Schedule(9.0, 11.5, 1.0), eta=Schedule(17.0, 1.1, 2.0),
+                                c=(None, Schedule(c[1], -0.5, 3.0), None))
+
+
+@dataclass(frozen=True)
+class ThesisHSMC:
+    """What the thesis gives the HSMC on one plant kind.
+
+    Attributes
+    ----------
+    appendix : str
+        The thesis appendix of its constants (``A``: App. A.5 / A.6).
+    coefficients : mapping
+        Its named subsystem constants ``a*``, ``b*``.
+    layout : tuple of tuple of str
+        Per subsystem (layer order): the constant multiplying each design-model state (``""``: none, 0),
+        then the name of its input gain.
+    force_model : bool
+        The constants model a cart driven by a force [N] (the law then drives it through the motor), not
+        by the motor voltage.
+    gains : callable
+        ``gains()``: the thesis's HSMC gains.
+    adaptive : callable
+        ``adaptive()``: the thesis's adaptive HSMC gains and schedules.
+    """
+
+    appendix: str
+    coefficients: Mapping[str, float]
+    layout: tuple[tuple[str, ...], ...]
+    force_model: bool
+    gains: Callable[[], HSMCGains]
+    adaptive: Callable[[], tuple[HSMCGains, AdaptiveSchedules]]
+
+
+#: The thesis's HSMC by plant kind (the kinds the HSMC laws support).
+THESIS_HSMC: dict[str, ThesisHSMC] = {
+    # state [xc, xc', th, th']
+    "single-mass": ThesisHSMC("A", THESIS_A5, (("", "a2", "a1", "a5", "b1"), ("", "a4", "a3", "a6", "b2")),
+                              True, _a5_gains, _a6_adaptive),
+    # state [xa, xa', xc, xc', th, th']
+    "double-mass": ThesisHSMC("B", THESIS_B5, (("a5", "a6", "a3", "a4", "a1", "a2", "b1"),
+                                               ("a11", "a12", "a9", "a10", "a7", "a8", "b2"),
+                                               ("a15", "a16", "a13", "a14", "", "", "b3")),
+                              False, _b5_gains, _b6_adaptive),
+}
+
+
+def thesis_hsmc(kind: str) -> ThesisHSMC:
+    """The thesis's HSMC on plant kind ``kind``.
+
+    Raises
+    ------
+    LawParameterError
+        Naming the kind, when the thesis gives the HSMC no constants for it.
+    """
+    name = get(kind).name  # an unknown kind: the registry's error
+    try:
+        return THESIS_HSMC[name]
+    except KeyError:
+        raise LawParameterError("kind", f"the HSMC has no thesis constants for plant kind {kind!r} (it has "
+                                        f"them for {', '.join(THESIS_HSMC)})") from None
+
+
 def thesis_coefficients(kind: str) -> dict[str, float]:
     """The thesis's named f_i, b_i constants (App. A.5 / B.5)."""
-    return dict(THESIS_A5 if kind == "single-mass" else THESIS_B5)
+    return dict(thesis_hsmc(kind).coefficients)
 
 
 def models_from_coefficients(kind: str, t: Mapping[str, float]) -> list[SubsystemModel]:
     """Subsystem models from the thesis-named constants, in design-model state order."""
-    if kind == "single-mass":  # state [xc, xc', th, th']
-        return [SubsystemModel((0.0, t["a2"], t["a1"], t["a5"]), t["b1"]),
-                SubsystemModel((0.0, t["a4"], t["a3"], t["a6"]), t["b2"])]
-    # state [xa, xa', xc, xc', th, th']
-    return [SubsystemModel((t["a5"], t["a6"], t["a3"], t["a4"], t["a1"], t["a2"]), t["b1"]),
-            SubsystemModel((t["a11"], t["a12"], t["a9"], t["a10"], t["a7"], t["a8"]), t["b2"]),
-            SubsystemModel((t["a15"], t["a16"], t["a13"], t["a14"], 0.0, 0.0), t["b3"])]
+    return [SubsystemModel(tuple(t[n] if n else 0.0 for n in row[:-1]), t[row[-1]])
+            for row in thesis_hsmc(kind).layout]
 
 
 def thesis_subsystem_models(kind: str) -> list[SubsystemModel]:
@@ -371,35 +485,12 @@ def thesis_subsystem_models(kind: str) -> list[SubsystemModel]:
 
 def thesis_hsmc_gains(kind: str) -> HSMCGains:
     """App. A.5 / B.5 surface and reaching-law constants."""
-    if kind == "single-mass":
-        t = THESIS_A5
-        return HSMCGains(c=(0.93 * abs(t["a1"] + t["a2"] + t["a5"]), 0.19 * abs(t["a3"] + t["a4"] + t["a6"])),
-                         lam=(-0.35,), top_weight=1.0, k=0.4, eta=0.0005, KI=240.0)
-    t = THESIS_B5
-    s1 = sum(t[f"a{i}"] for i in range(1, 7))
-    s2 = sum(t[f"a{i}"] for i in range(7, 13))
-    s3 = sum(t[f"a{i}"] for i in range(13, 17))
-    return HSMCGains(c=(0.1 * abs(s1), 0.7 * abs(s2) - 0.2, 0.2 * abs(s3)), lam=(-1.0, -50.0), k=8.0, eta=17.0,
-                     KI=0.0)
+    return thesis_hsmc(kind).gains()
 
 
 def thesis_adaptive(kind: str) -> tuple[HSMCGains, AdaptiveSchedules]:
     """App. A.6 / B.6 schedules (docs/controllers.md: the inferred mapping of the single-mass names)."""
-    base = thesis_hsmc_gains(kind)
-    if kind == "single-mass":
-        # c1 = 43.9911 + 3 e^-0.1t, c2 = 0.1766 + 10 e^-150t, k2 = K2 + dKP2 e^-KP2 t = 0.5 + 15 e^-0.1t,
-        # KI = 320 (1 - dKI2 e^-KI2 t) = 320 - 320 e^-0.3t, eta2 = 0.0005; the first layer's by the same
-        # forms: k1 = K1 + dKP e^-KP1 t = 14 e^-0.1t (no K1 in the listing), KI1 = 320 (1 - dKI e^-KI1 t)
-        g = replace(base, c=(43.9911, 0.1766), k=0.5, eta=0.0005, KI=320.0)
-        return g, AdaptiveSchedules(k=Schedule(0.5, 15.0, 0.1), KI=Schedule(320.0, -320.0, 0.3),
-                                    c=(Schedule(43.9911, 3.0, 0.1), Schedule(0.1766, 10.0, 150.0)),
-                                    k1=Schedule(0.0, 14.0, 0.1), KI1=Schedule(320.0, -320.0, 4.0))
-    # k3 = 9 + 11.5 e^-t, eta3 = 17 + 1.1 e^-2t, c2 = 0.6506 - 0.5 e^-3t, KI = 0
-    c = list(base.c)
-    c[1] = 0.7 * abs(sum(THESIS_B5[f"a{i}"] for i in range(7, 13)))  # B.6: 0.6506, without the -0.2
-    g = replace(base, c=tuple(c), k=9.0, eta=17.0, KI=0.0)
-    return g, AdaptiveSchedules(k=Schedule(9.0, 11.5, 1.0), eta=Schedule(17.0, 1.1, 2.0),
-                                c=(None, Schedule(c[1], -0.5, 3.0), None))
+    return thesis_hsmc(kind).adaptive()
 
 
 TUNED_HSMC: dict[str, HSMCGains] = {
@@ -436,14 +527,16 @@ def _hsmc_specs(kind: str) -> list[ParamSpec]:
     specs = [ParamSpec(f"c{i + 1}", 1.0, "1/s", f"slope of the {subsystem[i]} sliding surface "
                                                f"s{i + 1} = c{i + 1} position + velocity", "positive")
              for i in range(n)]
-    if kind == "single-mass":
-        specs += [ParamSpec("lambda1", -0.35, "m/rad", "layer weight: S2 = lambda1 S1 + lambda2 s2"),
+    thesis = thesis_hsmc(kind)
+    lam = thesis.gains().lam
+    if n == 2:  # one cart: the second parameter weights the cart's own surface in the top layer
+        specs += [ParamSpec("lambda1", lam[0], "m/rad", "layer weight: S2 = lambda1 S1 + lambda2 s2"),
                   ParamSpec("lambda2", 1.0, "1", "weight of the cart surface in S2 = lambda1 S1 + lambda2 s2")]
-        top = {"m": 1, "s": -1}
     else:
-        specs += [ParamSpec("lambda1", -1.0, "m/rad", "layer weight: S2 = lambda1 S1 + s2"),
-                  ParamSpec("lambda2", -50.0, "1", "layer weight: S3 = lambda2 S2 + s3")]
-        top = {"m": 1, "s": -1}
+        specs += [ParamSpec("lambda1", lam[0], "m/rad", "layer weight: S2 = lambda1 S1 + s2"),
+                  *(ParamSpec(f"lambda{i}", lam[i - 1], "1", f"layer weight: S{i + 1} = lambda{i} S{i} + s{i + 1}")
+                    for i in range(2, n))]
+    top = {"m": 1, "s": -1}
     specs += [ParamSpec("k", 1.0, "1/s", "reaching law: proportional gain (S' = -k S - eta tanh(g S) - KI int S)",
                         "nonnegative"),
               ParamSpec("eta", 0.0, unit_div({**top, "s": -2}, {}), "reaching law: switching gain", "nonnegative"),
@@ -457,21 +550,24 @@ def _hsmc_specs(kind: str) -> list[ParamSpec]:
               ParamSpec("use_thesis_coefficients", False, None, "subsystem models f_i, b_i: false = from the "
                                                                 "design model's linearization; true = the a*/b* "
                                                                 "parameters (the thesis's constants)", "bool")]
-    rows = subsystem_rows(kind)
-    thesis = thesis_coefficients(kind)
-    # unit of each thesis constant: d(row)/dt per state, u in volts for b (force in newtons for App. A.5)
-    coef_state = _coefficient_states(kind)
-    for name, value in thesis.items():
+    return specs + _coefficient_specs(kind, thesis)
+
+
+def _coefficient_specs(kind: str, thesis: ThesisHSMC) -> list[ParamSpec]:
+    """The thesis's constants as parameters; unit: d(row)/dt per state, per volt of ``u`` for b (per newton of
+    cart force for a force model)."""
+    app, rows, specs = thesis.appendix, subsystem_rows(kind), []
+    coef_state = _coefficient_states(kind, thesis)
+    for name, value in thesis.coefficients.items():
         if name.startswith("b"):
             row = rows[int(name[1:]) - 1]
-            per = {"N": 1} if kind == "single-mass" else {"V": 1}
-            unit = unit_div(_deriv_dim(row), per)
-            doc = (f"thesis App. A.5 input gain of subsystem {name[1:]} (per newton of cart force)" if
-                   kind == "single-mass" else f"thesis App. B.5 input gain of subsystem {name[1:]}")
+            unit = unit_div(_deriv_dim(row), {"N": 1} if thesis.force_model else {"V": 1})
+            doc = f"thesis App. {app}.5 input gain of subsystem {name[1:]}" + \
+                (" (per newton of cart force)" if thesis.force_model else "")
         else:
             row, state = coef_state[name]
             unit = unit_div(_deriv_dim(row), state_dim(state))
-            doc = f"thesis App. {'A' if kind == 'single-mass' else 'B'}.5 constant: d({row})/dt per {state}"
+            doc = f"thesis App. {app}.5 constant: d({row})/dt per {state}"
         specs.append(ParamSpec(name, value, unit, doc))
     return specs
 
@@ -497,26 +593,18 @@ def _deriv_dim(row: str) -> dict[str, int]:
     return {"rad": 1, "s": -2} if row == "pendulum_velocity" else {"m": 1, "s": -2}
 
 
-def _coefficient_states(kind: str) -> dict[str, tuple[str, str]]:
-    if kind == "single-mass":
-        return {"a1": ("pendulum_velocity", "pendulum_angle"), "a2": ("pendulum_velocity", "cart_velocity"),
-                "a5": ("pendulum_velocity", "pendulum_velocity"), "a3": ("cart_velocity", "pendulum_angle"),
-                "a4": ("cart_velocity", "cart_velocity"), "a6": ("cart_velocity", "pendulum_velocity")}
-    order = ("pendulum_angle", "pendulum_velocity", "passive_cart_position", "passive_cart_velocity",
-             "active_cart_position", "active_cart_velocity")
-    out = {}
-    for i, st in enumerate(order):
-        out[f"a{i + 1}"] = ("pendulum_velocity", st)
-        out[f"a{i + 7}"] = ("passive_cart_velocity", st)
-    for i, st in enumerate(order[2:]):
-        out[f"a{i + 13}"] = ("active_cart_velocity", st)
-    return out
+def _coefficient_states(kind: str, thesis: ThesisHSMC) -> dict[str, tuple[str, str]]:
+    """Thesis constant ``a*`` -> (the state whose derivative it gives, the state it multiplies)."""
+    rows, states = subsystem_rows(kind), design_states(kind)
+    return {name: (row, state) for row, layout in zip(rows, thesis.layout)
+            for state, name in zip(states, layout) if name}
 
 
 def _hsmc_values(kind: str, g: HSMCGains, use_thesis: bool) -> dict[str, Any]:
     v: dict[str, Any] = {f"c{i + 1}": float(c) for i, c in enumerate(g.c)}
-    v["lambda1"] = float(g.lam[0])
-    v["lambda2"] = float(g.top_weight if kind == "single-mass" else g.lam[1])
+    v.update({f"lambda{i + 1}": float(lam) for i, lam in enumerate(g.lam)})
+    if len(g.lam) == 1:  # one cart: lambda2 weights the cart's surface in the top layer
+        v["lambda2"] = float(g.top_weight)
     v.update(k=g.k, eta=g.eta, KI=g.KI, derivative_time_constant=g.derivative_time_constant,
              use_thesis_coefficients=use_thesis)
     return v
@@ -557,10 +645,10 @@ def _gains_and_models(kind: str, v: Mapping[str, Any]) -> tuple[HSMCGains, list[
     designed)."""
     n = len(subsystem_rows(kind))
     c = tuple(float(v[f"c{i + 1}"]) for i in range(n))
-    if kind == "single-mass":
+    if n == 2:  # one cart: lambda2 weights the cart's surface in the top layer
         lam, top = (float(v["lambda1"]),), float(v["lambda2"])
     else:
-        lam, top = (float(v["lambda1"]), float(v["lambda2"])), 1.0
+        lam, top = tuple(float(v[f"lambda{i}"]) for i in range(1, n)), 1.0
     g = HSMCGains(c=c, lam=lam, top_weight=top, k=float(v["k"]), eta=float(v["eta"]), KI=float(v["KI"]),
                   tanh_gain=float(v["tanh_gain"]), derivative_time_constant=float(v["derivative_time_constant"]),
                   denominator_min=float(v["denominator_min"]))
@@ -596,7 +684,7 @@ def _build_adaptive(kind: str, v: Mapping[str, Any], backend: str) -> AdaptiveHS
 def _through_motor(law: HSMC, kind: str, v: Mapping[str, Any]) -> HSMC:
     """The App. A.5 constants model a force-driven cart: their law's output is a force, applied through
     the design model's motor (``HSMC.drive_through_motor``). The other models are voltage models."""
-    if kind == "single-mass" and bool(v["use_thesis_coefficients"]):
+    if bool(v["use_thesis_coefficients"]) and thesis_hsmc(kind).force_model:
         p = design_params_from(kind, v)
         law.drive_through_motor(p.force_per_amp / p.Ra, p.emf_per_velocity)
     return law
@@ -625,14 +713,9 @@ def _linear_sliding_mode(law: HSMC, b: Builder, gains: tuple[Any, ...], extra: l
     g, T, tau = law.gains, law.sample_period, law.gains.derivative_time_constant
     c, k, eta, KI, k1, KI1 = gains
     notes = [f"eta tanh(g S) linearized as eta g S (g = {g.tanh_gain:g})", *extra]
-    if law.kind == "single-mass":
-        xc, th = b.input(0), b.input(1)
-        vth, vxc = b.derivative(th, T, tau), b.derivative(xc, T, tau)
-        x, pos, vel = (xc, vxc, th, vth), (th, xc), (vth, vxc)
-    else:
-        xa, xc, th = b.input(0), b.input(1), b.input(2)
-        vth, vxc, vxa = b.derivative(th, T, tau), b.derivative(xc, T, tau), b.derivative(xa, T, tau)
-        x, pos, vel = (xa, vxa, xc, vxc, th, vth), (th, xc, xa), (vth, vxc, vxa)
+    pos = tuple(b.input(j) for j, _ in law._reads)
+    vel = tuple(b.derivative(p, T, tau) for p in pos)
+    x = tuple((vel if v else pos)[i] for i, v in law._order)
     S = lsum([(p * ci + v) * a for a, ci, p, v in zip(law._alpha, c, pos, vel)])
     num = lsum([v * (a * ci) for a, ci, v in zip(law._alpha, c, vel)]) + lsum([xi * w for w, xi in zip(law._w, x)])
     total = num + S * (k + eta * g.tanh_gain)

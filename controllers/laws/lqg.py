@@ -387,8 +387,8 @@ def coulomb_model(kind: str, values: Mapping[str, Any]) -> dict[str, Any]:
     carts = [i for i, s in enumerate(states) if s.endswith("cart_velocity")]
     forces = [[b * per_newton for b in B]]
     leads = [[0.0] * len(states)]
-    if kind == "double-mass":
-        ia = states.index("active_cart_position")
+    if len(get(kind).carts) > 1:  # the pendulum's cart, coupled to the motor's by the spring K
+        ia = states.index(get(kind).carts[0].position)
         forces.append([0.0 if i == carts[0] else row[ia] / p.K for i, row in enumerate(A)])
         leads.append([1.0 / p.K if i == ia else 0.0 for i in range(len(states))])
     columns = tuple(tuple(zoh_lists(A, f, T)[1]) for f in forces)

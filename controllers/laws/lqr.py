@@ -40,6 +40,7 @@ from ipcosim.controllers.thesis import (
     THESIS_SINGLE_MASS_R,
 )
 from ipcosim.fmus.expm import Matrix, as_matrix
+from ipcosim.fmus.kinds import get
 from ipcosim.fmus.params import PlantParams
 from ipcosim.fmus.physics import MEASURED
 
@@ -167,15 +168,29 @@ def lqr_specs(kind: str) -> list[ParamSpec]:
     return specs
 
 
+#: The thesis's LQR by plant kind: (Q diagonal, R, observer pole factor, observer poles or None, output filter
+#: time constant [s]).
+THESIS_LQR: dict[str, tuple[tuple[float, ...], float, float, tuple[complex, ...] | None, float]] = {
+    "single-mass": (THESIS_SINGLE_MASS_Q_DIAGONAL, THESIS_SINGLE_MASS_R, 0.0, THESIS_SINGLE_MASS_OBSERVER_POLES, 0.0),
+    "double-mass": (THESIS_DOUBLE_MASS_Q_DIAGONAL, THESIS_DOUBLE_MASS_R, THESIS_DOUBLE_MASS_OBSERVER_FACTOR, None,
+                    0.0008),
+}
+
+
+def _thesis_lqr(kind: str) -> tuple[tuple[float, ...], float, float, tuple[complex, ...] | None, float]:
+    """The thesis's LQR on plant kind ``kind`` (:data:`THESIS_LQR`); an error naming a kind it has none for."""
+    name = get(kind).name  # an unknown kind: the registry's error
+    try:
+        return THESIS_LQR[name]
+    except KeyError:
+        raise LawParameterError("kind", f"the LQR has no thesis weights for plant kind {kind!r} (it has them for "
+                                        f"{', '.join(THESIS_LQR)})") from None
+
+
 def _lqr_values(kind: str, parameter_set: str) -> dict[str, Any]:
     """The thesis's weights and observer poles; ``discrete``: the same weights, K from the discrete LQR."""
     states = design_states(kind)
-    if kind == "single-mass":
-        Q, R, factor = THESIS_SINGLE_MASS_Q_DIAGONAL, THESIS_SINGLE_MASS_R, 0.0
-        poles, tau = THESIS_SINGLE_MASS_OBSERVER_POLES, 0.0
-    else:
-        Q, R, factor = THESIS_DOUBLE_MASS_Q_DIAGONAL, THESIS_DOUBLE_MASS_R, THESIS_DOUBLE_MASS_OBSERVER_FACTOR
-        poles, tau = None, 0.0008
+    Q, R, factor, poles, tau = _thesis_lqr(kind)
     v = {f"Q_{s}": float(Q[i]) for i, s in enumerate(states)}
     v.update(R=float(R), observer_pole_factor=factor, output_filter_time_constant=tau,
              discrete_design=parameter_set == "discrete")

@@ -84,7 +84,7 @@ class SwingUp(DiscreteLaw):
     ----------
     gains : SwingUpGains
     balance : LQR
-        The balancing law (same sample period and limit).
+        The balancing law (same plant kind, sample period and limit).
     cart : tuple of float
         ``(Meq + Mp, Beq, Kf, Ke, Mp, Lp, g)`` of the design model: cart mass [kg], viscous damping
         [N s/m], force per volt N Kt/(Ra rg) [N/V], back-EMF per velocity N Kb/rg [V s/m], pendulum
@@ -93,7 +93,7 @@ class SwingUp(DiscreteLaw):
 
     def __init__(self, gains: SwingUpGains, balance: LQR, cart: tuple[float, ...],
                  sample_period: float = 1e-3, voltage_limit: float = 10.0) -> None:
-        super().__init__("single-mass", sample_period, voltage_limit)
+        super().__init__(balance.kind, sample_period, voltage_limit)
         for f in fields(gains):
             check_nonneg(f.name, getattr(gains, f.name))
         if not 0 < gains.catch_angle < gains.release_angle:

@@ -1,6 +1,7 @@
 """The plant-kind registry (``ipcosim.fmus.kinds``): an unknown kind is an error, and a third kind (a gantry
 crane: the IP02 cart with its pendulum hanging, ``tests/data/kinds/crane.py``) runs through the plant, the FMU
-build, ``describe``, a run and the native build with nothing added but its module and its registry line."""
+build (its plant and HIL-adapter FMUs from scripts the build makes from the kind), ``describe``, a run and the
+native build with nothing added but its module and its registry line."""
 from __future__ import annotations
 
 import difflib
@@ -154,25 +155,29 @@ def _changed(original: Path, copy: Path) -> dict[str, int]:
 
 
 def test_the_crane_runs_through_the_fmu_build_describe_a_run_and_the_native_build(tmp_path: Path) -> None:
+    from fmpy import read_model_description
+
     import ipcosim
-    from ipcosim.fmus.pybuild import build_all, build_one
+    from ipcosim.fmus.pybuild import build_all, discover
     from ipcosim.harness.api.describe import describe
     from ipcosim.harness.native.cbuild import build_native
 
     pkg = _package_with(TOY, tmp_path)
-    (pkg / "fmus" / "fmu_ip02_crane.py").write_text(
-        '"""FMU ``IP02Crane``."""\nfrom ipcosim.fmus.plant_fmu import PlantFmu\n\n\n'
-        'class IP02Crane(PlantFmu):\n    """IP02 cart with its pendulum hanging (gantry crane)."""\n\n'
-        '    kind = "crane"\n')
-    assert _changed(ROOT, pkg) == {str(REGISTRY): 2, "fmus/kinds/crane.py": len(TOY.read_text().splitlines()),
-                                   "fmus/fmu_ip02_crane.py": 8}
+    assert _changed(ROOT, pkg) == {str(REGISTRY): 2, "fmus/kinds/crane.py": len(TOY.read_text().splitlines())}
 
     scenario = tmp_path / "crane-pid"
     resources = scenario / "resources"
     shutil.copytree(ROOT / "ssp" / "single-mass-pid", scenario)
     ssd = scenario / "SystemStructure.ssd"
     ssd.write_text(ssd.read_text().replace("IP02SingleMass", "IP02Crane").replace("single-mass-pid", "crane-pid"))
-    build_one(pkg / "fmus" / "fmu_ip02_crane.py", resources, root=pkg)
+    with kinds.registered(_load(pkg / "fmus" / "kinds" / "crane.py", "_toy_crane_kind_build").KIND):
+        generated = [s for s in discover(pkg) if not s.is_relative_to(pkg)]  # no script file: made from the kind
+        assert sorted(s.name for s in generated) == ["fmu_ip02_crane.py", "fmu_ip02_hil_crane.py"]
+        built = build_all(resources, root=pkg, scripts=generated)
+    assert sorted(r.fmu.name for r in built) == ["IP02Crane.fmu", "IP02HILCrane.fmu"]
+    adapter = read_model_description(str(resources / "IP02HILCrane.fmu"))  # the plant's connectors on a card
+    ports = {v.name: v.causality for v in adapter.modelVariables}
+    assert ports["voltage"] == "input" and [ports[m] for m in ("cart_position", "pendulum_angle")] == ["output"] * 2
     build_all(resources, scripts=[ROOT / "controllers" / "fmu_pid_single_mass.py",
                                   ROOT / "controllers" / "fmu_setpoint.py"])
 
