@@ -148,7 +148,8 @@ def replay_seconds(kind: str, folder: Path, repeats: int = 3) -> tuple[float, fl
     from ipcosim.fmus.params import DEFAULT_PRESET, preset
     from ipcosim.fmus.plant import replay
     from ipcosim.harness.native.replay import native_replay
-    from ipcosim.harness.studies.identify import DEFAULT_FIT, _Problem, read_log
+    from ipcosim.harness.studies.identify import DEFAULT_FIT, read_log
+    from ipcosim.harness.studies.identify_fit import _Problem
 
     log = read_log(folder, kind)
     out = []

@@ -106,7 +106,7 @@ def open_card(card_type: str, card_id: str, *, timeout: float = 1.0, plant: str 
         return TcpipCard(card_type, card_id, parsed.hostname, port, timeout=timeout, name=name, token=token)
     if scheme == "inproc":
         from ipcosim.fmus.hil.inproc import VirtualCard, get_rig
-        from ipcosim.fmus.hil.rig import RigConfig
+        from ipcosim.fmus.hil.rig_config import RigConfig
         rig_name, _, query = where.partition("?")
         opts = dict(urllib.parse.parse_qsl(query))
         unknown = set(opts) - {"plant", "clock"}

@@ -12,7 +12,8 @@ from typing import Sequence
 import numpy as np
 
 from ipcosim.fmus.hil.api import Card, ErrorCode, HILError, RigStatus, StepResult
-from ipcosim.fmus.hil.rig import NS, RigConfig, VirtualRig, to_ns
+from ipcosim.fmus.hil.rig import VirtualRig
+from ipcosim.fmus.hil.rig_config import NS, RigConfig, to_ns
 
 
 def _process_registry() -> tuple[dict, dict, threading.Lock]:

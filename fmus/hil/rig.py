@@ -28,20 +28,25 @@ FMUs step). Around it the rig models what a controller meets on the real bench:
   ``latency`` seconds after it was made, a reading shows the encoders ``latency``
   seconds before it was taken.
 
+
 Clocks. ``lockstep``: the rig's time advances only when asked (:meth:`VirtualRig.advance`,
 :meth:`VirtualRig.step`); deterministic, for CI. ``wallclock``: the rig's time is the host's
 monotonic clock since :meth:`start_clock`, counted in steps of the clock's ``resolution``
 (10 us). Neither ticks: the physics is computed when a request comes (or a status is asked),
-exactly from where it was to the request's instant with the voltage held -- a DAC holds its
-value, an encoder is read when asked --, in sub-steps of at most ``tick``. Inside such an
-interval the rig locates what happens on its own: a watchdog's expiry at its deadline, a
-software limit's trip at the first instant (to the clock's resolution) its encoder reading is
-beyond the limit; either latches at that instant. A STEP to a sample instant ``until`` is
-answered at once with the reading at ``until``: the voltage it writes is held to then, and
-the client waits for ``until`` before it acts again (:meth:`VirtualRig.exchange`). So a
-wall-clock run's physics is the lockstep replay of its own requests. Time is kept in integer
+exactly from where it was to the request's instant with the voltage held, and what happens
+inside that interval is located there (:mod:`ipcosim.fmus.hil.rig_physics`). A STEP to a sample
+instant ``until`` is answered at once with the reading at ``until``: the voltage it writes is
+held to then, and the client waits for ``until`` before it acts again (:meth:`VirtualRig.exchange`).
+So a wall-clock run's physics is the lockstep replay of its own requests. Time is kept in integer
 nanoseconds (never accumulated floats); the clock is a :class:`RigClock`. The rig is
 thread-safe (one re-entrant lock).
+
+The rig, one idea to a module:
+
+    rig_config   what defines a rig: the card's and the lab's facts, experiments, RigConfig
+    rig_clock    its timekeeping: the card's watchdog registers and the rig's clock
+    rig_physics  the plant advanced between requests, the watchdog's expiry and limit trips located
+    rig          (this module) the rig a card talks to: VirtualRig's card and lab operations
 """
 from __future__ import annotations
 
@@ -49,13 +54,10 @@ import collections
 import math
 import threading
 import time
-from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
-from ipcosim.errors import closest
-from ipcosim.fmus import instruments
 from ipcosim.fmus.hil.api import (
     CardInfo,
     ErrorCode,
@@ -67,272 +69,48 @@ from ipcosim.fmus.hil.api import (
     wait_until_ns,
     wrap_int32,
 )
-from ipcosim.fmus.instruments import end_stop_state
-from ipcosim.fmus.params import DEFAULT_PRESET, PRESETS, preset
+from ipcosim.fmus.hil.rig_clock import RigClock, Watchdog
+from ipcosim.fmus.hil.rig_config import (
+    AMPLIFIER_GAIN,
+    ANALOG_OUTPUTS,
+    CART_ENCODER,
+    CART_LIMIT_M,
+    CART_M_PER_COUNT,
+    CLOCKS,
+    COUNTS_PER_REV,
+    DAC_BITS,
+    DAC_LSB,
+    DAC_RANGE,
+    DEFAULT_RESOLUTION,
+    DEFAULT_TICK,
+    ENCODER_INPUTS,
+    END_STOP_M,
+    EXPERIMENTS,
+    LOCATE_NS,
+    MAX_REQUEST_SPAN_NS,
+    MAX_WATCHDOG_TIMEOUT,
+    MOTOR_CHANNEL,
+    NS,
+    PASSIVE_CART_ENCODER,
+    PENDULUM_ENCODER,
+    PENDULUM_LIMIT_RAD,
+    PENDULUM_RAD_PER_COUNT,
+    RigConfig,
+    RigEvent,
+    dac_quantize,
+    experiment_config,
+    to_ns,
+)
+from ipcosim.fmus.hil.rig_physics import RigPhysics
+from ipcosim.fmus.params import DEFAULT_PRESET, preset
 from ipcosim.fmus.physics import MEASURED
-from ipcosim.fmus.plant import Plant, PlantStepError
+from ipcosim.fmus.plant import Plant
 
-# Q4 card and IP02 facts (the thesis, sec. 3.3: Q4 card, 4096-count encoders; docs/plant.md, Parameters).
-ANALOG_OUTPUTS = 4
-ENCODER_INPUTS = 4
-DAC_BITS = instruments.DAC_BITS
-DAC_RANGE = instruments.DAC_RANGE_V      # +-10 V
-DAC_LSB = instruments.DAC_V_PER_CODE
-COUNTS_PER_REV = 4096
-CART_M_PER_COUNT = 2.275e-5
-PENDULUM_RAD_PER_COUNT = 1.534e-3
-AMPLIFIER_GAIN = 1.0
-MOTOR_CHANNEL = 0
-CART_ENCODER, PENDULUM_ENCODER, PASSIVE_CART_ENCODER = 0, 1, 2
-CART_LIMIT_M = instruments.CART_LIMIT_M
-PENDULUM_LIMIT_RAD = instruments.PENDULUM_LIMIT_RAD
-END_STOP_M = 0.407
-CLOCKS = ("lockstep", "wallclock")
-DEFAULT_TICK = {"lockstep": 1e-3, "wallclock": 5e-4}
-#: The clock's resolution [s]: a wall-clock request's instant is counted in these steps, so that every
-#: sub-step the physics takes is a whole number of them and its stepper is made once, before the run.
-DEFAULT_RESOLUTION = {"lockstep": 1e-9, "wallclock": 1e-5}
-#: How finely a limit trip is located in a lockstep rig (whose clock counts nanoseconds) [ns].
-LOCATE_NS = 10_000
-
-NS = 1_000_000_000
-#: Longest stretch of rig time one request may ask for (STEP to an instant, ADVANCE) [ns]: a
-#: client cannot make the rig wait, or compute, for longer than this.
-MAX_REQUEST_SPAN_NS = 10 * NS
-#: Longest watchdog timeout a client may set [s].
-MAX_WATCHDOG_TIMEOUT = 10.0
 #: The plants' steppers by step size, one table per plant parameters, shared by every rig of this process.
 _STEPPERS: dict = {}
 
 
-#: Experiments the rig can be set up for (``ipcosim rig serve --experiment NAME``): the pose it starts
-#: in and its software limits. ``identify``: the pendulum hanging (the excitation of
-#: ``{single-mass,double-mass}-identify`` swings it about its stable equilibrium), so the pendulum limit
-#: (an upright-balancing guard) is off; the cart limit stays (the excitation holds the cart within 0.25 m).
-EXPERIMENTS: dict[str, dict[str, object]] = {
-    "identify": {"initial_state": {"pendulum_angle": math.pi}, "pendulum_limit": None, "cart_limit": CART_LIMIT_M},
-}
-
-
-def experiment_config(name: str | None, given: Mapping[str, object]) -> dict[str, object]:
-    """``RigConfig`` keywords for the experiment ``name`` (``EXPERIMENTS``; None: none) under the ones
-    ``given``: a given value wins, given initial-state values join the experiment's."""
-    if name is not None and name not in EXPERIMENTS:
-        raise ValueError(f"--experiment {name}: no such rig experiment; {closest(name, EXPERIMENTS)}")
-    setup = EXPERIMENTS.get(name or "", {})
-    out = {**{k: v for k, v in setup.items() if k != "initial_state"}, **given}
-    out["initial_state"] = {**setup.get("initial_state", {}), **given.get("initial_state", {})}  # type: ignore[dict-item]
-    return out
-
-
-def to_ns(seconds: float) -> int:
-    """Seconds -> integer nanoseconds (rounded)."""
-    return int(round(float(seconds) * NS))
-
-
-def dac_quantize(volts: float) -> float:
-    """The DAC: the nearest 12-bit code in [-2048, 2047], back in volts."""
-    code = int(round(volts / DAC_LSB))
-    code = max(-(1 << (DAC_BITS - 1)), min((1 << (DAC_BITS - 1)) - 1, code))
-    return code * DAC_LSB
-
-
-@dataclass(frozen=True)
-class RigConfig:
-    """Everything that defines a virtual rig.
-
-    Parameters
-    ----------
-    plant : str
-        ``single-mass`` or ``double-mass``.
-    preset : str, optional
-        Physical parameter preset (default: the plant's thesis preset).
-    params : mapping
-        Physical parameter overrides (``ipcosim.fmus.params`` names).
-    initial_state : mapping
-        Initial values by state name (``ipcosim.fmus.physics.state_names``); others 0.
-    clock : str
-        ``lockstep`` or ``wallclock``.
-    tick : float, optional
-        Physics step [s]: the largest sub-step the physics takes.
-    cart_limit, pendulum_limit : float or None
-        Software limits [m], [rad]; None disables one.
-    end_stop : float
-        Hard end stops [m].
-    noise_counts : float
-        Standard deviation of encoder noise [counts]; 0 = none.
-    latency : float
-        One-way transport latency [s].
-    seed : int
-        Seed of the noise generator.
-    encoder_phase : float
-        Where the encoders' count edges lie relative to the zero position, in counts: a
-        counter reads ``floor(position / resolution + encoder_phase)``. 0.5 (default): the
-        edges are half a count either side of the zero (the reading is the nearest count,
-        no bias); 0: an edge at the zero (the reading is up to one count below).
-    cart_m_per_count, pendulum_rad_per_count : float
-        Encoder resolutions (default: the thesis's IP02 encoders).
-    resolution : float, optional
-        The clock's resolution [s] (default: 1 ns lockstep, 10 us wallclock); ``tick`` is a
-        whole number of it. A lockstep replay of a wall-clock run takes the wall clock's.
-    """
-
-    plant: str = "single-mass"
-    preset: str | None = None
-    params: Mapping[str, float] = field(default_factory=dict)
-    initial_state: Mapping[str, float] = field(default_factory=dict)
-    clock: str = "lockstep"
-    tick: float | None = None
-    cart_limit: float | None = CART_LIMIT_M
-    pendulum_limit: float | None = PENDULUM_LIMIT_RAD
-    end_stop: float = END_STOP_M
-    noise_counts: float = 0.0
-    latency: float = 0.0
-    seed: int = 0
-    encoder_phase: float = 0.5
-    cart_m_per_count: float = CART_M_PER_COUNT
-    pendulum_rad_per_count: float = PENDULUM_RAD_PER_COUNT
-    resolution: float | None = None
-
-    def checked(self) -> "RigConfig":
-        """Validate; raises ``ValueError`` naming the offending field."""
-        if self.plant not in DEFAULT_PRESET:
-            raise ValueError(f"rig plant {self.plant!r}: expected {' or '.join(DEFAULT_PRESET)}")
-        if self.clock not in CLOCKS:
-            raise ValueError(f"rig clock {self.clock!r}: expected lockstep or wallclock")
-        name = self.preset or DEFAULT_PRESET[self.plant]
-        if name in PRESETS and PRESETS[name][0] != self.plant:
-            raise ValueError(f"rig preset {name!r} is a {PRESETS[name][0]} preset, not {self.plant}")
-        for label, value, lo in (("tick", self.tick_s, 1e-6), ("end_stop", self.end_stop, 0.0),
-                                 ("resolution", self.resolution_s, 0.0)):
-            if not (math.isfinite(value) and value > lo):
-                raise ValueError(f"rig {label} = {value}: must be a finite number > {lo:g}")
-        res_ns = max(1, to_ns(self.resolution_s))
-        if to_ns(self.tick_s) % res_ns:
-            raise ValueError(f"rig tick = {self.tick_s} s: must be a whole number of the clock's resolution "
-                             f"({self.resolution_s:g} s)")
-        if not (math.isfinite(self.encoder_phase) and 0 <= self.encoder_phase < 1):
-            raise ValueError(f"rig encoder_phase = {self.encoder_phase}: must be in [0, 1) counts")
-        for label, value in (("cart_m_per_count", self.cart_m_per_count),
-                             ("pendulum_rad_per_count", self.pendulum_rad_per_count)):
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"rig {label} = {value}: must be > 0")
-        for label, value in (("noise_counts", self.noise_counts), ("latency", self.latency)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"rig {label} = {value}: must be a finite number >= 0")
-        for label, value in (("cart_limit", self.cart_limit), ("pendulum_limit", self.pendulum_limit)):
-            if value is not None and not (math.isfinite(value) and value > 0):
-                raise ValueError(f"rig {label} = {value}: must be > 0 (or disabled)")
-        return self
-
-    @property
-    def tick_s(self) -> float:
-        """The physics step [s] (the clock's default if not given)."""
-        return float(self.tick) if self.tick is not None else DEFAULT_TICK[self.clock]
-
-    @property
-    def resolution_s(self) -> float:
-        """The clock's resolution [s] (the clock's default if not given)."""
-        return float(self.resolution) if self.resolution is not None else DEFAULT_RESOLUTION[self.clock]
-
-
-@dataclass(frozen=True)
-class RigEvent:
-    """Something the rig's log keeps: a limit trip, a watchdog expiry, a session change..."""
-
-    time: float
-    topic: str  # limit, fault, watchdog, session, reset, halt
-    message: str
-
-
-# --- the card's watchdog and the rig's clock, which the rig composes -----------------------------
-
-class Watchdog:
-    """The watchdog's registers: running, expired (latched), timeout, deadline, last reload, expiry time [ns]."""
-
-    def __init__(self) -> None:
-        self.running = False
-        self.expired = False
-        self.timeout_ns = 0
-        self.deadline_ns = 0
-        self.last_reload_ns: int | None = None
-        self.expired_at_ns: int | None = None
-
-    def start(self, timeout_ns: int, now_ns: int) -> None:
-        """Run with ``timeout_ns``, reloaded at ``now_ns``."""
-        self.timeout_ns = timeout_ns
-        self.running = True
-        self._reloaded(now_ns)
-
-    def reload(self, now_ns: int) -> bool:
-        """Reload at ``now_ns``; False (and nothing done) if it had expired."""
-        if self.expired:
-            return False
-        if self.running:
-            self._reloaded(now_ns)
-        return True
-
-    def clear(self, now_ns: int) -> None:
-        """Clear an expiry; a running watchdog is reloaded at ``now_ns``."""
-        self.expired = False
-        if self.running:
-            self._reloaded(now_ns)
-
-    def stop(self) -> None:
-        """Stop the timer (an expiry stays until cleared)."""
-        self.running = False
-
-    def due(self, t_ns: int) -> bool:
-        """Whether it expires at rig time ``t_ns`` (running, not yet expired, deadline reached)."""
-        return self.running and not self.expired and t_ns >= self.deadline_ns
-
-    def expire(self, t_ns: int) -> None:
-        """Latch the expiry at rig time ``t_ns``."""
-        self.expired = True
-        self.expired_at_ns = t_ns
-
-    def _reloaded(self, now_ns: int) -> None:
-        self.last_reload_ns = now_ns
-        self.deadline_ns = now_ns + self.timeout_ns
-
-
-class RigClock:
-    """Rig time [ns] of one rig.
-
-    Parameters
-    ----------
-    mode : str
-        ``lockstep`` or ``wallclock``.
-    clock_ns : callable
-        Monotonic host clock in nanoseconds (wallclock; injectable for tests).
-    """
-
-    def __init__(self, mode: str, clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
-        self.mode = mode
-        self.clock_ns = clock_ns
-        self.wall0_ns: int | None = None   # wallclock: host time of rig time 0
-
-    @property
-    def lockstep(self) -> bool:
-        """True for the ``lockstep`` clock."""
-        return self.mode == "lockstep"
-
-    def start(self, physics_ns: int) -> None:
-        """Wallclock: rig time ``physics_ns`` is now (once; later calls keep the first start)."""
-        if self.wall0_ns is None:
-            self.wall0_ns = self.clock_ns() - physics_ns
-
-    def now_ns(self, physics_ns: int) -> int:
-        """The rig's time: ``physics_ns`` (lockstep) or host time since :meth:`start` (wallclock,
-        started now if it was not)."""
-        if self.lockstep:
-            return physics_ns
-        if self.wall0_ns is None:
-            self.start(physics_ns)
-        return self.clock_ns() - self.wall0_ns
-
-
-class VirtualRig:
+class VirtualRig(RigPhysics):
     """The virtual IP02 + Q4 rig (see the module docstring).
 
     Parameters
@@ -475,178 +253,6 @@ class VirtualRig:
                                                            f"most {MAX_REQUEST_SPAN_NS / NS:g} s per request")
             self._advance_to(self._t_ns + to_ns(dt))
 
-    def _advance_to(self, target_ns: int) -> None:
-        """Compute the physics to ``target_ns``, in pieces that end where something is due inside the
-        interval (a watchdog deadline, a delayed write reaching the amplifier)."""
-        while self._t_ns < target_ns:
-            self._piece(min(target_ns, self._next_due(target_ns)))
-
-    def _next_due(self, horizon_ns: int) -> int:
-        """The first instant after now and before ``horizon_ns`` at which something is due (else the horizon)."""
-        t, out = self._t_ns, horizon_ns
-        wd = self.watchdog
-        if wd.running and not wd.expired and t < wd.deadline_ns < out:
-            out = wd.deadline_ns
-        if self._pending and t < self._pending[0][0] < out:
-            out = self._pending[0][0]
-        return out
-
-    def _piece(self, end_ns: int) -> None:
-        """From now to ``end_ns`` in ``ceil(interval / tick)`` sub-steps as equal as the clock's resolution
-        allows (a lockstep rig: as equal as nanoseconds allow)."""
-        interval = end_ns - self._t_ns
-        q = self.res_ns if interval % self.res_ns == 0 else 1
-        units = interval // q
-        n = -(-interval // self.tick_ns)
-        done = 0
-        halted = self._halted.is_set
-        for k in range(1, n + 1):
-            if halted():
-                raise HILError(ErrorCode.CONNECTION, "the rig is shutting down")
-            upto = units * k // n * q
-            self._substep(upto - done)
-            done = upto
-
-    # --- physics ---------------------------------------------------------------------------------
-
-    def _substep(self, dt_ns: int) -> None:
-        t_ns = self._t_ns
-        while self._pending and self._pending[0][0] <= t_ns:
-            _, ch, v = self._pending.popleft()
-            self._applied[ch] = v
-        if self.watchdog.due(t_ns):
-            self._expire_watchdog(t_ns)
-        v = AMPLIFIER_GAIN * self._applied[MOTOR_CHANNEL] if self.amplifier_enabled else 0.0
-        armed = self.amplifier_enabled and self.limits_armed
-        start = self.plant.snapshot() if armed and not self.latency_ns else None
-        self._plant_step(t_ns, dt_ns, v)
-        if not armed:
-            return
-        beyond = self._beyond_limit()
-        if beyond is None:
-            return
-        if start is not None:
-            beyond = self._locate_trip(start, t_ns, dt_ns, v, beyond)
-        self._trip(*beyond)
-        if self._t_ns < t_ns + dt_ns:      # the rest of the sub-step with the amplifier off
-            self._substep(t_ns + dt_ns - self._t_ns)
-
-    def _plant_step(self, t_ns: int, dt_ns: int, v: float) -> None:
-        """One step of the plant from ``t_ns`` (the hard end stops after it)."""
-        try:
-            self.plant.do_step(t_ns / NS, dt_ns / NS, v)
-        except (PlantStepError, ValueError) as exc:
-            self.amplifier_enabled = False
-            self.limit_message = f"plant fault: {exc}"
-            self._event(t_ns, "fault", self.limit_message)
-            raise HILError(ErrorCode.INTERNAL, f"virtual rig: {exc}") from exc
-        self._t_ns = t_ns + dt_ns
-        self._end_stops()
-        self._record_history()
-
-    def _locate_trip(self, start: tuple, t_ns: int, dt_ns: int, v: float,
-                     beyond: tuple[int, float, float]) -> tuple[int, float, float]:
-        """The first instant of the sub-step from ``t_ns`` (state ``start``) at which a reading is beyond
-        its limit, by bisection on the clock's resolution (``LOCATE_NS`` on a lockstep clock): the
-        plant is left there, with what is beyond."""
-        q = self.res_ns if self.res_ns > 1 else LOCATE_NS
-        lo, hi = 0, dt_ns
-        end = self.plant.snapshot()
-        while True:
-            mid = (lo + (hi - lo) // 2) // q * q
-            if mid <= lo:
-                mid = lo + q
-            if mid >= hi:
-                break
-            self.plant.restore(start)
-            self._plant_step(t_ns, mid, v)
-            found = self._beyond_limit()
-            if found is None:
-                lo = mid
-            else:
-                hi, beyond, end = mid, found, self.plant.snapshot()
-        self.plant.restore(end)
-        self._t_ns = t_ns + hi
-        return beyond
-
-    def _end_stops(self) -> None:
-        x = self.plant.state
-        stopped = end_stop_state(x, [(ip, iv) for ip, iv, _ in self._carts], self.config.end_stop)
-        if stopped is None:
-            return
-        for ip, _, name in self._carts:
-            if stopped[ip] != x[ip]:
-                self.counters[f"end_stop:{name}"] += 1
-        self.plant.set_state(stopped)
-
-    def _record_history(self) -> None:
-        """With a transport latency: keep the states the encoders may still show."""
-        if not self.latency_ns:
-            return
-        self._history.append((self._t_ns, self.plant.state))
-        keep_from = self._t_ns - self.latency_ns
-        while len(self._history) > 1 and self._history[1][0] <= keep_from:
-            self._history.popleft()
-
-    def _sensed_state(self, at_ns: int | None = None) -> Sequence[float]:
-        """The state the encoders show at rig time ``at_ns`` (default: now), i.e. ``latency`` earlier."""
-        if not self.latency_ns:
-            return self.plant.state
-        when = (self._t_ns if at_ns is None else at_ns) - self.latency_ns
-        chosen = self._history[0][1]
-        for t, x in reversed(self._history):
-            if t <= when:
-                chosen = x
-                break
-        return chosen
-
-    def _position_counts(self, channel: int, x: Sequence[float]) -> int:
-        if channel not in self._encoders:
-            return 0
-        index, res = self._encoders[channel]
-        return math.floor(x[index] / res + self._phase)
-
-    def _beyond_limit(self) -> tuple[int, float, float] | None:
-        """``(encoder channel, reading, limit)`` of the first reading beyond its software limit, or None."""
-        x = self._sensed_state()
-        cfg = self.config
-        for ch, (index, res) in self._encoders.items():
-            limit = cfg.pendulum_limit if ch == PENDULUM_ENCODER else cfg.cart_limit
-            value = math.floor(x[index] / res + self._phase) * res
-            if limit is not None and abs(value) > limit:
-                return ch, value, limit
-        return None
-
-    def _trip(self, ch: int, value: float, limit: float) -> None:
-        """Latch the amplifier off now: the reading of encoder ``ch`` is ``value``, beyond ``limit``."""
-        name = self.plant.state_names[self._encoders[ch][0]]
-        unit = "rad" if ch == PENDULUM_ENCODER else "m"
-        extra = f" ({math.degrees(value):+.2f} deg, limit +-{math.degrees(limit):.0f} deg)" \
-            if ch == PENDULUM_ENCODER else ""
-        self.amplifier_enabled = False
-        self.limit_message = (f"{'pendulum' if ch == PENDULUM_ENCODER else 'cart'} limit tripped: "
-                              f"{name} = {value:+.4f} {unit} beyond +-{limit:.4g} {unit}{extra} "
-                              f"at rig time {self._t_ns / NS:.4f} s; amplifier latched off until reset")
-        self.counters["limit_trips"] += 1
-        self._event(self._t_ns, "limit", self.limit_message)
-
-    def _expire_watchdog(self, t_ns: int) -> None:
-        wd = self.watchdog
-        wd.expire(t_ns)
-        for ch in range(ANALOG_OUTPUTS):
-            self._ao[ch] = self._expiration[ch]
-            self._applied[ch] = self._expiration[ch]  # the card forces its outputs at once
-        self._pending.clear()
-        self.counters["watchdog_expiries"] += 1
-        last = wd.last_reload_ns if wd.last_reload_ns is not None else t_ns
-        self._event(t_ns, "watchdog", f"watchdog expired at rig time {t_ns / NS:.4f} s "
-                                      f"({(t_ns - last) / NS:.4f} s after the last reload; timeout "
-                                      f"{wd.timeout_ns / NS:g} s): outputs forced to their expiration "
-                                      f"states")
-
-    def _event(self, t_ns: int, topic: str, message: str) -> None:
-        self.events.append(RigEvent(t_ns / NS, topic, message))
-        self.event_count += 1
 
     # --- card operations (every one syncs the wallclock first) ------------------------------------
 
@@ -903,4 +509,9 @@ class VirtualRig:
             return self.plant.values()
 
 
-
+__all__ = ["VirtualRig", "RigConfig", "RigEvent", "RigClock", "Watchdog", "RigPhysics", "EXPERIMENTS",
+           "experiment_config", "to_ns", "dac_quantize", "NS", "ANALOG_OUTPUTS", "ENCODER_INPUTS", "DAC_BITS",
+           "DAC_RANGE", "DAC_LSB", "COUNTS_PER_REV", "CART_M_PER_COUNT", "PENDULUM_RAD_PER_COUNT", "AMPLIFIER_GAIN",
+           "MOTOR_CHANNEL", "CART_ENCODER", "PENDULUM_ENCODER", "PASSIVE_CART_ENCODER", "CART_LIMIT_M",
+           "PENDULUM_LIMIT_RAD", "END_STOP_M", "CLOCKS", "DEFAULT_TICK", "DEFAULT_RESOLUTION", "LOCATE_NS",
+           "MAX_REQUEST_SPAN_NS", "MAX_WATCHDOG_TIMEOUT"]

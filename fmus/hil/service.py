@@ -17,7 +17,8 @@ from typing import Callable, Mapping
 
 from ipcosim.errors import IpcosimError, UsageError, closest
 from ipcosim.fmus.hil.protocol import MAX_TOKEN, TOKEN_ENV
-from ipcosim.fmus.hil.rig import END_STOP_M, RigConfig, VirtualRig, experiment_config
+from ipcosim.fmus.hil.rig import VirtualRig
+from ipcosim.fmus.hil.rig_config import END_STOP_M, RigConfig, experiment_config
 from ipcosim.fmus.hil.server import (
     DEFAULT_HOST,
     DEFAULT_IDLE_TIMEOUT,
@@ -25,8 +26,8 @@ from ipcosim.fmus.hil.server import (
     DEFAULT_MAX_CONNECTIONS,
     DEFAULT_PORT,
     RigServer,
-    escape,
 )
+from ipcosim.fmus.hil.server_log import escape
 from ipcosim.fmus.params import PLANT_KINDS
 from ipcosim.fmus.physics import state_names
 

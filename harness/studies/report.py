@@ -19,7 +19,7 @@ from typing import Any, Mapping, Sequence
 from ipcosim.fmus.kinds import ByKind, get
 from ipcosim.fmus.params import KINDS
 from ipcosim.harness.scenario.scenarios import CONTROLLERS as SCENARIO_CONTROLLERS
-from ipcosim.harness.studies.robustness import fmt
+from ipcosim.harness.studies.robustness_summary import fmt
 from ipcosim.harness.support.extras import optional_figure
 
 CONTROLLERS = ("pid", "cascade-pid", "lqr", "hsmc", "adaptive-hsmc")

@@ -137,8 +137,10 @@ def test_adapter_passes_validate_fmu(kind, hil_fmus):
     assert private_resource(names, "fmus/hil/api.py")
     assert not any("/harness/" in n for n in names), names  # nothing of the master side
     assert all(n.endswith(".pyc") for n in names if "__pycache__" in n)  # only the build's checked bytecode
-    assert not private_resource(names, "fmus/hil/server.py")  # the rig side, in the same room: not imported
-    assert not private_resource(names, "fmus/hil/service.py")
+    for module in ("server", "server_requests", "server_log", "service"):  # the rig side, in the same room:
+        assert not private_resource(names, f"fmus/hil/{module}.py")       # not imported
+    for module in ("rig", "rig_config", "rig_clock", "rig_physics"):     # the in-process card's rig
+        assert private_resource(names, f"fmus/hil/{module}.py")
     assert not private_resource(names, "harness/cli/__init__.py")
 
 

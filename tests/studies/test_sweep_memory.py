@@ -174,13 +174,13 @@ def _sweep_peak(tmp_path: Path, runs: int) -> tuple[int, dict]:
     """tracemalloc peak [bytes] of a sweep of ``runs`` in-process runs into a folder, its summary read back and
     the rows its figures would draw, with the sizes held in memory made small (so that a few thousand runs
     are already a large sweep); and the summary."""
-    from ipcosim.harness.studies import columns, robustness, store, sweep
+    from ipcosim.harness.studies import columns, robustness, robustness_figures, store, sweep
     from ipcosim.harness.studies.sweep import run_sweep
 
     spec = SyntheticSpec()
     cases = make_cases(parse_all(["model.x=uniform(0,2)"], spec.parameters), spec.parameters, samples=runs, seed=4)
     out = tmp_path / str(runs)
-    sizes = [(store, "SORT_CHUNK"), (robustness, "FIGURE_RUNS"), (columns, "ROW_BLOCK"), (columns, "CHUNK"),
+    sizes = [(store, "SORT_CHUNK"), (robustness_figures, "FIGURE_RUNS"), (columns, "ROW_BLOCK"), (columns, "CHUNK"),
              (sweep, "RECORDED_SEEDS"), (store, "MERGE_FILES")]
     saved = [getattr(module, name) for module, name in sizes]
     for module, name in sizes:
@@ -189,7 +189,7 @@ def _sweep_peak(tmp_path: Path, runs: int) -> tuple[int, dict]:
     try:
         result = run_sweep(spec, cases, out=out, executor=_InProcessRuns())
         summary = robustness.summarize_results(result.path, spec.metric_names, limit=64)
-        drawn, total = robustness.figure_rows(result.path)
+        drawn, total = robustness_figures.figure_rows(result.path)
         assert (len(drawn), total) == (64, runs) and result.counts["error"] == runs // 50
         return tracemalloc.get_traced_memory()[1], summary
     finally:
