@@ -59,6 +59,7 @@ def equivalent_truth(kind: str, truth: dict[str, float], fit: Sequence[str]) -> 
     and ``amplifier_gain``, it carries the force per volt ``amplifier_gain N Kt / (rg Ra)``, and the viscous damping
     of the motor cart (``Beq``, ``Ba``) the part of the back-EMF damping ``N^2 Kt Kb / (rg^2 Ra)`` that the fitted
     ``Kt`` does not. Every other truth is itself."""
+    from ipcosim.fmus import kinds
     from ipcosim.fmus.params import DEFAULT_PRESET, preset
 
     base = preset(DEFAULT_PRESET[kind])
@@ -66,7 +67,7 @@ def equivalent_truth(kind: str, truth: dict[str, float], fit: Sequence[str]) -> 
     out = dict(truth)
     if "Kt" in fit and "Ra" not in fit and "amplifier_gain" not in fit:
         kt = true["amplifier_gain"] * true["Kt"] * base.Ra / true["Ra"]
-        damping = "Beq" if kind == "single-mass" else "Ba"
+        damping = kinds.get(kind).carts[0].damping  # the motor-driven cart's
         emf = base.N ** 2 * base.Kb / base.rg ** 2
         out[damping] = truth.get(damping, getattr(base, damping)) + emf * (true["Kt"] / true["Ra"] - kt / base.Ra)
         out["Kt"] = kt
@@ -167,10 +168,11 @@ def replay_seconds(kind: str, folder: Path, repeats: int = 3) -> tuple[float, fl
 
 def run() -> list[str]:
     from benchmarks.targets import figure, target
+    from ipcosim.fmus.params import KINDS
 
     lines = []
     with tempfile.TemporaryDirectory() as tmp:
-        for kind in ("single-mass", "double-mass"):
+        for kind in KINDS:
             truth, r = one_run(kind, 1, Path(tmp))
             key = kind.replace("-", "_")
             lines.append(f"{kind}: 20 s log at 1 kHz fitted in {r.fit_cpu_s:.1f} s CPU ({r.fit_time_s:.1f} s wall, "
@@ -271,9 +273,11 @@ def _seeds(text: str) -> list[int]:
 
 
 if __name__ == "__main__":
+    from ipcosim.fmus.params import KINDS
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--coverage", type=int, metavar="N", help="N seeded repetitions per plant")
-    parser.add_argument("--plant", choices=["single-mass", "double-mass"], action="append")
+    parser.add_argument("--plant", choices=list(KINDS), action="append")
     parser.add_argument("--rig", action="store_true", help="log through --swap plant=hil (a lockstep rig process)")
     parser.add_argument("--first", type=int, default=1, metavar="SEED", help="the first repetition's seed (default 1)")
     parser.add_argument("--seeds", type=_seeds, metavar="S,S,...", help="only these repetitions (instead of "
@@ -284,5 +288,5 @@ if __name__ == "__main__":
                         "already there (to measure an estimator change on the same logs)")
     args = parser.parse_args()
     seeds = args.seeds or range(args.first, args.first + (args.coverage or 10))
-    for kind in args.plant or ["single-mass", "double-mass"]:
+    for kind in args.plant or KINDS:
         print("\n".join(coverage(kind, seeds, args.rig, args.logs, args.model_error)), flush=True)

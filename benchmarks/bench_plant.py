@@ -118,7 +118,7 @@ def _pure_stepper(kind: str) -> Callable[[int], float]:
 
     plant = Plant(preset(DEFAULT_PRESET[kind]))
     x = plant.x.copy()
-    x[2 if kind == "single-mass" else 4] = math.pi
+    x[plant.state_names.index("pendulum_angle")] = math.pi
     plant.set_state(x)
 
     def timed(r: int) -> float:
@@ -134,7 +134,9 @@ def _pure_plants_us() -> dict[str, float]:
     """The least disturbed pure ``Plant.do_step`` of both kinds [us], in alternating rounds (as the FMU cycles
     are measured) spread over about a second, so that a stall of a shared machine (one measured run had every
     one of 250 consecutive rounds of one kind slowed 2.3 times, the other kind's not) slows both kinds alike."""
-    steppers = {kind: _pure_stepper(kind) for kind in ("single-mass", "double-mass")}
+    from ipcosim.fmus.params import KINDS
+
+    steppers = {kind: _pure_stepper(kind) for kind in KINDS}
     samples: dict[str, list[float]] = {kind: [] for kind in steppers}
     for r in range(PURE_ROUNDS):
         for kind, timed in steppers.items():
@@ -143,11 +145,11 @@ def _pure_plants_us() -> dict[str, float]:
 
 
 def measure() -> dict[str, float]:
-    """Median microseconds per cycle for 'floor', 'single-mass', 'double-mass' (+ '*-pure')."""
+    """Median microseconds per cycle for 'floor', 'fmubase' and each plant kind (+ '<kind>-pure')."""
     from pythonfmu import FmuBuilder
 
-    from ipcosim.fmus import wrapper
-    from ipcosim.fmus.pybuild import ROOT, build_all
+    from ipcosim.fmus import kinds, wrapper
+    from ipcosim.fmus.pybuild import build_all, model_scripts
 
     with tempfile.TemporaryDirectory(prefix="ipcosim-bench-") as tmp:
         work = Path(tmp)
@@ -158,12 +160,12 @@ def measure() -> dict[str, float]:
         base_script = work / "fmu_trivial_fmubase_bench.py"
         base_script.write_text(FMUBASE_SCRIPT)
         (base,) = build_all(work / "fmus", scripts=[base_script])
-        plants = {r.fmu.stem: r.fmu for r in build_all(work / "fmus", scripts=[
-            ROOT / "fmus" / "fmu_ip02_single_mass.py", ROOT / "fmus" / "fmu_ip02_double_mass.py"])}
+        models = {kind: kinds.get(kind).model for kind in kinds.names()}
+        scripts = model_scripts()
+        plants = {r.fmu.stem: r.fmu for r in build_all(work / "fmus", scripts=[scripts[m] for m in models.values()])}
         cases = {"floor": _cycle(trivial, "u", work),
                  "fmubase": _cycle(base.fmu, "u", work),
-                 "single-mass": _cycle(plants["IP02SingleMass"], "voltage", work),
-                 "double-mass": _cycle(plants["IP02DoubleMass"], "voltage", work)}
+                 **{kind: _cycle(plants[model], "voltage", work) for kind, model in models.items()}}
         try:
             for timed, _ in cases.values():  # warm-up
                 timed(CYCLES)
@@ -179,6 +181,8 @@ def measure() -> dict[str, float]:
 
 def run() -> list[str]:
     """Lines for ``make bench``."""
+    from ipcosim.fmus.params import KINDS
+
     m = measure()
     floor = m["floor"]
     lines = [f"plant FMU cycle through fmpy (setReal voltage, doStep h = 1 ms, getReal all outputs), "
@@ -190,7 +194,7 @@ def run() -> list[str]:
              f"{figure('plant.fmubase_added_us', m['fmubase'] - floor, 'us', what='FmuBase plumbing over the floor')}; "
              + target("plant.fmubase_over_floor", m["fmubase"] / floor, FMUBASE_OVER_FLOOR, "x",
                       what="FmuBase trivial FMU / pythonfmu trivial FMU") + ")"]
-    for kind in ("single-mass", "double-mass"):
+    for kind in KINDS:
         key = kind.replace("-", "_")
         ratio = m[kind] / floor
         cycle = figure(f"plant.{key}_cycle_us", m[kind], "us", what=f"{kind} plant FMU cycle")

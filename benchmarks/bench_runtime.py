@@ -189,13 +189,14 @@ def init_times(fmu_dir: Path, work: Path) -> dict[str, tuple[float, float]]:
 def _init_ms(fmu: Path, unzip: Path) -> tuple[float, float]:
     """One fresh process: (wall, CPU) milliseconds from instantiate to initialized (a HIL adapter
     against a lockstep virtual rig served by this process)."""
+    from ipcosim.fmus import kinds
     from ipcosim.fmus.hil.rig import RigConfig, VirtualRig
     from ipcosim.fmus.hil.server import RigServer
 
     uri, server = "", None
-    if fmu.stem.startswith("IP02HIL"):
-        plant = "single-mass" if "Single" in fmu.stem else "double-mass"
-        server = RigServer(VirtualRig(RigConfig(plant=plant, clock="lockstep")), "127.0.0.1", 0).start()
+    adapted = [kind for kind in kinds.names() if kinds.get(kind).hil_model == fmu.stem]
+    if adapted:  # a plant kind's HIL adapter: a rig of that kind
+        server = RigServer(VirtualRig(RigConfig(plant=adapted[0], clock="lockstep")), "127.0.0.1", 0).start()
         uri = f"q4:{server.uri}"
     try:
         proc = subprocess.run([sys.executable, "-c", INIT_SCRIPT, str(fmu), str(unzip), uri],

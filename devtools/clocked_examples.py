@@ -27,10 +27,12 @@ _RAMP = (f'{_INDENT}<ssv:Parameter name="waveform"><ssv:Integer value="1"/></ssv
 
 def clocked(plant: str) -> dict[str, str]:
     """The files of ``<plant>-lqr-clocked`` (name -> text)."""
-    name, kind = f"{plant}-lqr", "SingleMass" if plant == "single-mass" else "DoubleMass"
+    from ipcosim.fmus import kinds
+
+    name, suffix = f"{plant}-lqr", kinds.get(plant).suffix
     src = ROOT / "ssp" / name
     ssd = (src / "SystemStructure.ssd").read_text()
-    ssd = ssd.replace(f"resources/LQR{kind}.fmu", f"resources/LQR{kind}Clocked.fmu")
+    ssd = ssd.replace(f"resources/LQR{suffix}.fmu", f"resources/LQR{suffix}Clocked.fmu")
     ssd = ssd.replace(f'name="{name}"', f'name="{name}-clocked"')
     ssd = ssd.replace("Luenberger observer;", "Luenberger observer, sampled by its FMI 3.0 input clock (1 kHz);")
     return {"SystemStructure.ssd": ssd, **{p.name: p.read_text() for p in sorted(src.glob("*.ssv"))}}

@@ -100,6 +100,12 @@ ANGLE_RESOLUTION = PENDULUM_RAD_PER_COUNT
 POSITION_TOLERANCE = CART_M_PER_COUNT
 
 
+def _on_preset(law: str, kind: str) -> tuple[str, str]:
+    """The key in :func:`thesis_runs` of ``law``'s run on ``kind``'s thesis preset (``PRESET``): ``(law, kind)``,
+    or, for a law run on a model of its own (``OWN_MODEL``), the run made on the preset beside it (``LQR_ON_CH3``)."""
+    return (f"{law} on {PRESET[kind]}", kind) if (law, kind) in OWN_MODEL else (law, kind)
+
+
 def thesis_runs(realism_name: str, stop_time: float = STOP_TIME) -> dict[tuple[str, str], Run]:
     """Every law with the thesis's gain set, on both plants (CascadePID: no thesis set, left out), each
     on its own model (``OWN_MODEL``: plant and design model; else the kind's thesis preset)."""
@@ -112,8 +118,8 @@ def thesis_runs(realism_name: str, stop_time: float = STOP_TIME) -> dict[tuple[s
             design = {"design_params": preset(own)} if own else {}
             out[(law, kind)] = run(make_law(kind, law, "thesis", **design), kind, params, inst, stop_time)
             if own:
-                out[(f"{law} on {PRESET[kind]}", kind)] = run(make_law(kind, law, "thesis", **design), kind,
-                                                              preset(PRESET[kind], **phys), inst, stop_time)
+                out[_on_preset(law, kind)] = run(make_law(kind, law, "thesis", **design), kind,
+                                                 preset(PRESET[kind], **phys), inst, stop_time)
     return out
 
 
@@ -351,7 +357,7 @@ def _fewer_oscillations(R):
 def _hsmc_better(R):
     parts, ok = [], True
     for kind in KINDS:
-        h, lq, p = R[("HSMC", kind)], R[LQR_ON_CH3 if kind == "single-mass" else ("LQR", kind)], R[("PID", kind)]
+        h, lq, p = R[("HSMC", kind)], R[_on_preset("LQR", kind)], R[("PID", kind)]
         better = h.metrics["upright"] and (not lq.metrics["upright"] or h.itae < lq.itae) and \
             (not p.metrics["upright"] or h.itae < p.itae)
         ok = ok and better

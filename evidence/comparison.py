@@ -74,15 +74,15 @@ def step_row(scenario: str, pset: str, bench: str, kind: str) -> dict[str, Any]:
     m = {k: v for k, v in r.metrics.items() if not isinstance(v, (dict, list))}
     return {**m, "energy_J": _energy(r), "amplitude_bound_m": r.metadata.get("amplitude_bound_m"),
             "status": success_status(m, r.metadata.get("amplitude_bound_m")), "error": r.error,
-            **_old_verdict(m, realism_values(bench, kind))}
+            **_old_verdict(m, realism_values(bench, kind), kind)}
 
 
-def _old_verdict(metrics: dict[str, Any], values: dict[str, float]) -> dict[str, Any]:
-    """The verdict of the friction bound 2 mm + 2 b2 / K (the criterion before the predicted cycle), beside."""
+def _old_verdict(metrics: dict[str, Any], values: dict[str, float], kind: str) -> dict[str, Any]:
+    """The verdict of the friction bound 2 mm + 2 b2 / K (the criterion before the predicted cycle), beside, for a
+    run of plant ``kind`` with the ``plant.*`` values ``values``."""
     from ipcosim.fmus.metrics import amplitude_bound, success_status
     from ipcosim.fmus.params import DEFAULT_PRESET, preset
 
-    kind = "double-mass" if "plant.b2" in values else "single-mass"
     K = values.get("plant.K", getattr(preset(DEFAULT_PRESET[kind]), "K", 0.0))   # the scenarios' spring
     bound = amplitude_bound(float(values.get("plant.b2") or 0.0), float(K or 0.0))
     return {"old_amplitude_bound_m": bound, "old_status": success_status(metrics, bound)}
@@ -102,20 +102,21 @@ def rejudge(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         values = realism_values(r["bench"], r["kind"])
         bound = run_bound(select_parameter_set(load_scenario(r["scenario"]), r["set"]), values)
         step = {**r["step"], **bound}
-        step.update(status=success_status(step, bound["amplitude_bound_m"]), **_old_verdict(step, values))
+        step.update(status=success_status(step, bound["amplitude_bound_m"]), **_old_verdict(step, values, r["kind"]))
         out.append({**r, "step": step})
     return out
 
 
 def disturbance_row(scenario: str, pset: str, bench: str, kind: str, impulse: dict[str, float]) -> dict[str, Any]:
     """The push or tap run's figures: peak angle, the motor cart's largest excursion, recovery, upright."""
+    from ipcosim.fmus import kinds
     from ipcosim.harness.analysis.residual_cycle import realism_values
 
     values = {**realism_values(bench, kind), "setpoint.amplitude": 0.0, "plant.tap_time": PUSH_TIME, **impulse}
     r = _run(scenario, pset, values, PUSH_STOP_TIME)
     m = r.metrics
     t = np.asarray(r["time"], float)
-    col = "plant.cart_position" if kind == "single-mass" else "plant.active_cart_position"
+    col = f"plant.{kinds.get(kind).carts[0].position}"  # the motor cart's
     x = np.asarray(r[col], float)[t >= PUSH_TIME]
     fell_before = not bool(np.all(np.abs(np.asarray(r["plant.pendulum_angle"], float)[t < PUSH_TIME]) < 0.35))
     return {"peak_angle_rad": m.get("peak_angle_after_tap_rad"), "recovery_time_s": m.get("recovery_time_s"),

@@ -20,6 +20,8 @@ TOLERANCE = 0.30
 SIGNALS = {"single-mass": [("motor cart", "cart_position", "cart")],
            "double-mass": [("motor cart", "active_cart_position", "cart"),
                            ("passive cart", "passive_cart_position", "passive_cart")]}
+#: The table's cart columns, by the signals' labels (a kind without such a cart: ``-``).
+CART_COLUMNS = ("motor cart", "passive cart")
 
 
 def check_rows(comparison: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -110,17 +112,14 @@ def table(rows: list[dict[str, Any]]) -> str:
     for r in rows:
         p, sim = r["predicted"], r["simulated"]
         cells = []
-        for _, name, _ in SIGNALS["double-mass"]:
+        for label in CART_COLUMNS:
+            name = next((n for lab, n, _ in SIGNALS[r["kind"]] if lab == label), None)
             if name not in sim:
                 cells.append("-")
                 continue
             ps = (p.get("signals") or {}).get(name) or {}
             cells.append(f"{_pp(ps.get('peak_to_peak'), 1e3)} / {_pp(sim[name]['peak_to_peak'], 1e3)}, "
                          f"{_hz(p.get('frequency_Hz'))} / {_hz(sim[name]['frequency_Hz'])}")
-        if r["kind"] == "single-mass":
-            cells = [f"{_pp(((p.get('signals') or {}).get('cart_position') or {}).get('peak_to_peak'), 1e3)} / "
-                     f"{_pp(sim['cart_position']['peak_to_peak'], 1e3)}, {_hz(p.get('frequency_Hz'))} / "
-                     f"{_hz(sim['cart_position']['frequency_Hz'])}", "-"]
         pend = (p.get("signals") or {}).get("pendulum_angle") or {}
         cells.append(f"{_pp(pend.get('reading_peak_to_peak'), 1e3)} / {_pp(sim['pendulum_angle']['peak_to_peak'], 1e3)}"
                      f", {_hz(p.get('frequency_Hz'))} / {_hz(sim['pendulum_angle']['frequency_Hz'])}")

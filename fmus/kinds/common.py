@@ -15,13 +15,15 @@ from typing import Any, Callable, Mapping, Sequence
 
 @dataclass(frozen=True)
 class Cart:
-    """One cart of a plant: its position and velocity states, its Coulomb-friction parameter and, for a cart
-    that does not carry the pendulum, the parameter of its equivalent mass (what a force on it accelerates)."""
+    """One cart of a plant: its position and velocity states, its Coulomb-friction parameter, for a cart
+    that does not carry the pendulum the parameter of its equivalent mass (what a force on it accelerates),
+    and the parameter of the viscous damping between it and the track (``""``: none declared)."""
 
     position: str
     velocity: str
     coulomb: str
     mass: str = ""
+    damping: str = ""
 
 
 @dataclass(frozen=True)

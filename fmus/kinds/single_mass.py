@@ -174,7 +174,7 @@ KIND = PlantKind(
     },
     states=("cart_position", "cart_velocity", "pendulum_angle", "pendulum_velocity", "motor_current"),
     measured=("cart_position", "pendulum_angle"),
-    carts=(Cart("cart_position", "cart_velocity", "b"),),
+    carts=(Cart("cart_position", "cart_velocity", "b", damping="Beq"),),
     rhs=single_mass_rhs,
     applied_forces=lambda x, p: (single_mass_applied_force(x, p),),
     folded_rhs=single_mass_internal_rhs,

@@ -69,6 +69,25 @@ def test_parameters_of_no_kind_are_no_single_mass() -> None:
     assert kinds.plant_kind(parameters=["K", "Mp"]) == "double-mass"
 
 
+@pytest.mark.parametrize("name", KINDS)
+def test_a_carts_declared_damping_is_its_viscous_force_to_the_track(name: str) -> None:
+    """Raising a cart's ``damping`` parameter by 1 N s/m, that cart moving at v alone, adds -v N to the force on
+    it (``applied_forces``) and nothing to the other carts' (a damper between carts would move both)."""
+    from dataclasses import replace
+
+    kind = kinds.get(name)
+    p = preset(kind.default_preset)
+    for c, cart in enumerate(kind.carts):
+        assert p.__dataclass_fields__[cart.damping].metadata["unit"] == "N.s/m"
+        x = [0.0] * len(kind.states)
+        x[kind.states.index(cart.velocity)] = 0.3
+        before = kind.applied_forces(x, p)
+        after = kind.applied_forces(x, replace(p, **{cart.damping: getattr(p, cart.damping) + 1.0}))
+        change = np.subtract(after, before)
+        assert change[c] == pytest.approx(-0.3, rel=1e-12)
+        assert np.delete(change, c) == pytest.approx(0.0, abs=1e-12)
+
+
 # ------------------------------------------------------------------------------------------- the toy kind
 
 
