@@ -165,4 +165,7 @@ INTRO = (
     f"5 s (one run: the nominal bench is deterministic). Target: the motor cart's peak-to-peak within "
     f"{100 * TOLERANCE:.0f} % of the simulated one. The pendulum's simulated peak-to-peak is its encoder's "
     "reading, whole counts of 1.53 mrad; the predicted one is the reading of the predicted swing. The predicted "
-    "frequency is the cycle's (for two cycles side by side, the one with the larger motor-cart swing).")
+    "frequency is the cycle's (for two cycles side by side, the one with the larger motor-cart swing). *One "
+    "balance of both*: every nonlinearity balanced at one frequency, where the friction and the counts each give "
+    "a cycle, against the same simulated peak-to-peak: what one cycle would be where the rule adds two. A law's "
+    "dither is in the friction's describing function (docs/studies.md).")
