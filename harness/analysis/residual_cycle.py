@@ -26,14 +26,19 @@ eigenvalue's angle over ``T``; the amplitude of every measured signal is its eig
 A law's own Coulomb friction compensation (the LQG's ``friction_<b>`` with its threshold ``friction_velocity``)
 acts on the cart as a second nonlinearity of the same velocity: its describing function
 (:func:`compensation_gain`) is taken off the relay's, as if the law's velocity estimate were the cart's velocity
-(its lag is left out). Its breakaway term (:data:`LEFT_OUT_LAW_TERMS`) is left out.
+(its lag is left out). Its breakaway term (:data:`LEFT_OUT_LAW_TERMS`) is left out. A law's dither (a square
+wave of voltage at half the sample rate) swings each cart's velocity by a triangle of half-width
+:func:`dither_velocity` about the slow cycle: the plant's friction is averaged over that triangle
+(:func:`dithered_relay_gain`, a saturation), the law's compensation over the two velocities it reads
+(:func:`compensation_gain`); what the dither does to the encoders (a fraction of a micrometre) is left out.
 
 Where the approximation is weak (``docs/studies.md``, "The residual cycle"): the describing functions keep the
 first harmonic only, and the quantizer's is worst at the amplitudes the cycle sits at (a few counts: the reading
 is a square-ish wave); all the nonlinearities are taken to swing at one frequency, in the phase the linear loop
 gives them, about a count level (an offset between the signal's centre and the count grid changes the quantizer's
-gain); stiction above the kinetic force, the DAC's codes, a law's dither and its nonlinear breakaway term are left
-out; whether the cycle is stable is not checked.
+gain); stiction above the kinetic force, the sticking phases of stick-slip (the relay's describing function
+assumes a cart that never dwells at rest), the DAC's codes and a law's nonlinear breakaway term are left out;
+whether the cycle is stable is not checked.
 """
 from __future__ import annotations
 
@@ -109,16 +114,51 @@ def reading_peak_to_peak(amplitude: float, step: float) -> float:
     return amplitude * 2.0 if step <= 0 else 2.0 * step * math.floor(amplitude / step + 0.5)
 
 
-def compensation_gain(amplitude: float, force: float, threshold: float) -> float:
+def dithered_relay_gain(amplitude: float, force: float, dither: float) -> float:
+    """Describing function of Coulomb friction ``force sign(v)`` under a triangular velocity dither of
+    half-width ``dither`` (the cart's velocity under a square-wave voltage): averaged over the dither, whose
+    values are uniform on ``[-dither, dither]``, the relay is a saturation of slope ``force / dither``, and
+    its describing function is ``force / dither`` up to ``A = dither`` and
+    ``(2 force / (pi dither)) (asin(d / A) + (d / A) sqrt(1 - (d / A)^2))`` above (``d`` the dither; Gelb &
+    Vander Velde, 1968, ch. 2); without dither, :func:`relay_gain`.
+
+    Examples
+    --------
+    >>> round(dithered_relay_gain(0.5, 1.0, 1.0), 6)   # inside the dither: the saturation's slope
+    1.0
+    >>> round(dithered_relay_gain(1e6, 1.0, 1e-3) / relay_gain(1e6, 1.0), 6)   # far outside: the relay's
+    1.0
+    """
+    if dither <= 0.0:
+        return relay_gain(amplitude, force)
+    if amplitude <= dither:
+        return force / dither
+    r = dither / amplitude
+    return 2.0 * force / (math.pi * dither) * (math.asin(r) + r * math.sqrt(1.0 - r * r))
+
+
+def compensation_gain(amplitude: float, force: float, threshold: float, dither: float = 0.0) -> float:
     """Describing function of a law's Coulomb compensation ``force w(|v|) sign(v)`` (``w`` 0 up to ``threshold``,
     1 from twice it, linear between: ``ipcosim.controllers.laws.lqg.coulomb_estimate`` without its breakaway
-    term) for a velocity of ``amplitude``: its first harmonic over the amplitude, by quadrature."""
-    if force <= 0.0 or amplitude <= threshold:
+    term) for a velocity of ``amplitude``: its first harmonic over the amplitude, by quadrature. With a
+    ``dither`` [m/s], the law's velocity is ``v +- dither`` on alternate samples (a square-wave voltage turns
+    the velocity at the sample instants, where the law reads it): the mean of the two compensations."""
+    if force <= 0.0 or amplitude + dither <= threshold:
         return 0.0
     theta = (np.arange(COMPENSATION_POINTS) + 0.5) * (math.pi / 2 / COMPENSATION_POINTS)
     v = amplitude * np.sin(theta)
-    w = np.clip(v / threshold - 1.0, 0.0, 1.0)
+    w = np.mean([np.sign(v + d) * np.clip(np.abs(v + d) / threshold - 1.0, 0.0, 1.0) for d in (dither, -dither)],
+                axis=0)
     return float(4.0 / (math.pi * amplitude) * force * np.mean(w * np.sin(theta)) * (math.pi / 2))
+
+
+def dither_velocity(Ad: np.ndarray, Bd: np.ndarray, velocity: int, amplitude: float) -> float:
+    """Velocity half-width [m/s] of a cart (state ``velocity`` of the sampled plant ``Ad``, ``Bd``) under a
+    voltage alternating ``+-amplitude`` every sample (a law's dither): the steady swing ``x_k = (-1)^k xbar``
+    of ``x_{k+1} = Ad x_k + Bd u_k`` is ``xbar = -(I + Ad)^-1 Bd amplitude``, the velocity's turning points
+    (the plant alone: the loop's feedback at half the sample rate is left out)."""
+    xbar = np.linalg.solve(np.eye(Ad.shape[0]) + Ad, Bd[:, 0]) * amplitude
+    return float(abs(xbar[velocity]))
 
 
 @dataclass(frozen=True)
@@ -129,11 +169,13 @@ class _Nonlinearity:
     row: np.ndarray    # its input: row over the closed-loop state
     compensated: float = 0.0   # the law's compensation of that force [N] (friction)
     threshold: float = 0.0     # the velocity from which the law starts compensating [m/s]
+    dither: float = 0.0        # the velocity half-width of the law's dither on this cart [m/s] (friction)
 
     def gain(self, amplitude: float) -> float:
         if self.kind == "encoder":
             return quantizer_gain(amplitude, self.size)
-        return relay_gain(amplitude, self.size) - compensation_gain(amplitude, self.compensated, self.threshold)
+        return (dithered_relay_gain(amplitude, self.size, self.dither)
+                - compensation_gain(amplitude, self.compensated, self.threshold, self.dither))
 
 
 class QuasiLinearLoop:
@@ -143,7 +185,8 @@ class QuasiLinearLoop:
     """
 
     def __init__(self, loop: Any, params: Any, forces: Mapping[str, float], resolutions: Mapping[str, float],
-                 delay: int, compensation: Mapping[str, tuple[float, float]] | None = None) -> None:
+                 delay: int, compensation: Mapping[str, tuple[float, float]] | None = None,
+                 dither: float = 0.0) -> None:
         model = linearize(params, inductance=True)
         cols = force_columns(params)
         n = len(model.states)
@@ -176,18 +219,23 @@ class QuasiLinearLoop:
             self.base[out] += u_now[0]
         self.nonlinearities: list[_Nonlinearity] = []
         self.friction_in: dict[str, np.ndarray] = {}
-        self._add_nonlinearities(model, Bd, forces, resolutions, compensation or {})
+        self._add_nonlinearities(model, (Ad, Bd), forces, resolutions, compensation or {}, dither)
 
-    def _add_nonlinearities(self, model: Any, Bd: np.ndarray, forces: Mapping[str, float],
-                            resolutions: Mapping[str, float], compensation: Mapping[str, tuple[float, float]]) -> None:
-        """Each cart with a Coulomb force (its velocity in, a force on it out) and each encoder with a step."""
+    def _add_nonlinearities(self, model: Any, sampled: tuple[np.ndarray, np.ndarray], forces: Mapping[str, float],
+                            resolutions: Mapping[str, float], compensation: Mapping[str, tuple[float, float]],
+                            dither: float) -> None:
+        """Each cart with a Coulomb force (its velocity in, a force on it out; its velocity swing under the law's
+        ``dither`` [V]) and each encoder with a step."""
+        Ad, Bd = sampled
         pad = np.zeros(self.size - self.n)
         for j, (name, velocity) in enumerate(COULOMB_CARTS[self.kind]):
             if forces.get(name, 0.0) > 0.0:
                 row = np.zeros(self.size)
                 row[model.states.index(velocity)] = 1.0
                 comp, threshold = compensation.get(name, (0.0, 0.0))
-                self.nonlinearities.append(_Nonlinearity(name, "friction", float(forces[name]), row, comp, threshold))
+                swing = dither_velocity(Ad, Bd, model.states.index(velocity), dither) if dither else 0.0
+                self.nonlinearities.append(_Nonlinearity(name, "friction", float(forces[name]), row, comp, threshold,
+                                                         swing))
                 self.friction_in[name] = np.concatenate([Bd[:, 1 + j], pad])
         for i, signal in enumerate(model.outputs):
             if resolutions.get(signal, 0.0) > 0.0:
@@ -314,11 +362,13 @@ def predict_residual(loop: Any, params: Any, forces: Mapping[str, float], resolu
         ``coulomb_forces_N`` and what the law ``compensated_N`` of them.
     """
     comp = law_compensation(loop)
-    ql = QuasiLinearLoop(loop, params, forces, resolutions, delay, comp)
+    dither = float(getattr(loop.law_object, "dither_amplitude", 0.0) or 0.0)
+    ql = QuasiLinearLoop(loop, params, forces, resolutions, delay, comp, dither)
     out: dict[str, Any] = {"coulomb_forces_N": {k: float(v) for k, v in forces.items()},
                            "compensated_N": {k: c for k, (c, _) in comp.items()},
                            "resolutions": {k: float(v) for k, v in resolutions.items()},
-                           "delay_samples": delay,
+                           "delay_samples": delay, "dither_V": dither,
+                           "dither_velocity_m_s": {nl.name: nl.dither for nl in ql.nonlinearities if nl.dither},
                            "nonlinearities": [f"{nl.kind} {nl.name}" for nl in ql.nonlinearities]}
     try:
         hb = harmonic_balance(ql)
@@ -354,14 +404,17 @@ def predict_lab_cycle(loop: Any, params: Any, forces: Mapping[str, float], resol
     -------
     dict
         :func:`predict_residual`'s keys for the combined cycle, with ``combined`` (how), ``friction`` and
-        ``counts`` (each mechanism's own prediction, or None when the plant has none of it).
+        ``counts`` (each mechanism's own prediction, or None when the plant has none of it) and ``together``
+        (every nonlinearity in one balance at one frequency, where both mechanisms give a cycle; else None:
+        what one cycle would be where the rule adds two).
     """
     has_friction = any(v > 0 for v in forces.values())
     has_counts = any(v > 0 for v in resolutions.values())
     fr = predict_residual(loop, params, forces, {}, delay) if has_friction else None
     qu = predict_residual(loop, params, {}, resolutions, delay) if has_counts else None
-    parts = {"friction": fr, "counts": qu}
     found = [p for p in (fr, qu) if p is not None and p["found"]]
+    joint = predict_residual(loop, params, forces, resolutions, delay) if len(found) == 2 else None
+    parts = {"friction": fr, "counts": qu, "together": joint}
     if fr is None and qu is None:
         zero = {s: {"amplitude": 0.0, "peak_to_peak": 0.0, "reading_peak_to_peak": 0.0} for s in MEASURED[loop.kind]}
         return {"found": True, "reason": None, "combined": "no nonlinearity: a linear loop has no cycle",
@@ -370,8 +423,7 @@ def predict_lab_cycle(loop: Any, params: Any, forces: Mapping[str, float], resol
         f1, f2 = sorted(p["frequency_Hz"] for p in found)
         if f2 / f1 > DISTINCT_FREQUENCY_RATIO:
             return {**_superposed(fr, qu), **parts}
-        joint = predict_residual(loop, params, forces, resolutions, delay)
-        if joint["found"]:
+        if joint is not None and joint["found"]:
             return {**joint, "combined": "one cycle: friction and counts balanced together", **parts}
         found = [max(found, key=lambda p: p["motor_cart_peak_to_peak_m"])]
     if found:

@@ -44,6 +44,43 @@ def test_the_compensations_describing_function_is_the_first_harmonic_of_the_laws
     assert rc.compensation_gain(ratio * v0, b, v0) == pytest.approx(exact, abs=1e-3 * b / v0)
 
 
+@pytest.mark.parametrize("ratio", [0.3, 0.99, 1.01, 1.7, 6.0, 40.0])
+def test_the_dithered_relay_is_the_first_harmonic_of_the_friction_averaged_over_a_triangular_dither(ratio) -> None:
+    """A triangle wave of half-width d spends equal time at every velocity in [-d, d]: the friction the slow
+    swing feels is ``b sign(v + d')`` averaged over d' uniform there, taken here by its definition."""
+    b, d = 0.1047, 2.5e-4
+    shifts = (np.arange(400) + 0.5) / 400 * 2 * d - d
+    averaged = lambda v: b * float(np.mean(np.sign(v + shifts)))   # noqa: E731
+    exact = _first_harmonic_gain(averaged, ratio * d, 20_000)
+    assert rc.dithered_relay_gain(ratio * d, b, d) == pytest.approx(exact, rel=5e-3)
+    assert rc.dithered_relay_gain(ratio * d, b, 0.0) == rc.relay_gain(ratio * d, b)
+
+
+@pytest.mark.parametrize("ratio", [0.8, 1.5, 3.0])
+def test_the_dithered_compensation_is_the_mean_of_the_laws_estimate_at_the_two_dithered_velocities(ratio) -> None:
+    b, v0, d = 0.1047, 5e-4, 2.6e-4
+    exact = _first_harmonic_gain(lambda v: 0.5 * (coulomb_estimate(v + d, b, v0) + coulomb_estimate(v - d, b, v0)),
+                                 ratio * v0, 20_000)
+    assert rc.compensation_gain(ratio * v0, b, v0, d) == pytest.approx(exact, abs=2e-3 * b / v0)
+
+
+def test_the_dithers_velocity_swing_is_the_triangle_of_a_mass_pushed_each_way_for_one_sample() -> None:
+    """A free mass m pushed by +-F, the sign alternating every sample T: its velocity ramps by F T / m each
+    sample, a triangle of half-width F T / (2 m); with viscous damping c (``v' = (F - c v) / m``), the steady
+    alternation of the ZOH-sampled system stepped until it settles."""
+    m, F, T = 0.94, 0.7, 1e-3
+    Ad = np.array([[1.0, T], [0.0, 1.0]])
+    Bd = np.array([[F * T ** 2 / (2 * m)], [F * T / m]])
+    assert rc.dither_velocity(Ad, Bd, 1, 1.0) == pytest.approx(F * T / (2 * m), rel=1e-12)
+    c = 7.0
+    e = math.exp(-c * T / m)
+    Ad, Bd = np.array([[e]]), np.array([[F / c * (1 - e)]])
+    v = 0.0
+    for k in range(20_000):
+        v = e * v + Bd[0, 0] * 0.4 * (-1) ** k
+    assert rc.dither_velocity(Ad, Bd, 0, 0.4) == pytest.approx(abs(v), rel=1e-9)
+
+
 def test_friction_alone_is_the_nyquist_crossing_of_the_relay() -> None:
     """Without encoders and delay the harmonic balance of the single mass's one relay is the crossing of its
     velocity response with the negative real axis (``limit_cycle.predict``, found on a frequency grid)."""
