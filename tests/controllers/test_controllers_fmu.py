@@ -290,8 +290,8 @@ def test_bad_setpoint_parameter(controller_fmus) -> None:
 
 def test_a_controller_fmu_packs_only_its_own_law() -> None:
     """The project files a controller FMU carries (``pybuild.runtime_modules``, the closure of its script's
-    imports) hold one law module, its own -- the swing-up's also the LQR it balances with -- and never the
-    registry that knows every law."""
+    imports) hold one law's modules, its own and its companions (``<law>_*.py``, e.g. the HSMC's numbers) --
+    the swing-up's also the LQR it balances with -- and never the registry that knows every law."""
     import importlib.util
     import sys
 
@@ -312,7 +312,8 @@ def test_a_controller_fmu_packs_only_its_own_law() -> None:
         own = Path(sys.modules[cls.law.build.__module__].__file__).resolve()
         files = {f.resolve() for f in runtime_modules(script)}
         packed = {f for f in files if f.parent == laws and f.name not in ("__init__.py", "base.py")}
-        expected = {own, laws / "lqr.py"} if cls.law.name == "SwingUp" else {own}
+        own_modules = {own, *laws.glob(f"{own.stem}_*.py")}
+        expected = own_modules | {laws / "lqr.py"} if cls.law.name == "SwingUp" else own_modules
         assert packed == expected, f"{script.name} packs {sorted(p.name for p in packed)}"
         assert ROOT / "controllers" / "catalog.py" not in files, f"{script.name} packs the registry"
         seen.add(cls.law.name)
