@@ -105,6 +105,29 @@ def check_binary(fmu: Path, model: Any, where: str) -> None:
     raise NoBinaryError(f"{where}: has no binary for {folders[0]} (it has: {', '.join(has) or 'none'})")
 
 
+def runtime_members(fmu: Path, model: Any, target: Path) -> list[str] | None:
+    """The members of an FMU archive a run reads: ``modelDescription.xml``, ``resources/`` and the
+    shared libraries of this platform (:func:`binary_folders`); not the sources, the documentation
+    nor other platforms' binaries (a native FMU carries them: writing them and removing them again
+    was most of a run's extraction). Every member's name is checked as extracting it would be
+    (:func:`~ipcosim.harness.scenario.archive.member_path`, into ``target``). None (every member)
+    for what is not a zip archive.
+
+    Raises
+    ------
+    UnsafeArchiveError
+        A member whose name would leave ``target``.
+    """
+    if not zipfile.is_zipfile(fmu):
+        return None
+    folders = tuple(f"binaries/{folder}/" for folder in binary_folders(model.fmi_version))
+    with zipfile.ZipFile(fmu) as zf:
+        names = zf.namelist()
+    for name in names:
+        member_path(fmu, name, target)
+    return [n for n in names if n == "modelDescription.xml" or n.startswith(("resources/", *folders))]
+
+
 def plot_run(result: Result, path: Path | None = None) -> Any:
     """The figure of a pendulum run (:attr:`Result.plotter` of the results made here): the
     matplotlib Figure, or with ``path`` the PNG written there (see :mod:`ipcosim.harness.api.plot`)."""
@@ -313,7 +336,7 @@ class Prepared:
                 check_binary(path, inst.model, f"{self.scenario.origin}: component {inst.name!r} ({fmu})")
                 target = work / f"{len(by_file)}-{path.stem}"
                 if not (target / "modelDescription.xml").exists():
-                    safe_extract(path, target)
+                    safe_extract(path, target, runtime_members(path, inst.model, target))
                 by_file[path] = target
             self.unzip_dirs[inst.name] = by_file[path]
 

@@ -23,10 +23,7 @@ import time as _time
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from ipcosim.harness.master import (
-    clocked,  # noqa: F401 -- registers the slave of FMUs with clocks
-    signals,
-)
+from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import (
     ALGORITHMS,
     GAUSS_SEIDEL,
@@ -37,7 +34,6 @@ from ipcosim.harness.master.algorithm import (
     gauss_seidel_order,
     step_multiples,
 )
-from ipcosim.harness.master.clocks import clock_multiples
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
 from ipcosim.harness.master.integers import CarryError
 from ipcosim.harness.master.layout import Layout, named_variables
@@ -45,7 +41,6 @@ from ipcosim.harness.master.manipulators import Manipulator, SetValues
 from ipcosim.harness.master.me_slave import slave_of
 from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.plan import Block
-from ipcosim.harness.master.pyloop import compile_loop
 from ipcosim.harness.master.recorder import Recorder, TaskMetrics, TickFailure, timing_metrics
 from ipcosim.harness.master.results import Result, RowWriter, RunOutput, open_output, select_columns
 from ipcosim.harness.master.slave import DISCARD, TERMINATE, Slave
@@ -177,7 +172,7 @@ class Execution:
         self.instances = list(system.instances)
         self.index = {inst.name: i for i, inst in enumerate(self.instances)}
         self.multiples = step_multiples(system, self._planned_value, self.timebase.step)
-        self.multiples.update(clock_multiples(system, self.timebase))
+        self.multiples.update(_clock_multiples(system, self.timebase))
         check_last_steps(self.timebase, self.multiples, self.instances)
         if algorithm == GAUSS_SEIDEL:
             self.order = [self.index[n] for n in gauss_seidel_order(system)]
@@ -461,6 +456,8 @@ class Execution:
             self.loop_used = f"python ({why})"
         else:
             self.loop_used = "python (forced)"
+        from ipcosim.harness.master.pyloop import compile_loop
+
         return compile_loop(self.blocks, self.order, self.algorithm, self.timebase, self.record_every,
                             self.recorder.typed_record())
 
@@ -650,6 +647,18 @@ class Execution:
                 except Exception as exc:  # noqa: BLE001
                     first = first or exc
         return first
+
+
+def _clock_multiples(system: System, timebase: TimeBase) -> dict[str, int]:
+    """:func:`~ipcosim.harness.master.clocks.clock_multiples` of a system with FMI 3.0 components, the
+    only ones with clocks: the clocks' code, and the slave of FMUs with clocks that it registers
+    (:mod:`~ipcosim.harness.master.clocked`), are loaded for such a system alone."""
+    if not any(str(inst.model.fmi_version).startswith("3") for inst in system.instances):
+        return {}
+    from ipcosim.harness.master import clocked  # noqa: F401 -- registers the slave of FMUs with clocks
+    from ipcosim.harness.master.clocks import clock_multiples
+
+    return clock_multiples(system, timebase)
 
 
 def _next_chunk(chunk: int, ticks: int, seconds: float) -> int:
