@@ -1,7 +1,8 @@
 """The Python API of the master: :func:`prepare` for many runs of one scenario (parameter sweeps)
 that share the loaded, checked and extracted FMUs, and :func:`run_with`, the one path behind
 ``ipcosim run`` and :func:`ipcosim.run` (a :class:`RunOptions`, plus the master's extension points
-``observers`` and ``manipulators``).
+``observers`` and ``manipulators``). Where the FMUs are extracted is :mod:`~ipcosim.harness.api.extraction`'s;
+what the IP02 task adds to a run, :mod:`~ipcosim.harness.api.task`'s.
 
 Example::
 
@@ -20,26 +21,34 @@ import dataclasses
 import functools
 import json
 import os
-import shutil
 import sys
 import tempfile
 import time
 import weakref
-import zipfile
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError, UsageError, closest
 from ipcosim.fmus.metrics import (
-    BOUND_KEYS,
     CYCLE_SOURCES,
     amplitude_bound,
     predicted_amplitude_bound,
     streamed_task_metrics,
     tasks_of,
 )
+from ipcosim.harness.api.extraction import (  # noqa: F401 -- NoBinaryError, binary_folders: importable here too
+    EXTRACT_PREFIX,
+    NoBinaryError,
+    archive_members,
+    binary_folders,
+    check_binary,
+    remove_stale_extractions,
+    remove_temp,
+    runtime_members,
+)
 from ipcosim.harness.api.grammar import strip_nominal
 from ipcosim.harness.api.options import RunOptions, run_options
+from ipcosim.harness.api.task import has_linear_model, start_value, with_bound
 from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import ALGORITHMS, GAUSS_SEIDEL, StepSizeError
 from ipcosim.harness.master.execution import Execution, SlaveFactory, check_times
@@ -49,9 +58,9 @@ from ipcosim.harness.master.observers import Observer, Progress
 from ipcosim.harness.master.realtime import RealtimePacer
 from ipcosim.harness.master.recorder import TaskMetrics
 from ipcosim.harness.master.results import Result, RunOutput, SimulationError, json_safe
-from ipcosim.harness.master.slave import LoadedSlaves
+from ipcosim.harness.master.slaves import LoadedSlaves
 from ipcosim.harness.master.system import System
-from ipcosim.harness.scenario.archive import member_path, safe_extract
+from ipcosim.harness.scenario.archive import safe_extract
 from ipcosim.harness.scenario.binding import bind, warn_all
 from ipcosim.harness.scenario.default_experiment import default_step, default_stop_time
 from ipcosim.harness.scenario.ssp import load_scenario
@@ -65,97 +74,12 @@ class NothingToSimulateError(IpcosimError, ValueError):
     record time alone."""
 
 
-class NoBinaryError(IpcosimError, OSError):
-    """An FMU without a shared library for this machine's platform."""
-
-
-def binary_folders(fmi_version: str) -> tuple[str, ...]:
-    """The ``binaries/`` folders an FMU's shared library for this machine may be in: FMI 2.0's
-    platform name (``linux64``; off x86 also FMI 3.0's tuple, as FMI 2.0.4 section 2.3 allows),
-    FMI 3.0's platform tuple (``x86_64-linux``)."""
-    import fmpy
-
-    if fmi_version.startswith("3"):
-        return (fmpy.platform_tuple,)
-    if fmpy.architecture in ("x86", "x86_64"):
-        return (fmpy.platform,)
-    return (fmpy.platform, fmpy.platform_tuple)
-
-
-def check_binary(fmu: Path, model: Any, where: str) -> None:
-    """Refuse, in one line naming ``where``, an FMU whose archive holds no shared library for this
-    platform (``binaries/<platform>/<modelIdentifier>.<ext>``), listing the platforms it has.
-
-    Raises
-    ------
-    NoBinaryError
-    """
-    import fmpy
-
-    if not zipfile.is_zipfile(fmu):
-        return  # an extracted folder or a non-archive: fmpy reports what it lacks
-    with zipfile.ZipFile(fmu) as zf:
-        names = [n.replace("\\", "/") for n in zf.namelist()]
-    folders = binary_folders(model.fmi_version)
-    library = f"{model.model_identifier}{fmpy.sharedLibraryExtension}"
-    if any(f"binaries/{folder}/{library}" in names for folder in folders):
-        return
-    parts = [n.split("/") for n in names]
-    has = sorted({p[1] for p in parts if len(p) >= 3 and p[0] == "binaries" and p[1] and p[-1]})  # with a file
-    raise NoBinaryError(f"{where}: has no binary for {folders[0]} (it has: {', '.join(has) or 'none'})")
-
-
 def plot_run(result: Result, path: Path | None = None) -> Any:
     """The figure of a pendulum run (:attr:`Result.plotter` of the results made here): the
     matplotlib Figure, or with ``path`` the PNG written there (see :mod:`ipcosim.harness.api.plot`)."""
     from ipcosim.harness.api.plot import figure, plot_result
 
     return figure(result) if path is None else plot_result(result, path)
-
-
-#: Name of a run's temporary extraction folder, followed by the owning process's id: ``ipcosim-run-<pid>-*``.
-EXTRACT_PREFIX = "ipcosim-run-"
-
-
-def remove_stale_extractions(root: str | os.PathLike[str] | None = None) -> list[Path]:
-    """Remove the extraction folders (:data:`EXTRACT_PREFIX`) in ``root`` (default: the temporary
-    folder) whose owning process is gone -- a run killed before it could clean up -- and that
-    belong to this user; folders of running processes are left alone.
-
-    Returns
-    -------
-    list of Path
-        The folders removed.
-    """
-    removed = []
-    for folder in Path(root or tempfile.gettempdir()).glob(f"{EXTRACT_PREFIX}*-*"):
-        pid = folder.name[len(EXTRACT_PREFIX):].split("-", 1)[0]
-        try:
-            mine = folder.is_dir() and folder.stat().st_uid == os.getuid()
-        except (OSError, AttributeError):  # gone meanwhile; no uids on this OS
-            continue
-        if mine and pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
-            shutil.rmtree(folder, ignore_errors=True)
-            removed.append(folder)
-    return removed
-
-
-def _alive(pid: int) -> bool:
-    """Whether process ``pid`` exists (True where that cannot be asked safely)."""
-    if os.name == "nt":  # os.kill(pid, 0) would send it CTRL_C_EVENT there
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # exists, someone else's
-        return True
-    return True
-
-
-def _remove_temp(path: str) -> None:
-    shutil.rmtree(path, ignore_errors=True)
-    signals.unregister_temp(path)
 
 
 class Prepared:
@@ -186,7 +110,7 @@ class Prepared:
         ignored, with one warning per component).
     reuse_instances : bool
         Keep each component's FMU instance between runs and reset it (``fmi2Reset``) instead of
-        instantiating anew (:attr:`ipcosim.harness.master.slave.FMUSlave.reusable`): for studies
+        instantiating anew (:attr:`ipcosim.harness.master.fmu_slave.FMUSlave.reusable`): for studies
         of many runs, where each pythonfmu instantiation would keep a few kB alive.
     task_metrics : callable, optional
         The task's metrics of a run's rows (``ipcosim.harness.master.recorder.TaskMetrics``);
@@ -235,7 +159,7 @@ class Prepared:
                                          "simulate (no FMU in it or in its sub-systems)")
         work = self._workdir(workdir)
         try:
-            archived = self._archive_members(scenario, work) if scenario.location.is_file() else {}
+            archived = archive_members(scenario, work) if scenario.location.is_file() else {}
             self._python_scenario = scenario  # the laws' own parameters: what the residual cycle is predicted from
             if fmus == "native":
                 scenario, self._python_values = to_native(_with_fmus(scenario, archived))
@@ -279,28 +203,9 @@ class Prepared:
             return work
         remove_stale_extractions()
         self._tmp = Path(tempfile.mkdtemp(prefix=f"{EXTRACT_PREFIX}{os.getpid()}-"))
-        self._finalizer = weakref.finalize(self, _remove_temp, str(self._tmp))
+        self._finalizer = weakref.finalize(self, remove_temp, str(self._tmp))
         signals.register_temp(self._tmp)
         return self._tmp
-
-    @staticmethod
-    def _archive_members(scenario: Scenario, work: Path) -> dict[str, Path]:
-        """Extract the FMUs an ``.ssp`` archive carries (safely, see
-        :mod:`ipcosim.harness.scenario.archive`); components whose FMU is missing are left out."""
-        out: dict[str, Path] = {}
-        with zipfile.ZipFile(scenario.location) as zf:
-            names = set(zf.namelist())
-        wanted = {}
-        for comp in scenario.components:
-            if comp.source.startswith("file:"):
-                continue
-            member_path(scenario.location, comp.source, work / "ssp")  # refuses '..', absolute names
-            if comp.source in names:
-                wanted[comp.name] = comp.source
-        safe_extract(scenario.location, work / "ssp", sorted(set(wanted.values())))
-        for comp_name, member in wanted.items():
-            out[comp_name] = member_path(scenario.location, member, work / "ssp")
-        return out
 
     def _extract(self, work: Path) -> None:
         by_file: dict[Path, Path] = {}
@@ -313,7 +218,7 @@ class Prepared:
                 check_binary(path, inst.model, f"{self.scenario.origin}: component {inst.name!r} ({fmu})")
                 target = work / f"{len(by_file)}-{path.stem}"
                 if not (target / "modelDescription.xml").exists():
-                    safe_extract(path, target)
+                    safe_extract(path, target, runtime_members(path, inst.model, target))
                 by_file[path] = target
             self.unzip_dirs[inst.name] = by_file[path]
 
@@ -391,7 +296,7 @@ class Prepared:
                          manipulators=manipulators, slave_factory=self.slave_factory or self._slaves,
                          unzip_dirs=self.unzip_dirs,
                          record_every=options.record_every, max_init_iterations=options.max_init_iterations,
-                         task_metrics=_with_bound(self._run_task_metrics(values), metadata), loop=options.loop,
+                         task_metrics=with_bound(self._run_task_metrics(values), metadata), loop=options.loop,
                          output=RunOutput(options.out, list(options.record) or None, options.plot,
                                           {**metadata, "set": given}, plot_run, started,
                                           {"voltage_limit_V": metadata["voltage_limit_V"]}))  # `ipcosim view` draws it
@@ -459,7 +364,7 @@ class Prepared:
         amplitude bound (:meth:`_amplitude_bound`), from the values the run starts with (``values`` over the bound
         ones; ``given``: the ``--set`` values as given)."""
         def start(component: str, variable: str) -> Any:
-            return _start(self.system, values, component, variable)
+            return start_value(self.system, values, component, variable)
 
         b2, K = (start("plant", n) for n in ("b2", "K"))
         linear = not any(float(start("plant", n) or 0.0) > 0.0 for n in CYCLE_SOURCES)
@@ -485,7 +390,7 @@ class Prepared:
             why = "a swapped component" if self.swap else "no IP02 plant and controller to predict from"
             return {"amplitude_bound_m": amplitude_bound(b2, K), "amplitude_bound_from": f"friction bound: {why}",
                     "predicted_cart_peak_to_peak_m": None}
-        if linear and _has_linear_model(Path(str(self._python_scenario.component("controller").source)).stem):
+        if linear and has_linear_model(Path(str(self._python_scenario.component("controller").source)).stem):
             return {"amplitude_bound_m": predicted_amplitude_bound(0.0), "amplitude_bound_from": "prediction",
                     "predicted_cart_peak_to_peak_m": 0.0}
         from ipcosim.harness.analysis.residual_cycle import run_bound
@@ -508,45 +413,12 @@ class Prepared:
         self.close()
 
 
-def _has_linear_model(model: str) -> bool:
-    """Whether the controller FMU ``model`` (``LQRSingleMass``) is a law of the registry with a linear model."""
-    from ipcosim.controllers.catalog import REGISTRY, model_name
-    from ipcosim.fmus.params import KINDS
-
-    return any(model == model_name(kind, law) and e.linear is not None for law, e in REGISTRY.items()
-               for kind in KINDS if kind in e.sets)
-
-
-def _with_bound(task_metrics: TaskMetrics | None, metadata: Mapping[str, Any]) -> TaskMetrics | None:
-    """The task metrics with the run's amplitude bound beside them (``docs/metrics.md``), where there are any."""
-    if task_metrics is None:
-        return None
-    bound = {k: metadata[k] for k in BOUND_KEYS}
-
-    def measured(*args: Any, **kwargs: Any) -> dict[str, Any]:
-        out = dict(task_metrics(*args, **kwargs))
-        return {**out, **bound} if out else out
-
-    return measured
-
-
 def _card_observer(overruns: bool = False) -> Observer:
     """The observer of a run's HIL cards (:class:`~ipcosim.harness.hil.observer.CardObserver`),
     imported only for a run that may drive one: a plain simulation loads no HIL code."""
     from ipcosim.harness.hil.observer import CardObserver
 
     return CardObserver(overruns=overruns)
-
-
-def _start(system: System, values: Mapping[tuple[str, str], Any], component: str, variable: str) -> Any:
-    """The value ``component.variable`` starts a run with (its ``values`` entry, else its bound start), or None."""
-    try:
-        inst = system.instance(component)
-    except KeyError:
-        return None
-    if variable not in inst.model.variables:
-        return None
-    return values.get((component, variable), inst.start_value(variable))
 
 
 def build_missing(scenario: Scenario) -> list[str]:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ipcosim.fmus.instruments import REALISM
 from ipcosim.harness.cli import add_parameter_file_option, add_study_fmus_option
 
 #: The one line ``ipcosim --help`` shows for this command.
@@ -20,6 +19,8 @@ HELP = "robustness sweep: many runs of a scenario with varied parameters"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from ipcosim.fmus.instruments import REALISM  # the plant kinds' tables: only when sweep's options are built
+
     p = sub.add_parser(
         "sweep", help=HELP,
         description="Run a scenario many times with parameters drawn or stepped by --vary, in parallel "

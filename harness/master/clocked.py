@@ -26,15 +26,10 @@ from typing import Any, Sequence
 
 from ipcosim.harness.master.clocks import Clocking, clocking, exact_seconds
 from ipcosim.harness.master.clockstep import FAILED
-from ipcosim.harness.master.slave import (
-    OK,
-    SPECIAL_SLAVES,
-    TERMINATE,
-    WARNING,
-    FMU3Slave,
-    SlaveError,
-    load_library,
-)
+from ipcosim.harness.master.fmi3_slave import FMU3Slave
+from ipcosim.harness.master.fmu_slave import load_library
+from ipcosim.harness.master.slave import OK, TERMINATE, WARNING, SlaveError
+from ipcosim.harness.master.slaves import SPECIAL_SLAVES
 from ipcosim.harness.master.system import Variable
 
 

@@ -13,7 +13,8 @@ initialization see them. Runtime values live in the run's
 :class:`~ipcosim.harness.master.layout.Layout` (the value vectors), never on the parsed
 scenario; its :class:`~ipcosim.harness.master.recorder.Recorder` keeps the rows and assembles
 the result; the stepping loop is planned by :mod:`ipcosim.harness.master.plan` and rendered
-in Python (:mod:`~ipcosim.harness.master.pyloop`) or C (:mod:`~ipcosim.harness.master.cloop`).
+in Python (:mod:`~ipcosim.harness.master.pyloop`) or C (:mod:`~ipcosim.harness.master.cloop`) and run
+in chunks by the execution's stepping phase (:mod:`~ipcosim.harness.master.stepping`, its base class).
 """
 from __future__ import annotations
 
@@ -23,10 +24,7 @@ import time as _time
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from ipcosim.harness.master import (
-    clocked,  # noqa: F401 -- registers the slave of FMUs with clocks
-    signals,
-)
+from ipcosim.harness.master import signals
 from ipcosim.harness.master.algorithm import (
     ALGORITHMS,
     GAUSS_SEIDEL,
@@ -37,28 +35,20 @@ from ipcosim.harness.master.algorithm import (
     gauss_seidel_order,
     step_multiples,
 )
-from ipcosim.harness.master.clocks import clock_multiples
 from ipcosim.harness.master.cloop import LOOPS, CLoop, LoopUnavailable, python_functions
-from ipcosim.harness.master.integers import CarryError
 from ipcosim.harness.master.layout import Layout, named_variables
 from ipcosim.harness.master.manipulators import Manipulator, SetValues
 from ipcosim.harness.master.me_slave import slave_of
 from ipcosim.harness.master.observers import Observer
 from ipcosim.harness.master.plan import Block
-from ipcosim.harness.master.pyloop import compile_loop
 from ipcosim.harness.master.recorder import Recorder, TaskMetrics, TickFailure, timing_metrics
 from ipcosim.harness.master.results import Result, RowWriter, RunOutput, open_output, select_columns
-from ipcosim.harness.master.slave import DISCARD, TERMINATE, Slave
+from ipcosim.harness.master.slave import Slave
+from ipcosim.harness.master.stepping import CHUNK, CHUNK_SECONDS, Stepping
 from ipcosim.harness.master.system import Instance, System, value_type_of
 
 SlaveFactory = Callable[[Instance], Slave]
 
-#: At most this many ticks run between two looks at the record for non-finite values, at
-#: pending signals, and two writes of the results.
-CHUNK = 512
-#: Wall-clock seconds a chunk of ticks aims at (fewer ticks per chunk for slow FMUs), so rows
-#: reach the disk several times a second.
-CHUNK_SECONDS = 0.2
 #: Most communication steps of one run (a year at 1 kHz is 3e10).
 MAX_TICKS = 10 ** 12
 
@@ -100,7 +90,7 @@ def check_times(start: float, stop: Any, step: Any, record_every: Any = 1,
     return TimeBase.make(start, stop, step)  # a run that is not a whole number of steps ends with a short step
 
 
-class Execution:
+class Execution(Stepping):
     """One run of a bound system.
 
     Parameters
@@ -177,7 +167,7 @@ class Execution:
         self.instances = list(system.instances)
         self.index = {inst.name: i for i, inst in enumerate(self.instances)}
         self.multiples = step_multiples(system, self._planned_value, self.timebase.step)
-        self.multiples.update(clock_multiples(system, self.timebase))
+        self.multiples.update(_clock_multiples(system, self.timebase))
         check_last_steps(self.timebase, self.multiples, self.instances)
         if algorithm == GAUSS_SEIDEL:
             self.order = [self.index[n] for n in gauss_seidel_order(system)]
@@ -461,6 +451,8 @@ class Execution:
             self.loop_used = f"python ({why})"
         else:
             self.loop_used = "python (forced)"
+        from ipcosim.harness.master.pyloop import compile_loop
+
         return compile_loop(self.blocks, self.order, self.algorithm, self.timebase, self.record_every,
                             self.recorder.typed_record())
 
@@ -524,117 +516,6 @@ class Execution:
                     raise self.slaves[b.index].fail(f"fmi2Get{ch.value_type.capitalize()}", status,
                                                     t if t is not None else self.start_time)
 
-    def _step_all(self) -> None:
-        """Run every tick in chunks between observer/manipulator events, writing the rows of
-        each chunk and looking at pending signals in between."""
-        N, every = self.n_ticks, self.record_every
-        va = ctypes.addressof(self.layout.values_c)
-        due_man = {id(m): m.next_tick(-1) for m in self.manipulators}
-        due_obs = {id(o): o.next_tick(0) for o in self.observers}
-        n, chunk = 0, min(CHUNK, 16)
-        while n < N:
-            signals.check()
-            self._call_due(self.manipulators, due_man, n)
-            target = min(N, n + chunk, *(k for k in (*due_man.values(), *due_obs.values()) if k is not None and k > n))
-            t0 = _time.perf_counter()
-            if not self._run_chunk(n, target, va):
-                return  # a component ended the simulation
-            rows = target // every + 1
-            self.recorder.check_finite(n // every + 1, rows)
-            chunk = _next_chunk(chunk, target - n, _time.perf_counter() - t0)
-            # observers that need every tick make chunks of one tick
-            if self.recorder.due(rows, chunk):
-                self.recorder.emit(rows)
-            n = self.tick = target
-            self._call_due(self.observers, due_obs, n)
-        self.recorder.emit(N // every + 1)
-
-    def _call_due(self, hooks: Sequence[Manipulator | Observer], due: dict[int, int | None], n: int) -> None:
-        """``step`` every manipulator or observer due at tick ``n``; note when each is due next."""
-        for hook in hooks:
-            if due[id(hook)] == n:
-                hook.step(self, n)
-                due[id(hook)] = hook.next_tick(n)
-
-    def _run_chunk(self, n: int, target: int, va: int) -> bool:
-        """Ticks ``n .. target-1`` in the stepping loop; False when a component ended the
-        simulation within them (the run then ends normally at ``self.tick``)."""
-        rb, rbi = self.recorder.addresses()
-        marks = [s.errors_logged for s in self.slaves]
-        try:
-            failure = self._run_loop(n, target, rb, va, self.recorder.row_bytes, rbi)
-        except CarryError as exc:
-            self._carry_failed(exc)
-        if failure is None:
-            return True
-        self._loop_failed(failure, marks)
-        return False
-
-    def _carry_failed(self, exc: CarryError) -> None:
-        """After a connection could not deliver a value in tick ``exc.tick``: write the rows up
-        to there and raise the failure, naming the connection, the value and the time."""
-        fn = int(exc.tick or 0)
-        self.tick = fn
-        rows = fn // self.record_every + 1
-        self.recorder.check_finite(self.recorder.base_row, rows)
-        self.recorder.emit(rows)
-        err = CarryError(f"{exc} (in the step from t = {self.time_of(fn):.6g} s)", fn)
-        raise TickFailure(str(err), rows, err)
-
-    def _loop_failed(self, failure: tuple[int, int, str, int], marks: Sequence[int]) -> None:
-        """After the loop stopped on a status > fmi2Warning at tick ``failure[0]``: write the
-        rows up to there, then return when the component ended the simulation (and logged no
-        error since ``marks``), else raise the component's failure."""
-        fn, idx, function, status = failure
-        self.tick = fn
-        rows = fn // self.record_every + 1
-        self.recorder.check_finite(self.recorder.base_row, rows)
-        self.recorder.emit(rows)
-        slave = self.slaves[idx]
-        logged_error = slave.errors_logged > marks[idx]
-        if not logged_error and self._ended_by_fmu(idx, function, status):
-            self._record_last_successful(slave)
-            return
-        err = slave.fail(function, status, self.time_of(fn))
-        if status == DISCARD and function == "fmi2DoStep":
-            ended, query = slave.terminated()
-            why = ("but it logged an error in that step: a failure" if ended and logged_error
-                   else "the FMU did not end the simulation")
-            err = type(err)(f"{err} ({query}, {why})", err.component, err.function, err.status, err.time)
-        raise TickFailure(str(err), rows, err)
-
-    def _ended_by_fmu(self, idx: int, function: str, status: int) -> bool:
-        """Whether a failed ``do_step`` is a component ending the simulation itself (FMI 2.0:
-        fmi2Discard and fmi2GetBooleanStatus(fmi2Terminated) true; FMI 3.0: terminateSimulation).
-        The run then ends normally at ``self.tick``, the last communication point every component
-        reached; the metadata names the component."""
-        if function != "fmi2DoStep" or status not in (DISCARD, TERMINATE):
-            return False
-        slave = self.slaves[idx]
-        ended, query = slave.terminated()
-        if not ended:
-            return False
-        t, t_next = self.time_of(self.tick), self.time_of(self.tick + 1)
-        self.terminated_by = {"component": slave.name, "model": slave.model_name, "time": t,
-                              "note": f"component {slave.label()} ended the simulation in its step from "
-                                      f"t = {t:.6g} s to {t_next:.6g} s ({query}); the run ends at t = {t:.6g} s"}
-        return True
-
-    def _record_last_successful(self, slave: Any) -> None:
-        """After a component ended the simulation within its step: the row at the time it reached
-        there (its last successful time, when past the last full row), with every component's
-        outputs as they are then -- the row FMPy's ``simulate_fmu`` records."""
-        t, t_next = self.time_of(self.tick), self.time_of(self.tick + 1)
-        t_last = slave.last_successful_time()
-        if t_last is None or not t + 1e-12 * max(1.0, abs(t)) < t_last <= t_next:
-            return
-        for b in self.blocks:
-            self._get_outputs(b, t_last)
-        self.recorder.append_at(t_last)
-        assert self.terminated_by is not None
-        self.terminated_by.update(last_successful_time=t_last, note=self.terminated_by["note"].replace(
-            f"the run ends at t = {t:.6g} s", f"recorded up to its last successful time t = {t_last:.6g} s"))
-
     def _cleanup(self) -> BaseException | None:
         """Terminate (where FMI allows) and free every instantiated slave; first error returned."""
         first: BaseException | None = None
@@ -652,8 +533,13 @@ class Execution:
         return first
 
 
-def _next_chunk(chunk: int, ticks: int, seconds: float) -> int:
-    """Ticks for the next chunk so that it lasts about CHUNK_SECONDS (between 1 and CHUNK)."""
-    if ticks < chunk or seconds <= 0:
-        return chunk
-    return int(max(1, min(CHUNK, ticks * CHUNK_SECONDS / seconds)))
+def _clock_multiples(system: System, timebase: TimeBase) -> dict[str, int]:
+    """:func:`~ipcosim.harness.master.clocks.clock_multiples` of a system with FMI 3.0 components, the
+    only ones with clocks: the clocks' code, and the slave of FMUs with clocks that it registers
+    (:mod:`~ipcosim.harness.master.clocked`), are loaded for such a system alone."""
+    if not any(str(inst.model.fmi_version).startswith("3") for inst in system.instances):
+        return {}
+    from ipcosim.harness.master import clocked  # noqa: F401 -- registers the slave of FMUs with clocks
+    from ipcosim.harness.master.clocks import clock_multiples
+
+    return clock_multiples(system, timebase)

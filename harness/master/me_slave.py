@@ -26,21 +26,11 @@ import math
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ipcosim.harness.master.slave import (
-    ERROR,
-    OK,
-    TERMINATE,
-    BoundGetSet,
-    FMU2Slave,
-    FMU3Slave,
-    FMUSlave,
-    RawDoStep,
-    RawGetSet,
-    SlaveError,
-    fmi2_tuple_library,
-    fmu_slave,
-    load_library,
-)
+from ipcosim.harness.master.fmi2_slave import FMU2Slave
+from ipcosim.harness.master.fmi3_slave import FMU3Slave
+from ipcosim.harness.master.fmu_slave import FMUSlave, fmi2_tuple_library, load_library
+from ipcosim.harness.master.slave import ERROR, OK, TERMINATE, BoundGetSet, RawDoStep, RawGetSet, SlaveError
+from ipcosim.harness.master.slaves import fmu_slave
 from ipcosim.harness.master.system import Instance, Variable
 
 #: Relative tolerance of the solver when neither the SSD nor the FMU gives one.
@@ -298,7 +288,7 @@ def _errors_to_the_solver_only(solver: Any) -> None:
 
 def slave_of(instance: Instance, unzip_dir: Path, logging_on: bool = True, library: Any = None) -> FMUSlave:
     """The slave of one extracted FMU for the interface the component runs: for model exchange
-    :class:`ME3Slave` (FMI 3.0) or :class:`ME2Slave`, else :func:`~ipcosim.harness.master.slave.fmu_slave`'s."""
+    :class:`ME3Slave` (FMI 3.0) or :class:`ME2Slave`, else :func:`~ipcosim.harness.master.slaves.fmu_slave`'s."""
     if instance.interface != "ModelExchange":
         return fmu_slave(instance, unzip_dir, logging_on=logging_on, library=library)
     cls = ME3Slave if instance.model.fmi_version.startswith("3") else ME2Slave
@@ -307,7 +297,7 @@ def slave_of(instance: Instance, unzip_dir: Path, logging_on: bool = True, libra
 
 def library_of(instance: Instance, unzip_dir: Path) -> Any:
     """The loaded library :func:`slave_of` makes a slave from (see
-    :func:`~ipcosim.harness.master.slave.load_library`)."""
+    :func:`~ipcosim.harness.master.fmu_slave.load_library`)."""
     return load_me_library(instance, unzip_dir) if instance.interface == "ModelExchange" else load_library(
         instance, unzip_dir)
 

@@ -261,9 +261,11 @@ def test_the_cycle_check_sees_a_cycle() -> None:
 
 
 #: What a plain simulation (no swap, no real time, no live view) must not load: the master stays
-#: generic, and the rooms above it are loaded only by the commands that use them.
+#: generic, and the rooms above it are loaded only by the commands that use them; the code of FMI 3.0
+#: clocks only for FMI 3.0 FMUs (the scenarios' are FMI 2.0).
 NOT_FOR_A_PLAIN_RUN = ("ipcosim.harness.hil", "ipcosim.fmus.hil", "ipcosim.harness.studies", "ipcosim.harness.live",
-                       "ipcosim.harness.native")
+                       "ipcosim.harness.native", "ipcosim.harness.master.clocked", "ipcosim.harness.master.clocks",
+                       "ipcosim.harness.master.clockstep")
 
 _LOADED = """
 import os, sys, tempfile
@@ -295,6 +297,15 @@ def test_a_plain_run_loads_no_hil_study_or_live_code() -> None:
     assert status == 0
     assert "ipcosim.harness.master.execution" in modules  # the probe did run the master
     assert _within(modules, NOT_FOR_A_PLAIN_RUN) == []
+
+
+def test_a_native_run_loads_the_native_flavour_alone(native_fmus) -> None:
+    """The native flavour's run loads its redesign of the bindings (``harness.native``), and nothing else
+    a plain run does not."""
+    status, modules = _loaded_by_run("--fmus", "native", "--fmu-dir", str(native_fmus[1]))
+    assert status == 0
+    assert "ipcosim.harness.native.redesign" in modules  # the probe did run the native flavour
+    assert _within(modules, tuple(p for p in NOT_FOR_A_PLAIN_RUN if p != "ipcosim.harness.native")) == []
 
 
 def test_a_hil_swap_still_finds_its_alias() -> None:
