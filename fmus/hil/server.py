@@ -128,6 +128,7 @@ class RigServer(RigRequests):
         self._controller: _Session | None = None
         self._sock: socket.socket | None = None
         self._stopping = threading.Event()
+        self._stop_asked = False        # set by request_stop (a signal handler): a plain flag, no lock
         self._threads: list[threading.Thread] = []
         self._conns: set[socket.socket] = set()
         self._events_seen = 0
@@ -179,15 +180,20 @@ class RigServer(RigRequests):
     def serve(self, duration: float | None = None) -> None:
         """Block until :meth:`close` (or ``duration`` seconds), relaying new rig events to ``log``."""
         end = None if duration is None else time.monotonic() + duration
-        while not self._stopping.is_set():
+        while not (self._stop_asked or self._stopping.is_set()):
             self._relay_events()
             if end is not None and time.monotonic() >= end:
                 break
             self._stopping.wait(0.1)
 
     def request_stop(self) -> None:
-        """Make :meth:`serve` return (safe from a signal handler); then call :meth:`close`."""
-        self._stopping.set()
+        """Make :meth:`serve` return within 0.1 s; then call :meth:`close`.
+
+        Safe from a signal handler: it sets a plain flag and takes no lock. (``Event.set`` takes the lock
+        that :meth:`serve`'s ``Event.wait`` holds for an instant each time it wakes; a handler run in that
+        instant, on the same thread, waited for itself for ever.)
+        """
+        self._stop_asked = True
 
     def close(self) -> None:
         """Stop serving: every wait ends, the motor goes to 0 V, connections close, the clock stops.

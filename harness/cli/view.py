@@ -31,12 +31,14 @@ def main(args: argparse.Namespace) -> int:
     port = check_address(args.host, args.port, args.token, option="-")
     server = view_server(args.folder, args.host, port, args.token)
     print(f"ipcosim view: {args.folder} at {server.url} (Ctrl-C ends)", file=sys.stderr, flush=True)
-    ended = threading.Event()
-    # nothing runs that a signal could leave half done: Ctrl-C and SIGTERM simply end the serving
-    previous = {s: signal.signal(s, lambda *_: ended.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    pause, ended = threading.Event(), []
+    # nothing runs that a signal could leave half done: Ctrl-C and SIGTERM simply end the serving. The handler
+    # only appends to a list: an Event's set() would take the lock its wait holds for an instant on each wake-up
+    # (the handler runs on that same thread: a deadlock)
+    previous = {s: signal.signal(s, lambda signum, _: ended.append(signum)) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        while not ended.wait(0.2):
-            pass
+        while not ended:
+            pause.wait(0.2)
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)

@@ -380,15 +380,41 @@ def test_sigterm_and_sigint_stop_the_server_in_every_state_with_the_motor_at_zer
     procs = {state: _serve(*extra) for state, extra in states.items()}
     held = {state: _into_state(state, port) for state, (_, port) in procs.items()}
     took = {}
-    for state, (proc, _) in procs.items():
-        t0 = time.monotonic()
-        proc.send_signal(sig)
-        _, err = proc.communicate(timeout=30)
-        took[state] = time.monotonic() - t0
-        assert proc.returncode == 0, err
-        assert "motor at +0.000 V" in err.strip().splitlines()[-1], err
+    try:
+        for state, (proc, _) in procs.items():
+            t0 = time.monotonic()
+            proc.send_signal(sig)
+            _, err = proc.communicate(timeout=30)
+            took[state] = time.monotonic() - t0
+            assert proc.returncode == 0, err
+            assert "motor at +0.000 V" in err.strip().splitlines()[-1], err
+    finally:            # a rig that did not stop is not left serving after the test
+        for proc, _ in procs.values():
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
     for obj in held.values():
         if obj is not None:
             obj.close()
     print({k: f"{v * 1e3:.0f} ms" for k, v in took.items()})
     assert max(took.values()) < 5.0                          # generous here; the figures are printed
+
+
+def test_a_stop_asked_from_a_signal_handler_takes_no_lock_its_serving_loop_may_hold(server):
+    """SIGTERM's handler runs on the main thread, which may be at the instant ``serve``'s wait holds its
+    Event's lock (each time it wakes): a ``request_stop`` that took that lock waited for itself for ever (a
+    rig that outlived its duration and ignored every later signal). Held here on purpose, it must not block,
+    and ``serve`` then returns at once."""
+    import threading
+
+    srv = server()
+    asked = threading.Thread(target=lambda: (srv._stopping._cond.acquire(), srv.request_stop()), daemon=True)
+    asked.start()
+    asked.join(timeout=5)
+    blocked = asked.is_alive()
+    srv._stopping._cond.release()       # (a plain lock: released here, a blocked call goes on)
+    asked.join(timeout=5)
+    assert not blocked, "request_stop blocked on the lock the serving loop holds"
+    began = time.monotonic()
+    srv.serve(duration=30)
+    assert time.monotonic() - began < 1.0
