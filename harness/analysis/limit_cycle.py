@@ -42,17 +42,24 @@ def plant_of(loop: Any) -> PlantParams:
     return preset(DEFAULT_PRESET[loop.kind], **dict(loop.plant_values))
 
 
-def closed_loop(loop: Any) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    """The sampled closed loop of ``loop`` (``analyze.Loop``) with a force pushing each cart as input
-    (:data:`~ipcosim.fmus.linearize.COULOMB_CARTS` order): ``(Phi, Gamma, plant state names)``; the first
-    states of ``Phi`` are the plant's, then the law's."""
-    params = plant_of(loop)
+def sampled_plant(params: PlantParams, T: float) -> tuple[Any, list, np.ndarray, np.ndarray]:
+    """The plant's linearization (with the inductance), its force columns (a force pushing each cart with
+    Coulomb friction) and its zero-order-hold discretization at ``T`` [s] with the voltage and those forces
+    as inputs: ``(model, forces, Ad, Bd)``."""
     model = linearize(params, inductance=True)
     forces = force_columns(params)
     n = len(model.states)
     B = np.hstack([model.B, np.array([c for _, c in forces]).T])
-    sampled = control.c2d(control.ss(model.A, B, np.eye(n), np.zeros((n, B.shape[1]))), loop.T, method="zoh")
-    Ad, Bd = np.asarray(sampled.A), np.asarray(sampled.B)
+    sampled = control.c2d(control.ss(model.A, B, np.eye(n), np.zeros((n, B.shape[1]))), T, method="zoh")
+    return model, forces, np.asarray(sampled.A), np.asarray(sampled.B)
+
+
+def closed_loop(loop: Any) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """The sampled closed loop of ``loop`` (``analyze.Loop``) with a force pushing each cart as input
+    (:data:`~ipcosim.fmus.linearize.COULOMB_CARTS` order): ``(Phi, Gamma, plant state names)``; the first
+    states of ``Phi`` are the plant's, then the law's."""
+    model, forces, Ad, Bd = sampled_plant(plant_of(loop), loop.T)
+    n = len(model.states)
     law = loop.controller
     Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(m, dtype=float)) for m in (law.A, law.B, law.C, law.D))
     C = np.asarray(model.C)

@@ -47,11 +47,10 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-import control
 import numpy as np
 
 from ipcosim.errors import IpcosimError
-from ipcosim.fmus.linearize import COULOMB_CARTS, force_columns, linearize
+from ipcosim.fmus.linearize import COULOMB_CARTS
 from ipcosim.fmus.physics import MEASURED
 
 #: Largest loop the bound searches from (nonlinearity input amplitudes scale as s r) and the smallest [the ratios'
@@ -187,12 +186,10 @@ class QuasiLinearLoop:
     def __init__(self, loop: Any, params: Any, forces: Mapping[str, float], resolutions: Mapping[str, float],
                  delay: int, compensation: Mapping[str, tuple[float, float]] | None = None,
                  dither: float = 0.0) -> None:
-        model = linearize(params, inductance=True)
-        cols = force_columns(params)
+        from ipcosim.harness.analysis.limit_cycle import sampled_plant
+
+        model, _, Ad, Bd = sampled_plant(params, loop.T)
         n = len(model.states)
-        B = np.hstack([model.B, np.array([c for _, c in cols]).T])
-        sampled = control.c2d(control.ss(model.A, B, np.eye(n), np.zeros((n, B.shape[1]))), loop.T, method="zoh")
-        Ad, Bd = np.asarray(sampled.A), np.asarray(sampled.B)
         law = loop.controller
         Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(m, dtype=float)) for m in (law.A, law.B, law.C, law.D))
         self.states, self.T, self.kind = model.states, loop.T, loop.kind
