@@ -316,6 +316,7 @@ def test_master_dies_and_the_rigs_watchdog_puts_the_motor_at_zero(env, tmp_path)
             while rig.motor_voltage() == 0.0 and time.monotonic() < end and proc.poll() is None:
                 time.sleep(0.02)                               # bounded: until the master drives the motor
             assert rig.motor_voltage() == pytest.approx(1.5, abs=LSB), proc.stderr.read() if proc.poll() else ""
+            ended_before = sum(e.topic == "session" and "ended" in e.message for e in rig.events)   # the probe's
             os.kill(proc.pid, signal.SIGSTOP)                  # the master hangs
             end = time.monotonic() + 30
             while not rig.status().watchdog_expired and time.monotonic() < end:
@@ -327,7 +328,9 @@ def test_master_dies_and_the_rigs_watchdog_puts_the_motor_at_zero(env, tmp_path)
             os.kill(proc.pid, signal.SIGKILL)                  # and dies
             proc.wait(timeout=30)
         end = time.monotonic() + 30
-        while not any(e.topic == "session" and "ended" in e.message for e in rig.events) and time.monotonic() < end:
+        # the run's own session ends: the master's probe opened and ended one before the run began
+        while (sum(e.topic == "session" and "ended" in e.message for e in rig.events) <= ended_before
+               and time.monotonic() < end):
             time.sleep(0.01)
         assert rig.motor_voltage() == 0.0 and not rig.watchdog.running
 
