@@ -5,8 +5,13 @@ request/reply exchange of :mod:`ipcosim.fmus.hil.protocol`; a reply that does no
 ``timeout`` seconds raises ``HILError(TIMEOUT)`` naming the request. The socket blocks with its
 timeouts in the kernel (``SO_RCVTIMEO``, ``SO_SNDTIMEO``) and ``TCP_NODELAY``: a request is one
 write, its reply (as a rule) one read. A wall-clock rig answers a STEP at once with the reading
-at its sample instant; :meth:`TcpipCard.step` then waits on the host for that instant, as a
-card's own step does.
+at its sample instant; :meth:`TcpipCard.step` sleeps to that instant while the rig answers and then
+reads the reply, which waits in the socket: one wake-up a step, the timer's, as a card's own step.
+
+The rig's clock is reckoned from bounds, as a network time client does: a reply stamped ``t`` by the
+rig, to a request sent at host time ``s`` and read at ``r``, says the rig's clock is between
+``t - r`` and ``t - s`` ahead of the host's (:class:`ClockOffset`). A reply read late only loosens
+its lower bound, so sleeping while the rig answers never dates the rig's clock by the read.
 """
 from __future__ import annotations
 
@@ -68,6 +73,13 @@ NS = 1_000_000_000
 #: that sleeps to the instant made 12 to 26 % of a quiet host's walkthrough steps late.
 WAIT_SPIN_NS = 50_000
 
+#: A wallclock STEP whose sample instant is at most this far ahead [ns] sleeps to the instant before it
+#: reads the reply; a farther one reads the reply first, so that a refusal is never waited for long.
+OVERLAP_NS = 50_000_000
+#: How fast the rig's clock may drift from the host's [parts per million]: the bounds on their offset
+#: widen this fast as they age (a rig on the same host: not at all; a crystal: tens of ppm).
+DRIFT_PPM = 100
+
 #: Open tcpip cards of this process (diagnostics and fault-injection tests).
 OPEN_CARDS: "weakref.WeakSet[TcpipCard]" = weakref.WeakSet()
 
@@ -105,7 +117,8 @@ class TcpipCard(Card):
         self.stale_replies = 0
         self._sock: socket.socket | None = None
         self._last_rig_ns = 0
-        self._last_host_ns = time.monotonic_ns()
+        self._sent_ns = 0
+        self.offset = ClockOffset()
         self.last_flags = 0
         #: Requests made (each one round trip).
         self.requests = 0
@@ -169,6 +182,7 @@ class TcpipCard(Card):
         seq = self._seq
         limit = self.timeout if timeout is None else timeout
         self._set_timeout(limit)
+        self._sent_ns = time.monotonic_ns()
         try:
             self._sock.sendall(encode_frame(msg, seq, payload))
         except (socket.timeout, BlockingIOError):
@@ -209,15 +223,17 @@ class TcpipCard(Card):
                 return self._parse_reply(msg, frame.payload)
 
     def rig_now_ns(self) -> int:
-        """The rig's clock [ns] as this host reckons it: the last reply's time plus the host time since."""
-        return self._last_rig_ns + (time.monotonic_ns() - self._last_host_ns)
+        """The rig's clock [ns] as this host reckons it (:class:`ClockOffset`)."""
+        now = time.monotonic_ns()
+        return now + self.offset.at(now)
 
     def _parse_reply(self, msg: Msg, payload: bytes) -> Reader:
         r = Reader(payload)
         try:
             code, flags, t_ns = r.take(REPLY_PREFIX)
             self.last_flags = flags
-            self._last_rig_ns, self._last_host_ns = t_ns, time.monotonic_ns()
+            self._last_rig_ns = t_ns
+            self.offset.update(t_ns, self._sent_ns, time.monotonic_ns())
             if code != 0:
                 message = r.text()
                 if msg == Msg.HELLO:
@@ -290,17 +306,27 @@ class TcpipCard(Card):
         until_ns = int(round(until * NS))
         payload = (STEP_REQUEST.pack(until_ns, 1 if reload else 0) + pack_channels(ao)
                    + pack_doubles(as_finite(volts, len(ao), "step")) + pack_channels(enc))
-        r = self._request(Msg.STEP, payload)
+        wallclock = self.info.clock == "wallclock"
+        sent = self._send(Msg.STEP, payload)
+        self.last_wait_ns = 0
+        if wallclock and until_ns - self.rig_now_ns() <= OVERLAP_NS:
+            self._wait_for(until_ns)         # while the rig answers: its reply waits in the socket
+        r = self._receive(Msg.STEP, *sent)
         reloaded, late_ns, n = self._body(r, STEP_REPLY, "STEP")
         counts = list(self._body(r, f"{n}i", "STEP"))  # int32 on the wire
         now = self._last_rig_ns
-        self.last_wait_ns = 0
-        if self.info.clock == "wallclock":   # the reading is the sample instant's: not before it
-            began = time.monotonic_ns()
-            now = max(now, wait_until_ns(self.rig_now_ns, until_ns, spin_ns=max(WAIT_SPIN_NS, policy_spin_ns())))
-            self.last_wait_ns = time.monotonic_ns() - began
+        if wallclock:   # the reading is the sample instant's: not before it (a far instant's reply came first)
+            now = max(now, self._wait_for(until_ns))
         return StepResult(counts=counts, reloaded=bool(reloaded), time=now / NS, late=late_ns / NS,
                           status=self._flags_status())
+
+    def _wait_for(self, until_ns: int) -> int:
+        """Wait until the rig's clock reaches ``until_ns`` (adding the time to :attr:`last_wait_ns`);
+        returns the rig's clock then [ns]."""
+        began = time.monotonic_ns()
+        now = wait_until_ns(self.rig_now_ns, until_ns, spin_ns=max(WAIT_SPIN_NS, policy_spin_ns()))
+        self.last_wait_ns += time.monotonic_ns() - began
+        return now
 
     def _flags_status(self) -> RigStatus:
         f = self.last_flags
@@ -342,4 +368,50 @@ class TcpipCard(Card):
         self._abort()
 
 
-__all__ = ["TcpipCard", "PROTOCOL_VERSION"]
+class ClockOffset:
+    """How far the rig's clock is ahead of the host's [ns], from the bounds each reply gives.
+
+    A reply stamped ``t_ns`` (rig clock) to a request sent at ``sent_ns`` and read at ``read_ns``
+    (host clock) bounds the offset: ``t_ns - read_ns <= offset <= t_ns - sent_ns``. The tightest
+    lower and upper bound are kept, each widened by :data:`DRIFT_PPM` of its age. The rig answers at
+    once, so the upper bound is tight (a request's way there, renewed by every reply), while a reply
+    read after a sleep gives a loose lower bound: the offset is the upper bound less half the shortest
+    round trip seen (a request's way there, as near as the link tells), never below the lower bound.
+    Bounds that no longer overlap (the rig's clock jumped) give way to the newest reply's.
+    """
+
+    def __init__(self) -> None:
+        self.low = self.high = 0
+        self._low_at = self._high_at = 0
+        self.shortest_round_trip = 0
+        self._known = False
+
+    def _bounds(self, now_ns: int) -> tuple[int, int]:
+        return (self.low - (now_ns - self._low_at) * DRIFT_PPM // 1_000_000,
+                self.high + (now_ns - self._high_at) * DRIFT_PPM // 1_000_000)
+
+    def update(self, t_ns: int, sent_ns: int, read_ns: int) -> None:
+        """Take the bounds of one reply (see the class)."""
+        low, high = t_ns - read_ns, t_ns - sent_ns
+        if self._known:
+            was_low, was_high = self._bounds(read_ns)
+            if max(low, was_low) <= min(high, was_high):          # consistent: the tighter bound of each
+                take_low, take_high = low > was_low, high < was_high
+            else:                                                # the rig's clock jumped: the newest reply's
+                take_low = take_high = True
+            self.shortest_round_trip = min(self.shortest_round_trip, read_ns - sent_ns)
+        else:
+            take_low = take_high = self._known = True
+            self.shortest_round_trip = read_ns - sent_ns
+        if take_low:
+            self.low, self._low_at = low, read_ns
+        if take_high:
+            self.high, self._high_at = high, read_ns
+
+    def at(self, now_ns: int) -> int:
+        """The offset [ns] reckoned at host time ``now_ns``."""
+        low, high = self._bounds(now_ns)
+        return max(low, high - self.shortest_round_trip // 2)
+
+
+__all__ = ["TcpipCard", "ClockOffset", "PROTOCOL_VERSION"]
