@@ -119,6 +119,7 @@ class TcpipCard(Card):
         self._last_rig_ns = 0
         self._sent_ns = 0
         self.offset = ClockOffset()
+        self._step_channels: dict[tuple, tuple[int, bytes, bytes]] = {}
         self.last_flags = 0
         #: Requests made (each one round trip).
         self.requests = 0
@@ -301,11 +302,10 @@ class TcpipCard(Card):
 
     def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
              until: float, reload: bool = True) -> StepResult:
-        ao = as_channels(analog_channels, "analog output")
-        enc = as_channels(encoder_channels, "encoder")
+        n_ao, ao_packed, enc_packed = self._packed_channels(analog_channels, encoder_channels)
         until_ns = int(round(until * NS))
-        payload = (STEP_REQUEST.pack(until_ns, 1 if reload else 0) + pack_channels(ao)
-                   + pack_doubles(as_finite(volts, len(ao), "step")) + pack_channels(enc))
+        payload = (STEP_REQUEST.pack(until_ns, 1 if reload else 0) + ao_packed
+                   + pack_doubles(as_finite(volts, n_ao, "step")) + enc_packed)
         wallclock = self.info.clock == "wallclock"
         sent = self._send(Msg.STEP, payload)
         self.last_wait_ns = 0
@@ -320,11 +320,29 @@ class TcpipCard(Card):
         return StepResult(counts=counts, reloaded=bool(reloaded), time=now / NS, late=late_ns / NS,
                           status=self._flags_status())
 
+    def _packed_channels(self, analog_channels: Sequence[int], encoder_channels: Sequence[int]
+                         ) -> tuple[int, bytes, bytes]:
+        """A STEP's channels checked and packed: (analog outputs, their bytes, the encoders' bytes), once for
+        each set of channels a run steps with."""
+        try:
+            key = (tuple(analog_channels), tuple(encoder_channels))
+            packed = self._step_channels.get(key)
+        except TypeError:           # not sequences of hashable numbers: as_channels says what is wrong
+            key, packed = None, None
+        if packed is None:
+            ao = as_channels(analog_channels, "analog output")
+            packed = (len(ao), pack_channels(ao), pack_channels(as_channels(encoder_channels, "encoder")))
+            if key is not None:
+                self._step_channels[key] = packed
+        return packed
+
     def _wait_for(self, until_ns: int) -> int:
         """Wait until the rig's clock reaches ``until_ns`` (adding the time to :attr:`last_wait_ns`);
         returns the rig's clock then [ns]."""
         began = time.monotonic_ns()
-        now = wait_until_ns(self.rig_now_ns, until_ns, spin_ns=max(WAIT_SPIN_NS, policy_spin_ns()))
+        offset = self.offset.at(began)        # for the wait: its bounds widen 0.1 us a millisecond
+        now = wait_until_ns(lambda: time.monotonic_ns() + offset, until_ns,
+                            spin_ns=max(WAIT_SPIN_NS, policy_spin_ns()))
         self.last_wait_ns += time.monotonic_ns() - began
         return now
 
