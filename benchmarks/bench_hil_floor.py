@@ -15,7 +15,10 @@ skipped, with the reason, where the OS refuses it), on the quiet host and with t
 busy-loop processes under the default policy, at the bench's nice value). A reference cell,
 ``loaded, own slice``, runs the loaded no-RT runs again with ``IPCOSIM_RT_SLICE_US=0`` (both
 processes on the fair scheduler's own slice instead of the 0.7 ms they ask for by default), beside
-the same floor. Every repetition runs every subject in every condition, the subjects' order
+the same floor. A reference subject of the no-RT cells, ``floor at TCP's CPU``, is the floor's probe
+spending, after each wake-up, the CPU time a step of the TCP run just before it took (the run's
+``loop_cpu_per_step_us``): what the host does to any loop that computes that long each period. Every
+repetition runs every subject in every condition, the subjects' order
 rotating from one repetition to the next, so the floor is measured interleaved with the runs and
 shares the host's drift. A 2 kHz row (the walkthrough with ``--step 0.0005 --set
 controller.sample_period=0.0005``, beside the floor at 2 kHz) ends each repetition. Figures: the
@@ -63,6 +66,9 @@ WALKTHROUGH = ("ipcosim rig serve", "ipcosim run single-mass-lqr --swap plant=hi
 #: The in-process wallclock rig of the same run.
 INPROC_URI = "q4:0@inproc://bench?clock=wallclock"
 SUBJECTS = ("floor", "in-process", "TCP")
+#: The reference subject of the no-RT cells: the floor's probe spending, after each wake-up, the CPU
+#: time a step of the TCP run beside it took (its ``loop_cpu_per_step_us``).
+AT_CPU = "floor at TCP's CPU"
 LOADS = ("quiet", "loaded")
 HOGS = 2
 STOP_TIME = 5.0
@@ -83,6 +89,7 @@ class Sample:
     upright: bool | None = None
     error: str | None = None
     fifo: str = ""
+    cpu_us: float = float("nan")
 
 
 def cli(command: str) -> list[str]:
@@ -128,7 +135,7 @@ def walkthrough(uri: str, rt: bool, period: float) -> Sample:
     error = (lines[-1] if lines else f"exit status {done.returncode}") if done.returncode else None
     late = late_fraction(m) if "lateness_histogram" in m else float("nan")
     fifo = (m.get("realtime_setup") or {}).get("sched_fifo", "")
-    return Sample(late, bool(m.get("upright")) and not error, error, fifo)
+    return Sample(late, bool(m.get("upright")) and not error, error, fifo, m.get("loop_cpu_per_step_us", float("nan")))
 
 
 def measure(subject: str, rt: bool, period: float = 1e-3) -> Sample:
@@ -140,6 +147,13 @@ def measure(subject: str, rt: bool, period: float = 1e-3) -> Sample:
         return walkthrough(INPROC_URI, rt, period)
     with rig(rt) as uri:
         return walkthrough(uri, rt, period)
+
+
+def at_cpu(run: Sample) -> Sample:
+    """The floor's probe doing, after each wake-up, the CPU work of a step of ``run`` (NaN if it has none)."""
+    if not run.cpu_us > 0:
+        return Sample(float("nan"))
+    return Sample(host_floor.measure(1e-3, round(STOP_TIME / 1e-3), work=run.cpu_us * 1e-6).late_fraction)
 
 
 def rotated(items: Sequence[str], k: int) -> list[str]:
@@ -160,6 +174,8 @@ def collect(repetitions: int, rt_modes: Sequence[bool]) -> dict[Cell, list[Sampl
                 for rt in rt_modes:
                     for subject in rotated(SUBJECTS, rep):
                         got[(subject, load, rt)].append(measure(subject, rt))
+                    if not rt:
+                        got[(AT_CPU, load, rt)].append(at_cpu(got[("TCP", load, rt)][-1]))
                     print(f"   repetition {rep + 1}, {load}, {_rt(rt)}: "
                           + ", ".join(f"{s} {_pct(got[(s, load, rt)][-1])}" for s in SUBJECTS), flush=True)
                 if load == "loaded":
@@ -224,8 +240,8 @@ def cell_figures(got: dict[Cell, list[Sample]], load: str, rt: bool) -> str:
     key, label = f"hil_floor.{cell}_{'rt' if rt else 'plain'}", f"{load}, {_rt(rt)}"
     floor = median(got[("floor", load, rt)])
     parts = []
-    for subject in (s for s in SUBJECTS if (s, load, rt) in got):
-        samples, name = got[(subject, load, rt)], f"{key}_{subject.lower().replace('-', '')}"
+    for subject in (s for s in (*SUBJECTS, AT_CPU) if (s, load, rt) in got):
+        samples, name = got[(subject, load, rt)], f"{key}_{''.join(c for c in subject.lower() if c.isalnum())}"
         anchor = {} if subject == "floor" else {"anchor": f"the floor's median beside it: {fmt(100 * floor)} %"}
         what = f"{subject}, {label}: late steps,"
         part = (f"{subject} {figure(name + '_median_pct', 100 * median(samples), '%', what=what + ' median', **anchor)}"
@@ -233,7 +249,10 @@ def cell_figures(got: dict[Cell, list[Sample]], load: str, rt: bool) -> str:
         if subject != "floor":
             ratio = figure(name + "_over_floor", host_floor.ratio(median(samples), floor), "x",
                            what=f"{subject}, {label}: median over the floor's median", **anchor)
-            part += f" ({ratio}), upright {sum(bool(s.upright) for s in samples)}/{len(samples)}"
+            part += f" ({ratio})"
+        if subject in SUBJECTS[1:]:
+            cpu = float(np.median([s.cpu_us for s in samples]))
+            part += f", {fmt(cpu)} us CPU a step, upright {sum(bool(s.upright) for s in samples)}/{len(samples)}"
             failed = [_gist(s.error) for s in samples if s.error]
             part += f" (failed: {', '.join(sorted(set(failed)))})" if failed else ""
         parts.append(part)

@@ -1,13 +1,14 @@
-/* The host's floor: a bare loop paced on clock_nanosleep to absolute deadlines, doing no work.
+/* The host's floor: a bare loop paced on clock_nanosleep to absolute deadlines, doing no work
+ * (or, with --work-ns N, N ns of its own CPU time after each wake-up: a step's computation).
  *
- *   host_floor [--period-ns N] [--steps N] [--late-ns N] [--priority P]
+ *   host_floor [--period-ns N] [--steps N] [--late-ns N] [--priority P] [--work-ns N]
  *
  * Step n may start at t0 + n * period (CLOCK_MONOTONIC, integer nanoseconds: no drift, and a late
  * step does not shift the deadlines after it, as the master's pacer does). A step is late when it
  * starts --late-ns or more after its deadline. --priority P runs the loop under SCHED_FIFO at P
  * (0: not asked); a refusal is reported and the loop runs as it is. Prints one JSON object:
  * {"period_ns", "steps", "late_ns", "late", "late_fraction", "lateness_p99_ns", "lateness_max_ns",
- *  "sched_fifo"}. Exit status 2 on a bad option. */
+ *  "sched_fifo", "work_ns"}. Exit status 2 on a bad option. */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <sched.h>
@@ -19,6 +20,12 @@
 static long long now_ns(void) {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+static long long cpu_ns(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
     return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
 }
 
@@ -41,7 +48,7 @@ static int option(int argc, char **argv, int *i, const char *name, long long lo,
 }
 
 int main(int argc, char **argv) {
-    long long period = 1000000, steps = 5000, late_ns = 500000, priority = 0, n, late = 0, t0;
+    long long period = 1000000, steps = 5000, late_ns = 500000, priority = 0, work = 0, n, late = 0, t0;
     long long *lateness;
     char fifo[160] = "not requested";
     int i;
@@ -49,7 +56,8 @@ int main(int argc, char **argv) {
         if (!(option(argc, argv, &i, "--period-ns", 10000, 1000000000, &period)
               || option(argc, argv, &i, "--steps", 1, 10000000, &steps)
               || option(argc, argv, &i, "--late-ns", 1, 1000000000, &late_ns)
-              || option(argc, argv, &i, "--priority", 0, 99, &priority))) {
+              || option(argc, argv, &i, "--priority", 0, 99, &priority)
+              || option(argc, argv, &i, "--work-ns", 0, 1000000000, &work))) {
             fprintf(stderr, "host_floor: unknown option %s\n", argv[i]);
             return 2;
         }
@@ -70,12 +78,16 @@ int main(int argc, char **argv) {
         while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR) {}
         lateness[n] = now_ns() - deadline;
         if (lateness[n] >= late_ns) late++;
+        if (work > 0) {
+            long long until = cpu_ns() + work;
+            while (cpu_ns() < until) {}
+        }
     }
     qsort(lateness, (size_t)steps, sizeof *lateness, by_value);
     printf("{\"period_ns\": %lld, \"steps\": %lld, \"late_ns\": %lld, \"late\": %lld, \"late_fraction\": %.9g, "
-           "\"lateness_p99_ns\": %lld, \"lateness_max_ns\": %lld, \"sched_fifo\": \"%s\"}\n",
+           "\"lateness_p99_ns\": %lld, \"lateness_max_ns\": %lld, \"sched_fifo\": \"%s\", \"work_ns\": %lld}\n",
            period, steps, late_ns, late, (double)late / (double)steps, lateness[(steps * 99) / 100],
-           lateness[steps - 1], fifo);
+           lateness[steps - 1], fifo, work);
     free(lateness);
     return 0;
 }

@@ -97,7 +97,7 @@ def probe_binary() -> Path:
     return exe
 
 
-def measure(period: float = 1e-3, steps: int = STEPS, priority: int | None = None) -> Floor:
+def measure(period: float = 1e-3, steps: int = STEPS, priority: int | None = None, work: float = 0.0) -> Floor:
     """Run the probe once: ``steps`` steps of ``period`` seconds (the same threshold as the runs).
 
     Parameters
@@ -108,6 +108,8 @@ def measure(period: float = 1e-3, steps: int = STEPS, priority: int | None = Non
         Number of steps.
     priority : int, optional
         SCHED_FIFO priority of the probe (None: the default policy); a refusal is in ``sched_fifo``.
+    work : float
+        CPU time the probe spends after each wake-up [s] (0: none, the bare floor), as a step computes.
 
     Returns
     -------
@@ -115,7 +117,8 @@ def measure(period: float = 1e-3, steps: int = STEPS, priority: int | None = Non
         The late fraction and the lateness of the probe's steps.
     """
     cmd = [str(probe_binary()), "--period-ns", str(round(period * 1e9)), "--steps", str(steps),
-           "--late-ns", str(round(LATE_S * 1e9)), "--priority", str(priority or 0)]
+           "--late-ns", str(round(LATE_S * 1e9)), "--priority", str(priority or 0),
+           "--work-ns", str(max(0, round(work * 1e9)))]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=60 + 2 * steps * period)
     if done.returncode:
         raise FloorUnavailable(f"the host's floor probe failed: {done.stderr.strip() or done.returncode}")

@@ -38,6 +38,9 @@ metrics.json):
     (cyclic garbage collection off during the loop, start-up objects frozen), ``cpu_affinity``
     and ``sched_fifo`` (only when asked for), ``sched_slice`` (under the default policy) and
     ``timer_slack``.
+``loop_cpu_per_step_us``
+    The process's CPU time over the paced steps, per step [us]: on a busy host the share of late
+    steps grows with it (docs/hil.md, "Real time on your host").
 ``realtime_priority``
     Whether the run was under real-time priority (``SCHED_FIFO``, ``IPCOSIM_RT_PRIORITY``).
 ``overrun_budget``, ``overrun_budget_exceeded``
@@ -539,6 +542,7 @@ class RealtimePacer(Observer):
         self._setup: dict[str, str] = {}
         self._restore: Callable[[], None] = lambda: None
         self._over_budget = False
+        self._cpu_s: list[float] = []      # process CPU time when the schedule starts, and at the end
 
     def start(self, execution) -> None:  # noqa: ANN001 -- ipcosim.harness.master.execution.Execution
         self._setup, self._restore = realtime_setup()
@@ -560,6 +564,7 @@ class RealtimePacer(Observer):
             return
         if n == 1:      # the start-up step is done: the real-time schedule starts now
             self.pacer.start(1)
+            self._cpu_s = [time.process_time()]
         self.pacer.begin(n)
         self._open = True
 
@@ -568,6 +573,7 @@ class RealtimePacer(Observer):
             self.pacer.end()
             self._open = False
         self._restore()
+        self._cpu_s[1:] = [time.process_time()] if self._cpu_s else []
         if self.pacer is not None:
             st = self.pacer.stats()
             self._over_budget = bool(st.steps) and st.overruns > self.overrun_budget * st.steps
@@ -584,6 +590,9 @@ class RealtimePacer(Observer):
         if self.pacer is None:
             return {}
         out: dict[str, Any] = self.pacer.metrics()
+        paced = out["realtime_steps"] - 1         # the steps after the start-up step
+        if len(self._cpu_s) == 2 and paced > 0:
+            out["loop_cpu_per_step_us"] = round(1e6 * (self._cpu_s[1] - self._cpu_s[0]) / paced, 1)
         out["realtime_setup"] = dict(self._setup)
         out["realtime_priority"] = self._setup.get("sched_fifo", "").startswith("applied")
         out["overrun_budget"] = self.overrun_budget

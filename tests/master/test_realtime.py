@@ -376,6 +376,34 @@ def test_a_paced_run_writes_its_rows_a_few_at_a_time_and_its_timeline_when_asked
 
 
 @pytest.mark.integration
+def test_a_paced_run_reports_the_cpu_its_steps_take(tmp_path, monkeypatch):
+    """Each step made to burn 0.3 ms of CPU (a busy loop on the process's own CPU clock) shows in
+    ``loop_cpu_per_step_us`` as at least that, and an idle-waiting paced step takes far less than its period."""
+    import json
+
+    from ipcosim.harness.cli import main
+    from ipcosim.harness.master import realtime
+
+    def run(out):
+        assert main(["run", "single-mass-lqr", "--realtime", "--stop-time", "0.3", "--out", str(out), "--quiet",
+                     "--overrun-budget", "1"]) == 0
+        return json.loads((out / "metrics.json").read_text())["loop_cpu_per_step_us"]
+
+    plain = run(tmp_path / "plain")
+    end = realtime.RealtimePacer.step
+
+    def burning(self, execution, n):
+        until = time.process_time() + 3e-4
+        while time.process_time() < until:
+            pass
+        return end(self, execution, n)
+
+    monkeypatch.setattr(realtime.RealtimePacer, "step", burning)
+    burnt = run(tmp_path / "burnt")
+    assert 0 < plain < 1000 and burnt >= 300 and burnt >= plain + 250, (plain, burnt)
+
+
+@pytest.mark.integration
 def test_a_paced_run_is_as_steady_as_the_hosts_floor(tmp_path):
     """The pacer adds nothing to what the host does to a loop: a 5 s paced run of the single-mass LQR has at
     most three times the late steps (>= 0.5 ms) of a bare C loop on ``clock_nanosleep`` measured just before

@@ -2,6 +2,8 @@
 (``harness/master/realtime.py``) count the same steps: those starting 0.5 ms or more after their deadline."""
 from __future__ import annotations
 
+import json
+import resource
 import subprocess
 import time
 
@@ -53,6 +55,27 @@ def test_the_probe_paces_to_its_deadlines_and_reports_its_steps():
     assert 0 <= floor.lateness_p99 <= floor.lateness_max and floor.sched_fifo == "not requested"
     if floor.lateness_max < LATE_S:
         assert floor.late == 0
+
+
+def test_the_probes_work_is_cpu_time_after_each_wake_up():
+    """``--work-ns`` spends that much of the probe's own CPU time each step: 100 steps of 2 ms with 1 ms
+    of work take at least 0.1 s of CPU, and the bare probe next to none."""
+    try:
+        exe = host_floor.probe_binary()
+    except host_floor.FloorUnavailable as exc:
+        pytest.skip(str(exc))
+
+    def cpu(*argv: str) -> tuple[float, dict]:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        done = subprocess.run([str(exe), "--period-ns", "2000000", "--steps", "100", *argv], capture_output=True,
+                              text=True, timeout=30, check=True)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, json.loads(done.stdout)
+
+    worked, out = cpu("--work-ns", "1000000")
+    bare, plain = cpu()
+    assert worked >= 0.1 and out["work_ns"] == 1_000_000 and out["steps"] == 100
+    assert bare < 0.05 and plain["work_ns"] == 0
 
 
 def test_a_bad_option_of_the_probe_is_one_line_and_status_2():
