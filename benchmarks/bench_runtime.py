@@ -70,10 +70,11 @@ COLD_TARGET_S = 0.78
 LIBCOSIM_RATIO = 0.58
 ISSUE_LIBCOSIM_GOAL = 0.3
 #: Target: the native run's CPU time at most fmpy's simulate_fmu of the same loop. Not reached: 1.59x before a
-#: run extracted only what it reads, 1.45x after (medians of 7 alternating rounds, load 2). Of the 0.26 s
-#: of CPU, fmpy's own imports (numpy, fmpy, lxml) are 0.13 s; formatting results.csv, which simulate_fmu
-#: does not write, about 35 ms; the run path's own modules about 35 ms; the law registry the amplitude
-#: bound asks (whether the law has a linear model) about 11 ms.
+#: run extracted only what it reads, 1.45x after, 1.15x since results.csv is formatted in C and the command
+#: leaves without the interpreter's teardown (medians of 9 alternating rounds, load 2: 0.25 s against 0.22 s).
+#: What fmpy's process does not pay: ipcosim's own modules, about 65 ms (of which creating their 51
+#: dataclasses, 29 ms, and the law registry the amplitude bound asks whether the law has a linear model,
+#: 14 ms); formatting results.csv, about 20 ms. simulate_fmu's own stepping, in Python, takes about 70 ms.
 FMPY_RATIO = 1.0
 INIT_TARGET_MS = 60.0
 LOOP_TARGET_RTF = 41.0

@@ -27,6 +27,9 @@ COMMAND_MODULES = ("build", "list_", "describe", "run", "export", "linearize", "
                    "tune", "identify", "view")
 #: Each command's name on the command line (``list``), by its module's name (``list_``).
 COMMANDS = {module.rstrip("_"): module for module in COMMAND_MODULES}
+#: Commands that have closed every file they wrote when they return: the ``ipcosim`` command leaves after them
+#: without the interpreter's teardown (:func:`leave`).
+LEAVE_AT_ONCE = frozenset({"run"})
 
 
 def add_study_fmus_option(p: argparse.ArgumentParser) -> None:
@@ -179,9 +182,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     with signals.deferred(immediate=True):
         try:
             args = _parse(argv, command)
-            return _command(args, console)
+            status = _command(args, console)
         except signals.Interrupted as exc:  # while the parser was built, or while a failure was reported
             return _interrupted(command, exc, console, removed=_abandon_outputs())
+    if console and command in LEAVE_AT_ONCE:
+        leave(status)
+    return status
+
+
+def leave(status: int) -> None:
+    """End the process with ``status`` as the interpreter would, without its teardown: the exit handlers run
+    (temporary folders removed), the standard streams are flushed, and the objects, which hold nothing
+    unwritten, are not freed one by one (about 35 ms of CPU after a 10 s single-mass run: an eighth of
+    its whole process). Returns (to a normal exit) while a thread other than the daemon ones still runs."""
+    import atexit
+    import os
+    import threading
+
+    if any(not t.daemon for t in threading.enumerate() if t is not threading.main_thread()):
+        return
+    atexit._run_exitfuncs()  # noqa: SLF001 -- what the interpreter's exit runs first
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a reader gone away, a stream closed: nothing more to say
+            pass
+    os._exit(status)
 
 
 def command_named(argv: Sequence[str]) -> str:

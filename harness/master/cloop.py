@@ -210,19 +210,9 @@ def library(source: str, cache: Path | None = None) -> Any:
     LoopUnavailable
         No C compiler, or the compile failed (its first error line).
     """
-    from ipcosim.harness.support.paths import LOOP_DIR
-
-    cc = find_compiler()
-    if cc is None:
-        raise LoopUnavailable("no C compiler")
-    parts = [source, os.path.realpath(cc), platform.machine(), *CFLAGS]
-    key = hashlib.sha256("\0".join(parts).encode()).hexdigest()[:20]
-    folder = Path(cache or LOOP_DIR)
-    so = folder / f"{key}.so"
+    so = compiled(source, cache)
     if so in _LOADED:
         return _LOADED[so]
-    if not so.is_file():
-        _compile(source, so, cc)
     try:
         lib = ctypes.CDLL(str(so))
     except OSError as exc:
@@ -234,6 +224,27 @@ def library(source: str, cache: Path | None = None) -> Any:
     fn.restype = ctypes.c_int
     _LOADED[so] = fn
     return fn
+
+
+def compiled(source: str, cache: Path | None = None) -> Path:
+    """The shared library of the C ``source`` in the cache (``LOOP_DIR`` by default), compiled on first use.
+
+    Raises
+    ------
+    LoopUnavailable
+        No C compiler, or the compile failed (its first error line).
+    """
+    from ipcosim.harness.support.paths import LOOP_DIR
+
+    cc = find_compiler()
+    if cc is None:
+        raise LoopUnavailable("no C compiler")
+    parts = [source, os.path.realpath(cc), platform.machine(), *CFLAGS]
+    key = hashlib.sha256("\0".join(parts).encode()).hexdigest()[:20]
+    so = Path(cache or LOOP_DIR) / f"{key}.so"
+    if not so.is_file():
+        _compile(source, so, cc)
+    return so
 
 
 def _compile(source: str, so: Path, cc: str) -> None:

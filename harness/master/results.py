@@ -441,7 +441,7 @@ class RowWriter:
             return
         self._spool.write(self._to_spool(block).tobytes())
         if self._csv_fd is not None:
-            self._write_csv(csv_text(block, self.csv_columns).encode())
+            self._write_csv(csv_bytes(block, self.csv_columns))
         self.rows += len(block)
 
     def _to_spool(self, block: np.ndarray) -> np.ndarray:
@@ -504,6 +504,18 @@ class RowWriter:
     def close(self) -> None:
         """Release the files (after :meth:`finish`, the memory map keeps the spool alive)."""
         self.close_csv()
+
+
+def csv_bytes(data: np.ndarray, columns: Sequence[str]) -> bytes | bytearray:
+    """:func:`csv_text` encoded; Real columns only are formatted in C where it can be
+    (:mod:`~ipcosim.harness.master.cformat`: the same bytes)."""
+    if len(data) and all(data.dtype[c].kind == "f" for c in columns):
+        from ipcosim.harness.master import cformat
+
+        fast = cformat.lines([np.asarray(data[c], dtype=float) for c in columns])
+        if fast is not None:
+            return fast
+    return csv_text(data, columns).encode()
 
 
 def csv_text(data: np.ndarray, columns: Sequence[str]) -> str:
