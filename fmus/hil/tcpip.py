@@ -5,13 +5,14 @@ request/reply exchange of :mod:`ipcosim.fmus.hil.protocol`; a reply that does no
 ``timeout`` seconds raises ``HILError(TIMEOUT)`` naming the request. The socket blocks with its
 timeouts in the kernel (``SO_RCVTIMEO``, ``SO_SNDTIMEO``) and ``TCP_NODELAY``: a request is one
 write, its reply (as a rule) one read. A wall-clock rig answers a STEP at once with the reading
-at its sample instant; :meth:`TcpipCard.step` sleeps to that instant while the rig answers and then
-reads the reply, which waits in the socket: one wake-up a step, the timer's, as a card's own step.
+at its sample instant; :meth:`TcpipCard.step` reads the reply and then waits on the host for that
+instant, as a card's own step does.
 
 The rig's clock is reckoned from bounds, as a network time client does: a reply stamped ``t`` by the
 rig, to a request sent at host time ``s`` and read at ``r``, says the rig's clock is between
-``t - r`` and ``t - s`` ahead of the host's (:class:`ClockOffset`). A reply read late only loosens
-its lower bound, so sleeping while the rig answers never dates the rig's clock by the read.
+``t - r`` and ``t - s`` ahead of the host's (:class:`ClockOffset`). A reply read late (the client
+preempted between its arrival and the read) only loosens its own lower bound: it never dates the
+rig's clock by the read, as reckoning from the last reply's stamp plus the host time since did.
 """
 from __future__ import annotations
 
@@ -73,9 +74,6 @@ NS = 1_000_000_000
 #: that sleeps to the instant made 12 to 26 % of a quiet host's walkthrough steps late.
 WAIT_SPIN_NS = 50_000
 
-#: A wallclock STEP whose sample instant is at most this far ahead [ns] sleeps to the instant before it
-#: reads the reply; a farther one reads the reply first, so that a refusal is never waited for long.
-OVERLAP_NS = 50_000_000
 #: How fast the rig's clock may drift from the host's [parts per million]: the bounds on their offset
 #: widen this fast as they age (a rig on the same host: not at all; a crystal: tens of ppm).
 DRIFT_PPM = 100
@@ -306,16 +304,12 @@ class TcpipCard(Card):
         until_ns = int(round(until * NS))
         payload = (STEP_REQUEST.pack(until_ns, 1 if reload else 0) + ao_packed
                    + pack_doubles(as_finite(volts, n_ao, "step")) + enc_packed)
-        wallclock = self.info.clock == "wallclock"
-        sent = self._send(Msg.STEP, payload)
-        self.last_wait_ns = 0
-        if wallclock and until_ns - self.rig_now_ns() <= OVERLAP_NS:
-            self._wait_for(until_ns)         # while the rig answers: its reply waits in the socket
-        r = self._receive(Msg.STEP, *sent)
+        r = self._request(Msg.STEP, payload)
         reloaded, late_ns, n = self._body(r, STEP_REPLY, "STEP")
         counts = list(self._body(r, f"{n}i", "STEP"))  # int32 on the wire
         now = self._last_rig_ns
-        if wallclock:   # the reading is the sample instant's: not before it (a far instant's reply came first)
+        self.last_wait_ns = 0
+        if self.info.clock == "wallclock":   # the reading is the sample instant's: not before it
             now = max(now, self._wait_for(until_ns))
         return StepResult(counts=counts, reloaded=bool(reloaded), time=now / NS, late=late_ns / NS,
                           status=self._flags_status())

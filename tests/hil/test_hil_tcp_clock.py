@@ -1,9 +1,9 @@
 """The TCP card's reckoning of the rig's clock: bounds from each reply, as a network time client keeps.
 
 A reply stamped ``t`` (rig clock) to a request sent at host time ``s`` and read at ``r`` says the
-offset (rig minus host) lies in ``[t - r, t - s]``. The card sleeps to a sample instant while the
-rig answers, so most replies are read long after they came: the reckoning must not be dated by
-the read.
+offset (rig minus host) lies in ``[t - r, t - s]``. A reply read late (the client preempted between
+its arrival and the read, or a client that sleeps while the rig answers) must not date the
+reckoning by the read.
 """
 from __future__ import annotations
 
@@ -79,9 +79,10 @@ def wallclock_server():
 
 
 def test_steps_over_tcp_reach_the_rig_before_their_sample_instants(wallclock_server):
-    """The card sleeps to each instant while the rig answers; its next request must still reach the
-    rig before that request's instant (a client that dated the rig's clock by its late reads sent
-    every request after its instant: every sample read late, a period of delay)."""
+    """Each step returns at its sample instant on the card's reckoning of the rig's clock, and the next
+    request, sent after the controller's work, reaches the rig before that request's instant (a client
+    that reckoned the rig's clock behind sent its requests after their instants: every sample read at
+    its arrival, late)."""
     card = open_card("q4", wallclock_server.uri)
     try:
         h = 2e-3
