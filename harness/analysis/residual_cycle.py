@@ -36,9 +36,10 @@ Where the approximation is weak (``docs/studies.md``, "The residual cycle"): the
 first harmonic only, and the quantizer's is worst at the amplitudes the cycle sits at (a few counts: the reading
 is a square-ish wave); all the nonlinearities are taken to swing at one frequency, in the phase the linear loop
 gives them, about a count level (an offset between the signal's centre and the count grid changes the quantizer's
-gain); stiction above the kinetic force, the sticking phases of stick-slip (the relay's describing function
-assumes a cart that never dwells at rest), the DAC's codes and a law's nonlinear breakaway term are left out;
-whether the cycle is stable is not checked.
+gain); stiction above the kinetic force, the DAC's codes and a law's nonlinear breakaway term are left out;
+whether the cycle is stable is not checked. The sticking phases of stick-slip (the relay's describing function
+assumes a cart that never dwells at rest) are taken in one way only: on the double mass the motor cart's travel
+while the passive cart rests, ``2 b2 / K``, is added to its peak-to-peak (:func:`with_windup`).
 """
 from __future__ import annotations
 

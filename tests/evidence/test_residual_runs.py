@@ -50,3 +50,12 @@ def test_window_spread_of_two_incommensurate_sinusoids_reaches_their_sum() -> No
 def test_bad_seeds_are_one_clear_line(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--seeds", "zero"]) == 2
     assert capsys.readouterr().err.strip() == "--seeds 'zero': give integers separated by commas"
+
+
+def test_less_the_windup_takes_each_runs_own_2_b2_over_K_off() -> None:
+    rows = [{**r, "plant.b2": 0.1} for r in _rows()[:-1]]
+    full, less = diagnosis(rows), diagnosis(rows, less_windup=True)
+    sim = np.array([r["cart_peak_to_peak_m"] for r in rows])
+    pred = np.array([r["predicted_cart_peak_to_peak_m"] - 0.2 / r["plant.K"] for r in rows])
+    assert less["ratio"]["median"] == pytest.approx(np.median(sim / pred))
+    assert less["ratio"]["median"] > full["ratio"]["median"]
