@@ -61,8 +61,14 @@ def diagnosis(rows: Sequence[dict[str, Any]], less_windup: bool = False) -> dict
             "shortfall_mm": {**{k: v * 1e3 for k, v in _quantiles(short).items()},
                              "within_margin": float(np.mean(within))},
             "correlation": _corr(pred, sim), "factors": factors, "spring_thirds": thirds,
+            "windup_correlation": _corr([2 * float(r["plant.b2"]) / float(r["plant.K"]) for r in up], sim)
+            if "plant.b2" in drawn else None,
             "frequency_Hz": {"simulated_median": float(np.median([float(r["cart_frequency_Hz"]) for r in up])),
                              "simulated_with_K": _corr(K, [float(r["cart_frequency_Hz"]) for r in up])}}
+
+
+def _f(v: float | None) -> str:
+    return "-" if v is None else f"{v:.2f}"
 
 
 def _corr(a: Any, b: Any) -> float:
@@ -115,7 +121,8 @@ def markdown(by_seed: dict[tuple[int, str], dict[str, Any]], long: dict[str, Any
                    f"{e['median']:+.0%} (p10 {e['p10']:+.0%}, p90 {e['p90']:+.0%}); simulated - predicted median "
                    f"{s['median']:.2f} mm, p90 {s['p90']:.2f} mm, within the 1 mm margin {s['within_margin']:.1%}; "
                    f"simulated / predicted p10 {r['p10']:.2f}, median {r['median']:.2f}, p90 {r['p90']:.2f}; "
-                   f"correlation {d['correlation']:.2f}; simulated frequency median "
+                   f"correlation {d['correlation']:.2f} (with 2 b2 / K {_f(d['windup_correlation'])}); "
+                   f"simulated frequency median "
                    f"{d['frequency_Hz']['simulated_median']:.2f} Hz (correlation with K "
                    f"{d['frequency_Hz']['simulated_with_K']:+.2f})")
         top = sorted(d["factors"].items(), key=lambda kv: -abs(kv[1]["simulated"]))[:4]
