@@ -166,5 +166,7 @@ INTRO = (
     "reading, whole counts of 1.53 mrad; the predicted one is the reading of the predicted swing. The predicted "
     "frequency is the cycle's (for two cycles side by side, the one with the larger motor-cart swing). *One "
     "balance of both*: every nonlinearity balanced at one frequency, where the friction and the counts each give "
-    "a cycle, against the same simulated peak-to-peak: what one cycle would be where the rule adds two. A law's "
-    "dither is in the friction's describing function (docs/studies.md).")
+    "a cycle, against the same simulated peak-to-peak: what one cycle would be where the rule adds two (without "
+    "the windup). On the double mass the motor cart's predicted peak-to-peak includes its travel while the passive "
+    "cart rests at the turns, 2 b2 / K (1.47 mm here). A law's dither is in the friction's describing function "
+    "(docs/studies.md).")

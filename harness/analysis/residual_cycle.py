@@ -36,9 +36,10 @@ Where the approximation is weak (``docs/studies.md``, "The residual cycle"): the
 first harmonic only, and the quantizer's is worst at the amplitudes the cycle sits at (a few counts: the reading
 is a square-ish wave); all the nonlinearities are taken to swing at one frequency, in the phase the linear loop
 gives them, about a count level (an offset between the signal's centre and the count grid changes the quantizer's
-gain); stiction above the kinetic force, the sticking phases of stick-slip (the relay's describing function
-assumes a cart that never dwells at rest), the DAC's codes and a law's nonlinear breakaway term are left out;
-whether the cycle is stable is not checked.
+gain); stiction above the kinetic force, the DAC's codes and a law's nonlinear breakaway term are left out;
+whether the cycle is stable is not checked. The sticking phases of stick-slip (the relay's describing function
+assumes a cart that never dwells at rest) are taken in one way only: on the double mass the motor cart's travel
+while the passive cart rests, ``2 b2 / K``, is added to its peak-to-peak (:func:`with_windup`).
 """
 from __future__ import annotations
 
@@ -388,6 +389,49 @@ DISTINCT_FREQUENCY_RATIO = 1.5
 
 def predict_lab_cycle(loop: Any, params: Any, forces: Mapping[str, float], resolutions: Mapping[str, float],
                       delay: int = 0) -> dict[str, Any]:
+    """The residual cycle of the friction and the counts together (:func:`combined_cycle`), with the motor cart's
+    travel while a spring-coupled cart rests at the turns (:func:`with_windup`)."""
+    return with_windup(combined_cycle(loop, params, forces, resolutions, delay), params, forces)
+
+
+def spring_windup(params: Any, forces: Mapping[str, float]) -> float:
+    """The motor cart's travel [m] while the passive cart rests at a turn: ``2 b2 / K``, the spring wound from one
+    friction level to the other (``ipcosim.fmus.metrics.amplitude_bound``'s forced cycle); 0 without a spring or
+    without passive-cart friction.
+
+    Examples
+    --------
+    >>> from ipcosim.fmus.params import preset
+    >>> round(spring_windup(preset("thesis-ch4"), {"b2": 0.1047}) * 1e3, 3)   # the lab bench: 1.47 mm
+    1.473
+    """
+    K, b2 = float(getattr(params, "K", 0.0) or 0.0), float(forces.get("b2", 0.0) or 0.0)
+    return 2.0 * b2 / K if K > 0.0 and b2 > 0.0 else 0.0
+
+
+def with_windup(cycle: dict[str, Any], params: Any, forces: Mapping[str, float]) -> dict[str, Any]:
+    """``cycle`` with :func:`spring_windup` added to the motor cart's peak-to-peak (and its reading), where a cycle
+    was found.
+
+    The describing function takes the passive cart through its turns sliding; on the bench it rests there (a
+    quarter of the double-mass LQG's cycle) while the motor cart winds the spring from one friction level to the
+    other, ``2 b2`` of force, ``2 b2 / K`` of travel that the sliding cycle does not contain. Added whole it is an
+    upper estimate: the relay's first harmonic already swings the spring by part of it (``docs/studies.md``).
+    """
+    windup = spring_windup(params, forces)
+    if not cycle.get("found") or not windup or not cycle.get("signals"):
+        return {**cycle, "spring_windup_m": 0.0}
+    motor = next(iter(cycle["signals"]))
+    signals = dict(cycle["signals"])
+    m = dict(signals[motor])
+    m.update(amplitude=m["amplitude"] + windup / 2, peak_to_peak=m["peak_to_peak"] + windup,
+             reading_peak_to_peak=m["reading_peak_to_peak"] + windup)
+    signals[motor] = m
+    return {**cycle, "signals": signals, "motor_cart_peak_to_peak_m": m["peak_to_peak"], "spring_windup_m": windup}
+
+
+def combined_cycle(loop: Any, params: Any, forces: Mapping[str, float], resolutions: Mapping[str, float],
+                   delay: int = 0) -> dict[str, Any]:
     """The residual cycle of the friction and the counts together: how the two are combined.
 
     The friction relays are balanced together (exact readings), and the encoders together (no friction). Where

@@ -160,3 +160,25 @@ def test_a_finer_pendulum_encoder_shrinks_the_predicted_cycle() -> None:
     fine = rc.scenario_prediction(sc, {**lab, "plant.pendulum_resolution": 2 * math.pi / 8192})["counts"]
     assert fine["signals"]["pendulum_angle"]["amplitude"] < coarse["signals"]["pendulum_angle"]["amplitude"]
     assert fine["motor_cart_peak_to_peak_m"] < coarse["motor_cart_peak_to_peak_m"]
+
+
+def test_the_double_mass_cycle_adds_the_spring_windup_of_its_own_plant_to_the_motor_cart_only() -> None:
+    """The passive cart rests at the turns while the motor cart winds the spring through 2 b2 of force: 2 b2 / K of
+    travel on top of the sliding cycle, with the run's own spring and friction; the other signals are the sliding
+    cycle's. The single mass has no spring: nothing is added."""
+    from ipcosim.harness.analysis.residual_cycle import realism_values
+    from ipcosim.harness.scenario.ssp import load_scenario
+    from ipcosim.harness.scenario.structure import select_parameter_set
+
+    sc = select_parameter_set(load_scenario("double-mass-lqg"), "lab")
+    values = {**realism_values("lab", "double-mass"), "plant.K": 120.0, "plant.b2": 0.12}
+    p = rc.scenario_prediction(sc, values)
+    fr, qu = p["friction"], p["counts"]
+    assert p["spring_windup_m"] == pytest.approx(2 * 0.12 / 120.0, rel=1e-12)
+    assert p["motor_cart_peak_to_peak_m"] == pytest.approx(
+        fr["motor_cart_peak_to_peak_m"] + qu["motor_cart_peak_to_peak_m"] + 2e-3, rel=1e-12)
+    assert p["signals"]["passive_cart_position"]["peak_to_peak"] == pytest.approx(
+        fr["signals"]["passive_cart_position"]["peak_to_peak"] + qu["signals"]["passive_cart_position"]["peak_to_peak"])
+    single = rc.scenario_prediction(select_parameter_set(load_scenario("single-mass-lqr"), "thesis"),
+                                    realism_values("lab", "single-mass"))
+    assert single["spring_windup_m"] == 0.0
