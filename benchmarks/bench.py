@@ -108,11 +108,14 @@ def write_last(entries: dict[str, dict[str, Any]], path: Path = LAST_JSON) -> No
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the bench modules (all, or those whose name contains one of ``argv``), each in its own process."""
+    """Run the bench modules (all, those named exactly in ``argv``, or else those whose name contains one of
+    ``argv``), each in its own process."""
     args = list(sys.argv[1:] if argv is None else argv)
     if args[:1] == ["--one"] and len(args) in (2, 3):
         return run_one(args[1], Path(args[2]) if len(args) == 3 else None)
     names = [n for n in bench_modules() if not args or any(w in n for w in args)]
+    exact = [n for n in names if n.split(".")[-1] in args]
+    names = exact or names     # a module's own name selects it alone (bench_hil, not bench_hil_floor)
     if not names:
         print(f"bench: no bench module matches {' '.join(args)} (known: "
               f"{', '.join(n.split('.')[-1] for n in bench_modules())})", file=sys.stderr)
