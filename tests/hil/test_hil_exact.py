@@ -32,9 +32,13 @@ def drive_in_real_time(rig: VirtualRig, steps: int, h_ns: int, seed: int) -> lis
     return log
 
 
-def replay(log: list[tuple[int, float, int, list[int]]]) -> tuple[VirtualRig, list[list[int]]]:
-    """The same requests, at the same instants, on a lockstep rig with the wall clock's resolution."""
+def replay(session_ns: int, log: list[tuple[int, float, int, list[int]]]) -> tuple[VirtualRig, list[list[int]]]:
+    """The same session, begun at the same instant ``session_ns`` (where the operator puts the plant
+    back at its initial state), and the same requests, at the same instants, on a lockstep rig with
+    the wall clock's resolution."""
     rig = VirtualRig(RigConfig(clock="lockstep", **CONFIG))
+    rig.advance(session_ns / 1e9)
+    assert rig.now_ns() == session_ns
     rig.new_session("replay")
     start, *steps = log
     rig.advance((start[0] - rig.now_ns()) / 1e9)
@@ -52,12 +56,13 @@ def test_a_wall_clock_run_equals_the_lockstep_replay_of_its_own_requests():
     wall = VirtualRig(RigConfig(clock="wallclock", **CONFIG))
     wall.start_clock()
     wall.new_session("run")
+    session_ns = wall._t_ns         # on the wall's 10 us grid: 0 on a fast host, a tick or more on a slow one
     log = drive_in_real_time(wall, steps=400, h_ns=1_000_000, seed=3)
     late = sum(1 for instant, _, until, _ in log[1:] if instant > until)
     assert late > 0                                     # the replay covers late requests too
     off_grid = sum(1 for instant, *_ in log[1:] if instant % 500_000)
     assert off_grid > 100                               # the requests' instants are on no tick grid
-    lock, readings = replay(log)
+    lock, readings = replay(session_ns, log)
     assert readings == [counts for *_, counts in log[1:]]
     last = max(log[-1][0], -(-log[-1][2] // 10_000) * 10_000)      # the sample instant on the 10 us clock
     assert wall._t_ns == lock.now_ns() == last                          # both at the last reading
