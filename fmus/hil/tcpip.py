@@ -387,8 +387,9 @@ class ClockOffset:
     (host clock) bounds the offset: ``t_ns - read_ns <= offset <= t_ns - sent_ns``. The tightest
     lower and upper bound are kept, each widened by :data:`DRIFT_PPM` of its age. The rig answers at
     once, so the upper bound is tight (a request's way there, renewed by every reply), while a reply
-    read after a sleep gives a loose lower bound: the offset is the upper bound less half the shortest
-    round trip seen (a request's way there, as near as the link tells), never below the lower bound.
+    read late (the client preempted before its read) gives a loose lower bound: the offset is the upper
+    bound less half the shortest round trip seen (a request's way there, as near as the link tells),
+    never below the lower bound.
     Bounds that no longer overlap (the rig's clock jumped) give way to the newest reply's.
     """
 
