@@ -162,7 +162,7 @@ def as_channels(channels: Sequence[int] | int, what: str = "channels") -> list[i
         channels = [int(channels)]
     out = []
     for c in channels:
-        if isinstance(c, bool) or not isinstance(c, numbers.Integral) or c < 0:
+        if type(c) is not int and (isinstance(c, bool) or not isinstance(c, numbers.Integral)) or c < 0:
             raise HILError(ErrorCode.BAD_CHANNEL, f"{what}: channel {c!r} is not a non-negative integer")
         out.append(int(c))
     return out

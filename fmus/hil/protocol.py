@@ -72,9 +72,9 @@ loss) the rig forces its outputs to their watchdog expiration states (0 V).
 from __future__ import annotations
 
 import enum
+import functools
 import struct
-from dataclasses import dataclass
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 from ipcosim.errors import IpcosimError
 
@@ -145,9 +145,8 @@ class DecodeError(IpcosimError, ValueError):
     """A payload that does not decode for its message type."""
 
 
-@dataclass(frozen=True)
-class Frame:
-    """One received frame."""
+class Frame(NamedTuple):
+    """One received frame (a named tuple: one is made for every request)."""
 
     version: int
     type: int
@@ -242,6 +241,13 @@ class FrameDecoder:
             self._in_garbage = True
 
 
+@functools.lru_cache(maxsize=256)
+def network_struct(fmt: str) -> struct.Struct:
+    """The struct of a format in network order (``"2I"`` -> ``!2I``), made once: every request of a
+    session has the same channel counts."""
+    return struct.Struct("!" + fmt)
+
+
 class Reader:
     """Sequential payload decoder raising :class:`DecodeError` on short or trailing data."""
 
@@ -251,10 +257,9 @@ class Reader:
 
     def take(self, fmt: str | struct.Struct) -> tuple:
         """The next values: of a message's named struct, or of a format (network order implied)."""
-        s = fmt if isinstance(fmt, struct.Struct) else struct.Struct("!" + fmt)
-        fmt = s.format.removeprefix("!")
+        s = fmt if isinstance(fmt, struct.Struct) else network_struct(fmt)
         if self.pos + s.size > len(self.data):
-            raise DecodeError(f"payload too short for {fmt!r} at byte {self.pos}")
+            raise DecodeError(f"payload too short for {s.format.removeprefix('!')!r} at byte {self.pos}")
         out = s.unpack_from(self.data, self.pos)
         self.pos += s.size
         return out

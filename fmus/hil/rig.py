@@ -165,6 +165,7 @@ class VirtualRig(RigPhysics):
         for name in [n for n in MEASURED[self.kind][1:] if n != "pendulum_angle"][:1]:  # a second cart
             self._encoders[PASSIVE_CART_ENCODER] = (self.plant.state_names.index(name), cfg.cart_m_per_count)
         self._carts = [(i, i + 1, n) for i, n in enumerate(self.plant.state_names) if n.endswith("cart_position")]
+        self._cart_indices = [(ip, iv) for ip, iv, _ in self._carts]
         # with a transport latency the encoders show the past: the states of the last ``latency``
         self._history: collections.deque[tuple[int, np.ndarray]] = collections.deque()
         self._record_history()

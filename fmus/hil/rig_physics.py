@@ -60,6 +60,7 @@ class RigPhysics:
     _history: collections.deque[tuple[int, np.ndarray]]
     _encoders: dict[int, tuple[int, float]]
     _carts: list[tuple[int, int, str]]
+    _cart_indices: list[tuple[int, int]]
     _phase: float
 
     def _advance_to(self, target_ns: int) -> None:
@@ -156,7 +157,7 @@ class RigPhysics:
 
     def _end_stops(self) -> None:
         x = self.plant.state
-        stopped = end_stop_state(x, [(ip, iv) for ip, iv, _ in self._carts], self.config.end_stop)
+        stopped = end_stop_state(x, self._cart_indices, self.config.end_stop)
         if stopped is None:
             return
         for ip, _, name in self._carts:
