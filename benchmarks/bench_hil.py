@@ -189,7 +189,8 @@ def summary_line(label: str, m: dict[str, Any]) -> str:
 
 def pacer_floor(seconds: float = 3.0, period: float = 1e-3, rt: bool = False) -> str:
     """The pacer alone (no work per step): the machine's scheduling floor (``rt``: under SCHED_FIFO)."""
-    from ipcosim.harness.master.realtime import Pacer, apply_sched_fifo
+    from ipcosim.harness.master.host_setup import apply_sched_fifo
+    from ipcosim.harness.master.realtime import Pacer
 
     undo: list = []
     fifo = apply_sched_fifo(RT_PRIORITY, undo) if rt else ""

@@ -87,7 +87,7 @@ def serve(args: argparse.Namespace) -> int:
     """Serve a virtual rig until Ctrl-C, SIGTERM or ``--duration``."""
     from ipcosim.fmus.hil import service
     from ipcosim.harness.api.grammar import parse_numbers
-    from ipcosim.harness.master.realtime import apply_cpu_affinity, apply_sched_fifo, apply_sched_slice, slice_request
+    from ipcosim.harness.master.host_setup import apply_cpu_affinity, apply_sched_fifo, apply_sched_slice, slice_request
 
     options = service.ServeOptions(
         plant=args.plant, host=args.host, port=args.port, clock=args.clock, tick=args.tick, preset=args.preset,

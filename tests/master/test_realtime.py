@@ -244,7 +244,7 @@ def test_realtime_setup_reports_each_option_as_applied_or_not(monkeypatch):
     import gc
     import os
 
-    from ipcosim.harness.master.realtime import RealtimeSetupError, realtime_setup
+    from ipcosim.harness.master.host_setup import RealtimeSetupError, realtime_setup
 
     monkeypatch.delenv("IPCOSIM_RT_PRIORITY", raising=False)
     monkeypatch.setenv("IPCOSIM_RT_CPU", str(min(os.sched_getaffinity(0))))
@@ -275,26 +275,26 @@ def test_a_paced_loop_asks_the_fair_scheduler_for_a_short_slice(monkeypatch):
     back to the scheduler's own when the run ends; 0 leaves it alone; a bad value is refused by name."""
     import os
 
-    from ipcosim.harness.master import realtime
-    from ipcosim.harness.master.realtime import RealtimeSetupError, realtime_setup
+    from ipcosim.harness.master import host_setup
+    from ipcosim.harness.master.host_setup import RealtimeSetupError, realtime_setup
 
-    if realtime._sched_attr_calls() is None or os.sched_getscheduler(0) != os.SCHED_OTHER:
+    if host_setup._sched_attr_calls() is None or os.sched_getscheduler(0) != os.SCHED_OTHER:
         pytest.skip("a fair-scheduler slice is asked for on Linux (x86_64, aarch64, riscv64) under SCHED_OTHER")
     monkeypatch.delenv("IPCOSIM_RT_PRIORITY", raising=False)
     monkeypatch.delenv("IPCOSIM_RT_SLICE_US", raising=False)
-    default = realtime._sched_runtime()
+    default = host_setup._sched_runtime()
     report, restore = realtime_setup()
     try:
         if report["sched_slice"].startswith("not applied"):
             pytest.skip(report["sched_slice"])         # a kernel before 6.12
-        assert report["sched_slice"] == "applied: 700 us" and realtime._sched_runtime() == 700_000
+        assert report["sched_slice"] == "applied: 700 us" and host_setup._sched_runtime() == 700_000
     finally:
         restore()
-    assert realtime._sched_runtime() == default
+    assert host_setup._sched_runtime() == default
     monkeypatch.setenv("IPCOSIM_RT_SLICE_US", "0")
     report, restore = realtime_setup()
     restore()
-    assert report["sched_slice"].startswith("not requested") and realtime._sched_runtime() == default
+    assert report["sched_slice"].startswith("not requested") and host_setup._sched_runtime() == default
     monkeypatch.setenv("IPCOSIM_RT_SLICE_US", "nan")
     with pytest.raises(RealtimeSetupError, match="IPCOSIM_RT_SLICE_US=nan"):
         realtime_setup()
