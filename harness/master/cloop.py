@@ -27,7 +27,9 @@ import ctypes
 import hashlib
 import os
 import platform
+import sys
 import tempfile
+import time as _time
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -53,9 +55,44 @@ class LoopUnavailable(IpcosimError, RuntimeError):
 
 # --------------------------------------------------------------------------- C source
 _HEAD = """/* ipcosim stepping loop (generated from the system's structure; see harness/master/cloop.py) */
+#if defined(__linux__)
+#define _POSIX_C_SOURCE 200809L
+#endif
 #include <stddef.h>
 #include <stdint.h>
 #include <string.h>
+#if defined(__linux__)
+#include <time.h>
+
+/* The host's monotonic clock [ns] (Python's time.monotonic_ns). */
+static long long ipc_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+/* The pacer's wait (realtime.wait_until): sleep to spin ns before the deadline (an absolute sleep: a
+   signal or an early wake-up sleeps again), then read the clock up to the deadline; returns the clock. */
+static long long ipc_wait(long long deadline, long long spin)
+{
+    long long now = ipc_now();
+    while (deadline - now > spin) {
+        const long long at = deadline - spin;
+        struct timespec ts;
+        ts.tv_sec = (time_t)(at / 1000000000LL);
+        ts.tv_nsec = (long)(at %% 1000000000LL);
+        clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL);
+        now = ipc_now();
+    }
+    while (now < deadline)
+        now = ipc_now();
+    return now;
+}
+#else
+static long long ipc_now(void) { return 0; }
+static long long ipc_wait(long long deadline, long long spin) { (void)spin; return deadline; }
+#endif
 
 typedef void (*ipc_fn)(void);
 typedef int (*ipc_step)(void *, double, double, int);
@@ -65,12 +102,15 @@ typedef int (*ipc_set)(void *, const unsigned int *, size_t, const double *);
 /* p: per block handle, out vrs, in vrs, outputs, inputs, private outputs; then the value vector
    f: per block fmi2DoStep, fmi2GetReal, fmi2SetReal
    d: start, step, per block h and hl, per transfer factor and offset
-   q: N, exact (times from nanoseconds), start_ns, step_ns, record_every, row bytes
+   q: N, exact (times from nanoseconds), start_ns, step_ns, record_every, row bytes; pacing (0: none),
+      its t0 [ns], period [ns], spin [ns], first tick, and the addresses of each tick's start and end [ns]
    fail: tick, block, function (0 set, 1 step, 2 get), status */
 int ipcosim_loop(void *const *p, const ipc_fn *f, const double *d, const long long *q,
                  long long n0, long long n1, long long rb, long long *fail)
 {
     const long long N = q[0], exact = q[1], start_ns = q[2], step_ns = q[3], every = q[4], rs = q[5];
+    const long long pace = q[6], t0 = q[7], period = q[8], spin = q[9], first = q[10];
+    long long *const starts = (long long *)(intptr_t)q[11], *const ends = (long long *)(intptr_t)q[12];
     const double start = d[0], step = d[1];
     const void *va = p[%(va)d];
     long long n;
@@ -82,7 +122,11 @@ int ipcosim_loop(void *const *p, const ipc_fn *f, const double *d, const long lo
     for (n = n0; n < n1; n++) {
         const double t = exact ? (double)(start_ns + n * step_ns) / 1e9 : start + (double)n * step;
         (void)t;
+        if (pace)
+            starts[n - n0] = ipc_wait(t0 + (n - first) * period, spin);
 %(body)s
+        if (pace)
+            ends[n - n0] = ipc_now();
         if ((n + 1) %% every == 0)
             memcpy((void *)(intptr_t)(rb + ((n + 1) / every) * rs), va, (size_t)rs);
     }
@@ -314,10 +358,26 @@ class CLoop:
             doubles += [time.span(b.multiple), time.last_step(b.multiple)]
         self._d = (ctypes.c_double * (len(doubles) + len(params)))(*doubles, *params)
         exact = time.step_ns is not None
-        self._q = (ctypes.c_longlong * 6)(time.ticks, int(exact), time.start_ns or 0, time.step_ns or 0,
-                                          record_every, row_bytes)
+        self._q = (ctypes.c_longlong * 13)(time.ticks, int(exact), time.start_ns or 0, time.step_ns or 0,
+                                           record_every, row_bytes)
         self._fail = (ctypes.c_longlong * 4)()
         self._row_bytes, self._value_address = row_bytes, value_address
+        self._pacer: Any = None
+
+    def pace(self, pacer: Any) -> bool:
+        """Wait for each tick's deadline in the loop itself, as ``pacer`` would (a
+        :class:`~ipcosim.harness.master.realtime.Pacer` on the host's monotonic clock and ``time.sleep``: the
+        same deadlines, the same sleep then spin), and hand it each tick's start and end (``Pacer.took``), so
+        that the ticks of a chunk run without Python in between; None: no more pacing. False where the loop
+        has no absolute sleep (Linux only): the caller paces."""
+        if pacer is None:
+            self._q[6], self._pacer = 0, None
+            return True
+        if not sys.platform.startswith("linux"):
+            return False
+        self._q[6:11] = [1, pacer.deadline_ns(0), pacer.period_ns, pacer.spin_ns, 0]
+        self._pacer = pacer
+        return True
 
     def _c_function(self, fn: Callable[..., int], proto: Any) -> int:
         address = _address(fn)
@@ -339,7 +399,19 @@ class CLoop:
     def run(self, n0: int, n1: int, rb: int, va: int, rs: int, rbi: int = 0) -> tuple[int, int, str, int] | None:
         if va != self._value_address or rs != self._row_bytes:
             raise ValueError("the C loop was bound to another value vector or record layout")
-        if self._fn(self._p, self._f, self._d, self._q, n0, n1, rb, self._fail) == 0:
+        pacer, times = self._pacer, None
+        if pacer is not None:
+            times = (ctypes.c_longlong * (2 * (n1 - n0)))()
+            self._q[11] = ctypes.addressof(times)
+            self._q[12] = self._q[11] + ctypes.sizeof(ctypes.c_longlong) * (n1 - n0)
+        failed = self._fn(self._p, self._f, self._d, self._q, n0, n1, rb, self._fail) != 0
+        if times is not None:
+            started = (int(self._fail[0]) + 1 if failed else n1) - n0
+            ends = times[n1 - n0:n1 - n0 + started]
+            if failed:      # the tick that failed ends now
+                ends[-1] = _time.monotonic_ns()
+            pacer.took(n0, times[:started], ends)
+        if not failed:
             return None
         if self._errors:
             raise self._errors.pop(0)

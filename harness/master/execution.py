@@ -406,6 +406,7 @@ class Execution(Stepping):
                 self.slaves[idx].exit_initialization_mode()
             for b in self.blocks:
                 self._get_outputs(b, self.start_time)
+        self.cloop: CLoop | None = None        # the C stepping loop, when the run uses it
         self._run_loop, self._loop_source = self._compile_loop()
 
     def _carry_parameters(self) -> None:
@@ -442,7 +443,7 @@ class Execution(Stepping):
                 try:
                     cloop = CLoop(self.blocks, self.order, self.algorithm, self.timebase, self.record_every,
                                   self.recorder.row_bytes, ctypes.addressof(self.layout.values_c))
-                    self.loop_used = "c"
+                    self.loop_used, self.cloop = "c", cloop
                     return cloop.run, cloop.source
                 except LoopUnavailable as exc:
                     if self.loop == "c":

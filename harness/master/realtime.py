@@ -9,6 +9,7 @@ real-time policy (the OS wakes a sleeper tens of microseconds late; a real-time 
 takes no one's share by spinning) and none under the default policy, where a process that
 spins spends its fair share of a CPU and is then woken behind a busy neighbour (see
 :func:`default_spin`); there the timer slack is cut to 1 us instead (:func:`realtime_setup`).
+On the C stepping loop the loop itself waits, on the pacer's schedule (``CLoop.pace``, :meth:`Pacer.took`).
 
 Statistics (:meth:`Pacer.metrics`, the keys ``ipcosim run --realtime`` adds to
 metrics.json):
@@ -82,7 +83,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -272,6 +273,14 @@ class Pacer:
         self._durations.append(d)
         return d
 
+    def took(self, first_tick: int, starts: Sequence[int], ends: Sequence[int]) -> None:
+        """Ticks ``first_tick``, ``first_tick + 1``, ... paced by the C stepping loop on this pacer's schedule
+        (``CLoop.pace``): their starts and ends [ns]."""
+        for k, (start, end) in enumerate(zip(starts, ends)):
+            self._starts.append(start)
+            self._lateness.append(start - self.deadline_ns(first_tick + k))
+            self._durations.append(end - start)
+
     def lateness_since(self, k: int) -> list[int]:
         """How late steps ``k``, ``k + 1``, ... started [ns] against the deadlines they waited for (a
         running count for a live view; :meth:`lateness_ns` is the run's own account)."""
@@ -376,6 +385,7 @@ class RealtimePacer(Observer):
         self._restore: Callable[[], None] = lambda: None
         self._over_budget = False
         self._cpu_s: list[float] = []      # process CPU time when the schedule starts, and at the end
+        self._in_loop = False              # whether the C loop paces the ticks (from tick 1 on)
 
     def start(self, execution) -> None:  # noqa: ANN001 -- ipcosim.harness.master.execution.Execution
         self._setup, self._restore = realtime_setup()
@@ -387,10 +397,12 @@ class RealtimePacer(Observer):
         self._open = True
 
     def next_tick(self, n: int) -> int | None:
-        return n + 1
+        return None if self._in_loop else n + 1
 
     def step(self, execution, n: int) -> None:  # noqa: ANN001
         assert self.pacer is not None
+        if self._in_loop:       # the C loop paces every tick itself
+            return
         self.pacer.end()
         self._open = False
         if n >= execution.n_ticks:
@@ -398,13 +410,28 @@ class RealtimePacer(Observer):
         if n == 1:      # the start-up step is done: the real-time schedule starts now
             self.pacer.start(1)
             self._cpu_s = [time.process_time()]
+            if self._pace_in_loop(execution):
+                return
         self.pacer.begin(n)
         self._open = True
+
+    def _pace_in_loop(self, execution) -> bool:  # noqa: ANN001
+        """From tick 1 on, let the C stepping loop wait for each deadline itself (``CLoop.pace``), where the
+        run has one and the pacer keeps the host's clock: the ticks between two writes of rows then run with
+        no Python between them, and this observer is not called again."""
+        loop, pacer = getattr(execution, "cloop", None), self.pacer
+        if (loop is None or pacer is None or pacer.clock_ns is not time.monotonic_ns or pacer.sleep is not time.sleep
+                or not loop.pace(pacer)):
+            return False
+        self._in_loop = True
+        return True
 
     def finish(self, execution, error: BaseException | None) -> None:  # noqa: ANN001
         if self._open and self.pacer is not None:
             self.pacer.end()
             self._open = False
+        if self._in_loop:
+            execution.cloop.pace(None)
         self._restore()
         self._cpu_s[1:] = [time.process_time()] if self._cpu_s else []
         if self.pacer is not None:

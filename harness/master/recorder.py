@@ -155,6 +155,13 @@ class Recorder:
                 or (self.max_pending_rows is not None and pending >= self.max_pending_rows)
                 or _time.monotonic() - self._last_emit >= self.flush_seconds)
 
+    def write_tick(self, n: int) -> int:
+        """The first tick after ``n`` at whose end ``max_pending_rows`` rows wait (a chunk ending there is
+        written whole; very far when there is no such limit)."""
+        if self.max_pending_rows is None:
+            return n + (1 << 62)
+        return max(n + 1, (self.base_row + self.max_pending_rows - 1) * self.record_every)
+
     def emit(self, rows: int) -> None:
         """Hand the buffer rows ``base_row .. rows-1`` (absolute numbers) to the writer.
 

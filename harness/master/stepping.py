@@ -42,7 +42,8 @@ class Stepping:
         while n < N:
             signals.check()
             self._call_due(self.manipulators, due_man, n)
-            target = min(N, n + chunk, *(k for k in (*due_man.values(), *due_obs.values()) if k is not None and k > n))
+            target = min(N, n + chunk, self.recorder.write_tick(n),
+                         *(k for k in (*due_man.values(), *due_obs.values()) if k is not None and k > n))
             t0 = _time.perf_counter()
             if not self._run_chunk(n, target, va):
                 return  # a component ended the simulation

@@ -188,7 +188,8 @@ def test_a_run_over_its_overrun_budget_says_so_in_one_line(monkeypatch):
 
 @pytest.mark.integration
 def test_a_degraded_realtime_run_warns_and_exits_3(tmp_path, monkeypatch, capsys):
-    """A host that starts every 10th step 2 ms late (a loaded machine) is over the default 1 % budget."""
+    """A host that starts every 10th step 2 ms late (a loaded machine) is over the default 1 % budget (the
+    Python loop, whose pacer waits for each step in Python, where the delay is injected)."""
     import json
 
     from ipcosim.harness.cli import main
@@ -204,7 +205,8 @@ def test_a_degraded_realtime_run_warns_and_exits_3(tmp_path, monkeypatch, capsys
     monkeypatch.setattr(realtime.Pacer, "begin", loaded)
     monkeypatch.delenv("IPCOSIM_RT_OVERRUN_BUDGET", raising=False)
     out = tmp_path / "rt"
-    status = main(["run", "single-mass-lqr", "--realtime", "--stop-time", "0.3", "--out", str(out), "--quiet"])
+    status = main(["run", "single-mass-lqr", "--realtime", "--stop-time", "0.3", "--out", str(out), "--quiet",
+                   "--loop", "python"])
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 3, err
     assert len(err) == 1 and err[0].startswith("ipcosim run: warning: real-time run degraded:"), err
@@ -217,6 +219,12 @@ def test_a_degraded_realtime_run_warns_and_exits_3(tmp_path, monkeypatch, capsys
                  "--overrun-budget", "0.9"]) == 0
     assert main(["run", "single-mass-lqr", "--overrun-budget", "2", "--out", str(out)]) == 2  # usage
     assert "--overrun-budget 2: expected a fraction in [0, 1]" in capsys.readouterr().err
+    # the C loop, which waits for each step itself: a 2 us step no host holds is degraded too
+    monkeypatch.setattr(realtime.Pacer, "begin", begin)
+    assert main(["run", "single-mass-lqr", "--realtime", "--stop-time", "0.002", "--step", "2e-6", "--out", str(out),
+                 "--quiet", "--loop", "c"]) == 3
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["overrun_budget_exceeded"] is True and m["realtime_steps"] == 1000 and m["overrun_fraction"] > 0.5
 
 
 def test_a_fault_of_the_card_makes_the_run_not_upright_whatever_the_last_sample():
@@ -390,15 +398,23 @@ def test_a_paced_run_reports_the_cpu_its_steps_take(tmp_path, monkeypatch):
         return json.loads((out / "metrics.json").read_text())["loop_cpu_per_step_us"]
 
     plain = run(tmp_path / "plain")
-    end = realtime.RealtimePacer.step
+    begin, took = realtime.Pacer.begin, realtime.Pacer.took
 
-    def burning(self, execution, n):
-        until = time.process_time() + 3e-4
+    def burn(steps):
+        until = time.process_time() + 3e-4 * steps
         while time.process_time() < until:
             pass
-        return end(self, execution, n)
 
-    monkeypatch.setattr(realtime.RealtimePacer, "step", burning)
+    def burning_begin(self, tick):      # a step paced by the pacer in Python
+        burn(1)
+        return begin(self, tick)
+
+    def burning_took(self, first_tick, starts, ends):     # steps paced by the C loop, handed over
+        burn(len(starts))
+        return took(self, first_tick, starts, ends)
+
+    monkeypatch.setattr(realtime.Pacer, "begin", burning_begin)
+    monkeypatch.setattr(realtime.Pacer, "took", burning_took)
     burnt = run(tmp_path / "burnt")
     assert 0 < plain < 1000 and burnt >= 300 and burnt >= plain + 250, (plain, burnt)
 
@@ -437,3 +453,37 @@ def test_a_paced_run_is_as_steady_as_the_hosts_floor(tmp_path):
     if judged.unjudged(priority):
         pytest.skip(judged.unjudged(priority))
     assert judged.within, str(judged)
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the C loop paces on Linux (clock_nanosleep)")
+def test_the_c_loop_waits_for_each_deadline_itself_and_python_runs_only_between_writes(tmp_path, monkeypatch):
+    """With the C stepping loop, a paced run's ticks wait for their deadlines in C (``CLoop.pace``): every tick
+    after the start-up step is handed to the pacer once, in order, started no earlier than its own deadline on
+    the pacer's schedule and ended after it started; the pacer's observer is not called after the start-up step;
+    and the results are the unpaced run's, byte for byte."""
+    from ipcosim.harness.cli import main
+    from ipcosim.harness.master import realtime
+
+    calls: list[int] = []
+    handed: list[tuple[int, int, int, int]] = []
+    step, took = realtime.RealtimePacer.step, realtime.Pacer.took
+
+    def counting(self, execution, n):
+        calls.append(n)
+        return step(self, execution, n)
+
+    def recording(self, first_tick, starts, ends):
+        handed.extend((first_tick + k, s, self.deadline_ns(first_tick + k), e)
+                      for k, (s, e) in enumerate(zip(starts, ends)))
+        return took(self, first_tick, starts, ends)
+
+    monkeypatch.setattr(realtime.RealtimePacer, "step", counting)
+    monkeypatch.setattr(realtime.Pacer, "took", recording)
+    args = ["run", "single-mass-lqr", "--stop-time", "0.2", "--quiet", "--loop", "c"]
+    assert main([*args, "--realtime", "--out", str(tmp_path / "paced"), "--overrun-budget", "1"]) == 0
+    assert [tick for tick, *_ in handed] == list(range(1, 200))
+    assert all(start >= deadline and end >= start for _, start, deadline, end in handed)
+    assert calls == [1], "after the start-up step the observer is not called again"
+    assert main([*args, "--out", str(tmp_path / "unpaced")]) == 0
+    assert (tmp_path / "paced" / "results.csv").read_bytes() == (tmp_path / "unpaced" / "results.csv").read_bytes()
