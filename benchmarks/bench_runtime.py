@@ -74,7 +74,7 @@ ISSUE_LIBCOSIM_GOAL = 0.3
 #: value of results.csv in exact integer arithmetic instead of the interpreter's big-number dtoa, starts with the
 #: cyclic garbage collector off (on, past what the start made, when it steps) and loads neither OpenSSL, difflib,
 #: decimal nor the swaps: 0.93x (medians of 15 alternating rounds, load 2: 0.172 s against 0.185 s; the bench's
-#: least disturbed of 5 at load 3: 0.95x, 0.168 s against 0.177 s). Before: 1.59x, 1.45x once a run extracted only
+#: least disturbed of 5 at load 2: 0.94x, 0.169 s against 0.180 s). Before: 1.59x, 1.45x once a run extracted only
 #: what it reads, 1.15x once results.csv was formatted in C and the command left without the interpreter's
 #: teardown. What fmpy's process still does not pay: ipcosim's own modules, about 43 ms (of which creating the 39
 #: dataclasses on a run's path, 20 ms); the SSP reading, the three FMUs' extraction and loading, the metrics and
