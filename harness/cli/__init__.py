@@ -82,9 +82,10 @@ class _Version(argparse.Action):
         parser.exit()
 
 
-def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+def build_parser(only: str | None = None, listed: bool = True) -> argparse.ArgumentParser:
     """The top-level parser with every sub-command registered (``only=None``), or with the command
-    ``only`` registered whole and every other one by its name and one line of help.
+    ``only`` registered whole and every other one by its name and one line of help (``listed``: what the
+    top-level help lists; without it, the other commands are left out, their modules not loaded).
 
     A command registers its options in its module's ``register``, which may load what the options
     are made of (the run options load numpy); its one line of help is the module's ``HELP``. So
@@ -99,6 +100,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name, module_name in COMMANDS.items():
+        if not (listed or only is None or name == only):
+            continue
         module = importlib.import_module(f"ipcosim.harness.cli.{module_name}")
         if only is None or name == only:
             module.register(sub)
@@ -244,7 +247,8 @@ def _parse(argv: Sequence[str], command: str) -> argparse.Namespace:
     from ipcosim.harness.support.threads import single_threaded
 
     single_threaded()  # before a command's options load numpy
-    parser = build_parser(command)
+    before = argv[:list(argv).index(command)] if command else argv  # the top-level options
+    parser = build_parser(command, listed=not command or any(a in ("-h", "--help") for a in before))
     argv = _negative_values(parser, argv)
     args, unknown = parser.parse_known_args(argv)
     if unknown:
