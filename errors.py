@@ -7,7 +7,6 @@ by name and by meaning.
 """
 from __future__ import annotations
 
-import difflib
 from typing import Iterable
 
 
@@ -74,6 +73,8 @@ def close_names(name: str, known: Iterable[str]) -> list[str]:
     case = [n for n in names if n.lower() == name.lower()]
     if case:  # a case slip (mp for Mp) is the answer
         return case[:3]
+    import difflib  # loaded when a name is wrong, not by every command
+
     cutoff = 0.6 if len(name) > 3 else 0.5  # one wrong letter of two or three is a slip too (Mx for Mp)
     near = difflib.get_close_matches(name, names, n=3, cutoff=cutoff)
     if not near:  # prefixes (sample for sample_period) count too

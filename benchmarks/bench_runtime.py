@@ -69,12 +69,16 @@ CYCLE_TARGET_B = 250.0
 COLD_TARGET_S = 0.78
 LIBCOSIM_RATIO = 0.58
 ISSUE_LIBCOSIM_GOAL = 0.3
-#: Target: the native run's CPU time at most fmpy's simulate_fmu of the same loop. Not reached: 1.59x before a
-#: run extracted only what it reads, 1.45x after, 1.15x since results.csv is formatted in C and the command
-#: leaves without the interpreter's teardown (medians of 9 alternating rounds, load 2: 0.25 s against 0.22 s).
-#: What fmpy's process does not pay: ipcosim's own modules, about 65 ms (of which creating their 51
-#: dataclasses, 29 ms, and the law registry the amplitude bound asks whether the law has a linear model,
-#: 14 ms); formatting results.csv, about 20 ms. simulate_fmu's own stepping, in Python, takes about 70 ms.
+#: Target: the native run's CPU time at most fmpy's simulate_fmu of the same loop. Met since a run imports only its
+#: own law's module (the amplitude bound asks that law alone whether it has a linear model) and no other command's,
+#: formats nearly every value of results.csv in exact integer arithmetic instead of the interpreter's big-number
+#: dtoa, starts with the cyclic garbage collector off (on, past what the start made, when it steps) and loads
+#: neither OpenSSL, difflib, decimal nor the swaps: 0.90x (medians of 15 alternating rounds, load 1: 0.176 s against
+#: 0.194 s; the bench's least disturbed of 5 at load 1: 0.93x, 0.169 s against 0.181 s). Before: 1.59x, 1.45x once
+#: a run extracted only what it reads, 1.15x once results.csv was formatted in C and the command left without the
+#: interpreter's teardown. What fmpy's process still does not pay: ipcosim's own modules, about 43 ms (of which
+#: creating the 39 dataclasses on a run's path, 20 ms); the SSP reading, the three FMUs' extraction and loading,
+#: the metrics and results.csv, about 40 ms together. simulate_fmu's own stepping, in Python, takes about 70 ms.
 FMPY_RATIO = 1.0
 INIT_TARGET_MS = 60.0
 LOOP_TARGET_RTF = 41.0

@@ -27,9 +27,9 @@ Flat parameter names (``schema``): the law's gains as in its module of ``ipcosim
 physical constants as ``model_<name>`` (``ipcosim.fmus.params`` names, defaults = the plant kind's default
 preset): the controller's *belief* about the plant, independent of the plant component.
 
-Adding a law: one module in ``ipcosim.controllers.laws`` declaring its ``LawEntry``, listed in ``REGISTRY``
-below; its FMU scripts (``controllers/fmu_<law>_<plant>.py``); its scenario row
-(``ipcosim.harness.scenario.scenarios``).
+Adding a law: one module in ``ipcosim.controllers.laws`` declaring its ``LawEntry``, listed in
+``ipcosim.controllers.laws.ENTRIES`` (``REGISTRY`` below collects them); its FMU scripts
+(``controllers/fmu_<law>_<plant>.py``); its scenario row (``ipcosim.harness.scenario.scenarios``).
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ import sys
 from types import ModuleType
 from typing import Any
 
-from ipcosim.controllers.laws import base, excitation, hsmc, lqg, lqr, pid, swing_up
+from ipcosim.controllers.laws import ENTRIES, base, declared
 from ipcosim.controllers.laws.base import (
     PLANT_SUFFIX,
     CatalogError,
@@ -49,9 +49,7 @@ from ipcosim.errors import closest
 from ipcosim.fmus.params import DEFAULT_PRESET, KINDS, PlantParams
 
 #: Every law by name, in the order the evidence tables and the native build list them.
-REGISTRY: dict[str, LawEntry] = {e.name: e for e in (
-    pid.PID_LAW, pid.CASCADE_PID_LAW, lqr.LQR_LAW, hsmc.HSMC_LAW, hsmc.ADAPTIVE_HSMC_LAW, lqg.LQG_LAW,
-    swing_up.SWING_UP_LAW, excitation.EXCITATION_LAW)}
+REGISTRY: dict[str, LawEntry] = {e.name: e for e in map(declared, ENTRIES)}
 #: The control laws on both plants (the swing-up runs on the single mass only; the excitation is no control law).
 LAWS = tuple(name for name, e in REGISTRY.items() if e.feedback and set(e.sets) == set(KINDS))
 #: Parameter sets per law and plant kind; the first is the default (the one that does the task).

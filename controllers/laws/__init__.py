@@ -4,7 +4,8 @@
 ``lqr``, ``lqg``, ``hsmc`` (HSMC and adaptive HSMC), ``swing_up``, ``excitation`` (the identification
 experiment). Each law module holds its law class, its parameters and named sets, its linear model and
 its registry entry; ``ipcosim.controllers.catalog`` collects the entries. This package imports none of
-them, so a controller FMU carries only its own law's module.
+them, so a controller FMU carries only its own law's module; :data:`ENTRIES` says where each entry is
+declared, so that one law's entry is found without importing the others (:func:`declared`).
 
 Every law is a small class with explicit state:
 
@@ -26,3 +27,31 @@ Sign conventions (``ipcosim.fmus.physics``): a positive voltage pushes the motor
 pendulum angle is counter-clockwise from upright, so pushing the cart towards +x makes the
 angle grow, and the pendulum leans towards +x for a *negative* angle.
 """
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ipcosim.controllers.laws.base import LawEntry
+
+#: Where each law's registry entry is declared, by the law's name: (its module of this package, the entry's name
+#: there), in the order the evidence tables and the native build list the laws (``ipcosim.controllers.catalog``).
+ENTRIES: dict[str, tuple[str, str]] = {
+    "PID": ("pid", "PID_LAW"), "CascadePID": ("pid", "CASCADE_PID_LAW"), "LQR": ("lqr", "LQR_LAW"),
+    "HSMC": ("hsmc", "HSMC_LAW"), "AdaptiveHSMC": ("hsmc", "ADAPTIVE_HSMC_LAW"), "LQG": ("lqg", "LQG_LAW"),
+    "SwingUp": ("swing_up", "SWING_UP_LAW"), "Excitation": ("excitation", "EXCITATION_LAW")}
+
+
+def declared(law: str) -> LawEntry | None:
+    """The registry entry of the law named ``law``, importing its module alone; None when no law has that name.
+
+    Parameters
+    ----------
+    law : str
+        A key of :data:`ENTRIES` (``LQR``).
+    """
+    if law not in ENTRIES:
+        return None
+    module, name = ENTRIES[law]
+    return getattr(importlib.import_module(f"{__name__}.{module}"), name)

@@ -26,7 +26,7 @@ import tempfile
 import time
 import weakref
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 from ipcosim.errors import IpcosimError, UsageError, closest
 from ipcosim.fmus.metrics import (
@@ -65,8 +65,10 @@ from ipcosim.harness.scenario.binding import bind, warn_all
 from ipcosim.harness.scenario.default_experiment import default_step, default_stop_time
 from ipcosim.harness.scenario.ssp import load_scenario
 from ipcosim.harness.scenario.structure import Scenario, select_parameter_set
-from ipcosim.harness.scenario.swaps import SwapTarget
 from ipcosim.harness.scenario.values import with_set
+
+if TYPE_CHECKING:  # the swaps are loaded by a run that swaps a component (:func:`_swap_label`)
+    from ipcosim.harness.scenario.swaps import SwapTarget
 
 
 class NothingToSimulateError(IpcosimError, ValueError):
@@ -140,8 +142,7 @@ class Prepared:
         self.slave_factory = slave_factory
         self.task_metrics = task_metrics
         self.parameter_set = parameter_set
-        self.swap = {k: (str(v) if not isinstance(v, SwapTarget) else v.description or str(v.fmu))
-                     for k, v in (swap or {}).items()}
+        self.swap = {k: _swap_label(v) for k, v in (swap or {}).items()}
         self.reuse_instances = reuse_instances
         self._tmp: Path | None = None
         self._finalizer: Any = None
@@ -411,6 +412,15 @@ class Prepared:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+def _swap_label(value: str | os.PathLike[str] | SwapTarget) -> str:
+    """How a run's metadata names what a component was swapped for: the path or alias as given, a
+    :class:`~ipcosim.harness.scenario.swaps.SwapTarget` by its description (else its FMU), the swaps loaded
+    only by a run that swaps."""
+    from ipcosim.harness.scenario.swaps import SwapTarget
+
+    return (value.description or str(value.fmu)) if isinstance(value, SwapTarget) else str(value)
 
 
 def _card_observer(overruns: bool = False) -> Observer:

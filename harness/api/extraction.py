@@ -77,8 +77,9 @@ def runtime_members(fmu: Path, model: Any, target: Path) -> list[str] | None:
     folders = tuple(f"binaries/{folder}/" for folder in binary_folders(model.fmi_version))
     with zipfile.ZipFile(fmu) as zf:
         names = zf.namelist()
+    root = target.resolve()
     for name in names:
-        member_path(fmu, name, target)
+        member_path(fmu, name, target, root)
     return [n for n in names if n == "modelDescription.xml" or n.startswith(("resources/", *folders))]
 
 

@@ -12,12 +12,17 @@ from ipcosim.harness.master.system import System
 
 
 def has_linear_model(model: str) -> bool:
-    """Whether the controller FMU ``model`` (``LQRSingleMass``) is a law of the registry with a linear model."""
-    from ipcosim.controllers.catalog import REGISTRY, model_name
-    from ipcosim.fmus.params import KINDS
+    """Whether the controller FMU ``model`` (``LQRSingleMass``) is a law of the registry with a linear model
+    (``<Law><Plant>``: the law's module alone is imported, not the registry's every law)."""
+    from ipcosim.controllers.laws import declared
+    from ipcosim.fmus.kinds import get, names
 
-    return any(model == model_name(kind, law) and e.linear is not None for law, e in REGISTRY.items()
-               for kind in KINDS if kind in e.sets)
+    for kind in names():
+        suffix = get(kind).suffix
+        e = declared(model[:len(model) - len(suffix)]) if model.endswith(suffix) else None
+        if e is not None and e.linear is not None and kind in e.sets:
+            return True
+    return False
 
 
 def with_bound(task_metrics: TaskMetrics | None, metadata: Mapping[str, Any]) -> TaskMetrics | None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ipcosim.harness.cli import EXIT_REALTIME_DEGRADED
+from ipcosim.harness.cli import EXIT_REALTIME_DEGRADED, collector_on
 
 #: How the summary shows a metric that has no value (docs/metrics.md).
 NOT_REACHED = {"settling_time_s": "not settled", "recovery_time_s": "not recovered",
@@ -61,6 +61,7 @@ def main(args: argparse.Namespace) -> int:
             for note in prepared.system.notes:
                 print(f"note: {note}")
         signals.keep(f"the rows so far are in {out / 'results.csv'}" if out is not None else None)
+        collector_on()
         result = run_with(options, prepared)
     if options.progress:
         m = json_safe(result.metrics)

@@ -24,7 +24,6 @@ Not covered: Integer, Boolean and String connectors (the Python loop runs those 
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import os
 import platform
 import sys
@@ -284,11 +283,25 @@ def compiled(source: str, cache: Path | None = None) -> Path:
     if cc is None:
         raise LoopUnavailable("no C compiler")
     parts = [source, os.path.realpath(cc), platform.machine(), *CFLAGS]
-    key = hashlib.sha256("\0".join(parts).encode()).hexdigest()[:20]
+    key = sha256_hex("\0".join(parts))[:20]
     so = Path(cache or LOOP_DIR) / f"{key}.so"
     if not so.is_file():
         _compile(source, so, cc)
     return so
+
+
+def sha256_hex(text: str) -> str:
+    """The SHA-256 of ``text`` (UTF-8) in hex: by the interpreter's own implementation where it has one, as
+    :mod:`random` takes its SHA-512 (importing :mod:`hashlib` loads OpenSSL: about 4 ms of every run's CPU), else by
+    :mod:`hashlib`."""
+    try:
+        from _sha256 import sha256  # Python 3.11
+    except ImportError:
+        try:
+            from _sha2 import sha256  # Python 3.12 and later
+        except ImportError:
+            from hashlib import sha256
+    return sha256(text.encode()).hexdigest()
 
 
 def _compile(source: str, so: Path, cc: str) -> None:

@@ -10,7 +10,6 @@ vector: a value of any of these types fits, ``UInt64`` values of 2**63 and above
 """
 from __future__ import annotations
 
-from decimal import Decimal, InvalidOperation
 from typing import Any
 
 import numpy as np
@@ -80,6 +79,8 @@ def exact_integer(x: Any) -> int:
         if not float(x).is_integer():
             raise ValueError(x)
         return int(x)
+    from decimal import Decimal, InvalidOperation  # text only: a run that gives none does not load decimal
+
     try:
         d = Decimal(str(x).strip())
     except InvalidOperation:

@@ -36,8 +36,19 @@ def _display(path: Path) -> str:
         return str(path)
 
 
-def member_path(archive: Path, name: str, target: Path) -> Path:
+def member_path(archive: Path, name: str, target: Path, root: Path | None = None) -> Path:
     """The path inside ``target`` where member ``name`` goes.
+
+    Parameters
+    ----------
+    archive : Path
+        The archive (named in messages).
+    name : str
+        The member's name.
+    target : Path
+        The extraction folder.
+    root : Path, optional
+        ``target.resolve()``, given by a caller that checks every member of an archive (resolved once).
 
     Raises
     ------
@@ -45,19 +56,19 @@ def member_path(archive: Path, name: str, target: Path) -> Path:
         If the name is absolute, has a drive letter, a backslash or a ``..`` component, or
         resolves (following links already in ``target``) outside ``target``.
     """
-    where = f"{_display(archive)}: member {name!r}"
+    where = lambda: f"{_display(archive)}: member {name!r}"
     if not name or "\x00" in name:
-        raise UnsafeArchiveError(f"{where}: empty or NUL in the name")
+        raise UnsafeArchiveError(f"{where()}: empty or NUL in the name")
     if name.startswith(("/", "\\")) or "\\" in name or (len(name) > 1 and name[1] == ":"):
-        raise UnsafeArchiveError(f"{where}: absolute name or drive letter (refused)")
+        raise UnsafeArchiveError(f"{where()}: absolute name or drive letter (refused)")
     parts = PurePosixPath(name).parts
     if any(p == ".." for p in parts):
-        raise UnsafeArchiveError(f"{where}: '..' in the name would leave the extraction folder (refused)")
-    root = target.resolve()
+        raise UnsafeArchiveError(f"{where()}: '..' in the name would leave the extraction folder (refused)")
+    root = target.resolve() if root is None else root
     dest = target.joinpath(*[p for p in parts if p not in ("", ".")])
     resolved = dest.resolve()
     if resolved != root and root not in resolved.parents:
-        raise UnsafeArchiveError(f"{where}: resolves outside the extraction folder (refused)")
+        raise UnsafeArchiveError(f"{where()}: resolves outside the extraction folder (refused)")
     return dest
 
 
@@ -136,8 +147,9 @@ def safe_extract(archive: str | os.PathLike[str], target: str | os.PathLike[str]
         infos = {i.filename: i for i in check_archive(archive, zf)}
         names = list(infos) if members is None else list(members)
         plan = []
+        root = target.resolve()
         for name in names:  # check every name before writing anything
-            dest = member_path(archive, name, target)
+            dest = member_path(archive, name, target, root)
             if name not in infos:
                 raise UnsafeArchiveError(f"{_display(archive)}: member {name!r}: no such member")
             plan.append((infos[name], dest))

@@ -17,7 +17,7 @@ import os
 import warnings
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 from ipcosim.errors import closest
 from ipcosim.harness.master.system import SSP_TYPE, Instance, Link, Model, System, Variable, value_type_of
@@ -27,7 +27,6 @@ from ipcosim.harness.scenario.errors import BindingError, FMUNotFoundError
 from ipcosim.harness.scenario.model_description import read_model
 from ipcosim.harness.scenario.rebuild import rebuild_hint
 from ipcosim.harness.scenario.structure import Component, Connection, Parameter, ParameterLink, ParameterSet, Scenario
-from ipcosim.harness.scenario.swaps import SwapTarget, resolve_swap
 from ipcosim.harness.scenario.transformations import (
     after_unit_conversion,
     enumeration_mapping,
@@ -36,6 +35,9 @@ from ipcosim.harness.scenario.transformations import (
 )
 from ipcosim.harness.scenario.units import connector_unit, unit_conversion, unit_table
 from ipcosim.harness.scenario.values import convert_value
+
+if TYPE_CHECKING:  # the swaps are loaded by a run that swaps a component
+    from ipcosim.harness.scenario.swaps import SwapTarget
 
 
 class UnconnectedInputWarning(UserWarning):
@@ -126,6 +128,8 @@ def _bind_component(scenario: Scenario, comp: Component, swap: Mapping[str, Any]
     model = _component_model(scenario, comp, comp.name in swap, fmu_files, models)
     swapped_from, realtime, extra = None, False, {}
     if comp.name in swap:
+        from ipcosim.harness.scenario.swaps import resolve_swap
+
         target = resolve_swap(scenario, comp.name, swap[comp.name], model)
         swapped_from = model.path.name if model is not None and model.path else comp.source
         realtime = target.realtime

@@ -57,3 +57,41 @@ def test_the_run_command_writes_everything_before_it_leaves(tmp_path: Path) -> N
     rows = (out / "results.csv").read_text().splitlines()
     assert rows[0].startswith("time,") and len(rows) == 1 + 201 and float(rows[-1].split(",")[0]) == 0.2
     assert (out / "metrics.json").read_text().rstrip().endswith("}")
+
+
+#: The console ``ipcosim run`` (``argv`` None) in a fresh interpreter, the collector's state seen where the run is
+#: prepared and where it steps, printed before the command leaves; then ``main`` called from Python.
+COLLECTOR_PROBE = r"""
+import gc, sys
+import ipcosim.harness.api.engine as engine
+seen = {}
+def spy(name, real):
+    def call(*args, **kwargs):
+        seen[name] = (gc.isenabled(), gc.get_freeze_count() > 0)
+        return real(*args, **kwargs)
+    return call
+engine.prepare_with, engine.run_with = spy("prepare", engine.prepare_with), spy("run", engine.run_with)
+from ipcosim.harness.cli import main
+argv = ["run", "single-mass-lqr", "--stop-time", "0.05", "--quiet", "--out", sys.argv[1]]
+if sys.argv[2] == "python":
+    main(argv)
+    print(seen, gc.isenabled(), gc.get_freeze_count())
+else:
+    import atexit
+    atexit.register(lambda: print(seen))  # leave runs the exit handlers
+    sys.argv[1:] = argv
+    main()
+"""
+
+
+def test_the_run_command_collects_garbage_while_it_runs_not_while_it_starts(tmp_path: Path) -> None:
+    """The console run starts with the cyclic collector off and steps with it on, past what its start made;
+    ``main`` called from Python leaves the collector as it found it."""
+    done = subprocess.run([sys.executable, "-c", COLLECTOR_PROBE, str(tmp_path / "a"), "console"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["{'prepare':", "(False,", "False),", "'run':", "(True,", "True)}"]
+    done = subprocess.run([sys.executable, "-c", COLLECTOR_PROBE, str(tmp_path / "b"), "python"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["{'prepare':", "(True,", "False),", "'run':", "(True,", "False)}", "True", "0"]

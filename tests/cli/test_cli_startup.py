@@ -54,6 +54,23 @@ def test_every_command_is_listed_by_help_whichever_is_built() -> None:
     assert "ipcosim rig serve" in whole and "ipcosim rig serve" not in outline  # the outline has no options
 
 
+def test_a_command_loads_no_other_commands_module() -> None:
+    loaded = _loaded(["run", "--help"])
+    assert "ipcosim.harness.cli.run" in loaded
+    assert not [m for m in loaded if m.startswith("ipcosim.harness.cli.") and m != "ipcosim.harness.cli.run"]
+
+
+@pytest.mark.parametrize("argv", [["-h", "run"], ["--debug", "--help", "list"]], ids=" ".join)
+def test_the_help_asked_for_before_a_command_lists_every_command(argv: list[str], capsys) -> None:
+    with pytest.raises(SystemExit):
+        cli.main(["--help"])
+    alone = capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        cli.main(argv)
+    assert capsys.readouterr().out == alone
+    assert set(cli.COMMANDS) <= {line.split()[0] for line in alone.splitlines() if line.startswith("    ")}
+
+
 @pytest.mark.parametrize("argv, named", [(["run", "x"], "run"), (["--debug", "list"], "list"),
                                          (["--version"], ""), (["lst"], ""), ([], "")])
 def test_the_command_is_read_from_the_words_before_parsing(argv: list[str], named: str) -> None:

@@ -45,6 +45,31 @@ def test_random_bit_patterns_and_repeats() -> None:
     assert finite == [v for row in zip(*(c.tolist() for c in columns)) for v in row if not math.isnan(v)]
 
 
+def _neighbours(x: float, steps: int) -> list[float]:
+    """``x`` and the ``steps`` doubles either side of it."""
+    out, down, up = [x], x, x
+    for _ in range(steps):
+        down, up = math.nextafter(down, -math.inf), math.nextafter(up, math.inf)
+        out += [down, up]
+    return out
+
+
+def test_values_a_run_records_and_the_roundings_between_them() -> None:
+    """The magnitudes formatted in exact integer arithmetic (1e-16 .. 1e17) and either side of them: log-uniform
+    values of both signs, the doubles beside each power of ten and each d * 10**k (where the 17 digits carry into
+    another decimal exponent, or the form changes between fixed and exponent), and exact ties at the 17th digit
+    (``(4e15 + odd) / 4``: 18 significant digits ending in 5, rounded half to even)."""
+    needs_library()
+    rng = np.random.default_rng(11)
+    logs = np.sign(rng.standard_normal(60000)) * 10.0 ** rng.uniform(-18, 18, 60000)
+    edges = [v for k in range(-18, 19) for d in range(1, 10) for v in _neighbours(d * 10.0 ** k, 6)]
+    ties = [m / 4 for m in range(4 * 10**15 + 1, 4 * 10**15 + 2001, 2)]
+    assert "%.17g" % ties[0] == "1000000000000000.2" and "%.17g" % ties[1] == "1000000000000000.8"
+    crafted = np.array(edges + [-v for v in edges] + ties + [-v for v in ties])
+    columns = [logs, np.resize(crafted, logs.size), np.cumsum(np.full(logs.size, 1e-3))]
+    assert bytes(cformat.lines(columns)) == python_lines(columns)
+
+
 def test_csv_bytes_without_the_library_are_the_same(monkeypatch: pytest.MonkeyPatch) -> None:
     data = np.zeros(50, dtype=[("time", "f8"), ("a.y", "f8")])
     data["time"] = np.arange(50) * 1e-3

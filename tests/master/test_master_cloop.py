@@ -178,6 +178,20 @@ def test_the_library_is_keyed_by_the_structure_alone(tmp_path, monkeypatch):
     assert not [p for p in tmp_path.iterdir() if p.suffix != ".so"]  # no temporary files left
 
 
+def test_a_librarys_name_is_the_sha256_of_what_it_is_built_from_as_hashlib_computes_it(monkeypatch):
+    import hashlib
+
+    for text in ("", "int x;\0/usr/bin/cc\0x86_64\0-O2", "\u00e9\u4e2d" * 1000):
+        assert cloop.sha256_hex(text) == hashlib.sha256(text.encode()).hexdigest()
+    parts = ["int f(void) { return 1; }", "/bin/cc", "x86_64", *cloop.CFLAGS]
+    monkeypatch.setattr(cloop, "find_compiler", lambda: "/bin/cc")
+    monkeypatch.setattr(cloop.os.path, "realpath", lambda p: p)
+    monkeypatch.setattr(cloop.platform, "machine", lambda: "x86_64")
+    monkeypatch.setattr(cloop, "_compile", lambda *a: None)
+    so = cloop.compiled(parts[0], cache=Path("/nonexistent-cache"))
+    assert so.name == hashlib.sha256("\0".join(parts).encode()).hexdigest()[:20] + ".so"
+
+
 def test_parallel_compiles_of_one_loop_each_end_with_a_whole_library(tmp_path):
     source = _source()
     code = ("import sys; from pathlib import Path; from ipcosim.harness.master import cloop; "
