@@ -10,6 +10,7 @@ import pytest
 
 from ipcosim.controllers.laws.lqg import coulomb_estimate
 from ipcosim.fmus.instruments import CART_M_PER_COUNT, PENDULUM_RAD_PER_COUNT, quantize
+from ipcosim.harness.analysis import describing as df
 from ipcosim.harness.analysis import residual_cycle as rc
 from ipcosim.harness.analysis.analyze import break_point_margins, frequency_grid, scenario_loop, sensor_loop
 from ipcosim.harness.analysis.limit_cycle import plant_of, predict
@@ -26,22 +27,22 @@ def _first_harmonic_gain(f, amplitude: float, n: int = 200_000) -> float:
 def test_the_quantizers_describing_function_is_the_first_harmonic_of_the_encoders_reading(counts) -> None:
     q = PENDULUM_RAD_PER_COUNT
     exact = _first_harmonic_gain(lambda x: quantize(x, q), counts * q, 40_000)
-    assert rc.quantizer_gain(counts * q, q) == pytest.approx(exact, abs=2e-3)
+    assert df.quantizer_gain(counts * q, q) == pytest.approx(exact, abs=2e-3)
 
 
 def test_the_quantizers_gain_dips_below_one_under_each_threshold_and_tends_to_one() -> None:
     q = 1.0
-    assert rc.quantizer_gain(1.5, q) == pytest.approx(4 / (1.5 * math.pi) * math.sqrt(1 - 1 / 9), rel=1e-12)
-    assert rc.quantizer_gain(1.5, q) < rc.quantizer_gain(2.5, q) < rc.quantizer_gain(3.5, q) < 1.0
-    assert rc.quantizer_gain(500.5, q) == pytest.approx(1.0, abs=5e-5)     # the dips shrink as ~0.4 / n^1.5
-    assert rc.quantizer_gain(rc.LINEAR_QUANTIZER_COUNTS - 0.5, q) == pytest.approx(1.0, abs=1e-6)
+    assert df.quantizer_gain(1.5, q) == pytest.approx(4 / (1.5 * math.pi) * math.sqrt(1 - 1 / 9), rel=1e-12)
+    assert df.quantizer_gain(1.5, q) < df.quantizer_gain(2.5, q) < df.quantizer_gain(3.5, q) < 1.0
+    assert df.quantizer_gain(500.5, q) == pytest.approx(1.0, abs=5e-5)     # the dips shrink as ~0.4 / n^1.5
+    assert df.quantizer_gain(df.LINEAR_QUANTIZER_COUNTS - 0.5, q) == pytest.approx(1.0, abs=1e-6)
 
 
 @pytest.mark.parametrize("ratio", [0.5, 1.3, 1.9, 2.5, 8.0])
 def test_the_compensations_describing_function_is_the_first_harmonic_of_the_laws_estimate(ratio) -> None:
     b, v0 = 0.1047, 2e-3
     exact = _first_harmonic_gain(lambda v: coulomb_estimate(v, b, v0), ratio * v0, 20_000)
-    assert rc.compensation_gain(ratio * v0, b, v0) == pytest.approx(exact, abs=1e-3 * b / v0)
+    assert df.compensation_gain(ratio * v0, b, v0) == pytest.approx(exact, abs=1e-3 * b / v0)
 
 
 @pytest.mark.parametrize("ratio", [0.3, 0.99, 1.01, 1.7, 6.0, 40.0])
@@ -52,8 +53,8 @@ def test_the_dithered_relay_is_the_first_harmonic_of_the_friction_averaged_over_
     shifts = (np.arange(400) + 0.5) / 400 * 2 * d - d
     averaged = lambda v: b * float(np.mean(np.sign(v + shifts)))   # noqa: E731
     exact = _first_harmonic_gain(averaged, ratio * d, 20_000)
-    assert rc.dithered_relay_gain(ratio * d, b, d) == pytest.approx(exact, rel=5e-3)
-    assert rc.dithered_relay_gain(ratio * d, b, 0.0) == rc.relay_gain(ratio * d, b)
+    assert df.dithered_relay_gain(ratio * d, b, d) == pytest.approx(exact, rel=5e-3)
+    assert df.dithered_relay_gain(ratio * d, b, 0.0) == df.relay_gain(ratio * d, b)
 
 
 @pytest.mark.parametrize("ratio", [0.8, 1.5, 3.0])
@@ -61,7 +62,7 @@ def test_the_dithered_compensation_is_the_mean_of_the_laws_estimate_at_the_two_d
     b, v0, d = 0.1047, 5e-4, 2.6e-4
     exact = _first_harmonic_gain(lambda v: 0.5 * (coulomb_estimate(v + d, b, v0) + coulomb_estimate(v - d, b, v0)),
                                  ratio * v0, 20_000)
-    assert rc.compensation_gain(ratio * v0, b, v0, d) == pytest.approx(exact, abs=2e-3 * b / v0)
+    assert df.compensation_gain(ratio * v0, b, v0, d) == pytest.approx(exact, abs=2e-3 * b / v0)
 
 
 def test_the_dithers_velocity_swing_is_the_triangle_of_a_mass_pushed_each_way_for_one_sample() -> None:
@@ -71,14 +72,14 @@ def test_the_dithers_velocity_swing_is_the_triangle_of_a_mass_pushed_each_way_fo
     m, F, T = 0.94, 0.7, 1e-3
     Ad = np.array([[1.0, T], [0.0, 1.0]])
     Bd = np.array([[F * T ** 2 / (2 * m)], [F * T / m]])
-    assert rc.dither_velocity(Ad, Bd, 1, 1.0) == pytest.approx(F * T / (2 * m), rel=1e-12)
+    assert df.dither_velocity(Ad, Bd, 1, 1.0) == pytest.approx(F * T / (2 * m), rel=1e-12)
     c = 7.0
     e = math.exp(-c * T / m)
     Ad, Bd = np.array([[e]]), np.array([[F / c * (1 - e)]])
     v = 0.0
     for k in range(20_000):
         v = e * v + Bd[0, 0] * 0.4 * (-1) ** k
-    assert rc.dither_velocity(Ad, Bd, 0, 0.4) == pytest.approx(abs(v), rel=1e-9)
+    assert df.dither_velocity(Ad, Bd, 0, 0.4) == pytest.approx(abs(v), rel=1e-9)
 
 
 def test_friction_alone_is_the_nyquist_crossing_of_the_relay() -> None:
@@ -102,7 +103,7 @@ def test_one_encoder_alone_balances_where_its_gain_is_the_loops_lower_gain_limit
     p = rc.predict_residual(loop, plant_of(loop), {}, {"pendulum_angle": PENDULUM_RAD_PER_COUNT}, delay=0)
     assert p["found"]
     a = p["signals"]["pendulum_angle"]["amplitude"]
-    assert rc.quantizer_gain(a, PENDULUM_RAD_PER_COUNT) == pytest.approx(margins["gain_lower"], rel=2e-3)
+    assert df.quantizer_gain(a, PENDULUM_RAD_PER_COUNT) == pytest.approx(margins["gain_lower"], rel=2e-3)
     assert 2 * math.pi * p["frequency_Hz"] == pytest.approx(margins["gain_lower_frequency_rad_s"], rel=1e-2)
 
 
