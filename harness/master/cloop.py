@@ -102,14 +102,14 @@ typedef int (*ipc_set)(void *, const unsigned int *, size_t, const double *);
    f: per block fmi2DoStep, fmi2GetReal, fmi2SetReal
    d: start, step, per block h and hl, per transfer factor and offset
    q: N, exact (times from nanoseconds), start_ns, step_ns, record_every, row bytes; pacing (0: none),
-      its t0 [ns], period [ns], spin [ns], first tick, and the addresses of each tick's start and end [ns]
+      the deadline of tick 0 [ns], period [ns], spin [ns], and the addresses of each tick's start and end [ns]
    fail: tick, block, function (0 set, 1 step, 2 get), status */
 int ipcosim_loop(void *const *p, const ipc_fn *f, const double *d, const long long *q,
                  long long n0, long long n1, long long rb, long long *fail)
 {
     const long long N = q[0], exact = q[1], start_ns = q[2], step_ns = q[3], every = q[4], rs = q[5];
-    const long long pace = q[6], t0 = q[7], period = q[8], spin = q[9], first = q[10];
-    long long *const starts = (long long *)(intptr_t)q[11], *const ends = (long long *)(intptr_t)q[12];
+    const long long pace = q[6], t0 = q[7], period = q[8], spin = q[9];
+    long long *const starts = (long long *)(intptr_t)q[10], *const ends = (long long *)(intptr_t)q[11];
     const double start = d[0], step = d[1];
     const void *va = p[%(va)d];
     long long n;
@@ -122,7 +122,7 @@ int ipcosim_loop(void *const *p, const ipc_fn *f, const double *d, const long lo
         const double t = exact ? (double)(start_ns + n * step_ns) / 1e9 : start + (double)n * step;
         (void)t;
         if (pace)
-            starts[n - n0] = ipc_wait(t0 + (n - first) * period, spin);
+            starts[n - n0] = ipc_wait(t0 + n * period, spin);
 %(body)s
         if (pace)
             ends[n - n0] = ipc_now();
@@ -371,7 +371,7 @@ class CLoop:
             doubles += [time.span(b.multiple), time.last_step(b.multiple)]
         self._d = (ctypes.c_double * (len(doubles) + len(params)))(*doubles, *params)
         exact = time.step_ns is not None
-        self._q = (ctypes.c_longlong * 13)(time.ticks, int(exact), time.start_ns or 0, time.step_ns or 0,
+        self._q = (ctypes.c_longlong * 12)(time.ticks, int(exact), time.start_ns or 0, time.step_ns or 0,
                                            record_every, row_bytes)
         self._fail = (ctypes.c_longlong * 4)()
         self._row_bytes, self._value_address = row_bytes, value_address
@@ -388,7 +388,7 @@ class CLoop:
             return True
         if not sys.platform.startswith("linux"):
             return False
-        self._q[6:11] = [1, pacer.deadline_ns(0), pacer.period_ns, pacer.spin_ns, 0]
+        self._q[6:10] = [1, pacer.deadline_ns(0), pacer.period_ns, pacer.spin_ns]
         self._pacer = pacer
         return True
 
@@ -415,8 +415,8 @@ class CLoop:
         pacer, times = self._pacer, None
         if pacer is not None:
             times = (ctypes.c_longlong * (2 * (n1 - n0)))()
-            self._q[11] = ctypes.addressof(times)
-            self._q[12] = self._q[11] + ctypes.sizeof(ctypes.c_longlong) * (n1 - n0)
+            self._q[10] = ctypes.addressof(times)
+            self._q[11] = self._q[10] + ctypes.sizeof(ctypes.c_longlong) * (n1 - n0)
         failed = self._fn(self._p, self._f, self._d, self._q, n0, n1, rb, self._fail) != 0
         if times is not None:
             started = (int(self._fail[0]) + 1 if failed else n1) - n0
