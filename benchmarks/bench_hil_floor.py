@@ -17,7 +17,12 @@ busy-loop processes under the default policy, at the bench's nice value). A refe
 processes on the fair scheduler's own slice instead of the 0.7 ms they ask for by default), beside
 the same floor. A reference subject of the no-RT cells, ``floor at TCP's CPU``, is the floor's probe
 spending, after each wake-up, the CPU time a step of the TCP run just before it took (the run's
-``loop_cpu_per_step_us``): what the host does to any loop that computes that long each period. Every
+``loop_cpu_per_step_us``): what the host does to any loop that computes that long each period. Two
+more reference subjects measure what a rig in a second process costs whatever it is written in: the
+``pair floor`` (every cell) is the probe exchanging a message with a forked C peer over loopback TCP
+every period, as the run does with its rig, with no computation on either side; ``pair at TCP's
+CPU`` (the no-RT cells) is that pair spending the TCP run's CPU time a step on the loop's side and
+its rig's CPU time a request (the ``ipcosim rig serve`` process's, from /proc) on the peer's. Every
 repetition runs every subject in every condition, the subjects' order
 rotating from one repetition to the next, so the floor is measured interleaved with the runs and
 shares the host's drift. A 2 kHz row (the walkthrough with ``--step 0.0005 --set
@@ -42,6 +47,7 @@ Targets (from the walkthrough's promise: as steady as the in-process rig, at the
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import shlex
@@ -53,7 +59,7 @@ from collections import defaultdict
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -69,6 +75,14 @@ SUBJECTS = ("floor", "in-process", "TCP")
 #: The reference subject of the no-RT cells: the floor's probe spending, after each wake-up, the CPU
 #: time a step of the TCP run beside it took (its ``loop_cpu_per_step_us``).
 AT_CPU = "floor at TCP's CPU"
+#: The reference subject of every cell: the floor of two processes exchanging a message each period
+#: (the probe's ``--pair``: C on both sides, no computation), what any run with a rig in a second
+#: process meets before it computes anything.
+PAIR = "pair floor"
+#: The reference subject of the no-RT cells: the pair spending the TCP run's CPU time a step on the
+#: loop's side and its rig's CPU time a request on the peer's.
+PAIR_AT_CPU = "pair at TCP's CPU"
+REFERENCES = (AT_CPU, PAIR, PAIR_AT_CPU)
 LOADS = ("quiet", "loaded")
 HOGS = 2
 STOP_TIME = 5.0
@@ -90,6 +104,7 @@ class Sample:
     error: str | None = None
     fifo: str = ""
     cpu_us: float = float("nan")
+    peer_cpu_us: float = float("nan")
 
 
 def cli(command: str) -> list[str]:
@@ -112,10 +127,20 @@ def hogs(n: int) -> Iterator[None]:
 
 
 @contextmanager
-def rig(rt: bool) -> Iterator[str]:
-    """The walkthrough's ``ipcosim rig serve`` on a free port (``bench_hil.served``); yields its card URI."""
-    with served(cli(WALKTHROUGH[0]) + ["--port", "0", "--duration", "300"], rt) as (_, uri):
-        yield uri
+def rig(rt: bool) -> Iterator[tuple[str, Callable[[], float]]]:
+    """The walkthrough's ``ipcosim rig serve`` on a free port (``bench_hil.served``); yields its card URI
+    and a function giving the CPU time its process has used [s] (NaN where /proc does not say)."""
+    with served(cli(WALKTHROUGH[0]) + ["--port", "0", "--duration", "300"], rt) as (proc, uri):
+        yield uri, lambda: process_cpu_s(proc.pid)
+
+
+def process_cpu_s(pid: int) -> float:
+    """The user and system CPU time process ``pid`` has used [s], from /proc (NaN without it)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return float("nan")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def walkthrough(uri: str, rt: bool, period: float) -> Sample:
@@ -145,15 +170,26 @@ def measure(subject: str, rt: bool, period: float = 1e-3) -> Sample:
         return Sample(f.late_fraction, fifo=f.sched_fifo)
     if subject == "in-process":
         return walkthrough(INPROC_URI, rt, period)
-    with rig(rt) as uri:
-        return walkthrough(uri, rt, period)
+    with rig(rt) as (uri, rig_cpu):
+        before = rig_cpu()
+        run = walkthrough(uri, rt, period)
+        per_request = (rig_cpu() - before) / round(STOP_TIME / period) * 1e6
+        return dataclasses.replace(run, peer_cpu_us=per_request)
 
 
-def at_cpu(run: Sample) -> Sample:
-    """The floor's probe doing, after each wake-up, the CPU work of a step of ``run`` (NaN if it has none)."""
-    if not run.cpu_us > 0:
+def at_cpu(run: Sample, pair: bool = False) -> Sample:
+    """The floor's probe doing, after each wake-up, the CPU work of a step of ``run`` (NaN if it has none);
+    with ``pair``, the pair's probe, its peer doing the CPU work of a request of ``run``'s rig."""
+    if not run.cpu_us > 0 or (pair and not run.peer_cpu_us >= 0):
         return Sample(float("nan"))
-    return Sample(host_floor.measure(1e-3, round(STOP_TIME / 1e-3), work=run.cpu_us * 1e-6).late_fraction)
+    extra = {"pair": True, "peer_work": run.peer_cpu_us * 1e-6} if pair else {}
+    return Sample(host_floor.measure(1e-3, round(STOP_TIME / 1e-3), work=run.cpu_us * 1e-6, **extra).late_fraction)
+
+
+def pair_floor(rt: bool) -> Sample:
+    """The pair's probe with no computation on either side (SCHED_FIFO for both with ``rt``)."""
+    f = host_floor.measure(1e-3, round(STOP_TIME / 1e-3), RT_PRIORITY if rt else None, pair=True)
+    return Sample(f.late_fraction, fifo=f.sched_fifo)
 
 
 def rotated(items: Sequence[str], k: int) -> list[str]:
@@ -174,10 +210,10 @@ def collect(repetitions: int, rt_modes: Sequence[bool]) -> dict[Cell, list[Sampl
                 for rt in rt_modes:
                     for subject in rotated(SUBJECTS, rep):
                         got[(subject, load, rt)].append(measure(subject, rt))
-                    if not rt:
-                        got[(AT_CPU, load, rt)].append(at_cpu(got[("TCP", load, rt)][-1]))
+                    references(got, (load, rt))
                     print(f"   repetition {rep + 1}, {load}, {_rt(rt)}: "
-                          + ", ".join(f"{s} {_pct(got[(s, load, rt)][-1])}" for s in SUBJECTS), flush=True)
+                          + ", ".join(f"{s} {_pct(got[(s, load, rt)][-1])}" for s in (*SUBJECTS, *REFERENCES)
+                                      if (s, load, rt) in got), flush=True)
                 if load == "loaded":
                     _own_slice(got, rep)
         for subject in rotated(("floor", "TCP"), rep):
@@ -185,6 +221,17 @@ def collect(repetitions: int, rt_modes: Sequence[bool]) -> dict[Cell, list[Sampl
         print(f"   repetition {rep + 1}, 2 kHz: floor {_pct(got[('floor', '2 kHz', False)][-1])}, "
               f"TCP {_pct(got[('TCP', '2 kHz', False)][-1])}", flush=True)
     return got
+
+
+def references(got: dict[Cell, list[Sample]], condition: tuple[str, bool]) -> None:
+    """The reference subjects of one condition (load, rt), after its runs: the pair's floor, and without
+    RT priority the floor's and the pair's probes at the CPU of the TCP run just measured."""
+    load, rt = condition
+    got[(PAIR, load, rt)].append(pair_floor(rt))
+    if not rt:
+        tcp = got[("TCP", load, rt)][-1]
+        got[(AT_CPU, load, rt)].append(at_cpu(tcp))
+        got[(PAIR_AT_CPU, load, rt)].append(at_cpu(tcp, pair=True))
 
 
 #: The reference cell: loaded, no RT priority, each process left on the fair scheduler's own slice.
@@ -240,7 +287,7 @@ def cell_figures(got: dict[Cell, list[Sample]], load: str, rt: bool) -> str:
     key, label = f"hil_floor.{cell}_{'rt' if rt else 'plain'}", f"{load}, {_rt(rt)}"
     floor = median(got[("floor", load, rt)])
     parts = []
-    for subject in (s for s in (*SUBJECTS, AT_CPU) if (s, load, rt) in got):
+    for subject in (s for s in (*SUBJECTS, *REFERENCES) if (s, load, rt) in got):
         samples, name = got[(subject, load, rt)], f"{key}_{''.join(c for c in subject.lower() if c.isalnum())}"
         anchor = {} if subject == "floor" else {"anchor": f"the floor's median beside it: {fmt(100 * floor)} %"}
         what = f"{subject}, {label}: late steps,"
@@ -252,11 +299,18 @@ def cell_figures(got: dict[Cell, list[Sample]], load: str, rt: bool) -> str:
             part += f" ({ratio})"
         if subject in SUBJECTS[1:]:
             cpu = float(np.median([s.cpu_us for s in samples]))
-            part += f", {fmt(cpu)} us CPU a step, upright {sum(bool(s.upright) for s in samples)}/{len(samples)}"
+            part += f", {fmt(cpu)} us CPU a step{_rig_cpu(samples)}"
+            part += f", upright {sum(bool(s.upright) for s in samples)}/{len(samples)}"
             failed = [_gist(s.error) for s in samples if s.error]
             part += f" (failed: {', '.join(sorted(set(failed)))})" if failed else ""
         parts.append(part)
     return f"{label:32s} " + "; ".join(parts)
+
+
+def _rig_cpu(samples: list[Sample]) -> str:
+    """The TCP rig's CPU time a request, where it was measured."""
+    cpu = [s.peer_cpu_us for s in samples if s.peer_cpu_us >= 0]
+    return f" (the rig's {fmt(float(np.median(cpu)))} us a request)" if cpu else ""
 
 
 def judge(got: dict[Cell, list[Sample]], rt_done: bool) -> list[str]:

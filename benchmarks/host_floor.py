@@ -97,7 +97,8 @@ def probe_binary() -> Path:
     return exe
 
 
-def measure(period: float = 1e-3, steps: int = STEPS, priority: int | None = None, work: float = 0.0) -> Floor:
+def measure(period: float = 1e-3, steps: int = STEPS, priority: int | None = None, work: float = 0.0, *,
+            pair: bool = False, peer_work: float = 0.0) -> Floor:
     """Run the probe once: ``steps`` steps of ``period`` seconds (the same threshold as the runs).
 
     Parameters
@@ -110,6 +111,12 @@ def measure(period: float = 1e-3, steps: int = STEPS, priority: int | None = Non
         SCHED_FIFO priority of the probe (None: the default policy); a refusal is in ``sched_fifo``.
     work : float
         CPU time the probe spends after each wake-up [s] (0: none, the bare floor), as a step computes.
+    pair : bool
+        The floor of two processes exchanging a message every period: a forked peer on a loopback TCP
+        connection answers each step's message, which the loop waits for (half its ``work`` before
+        the exchange, half after), as a run waits for a rig in a second process.
+    peer_work : float
+        With ``pair``: the CPU time the peer spends on each answer [s].
 
     Returns
     -------
@@ -119,6 +126,8 @@ def measure(period: float = 1e-3, steps: int = STEPS, priority: int | None = Non
     cmd = [str(probe_binary()), "--period-ns", str(round(period * 1e9)), "--steps", str(steps),
            "--late-ns", str(round(LATE_S * 1e9)), "--priority", str(priority or 0),
            "--work-ns", str(max(0, round(work * 1e9)))]
+    if pair:
+        cmd += ["--pair", "--peer-work-ns", str(max(0, round(peer_work * 1e9)))]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=60 + 2 * steps * period)
     if done.returncode:
         raise FloorUnavailable(f"the host's floor probe failed: {done.stderr.strip() or done.returncode}")

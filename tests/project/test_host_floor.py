@@ -136,3 +136,28 @@ def test_the_hil_bench_judges_the_walkthrough_against_its_floor_and_the_in_proce
     assert judged((0.0,) * 5, (0.0,) * 5, (0.0,) * 5, khz=(0.02,) * 5)["2khz_tcp_median_pct"] is False
     loud_2khz = judged((0.0,) * 5, (0.0,) * 5, (0.0,) * 5, khz=(0.02,) * 5, khz_floor=(0.004,) * 5)
     assert loud_2khz["2khz_tcp_median_pct"] is None         # a floor above 0.3 %: printed, not judged
+
+
+def test_the_pairs_loop_waits_for_its_peers_answer_every_period():
+    """``--pair``: the loop waits each period for the peer's answer, so a peer that spends 1.5 ms of CPU on each
+    answer makes nearly every step of a 1 ms loop late, while the same peer at 0.1 ms leaves the loop on time
+    on a quiet host; the peer's CPU time is spent (it is the probe's child)."""
+    try:
+        exe = host_floor.probe_binary()
+    except host_floor.FloorUnavailable as exc:
+        pytest.skip(str(exc))
+
+    def pair(peer_work_ns: int) -> tuple[float, dict]:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        done = subprocess.run([str(exe), "--steps", "100", "--pair", "--peer-work-ns", str(peer_work_ns)],
+                              capture_output=True, text=True, timeout=30, check=True)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, json.loads(done.stdout)
+
+    cpu, slow = pair(1_500_000)
+    assert slow["pair"] is True and slow["peer_work_ns"] == 1_500_000
+    assert cpu >= 0.15 and slow["late"] >= 90
+    _, fast = pair(100_000)
+    assert fast["late"] < slow["late"]
+    _, bare = pair(0)
+    assert bare["steps"] == 100 and bare["work_ns"] == 0
