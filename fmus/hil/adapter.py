@@ -23,7 +23,10 @@ Quanser's package, or the virtual rig), at volts-and-counts level:
   clock run to the sample instant ``t + h`` and read the encoders there (one
   ``Card.step``; on a ``lockstep`` virtual rig this advances the rig by exactly ``h``),
   and convert counts to SI units with the calibrations (a negative calibration reverses a
-  direction). Counter wrap-around is unwrapped.
+  direction). Counter wrap-around is unwrapped. A virtual rig answers with the sample instant's
+  reading at once; the step returns then, and the next one waits for that instant before it
+  sends, if it comes earlier (a host pacing to the wall clock never waits twice for an instant;
+  see :meth:`HilFmu._sample_base` for where the instants sit).
 * **faults** (a limit trip, a watchdog expiry, a card error, a rig that does not answer
   within ``watchdog_timeout`` of the sample instant -- 5 s for a lockstep virtual rig,
   whose simulated time a stalled host cannot hurt): the message goes to ``last_error`` and to the FMI log, the
@@ -164,6 +167,7 @@ class HilFmu(FmuBase):
         self._holder: dict[str, Any] = {}
         self._finalizer = weakref.finalize(self, _close_quietly, self._holder)
         self._base_ns: int | None = None
+        self._paced_base = False
         self._armed = False
         self._raw: list[int] = []
         self._unwrapped: list[int] = []
@@ -197,6 +201,7 @@ class HilFmu(FmuBase):
         self._unwrapped = [0] * len(self._enc)
         self._pos = [0.0] * len(self._enc)
         self._base_ns = None
+        self._paced_base = False
 
     def _open_checked(self) -> Any:
         """Open the card, check it (plant kind, amplifier not latched off), 0 V, expiration state, encoders 0."""
@@ -238,6 +243,8 @@ class HilFmu(FmuBase):
 
         try:
             card = self._holder.get("card") or self._open_checked()
+            if hasattr(card, "defer_wait"):   # the next doStep waits for this one's sample instant
+                card.defer_wait = True
             card.watchdog_start(self.watchdog_timeout)
             self._raw = [int(c) for c in card.read_encoder(self._enc)]
         except FmuError as exc:
@@ -264,7 +271,7 @@ class HilFmu(FmuBase):
     def step(self, t: float, h: float) -> None:
         began = time.monotonic_ns()
         first = not self._armed
-        self._card_step(t, h)
+        self._card_step(t, h, began)
         card = self._holder.get("card")
         requests = getattr(card, "requests", 0)
         if first:
@@ -273,7 +280,7 @@ class HilFmu(FmuBase):
             self._times_ns.append(time.monotonic_ns() - began - getattr(card, "last_wait_ns", 0))
             self._requests[1] = requests
 
-    def _card_step(self, t: float, h: float) -> None:
+    def _card_step(self, t: float, h: float, began_ns: int) -> None:
         from ipcosim.fmus.hil import ErrorCode, HILError, count_difference
 
         card = self._arm() if not self._armed else self._holder.get("card")
@@ -284,13 +291,8 @@ class HilFmu(FmuBase):
             self._fault(f"input voltage = {v} at t = {t:.6g} s is not finite")
         v = max(-self.voltage_limit, min(self.voltage_limit, v)) / self.amplifier_gain
         try:
-            if self._base_ns is None:
-                now_ns = int(round(card.time() * 1e9))
-                tick = int(round(getattr(card.info, "tick", 0.0) * 1e9))
-                base = now_ns - int(round(t * 1e9))
-                if tick > 0:  # put the sample instants on the card's clock grid
-                    base = (base // tick) * tick
-                self._base_ns = base
+            base = self._sample_base(card, t, h, began_ns)
+            self._base_ns = self._base_ns if base is None else base
             until = (self._base_ns + int(round((t + h) * 1e9))) / 1e9
             res = card.step([int(self.analog_channel)], [v], self._enc, until, reload=True)
         except HILError as exc:
@@ -316,6 +318,29 @@ class HilFmu(FmuBase):
             except HILError:
                 message = ""
             self._fault(message or "a safety limit latched the amplifier off")
+
+    def _sample_base(self, card: Any, t: float, h: float, began_ns: int) -> int | None:
+        """The card time [ns] of the run's time 0 (the sample instant ending the step from ``t`` is
+        ``base + t + h``), or None to keep the one in use.
+
+        The start-up step (the first) puts it at the card's time after arming, on the card's tick grid:
+        a lockstep card keeps it. A real-time card's is put again at the next step, the first a host
+        pacing to the wall clock paces: a quarter period before that step began on the card's clock
+        (the host's time since then taken off). Each later step then reaches the card after the last
+        sample instant (no wait) unless it starts a quarter period earlier than that one did, and before
+        its own unless it starts three quarters of a period later.
+        """
+        if self._base_ns is None:
+            now_ns = int(round(card.time() * 1e9))
+            tick = int(round(getattr(card.info, "tick", 0.0) * 1e9))
+            base = now_ns - int(round(t * 1e9))
+            return (base // tick) * tick if tick > 0 else base
+        if self._paced_base or getattr(card.info, "clock", "") == "lockstep":
+            return None
+        self._paced_base = True
+        # a card that reckons its clock locally is not asked (no extra round trip)
+        now_ns = card.rig_now_ns() if hasattr(card, "rig_now_ns") else int(round(card.time() * 1e9))
+        return now_ns - (time.monotonic_ns() - began_ns) - int(round(t * 1e9)) - int(round(h * 1e9)) // 4
 
     def _fault(self, message: str) -> None:
         """Record, make safe (0 V, close), and fail the step."""

@@ -7,11 +7,12 @@ for deterministic tests, and by tests that want to look inside the rig they driv
 from __future__ import annotations
 
 import threading
+import time
 from typing import Sequence
 
 import numpy as np
 
-from ipcosim.fmus.hil.api import Card, ErrorCode, HILError, RigStatus, StepResult
+from ipcosim.fmus.hil.api import Card, ErrorCode, HILError, RigStatus, StepResult, wait_until_ns
 from ipcosim.fmus.hil.rig import VirtualRig
 from ipcosim.fmus.hil.rig_config import NS, RigConfig, to_ns
 
@@ -99,6 +100,10 @@ class VirtualCard(Card):
         self._closed = False
         #: How long the last :meth:`step` waited for its sample instant [ns].
         self.last_wait_ns = 0
+        #: As :attr:`TcpipCard.defer_wait <ipcosim.fmus.hil.tcpip.TcpipCard.defer_wait>`: with it, a wall-clock
+        #: :meth:`step` returns with its reading at once and the next one waits for its sample instant.
+        self.defer_wait = False
+        self._deferred_ns: int | None = None
         rig.start_clock()
         rig.new_session(who)
 
@@ -142,9 +147,20 @@ class VirtualCard(Card):
 
     def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
              until: float, reload: bool = True) -> StepResult:
-        res = self._check().step(analog_channels, volts, encoder_channels, to_ns(until), reload)
-        self.last_wait_ns = self.rig.last_wait_ns
-        return res
+        rig = self._check()
+        self.last_wait_ns = 0
+        if self._deferred_ns is not None:    # not before the last step's sample instant
+            began = time.monotonic_ns()
+            wait_until_ns(rig.now_ns, self._deferred_ns, abort=self.rig._halted.is_set)
+            self.last_wait_ns, self._deferred_ns = time.monotonic_ns() - began, None
+        if not self.defer_wait or self.rig.lockstep:
+            res = rig.step(analog_channels, volts, encoder_channels, to_ns(until), reload)
+            self.last_wait_ns += self.rig.last_wait_ns
+            return res
+        self._deferred_ns = to_ns(until)
+        reloaded, late, counts = rig.exchange(analog_channels, volts, encoder_channels, self._deferred_ns, reload)
+        return StepResult(counts=np.array(counts, dtype=np.int32), reloaded=reloaded, time=rig.now_ns() / NS,
+                          late=late / NS, status=rig.status())
 
     def advance(self, dt: float) -> None:
         """Lockstep: advance the rig by ``dt`` seconds."""

@@ -104,6 +104,20 @@ class TcpipCard(Card):
     #: The rig leases the session: a client that stays silent longer than the rig's idle timeout
     #: is dropped (the HIL adapter therefore connects again when stepping begins).
     leased = True
+    #: False: :meth:`step` returns at its sample instant, as :meth:`Card.step <ipcosim.fmus.hil.api.Card.step>`
+    #: says. True: it returns with the reading at once (the rig computes the sample instant's reading
+    #: exactly when the request comes) and the wait for that instant moves to the start of the next
+    #: :meth:`step`, so no request is ever sent before the last one's sample instant. The adapter FMU
+    #: steps so: a host that paces to the wall clock (``ipcosim run --realtime``) then does not wait
+    #: twice for one instant, and a host that does not pace is held back at its next ``doStep``.
+    defer_wait = False
+    #: False: :meth:`step` returns at its sample instant, as :meth:`Card.step <ipcosim.fmus.hil.api.Card.step>`
+    #: says. True: it returns with the reading at once (the rig computes the sample instant's reading
+    #: exactly when the request comes) and the wait for that instant moves to the start of the next
+    #: :meth:`step`, so no request is ever sent before the last one's sample instant. The adapter FMU
+    #: steps so: a host that paces to the wall clock (``ipcosim run --realtime``) then never waits twice
+    #: for one instant, and a host that does not is held back at the next ``doStep`` as before.
+    defer_wait = False
 
     def __init__(self, card_type: str, card_id: str, host: str, port: int, *, timeout: float = 1.0,
                  role: str = "control", name: str = "ipcosim", token: str | None = None) -> None:
@@ -124,6 +138,7 @@ class TcpipCard(Card):
         #: How long the last :meth:`step` waited for its sample instant [ns].
         self.last_wait_ns = 0
         self._applied_timeout = 0.0
+        self._deferred_ns: int | None = None     # the last sample instant, with defer_wait
         try:
             sock = socket.create_connection((host, port), timeout=max(self.timeout, 2.0))
         except OSError as exc:
@@ -301,6 +316,10 @@ class TcpipCard(Card):
     def step(self, analog_channels: Sequence[int], volts: Sequence[float], encoder_channels: Sequence[int],
              until: float, reload: bool = True) -> StepResult:
         n_ao, ao_packed, enc_packed = self._packed_channels(analog_channels, encoder_channels)
+        self.last_wait_ns = 0
+        if self._deferred_ns is not None:    # not before the last request's sample instant
+            self._wait_for(self._deferred_ns)
+            self._deferred_ns = None
         until_ns = int(round(until * NS))
         payload = (STEP_REQUEST.pack(until_ns, 1 if reload else 0) + ao_packed
                    + pack_doubles(as_finite(volts, n_ao, "step")) + enc_packed)
@@ -308,8 +327,9 @@ class TcpipCard(Card):
         reloaded, late_ns, n = self._body(r, STEP_REPLY, "STEP")
         counts = list(self._body(r, f"{n}i", "STEP"))  # int32 on the wire
         now = self._last_rig_ns
-        self.last_wait_ns = 0
-        if self.info.clock == "wallclock":   # the reading is the sample instant's: not before it
+        if self.info.clock == "wallclock" and self.defer_wait:
+            self._deferred_ns = until_ns
+        elif self.info.clock == "wallclock":   # the reading is the sample instant's: not before it
             now = max(now, self._wait_for(until_ns))
         return StepResult(counts=counts, reloaded=bool(reloaded), time=now / NS, late=late_ns / NS,
                           status=self._flags_status())

@@ -156,6 +156,31 @@ def test_inproc_card_drives_a_registered_rig_and_is_exclusive():
         unregister_rig("test-api")
 
 
+def test_a_deferred_inproc_step_returns_at_once_and_the_next_waits_for_its_sample_instant():
+    """As over TCP: with ``defer_wait`` a wall-clock step returns its sample instant's reading at once and the
+    next step starts no earlier than that instant; without it, a step returns at its instant."""
+    import time
+
+    rig = register_rig("test-defer", VirtualRig(RigConfig(clock="wallclock", pendulum_limit=None, cart_limit=None)))
+    try:
+        card = open_card("q4", "0@inproc://test-defer")
+        card.watchdog_start(1.0)
+        card.defer_wait = True
+        until = card.time() + 0.2
+        began = time.monotonic()
+        first = card.step([0], [0.5], [0, 1], until)
+        assert time.monotonic() - began < 0.15 and first.time < until and rig._t_ns >= round(until * 1e9)
+        card.step([0], [0.5], [0, 1], until + 0.001)
+        assert card.last_wait_ns > 0.1e9 and rig.now_ns() >= round(until * 1e9)
+        card.defer_wait = False
+        until3 = card.time() + 0.05
+        third = card.step([0], [0.5], [0, 1], until3)
+        assert third.time >= until3
+        card.close()
+    finally:
+        unregister_rig("test-defer")
+
+
 def test_inproc_creates_a_rig_from_the_query():
     try:
         card = open_uri("q4:0@inproc://test-query?plant=double-mass")

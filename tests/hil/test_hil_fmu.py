@@ -397,3 +397,41 @@ def test_initialization_longer_than_the_watchdog_and_the_lease_does_not_stop_the
             assert do_step(f, k * 1e-3, 1e-3) == OK, f.text()
         assert srv.rig.watchdog.running and not srv.rig.status().watchdog_expired
         free(f)
+
+
+class _ClockCard:
+    """A card that only tells its time [s] and its clock (for the adapter's sample instants)."""
+
+    def __init__(self, now_s: float, clock: str, tick: float = 5e-4) -> None:
+        import types
+
+        self.now_s, self.info = now_s, types.SimpleNamespace(clock=clock, tick=tick)
+
+    def time(self) -> float:
+        return self.now_s
+
+
+def test_a_real_time_cards_sample_instants_sit_a_quarter_period_before_the_first_paced_step():
+    """The start-up step puts the sample instants on the card's tick grid (a lockstep card keeps them); on a
+    real-time card the next step, the first a host paces, puts them a quarter period before its start on the
+    card's clock (the host's time since it began taken off), and later steps leave them there."""
+    import time
+
+    from ipcosim.fmus.hil.adapter import HilFmu
+
+    fmu = HilFmu.__new__(HilFmu)
+    for clock in ("wallclock", "lockstep"):
+        fmu._base_ns, fmu._paced_base = None, False
+        card = _ClockCard(12.3456789, clock)
+        fmu._base_ns = fmu._sample_base(card, 0.0, 1e-3, time.monotonic_ns())
+        assert fmu._base_ns == 12_345_500_000                                  # the tick grid (0.5 ms)
+        card.now_s = 12.35
+        began = time.monotonic_ns() - 3_000_000                 # the second step, at t = 1 ms, began 3 ms ago
+        base = fmu._sample_base(card, 1e-3, 1e-3, began)
+        elapsed = time.monotonic_ns() - began
+        if clock == "lockstep":
+            assert base is None
+            continue
+        assert 12_350_000_000 - elapsed - 1_000_000 - 250_000 <= base <= 12_350_000_000 - 3_000_000 - 1_250_000
+        fmu._base_ns = base
+        assert fmu._sample_base(card, 2e-3, 1e-3, time.monotonic_ns()) is None     # put once

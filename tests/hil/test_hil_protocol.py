@@ -246,3 +246,29 @@ def test_a_stalled_rig_times_out_with_a_clear_error():
 def test_server_binds_loopback_by_default():
     srv = RigServer(VirtualRig(RigConfig()), port=0)
     assert srv.host == "127.0.0.1"
+
+
+def test_a_deferred_step_returns_at_once_and_the_next_waits_for_its_sample_instant():
+    """``defer_wait``: STEP returns the sample instant's reading as soon as the rig answers, and the next STEP
+    is not sent before that instant (the rig's own clock says so: no request of the second step arrives
+    before the first one's ``until``); without it, STEP returns at its sample instant (Card.step)."""
+    srv = RigServer(VirtualRig(RigConfig(clock="wallclock", pendulum_limit=None, cart_limit=None)),
+                    "127.0.0.1", 0).start()
+    try:
+        card = open_card("q4", srv.uri)
+        card.watchdog_start(1.0)
+        until = card.time() + 0.2
+        card.defer_wait = True
+        began = time.monotonic()
+        first = card.step([0], [0.5], [0, 1], until)
+        assert time.monotonic() - began < 0.15 and first.time < until          # answered before its instant
+        second = card.step([0], [0.5], [0, 1], until + 0.001)
+        assert second.time >= until and srv.rig.now_ns() >= round(until * 1e9)  # sent after the first's instant
+        assert card.last_wait_ns > 0.1e9 and first.late == second.late == 0
+        card.defer_wait = False
+        until3 = card.time() + 0.05
+        third = card.step([0], [0.5], [0, 1], until3)
+        assert third.time >= until3 and card.last_wait_ns > 0.02e9              # waited for its own instant
+        card.close()
+    finally:
+        srv.close()
