@@ -7,12 +7,11 @@ for deterministic tests, and by tests that want to look inside the rig they driv
 from __future__ import annotations
 
 import threading
-import time
 from typing import Sequence
 
 import numpy as np
 
-from ipcosim.fmus.hil.api import Card, ErrorCode, HILError, RigStatus, StepResult, wait_until_ns
+from ipcosim.fmus.hil.api import Card, ErrorCode, HILError, RigStatus, StepResult
 from ipcosim.fmus.hil.rig import VirtualRig
 from ipcosim.fmus.hil.rig_config import NS, RigConfig, to_ns
 
@@ -150,9 +149,7 @@ class VirtualCard(Card):
         rig = self._check()
         self.last_wait_ns = 0
         if self._deferred_ns is not None:    # not before the last step's sample instant
-            began = time.monotonic_ns()
-            wait_until_ns(rig.now_ns, self._deferred_ns, abort=self.rig._halted.is_set)
-            self.last_wait_ns, self._deferred_ns = time.monotonic_ns() - began, None
+            self.last_wait_ns, self._deferred_ns = rig.wait_for(self._deferred_ns), None
         if not self.defer_wait or self.rig.lockstep:
             res = rig.step(analog_channels, volts, encoder_channels, to_ns(until), reload)
             self.last_wait_ns += self.rig.last_wait_ns

@@ -405,16 +405,27 @@ class VirtualRig(RigPhysics):
         :meth:`exchange`, then (wallclock) a wait until the rig's clock reaches ``until_ns``.
         """
         reloaded, late, counts = self.exchange(analog_channels, volts, encoder_channels, until_ns, reload)
-        self.last_wait_ns = 0
-        if not self.lockstep:
-            began = time.monotonic_ns()
-            wait_until_ns(self.now_ns, until_ns, abort=self._halted.is_set)
-            self.last_wait_ns = time.monotonic_ns() - began
-            if self._halted.is_set():
-                raise HILError(ErrorCode.CONNECTION, "the rig is shutting down")
+        self.last_wait_ns = self.wait_for(until_ns)
         with self.lock:
             return StepResult(counts=np.array(counts, dtype=np.int32), reloaded=reloaded,
                               time=max(self._t_ns, self.now_ns()) / NS, late=late / NS, status=self._status())
+
+    def wait_for(self, until_ns: int) -> int:
+        """Wallclock: wait until the rig's clock reaches ``until_ns`` (a sample instant); returns how long
+        it waited [ns] (lockstep: 0, nothing to wait for).
+
+        Raises
+        ------
+        HILError
+            The rig was halted meanwhile (``CONNECTION``).
+        """
+        if self.lockstep:
+            return 0
+        began = time.monotonic_ns()
+        wait_until_ns(self.now_ns, until_ns, abort=self._halted.is_set)
+        if self._halted.is_set():
+            raise HILError(ErrorCode.CONNECTION, "the rig is shutting down")
+        return time.monotonic_ns() - began
 
     def flags(self) -> tuple[bool, bool, bool, bool]:
         """``(amplifier enabled, limit tripped, watchdog expired, watchdog running)`` as they stand."""
