@@ -55,6 +55,9 @@ from ipcosim.fmus.physics import MEASURED, STATE_UNITS
 DEFAULT_CARD_URI = "q4:0@tcpip://127.0.0.1:18920"
 CART_M_PER_COUNT = 2.275e-5            # IP02 cart encoder: 4096 counts/rev (the thesis, sec. 3.3)
 PENDULUM_RAD_PER_COUNT = 1.534e-3      # pendulum encoder, 2 pi / 4096 rad, counter-clockwise positive
+#: How far ahead of the first paced step a real-time card's sample instants are put [periods]: room for the
+#: clock's reckoning over TCP (a few tens of microseconds) without aging every reading by much.
+ANCHOR_LEAD = 0.05
 #: How long to wait for a lockstep virtual rig's answer [s] (a real-time card: watchdog_timeout).
 LOCKSTEP_REPLY_TIMEOUT = 5.0
 
@@ -324,23 +327,29 @@ class HilFmu(FmuBase):
         ``base + t + h``), or None to keep the one in use.
 
         The start-up step (the first) puts it at the card's time after arming, on the card's tick grid:
-        a lockstep card keeps it. A real-time card's is put again at the next step, the first a host
-        pacing to the wall clock paces: a quarter period before that step began on the card's clock
-        (the host's time since then taken off). Each later step then reaches the card after the last
-        sample instant (no wait) unless it starts a quarter period earlier than that one did, and before
-        its own unless it starts three quarters of a period later.
+        a lockstep card keeps it. On a real-time card a later step puts it :data:`ANCHOR_LEAD` of a
+        period before that step began on the card's clock (the host's time since then taken off): the
+        first paced step always, a later one when it began earlier than that schedule says, by less than
+        half a period (the host paces on an earlier schedule: a stall of the first paced step, say).
+        So a host pacing to the wall clock starts each step after the last sample instant, with a
+        reading of that instant (a little older than the step), and waits for none; a host that does
+        not pace comes about a period early and is held back by the card instead.
         """
         if self._base_ns is None:
             now_ns = int(round(card.time() * 1e9))
             tick = int(round(getattr(card.info, "tick", 0.0) * 1e9))
             base = now_ns - int(round(t * 1e9))
             return (base // tick) * tick if tick > 0 else base
-        if self._paced_base or getattr(card.info, "clock", "") == "lockstep":
+        if getattr(card.info, "clock", "") == "lockstep":
             return None
-        self._paced_base = True
         # a card that reckons its clock locally is not asked (no extra round trip)
         now_ns = card.rig_now_ns() if hasattr(card, "rig_now_ns") else int(round(card.time() * 1e9))
-        return now_ns - (time.monotonic_ns() - began_ns) - int(round(t * 1e9)) - int(round(h * 1e9)) // 4
+        h_ns = int(round(h * 1e9))
+        base = now_ns - (time.monotonic_ns() - began_ns) - int(round(t * 1e9)) - int(round(h_ns * ANCHOR_LEAD))
+        if not self._paced_base:
+            self._paced_base = True
+            return base
+        return base if 0 < self._base_ns - base < h_ns // 2 else None
 
     def _fault(self, message: str) -> None:
         """Record, make safe (0 V, close), and fail the step."""

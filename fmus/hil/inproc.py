@@ -141,6 +141,10 @@ class VirtualCard(Card):
     def time(self) -> float:
         return self._check().time()
 
+    def rig_now_ns(self) -> int:
+        """The rig's clock [ns] as it reads now (nothing computed for it, unlike :meth:`time`)."""
+        return self._check().now_ns()
+
     def status(self) -> RigStatus:
         return self._check().status()
 

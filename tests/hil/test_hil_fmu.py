@@ -411,14 +411,17 @@ class _ClockCard:
         return self.now_s
 
 
-def test_a_real_time_cards_sample_instants_sit_a_quarter_period_before_the_first_paced_step():
+def test_a_real_time_cards_sample_instants_follow_the_earliest_paced_schedule():
     """The start-up step puts the sample instants on the card's tick grid (a lockstep card keeps them); on a
-    real-time card the next step, the first a host paces, puts them a quarter period before its start on the
-    card's clock (the host's time since it began taken off), and later steps leave them there."""
+    real-time card the next step, the first a host paces, puts them ANCHOR_LEAD of a period before its start
+    on the card's clock (the host's time since it began taken off); a later step that begins earlier than
+    that schedule by less than half a period moves them with it, one that begins later or about a period
+    early (a host that does not pace) leaves them."""
     import time
 
-    from ipcosim.fmus.hil.adapter import HilFmu
+    from ipcosim.fmus.hil.adapter import ANCHOR_LEAD, HilFmu
 
+    lead = round(1e6 * ANCHOR_LEAD)                           # [ns] of a 1 ms period
     fmu = HilFmu.__new__(HilFmu)
     for clock in ("wallclock", "lockstep"):
         fmu._base_ns, fmu._paced_base = None, False
@@ -432,6 +435,15 @@ def test_a_real_time_cards_sample_instants_sit_a_quarter_period_before_the_first
         if clock == "lockstep":
             assert base is None
             continue
-        assert 12_350_000_000 - elapsed - 1_000_000 - 250_000 <= base <= 12_350_000_000 - 3_000_000 - 1_250_000
+        assert 12_350_000_000 - elapsed - 1_000_000 - lead <= base <= 12_350_000_000 - 3_000_000 - 1_000_000 - lead
         fmu._base_ns = base
-        assert fmu._sample_base(card, 2e-3, 1e-3, time.monotonic_ns()) is None     # put once
+
+        def at(t: float, ahead_ns: int, card: _ClockCard = card, base: int = base) -> int | None:
+            """A step at time ``t`` that begins ``ahead_ns`` before the schedule in use (negative: after)."""
+            card.now_s = (base + round(t * 1e9) + lead - ahead_ns) / 1e9
+            return fmu._sample_base(card, t, 1e-3, time.monotonic_ns())
+
+        assert at(0.002, -200_000) is None                     # later than the schedule: kept
+        assert at(0.003, 900_000) is None                      # about a period early: not a pacing host, kept
+        moved = at(0.004, 200_000)                             # 0.2 ms early: the host's schedule, followed
+        assert moved is not None and 199_000 <= base - moved <= 201_000
