@@ -111,13 +111,6 @@ class TcpipCard(Card):
     #: steps so: a host that paces to the wall clock (``ipcosim run --realtime``) then does not wait
     #: twice for one instant, and a host that does not pace is held back at its next ``doStep``.
     defer_wait = False
-    #: False: :meth:`step` returns at its sample instant, as :meth:`Card.step <ipcosim.fmus.hil.api.Card.step>`
-    #: says. True: it returns with the reading at once (the rig computes the sample instant's reading
-    #: exactly when the request comes) and the wait for that instant moves to the start of the next
-    #: :meth:`step`, so no request is ever sent before the last one's sample instant. The adapter FMU
-    #: steps so: a host that paces to the wall clock (``ipcosim run --realtime``) then never waits twice
-    #: for one instant, and a host that does not is held back at the next ``doStep`` as before.
-    defer_wait = False
 
     def __init__(self, card_type: str, card_id: str, host: str, port: int, *, timeout: float = 1.0,
                  role: str = "control", name: str = "ipcosim", token: str | None = None) -> None:
